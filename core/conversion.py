@@ -1,0 +1,373 @@
+"""Polar-to-Cartesian converted measurements and their covariances.
+
+A radar at the origin measures range and azimuth ``r̂ = r + v_r``, ``β̂ = β + v_β`` with
+``v_r ~ N(0, σr²)`` and ``v_β ~ N(0, σβ²)`` independent; write ``s = σβ²`` (rad²). The tracker
+works in Cartesian coordinates, so each measurement is converted to ``x = r̂ cos β̂``,
+``y = r̂ sin β̂`` (Prosov, eq. 8). Because the map is nonlinear the converted point is biased:
+
+    E[cos β̂] = e^(−s/2) cos β,              E[sin β̂] = e^(−s/2) sin β
+    E[cos² β̂] = ½(1 + e^(−2s) cos 2β),       E[sin² β̂] = ½(1 − e^(−2s) cos 2β)
+    E[sin β̂ cos β̂] = ½ e^(−2s) sin 2β,      E[r̂²] = r² + σr²
+
+so ``E[r̂ cos β̂] = r cos β · e^(−s/2)``: the naive point is pulled towards the radar by ≈ r s/2.
+
+Every conversion here is a scale κ applied to the naive point plus a covariance R:
+
+=========  =================================  ===============================================
+name       point                              covariance
+=========  =================================  ===============================================
+naive      κ = 1 (eq. 8)                      first order J diag(σr², r̂² s) Jᵀ (eq. 9)
+seed       κ = 1 − s/2 (eq. 10 as printed)    eq. 11a–c (Lerro & Bar-Shalom averaged cov.)
+cmkf_d     κ = 1 − (e^(−s) − e^(−s/2))        eq. 11a–c
+ucm        κ = e^(s/2)                        exact true-conditioned cov., at the measurement
+ducm       κ = e^(s/2)                        exact true-conditioned cov., at the prediction
+=========  =================================  ===============================================
+
+What the analysis in ``shared/spec/conversion.md`` found, and what users should know:
+
+* eq. 10 (``seed``) has the opposite sign to the frequentist correction:
+  E[x_seed] ≈ r cos β (1 − s), twice the naive bias. It is the second-order posterior mean
+  of the true position given the measurement, not an unbiased measurement.
+* eq. 11 is exactly the posterior average of the naive point's true-conditioned covariance
+  (Lerro and Bar-Shalom 1993), which belongs with the opposite-sign correction (``cmkf_d``).
+* A covariance evaluated at the *measured* bearing correlates the Kalman gain with the
+  measurement error; ``ducm`` (Bordonaro, Willett, Bar-Shalom 2014) evaluates it at the
+  filter's predicted position instead.
+
+All functions broadcast over any leading batch shape ``(...)``. Angles are radians.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import NamedTuple
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+METHODS_2D: tuple[str, ...] = ("naive", "seed", "cmkf_d", "ucm", "ducm")
+METHODS_3D: tuple[str, ...] = ("naive", "ucm")
+
+
+class Converted(NamedTuple):
+    """A batch of converted measurements.
+
+    Attributes:
+        z: (..., d) Cartesian points, d = 2 or 3.
+        R: (..., d, d) their covariances.
+    """
+
+    z: NDArray[np.float64]
+    R: NDArray[np.float64]
+
+
+def _sym2(r11: NDArray, r12: NDArray, r22: NDArray) -> NDArray[np.float64]:
+    """Stack three (...) arrays into (..., 2, 2) symmetric matrices."""
+    row0 = np.stack([r11, r12], axis=-1)
+    row1 = np.stack([r12, r22], axis=-1)
+    return np.stack([row0, row1], axis=-2)
+
+
+def _f(a: ArrayLike) -> NDArray[np.float64]:
+    return np.asarray(a, dtype=np.float64)
+
+
+# --------------------------------------------------------------------------------------------
+# Exact moments (used by ucm / ducm and by the tests)
+# --------------------------------------------------------------------------------------------
+
+
+def scale_factor(method: str, sigma_beta: ArrayLike) -> NDArray[np.float64]:
+    """The scale κ a 2D method applies to the naive point ``r̂ (cos β̂, sin β̂)``."""
+    s = _f(sigma_beta) ** 2
+    if method == "naive":
+        return np.ones_like(s)
+    if method == "seed":
+        return 1.0 - s / 2.0  # Prosov eq. 10 as printed
+    if method == "cmkf_d":
+        return 1.0 - (np.exp(-s) - np.exp(-s / 2.0))  # Lerro & Bar-Shalom debiasing
+    if method in ("ucm", "ducm"):
+        return np.exp(s / 2.0)  # Mo et al. 1998: 1 / E[cos v_β]
+    raise ValueError(f"method must be one of {', '.join(METHODS_2D)} (got {method!r})")
+
+
+def naive_mean_given_truth(
+    r: ArrayLike, beta: ArrayLike, sigma_beta: ArrayLike
+) -> NDArray[np.float64]:
+    """E[r̂ (cos β̂, sin β̂) | r, β] = r e^(−s/2) (cos β, sin β).  Shape (..., 2)."""
+    r, beta, s = _f(r), _f(beta), _f(sigma_beta) ** 2
+    a = r * np.exp(-s / 2.0)
+    return np.stack([a * np.cos(beta), a * np.sin(beta)], axis=-1)
+
+
+def naive_cov_given_truth(
+    r: ArrayLike, beta: ArrayLike, sigma_r: ArrayLike, sigma_beta: ArrayLike
+) -> NDArray[np.float64]:
+    """Exact covariance of the naive point given the true (r, β).  Shape (..., 2, 2).
+
+    From the moments in the module docstring:
+
+        Cxx = (r² + σr²) ½(1 + e^(−2s) cos 2β) − r² e^(−s) cos² β
+        Cyy = (r² + σr²) ½(1 − e^(−2s) cos 2β) − r² e^(−s) sin² β
+        Cxy = (r² + σr²) ½ e^(−2s) sin 2β     − r² e^(−s) sin β cos β
+
+    Scaling the point by κ scales this by κ², so it also gives the ucm covariance.
+    """
+    r, beta, sr, s = _f(r), _f(beta), _f(sigma_r), _f(sigma_beta) ** 2
+    m2 = r * r + sr * sr
+    e2 = np.exp(-2.0 * s)
+    e1 = np.exp(-s)
+    c, sn = np.cos(beta), np.sin(beta)
+    c2b, s2b = np.cos(2.0 * beta), np.sin(2.0 * beta)
+    cxx = m2 * 0.5 * (1.0 + e2 * c2b) - r * r * e1 * c * c
+    cyy = m2 * 0.5 * (1.0 - e2 * c2b) - r * r * e1 * sn * sn
+    cxy = m2 * 0.5 * e2 * s2b - r * r * e1 * sn * c
+    return _sym2(cxx, cxy, cyy)
+
+
+# --------------------------------------------------------------------------------------------
+# Covariances named by the papers
+# --------------------------------------------------------------------------------------------
+
+
+def linearized_cov(
+    r: ArrayLike, beta: ArrayLike, sigma_r: ArrayLike, sigma_beta: ArrayLike
+) -> NDArray[np.float64]:
+    """First-order covariance J diag(σr², σβ²) Jᵀ of the naive point (Prosov eq. 9).
+
+        R11 = σr² cos²β + r² s sin²β
+        R22 = σr² sin²β + r² s cos²β
+        R12 = (σr² − r² s) sin β cos β
+    """
+    r, beta, sr2, s = _f(r), _f(beta), _f(sigma_r) ** 2, _f(sigma_beta) ** 2
+    c, sn = np.cos(beta), np.sin(beta)
+    rs = r * r * s
+    return _sym2(sr2 * c * c + rs * sn * sn, (sr2 - rs) * sn * c, sr2 * sn * sn + rs * c * c)
+
+
+def averaged_cov(
+    r: ArrayLike, beta: ArrayLike, sigma_r: ArrayLike, sigma_beta: ArrayLike
+) -> NDArray[np.float64]:
+    """Prosov eq. 11a–c, evaluated at the measurement (r, β) = (r̂, β̂).
+
+        c11 = r² e^(−2s) [cos²β (cosh 2s − cosh s) + sin²β (sinh 2s − sinh s)]
+            + σr² e^(−2s) [cos²β (2 cosh 2s − cosh s) + sin²β (2 sinh 2s − sinh s)]
+        c22 = the same with sin and cos exchanged
+        c12 = sin β cos β e^(−4s) [σr² + (r² + σr²)(1 − e^s)]
+
+    This is Lerro and Bar-Shalom's (1993) average of the naive point's true-conditioned
+    covariance over the posterior of (r, β) given the measurement (flat prior); the tests check
+    that identity by quadrature.
+    """
+    r, beta, sr2, s = _f(r), _f(beta), _f(sigma_r) ** 2, _f(sigma_beta) ** 2
+    c2, s2 = np.cos(beta) ** 2, np.sin(beta) ** 2
+    e2 = np.exp(-2.0 * s)
+    ch1, ch2, sh1, sh2 = np.cosh(s), np.cosh(2.0 * s), np.sinh(s), np.sinh(2.0 * s)
+    r2 = r * r
+    a_c, a_s = ch2 - ch1, sh2 - sh1
+    b_c, b_s = 2.0 * ch2 - ch1, 2.0 * sh2 - sh1
+    c11 = r2 * e2 * (c2 * a_c + s2 * a_s) + sr2 * e2 * (c2 * b_c + s2 * b_s)
+    c22 = r2 * e2 * (s2 * a_c + c2 * a_s) + sr2 * e2 * (s2 * b_c + c2 * b_s)
+    c12 = np.sin(beta) * np.cos(beta) * np.exp(-4.0 * s) * (sr2 + (r2 + sr2) * (1.0 - np.exp(s)))
+    return _sym2(c11, c12, c22)
+
+
+# --------------------------------------------------------------------------------------------
+# The five 2D conversions
+# --------------------------------------------------------------------------------------------
+
+
+def _naive_point(r: NDArray, beta: NDArray) -> NDArray[np.float64]:
+    return np.stack([r * np.cos(beta), r * np.sin(beta)], axis=-1)
+
+
+def convert_naive(
+    r: ArrayLike, beta: ArrayLike, sigma_r: ArrayLike, sigma_beta: ArrayLike
+) -> Converted:
+    """Naive conversion (eq. 8) with the linearized covariance (eq. 9)."""
+    r, beta = _f(r), _f(beta)
+    return Converted(_naive_point(r, beta), linearized_cov(r, beta, sigma_r, sigma_beta))
+
+
+def convert_seed(
+    r: ArrayLike, beta: ArrayLike, sigma_r: ArrayLike, sigma_beta: ArrayLike
+) -> Converted:
+    """Prosov's "unbiased" conversion as published: κ = 1 − s/2 (eq. 10), covariance eq. 11.
+
+    Note: this *doubles* the bias of the converted point; see the module docstring.
+    """
+    r, beta = _f(r), _f(beta)
+    kappa = scale_factor("seed", sigma_beta)[..., None]
+    return Converted(kappa * _naive_point(r, beta), averaged_cov(r, beta, sigma_r, sigma_beta))
+
+
+def convert_cmkf_d(
+    r: ArrayLike, beta: ArrayLike, sigma_r: ArrayLike, sigma_beta: ArrayLike
+) -> Converted:
+    """Lerro and Bar-Shalom (1993) debiased conversion: κ = 1 − (e^(−s) − e^(−s/2)), eq. 11."""
+    r, beta = _f(r), _f(beta)
+    kappa = scale_factor("cmkf_d", sigma_beta)[..., None]
+    return Converted(kappa * _naive_point(r, beta), averaged_cov(r, beta, sigma_r, sigma_beta))
+
+
+def convert_ucm(
+    r: ArrayLike, beta: ArrayLike, sigma_r: ArrayLike, sigma_beta: ArrayLike
+) -> Converted:
+    """Unbiased conversion (Mo, Song, Zhou, Sun, Bar-Shalom 1998): κ = e^(s/2).
+
+    The covariance is the exact true-conditioned covariance of the unbiased point,
+    e^s · ``naive_cov_given_truth``, evaluated at the measured (r̂, β̂).
+    """
+    r, beta = _f(r), _f(beta)
+    s = _f(sigma_beta) ** 2
+    kappa = np.exp(s / 2.0)
+    cov = np.exp(s)[..., None, None] * naive_cov_given_truth(r, beta, sigma_r, sigma_beta)
+    return Converted(kappa[..., None] * _naive_point(r, beta), cov)
+
+
+def convert_ducm(
+    r: ArrayLike,
+    beta: ArrayLike,
+    sigma_r: ArrayLike,
+    sigma_beta: ArrayLike,
+    predicted_xy: ArrayLike,
+) -> Converted:
+    """Decorrelated unbiased conversion (Bordonaro, Willett, Bar-Shalom 2014).
+
+    Same point as ``ucm``; the covariance is evaluated at the filter's predicted position
+    ``predicted_xy`` (..., 2), radar-centred, so the gain is independent of this measurement's
+    error.
+    """
+    r, beta = _f(r), _f(beta)
+    p = _f(predicted_xy)
+    r_p = np.hypot(p[..., 0], p[..., 1])
+    beta_p = np.arctan2(p[..., 1], p[..., 0])
+    s = _f(sigma_beta) ** 2
+    kappa = np.exp(s / 2.0)
+    cov = np.exp(s)[..., None, None] * naive_cov_given_truth(r_p, beta_p, sigma_r, sigma_beta)
+    return Converted(kappa[..., None] * _naive_point(r, beta), cov)
+
+
+_CONVERTERS: dict[str, Callable[..., Converted]] = {
+    "naive": convert_naive,
+    "seed": convert_seed,
+    "cmkf_d": convert_cmkf_d,
+    "ucm": convert_ucm,
+}
+
+
+def convert(
+    method: str,
+    r: ArrayLike,
+    beta: ArrayLike,
+    sigma_r: ArrayLike,
+    sigma_beta: ArrayLike,
+    predicted_xy: ArrayLike | None = None,
+) -> Converted:
+    """Dispatch to one of ``METHODS_2D``; ``ducm`` needs ``predicted_xy`` (..., 2)."""
+    if method == "ducm":
+        if predicted_xy is None:
+            raise ValueError("method ducm needs predicted_xy (the filter's predicted position)")
+        return convert_ducm(r, beta, sigma_r, sigma_beta, predicted_xy)
+    try:
+        fn = _CONVERTERS[method]
+    except KeyError:
+        raise ValueError(
+            f"method must be one of {', '.join(METHODS_2D)} (got {method!r})"
+        ) from None
+    return fn(r, beta, sigma_r, sigma_beta)
+
+
+# --------------------------------------------------------------------------------------------
+# 3D: range, azimuth β, elevation ε;  x = r cos ε cos β, y = r cos ε sin β, z = r sin ε
+# --------------------------------------------------------------------------------------------
+
+
+def _point_3d(r: NDArray, az: NDArray, el: NDArray) -> NDArray[np.float64]:
+    ce = np.cos(el)
+    return np.stack([r * ce * np.cos(az), r * ce * np.sin(az), r * np.sin(el)], axis=-1)
+
+
+def convert_naive_3d(
+    r: ArrayLike,
+    azimuth: ArrayLike,
+    elevation: ArrayLike,
+    sigma_r: ArrayLike,
+    sigma_azimuth: ArrayLike,
+    sigma_elevation: ArrayLike,
+) -> Converted:
+    """Naive 3D conversion with the first-order covariance J diag(σr², σβ², σε²) Jᵀ."""
+    r, az, el = _f(r), _f(azimuth), _f(elevation)
+    ca, sa, ce, se = np.cos(az), np.sin(az), np.cos(el), np.sin(el)
+    # Columns of J: ∂p/∂r, ∂p/∂β, ∂p/∂ε.
+    j_r = np.stack([ce * ca, ce * sa, se], axis=-1)
+    j_b = np.stack([-r * ce * sa, r * ce * ca, np.zeros_like(r * ca)], axis=-1)
+    j_e = np.stack([-r * se * ca, -r * se * sa, r * ce], axis=-1)
+    var_r = _f(sigma_r) ** 2
+    var_b = _f(sigma_azimuth) ** 2
+    var_e = _f(sigma_elevation) ** 2
+    cov = (
+        var_r[..., None, None] * j_r[..., :, None] * j_r[..., None, :]
+        + var_b[..., None, None] * j_b[..., :, None] * j_b[..., None, :]
+        + var_e[..., None, None] * j_e[..., :, None] * j_e[..., None, :]
+    )
+    return Converted(_point_3d(r, az, el), cov)
+
+
+def naive_cov_given_truth_3d(
+    r: ArrayLike,
+    azimuth: ArrayLike,
+    elevation: ArrayLike,
+    sigma_r: ArrayLike,
+    sigma_azimuth: ArrayLike,
+    sigma_elevation: ArrayLike,
+) -> NDArray[np.float64]:
+    """Exact covariance (..., 3, 3) of the naive 3D point given the true (r, β, ε).
+
+    With a = cos ε̂ cos β̂, b = cos ε̂ sin β̂, c = sin ε̂ and independent angle errors,
+    E[p pᵀ] = (r² + σr²) E[(a, b, c)(a, b, c)ᵀ], each entry a product of the one-angle moments.
+    """
+    r, az, el = _f(r), _f(azimuth), _f(elevation)
+    sb, se = _f(sigma_azimuth) ** 2, _f(sigma_elevation) ** 2
+    m2 = r * r + _f(sigma_r) ** 2
+    # One-angle moments: E[cos], E[sin], E[cos²], E[sin²], E[sin cos].
+    eb1, ee1 = np.exp(-sb / 2.0), np.exp(-se / 2.0)
+    eb2, ee2 = np.exp(-2.0 * sb), np.exp(-2.0 * se)
+    cb, sb_, ce, se_ = eb1 * np.cos(az), eb1 * np.sin(az), ee1 * np.cos(el), ee1 * np.sin(el)
+    cb2 = 0.5 * (1.0 + eb2 * np.cos(2.0 * az))
+    sb2 = 0.5 * (1.0 - eb2 * np.cos(2.0 * az))
+    sbcb = 0.5 * eb2 * np.sin(2.0 * az)
+    ce2 = 0.5 * (1.0 + ee2 * np.cos(2.0 * el))
+    se2 = 0.5 * (1.0 - ee2 * np.cos(2.0 * el))
+    sece = 0.5 * ee2 * np.sin(2.0 * el)
+    second = [
+        [ce2 * cb2, ce2 * sbcb, sece * cb],
+        [ce2 * sbcb, ce2 * sb2, sece * sb_],
+        [sece * cb, sece * sb_, se2],
+    ]
+    mean = np.stack([r * ce * cb, r * ce * sb_, r * se_], axis=-1)
+    e_ppt = np.stack([np.stack(row, axis=-1) for row in second], axis=-2) * m2[..., None, None]
+    return e_ppt - mean[..., :, None] * mean[..., None, :]
+
+
+def convert_ucm_3d(
+    r: ArrayLike,
+    azimuth: ArrayLike,
+    elevation: ArrayLike,
+    sigma_r: ArrayLike,
+    sigma_azimuth: ArrayLike,
+    sigma_elevation: ArrayLike,
+) -> Converted:
+    """Unbiased 3D conversion: one factor e^(s/2) per angle in each coordinate.
+
+    κ = (e^((sβ+sε)/2), e^((sβ+sε)/2), e^(sε/2)) on (x, y, z); the covariance is the exact
+    true-conditioned one, D C D with D = diag(κ), evaluated at the measurement.
+    """
+    r, az, el = _f(r), _f(azimuth), _f(elevation)
+    sb, se = _f(sigma_azimuth) ** 2, _f(sigma_elevation) ** 2
+    kxy = np.exp((sb + se) / 2.0)
+    kz = np.exp(se / 2.0) * np.ones_like(kxy)
+    kappa = np.stack([kxy, kxy, kz], axis=-1)
+    cov = naive_cov_given_truth_3d(r, az, el, sigma_r, sigma_azimuth, sigma_elevation)
+    cov = kappa[..., :, None] * cov * kappa[..., None, :]
+    return Converted(kappa * _point_3d(r, az, el), cov)

@@ -1,0 +1,220 @@
+"""The Prosov experiment: converted-measurement Kalman filters by Monte Carlo.
+
+One radar at the origin, a target starting at 150 km on the x axis moving radially outward at
+200 m/s, σr = 250 m, σβ = 1° or 2°, T = 10 s, 60 scans (``shared/spec/conversion.md``). Every
+method filters the *same* noisy measurements (common random numbers), so differences between
+methods are not Monte Carlo noise of the measurements.
+
+Runs are processed in blocks of ``BLOCK_RUNS``; block b draws its noise from the b-th child of
+``numpy.random.SeedSequence(seed)``, so a result is reproducible bit for bit for the same seed
+and the first runs of a long experiment are the runs of a short one.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from core.conversion import METHODS_2D, convert
+from core.kalman_cv import CVBatch, cv_init, cv_predict, cv_update, empty_batch
+from core.metrics import MetricsAccumulator, TrackMetrics, delta_percent, nees_band
+from core.polar_filters import ekf_update, init_from_polar, ukf_update
+from core.scenario import ConstantVelocityTarget2D, polar_measurements, prosov_target
+from core.validation import ParameterError, check_choice, check_int, check_real
+
+POLAR_METHODS: tuple[str, ...] = ("ekf", "ukf")
+ALL_METHODS: tuple[str, ...] = METHODS_2D + POLAR_METHODS
+#: Runs per block: large enough that vector operations dominate Python overhead, small enough
+#: that a block's working set stays in cache.
+BLOCK_RUNS = 8192
+#: Upper limit of σβ accepted anywhere: beyond it a Cartesian Gaussian is meaningless.
+MAX_SIGMA_BETA_DEG = 20.0
+
+ProgressFn = Callable[[int, int], None]
+
+
+@dataclass(frozen=True)
+class TrackingConfig:
+    """One Monte Carlo tracking experiment with a single 2D radar at the origin.
+
+    Attributes:
+        sigma_r_m: range noise σr, m.
+        sigma_beta_deg: azimuth noise σβ, degrees.
+        runs: Monte Carlo runs M (>= 2).
+        seed: root seed of ``numpy.random.SeedSequence``.
+        target: the true trajectory (period and number of scans live there).
+        sigma_a_mps2: process-noise acceleration std of the filters (0: the paper's Q = 0).
+        sigma_v0_mps: initial velocity std of every track.
+        methods: which filters to run, from ``ALL_METHODS``.
+    """
+
+    sigma_r_m: float = 250.0
+    sigma_beta_deg: float = 1.0
+    runs: int = 1000
+    seed: int = 1
+    target: ConstantVelocityTarget2D = field(default_factory=prosov_target)
+    sigma_a_mps2: float = 0.0
+    sigma_v0_mps: float = 1000.0
+    methods: tuple[str, ...] = ALL_METHODS
+
+    def __post_init__(self) -> None:
+        check_real("sigma_r_m", self.sigma_r_m, low=0.0, high=1e6)
+        check_real("sigma_beta_deg", self.sigma_beta_deg, low=0.0, high=MAX_SIGMA_BETA_DEG)
+        check_int("runs", self.runs, low=2)
+        check_int("seed", self.seed, low=0)
+        check_real("sigma_a_mps2", self.sigma_a_mps2, low=0.0, low_open=False)
+        check_real("sigma_v0_mps", self.sigma_v0_mps, low=0.0)
+        if not self.methods:
+            raise ParameterError(f"methods must name at least one of {', '.join(ALL_METHODS)}")
+        for m in self.methods:
+            check_choice("method", m, ALL_METHODS)
+
+    @property
+    def sigma_beta_rad(self) -> float:
+        return float(np.deg2rad(self.sigma_beta_deg))
+
+
+@dataclass(frozen=True)
+class TrackingResult:
+    """Per-scan statistics of every method for one configuration.
+
+    Attributes:
+        config: what was run.
+        n: (N,) scan numbers 1 … N.
+        metrics: method name → per-scan statistics.
+        nees_pos_band95 / nees_state_band95: 95% χ² band of the run-averaged NEES.
+    """
+
+    config: TrackingConfig
+    n: NDArray[np.int64]
+    metrics: dict[str, TrackMetrics]
+    nees_pos_band95: tuple[float, float]
+    nees_state_band95: tuple[float, float]
+
+    def delta_x_percent(self) -> dict[str, NDArray[np.float64]]:
+        """Prosov's Δx(n) of ``seed`` against ``naive`` under the three readings of σ̂x."""
+        a, b = self.metrics["seed"], self.metrics["naive"]
+        return {
+            "filter": delta_percent(a.sigma_x_filter, b.sigma_x_filter),
+            "rmse": delta_percent(a.rmse_x, b.rmse_x),
+            "std": delta_percent(a.std_x, b.std_x),
+        }
+
+
+def block_sizes(runs: int, block: int = BLOCK_RUNS) -> list[int]:
+    """Split ``runs`` into blocks of ``block`` runs (the last one shorter)."""
+    full, rest = divmod(runs, block)
+    return [block] * full + ([rest] if rest else [])
+
+
+def filter_block(
+    method: str,
+    r_hat: NDArray[np.float64],
+    beta_hat: NDArray[np.float64],
+    config: TrackingConfig,
+    on_scan: Callable[[int, CVBatch], None],
+) -> CVBatch:
+    """Run one method over a block of runs; ``on_scan(n, state)`` sees every filtered state.
+
+    Args:
+        r_hat, beta_hat: (m, N) measured ranges (m) and azimuths (rad).
+    Returns:
+        The state after the last scan.
+
+    Tracks start at scan 1 from the first measurement: the converted point of the method
+    (``ducm`` starts like ``ucm``: there is no prediction yet) or, for the EKF and UKF, the
+    naive point with its linearized covariance; velocity 0 with std ``sigma_v0_mps``.
+    """
+    sr, sb = config.sigma_r_m, config.sigma_beta_rad
+    T, qa = config.target.period_s, config.sigma_a_mps2
+    m, steps = r_hat.shape
+    if method in POLAR_METHODS:
+        state = init_from_polar(r_hat[:, 0], beta_hat[:, 0], sr, sb, config.sigma_v0_mps)
+    else:
+        first = convert("ucm" if method == "ducm" else method, r_hat[:, 0], beta_hat[:, 0], sr, sb)
+        state = cv_init(first.z, first.R, config.sigma_v0_mps)
+    on_scan(0, state)
+    # Two buffers, ping-ponged: prediction into one, update into the other.
+    pred_buf, post_buf = empty_batch(m), empty_batch(m)
+    for n in range(1, steps):
+        pred = cv_predict(state, T, qa, out=pred_buf)
+        r_n, b_n = r_hat[:, n], beta_hat[:, n]
+        if method == "ekf":
+            state = ekf_update(pred, r_n, b_n, sr, sb, out=post_buf)
+        elif method == "ukf":
+            state = ukf_update(pred, r_n, b_n, sr, sb, out=post_buf)
+        else:
+            predicted_xy = pred.x[:, [0, 2]] if method == "ducm" else None
+            c = convert(method, r_n, b_n, sr, sb, predicted_xy)
+            state = cv_update(pred, c.z, c.R, out=post_buf)
+        on_scan(n, state)  # state lives in post_buf; the next prediction writes pred_buf
+    return state
+
+
+def run_tracking(
+    config: TrackingConfig,
+    progress: ProgressFn | None = None,
+    block: int = BLOCK_RUNS,
+) -> TrackingResult:
+    """Monte Carlo of every configured method; statistics accumulated block by block.
+
+    Args:
+        progress: called as ``progress(runs_done, runs_total)`` after each block.
+    """
+    truth = config.target.truth()
+    steps = truth.shape[0]
+    acc = {m: MetricsAccumulator(steps) for m in config.methods}
+    sizes = block_sizes(config.runs, block)
+    children = np.random.SeedSequence(config.seed).spawn(len(sizes))
+    done = 0
+    for size, child in zip(sizes, children, strict=True):
+        rng = np.random.default_rng(child)
+        r_hat, beta_hat = polar_measurements(
+            truth, config.sigma_r_m, config.sigma_beta_rad, size, rng
+        )
+        for method in config.methods:
+            block_acc = MetricsAccumulator(steps)
+            filter_block(
+                method, r_hat, beta_hat, config,
+                lambda n, st, a=block_acc: a.add(n, st, truth[n]),
+            )
+            acc[method].merge(block_acc)
+        done += size
+        if progress is not None:
+            progress(done, config.runs)
+    return TrackingResult(
+        config=config,
+        n=np.arange(1, steps + 1),
+        metrics={m: a.result() for m, a in acc.items()},
+        nees_pos_band95=nees_band(2, config.runs),
+        nees_state_band95=nees_band(4, config.runs),
+    )
+
+
+def prosov_configs(
+    sigma_beta_deg: Sequence[float] = (1.0, 2.0),
+    runs: int = 1000,
+    seed: int = 1,
+    period_s: float = 10.0,
+    steps: int = 60,
+    sigma_r_m: float = 250.0,
+    methods: Sequence[str] = ALL_METHODS,
+) -> list[TrackingConfig]:
+    """The seed's experiment, one configuration per σβ (the paper: 1° and 2°)."""
+    check_real("period_s", period_s, low=0.0)
+    check_int("steps", steps, low=2)
+    target = prosov_target(period_s, steps)
+    return [
+        TrackingConfig(
+            sigma_r_m=sigma_r_m,
+            sigma_beta_deg=float(sb),
+            runs=runs,
+            seed=seed,
+            target=target,
+            methods=tuple(methods),
+        )
+        for sb in sigma_beta_deg
+    ]

@@ -1,0 +1,163 @@
+"""The ``radarviz`` command line.
+
+Bad input gets one line on standard error naming the parameter and its allowed range, and exit
+status 2; no traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Sequence
+from typing import NoReturn
+
+from core.prosov import ALL_METHODS, MAX_SIGMA_BETA_DEG, prosov_configs, run_tracking
+from core.validation import ParameterError, check_int, check_real
+
+EXIT_USAGE = 2
+#: Runs × cases above which a progress bar is drawn on standard error.
+PROGRESS_MIN_RUNS = 20_000
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse, but errors are one line (no usage dump) and exit with status 2."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(EXIT_USAGE, f"radarviz: error: {message}\n")
+
+
+def _fail(message: str) -> int:
+    print(f"radarviz: error: {message}", file=sys.stderr)
+    return EXIT_USAGE
+
+
+def _number(text: str) -> float:
+    """argparse type: any float text, NaN included, so the range check can name it."""
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+
+
+def _integer(text: str) -> int:
+    try:
+        return int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(
+        prog="radarviz",
+        description="Radar target-tracking research: converted measurements, Doppler, fusion.",
+    )
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+
+    rep = sub.add_parser("reproduce", help="reproduce a paper's experiment")
+    rep_sub = rep.add_subparsers(dest="experiment", required=True, parser_class=_Parser)
+    pro = rep_sub.add_parser(
+        "prosov", help="converted-measurement Kalman filters (Prosov), Monte Carlo"
+    )
+    pro.add_argument("--sigma-beta-deg", type=_number, nargs="+", default=[1.0, 2.0],
+                     help="azimuth noise σβ in degrees, one case each (default: 1 2)")
+    pro.add_argument("--sigma-r-m", type=_number, default=250.0,
+                     help="range noise σr in metres (default 250)")
+    pro.add_argument("--runs", type=_integer, default=1000, help="Monte Carlo runs (default 1000)")
+    pro.add_argument("--seed", type=_integer, default=1, help="random seed (default 1)")
+    pro.add_argument("--period", type=_number, default=10.0, help="scan period T in s (default 10)")
+    pro.add_argument("--steps", type=_integer, default=60, help="scans per run (default 60)")
+    pro.add_argument("--methods", nargs="+", default=list(ALL_METHODS), metavar="METHOD",
+                     help=f"methods to run (default all: {' '.join(ALL_METHODS)})")
+    pro.add_argument("--json", action="store_true",
+                     help="print only the JSON document on standard output")
+    pro.add_argument("--plot", metavar="FILE.png", help="write the figure (Figs. 1-2, bias, NEES)")
+
+    bench = sub.add_parser("bench", help="speed of the batched filters vs filterpy")
+    bench.add_argument("--json", action="store_true", help="print only JSON")
+    bench.add_argument("--runs", type=_integer, nargs="+", default=[10_000, 100_000],
+                       help="run counts to time the batched filter at (default 10000 100000)")
+    bench.add_argument("--filterpy-runs", type=_integer, default=200,
+                       help="runs of the filterpy subsample (default 200)")
+    return parser
+
+
+def _cmd_reproduce_prosov(args: argparse.Namespace) -> int:
+    for sb in args.sigma_beta_deg:
+        check_real("--sigma-beta-deg", sb, low=0.0, high=MAX_SIGMA_BETA_DEG)
+    check_real("--sigma-r-m", args.sigma_r_m, low=0.0, high=1e6)
+    check_int("--runs", args.runs, low=2)
+    check_int("--seed", args.seed, low=0)
+    check_real("--period", args.period, low=0.0, high=3600.0)
+    check_int("--steps", args.steps, low=2, high=100_000)
+    for m in args.methods:
+        if m not in ALL_METHODS:
+            raise ParameterError(f"--methods must be among {', '.join(ALL_METHODS)} (got {m!r})")
+    if args.plot is not None and not args.plot.strip():
+        raise ParameterError("--plot must name a file (got an empty string)")
+    configs = prosov_configs(
+        sigma_beta_deg=args.sigma_beta_deg, runs=args.runs, seed=args.seed,
+        period_s=args.period, steps=args.steps, sigma_r_m=args.sigma_r_m, methods=args.methods,
+    )
+    from viz_app.prosov_report import format_prosov_table, prosov_document
+    from viz_app.runtime import tune_allocator
+
+    tune_allocator()
+    results = []
+    show_progress = args.runs * len(configs) >= PROGRESS_MIN_RUNS
+    for cfg in configs:
+        bar = None
+        if show_progress:
+            from viz_app.progress import ProgressBar
+
+            bar = ProgressBar(f"prosov σβ={cfg.sigma_beta_deg:g}°")
+        results.append(run_tracking(cfg, progress=bar))
+    doc = prosov_document(results)
+    if args.plot:
+        from viz_app.prosov_plot import plot_prosov
+
+        plot_prosov(doc, args.plot)
+    if args.json:
+        json.dump(doc, sys.stdout, allow_nan=False)
+        sys.stdout.write("\n")
+    else:
+        print(format_prosov_table(doc))
+        if args.plot:
+            print(f"\nfigure written to {args.plot}")
+    return 0
+
+
+def _cmd_bench(args: argparse.Namespace) -> int:
+    for m in args.runs:
+        check_int("--runs", m, low=100, high=10_000_000)
+    check_int("--filterpy-runs", args.filterpy_runs, low=1, high=100_000)
+    from viz_app.bench import format_bench, run_bench
+    from viz_app.runtime import tune_allocator
+
+    tune_allocator()
+    doc = run_bench(runs=args.runs, filterpy_runs=args.filterpy_runs)
+    if args.json:
+        json.dump(doc, sys.stdout)
+        sys.stdout.write("\n")
+    else:
+        print(format_bench(doc))
+    return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``radarviz`` console script; returns the exit status."""
+    args = build_parser().parse_args(argv)
+    try:
+        if args.command == "reproduce" and args.experiment == "prosov":
+            return _cmd_reproduce_prosov(args)
+        if args.command == "bench":
+            return _cmd_bench(args)
+    except ParameterError as exc:
+        return _fail(str(exc))
+    except OSError as exc:
+        return _fail(f"{exc.strerror or exc}: {exc.filename}" if exc.filename else str(exc))
+    return _fail(f"unknown command {args.command!r}")
+
+
+if __name__ == "__main__":
+    sys.exit(main())
