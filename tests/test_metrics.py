@@ -1,0 +1,61 @@
+"""Streaming metrics equal the direct computation; the NEES band has its stated coverage."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from core.kalman_cv import as_batch
+from core.metrics import MetricsAccumulator, delta_percent, nees_band
+
+
+def test_accumulator_equals_direct_statistics_over_blocks() -> None:
+    rng = np.random.default_rng(2)
+    m, steps = 3000, 3
+    truth = np.array([[1e5, 10.0, 2e4, -5.0]] * steps)
+    acc = MetricsAccumulator(steps)
+    xs, Ps = [], []
+    for n in range(steps):
+        a = rng.normal(size=(m, 4, 4))
+        P = a @ a.transpose(0, 2, 1) * 100.0 + np.eye(4) * 50.0
+        x = truth[n] + rng.normal(size=(m, 4)) * [20.0, 1.0, 30.0, 2.0] + [5.0, 0, -3.0, 0]
+        xs.append(x)
+        Ps.append(P)
+        for lo in range(0, m, 1024):  # blocks of unequal size, merged
+            block = MetricsAccumulator(steps)
+            block.add(n, as_batch(x[lo : lo + 1024], P[lo : lo + 1024]), truth[n])
+            acc.merge(block)
+    res = acc.result()
+    for n in range(steps):
+        e = xs[n] - truth[n]
+        u = truth[n, [0, 2]] / np.hypot(truth[n, 0], truth[n, 2])
+        epos = e[:, [0, 2]]
+        Ppos = Ps[n][:, [0, 2]][:, :, [0, 2]]
+        np.testing.assert_allclose(res.bias_x[n], e[:, 0].mean(), rtol=1e-12)
+        np.testing.assert_allclose(res.rmse_x[n], np.sqrt((e[:, 0] ** 2).mean()), rtol=1e-12)
+        np.testing.assert_allclose(res.std_x[n], e[:, 0].std(ddof=1), rtol=1e-9)
+        np.testing.assert_allclose(res.bias_range[n], (epos @ u).mean(), rtol=1e-9)
+        np.testing.assert_allclose(
+            res.bias_cross[n], (epos @ np.array([-u[1], u[0]])).mean(), rtol=1e-9
+        )
+        np.testing.assert_allclose(
+            res.sigma_x_filter[n], np.sqrt(Ps[n][:, 0, 0].mean()), rtol=1e-12
+        )
+        nees_pos = np.einsum("mi,mij,mj->m", epos, np.linalg.inv(Ppos), epos).mean()
+        nees = np.einsum("mi,mij,mj->m", e, np.linalg.inv(Ps[n]), e).mean()
+        np.testing.assert_allclose(res.nees_pos[n], nees_pos, rtol=1e-9)
+        np.testing.assert_allclose(res.nees_state[n], nees, rtol=1e-9)
+
+
+def test_nees_band_coverage_is_95_percent() -> None:
+    """Averages of M χ²(2) draws fall inside the band with probability 0.95."""
+    rng = np.random.default_rng(9)
+    runs, trials = 50, 40_000
+    lo, hi = nees_band(2, runs)
+    avg = rng.chisquare(2, size=(trials, runs)).mean(axis=1)
+    inside = np.mean((avg >= lo) & (avg <= hi))
+    se = np.sqrt(0.95 * 0.05 / trials)
+    assert abs(inside - 0.95) < 4.5 * se
+
+
+def test_delta_percent() -> None:
+    np.testing.assert_allclose(delta_percent(np.array([102.0]), np.array([100.0])), [2.0])
