@@ -213,8 +213,23 @@ def cv_update(
     """Kalman update of every run with a Cartesian position z (M, 2), covariance R (M, 2, 2)."""
     z = np.asarray(z, dtype=np.float64)
     R = np.asarray(R, dtype=np.float64)
+    return cv_update_parts(state, z[:, 0], z[:, 1], R[:, 0, 0], R[:, 0, 1], R[:, 1, 1], out)
+
+
+def cv_update_parts(
+    state: CVBatch,
+    zx: Vec,
+    zy: Vec,
+    r00: Vec,
+    r01: Vec,
+    r11: Vec,
+    out: CVBatch | None = None,
+) -> CVBatch:
+    """``cv_update`` with z and R given as their (M,) components (the Monte Carlo fast path).
+
+        S = H2 P H2ᵀ + R,   K = P H2ᵀ S⁻¹   (2 × 2 inverse written out),   then Joseph.
+    """
     P = state.P
-    r00, r01, r11 = R[:, 0, 0], R[:, 0, 1], R[:, 1, 1]
     s00 = P[:, 0, 0] + r00
     s01 = P[:, 0, 2] + r01
     s11 = P[:, 2, 2] + r11
@@ -225,7 +240,7 @@ def cv_update(
         u0, u1 = P[:, i, 0], P[:, i, 2]
         K[i, 0] = u0 * i00 + u1 * i01
         K[i, 1] = u0 * i01 + u1 * i11
-    nu = (z[:, 0] - state.x[:, 0], z[:, 1] - state.x[:, 2])
+    nu = (zx - state.x[:, 0], zy - state.x[:, 2])
     return joseph_update_position(state, nu, K, K, (s00, s01, s11), out)
 
 
