@@ -63,6 +63,7 @@ class Converted(NamedTuple):
 
 def _sym2(r11: NDArray, r12: NDArray, r22: NDArray) -> NDArray[np.float64]:
     """Stack three (...) arrays into (..., 2, 2) symmetric matrices."""
+    r11, r12, r22 = np.broadcast_arrays(r11, r12, r22)
     row0 = np.stack([r11, r12], axis=-1)
     row1 = np.stack([r12, r22], axis=-1)
     return np.stack([row0, row1], axis=-2)
@@ -75,6 +76,37 @@ def _f(a: ArrayLike) -> NDArray[np.float64]:
 # --------------------------------------------------------------------------------------------
 # Exact moments (used by ucm / ducm and by the tests)
 # --------------------------------------------------------------------------------------------
+
+
+class _AngleMoments(NamedTuple):
+    """Moments of (cos θ̂, sin θ̂) for θ̂ ~ N(θ, s), written without cancellation."""
+
+    mc: NDArray[np.float64]  # E[cos θ̂] = e^(−s/2) cos θ
+    ms: NDArray[np.float64]  # E[sin θ̂] = e^(−s/2) sin θ
+    ecc: NDArray[np.float64]  # E[cos² θ̂] = ½(1 + e^(−2s) cos 2θ)
+    ess: NDArray[np.float64]  # E[sin² θ̂] = ½(1 − e^(−2s) cos 2θ)
+    esc: NDArray[np.float64]  # E[sin θ̂ cos θ̂] = ½ e^(−2s) sin 2θ
+    vcc: NDArray[np.float64]  # Var(cos θ̂) = ½ cos²θ (1 − e^(−s))² + ½ sin²θ (1 − e^(−2s))
+    vss: NDArray[np.float64]  # Var(sin θ̂) = ½ sin²θ (1 − e^(−s))² + ½ cos²θ (1 − e^(−2s))
+    csc: NDArray[np.float64]  # Cov(sin θ̂, cos θ̂) = −sin θ cos θ e^(−s) (1 − e^(−s))
+
+
+def _angle_moments(theta: NDArray, s: NDArray) -> _AngleMoments:
+    """One-angle moments; 1 − e^(−s) via expm1 so the O(s) variances keep full precision."""
+    c, sn = np.cos(theta), np.sin(theta)
+    cc, ss, sc = c * c, sn * sn, sn * c
+    e_half, e1, e2 = np.exp(-s / 2.0), np.exp(-s), np.exp(-2.0 * s)
+    om1, om2 = -np.expm1(-s), -np.expm1(-2.0 * s)
+    return _AngleMoments(
+        mc=e_half * c,
+        ms=e_half * sn,
+        ecc=0.5 * (cc * (1.0 + e2) + ss * om2),
+        ess=0.5 * (ss * (1.0 + e2) + cc * om2),
+        esc=e2 * sc,
+        vcc=0.5 * (cc * om1 * om1 + ss * om2),
+        vss=0.5 * (ss * om1 * om1 + cc * om2),
+        csc=-e1 * om1 * sc,
+    )
 
 
 def scale_factor(method: str, sigma_beta: ArrayLike) -> NDArray[np.float64]:
@@ -112,17 +144,15 @@ def naive_cov_given_truth(
         Cxy = (r² + σr²) ½ e^(−2s) sin 2β     − r² e^(−s) sin β cos β
 
     Scaling the point by κ scales this by κ², so it also gives the ucm covariance.
+
+    Numerics: evaluated as σr² E[u uᵀ] + r² Cov(u), u = (cos β̂, sin β̂), which is the same
+    thing with the O(r²) cancellation removed (as written above, the radial variance loses
+    ~eps·r²/σr² relative precision and can come out ≤ 0 once r/σr ≳ 5e7 at small s).
     """
-    r, beta, sr, s = _f(r), _f(beta), _f(sigma_r), _f(sigma_beta) ** 2
-    m2 = r * r + sr * sr
-    e2 = np.exp(-2.0 * s)
-    e1 = np.exp(-s)
-    c, sn = np.cos(beta), np.sin(beta)
-    c2b, s2b = np.cos(2.0 * beta), np.sin(2.0 * beta)
-    cxx = m2 * 0.5 * (1.0 + e2 * c2b) - r * r * e1 * c * c
-    cyy = m2 * 0.5 * (1.0 - e2 * c2b) - r * r * e1 * sn * sn
-    cxy = m2 * 0.5 * e2 * s2b - r * r * e1 * sn * c
-    return _sym2(cxx, cxy, cyy)
+    r, beta, s = _f(r), _f(beta), _f(sigma_beta) ** 2
+    r2, sr2 = r * r, _f(sigma_r) ** 2
+    m = _angle_moments(beta, s)
+    return _sym2(sr2 * m.ecc + r2 * m.vcc, sr2 * m.esc + r2 * m.csc, sr2 * m.ess + r2 * m.vss)
 
 
 # --------------------------------------------------------------------------------------------
@@ -164,11 +194,13 @@ def averaged_cov(
     e2 = np.exp(-2.0 * s)
     ch1, ch2, sh1, sh2 = np.cosh(s), np.cosh(2.0 * s), np.sinh(s), np.sinh(2.0 * s)
     r2 = r * r
-    a_c, a_s = ch2 - ch1, sh2 - sh1
+    # cosh 2s − cosh s and sinh 2s − sinh s as products (no cancellation at small s).
+    sh_half = np.sinh(0.5 * s)
+    a_c, a_s = 2.0 * np.sinh(1.5 * s) * sh_half, 2.0 * np.cosh(1.5 * s) * sh_half
     b_c, b_s = 2.0 * ch2 - ch1, 2.0 * sh2 - sh1
     c11 = r2 * e2 * (c2 * a_c + s2 * a_s) + sr2 * e2 * (c2 * b_c + s2 * b_s)
     c22 = r2 * e2 * (s2 * a_c + c2 * a_s) + sr2 * e2 * (s2 * b_c + c2 * b_s)
-    c12 = np.sin(beta) * np.cos(beta) * np.exp(-4.0 * s) * (sr2 + (r2 + sr2) * (1.0 - np.exp(s)))
+    c12 = np.sin(beta) * np.cos(beta) * np.exp(-4.0 * s) * (sr2 - (r2 + sr2) * np.expm1(s))
     return _sym2(c11, c12, c22)
 
 
@@ -297,7 +329,7 @@ def convert_naive_3d(
     sigma_elevation: ArrayLike,
 ) -> Converted:
     """Naive 3D conversion with the first-order covariance J diag(σr², σβ², σε²) Jᵀ."""
-    r, az, el = _f(r), _f(azimuth), _f(elevation)
+    r, az, el = np.broadcast_arrays(_f(r), _f(azimuth), _f(elevation))
     ca, sa, ce, se = np.cos(az), np.sin(az), np.cos(el), np.sin(el)
     # Columns of J: ∂p/∂r, ∂p/∂β, ∂p/∂ε.
     j_r = np.stack([ce * ca, ce * sa, se], axis=-1)
@@ -326,28 +358,27 @@ def naive_cov_given_truth_3d(
 
     With a = cos ε̂ cos β̂, b = cos ε̂ sin β̂, c = sin ε̂ and independent angle errors,
     E[p pᵀ] = (r² + σr²) E[(a, b, c)(a, b, c)ᵀ], each entry a product of the one-angle moments.
+
+    Numerics: evaluated as σr² E[u uᵀ] + r² Cov(u), u = (a, b, c), with each entry of Cov(u)
+    from Cov(XY, X'Y') = Cov(X, X') E[YY'] + E[X] E[X'] Cov(Y, Y') for the independent
+    elevation (X) and azimuth (Y) factors, so no O(r²) terms cancel.
     """
-    r, az, el = _f(r), _f(azimuth), _f(elevation)
-    sb, se = _f(sigma_azimuth) ** 2, _f(sigma_elevation) ** 2
-    m2 = r * r + _f(sigma_r) ** 2
-    # One-angle moments: E[cos], E[sin], E[cos²], E[sin²], E[sin cos].
-    eb1, ee1 = np.exp(-sb / 2.0), np.exp(-se / 2.0)
-    eb2, ee2 = np.exp(-2.0 * sb), np.exp(-2.0 * se)
-    cb, sb_, ce, se_ = eb1 * np.cos(az), eb1 * np.sin(az), ee1 * np.cos(el), ee1 * np.sin(el)
-    cb2 = 0.5 * (1.0 + eb2 * np.cos(2.0 * az))
-    sb2 = 0.5 * (1.0 - eb2 * np.cos(2.0 * az))
-    sbcb = 0.5 * eb2 * np.sin(2.0 * az)
-    ce2 = 0.5 * (1.0 + ee2 * np.cos(2.0 * el))
-    se2 = 0.5 * (1.0 - ee2 * np.cos(2.0 * el))
-    sece = 0.5 * ee2 * np.sin(2.0 * el)
-    second = [
-        [ce2 * cb2, ce2 * sbcb, sece * cb],
-        [ce2 * sbcb, ce2 * sb2, sece * sb_],
-        [sece * cb, sece * sb_, se2],
-    ]
-    mean = np.stack([r * ce * cb, r * ce * sb_, r * se_], axis=-1)
-    e_ppt = np.stack([np.stack(row, axis=-1) for row in second], axis=-2) * m2[..., None, None]
-    return e_ppt - mean[..., :, None] * mean[..., None, :]
+    r = _f(r)
+    r2, sr2 = r * r, _f(sigma_r) ** 2
+    b = _angle_moments(_f(azimuth), _f(sigma_azimuth) ** 2)
+    e = _angle_moments(_f(elevation), _f(sigma_elevation) ** 2)
+    mc_e2 = e.mc * e.mc
+    # (second moment E[u_i u_j], covariance Cov(u_i, u_j)) for the upper triangle.
+    xx = (e.ecc * b.ecc, e.vcc * b.ecc + mc_e2 * b.vcc)
+    xy = (e.ecc * b.esc, e.vcc * b.esc + mc_e2 * b.csc)
+    yy = (e.ecc * b.ess, e.vcc * b.ess + mc_e2 * b.vss)
+    xz = (e.esc * b.mc, e.csc * b.mc)
+    yz = (e.esc * b.ms, e.csc * b.ms)
+    zz = (e.ess, e.vss)
+    entries = [sr2 * m2 + r2 * cv for m2, cv in (xx, xy, xz, yy, yz, zz)]
+    cxx, cxy, cxz, cyy, cyz, czz = np.broadcast_arrays(*entries)
+    rows = [[cxx, cxy, cxz], [cxy, cyy, cyz], [cxz, cyz, czz]]
+    return np.stack([np.stack(row, axis=-1) for row in rows], axis=-2)
 
 
 def convert_ucm_3d(
@@ -363,7 +394,7 @@ def convert_ucm_3d(
     κ = (e^((sβ+sε)/2), e^((sβ+sε)/2), e^(sε/2)) on (x, y, z); the covariance is the exact
     true-conditioned one, D C D with D = diag(κ), evaluated at the measurement.
     """
-    r, az, el = _f(r), _f(azimuth), _f(elevation)
+    r, az, el = np.broadcast_arrays(_f(r), _f(azimuth), _f(elevation))
     sb, se = _f(sigma_azimuth) ** 2, _f(sigma_elevation) ** 2
     kxy = np.exp((sb + se) / 2.0)
     kz = np.exp(se / 2.0) * np.ones_like(kxy)

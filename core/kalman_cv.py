@@ -16,8 +16,8 @@ Layout. The run index leads every public array: ``x`` is (M, 4) and ``P`` is (M,
 arrays are transposed views of component-major storage ((4, M) and (4, 4, M)), so that each
 component ``P[:, i, j]`` is one contiguous vector and the update is written as a few hundred
 vector operations over all runs instead of M small matrix products: this is what makes 10⁵
-runs cheap (see ``radarviz bench``). Only H2-shaped measurements (position, or a 2-vector
-whose Jacobian is G·H2, as in the polar EKF) are supported; that is the structure exploited.
+runs cheap (see ``radarviz bench``). Only position measurements (H = H2) are supported;
+that is the structure exploited (the polar EKF maps its update onto one).
 """
 
 from __future__ import annotations
@@ -167,21 +167,22 @@ def joseph_update_position(
     state: CVBatch,
     innovation: tuple[Vec, Vec],
     K: NDArray[np.float64],
-    L: NDArray[np.float64],
     S: tuple[Vec, Vec, Vec],
     out: CVBatch | None = None,
 ) -> CVBatch:
-    """Joseph-form update for a 2-vector measurement with Jacobian G·H2 (G is 2 × 2 per run).
+    """Joseph-form update for a position measurement (H = H2), any gain K.
 
         x⁺ = x + K ν
-        P⁺ = (I − L H2) P (I − L H2)ᵀ + K R Kᵀ,          L = K G,  S = G H2 P H2ᵀ Gᵀ + R
-           = P − L Uᵀ − U Lᵀ + K S Kᵀ,                    U = P H2ᵀ  (columns 0 and 2 of P)
+        P⁺ = (I − K H2) P (I − K H2)ᵀ + K R Kᵀ,            S = H2 P H2ᵀ + R
+           = P − K Uᵀ + (K S − U) Kᵀ,                       U = P H2ᵀ  (columns 0 and 2 of P)
 
-    The second line is the Joseph form multiplied out; it is an identity for *any* gain K, so
-    an error δK in the gain still changes P only at second order (the reason to prefer Joseph
-    over P − K H P), and it costs about half the vector operations. For a position
-    measurement G = I and L = K. ``K`` and ``L`` are (4, 2, M) component-major gains,
-    ``innovation`` the two (M,) components of ν, ``S`` the (M,) entries (s00, s01, s11).
+    The second line is the Joseph form multiplied out: an identity for *any* gain K, so an
+    error δK in the gain changes P only at second order (the reason to prefer Joseph over
+    P − K H P); the term K S − U vanishes for the optimal gain up to rounding. It costs about
+    half the vector operations of forming (I − K H2) P first. ``K`` is the (4, 2, M)
+    component-major gain, ``innovation`` the two (M,) components of ν, ``S`` the (M,) entries
+    (s00, s01, s11). A polar EKF uses this too, after mapping its innovation and R to position
+    (see ``core.polar_filters.ekf_update``).
     """
     x, P = state.x, state.P
     out = _target(state, out)
@@ -191,18 +192,13 @@ def joseph_update_position(
     s00, s01, s11 = S
     U0 = [P[:, i, 0] for i in range(4)]
     U1 = [P[:, i, 2] for i in range(4)]
-    # KS − U: zero up to rounding for the optimal gain, kept so the identity holds for any K.
     V0 = [K[i, 0] * s00 + K[i, 1] * s01 - U0[i] for i in range(4)]
     V1 = [K[i, 0] * s01 + K[i, 1] * s11 - U1[i] for i in range(4)]
-    if L is not K:
-        # −U Lᵀ + K S Kᵀ  =  (KS − U) Kᵀ + U (K − L)ᵀ
-        D = K - L
     oP = out.P
     for i, j in _UPPER4:
-        acc = P[:, i, j] - L[i, 0] * U0[j] - L[i, 1] * U1[j] + V0[i] * K[j, 0] + V1[i] * K[j, 1]
-        if L is not K:
-            acc += U0[i] * D[j, 0] + U1[i] * D[j, 1]
-        oP[:, i, j] = acc
+        oP[:, i, j] = (
+            P[:, i, j] - K[i, 0] * U0[j] - K[i, 1] * U1[j] + V0[i] * K[j, 0] + V1[i] * K[j, 1]
+        )
     _mirror(oP)
     return out
 
@@ -241,7 +237,7 @@ def cv_update_parts(
         K[i, 0] = u0 * i00 + u1 * i01
         K[i, 1] = u0 * i01 + u1 * i11
     nu = (zx - state.x[:, 0], zy - state.x[:, 2])
-    return joseph_update_position(state, nu, K, K, (s00, s01, s11), out)
+    return joseph_update_position(state, nu, K, (s00, s01, s11), out)
 
 
 def quad_form_inv(P: NDArray[np.float64], e: NDArray[np.float64]) -> NDArray[np.float64]:
