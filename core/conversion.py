@@ -39,7 +39,6 @@ All functions broadcast over any leading batch shape ``(...)``. Angles are radia
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from typing import NamedTuple
 
 import numpy as np
@@ -93,7 +92,11 @@ class _AngleMoments(NamedTuple):
 
 def _angle_moments(theta: NDArray, s: NDArray) -> _AngleMoments:
     """One-angle moments; 1 − e^(−s) via expm1 so the O(s) variances keep full precision."""
-    c, sn = np.cos(theta), np.sin(theta)
+    return _angle_moments_cs(np.cos(theta), np.sin(theta), s)
+
+
+def _angle_moments_cs(c: NDArray, sn: NDArray, s: NDArray) -> _AngleMoments:
+    """``_angle_moments`` from cos θ and sin θ (callers often have them without trigonometry)."""
     cc, ss, sc = c * c, sn * sn, sn * c
     e_half, e1, e2 = np.exp(-s / 2.0), np.exp(-s), np.exp(-2.0 * s)
     om1, om2 = -np.expm1(-s), -np.expm1(-2.0 * s)
@@ -149,10 +152,45 @@ def naive_cov_given_truth(
     thing with the O(r²) cancellation removed (as written above, the radial variance loses
     ~eps·r²/σr² relative precision and can come out ≤ 0 once r/σr ≳ 5e7 at small s).
     """
-    r, beta, s = _f(r), _f(beta), _f(sigma_beta) ** 2
-    r2, sr2 = r * r, _f(sigma_r) ** 2
-    m = _angle_moments(beta, s)
-    return _sym2(sr2 * m.ecc + r2 * m.vcc, sr2 * m.esc + r2 * m.csc, sr2 * m.ess + r2 * m.vss)
+    r, beta = _f(r), _f(beta)
+    return _sym2(*_true_cov_parts(r, np.cos(beta), np.sin(beta), _f(sigma_r), _f(sigma_beta)))
+
+
+CovParts = tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]
+
+
+def _true_cov_parts(
+    r: NDArray, c: NDArray, sn: NDArray, sr: NDArray, sb: NDArray, scale: ArrayLike = 1.0
+) -> CovParts:
+    """(Cxx, Cxy, Cyy) of ``naive_cov_given_truth`` × ``scale``, bearing given by cos c, sin sn.
+
+    σr² E[u uᵀ] + r² Cov(u) regrouped by cos²β, sin²β and sin β cos β (every term of the
+    diagonal is non-negative, so nothing cancels), with the scalar coefficients folded first:
+
+        Cxx = cos²β · A + sin²β · B,   Cyy = sin²β · A + cos²β · B,   Cxy = sin β cos β · C
+        A = ½[σr² (1 + e^(−2s)) + r² (1 − e^(−s))²],   B = ½ (σr² + r²)(1 − e^(−2s))
+        C = σr² e^(−2s) − r² e^(−s) (1 − e^(−s))
+    """
+    s = sb * sb
+    k = _f(scale)
+    e1, e2 = np.exp(-s), np.exp(-2.0 * s)
+    om1, om2 = -np.expm1(-s), -np.expm1(-2.0 * s)
+    sr2 = sr * sr
+    r2 = r * r
+    a_const = (0.5 * k) * sr2 * (1.0 + e2)
+    A = r2 * ((0.5 * k) * om1 * om1)
+    A += a_const
+    B = r2 + sr2
+    B *= (0.5 * k) * om2
+    C = r2 * (-k * e1 * om1)
+    C += k * sr2 * e2
+    cc, ss = c * c, sn * sn
+    cxx = cc * A
+    cxx += ss * B
+    cyy = ss * A
+    cyy += cc * B
+    C = C * (sn * c)  # not in place: r and the bearing may broadcast against each other
+    return cxx, C, cyy
 
 
 # --------------------------------------------------------------------------------------------
@@ -169,10 +207,13 @@ def linearized_cov(
         R22 = σr² sin²β + r² s cos²β
         R12 = (σr² − r² s) sin β cos β
     """
-    r, beta, sr2, s = _f(r), _f(beta), _f(sigma_r) ** 2, _f(sigma_beta) ** 2
-    c, sn = np.cos(beta), np.sin(beta)
-    rs = r * r * s
-    return _sym2(sr2 * c * c + rs * sn * sn, (sr2 - rs) * sn * c, sr2 * sn * sn + rs * c * c)
+    r, beta = _f(r), _f(beta)
+    return _sym2(*_linearized_parts(r, np.cos(beta), np.sin(beta), _f(sigma_r), _f(sigma_beta)))
+
+
+def _linearized_parts(r: NDArray, c: NDArray, sn: NDArray, sr: NDArray, sb: NDArray) -> CovParts:
+    sr2, rs = sr * sr, r * r * (sb * sb)
+    return sr2 * c * c + rs * sn * sn, (sr2 - rs) * sn * c, sr2 * sn * sn + rs * c * c
 
 
 def averaged_cov(
@@ -189,8 +230,13 @@ def averaged_cov(
     covariance over the posterior of (r, β) given the measurement (flat prior); the tests check
     that identity by quadrature.
     """
-    r, beta, sr2, s = _f(r), _f(beta), _f(sigma_r) ** 2, _f(sigma_beta) ** 2
-    c2, s2 = np.cos(beta) ** 2, np.sin(beta) ** 2
+    r, beta = _f(r), _f(beta)
+    return _sym2(*_averaged_parts(r, np.cos(beta), np.sin(beta), _f(sigma_r), _f(sigma_beta)))
+
+
+def _averaged_parts(r: NDArray, c: NDArray, sn: NDArray, sr: NDArray, sb: NDArray) -> CovParts:
+    sr2, s = sr * sr, sb * sb
+    c2, s2 = c * c, sn * sn
     e2 = np.exp(-2.0 * s)
     ch1, ch2, sh1, sh2 = np.cosh(s), np.cosh(2.0 * s), np.sinh(s), np.sinh(2.0 * s)
     r2 = r * r
@@ -198,10 +244,10 @@ def averaged_cov(
     sh_half = np.sinh(0.5 * s)
     a_c, a_s = 2.0 * np.sinh(1.5 * s) * sh_half, 2.0 * np.cosh(1.5 * s) * sh_half
     b_c, b_s = 2.0 * ch2 - ch1, 2.0 * sh2 - sh1
-    c11 = r2 * e2 * (c2 * a_c + s2 * a_s) + sr2 * e2 * (c2 * b_c + s2 * b_s)
-    c22 = r2 * e2 * (s2 * a_c + c2 * a_s) + sr2 * e2 * (s2 * b_c + c2 * b_s)
-    c12 = np.sin(beta) * np.cos(beta) * np.exp(-4.0 * s) * (sr2 - (r2 + sr2) * np.expm1(s))
-    return _sym2(c11, c12, c22)
+    c11 = r2 * (e2 * (c2 * a_c + s2 * a_s)) + sr2 * e2 * (c2 * b_c + s2 * b_s)
+    c22 = r2 * (e2 * (s2 * a_c + c2 * a_s)) + sr2 * e2 * (s2 * b_c + c2 * b_s)
+    c12 = sn * c * np.exp(-4.0 * s) * (sr2 - (r2 + sr2) * np.expm1(s))
+    return c11, c12, c22
 
 
 # --------------------------------------------------------------------------------------------
@@ -209,16 +255,68 @@ def averaged_cov(
 # --------------------------------------------------------------------------------------------
 
 
-def _naive_point(r: NDArray, beta: NDArray) -> NDArray[np.float64]:
-    return np.stack([r * np.cos(beta), r * np.sin(beta)], axis=-1)
+class ConvertedParts(NamedTuple):
+    """A batch of 2D converted measurements as separate (...) components.
+
+    The Monte Carlo filter loop uses this form directly (no (..., 2, 2) arrays to build and
+    take apart); ``Converted`` is the stacked form.
+    """
+
+    x: NDArray[np.float64]
+    y: NDArray[np.float64]
+    r00: NDArray[np.float64]
+    r01: NDArray[np.float64]
+    r11: NDArray[np.float64]
+
+    def stacked(self) -> Converted:
+        x, y = np.broadcast_arrays(self.x, self.y)
+        return Converted(np.stack([x, y], axis=-1), _sym2(self.r00, self.r01, self.r11))
+
+
+def convert_parts(
+    method: str,
+    r: ArrayLike,
+    beta: ArrayLike,
+    sigma_r: ArrayLike,
+    sigma_beta: ArrayLike,
+    predicted_xy: tuple[ArrayLike, ArrayLike] | None = None,
+) -> ConvertedParts:
+    """Any of ``METHODS_2D`` as components; ``ducm`` needs ``predicted_xy = (x⁻, y⁻)``.
+
+    Args:
+        r, beta: (...) measured range (m) and azimuth (rad).
+        sigma_r, sigma_beta: σr (m) and σβ (rad), scalars or broadcastable to (...).
+        predicted_xy: the filter's predicted position, radar-centred, two (...) arrays.
+    """
+    r, beta = _f(r), _f(beta)
+    sr, sb = _f(sigma_r), _f(sigma_beta)
+    c, sn = np.cos(beta), np.sin(beta)
+    if method == "naive":
+        return ConvertedParts(r * c, r * sn, *_linearized_parts(r, c, sn, sr, sb))
+    if method in ("seed", "cmkf_d"):
+        kr = scale_factor(method, sb) * r
+        return ConvertedParts(kr * c, kr * sn, *_averaged_parts(r, c, sn, sr, sb))
+    if method == "ucm":
+        es = np.exp(sb * sb)
+        kr = np.sqrt(es) * r
+        return ConvertedParts(kr * c, kr * sn, *_true_cov_parts(r, c, sn, sr, sb, es))
+    if method == "ducm":
+        if predicted_xy is None:
+            raise ValueError("method ducm needs predicted_xy (the filter's predicted position)")
+        px, py = _f(predicted_xy[0]), _f(predicted_xy[1])
+        r_p = np.hypot(px, py)
+        es = np.exp(sb * sb)
+        kr = np.sqrt(es) * r
+        cov = _true_cov_parts(r_p, px / r_p, py / r_p, sr, sb, es)
+        return ConvertedParts(kr * c, kr * sn, *cov)
+    raise ValueError(f"method must be one of {', '.join(METHODS_2D)} (got {method!r})")
 
 
 def convert_naive(
     r: ArrayLike, beta: ArrayLike, sigma_r: ArrayLike, sigma_beta: ArrayLike
 ) -> Converted:
     """Naive conversion (eq. 8) with the linearized covariance (eq. 9)."""
-    r, beta = _f(r), _f(beta)
-    return Converted(_naive_point(r, beta), linearized_cov(r, beta, sigma_r, sigma_beta))
+    return convert_parts("naive", r, beta, sigma_r, sigma_beta).stacked()
 
 
 def convert_seed(
@@ -228,18 +326,14 @@ def convert_seed(
 
     Note: this *doubles* the bias of the converted point; see the module docstring.
     """
-    r, beta = _f(r), _f(beta)
-    kappa = scale_factor("seed", sigma_beta)[..., None]
-    return Converted(kappa * _naive_point(r, beta), averaged_cov(r, beta, sigma_r, sigma_beta))
+    return convert_parts("seed", r, beta, sigma_r, sigma_beta).stacked()
 
 
 def convert_cmkf_d(
     r: ArrayLike, beta: ArrayLike, sigma_r: ArrayLike, sigma_beta: ArrayLike
 ) -> Converted:
     """Lerro and Bar-Shalom (1993) debiased conversion: κ = 1 − (e^(−s) − e^(−s/2)), eq. 11."""
-    r, beta = _f(r), _f(beta)
-    kappa = scale_factor("cmkf_d", sigma_beta)[..., None]
-    return Converted(kappa * _naive_point(r, beta), averaged_cov(r, beta, sigma_r, sigma_beta))
+    return convert_parts("cmkf_d", r, beta, sigma_r, sigma_beta).stacked()
 
 
 def convert_ucm(
@@ -250,11 +344,7 @@ def convert_ucm(
     The covariance is the exact true-conditioned covariance of the unbiased point,
     e^s · ``naive_cov_given_truth``, evaluated at the measured (r̂, β̂).
     """
-    r, beta = _f(r), _f(beta)
-    s = _f(sigma_beta) ** 2
-    kappa = np.exp(s / 2.0)
-    cov = np.exp(s)[..., None, None] * naive_cov_given_truth(r, beta, sigma_r, sigma_beta)
-    return Converted(kappa[..., None] * _naive_point(r, beta), cov)
+    return convert_parts("ucm", r, beta, sigma_r, sigma_beta).stacked()
 
 
 def convert_ducm(
@@ -270,22 +360,8 @@ def convert_ducm(
     ``predicted_xy`` (..., 2), radar-centred, so the gain is independent of this measurement's
     error.
     """
-    r, beta = _f(r), _f(beta)
     p = _f(predicted_xy)
-    r_p = np.hypot(p[..., 0], p[..., 1])
-    beta_p = np.arctan2(p[..., 1], p[..., 0])
-    s = _f(sigma_beta) ** 2
-    kappa = np.exp(s / 2.0)
-    cov = np.exp(s)[..., None, None] * naive_cov_given_truth(r_p, beta_p, sigma_r, sigma_beta)
-    return Converted(kappa[..., None] * _naive_point(r, beta), cov)
-
-
-_CONVERTERS: dict[str, Callable[..., Converted]] = {
-    "naive": convert_naive,
-    "seed": convert_seed,
-    "cmkf_d": convert_cmkf_d,
-    "ucm": convert_ucm,
-}
+    return convert_parts("ducm", r, beta, sigma_r, sigma_beta, (p[..., 0], p[..., 1])).stacked()
 
 
 def convert(
@@ -301,13 +377,7 @@ def convert(
         if predicted_xy is None:
             raise ValueError("method ducm needs predicted_xy (the filter's predicted position)")
         return convert_ducm(r, beta, sigma_r, sigma_beta, predicted_xy)
-    try:
-        fn = _CONVERTERS[method]
-    except KeyError:
-        raise ValueError(
-            f"method must be one of {', '.join(METHODS_2D)} (got {method!r})"
-        ) from None
-    return fn(r, beta, sigma_r, sigma_beta)
+    return convert_parts(method, r, beta, sigma_r, sigma_beta).stacked()
 
 
 # --------------------------------------------------------------------------------------------

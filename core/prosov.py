@@ -18,8 +18,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from core.conversion import METHODS_2D, convert
-from core.kalman_cv import CVBatch, cv_init, cv_predict, cv_update, empty_batch
+from core.conversion import METHODS_2D, convert, convert_parts
+from core.kalman_cv import CVBatch, cv_init, cv_predict, cv_update_parts, empty_batch
 from core.metrics import MetricsAccumulator, TrackMetrics, delta_percent, nees_band
 from core.polar_filters import ekf_update, init_from_polar, ukf_update
 from core.scenario import ConstantVelocityTarget2D, polar_measurements, prosov_target
@@ -29,7 +29,7 @@ POLAR_METHODS: tuple[str, ...] = ("ekf", "ukf")
 ALL_METHODS: tuple[str, ...] = METHODS_2D + POLAR_METHODS
 #: Runs per block: large enough that vector operations dominate Python overhead, small enough
 #: that a block's working set stays in cache.
-BLOCK_RUNS = 8192
+BLOCK_RUNS = 16384
 #: Upper limit of σβ accepted anywhere: beyond it a Cartesian Gaussian is meaningless.
 MAX_SIGMA_BETA_DEG = 20.0
 
@@ -137,19 +137,21 @@ def filter_block(
         first = convert("ucm" if method == "ducm" else method, r_hat[:, 0], beta_hat[:, 0], sr, sb)
         state = cv_init(first.z, first.R, config.sigma_v0_mps)
     on_scan(0, state)
-    # Two buffers, ping-ponged: prediction into one, update into the other.
+    # Scan-major copies, so each scan's measurements are contiguous vectors.
+    r_scans, b_scans = np.ascontiguousarray(r_hat.T), np.ascontiguousarray(beta_hat.T)
+    # Two buffers: prediction into one, update into the other, every scan.
     pred_buf, post_buf = empty_batch(m), empty_batch(m)
     for n in range(1, steps):
         pred = cv_predict(state, T, qa, out=pred_buf)
-        r_n, b_n = r_hat[:, n], beta_hat[:, n]
+        r_n, b_n = r_scans[n], b_scans[n]
         if method == "ekf":
             state = ekf_update(pred, r_n, b_n, sr, sb, out=post_buf)
         elif method == "ukf":
             state = ukf_update(pred, r_n, b_n, sr, sb, out=post_buf)
         else:
-            predicted_xy = pred.x[:, [0, 2]] if method == "ducm" else None
-            c = convert(method, r_n, b_n, sr, sb, predicted_xy)
-            state = cv_update(pred, c.z, c.R, out=post_buf)
+            predicted = (pred.x[:, 0], pred.x[:, 2]) if method == "ducm" else None
+            c = convert_parts(method, r_n, b_n, sr, sb, predicted)
+            state = cv_update_parts(pred, c.x, c.y, c.r00, c.r01, c.r11, out=post_buf)
         on_scan(n, state)  # state lives in post_buf; the next prediction writes pred_buf
     return state
 
