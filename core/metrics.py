@@ -101,8 +101,13 @@ class MetricsAccumulator:
         self.runs += other.runs
 
     def result(self) -> TrackMetrics:
-        """The per-scan statistics (needs at least 2 runs per scan)."""
+        """The per-scan statistics; NaN at scans no run reached (e.g. before a track start)."""
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return self._result()
+
+    def _result(self) -> TrackMetrics:
         m = self.runs.astype(np.float64)
+        m[m == 0] = np.nan
         s = self.sums
         bias_x = s["ex"] / m
         # Sample variance from the sums; clip tiny negative values left by rounding.

@@ -106,3 +106,65 @@ def test_bench_json_keys(capsys) -> None:
         assert key in doc
     assert doc["runs"] == [500, 1000] and len(doc["kf_ns_per_step"]) == 2
     assert doc["filterpy_ns_per_step"] > 0 and all(v > 0 for v in doc["speedup_vs_filterpy"])
+
+
+def test_reproduce_gorshkov_json_document(capsys) -> None:
+    code = main(["reproduce", "gorshkov", "--trials", "2000", "--seed", "5", "--radars", "RLS1",
+                 "RLS6", "--tracking-runs", "50", "--json"])
+    assert code == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["experiment"] == "gorshkov" and doc["trials"] == 2000 and doc["seed"] == 5
+    assert [r["name"] for r in doc["radars"]] == ["RLS1", "RLS6"]
+    rls1 = doc["radars"][0]
+    assert rls1["sigma_r_m"] == 250 and rls1["sigma_vr_mps"] == 35 and rls1["period_s"] == 10
+    assert abs(rls1["c0"] - 250**2 / (10**2 * 35**2)) < 1e-12
+    assert rls1["k"] == list(range(1, 21))
+    for group in ("sigma", "sigma_analytic"):
+        assert set(rls1[group]) == {"range_only", "range_doppler"}
+        for v in rls1[group].values():
+            assert set(v) == {"r", "vr", "a"} and all(len(x) == 20 for x in v.values())
+    # Undefined values are null: range-only acceleration below k = 3, velocity at k = 1,
+    # Doppler acceleration at k = 1.
+    ro, rd = rls1["sigma"]["range_only"], rls1["sigma"]["range_doppler"]
+    assert ro["a"][:2] == [None, None] and ro["a"][2] is not None
+    assert ro["vr"][0] is None and rd["vr"][0] is not None
+    assert rd["a"][0] is None and rd["a"][1] is not None
+    assert set(rls1["gain_percent"]) == {"r", "vr", "a"}
+    tr = doc["tracking"]
+    assert tr["radar"] == "RLS3" and tr["runs"] == 50 and tr["start_scans"] == 3
+    assert set(tr["variants"]) == {"range_only", "range_doppler"}
+    assert tr["variants"]["range_doppler"]["rmse_vr"][:2] == [None, None]
+
+
+@pytest.mark.parametrize(
+    ("args", "needle"),
+    [
+        (["--radars", "RLS7"], "--radars must be among RLS1, RLS2, RLS3, RLS4, RLS5, RLS6"),
+        (["--trials", "1"], "--trials must be an integer in [2,"),
+        (["--tracking-runs", "1"], "--tracking-runs must be 0 (skip) or an integer >= 2"),
+        (["--tracking-radar", "X"], "--tracking-radar must be one of RLS1"),
+        (["--sigma-beta-deg", "nan"], "--sigma-beta-deg must be a finite number in (0, 20]"),
+        (["--k-max", "0"], "--k-max must be an integer in [1, 20]"),
+        (["--custom", "250", "0", "10"], "--custom C0 must be a finite number in (0, 1e+08]"),
+        (["--custom", "-1", "1", "10"], "--custom SIGMA_R_M must be a finite number in (0,"),
+        (["--custom", "250", "1", "0"], "--custom PERIOD_S must be a finite number in (0, 3600]"),
+    ],
+)
+def test_gorshkov_bad_input(args: list[str], needle: str, capsys) -> None:
+    assert main(["reproduce", "gorshkov", *args]) == 2
+    err = capsys.readouterr().err
+    assert needle in err and err.count("\n") == 1
+
+
+def test_gorshkov_custom_radar_follows_c0(capsys) -> None:
+    code = main(["reproduce", "gorshkov", "--trials", "500", "--radars", "RLS2", "--custom",
+                 "250", "1", "10", "--k-max", "5", "--tracking-runs", "0", "--json"])
+    assert code == 0
+    doc = json.loads(capsys.readouterr().out)
+    rls2, custom = doc["radars"]
+    assert custom["name"] == "custom" and abs(custom["sigma_vr_mps"] - 25.0) < 1e-9
+    assert custom["k"] == [1, 2, 3, 4, 5] and "tracking" not in doc
+    # Same σr, σVr, T as RLS2: identical analytic σ.
+    assert custom["sigma_analytic"] == {
+        v: {k: x[:5] for k, x in d.items()} for v, d in rls2["sigma_analytic"].items()
+    }

@@ -10,6 +10,8 @@ Figures (ns per track-step = wall time / (runs × scans), one core):
   runs, with the converted points and covariances computed beforehand and not timed (so the
   ratio is, if anything, unfair to the batched filter).
 * ``speedup_vs_filterpy`` = filterpy_ns_per_step / kf_ns_per_step.
+* ``gorshkov_s``: wall time of the whole Gorshkov experiment (six radars, 10⁵ trials each,
+  range only and range + Doppler, k = 1 … 20), best of ``repeats``.
 * ``peak_rss_mb``: peak resident memory of the process.
 """
 
@@ -95,11 +97,24 @@ def bench_filterpy(runs: int, config: TrackingConfig) -> float:
     return elapsed / (runs * (steps - 1)) * 1e9
 
 
+def bench_gorshkov(trials: int = 100_000, repeats: int = 2) -> float:
+    """Seconds for the whole Gorshkov Monte Carlo (all six presets), best of ``repeats``."""
+    from core.finite_memory import run_gorshkov
+
+    best = float("inf")
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        run_gorshkov(None, trials=trials, seed=1)
+        best = min(best, time.perf_counter() - t0)
+    return best
+
+
 def run_bench(
     runs: Sequence[int] = (10_000, 100_000), filterpy_runs: int = 200
 ) -> dict[str, Any]:
     """All figures of ``radarviz bench`` as a JSON-ready dict."""
     config = TrackingConfig(runs=2, target=prosov_target())
+    gorshkov_s = bench_gorshkov()
     fp = bench_filterpy(filterpy_runs, config)
     kf, kf_only = [], []
     for m in runs:
@@ -115,6 +130,8 @@ def run_bench(
         "filterpy_runs": filterpy_runs,
         "filterpy_ns_per_step": fp,
         "speedup_vs_filterpy": [fp / v for v in kf],
+        "gorshkov_trials": 100_000,
+        "gorshkov_s": gorshkov_s,
         "peak_rss_mb": peak_rss_mb(),
     }
 
@@ -133,5 +150,9 @@ def format_bench(doc: dict[str, Any]) -> str:
             f"batched ucm filter, {m:>7} runs: {e2e:6.1f} ns per track-step "
             f"(filter only {only:6.1f})   speedup vs filterpy {sp:6.0f}×"
         )
+    lines.append(
+        f"Gorshkov experiment (6 radars × {doc['gorshkov_trials']} trials, both variants): "
+        f"{doc['gorshkov_s']:.2f} s"
+    )
     lines.append(f"peak RSS: {doc['peak_rss_mb']:.0f} MiB")
     return "\n".join(lines)

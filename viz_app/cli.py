@@ -73,6 +73,29 @@ def build_parser() -> argparse.ArgumentParser:
                      help="print only the JSON document on standard output")
     pro.add_argument("--plot", metavar="FILE.png", help="write the figure (Figs. 1-2, bias, NEES)")
 
+    gor = rep_sub.add_parser(
+        "gorshkov", help="finite-memory range / radial-velocity filter (Gorshkov), Monte Carlo"
+    )
+    gor.add_argument("--trials", type=_integer, default=100_000,
+                     help="Monte Carlo trials per radar (default 100000)")
+    gor.add_argument("--seed", type=_integer, default=1, help="random seed (default 1)")
+    gor.add_argument("--radars", nargs="+", default=None, metavar="RLS",
+                     help="radar presets (default all: RLS1 … RLS6)")
+    gor.add_argument("--k-max", type=_integer, default=20,
+                     help="largest window length k (default 20; the experiment has 20 scans)")
+    gor.add_argument("--custom", nargs=3, type=_number, metavar=("SIGMA_R_M", "C0", "PERIOD_S"),
+                     help="add a radar 'custom' with σr (m), C0 and T (s); σVr follows from "
+                          "C0 = σr² / (T² σVr²)")
+    gor.add_argument("--tracking-radar", default="RLS3",
+                     help="preset of the Doppler-aided tracking comparison (default RLS3)")
+    gor.add_argument("--tracking-runs", type=_integer, default=1000,
+                     help="Monte Carlo runs of the tracking comparison (0 to skip; default 1000)")
+    gor.add_argument("--sigma-beta-deg", type=_number, default=1.0,
+                     help="azimuth noise of the tracking comparison, degrees (default 1)")
+    gor.add_argument("--json", action="store_true",
+                     help="print only the JSON document on standard output")
+    gor.add_argument("--plot", metavar="FILE.png", help="write the figure (Figs. 1-3)")
+
     bench = sub.add_parser("bench", help="speed of the batched filters vs filterpy")
     bench.add_argument("--json", action="store_true", help="print only JSON")
     bench.add_argument("--runs", type=_integer, nargs="+", default=[10_000, 100_000],
@@ -127,6 +150,60 @@ def _cmd_reproduce_prosov(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_reproduce_gorshkov(args: argparse.Namespace) -> int:
+    from core.doppler_tracking import DopplerTrackingConfig, run_doppler_tracking
+    from core.finite_memory import PRESETS, RadarPreset, run_gorshkov
+
+    check_int("--trials", args.trials, low=2, high=100_000_000)
+    check_int("--seed", args.seed, low=0)
+    k_max = check_int("--k-max", args.k_max, low=1, high=20)
+    radars: list = args.radars if args.radars is not None else list(PRESETS)
+    for name in radars:
+        if name not in PRESETS:
+            raise ParameterError(f"--radars must be among {', '.join(PRESETS)} (got {name!r})")
+    if args.custom is not None:
+        sr = check_real("--custom SIGMA_R_M", args.custom[0], low=0.0, high=1e6)
+        c0 = check_real("--custom C0", args.custom[1], low=0.0, high=1e8)
+        T = check_real("--custom PERIOD_S", args.custom[2], low=0.0, high=3600.0)
+        radars = [*radars, RadarPreset("custom", "-", sr, sr / (T * c0**0.5), T)]
+    if args.tracking_radar not in PRESETS:
+        raise ParameterError(
+            f"--tracking-radar must be one of {', '.join(PRESETS)} (got {args.tracking_radar!r})"
+        )
+    check_int("--tracking-runs", args.tracking_runs, low=0)
+    if args.tracking_runs == 1:
+        raise ParameterError("--tracking-runs must be 0 (skip) or an integer >= 2 (got 1)")
+    check_real("--sigma-beta-deg", args.sigma_beta_deg, low=0.0, high=MAX_SIGMA_BETA_DEG)
+    if args.plot is not None and not args.plot.strip():
+        raise ParameterError("--plot must name a file (got an empty string)")
+    from viz_app.gorshkov_report import format_gorshkov_table, gorshkov_document
+    from viz_app.runtime import tune_allocator
+
+    tune_allocator()
+    result = run_gorshkov(radars, trials=args.trials, seed=args.seed, ks=range(1, k_max + 1))
+    tracking = None
+    if args.tracking_runs:
+        tracking = run_doppler_tracking(
+            DopplerTrackingConfig(
+                radar=args.tracking_radar, sigma_beta_deg=args.sigma_beta_deg,
+                runs=args.tracking_runs, seed=args.seed,
+            )
+        )
+    doc = gorshkov_document(result, tracking)
+    if args.plot:
+        from viz_app.gorshkov_plot import plot_gorshkov
+
+        plot_gorshkov(doc, args.plot)
+    if args.json:
+        json.dump(doc, sys.stdout, allow_nan=False)
+        sys.stdout.write("\n")
+    else:
+        print(format_gorshkov_table(doc))
+        if args.plot:
+            print(f"\nfigure written to {args.plot}")
+    return 0
+
+
 def _cmd_bench(args: argparse.Namespace) -> int:
     for m in args.runs:
         check_int("--runs", m, low=100, high=10_000_000)
@@ -150,6 +227,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         if args.command == "reproduce" and args.experiment == "prosov":
             return _cmd_reproduce_prosov(args)
+        if args.command == "reproduce" and args.experiment == "gorshkov":
+            return _cmd_reproduce_gorshkov(args)
         if args.command == "bench":
             return _cmd_bench(args)
     except ParameterError as exc:
