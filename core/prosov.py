@@ -220,3 +220,26 @@ def prosov_configs(
         )
         for sb in sigma_beta_deg
     ]
+
+
+def track_history(
+    method: str,
+    r_hat: NDArray[np.float64],
+    beta_hat: NDArray[np.float64],
+    config: TrackingConfig,
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Every filtered state of a few runs, for display: x (m, N, 4) and P (m, N, 4, 4).
+
+    The Monte Carlo statistics never keep states; this is for the handful of runs a viewer
+    draws (memory grows as m · N).
+    """
+    m, steps = r_hat.shape
+    xs = np.empty((m, steps, 4))
+    ps = np.empty((m, steps, 4, 4))
+
+    def keep(n: int, state: CVBatch) -> None:
+        xs[:, n] = state.x
+        ps[:, n] = state.P
+
+    filter_block(method, r_hat, beta_hat, config, keep)
+    return xs, ps

@@ -96,6 +96,10 @@ def build_parser() -> argparse.ArgumentParser:
                      help="print only the JSON document on standard output")
     gor.add_argument("--plot", metavar="FILE.png", help="write the figure (Figs. 1-3)")
 
+    from viz_app.cli_recording import add_commands
+
+    add_commands(sub)
+
     bench = sub.add_parser("bench", help="speed of the batched filters vs filterpy")
     bench.add_argument("--json", action="store_true", help="print only JSON")
     bench.add_argument("--runs", type=_integer, nargs="+", default=[10_000, 100_000],
@@ -231,6 +235,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _cmd_reproduce_gorshkov(args)
         if args.command == "bench":
             return _cmd_bench(args)
+        from viz_app.cli_recording import COMMANDS
+
+        if args.command in COMMANDS:
+            return COMMANDS[args.command](args)
     except ParameterError as exc:
         return _fail(str(exc))
     except OSError as exc:

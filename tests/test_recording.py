@@ -1,0 +1,117 @@
+"""Recordings read back: documented entity paths, one row per scan, values equal to core's."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pytest
+from rerun.chunk import RrdReader
+
+from core.prosov import TrackingConfig, run_tracking
+from viz_app.cli import main
+from viz_app.recording import ellipsoid_axes, recording_file
+from viz_app.scenes import log_prosov
+
+
+def _read(path: Path) -> tuple[dict[str, int], dict[str, dict[str, list]]]:
+    """Temporal rows per entity, and the temporal columns of each entity."""
+    rows: dict[str, int] = defaultdict(int)
+    cols: dict[str, dict[str, list]] = defaultdict(lambda: defaultdict(list))
+    for chunk in RrdReader(str(path)).stream():
+        if chunk.is_static:
+            rows.setdefault(chunk.entity_path, 0)
+            continue
+        rows[chunk.entity_path] += chunk.num_rows
+        rb = chunk.to_record_batch()
+        for name, field in zip(rb.schema.names, rb.schema, strict=True):
+            col = rb.column(name)
+            if pa.types.is_timestamp(field.type):
+                continue  # log time: not ours to check
+            if pa.types.is_duration(field.type):
+                col = col.cast(pa.int64())  # nanoseconds
+            cols[chunk.entity_path][name].extend(col.to_pylist())
+    return rows, cols
+
+
+@pytest.fixture(scope="module")
+def prosov_rrd(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    path = tmp_path_factory.mktemp("rec") / "prosov.rrd"
+    with recording_file(path) as rec:
+        log_prosov(rec, sigma_beta_deg=2.0, runs=200, seed=3, cloud_points=500)
+    return path
+
+
+def test_documented_entity_paths_exist_with_one_row_per_scan(prosov_rrd: Path) -> None:
+    rows, _ = _read(prosov_rrd)
+    scans = 60
+    per_scan = ["/world/truth/position", "/world/measurements/radar", "/world/converted/seed"]
+    for m in ("naive", "seed", "cmkf_d", "ucm", "ducm", "ekf", "ukf"):
+        per_scan += [f"/world/tracks/{m}/{part}" for part in
+                     ("position", "covariance", "velocity")]
+        per_scan += [f"/plots/{metric}/{m}" for metric in
+                     ("bias_range", "rmse_x", "sigma_x_filter", "nees_pos")]
+    per_scan += ["/plots/delta_x/filter", "/plots/delta_x/rmse", "/plots/delta_x/std",
+                 "/plots/nees_pos/band95_lo"]
+    for path in per_scan:
+        assert rows.get(path) == scans, (path, rows.get(path))
+    for static in ("/world/radars/radar", "/world/truth/path", "/world/tracks/ducm/path",
+                   "/world/monte_carlo/ucm/cloud", "/world/monte_carlo/ucm/mean", "/log"):
+        assert static in rows, static
+
+
+def test_logged_series_equal_core_outputs(prosov_rrd: Path) -> None:
+    _, cols = _read(prosov_rrd)
+    res = run_tracking(TrackingConfig(sigma_beta_deg=2.0, runs=200, seed=3))
+    for m, metric in (("naive", "rmse_x"), ("ducm", "nees_pos"), ("ukf", "bias_range")):
+        got = cols[f"/plots/{metric}/{m}"]
+        assert got["scan"] == list(range(1, 61))
+        np.testing.assert_array_equal(np.array(got["time"]) / 1e9, np.arange(60) * 10.0)
+        np.testing.assert_array_equal([v[0] for v in got["Scalars:scalars"]],
+                                      getattr(res.metrics[m], metric))
+
+
+def test_rrd_verify_passes(prosov_rrd: Path) -> None:
+    exe = Path(sys.executable).with_name("rerun")
+    proc = subprocess.run([str(exe), "rrd", "verify", str(prosov_rrd)], capture_output=True,
+                          text=True)
+    assert proc.returncode == 0, proc.stderr
+
+
+def test_ellipsoid_axes_reconstruct_the_covariance() -> None:
+    rng = np.random.default_rng(1)
+    a = rng.normal(size=(50, 3, 3))
+    cov = a @ a.transpose(0, 2, 1) + np.eye(3) * 0.1
+    half, q = ellipsoid_axes(cov)
+    x, y, z, w = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
+    R = np.stack([
+        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
+        np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
+        np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1),
+    ], -2)
+    rebuilt = R @ (half[:, :, None] ** 2 * np.eye(3)) @ R.transpose(0, 2, 1)
+    np.testing.assert_allclose(rebuilt, cov, rtol=1e-9, atol=1e-12)
+
+
+def test_record_refuses_to_overwrite_and_leaves_no_temporary(tmp_path: Path, capsys) -> None:
+    out = tmp_path / "g.rrd"
+    out.write_bytes(b"keep me")
+    assert main(["record", "--preset", "prosov", "--out", str(out)]) == 2
+    assert "refusing to overwrite (pass --overwrite)" in capsys.readouterr().err
+    assert out.read_bytes() == b"keep me"
+    assert main(["record", "--preset", "gorshkov", "--out", str(out), "--overwrite"]) == 0
+    rows, _ = _read(out)
+    assert rows["/plots/finite_memory/gain_r/RLS6"] == 20
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["g.rrd"]
+
+
+def test_demo_writes_a_recording_headless(tmp_path: Path, capsys) -> None:
+    out = tmp_path / "sub" / "demo.rrd"
+    assert main(["demo", "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert f"wrote {out}" in printed and "radarviz view" in printed
+    assert out.stat().st_size < 20e6
