@@ -168,3 +168,12 @@ def test_gorshkov_custom_radar_follows_c0(capsys) -> None:
     assert custom["sigma_analytic"] == {
         v: {k: x[:5] for k, x in d.items()} for v, d in rls2["sigma_analytic"].items()
     }
+
+
+def test_reproduce_gorshkov_plot(tmp_path: Path, capsys) -> None:
+    png = tmp_path / "g.png"
+    assert main(["reproduce", "gorshkov", "--trials", "500", "--tracking-runs", "0",
+                 "--plot", str(png)]) == 0
+    assert "range gain peaks at" in capsys.readouterr().out
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert [p.name for p in tmp_path.iterdir()] == ["g.png"]
