@@ -333,26 +333,38 @@ def log_cloud(rec: rr.RecordingStream, method: str, points: NDArray, truth: NDAr
     )
 
 
-def log_text(
-    rec: rr.RecordingStream, text: str, level: str = "INFO", scan: int | None = None
-) -> None:
-    """A line in the text log (at ``scan`` if given, else static)."""
-    if scan is None:
-        rec.log("log", rr.TextLog(text, level=level), static=True)
-    else:
-        rec.set_time("scan", sequence=scan)
-        rec.log("log", rr.TextLog(text, level=level))
+def log_text(rec: rr.RecordingStream, text: str, level: str = "INFO", scan: int = 1) -> None:
+    """A line in the text log at ``scan`` (the text-log view lists timed entries)."""
+    rec.send_columns(
+        "log",
+        indexes=[rr.TimeColumn("scan", sequence=[scan])],
+        columns=rr.TextLog.columns(text=[text], level=[level]),
+    )
 
 
 def default_blueprint(
     series: Sequence[str] = ("bias_range", "rmse_x", "nees_pos"),
+    centre: Sequence[float] = (0.0, 0.0, 0.0),
+    extent_m: float = 300e3,
 ) -> rrb.Blueprint:
-    """3D view, top-down 2D view of the same scene, time-series panels, text log."""
+    """3D view, top-down view of the same scene, time-series panels, text log.
+
+    The top-down view is a 3D view whose eye looks straight down on ``centre`` from
+    ``extent_m`` above, y up (a 2D view cannot show 3D entities).
+    """
     plots = [rrb.TimeSeriesView(origin=f"plots/{name}", name=name) for name in series]
+    cx, cy, cz = (float(v) for v in centre)
+    top_down = rrb.Spatial3DView(
+        origin="world",
+        name="top-down",
+        eye_controls=rrb.EyeControls3D(
+            position=(cx, cy, cz + extent_m), look_target=(cx, cy, cz), eye_up=(0.0, 1.0, 0.0)
+        ),
+    )
     return rrb.Blueprint(
         rrb.Horizontal(
             rrb.Vertical(
-                rrb.Spatial3DView(origin="world", name="3D"),
+                rrb.Horizontal(rrb.Spatial3DView(origin="world", name="3D"), top_down),
                 rrb.TextLogView(origin="log", name="log"),
                 row_shares=[3, 1],
             ),

@@ -187,4 +187,4 @@ def record_preset(rec: rr.RecordingStream, preset: str, seed: int = 1) -> None:
     series: tuple[str, ...] = PROSOV_SERIES if preset in ("demo", "prosov") else ()
     if preset == "gorshkov":
         series = ("finite_memory/gain_r", "finite_memory/sigma_vr", "doppler_start/rmse_vr")
-    rec.send_blueprint(default_blueprint(series))
+    rec.send_blueprint(default_blueprint(series, centre=(200e3, 0.0, 0.0), extent_m=250e3))
