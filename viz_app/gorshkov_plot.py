@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import math
 import os
-import secrets
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -31,6 +30,8 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.ticker import LogFormatter, MaxNLocator
+
+from viz_app.figures import write_figure_atomically
 
 #: Radar presets in display order; each keeps its colour in every panel (and in any subset).
 RADAR_ORDER: tuple[str, ...] = ("RLS1", "RLS2", "RLS3", "RLS4", "RLS5", "RLS6")
@@ -375,30 +376,6 @@ def _build_figure(doc: Mapping[str, Any], radars: Sequence[tuple[str, Mapping[st
     return fig
 
 
-def _write_atomically(fig: Figure, path: Path) -> None:
-    """Render into a temporary file beside ``path``, then rename it onto ``path``."""
-    fmt = path.suffix.lstrip(".").lower() or "png"
-    supported = fig.canvas.get_supported_filetypes()
-    if fmt not in supported:
-        raise ValueError(
-            f"cannot write a figure as .{fmt} ({path}); use one of "
-            + ", ".join("." + k for k in sorted(supported))
-        )
-    directory = path.parent
-    tmp = directory / f".{path.name}.{secrets.token_hex(6)}.tmp{path.suffix}"
-    # O_EXCL with mode 0o666 keeps the usual umask-derived permissions of a new file.
-    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fig.savefig(fh, format=fmt, dpi=DPI)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
-
-
 def _check_doc(doc: Any) -> list[tuple[str, Mapping[str, Any]]]:
     """The (name, radar) pairs of ``doc``; ValueError with one line when it cannot be drawn."""
     if not isinstance(doc, Mapping):
@@ -440,4 +417,4 @@ def plot_gorshkov(doc: dict, path: str | os.PathLike) -> None:
     radars = _check_doc(doc)
     out = Path(os.fsdecode(os.fspath(path)))
     fig = _build_figure(doc, radars)
-    _write_atomically(fig, out)
+    write_figure_atomically(fig, out, DPI)

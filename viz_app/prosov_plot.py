@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import math
 import os
-import secrets
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -27,6 +26,8 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 from matplotlib.ticker import LogFormatter
+
+from viz_app.figures import write_figure_atomically
 
 #: Methods in display order; each keeps its colour in every panel.
 METHOD_ORDER: tuple[str, ...] = ("naive", "seed", "cmkf_d", "ucm", "ducm", "ekf", "ukf")
@@ -317,30 +318,6 @@ def _build_figure(doc: Mapping[str, Any], cases: Sequence[Mapping[str, Any]],
     return fig
 
 
-def _write_atomically(fig: Figure, path: Path) -> None:
-    """Render into a temporary file beside ``path``, then rename it onto ``path``."""
-    fmt = path.suffix.lstrip(".").lower() or "png"
-    supported = fig.canvas.get_supported_filetypes()
-    if fmt not in supported:
-        raise ValueError(
-            f"cannot write a figure as .{fmt} ({path}); use one of "
-            + ", ".join("." + k for k in sorted(supported))
-        )
-    directory = path.parent
-    tmp = directory / f".{path.name}.{secrets.token_hex(6)}.tmp{path.suffix}"
-    # O_EXCL with mode 0o666 keeps the usual umask-derived permissions of a new file.
-    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fig.savefig(fh, format=fmt, dpi=DPI)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
-
-
 def plot_prosov(doc: dict, path: str | os.PathLike, paper_scans: int = 20) -> None:
     """Draw the Prosov reproduction document ``doc`` into the image file ``path``.
 
@@ -363,4 +340,4 @@ def plot_prosov(doc: dict, path: str | os.PathLike, paper_scans: int = 20) -> No
         raise ValueError(f"paper_scans must be a non-negative integer, got {paper_scans!r}")
     out = Path(os.fsdecode(os.fspath(path)))
     fig = _build_figure(doc, cases, paper_scans)
-    _write_atomically(fig, out)
+    write_figure_atomically(fig, out, DPI)

@@ -1,0 +1,38 @@
+"""Writing matplotlib figures: atomically, in the format the file suffix names."""
+
+from __future__ import annotations
+
+import os
+import secrets
+from pathlib import Path
+
+from matplotlib.figure import Figure
+
+DPI = 120
+
+
+def write_figure_atomically(fig: Figure, path: Path, dpi: int = DPI) -> None:
+    """Render into a temporary file beside ``path``, then rename it onto ``path``.
+
+    Raises ValueError (one line) if matplotlib cannot write the suffix's format; on any error
+    the temporary file is removed and ``path`` is untouched.
+    """
+    fmt = path.suffix.lstrip(".").lower() or "png"
+    supported = fig.canvas.get_supported_filetypes()
+    if fmt not in supported:
+        raise ValueError(
+            f"cannot write a figure as .{fmt} ({path}); use one of "
+            + ", ".join("." + k for k in sorted(supported))
+        )
+    tmp = path.parent / f".{path.name}.{secrets.token_hex(6)}.tmp{path.suffix}"
+    # O_EXCL with mode 0o666 keeps the usual umask-derived permissions of a new file.
+    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fig.savefig(fh, format=fmt, dpi=dpi)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
