@@ -43,6 +43,14 @@ def _browser_or_fail() -> None:
         pytest.skip("chromium / playwright not installed (apt-get install chromium)")
 
 
+def _answers(url: str) -> bool:
+    try:
+        with urllib.request.urlopen(url, timeout=2):
+            return True
+    except OSError:
+        return False
+
+
 def _wait_http(url: str, timeout: float = 30.0) -> None:
     end = time.monotonic() + timeout
     while time.monotonic() < end:
@@ -102,4 +110,8 @@ def test_web_viewer_renders_a_recording(tmp_path: Path) -> None:
     finally:
         os.killpg(proc.pid, 15)
         proc.wait(timeout=10)
-    assert proc.returncode is not None
+    # Stopping `radarviz view` stops the viewer it started (no orphaned server on the port).
+    end = time.monotonic() + 10
+    while time.monotonic() < end and _answers(f"http://127.0.0.1:{web}/"):
+        time.sleep(0.2)
+    assert not _answers(f"http://127.0.0.1:{web}/"), "the web viewer outlived radarviz view"

@@ -96,6 +96,18 @@ def build_parser() -> argparse.ArgumentParser:
                      help="print only the JSON document on standard output")
     gor.add_argument("--plot", metavar="FILE.png", help="write the figure (Figs. 1-3)")
 
+    vel = rep_sub.add_parser(
+        "velocity", help="3D velocity from the radial velocities of 3 radars, Monte Carlo"
+    )
+    vel.add_argument("--trials", type=_integer, default=200_000,
+                     help="Monte Carlo trials of the baseline (default 200000; the sweep uses "
+                          "at most 20000 per point)")
+    vel.add_argument("--seed", type=_integer, default=1, help="random seed (default 1)")
+    vel.add_argument("--json", action="store_true",
+                     help="print only the JSON document on standard output")
+    vel.add_argument("--plot", metavar="FILE.png",
+                     help="write the figure (baseline σ and correlations, sweep)")
+
     from viz_app.cli_recording import add_commands
 
     add_commands(sub)
@@ -208,6 +220,32 @@ def _cmd_reproduce_gorshkov(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_reproduce_velocity(args: argparse.Namespace) -> int:
+    from core.velocity import run_velocity_experiment
+
+    check_int("--trials", args.trials, low=2, high=100_000_000)
+    check_int("--seed", args.seed, low=0)
+    if args.plot is not None and not args.plot.strip():
+        raise ParameterError("--plot must name a file (got an empty string)")
+    from viz_app.runtime import tune_allocator
+    from viz_app.velocity_report import format_velocity_table, velocity_document
+
+    tune_allocator()
+    doc = velocity_document(run_velocity_experiment(args.trials, args.seed))
+    if args.plot:
+        from viz_app.velocity_plot import plot_velocity
+
+        plot_velocity(doc, args.plot)
+    if args.json:
+        json.dump(doc, sys.stdout, allow_nan=False)
+        sys.stdout.write("\n")
+    else:
+        print(format_velocity_table(doc))
+        if args.plot:
+            print(f"\nfigure written to {args.plot}")
+    return 0
+
+
 def _cmd_bench(args: argparse.Namespace) -> int:
     for m in args.runs:
         check_int("--runs", m, low=100, high=10_000_000)
@@ -233,6 +271,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _cmd_reproduce_prosov(args)
         if args.command == "reproduce" and args.experiment == "gorshkov":
             return _cmd_reproduce_gorshkov(args)
+        if args.command == "reproduce" and args.experiment == "velocity":
+            return _cmd_reproduce_velocity(args)
         if args.command == "bench":
             return _cmd_bench(args)
         from viz_app.cli_recording import COMMANDS

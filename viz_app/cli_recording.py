@@ -121,12 +121,17 @@ def cmd_view(args: argparse.Namespace) -> int:
     grpc_port = args.port or free_port(args.host)
     web_port = args.web_port or free_port(args.host)
     proc = serve_recording(args.path, args.host, grpc_port, web_port)
+
+    def _stop(signum: int, frame: object) -> None:
+        raise SystemExit(0)  # unwinds into the finally below, which stops the viewer
+
+    signal.signal(signal.SIGTERM, _stop)
     print(f"serving {args.path}")
     print(f"open {viewer_url(args.host, web_port, grpc_port)}", flush=True)
     print("stop with Ctrl-C", flush=True)
     try:
         return proc.wait()
-    except KeyboardInterrupt:
+    except (KeyboardInterrupt, SystemExit):
         return 0
     finally:
         if proc.poll() is None:
