@@ -115,3 +115,34 @@ def test_demo_writes_a_recording_headless(tmp_path: Path, capsys) -> None:
     printed = capsys.readouterr().out
     assert f"wrote {out}" in printed and "radarviz view" in printed
     assert out.stat().st_size < 20e6
+
+
+def test_velocity_preset_logs_the_fused_velocity_and_flags_bad_geometry(tmp_path: Path) -> None:
+    from core.scenario3d import generate_measurements
+    from core.velocity import M_WARN
+    from viz_app.scenes import fusion_scenario
+
+    out = tmp_path / "v.rrd"
+    assert main(["record", "--preset", "velocity", "--out", str(out), "--seed", "2"]) == 0
+    rows, cols = _read(out)
+    for r in ("R1", "R2", "R3"):
+        assert f"/world/radars/{r}" in rows and rows[f"/world/fusion/measurements/{r}"] == 60
+    assert rows["/world/fusion/position"] == 60 and rows["/world/fusion/truth/position"] == 60
+    m = np.array([v[0] for v in cols["/plots/fused_velocity/m"]["Scalars:scalars"]])
+    shown = set(cols["/world/fused_velocity/vector"]["scan"])
+    flagged = {n for n, mv in zip(cols["/plots/fused_velocity/m"]["scan"], m, strict=True)
+               if mv > M_WARN}
+    # Every scan gets either an arrow with its ellipsoid or a warning, never both.
+    assert shown.isdisjoint(flagged) and len(shown) + len(flagged) == 60
+    assert rows["/world/fused_velocity/covariance"] == len(shown)
+    warnings = [t[0] for t in cols["/log"]["TextLog:text"] if "velocity at scan" in t[0]]
+    assert len(warnings) == len(flagged) > 0
+    # The logged error series is the estimate minus the truth of the same scenario.
+    truth = generate_measurements(fusion_scenario(), 590.0, seed=None)["R1"].true_velocity
+    err_vz = cols["/plots/fused_velocity/error_vz"]
+    arrows = cols["/world/fused_velocity/vector"]
+    assert err_vz["scan"] == arrows["scan"]
+    vz = np.array([v[0][2] for v in arrows["Arrows3D:vectors"]]) / 10.0  # one period of motion
+    expected = vz - truth[np.array(arrows["scan"]) - 1, 2]
+    np.testing.assert_allclose([v[0] for v in err_vz["Scalars:scalars"]], expected,
+                               rtol=1e-5, atol=1e-4)

@@ -15,7 +15,7 @@ from pathlib import Path
 
 from core.validation import ParameterError, check_choice, check_int
 
-PRESETS = ("demo", "prosov", "gorshkov")
+PRESETS = ("demo", "prosov", "gorshkov", "velocity")
 DEFAULT_DEMO_PATH = "recordings/demo.rrd"
 LOOPBACK = "127.0.0.1"
 

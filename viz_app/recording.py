@@ -129,15 +129,21 @@ def log_radar_site(rec: rr.RecordingStream, name: str, position: Sequence[float]
     )
 
 
-def log_truth(rec: rr.RecordingStream, scans: NDArray, times: NDArray, positions: NDArray):
+def log_truth(
+    rec: rr.RecordingStream,
+    scans: NDArray,
+    times: NDArray,
+    positions: NDArray,
+    root: str = "world/truth",
+):
     """True positions per scan and the whole path (static)."""
     p = _xyz(positions)
     rec.send_columns(
-        "world/truth/position",
+        f"{root}/position",
         indexes=_indexes(scans, times),
         columns=rr.Points3D.columns(positions=p, radii=[300.0] * len(p)),
     )
-    rec.log("world/truth/path", rr.LineStrips3D([p], colors=[colour("truth")]), static=True)
+    rec.log(f"{root}/path", rr.LineStrips3D([p], colors=[colour("truth")]), static=True)
 
 
 def log_points(
@@ -279,6 +285,64 @@ def log_track(
         f"{base}/velocity",
         indexes=idx,
         columns=rr.Arrows3D.columns(origins=pos, vectors=vel * period, colors=[rgb] * n),
+    )
+
+
+def log_velocity(
+    rec: rr.RecordingStream,
+    scans: NDArray,
+    times: NDArray,
+    position: NDArray,
+    position_cov: NDArray,
+    velocity: NDArray,
+    velocity_cov: NDArray,
+    period: float,
+) -> None:
+    """Fused position (point + 1σ ellipsoid) and the multi-radar velocity vector per scan.
+
+    The arrow is drawn from the fused position, as the motion over one scan period; its error
+    ellipsoid (1σ of the velocity, times the period) sits at the arrow's tip. Scans whose
+    velocity is NaN (geometry flagged) get no arrow and no ellipsoid.
+    """
+    idx = _indexes(scans, times)
+    n = len(position)
+    rgb = (230, 80, 20)
+    rec.send_columns(
+        "world/fusion/position",
+        indexes=idx,
+        columns=rr.Points3D.columns(
+            positions=position, colors=[(0, 120, 200)] * n, radii=[250.0] * n
+        ),
+    )
+    half, quat = ellipsoid_axes(position_cov)
+    rec.send_columns(
+        "world/fusion/position_covariance",
+        indexes=idx,
+        columns=rr.Ellipsoids3D.columns(
+            centers=position, half_sizes=half, quaternions=quat, colors=[(0, 120, 200)] * n
+        ),
+    )
+    ok = np.all(np.isfinite(velocity), axis=-1)
+    if not ok.any():
+        return
+    idx_ok = _indexes(np.asarray(scans)[ok], np.asarray(times)[ok])
+    k = int(ok.sum())
+    vec = velocity[ok] * period
+    rec.send_columns(
+        "world/fused_velocity/vector",
+        indexes=idx_ok,
+        columns=rr.Arrows3D.columns(origins=position[ok], vectors=vec, colors=[rgb] * k),
+    )
+    half_v, quat_v = ellipsoid_axes(velocity_cov[ok] * period**2)
+    rec.send_columns(
+        "world/fused_velocity/covariance",
+        indexes=idx_ok,
+        columns=rr.Ellipsoids3D.columns(
+            centers=position[ok] + vec,
+            half_sizes=np.maximum(half_v, 1.0),
+            quaternions=quat_v,
+            colors=[rgb] * k,
+        ),
     )
 
 

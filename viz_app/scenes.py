@@ -10,6 +10,19 @@ from core.doppler_tracking import DopplerTrackingConfig, run_doppler_tracking
 from core.finite_memory import run_gorshkov
 from core.prosov import TrackingConfig, run_tracking, track_history
 from core.scenario import polar_measurements
+from core.scenario3d import RadarSite, Scenario3D, Segment, Trajectory3D, generate_measurements
+from core.velocity import (
+    BASELINE_SIGMA_AZ_DEG,
+    BASELINE_SIGMA_EL_DEG,
+    BASELINE_SIGMA_VR_MPS,
+    BASELINE_SITES_M,
+    BASELINE_TARGET_M,
+    BASELINE_VELOCITY_MPS,
+    M_WARN,
+    GeometryError,
+    estimate_velocity,
+    fuse_positions,
+)
 from viz_app.recording import (
     colour,
     default_blueprint,
@@ -20,6 +33,7 @@ from viz_app.recording import (
     log_text,
     log_track,
     log_truth,
+    log_velocity,
 )
 
 PROSOV_SERIES = ("bias_range", "rmse_x", "sigma_x_filter", "nees_pos", "delta_x")
@@ -178,13 +192,148 @@ def log_gorshkov(
     log_text(rec, f"Gorshkov: {trials} trials per radar; Doppler start: {tracking_runs} runs")
 
 
+def fusion_scenario(period_s: float = 10.0) -> Scenario3D:
+    """The velocity paper's baseline radars and target; the target turns for 100 s mid-way."""
+    radars = tuple(
+        RadarSite(
+            f"R{k + 1}",
+            tuple(site),
+            50.0 * (k + 1),
+            float(np.deg2rad(BASELINE_SIGMA_AZ_DEG[k])),
+            float(np.deg2rad(BASELINE_SIGMA_EL_DEG[k])),
+            BASELINE_SIGMA_VR_MPS[k],
+            period_s,
+        )
+        for k, site in enumerate(BASELINE_SITES_M)
+    )
+    trajectory = Trajectory3D(
+        BASELINE_TARGET_M,
+        BASELINE_VELOCITY_MPS,
+        (Segment(200.0), Segment(100.0, turn_rate=0.02), Segment(1e6)),
+    )
+    return Scenario3D(radars, trajectory)
+
+
+def log_fusion(rec: rr.RecordingStream, seed: int = 1, scans: int = 60) -> None:
+    """Several radars, one target: fused position and the full velocity vector per scan.
+
+    Each scan the radars' (r, β, ε) are fused into one position and their radial velocities
+    give the velocity vector (``core.velocity``); its 1σ ellipsoid is drawn unless the
+    geometry metric m says the linear statistics do not hold, which goes to the text log.
+    """
+    scenario = fusion_scenario()
+    period = scenario.radars[0].period
+    meas = generate_measurements(scenario, (scans - 1) * period, seed=seed)
+    radars = scenario.radars
+    sites = np.array([r.position for r in radars])
+    first = meas[radars[0].name]
+    n = np.arange(1, len(first.t) + 1)
+    t = first.t
+    for r in radars:
+        log_radar_site(
+            rec,
+            r.name,
+            r.position,
+            f"{r.name}  σr {r.sigma_r:g} m, σβ {np.rad2deg(r.sigma_azimuth):g}°, "
+            f"σε {np.rad2deg(r.sigma_elevation):g}°, σVr {r.sigma_vr:g} m/s, T {r.period:g} s",
+        )
+    log_truth(rec, n, t, first.true_position, root="world/fusion/truth")
+    stack = {
+        k: np.stack([meas[r.name].__dict__[k] for r in radars], axis=-1)
+        for k in ("range", "azimuth", "elevation", "radial_velocity")
+    }
+    sig = {
+        k: np.array([getattr(r, k) for r in radars])
+        for k in ("sigma_r", "sigma_azimuth", "sigma_elevation", "sigma_vr")
+    }
+    fused = fuse_positions(
+        sites,
+        stack["range"],
+        stack["azimuth"],
+        stack["elevation"],
+        sig["sigma_r"],
+        sig["sigma_azimuth"],
+        sig["sigma_elevation"],
+    )
+    for k, r in enumerate(radars):
+        log_points(
+            rec,
+            f"world/fusion/measurements/{r.name}",
+            n,
+            t,
+            fused.points[:, k],
+            (90, 90, 90),
+            radius=150.0,
+        )
+    vel = np.full((len(n), 3), np.nan)
+    cov = np.full((len(n), 3, 3), np.nan)
+    m = np.full(len(n), np.nan)
+    for i in range(len(n)):
+        try:
+            est = estimate_velocity(
+                sites,
+                stack["radial_velocity"][i],
+                stack["azimuth"][i],
+                stack["elevation"][i],
+                sig["sigma_vr"],
+                sig["sigma_elevation"],
+                sig["sigma_azimuth"],
+            )
+        except GeometryError as exc:
+            log_text(rec, f"velocity at scan {n[i]}: {exc}", level="WARN", scan=int(n[i]))
+            continue
+        m[i] = est.m
+        if est.warning:
+            log_text(rec, f"velocity at scan {n[i]}: {est.warning}", level="WARN", scan=int(n[i]))
+            continue
+        vel[i], cov[i] = est.velocity, est.covariance
+    log_velocity(rec, n, t, fused.position, fused.covariance, vel, cov, period)
+    err = vel - first.true_velocity
+    for j, axis in enumerate(("vx", "vy", "vz")):
+        log_series(
+            rec,
+            f"plots/fused_velocity/error_{axis}",
+            n,
+            t,
+            err[:, j],
+            None,
+            f"V̂{axis[1]} − V{axis[1]}",
+        )
+        log_series(
+            rec,
+            f"plots/fused_velocity/sigma_{axis}",
+            n,
+            t,
+            np.sqrt(cov[:, j, j]),
+            None,
+            f"σ {axis}",
+        )
+    log_series(rec, "plots/fused_velocity/m", n, t, m, None, "geometry metric m")
+    log_series(
+        rec,
+        "plots/fused_velocity/m_warn",
+        n,
+        t,
+        np.full(len(n), M_WARN),
+        (160, 160, 160),
+        "m warning level",
+    )
+    log_text(rec, f"velocity fusion: {len(radars)} radars, {len(n)} scans, seed {seed}")
+
+
 def record_preset(rec: rr.RecordingStream, preset: str, seed: int = 1) -> None:
     """Fill ``rec`` with one of the presets (the demo combines them) and send its blueprint."""
     if preset in ("demo", "prosov"):
         log_prosov(rec, seed=seed)
     if preset in ("demo", "gorshkov"):
         log_gorshkov(rec, seed=seed)
-    series: tuple[str, ...] = PROSOV_SERIES if preset in ("demo", "prosov") else ()
-    if preset == "gorshkov":
-        series = ("finite_memory/gain_r", "finite_memory/sigma_vr", "doppler_start/rmse_vr")
-    rec.send_blueprint(default_blueprint(series, centre=(200e3, 0.0, 0.0), extent_m=250e3))
+    if preset in ("demo", "velocity"):
+        log_fusion(rec, seed=seed)
+    series: tuple[str, ...] = {
+        "demo": ("rmse_x", "nees_pos", "delta_x", "finite_memory/gain_r", "fused_velocity"),
+        "prosov": PROSOV_SERIES,
+        "gorshkov": ("finite_memory/gain_r", "finite_memory/sigma_vr", "doppler_start/rmse_vr"),
+        "velocity": ("fused_velocity",),
+    }[preset]
+    centre, extent = ((40e3, 30e3, 0.0), 150e3) if preset == "velocity" else ((120e3, 0, 0), 300e3)
+    rec.send_blueprint(default_blueprint(series, centre=centre, extent_m=extent))
