@@ -9,8 +9,8 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from collections.abc import Sequence
-from typing import NoReturn
+from collections.abc import Callable, Sequence
+from typing import Any, NoReturn
 
 from core.prosov import ALL_METHODS, MAX_SIGMA_BETA_DEG, prosov_configs, run_tracking
 from core.validation import ParameterError, check_int, check_real
@@ -121,6 +121,25 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _emit(
+    args: argparse.Namespace,
+    doc: dict[str, Any],
+    table: Callable[[dict[str, Any]], str],
+    plot: Callable[[dict[str, Any], str], None],
+) -> int:
+    """Write the figure if asked, then print the JSON document or the table."""
+    if args.plot:
+        plot(doc, args.plot)
+    if args.json:
+        json.dump(doc, sys.stdout, allow_nan=False)
+        sys.stdout.write("\n")
+    else:
+        print(table(doc))
+        if args.plot:
+            print(f"\nfigure written to {args.plot}")
+    return 0
+
+
 def _cmd_reproduce_prosov(args: argparse.Namespace) -> int:
     for sb in args.sigma_beta_deg:
         check_real("--sigma-beta-deg", sb, low=0.0, high=MAX_SIGMA_BETA_DEG)
@@ -151,19 +170,9 @@ def _cmd_reproduce_prosov(args: argparse.Namespace) -> int:
 
             bar = ProgressBar(f"prosov σβ={cfg.sigma_beta_deg:g}°")
         results.append(run_tracking(cfg, progress=bar))
-    doc = prosov_document(results)
-    if args.plot:
-        from viz_app.prosov_plot import plot_prosov
+    from viz_app.prosov_plot import plot_prosov
 
-        plot_prosov(doc, args.plot)
-    if args.json:
-        json.dump(doc, sys.stdout, allow_nan=False)
-        sys.stdout.write("\n")
-    else:
-        print(format_prosov_table(doc))
-        if args.plot:
-            print(f"\nfigure written to {args.plot}")
-    return 0
+    return _emit(args, prosov_document(results), format_prosov_table, plot_prosov)
 
 
 def _cmd_reproduce_gorshkov(args: argparse.Namespace) -> int:
@@ -205,19 +214,9 @@ def _cmd_reproduce_gorshkov(args: argparse.Namespace) -> int:
                 runs=args.tracking_runs, seed=args.seed,
             )
         )
-    doc = gorshkov_document(result, tracking)
-    if args.plot:
-        from viz_app.gorshkov_plot import plot_gorshkov
+    from viz_app.gorshkov_plot import plot_gorshkov
 
-        plot_gorshkov(doc, args.plot)
-    if args.json:
-        json.dump(doc, sys.stdout, allow_nan=False)
-        sys.stdout.write("\n")
-    else:
-        print(format_gorshkov_table(doc))
-        if args.plot:
-            print(f"\nfigure written to {args.plot}")
-    return 0
+    return _emit(args, gorshkov_document(result, tracking), format_gorshkov_table, plot_gorshkov)
 
 
 def _cmd_reproduce_velocity(args: argparse.Namespace) -> int:
@@ -231,19 +230,10 @@ def _cmd_reproduce_velocity(args: argparse.Namespace) -> int:
     from viz_app.velocity_report import format_velocity_table, velocity_document
 
     tune_allocator()
-    doc = velocity_document(run_velocity_experiment(args.trials, args.seed))
-    if args.plot:
-        from viz_app.velocity_plot import plot_velocity
+    from viz_app.velocity_plot import plot_velocity
 
-        plot_velocity(doc, args.plot)
-    if args.json:
-        json.dump(doc, sys.stdout, allow_nan=False)
-        sys.stdout.write("\n")
-    else:
-        print(format_velocity_table(doc))
-        if args.plot:
-            print(f"\nfigure written to {args.plot}")
-    return 0
+    doc = velocity_document(run_velocity_experiment(args.trials, args.seed))
+    return _emit(args, doc, format_velocity_table, plot_velocity)
 
 
 def _cmd_bench(args: argparse.Namespace) -> int:

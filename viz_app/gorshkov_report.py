@@ -6,25 +6,20 @@ length k, with null where a value is undefined (e.g. range-only acceleration at 
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 import numpy as np
 
 from core.doppler_tracking import DopplerTrackingResult
 from core.finite_memory import FilterStats, GorshkovResult
-from viz_app.prosov_report import METRIC_KEYS
+from viz_app.prosov_report import METRIC_KEYS, json_series
 
 _STATE_KEYS = ("r", "vr", "a")
 
 
-def _series(values: np.ndarray) -> list[float | None]:
-    return [float(v) if math.isfinite(v) else None for v in np.asarray(values, dtype=float)]
-
-
 def _by_state(a: np.ndarray) -> dict[str, list[float | None]]:
     """(K, 3) → {"r": [...], "vr": [...], "a": [...]}."""
-    return {key: _series(a[:, i]) for i, key in enumerate(_STATE_KEYS)}
+    return {key: json_series(a[:, i]) for i, key in enumerate(_STATE_KEYS)}
 
 
 def _variants(get: str, ro: FilterStats, rd: FilterStats) -> dict[str, Any]:
@@ -36,9 +31,9 @@ def tracking_document(result: DopplerTrackingResult) -> dict[str, Any]:
     cfg = result.config
     variants = {}
     for name, m in result.metrics.items():
-        entry = {k: _series(getattr(m, k)) for k in METRIC_KEYS}
-        entry["rmse_vr"] = _series(result.rmse_vr[name])
-        entry["sigma_vr_filter"] = _series(result.sigma_vr_filter[name])
+        entry = {k: json_series(getattr(m, k)) for k in METRIC_KEYS}
+        entry["rmse_vr"] = json_series(result.rmse_vr[name])
+        entry["sigma_vr_filter"] = json_series(result.sigma_vr_filter[name])
         variants[name] = entry
     return {
         "radar": cfg.radar,

@@ -25,7 +25,7 @@ METRIC_KEYS: tuple[str, ...] = (
 )
 
 
-def _series(values: np.ndarray) -> list[float | None]:
+def json_series(values: np.ndarray) -> list[float | None]:
     """A JSON list: floats, with None where a value is undefined (NaN or infinite)."""
     return [float(v) if math.isfinite(v) else None for v in np.asarray(values, dtype=float)]
 
@@ -38,12 +38,12 @@ def case_document(result: TrackingResult) -> dict[str, Any]:
         "sigma_r_m": cfg.sigma_r_m,
         "n": [int(v) for v in result.n],
         "methods": {
-            name: {k: _series(getattr(m, k)) for k in METRIC_KEYS}
+            name: {k: json_series(getattr(m, k)) for k in METRIC_KEYS}
             for name, m in result.metrics.items()
         },
     }
     if "seed" in result.metrics and "naive" in result.metrics:
-        case["delta_x_percent"] = {k: _series(v) for k, v in result.delta_x_percent().items()}
+        case["delta_x_percent"] = {k: json_series(v) for k, v in result.delta_x_percent().items()}
     case["nees_pos_band95"] = list(result.nees_pos_band95)
     return case
 
