@@ -269,8 +269,9 @@ class ConvertedParts(NamedTuple):
     r11: NDArray[np.float64]
 
     def stacked(self) -> Converted:
-        x, y = np.broadcast_arrays(self.x, self.y)
-        return Converted(np.stack([x, y], axis=-1), _sym2(self.r00, self.r01, self.r11))
+        """(z (..., 2), R (..., 2, 2)) with one batch shape for both (all parts broadcast)."""
+        x, y, r00, r01, r11 = np.broadcast_arrays(self.x, self.y, self.r00, self.r01, self.r11)
+        return Converted(np.stack([x, y], axis=-1), _sym2(r00, r01, r11))
 
 
 def convert_parts(

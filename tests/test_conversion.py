@@ -635,3 +635,11 @@ def test_unknown_method_names_the_allowed_ones() -> None:
 def test_ducm_needs_predicted_position() -> None:
     with pytest.raises(ValueError, match="predicted_xy"):
         cv.convert("ducm", 1e3, 0.1, 10.0, 0.01)
+
+
+def test_point_and_covariance_share_the_batch_shape() -> None:
+    """Scalar measurement, batched σ (or one prediction, batched measurements): z and R agree."""
+    c = cv.convert("naive", 1e5, 0.3, 250.0, np.array([0.01, 0.02, 0.03]))
+    assert c.z.shape == (3, 2) and c.R.shape == (3, 2, 2)
+    d = cv.convert("ducm", np.array([1e5, 2e5]), 0.1, 250.0, 0.01, np.array([1e5, 1e4]))
+    assert d.z.shape == (2, 2) and d.R.shape == (2, 2, 2)
