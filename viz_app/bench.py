@@ -29,6 +29,7 @@ from core.kalman_cv import cv_init, cv_predict, cv_update, empty_batch, transiti
 from core.prosov import BLOCK_RUNS, TrackingConfig, block_sizes, filter_block
 from core.scenario import polar_measurements, prosov_target
 from viz_app.runtime import peak_rss_mb
+from viz_app.tune import measure_tune_latency
 
 _H2 = np.array([[1.0, 0.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]])
 
@@ -132,6 +133,7 @@ def run_bench(
         "speedup_vs_filterpy": [fp / v for v in kf],
         "gorshkov_trials": 100_000,
         "gorshkov_s": gorshkov_s,
+        "tune_median_ms": measure_tune_latency(),
         "peak_rss_mb": peak_rss_mb(),
     }
 
@@ -154,5 +156,6 @@ def format_bench(doc: dict[str, Any]) -> str:
         f"Gorshkov experiment (6 radars × {doc['gorshkov_trials']} trials, both variants): "
         f"{doc['gorshkov_s']:.2f} s"
     )
+    lines.append(f"tune: change → recording flushed, median {doc['tune_median_ms']:.0f} ms")
     lines.append(f"peak RSS: {doc['peak_rss_mb']:.0f} MiB")
     return "\n".join(lines)

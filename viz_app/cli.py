@@ -112,6 +112,14 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_commands(sub)
 
+    tune = sub.add_parser("tune", help="Viser panel that re-runs the Prosov scene into Rerun")
+    tune.add_argument("--host", default="127.0.0.1",
+                      help="address to bind (default 127.0.0.1; anything else is exposed)")
+    tune.add_argument("--port", type=_integer, default=0, help="panel port (default: a free one)")
+    tune.add_argument("--viewer-port", type=_integer, default=0,
+                      help="web viewer port (default: a free one)")
+    tune.add_argument("--no-browser", action="store_true", help="do not open a browser")
+
     bench = sub.add_parser("bench", help="speed of the batched filters vs filterpy")
     bench.add_argument("--json", action="store_true", help="print only JSON")
     bench.add_argument("--runs", type=_integer, nargs="+", default=[10_000, 100_000],
@@ -265,6 +273,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _cmd_reproduce_velocity(args)
         if args.command == "bench":
             return _cmd_bench(args)
+        if args.command == "tune":
+            from viz_app.tune import cmd_tune
+
+            return cmd_tune(args.host, args.port, args.viewer_port, args.no_browser)
         from viz_app.cli_recording import COMMANDS
 
         if args.command in COMMANDS:

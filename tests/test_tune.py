@@ -1,0 +1,283 @@
+"""``radarviz tune``: parameters, the coalescing worker, and the panel in headless Chromium.
+
+The browser test is required in CI (``CI=true``): a missing browser is a failure, not a skip.
+"""
+
+from __future__ import annotations
+
+import os
+import queue
+import re
+import signal
+import subprocess
+import sys
+import threading
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from core.prosov import run_tracking
+from core.validation import ParameterError
+from viz_app.cli_recording import free_port
+from viz_app.tune import (
+    Coalescer,
+    TuneParams,
+    TuneSession,
+    preset_values,
+    simulate,
+)
+
+ROOT = Path(__file__).resolve().parents[1]
+ARTIFACTS = ROOT / "test-artifacts"
+SMALL = TuneParams(runs=20, steps=10)
+
+
+def _os_threads() -> int:
+    with open("/proc/self/status") as f:
+        for line in f:
+            if line.startswith("Threads:"):
+                return int(line.split()[1])
+    return threading.active_count()
+
+
+# --- parameters ---------------------------------------------------------------------------
+
+
+def test_params_validation_one_line_errors() -> None:
+    for bad in ({"sigma_r_m": 0.0}, {"sigma_beta_deg": -1.0}, {"sigma_beta_deg": float("nan")},
+                {"period_s": 0.0}, {"c0": 0.0}, {"runs": 1}, {"seed": -1}, {"methods": ()},
+                {"methods": ("kalman",)}):
+        with pytest.raises(ParameterError) as info:
+            replace(TuneParams(), **bad)
+        assert "\n" not in str(info.value)
+
+
+def test_c0_links_sigma_vr_and_presets() -> None:
+    p = TuneParams(sigma_r_m=250.0, period_s=10.0, c0=1.0)
+    assert p.sigma_vr_mps == pytest.approx(25.0)  # RLS2: C0 = 1
+    v = preset_values("RLS5")
+    assert v["sigma_r_m"] == 50.0 and v["period_s"] == 10.0 and v["c0"] == pytest.approx(25.0)
+    assert TuneParams(**v).sigma_vr_mps == pytest.approx(1.0)
+    with pytest.raises(ParameterError):
+        preset_values("RLS9")
+
+
+def test_from_raw_accepts_panel_floats() -> None:
+    p = TuneParams.from_raw({"runs": 50.0, "seed": 3.0, "methods": ["ucm", "ekf"]})
+    assert p.runs == 50 and p.seed == 3 and p.methods == ("ucm", "ekf")
+
+
+def test_simulation_matches_core_statistics() -> None:
+    p = TuneParams(runs=50, steps=20, sigma_beta_deg=1.5)
+    mine = simulate(p)
+    ref = run_tracking(p.config())
+    for m in p.methods:
+        for name in ("bias_range", "rmse_x", "sigma_x_filter", "nees_pos"):
+            np.testing.assert_allclose(getattr(mine.methods[m], name),
+                                       getattr(ref.metrics[m], name), rtol=1e-9, atol=1e-9)
+
+
+# --- coalescing worker --------------------------------------------------------------------
+
+
+def test_coalescer_runs_newest_only() -> None:
+    seen: list[int] = []
+    gate = threading.Event()
+
+    def fn(item: int) -> int:
+        gate.wait(5)
+        seen.append(item)
+        return item
+
+    w = Coalescer(fn)
+    try:
+        w.submit(0)
+        time.sleep(0.05)  # the worker is now blocked in run 0
+        for i in range(1, 50):
+            w.submit(i)
+        gate.set()
+        assert w.wait_idle(10)
+    finally:
+        w.stop()
+    assert seen == [0, 49]
+    assert not w.alive
+
+
+def test_coalescer_survives_exceptions() -> None:
+    errors: list[str] = []
+    done: list[int] = []
+
+    def fn(item: int) -> int:
+        if item < 0:
+            raise RuntimeError("boom")
+        return item
+
+    w = Coalescer(fn, lambda i, r, ms: done.append(r), lambda i, e: errors.append(str(e)))
+    try:
+        w.submit(-1)
+        assert w.wait_idle(5)
+        w.submit(7)
+        assert w.wait_idle(5)
+    finally:
+        w.stop()
+    assert errors == ["boom"] and done == [7]
+
+
+def test_bad_value_shows_error_and_keeps_last_good() -> None:
+    s = TuneSession(None)
+    w = Coalescer(s.run, s.done, s.error)
+    try:
+        w.submit(SMALL)
+        assert w.wait_idle(30)
+        good = s.last_good
+        assert good is not None and s.last_error is None
+        w.submit({**SMALL.__dict__, "sigma_r_m": -5.0})
+        assert w.wait_idle(30)
+    finally:
+        w.stop()
+    assert s.last_good is good
+    assert s.last_error is not None and "σr" in s.last_error and "\n" not in s.last_error
+    assert "ucm" in s.status_markdown()
+
+
+def test_stress_rapid_changes_coalesce() -> None:
+    """100 changes in 2 s: a few runs, the last with the final values, no thread growth."""
+    s = TuneSession(None)
+    w = Coalescer(s.run, s.done, s.error)
+    base = TuneParams(runs=200, steps=60)
+    try:
+        w.submit(base)
+        assert w.wait_idle(60)
+        threads0 = _os_threads()
+        runs0 = w.completed
+        t0 = time.monotonic()
+        for i in range(100):
+            w.submit(replace(base, sigma_beta_deg=round(1.0 + 0.05 * i, 2)))
+            time.sleep(max(0.0, t0 + 0.02 * (i + 1) - time.monotonic()))
+        assert w.wait_idle(60)
+        runs = w.completed - runs0
+        threads1 = _os_threads()
+    finally:
+        w.stop()
+    assert 1 <= runs <= 30, runs
+    assert s.last_good is not None
+    assert s.last_good.params.sigma_beta_deg == pytest.approx(1.0 + 0.05 * 99)
+    assert threads1 <= threads0 + 2, (threads0, threads1)
+
+
+# --- the command in a browser -------------------------------------------------------------
+
+
+def _browser_or_fail() -> None:
+    from test_browser import _browser_or_fail as check
+
+    check()
+
+
+def _reader(proc: subprocess.Popen, lines: queue.Queue) -> None:
+    assert proc.stdout is not None
+    for line in proc.stdout:
+        lines.put(line.rstrip("\n"))
+
+
+def _expect(lines: queue.Queue, pattern: str, timeout: float, log: list[str]) -> re.Match:
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        try:
+            line = lines.get(timeout=0.2)
+        except queue.Empty:
+            continue
+        log.append(line)
+        m = re.search(pattern, line)
+        if m:
+            return m
+    raise AssertionError(f"no line matching {pattern!r} within {timeout} s; got {log}")
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    return True
+
+
+def _group_alive(pgid: int) -> bool:
+    try:
+        os.killpg(pgid, 0)
+    except ProcessLookupError:
+        return False
+    return True
+
+
+def test_tune_panel_slider_makes_new_recording() -> None:
+    _browser_or_fail()
+    from playwright.sync_api import sync_playwright
+    from test_browser import CHROMIUM, CHROMIUM_ARGS
+
+    exe = Path(sys.executable).with_name("radarviz")
+    panel_port, viewer_port = free_port(), free_port()
+    proc = subprocess.Popen(
+        [str(exe), "tune", "--no-browser", "--port", str(panel_port),
+         "--viewer-port", str(viewer_port)],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+        cwd=ROOT, env={**os.environ, "PYTHONUNBUFFERED": "1"},
+    )
+    lines: queue.Queue = queue.Queue()
+    threading.Thread(target=_reader, args=(proc, lines), daemon=True).start()
+    log: list[str] = []
+    rerun_pids: list[int] = []
+    try:
+        panel = _expect(lines, r"^panel (\S+)", 60, log).group(1)
+        viewer = _expect(lines, r"^viewer (\S+)", 10, log).group(1)
+        first = _expect(lines, r"^run (\S+) sigma_beta_deg=2 ms=(\d+)", 60, log)
+        rerun_pids = [int(p) for p in subprocess.run(
+            ["pgrep", "-f", f"web-viewer-port {viewer_port}"], capture_output=True, text=True
+        ).stdout.split()]
+        assert rerun_pids, "the rerun web viewer child is not running"
+        ARTIFACTS.mkdir(exist_ok=True)
+        with sync_playwright() as p:
+            browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
+            page = browser.new_page(viewport={"width": 1400, "height": 900})
+            page.goto(panel)
+            page.get_by_text(first.group(1)).first.wait_for(timeout=60_000)
+            slider = page.get_by_role("slider").first
+            slider.focus()
+            slider.press("ArrowRight")
+            second = _expect(lines, r"^run (\S+) sigma_beta_deg=2.1 ms=(\d+)", 60, log)
+            assert second.group(1) != first.group(1)
+            # The status line in the panel (React DOM) names the new recording.
+            page.get_by_text(second.group(1)).first.wait_for(timeout=30_000)
+            assert page.get_by_text("σβ 2.1°").count() >= 1
+            page.screenshot(path=str(ARTIFACTS / "tune_panel.png"))
+
+            view = browser.new_page(viewport={"width": 1400, "height": 900})
+            view.goto(viewer)
+            view.wait_for_selector("canvas", timeout=60_000)
+            time.sleep(8)  # let the viewer stream and draw the newest recording
+            view.screenshot(path=str(ARTIFACTS / "tune_viewer.png"))
+            browser.close()
+        assert (ARTIFACTS / "tune_panel.png").stat().st_size > 10_000
+        assert (ARTIFACTS / "tune_viewer.png").stat().st_size > 10_000
+    finally:
+        with_group = _group_alive(proc.pid)
+        if with_group:
+            os.killpg(proc.pid, signal.SIGTERM)
+        try:
+            proc.wait(timeout=15)
+        except subprocess.TimeoutExpired:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait(timeout=5)
+            raise
+    assert proc.returncode == 0, proc.stderr.read() if proc.stderr else ""
+    # SIGTERM stopped everything it started: its group is gone, and so is the rerun child's.
+    end = time.monotonic() + 10
+    while time.monotonic() < end and (
+        _group_alive(proc.pid) or any(_pid_alive(pid) for pid in rerun_pids)
+    ):
+        time.sleep(0.2)
+    assert not _group_alive(proc.pid)
+    assert not any(_pid_alive(pid) for pid in rerun_pids), "rerun outlived radarviz tune"
