@@ -109,8 +109,10 @@ def build_parser() -> argparse.ArgumentParser:
                      help="write the figure (baseline σ and correlations, sweep)")
 
     from viz_app.cli_recording import add_commands
+    from viz_app.track_io import add_commands as add_track_commands
 
     add_commands(sub)
+    add_track_commands(sub)
 
     tune = sub.add_parser("tune", help="Viser panel that re-runs the Prosov scene into Rerun")
     tune.add_argument("--host", default="127.0.0.1",
@@ -281,6 +283,10 @@ def main(argv: Sequence[str] | None = None) -> int:
 
         if args.command in COMMANDS:
             return COMMANDS[args.command](args)
+        from viz_app.track_io import COMMANDS as TRACK_COMMANDS
+
+        if args.command in TRACK_COMMANDS:
+            return TRACK_COMMANDS[args.command](args)
     except ParameterError as exc:
         return _fail(str(exc))
     except OSError as exc:

@@ -1,0 +1,271 @@
+"""``radarviz simulate`` and ``radarviz track``: files in, files out (``viz_app.track_io``).
+
+* Round trip: the Prosov run written by ``simulate`` and tracked from the file equals the
+  in-memory tracks (``core.prosov.track_history`` on the same measurements) to 1e-9 relative;
+  the only differences are the azimuth's degrees → radians round trip (≈ 1 ulp).
+* Bad files: exit 2, one line on standard error naming file, line and column, no output file
+  (and no temporary file left beside it; an existing output is left untouched).
+* The ``ekf`` rows equal filterpy's ``ExtendedKalmanFilter`` run directly on the same file (two
+  radars, one away from the origin, irregular time steps including dt = 0, process noise).
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from filterpy.common import Q_discrete_white_noise
+from filterpy.kalman import ExtendedKalmanFilter
+
+from core.kalman_cv import transition_matrix
+from core.prosov import ALL_METHODS, track_history
+from core.track_stream import prosov_single_run
+from viz_app.cli import main
+from viz_app.track_io import TRACK_COLUMNS
+
+RTOL = 1e-9
+
+GOOD_RADARS = """\
+[radars.a]
+x_m = 0.0
+y_m = 0.0
+z_m = 0.0
+sigma_range_m = 250.0
+sigma_azimuth_deg = 1.0
+
+[radars.b]
+x_m = 60000.0
+y_m = -20000.0
+z_m = 15.0
+sigma_range_m = 100.0
+sigma_azimuth_deg = 0.5
+"""
+
+HEADER = "time_s,radar,range_m,azimuth_deg\n"
+GOOD_ROWS = [
+    "0,a,150000,0.5\n",
+    "10,b,94000,10.0\n",
+    "20,a,152000,0.4\n",
+    "30,b,95000,10.2\n",
+]
+
+
+def read_tracks(path: Path) -> list[dict[str, str]]:
+    with open(path, newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    assert rows and tuple(rows[0]) == TRACK_COLUMNS
+    return rows
+
+
+def state_of(row: dict[str, str]) -> tuple[np.ndarray, np.ndarray]:
+    """The 2D (x, ẋ, y, ẏ) mean and covariance of one output row."""
+    x = np.array([float(row[k]) for k in ("x_m", "vx_mps", "y_m", "vy_mps")])
+    names = ("x", "vx", "y", "vy")
+    P = np.empty((4, 4))
+    for i, a in enumerate(names):
+        for j, b in enumerate(names):
+            key = f"p_{a}{b}" if f"p_{a}{b}" in row else f"p_{b}{a}"
+            P[i, j] = float(row[key])
+    for k in ("z_m", "vz_mps", "p_xz", "p_yz", "p_zz", "p_vzvz", "p_zvx", "p_xvz"):
+        assert float(row[k]) == 0.0
+    return x, P
+
+
+def close(a: np.ndarray, b: np.ndarray) -> None:
+    np.testing.assert_allclose(a, b, rtol=RTOL, atol=RTOL * np.abs(b).max())
+
+
+# --------------------------------------------------------------------------------------------
+# Round trip
+# --------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("sigma_beta_deg", [1.0, 2.0])
+def test_simulate_then_track_equals_in_memory(tmp_path: Path, sigma_beta_deg: float) -> None:
+    meas, radars, out = tmp_path / "m.csv", tmp_path / "r.toml", tmp_path / "t.csv"
+    assert main(["simulate", "--preset", "prosov", "--out", str(meas), "--radars-out",
+                 str(radars), "--seed", "3", "--sigma-beta-deg", str(sigma_beta_deg)]) == 0
+    assert main(["track", "--input", str(meas), "--radars", str(radars), "--out", str(out)]) == 0
+    rows = read_tracks(out)
+    times, r_hat, b_hat, cfg = prosov_single_run(3, sigma_beta_deg)
+    n = len(times)
+    assert len(rows) == n * len(ALL_METHODS)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["m.csv", "r.toml", "t.csv"]
+    for k, method in enumerate(ALL_METHODS):
+        xs, ps = track_history(method, r_hat, b_hat, cfg)
+        mine = rows[k :: len(ALL_METHODS)]
+        for i, row in enumerate(mine):
+            assert row["method"] == method
+            assert float(row["time_s"]) == times[i]
+            x, P = state_of(row)
+            close(x, xs[0, i])
+            close(P, ps[0, i])
+
+
+def test_method_subset_and_default_out(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    (tmp_path / "m.csv").write_text(HEADER + "".join(GOOD_ROWS))
+    (tmp_path / "r.toml").write_text(GOOD_RADARS)
+    monkeypatch.chdir(tmp_path)
+    assert main(["track", "--input", "m.csv", "--radars", "r.toml", "--method", "ducm",
+                 "ukf"]) == 0
+    rows = read_tracks(tmp_path / "tracks.csv")
+    assert [r["method"] for r in rows] == ["ducm", "ukf"] * len(GOOD_ROWS)
+
+
+# --------------------------------------------------------------------------------------------
+# Bad files
+# --------------------------------------------------------------------------------------------
+
+BAD_CASES = {
+    "missing column": ("time_s,radar,azimuth_deg\n0,a,1\n", GOOD_RADARS,
+                       "m.csv line 1, column range_m: missing"),
+    "unknown column": ("time_s,radar,range_m,azimuth_deg,snr\n0,a,1,1,3\n", GOOD_RADARS,
+                       "m.csv line 1, column snr: unknown column"),
+    "non-numeric": (HEADER + GOOD_ROWS[0] + "10,a,abc,1\n", GOOD_RADARS,
+                    "m.csv line 3, column range_m: must be a finite number > 0 (got 'abc')"),
+    "nan": (HEADER + GOOD_ROWS[0] + "10,a,150000,nan\n", GOOD_RADARS,
+            "m.csv line 3, column azimuth_deg: must be a finite number"),
+    "unsorted": (HEADER + GOOD_ROWS[0] + GOOD_ROWS[2] + GOOD_ROWS[1], GOOD_RADARS,
+                 "m.csv line 4, column time_s: must not be before"),
+    "unknown radar": (HEADER + GOOD_ROWS[0] + "10,zz,150000,1\n", GOOD_RADARS,
+                      "m.csv line 3, column radar: unknown radar"),
+    "range zero": (HEADER + "0,a,0,1\n", GOOD_RADARS, "m.csv line 2, column range_m"),
+    "range negative": (HEADER + "0,a,-5,1\n", GOOD_RADARS, "m.csv line 2, column range_m"),
+    "azimuth": (HEADER + "0,a,1000,361\n", GOOD_RADARS, "m.csv line 2, column azimuth_deg"),
+    "elevation": ("time_s,radar,range_m,azimuth_deg,elevation_deg\n0,a,1000,1,x\n", GOOD_RADARS,
+                  "m.csv line 2, column elevation_deg"),
+    "short row": (HEADER + "0,a,1000\n", GOOD_RADARS, "m.csv line 2: expected 4 fields"),
+    "no plots": (HEADER, GOOD_RADARS, "m.csv: no plots"),
+    "negative sigma": (HEADER + GOOD_ROWS[0], GOOD_RADARS.replace("100.0", "-1.0"),
+                       "r.toml, radar 'b', key sigma_range_m: must be a finite number > 0"),
+    "missing radar key": (HEADER + GOOD_ROWS[0], GOOD_RADARS.replace("z_m = 15.0\n", ""),
+                          "r.toml, radar 'b', key z_m: missing"),
+    "bad toml": (HEADER + GOOD_ROWS[0], "[radars.a\n", "r.toml: not valid TOML"),
+    # Many good rows, then a bad one: the tracks already written must be discarded.
+    "late error": (HEADER + "".join(f"{t},a,{150000 + 2000 * t},0.1\n" for t in range(300))
+                   + "5000,a,150000,1e400\n", GOOD_RADARS,
+                   "m.csv line 302, column azimuth_deg"),
+}
+
+
+@pytest.mark.parametrize("case", list(BAD_CASES))
+@pytest.mark.parametrize("existing", [False, True])
+def test_bad_file_exit_2_one_line_no_output(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str],
+    case: str, existing: bool,
+) -> None:
+    meas_text, radars_text, expected = BAD_CASES[case]
+    (tmp_path / "m.csv").write_text(meas_text)
+    (tmp_path / "r.toml").write_text(radars_text)
+    if existing:
+        (tmp_path / "t.csv").write_text("old\n")
+    monkeypatch.chdir(tmp_path)
+    capsys.readouterr()
+    status = main(["track", "--input", "m.csv", "--radars", "r.toml", "--out", "t.csv"])
+    out, err = capsys.readouterr()
+    assert status == 2
+    assert out == ""
+    assert err.count("\n") == 1 and err.startswith("radarviz: error: "), err
+    assert expected in err, err
+    expected_files = ["m.csv", "r.toml"] + (["t.csv"] if existing else [])
+    assert sorted(p.name for p in tmp_path.iterdir()) == expected_files
+    if existing:
+        assert (tmp_path / "t.csv").read_text() == "old\n"
+
+
+def test_unknown_method_and_preset(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    (tmp_path / "m.csv").write_text(HEADER + "".join(GOOD_ROWS))
+    (tmp_path / "r.toml").write_text(GOOD_RADARS)
+    out = tmp_path / "t.csv"
+    assert main(["track", "--input", str(tmp_path / "m.csv"), "--radars",
+                 str(tmp_path / "r.toml"), "--method", "kf", "--out", str(out)]) == 2
+    assert main(["simulate", "--preset", "nope", "--out", str(tmp_path / "x.csv"),
+                 "--radars-out", str(tmp_path / "x.toml")]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 2 and "--method" in err[0] and "--preset" in err[1]
+    assert not out.exists() and not (tmp_path / "x.csv").exists()
+
+
+# --------------------------------------------------------------------------------------------
+# EKF against filterpy, on the file
+# --------------------------------------------------------------------------------------------
+
+
+def write_two_radar_file(path: Path) -> None:
+    """A target seen alternately by radars a (origin) and b (away), irregular times."""
+    rng = np.random.default_rng(5)
+    sites = {"a": (0.0, 0.0, 250.0, 1.0), "b": (60000.0, -20000.0, 100.0, 0.5)}
+    times = np.concatenate([[0.0], np.cumsum(rng.uniform(0.5, 12.0, 59))])
+    times[10] = times[9]  # two plots at the same time: dt = 0
+    lines = [HEADER]
+    for k, t in enumerate(times.tolist()):
+        name = "ab"[k % 2]
+        sx, sy, sr, sb = sites[name]
+        px, py = 140e3 + 150.0 * t, 10e3 - 80.0 * t
+        r = math.hypot(px - sx, py - sy) + sr * rng.standard_normal()
+        az = math.degrees(math.atan2(py - sy, px - sx)) + sb * rng.standard_normal()
+        lines.append(f"{t!r},{name},{r!r},{az!r}\n")
+    path.write_text("".join(lines))
+
+
+def test_ekf_matches_filterpy_on_the_file(tmp_path: Path) -> None:
+    meas, radars, out = tmp_path / "m.csv", tmp_path / "r.toml", tmp_path / "t.csv"
+    write_two_radar_file(meas)
+    radars.write_text(GOOD_RADARS)
+    sigma_a = 0.3
+    assert main(["track", "--input", str(meas), "--radars", str(radars), "--out", str(out),
+                 "--method", "ekf", "--sigma-a", str(sigma_a)]) == 0
+    rows = read_tracks(out)
+    sites = {"a": (0.0, 0.0, 250.0, 1.0), "b": (60000.0, -20000.0, 100.0, 0.5)}
+    with open(meas, newline="") as fh:
+        plots = list(csv.DictReader(fh))
+    assert len(rows) == len(plots)
+
+    f = ExtendedKalmanFilter(dim_x=4, dim_z=2)
+    last_t = None
+    for row, plot in zip(rows, plots, strict=True):
+        t = float(plot["time_s"])
+        sx, sy, sr, sb_deg = sites[plot["radar"]]
+        sb = math.radians(sb_deg)
+        r, b = float(plot["range_m"]), math.radians(float(plot["azimuth_deg"]))
+        z = np.array([r, b])
+        if last_t is None:
+            # The spec's start: naive point, linearized covariance, velocity 0 ± 1000 m/s.
+            c, s = math.cos(b), math.sin(b)
+            J = np.array([[c, -r * s], [s, r * c]])
+            Rxy = J @ np.diag([sr**2, sb**2]) @ J.T
+            f.x = np.array([sx + r * c, 0.0, sy + r * s, 0.0])
+            P = np.zeros((4, 4))
+            P[np.ix_([0, 2], [0, 2])] = Rxy
+            P[1, 1] = P[3, 3] = 1000.0**2
+            f.P = P
+        else:
+            dt = t - last_t
+            if dt > 0:
+                f.F = transition_matrix(dt)
+                f.Q = Q_discrete_white_noise(2, dt=dt, var=sigma_a**2, block_size=2)
+                f.predict()
+
+            def hx(x: np.ndarray, sx: float = sx, sy: float = sy) -> np.ndarray:
+                return np.array([math.hypot(x[0] - sx, x[2] - sy),
+                                 math.atan2(x[2] - sy, x[0] - sx)])
+
+            def jac(x: np.ndarray, sx: float = sx, sy: float = sy) -> np.ndarray:
+                dx, dy = x[0] - sx, x[2] - sy
+                r2 = dx * dx + dy * dy
+                rr = math.sqrt(r2)
+                return np.array([[dx / rr, 0.0, dy / rr, 0.0], [-dy / r2, 0.0, dx / r2, 0.0]])
+
+            def residual(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+                y = np.asarray(a, dtype=float) - b
+                y[1] = math.remainder(y[1], 2.0 * math.pi)
+                return y
+
+            f.update(z, jac, hx, R=np.diag([sr**2, sb**2]), residual=residual)
+        last_t = t
+        x, P = state_of(row)
+        close(x, f.x)
+        close(P, f.P)
