@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import math
 import os
 import secrets
+from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 from matplotlib.figure import Figure
 
@@ -36,3 +39,24 @@ def write_figure_atomically(fig: Figure, path: Path, dpi: int = DPI) -> None:
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
+
+
+def finite_points(
+    xs: Sequence[Any], ys: Sequence[Any] | None, *, positive: bool = False
+) -> tuple[list[float], list[float]]:
+    """The (x, y) pairs of a JSON series where both are finite numbers (and y > 0 if
+    ``positive``): nulls, booleans and non-numbers are skipped."""
+    px: list[float] = []
+    py: list[float] = []
+    for x, y in zip(xs, ys or (), strict=False):
+        if x is None or y is None or isinstance(x, bool) or isinstance(y, bool):
+            continue
+        try:
+            fx, fy = float(x), float(y)
+        except (TypeError, ValueError):
+            continue
+        if not (math.isfinite(fx) and math.isfinite(fy)) or (positive and fy <= 0.0):
+            continue
+        px.append(fx)
+        py.append(fy)
+    return px, py

@@ -31,7 +31,7 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.ticker import LogFormatter, MaxNLocator
 
-from viz_app.figures import write_figure_atomically
+from viz_app.figures import finite_points, write_figure_atomically
 
 #: Radar presets in display order; each keeps its colour in every panel (and in any subset).
 RADAR_ORDER: tuple[str, ...] = ("RLS1", "RLS2", "RLS3", "RLS4", "RLS5", "RLS6")
@@ -64,25 +64,6 @@ LEGEND_PAD = 0.04
 WIDTH_IN = 12.0
 HEIGHT_IN = 11.0
 DPI = 120
-
-
-def _points(xs: Sequence[Any], ys: Sequence[Any] | None, *, positive: bool = False
-            ) -> tuple[list[float], list[float]]:
-    """The (x, y) pairs where both are finite numbers (and y > 0 if ``positive``)."""
-    px: list[float] = []
-    py: list[float] = []
-    for x, y in zip(xs, ys or (), strict=False):
-        if x is None or y is None or isinstance(x, bool) or isinstance(y, bool):
-            continue
-        try:
-            fx, fy = float(x), float(y)
-        except (TypeError, ValueError):
-            continue
-        if not (math.isfinite(fx) and math.isfinite(fy)) or (positive and fy <= 0.0):
-            continue
-        px.append(fx)
-        py.append(fy)
-    return px, py
 
 
 def _broken(xs: Sequence[Any], ys: Sequence[Any] | None, *, positive: bool = False
@@ -240,7 +221,9 @@ def _plot_sigma(ax: Axes, radars: Sequence[tuple[str, Mapping[str, Any]]], key: 
                         zorder=3 if dashed else 4)
                 drawn = True
         for name, rad in radars:
-            x, y = _points(rad.get("k") or [], _get(rad, "sigma", variant, key), positive=True)
+            x, y = finite_points(
+                rad.get("k") or [], _get(rad, "sigma", variant, key), positive=True
+            )
             if not x:
                 continue
             ax.plot(x, y, ls="none", marker="o", ms=MARKER_SIZE, mew=0.9,

@@ -27,7 +27,7 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 from matplotlib.ticker import LogFormatter
 
-from viz_app.figures import write_figure_atomically
+from viz_app.figures import finite_points, write_figure_atomically
 
 #: Methods in display order; each keeps its colour in every panel.
 METHOD_ORDER: tuple[str, ...] = ("naive", "seed", "cmkf_d", "ucm", "ducm", "ekf", "ukf")
@@ -59,22 +59,6 @@ _WINDOW_COLOUR = "0.9"
 CASE_WIDTH_IN = 6.0
 HEIGHT_IN = 11.0
 DPI = 120
-
-
-def _points(xs: Sequence[Any], ys: Sequence[Any] | None, *, positive: bool = False
-            ) -> tuple[list[float], list[float]]:
-    """The (x, y) pairs where both are finite numbers (and y > 0 if ``positive``)."""
-    px: list[float] = []
-    py: list[float] = []
-    for x, y in zip(xs, ys or (), strict=False):
-        if x is None or y is None:
-            continue
-        fx, fy = float(x), float(y)
-        if not (math.isfinite(fx) and math.isfinite(fy)) or (positive and fy <= 0.0):
-            continue
-        px.append(fx)
-        py.append(fy)
-    return px, py
 
 
 def _method_colours(cases: Sequence[Mapping[str, Any]]) -> dict[str, str]:
@@ -128,7 +112,7 @@ def _plot_delta(ax: Axes, case: Mapping[str, Any], paper_scans: int) -> None:
     if not delta:
         _note(ax, "Δx needs both naive and seed")
         return
-    readings = {key: _points(ns, delta.get(key)) for key, _, _ in _READINGS}
+    readings = {key: finite_points(ns, delta.get(key)) for key, _, _ in _READINGS}
     if not any(x for x, _ in readings.values()):
         _note(ax, "no Δx values")
         return
@@ -202,8 +186,8 @@ def _plot_bias(ax: Axes, case: Mapping[str, Any], colours: Mapping[str, str]) ->
         series = methods.get(name)
         if series is None:
             continue
-        ranges[name] = _points(ns, series.get("bias_range"))
-        for xv, v in zip(*_points(ns, series.get("bias_cross")), strict=True):
+        ranges[name] = finite_points(ns, series.get("bias_range"))
+        for xv, v in zip(*finite_points(ns, series.get("bias_cross")), strict=True):
             cross_by_n.setdefault(xv, []).append(v)
     if not any(x for x, _ in ranges.values()):
         _note(ax, "no range-bias values")
@@ -244,7 +228,7 @@ def _plot_nees(ax: Axes, case: Mapping[str, Any], colours: Mapping[str, str]) ->
         _note(ax, "no methods in this case")
         return
     nees = {
-        name: _points(ns, methods[name].get("nees_pos"), positive=True)
+        name: finite_points(ns, methods[name].get("nees_pos"), positive=True)
         for name in colours
         if methods.get(name) is not None
     }
