@@ -7,6 +7,7 @@ status 2; no traceback.
 from __future__ import annotations
 
 import argparse
+import importlib
 import json
 import sys
 from collections.abc import Callable, Sequence
@@ -135,11 +136,16 @@ def _emit(
     args: argparse.Namespace,
     doc: dict[str, Any],
     table: Callable[[dict[str, Any]], str],
-    plot: Callable[[dict[str, Any], str], None],
+    plot: str,
 ) -> int:
-    """Write the figure if asked, then print the JSON document or the table."""
+    """Write the figure if asked, then print the JSON document or the table.
+
+    ``plot`` names the figure function as "module:function"; it is imported only when a
+    figure is asked for, so a table or JSON run does not load matplotlib.
+    """
     if args.plot:
-        plot(doc, args.plot)
+        module, func = plot.split(":")
+        getattr(importlib.import_module(module), func)(doc, args.plot)
     if args.json:
         json.dump(doc, sys.stdout, allow_nan=False)
         sys.stdout.write("\n")
@@ -180,9 +186,8 @@ def _cmd_reproduce_prosov(args: argparse.Namespace) -> int:
 
             bar = ProgressBar(f"prosov σβ={cfg.sigma_beta_deg:g}°")
         results.append(run_tracking(cfg, progress=bar))
-    from viz_app.prosov_plot import plot_prosov
-
-    return _emit(args, prosov_document(results), format_prosov_table, plot_prosov)
+    return _emit(args, prosov_document(results), format_prosov_table,
+                 "viz_app.prosov_plot:plot_prosov")
 
 
 def _cmd_reproduce_gorshkov(args: argparse.Namespace) -> int:
@@ -224,9 +229,8 @@ def _cmd_reproduce_gorshkov(args: argparse.Namespace) -> int:
                 runs=args.tracking_runs, seed=args.seed,
             )
         )
-    from viz_app.gorshkov_plot import plot_gorshkov
-
-    return _emit(args, gorshkov_document(result, tracking), format_gorshkov_table, plot_gorshkov)
+    return _emit(args, gorshkov_document(result, tracking), format_gorshkov_table,
+                 "viz_app.gorshkov_plot:plot_gorshkov")
 
 
 def _cmd_reproduce_velocity(args: argparse.Namespace) -> int:
@@ -240,10 +244,8 @@ def _cmd_reproduce_velocity(args: argparse.Namespace) -> int:
     from viz_app.velocity_report import format_velocity_table, velocity_document
 
     tune_allocator()
-    from viz_app.velocity_plot import plot_velocity
-
     doc = velocity_document(run_velocity_experiment(args.trials, args.seed))
-    return _emit(args, doc, format_velocity_table, plot_velocity)
+    return _emit(args, doc, format_velocity_table, "viz_app.velocity_plot:plot_velocity")
 
 
 def _cmd_bench(args: argparse.Namespace) -> int:
