@@ -29,6 +29,7 @@ UKF, P − K S Kᵀ), symmetrised, so P stays symmetric positive definite over 1
 from __future__ import annotations
 
 import functools
+import math
 from typing import NamedTuple
 
 import numpy as np
@@ -232,12 +233,24 @@ def doppler_update(
     (a small angle error δ tilts u by g δ, so V̂r moves by g·v δ). With ε = 0 and σε = 0 this
     is ``core.doppler_tracking.doppler_los_update`` exactly.
     """
-    u, e_b, e_e = line_of_sight(azimuth, elevation)
     x, P = track.x, track.P
-    v, Pvv = x[VEL], P[1::2, 1::2]
-    r_e = sigma_vr * sigma_vr
-    for g, s in ((np.cos(elevation) * e_b, sigma_azimuth), (e_e, sigma_elevation)):
-        r_e += s * s * (float(g @ v) ** 2 + float(g @ Pvv @ g))
+    ca, sa = math.cos(azimuth), math.sin(azimuth)
+    ce, se = math.cos(elevation), math.sin(elevation)
+    u = np.array([ce * ca, ce * sa, se])
+    vx, vy, vz = x[1], x[3], x[5]
+    # g_β = ∂u/∂β = cos ε (−sin β, cos β, 0),  g_ε = ∂u/∂ε = (−sin ε cos β, −sin ε sin β, cos ε);
+    # written out in floats: three-vectors are cheaper in Python than as numpy calls.
+    gb = (-ce * sa, ce * ca)
+    ge = (-se * ca, -se * sa, ce)
+    pxx, pxy, pxz, pyy, pyz, pzz = P[1, 1], P[1, 3], P[1, 5], P[3, 3], P[3, 5], P[5, 5]
+    gb_v = gb[0] * vx + gb[1] * vy
+    gb_P_gb = gb[0] * gb[0] * pxx + 2.0 * gb[0] * gb[1] * pxy + gb[1] * gb[1] * pyy
+    ge_v = ge[0] * vx + ge[1] * vy + ge[2] * vz
+    ge_P_ge = (ge[0] * ge[0] * pxx + ge[1] * ge[1] * pyy + ge[2] * ge[2] * pzz
+               + 2.0 * (ge[0] * ge[1] * pxy + ge[0] * ge[2] * pxz + ge[1] * ge[2] * pyz))
+    r_e = (sigma_vr * sigma_vr + sigma_azimuth**2 * (gb_v * gb_v + gb_P_gb)
+           + sigma_elevation**2 * (ge_v * ge_v + ge_P_ge))
+    v = x[VEL]
     # Scalar Joseph update with h = u on the velocity: U = P h, S = hᵀ U + r_e, K = U / S,
     # P⁺ = P − K Uᵀ + (K S − U) Kᵀ (see ``joseph_update``).
     U = P[:, 1::2] @ u

@@ -22,9 +22,16 @@ from filterpy.kalman import ExtendedKalmanFilter
 
 from core.kalman_cv import transition_matrix
 from core.prosov import ALL_METHODS, track_history
-from core.track_stream import prosov_single_run
+from core.track_stream import METHODS_3D, StreamOptions, StreamTracker, prosov_single_run
 from viz_app.cli import main
-from viz_app.track_io import TRACK_COLUMNS
+from viz_app.track_io import (
+    READ_BLOCK,
+    TRACK_COLUMNS,
+    parse_radars,
+    simulated_plots,
+    state_from_row,
+    track_lines,
+)
 
 RTOL = 1e-9
 
@@ -269,3 +276,194 @@ def test_ekf_matches_filterpy_on_the_file(tmp_path: Path) -> None:
         x, P = state_of(row)
         close(x, f.x)
         close(P, f.P)
+
+
+# --------------------------------------------------------------------------------------------
+# 3D + Doppler files, finite-memory start, streaming, recording
+# --------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("init", ["first-plot", "finite-memory"])
+def test_fusion_file_round_trip_equals_in_memory(tmp_path: Path, init: str) -> None:
+    """``simulate --preset fusion`` (3 radars, 3D, Doppler, staggered scans) tracked from the
+    file equals the same plots tracked in memory, plot by plot (``StreamTracker.add``: no
+    block vectorisation, so this also checks the block path against the one-plot path)."""
+    meas, radars, out = tmp_path / "m.csv", tmp_path / "r.toml", tmp_path / "t.csv"
+    assert main(["simulate", "--preset", "fusion", "--scans", "30", "--seed", "4", "--out",
+                 str(meas), "--radars-out", str(radars)]) == 0
+    assert main(["track", "--input", str(meas), "--radars", str(radars), "--out", str(out),
+                 "--sigma-a", "1.5", "--init", init]) == 0
+    rows = read_tracks(out)
+    plots, _ = simulated_plots("fusion", seed=4, scans=30)
+    tracker = StreamTracker(METHODS_3D, True, StreamOptions(sigma_a_mps2=1.5, init=init))
+    expected = [(p.time_s, r) for p in plots for r in tracker.add(p)]
+    assert len(plots) == 90
+    # finite-memory: R1's plots at 0, 10, 20 s make the window; the 6 plots up to the start
+    # (R2's and R3's included) give no rows.
+    assert len(rows) == len(expected) == (90 if init == "first-plot" else 84) * len(METHODS_3D)
+    for row, (t, (method, x, P)) in zip(rows, expected, strict=True):
+        assert row["method"] == method and float(row["time_s"]) == t
+        got_x, got_P = state_from_row(row)
+        close(got_x, x)
+        close(got_P, P)
+        assert np.all(np.linalg.eigvalsh(got_P) > 0)
+
+
+class _CountingLines:
+    """Measurement lines made on demand; records how many tracked rows existed per line."""
+
+    def __init__(self, n: int, written: list[int]):
+        self.n, self.written, self.lag = n, written, 0
+
+    def __iter__(self):
+        yield HEADER
+        for k in range(self.n):
+            # Rows written so far must trail the lines read by at most one read block.
+            self.lag = max(self.lag, k - self.written[0])
+            t = 10.0 * k
+            yield f"{t!r},a,{150000 + 200 * t!r},{0.5 + 0.001 * k!r}\n"
+
+
+def test_tracking_streams_with_a_bounded_buffer() -> None:
+    """The reader is never more than ``READ_BLOCK`` plots ahead of the tracks written."""
+    written = [0]
+    n = 3 * READ_BLOCK + 17
+    lines = _CountingLines(n, written)
+
+    def on_rows(plot: object, rows: list) -> None:
+        written[0] += 1
+
+    radars = parse_radars(GOOD_RADARS, "r.toml")
+    plots, three_d, methods = track_lines(lines, "m.csv", radars, ("ucm",), StreamOptions(),
+                                          on_rows)
+    assert (plots, three_d, methods) == (n, False, ("ucm",))
+    assert written[0] == n
+    assert READ_BLOCK - 1 <= lines.lag <= READ_BLOCK
+
+
+def test_rrd_recording_of_a_tracked_file(tmp_path: Path) -> None:
+    from tests.test_recording import _read
+
+    meas, radars = tmp_path / "m.csv", tmp_path / "r.toml"
+    out, rrd = tmp_path / "t.csv", tmp_path / "t.rrd"
+    assert main(["simulate", "--preset", "fusion", "--scans", "12", "--out", str(meas),
+                 "--radars-out", str(radars)]) == 0
+    rrd.write_text("old")  # replaced, like the track CSV
+    assert main(["track", "--input", str(meas), "--radars", str(radars), "--out", str(out),
+                 "--rrd", str(rrd), "--method", "ekf", "ucm"]) == 0
+    rows, cols = _read(rrd)
+    tracks = read_tracks(out)
+    for m in ("ekf", "ucm"):
+        for part in ("position", "covariance", "velocity"):
+            assert rows[f"/world/tracks/{m}/{part}"] == 36
+        assert rows[f"/plots/sigma_pos_m/{m}"] == 36
+        assert f"/world/tracks/{m}/path/000000" in rows
+        got = cols[f"/world/tracks/{m}/position"]
+        assert got["plot"] == list(range(1, 37))
+        pos = np.array([v[0] for v in got["Points3D:positions"]])
+        want = np.array([[float(r[k]) for k in ("x_m", "y_m", "z_m")]
+                         for r in tracks if r["method"] == m])
+        np.testing.assert_allclose(pos, want, rtol=1e-6)  # the recording stores float32
+    for r in ("R1", "R2", "R3"):
+        assert rows[f"/world/measurements/{r}"] == 12
+        assert f"/world/radars/{r}" in rows
+
+
+MIXED_RADARS = GOOD_RADARS.replace(
+    "sigma_azimuth_deg = 1.0\n", "sigma_azimuth_deg = 1.0\nsigma_radial_velocity_mps = 2.0\n")
+
+
+def test_empty_radial_velocity_cells_skip_the_doppler_update(tmp_path: Path) -> None:
+    """Radar a has Doppler, b has none (empty cells): a's rows change with --doppler, b's
+    first update does not see a Doppler row."""
+    meas, radars = tmp_path / "m.csv", tmp_path / "r.toml"
+    lines = ["time_s,radar,range_m,azimuth_deg,radial_velocity_mps\n",
+             "0,a,150000,0.5,190\n", "10,b,94000,10.0,\n", "20,a,152000,0.4,201\n"]
+    meas.write_text("".join(lines))
+    radars.write_text(MIXED_RADARS)
+    results = {}
+    for mode in ("use", "ignore"):
+        out = tmp_path / f"{mode}.csv"
+        assert main(["track", "--input", str(meas), "--radars", str(radars), "--out", str(out),
+                     "--method", "naive", "--doppler", mode]) == 0
+        results[mode] = [state_from_row(r)[0] for r in read_tracks(out)]
+    use, ignore = results["use"], results["ignore"]
+    # Plot 1 (a, Doppler 190 m/s along 0.5°): the velocity moves from 0 to ≈ 190 m/s.
+    assert np.allclose(ignore[0][[1, 3]], 0.0)
+    assert abs(np.hypot(use[0][1], use[0][3]) - 190.0) < 1.0
+    assert not np.allclose(use[2], ignore[2])
+
+
+NEW_BAD_CASES = {
+    "doppler without sigma": ("time_s,radar,range_m,azimuth_deg,radial_velocity_mps\n"
+                              "0,a,150000,0.5,10\n", GOOD_RADARS,
+                              "m.csv line 2, column radial_velocity_mps: radar 'a' has no "
+                              "sigma_radial_velocity_mps"),
+    "elevation without sigma": ("time_s,radar,range_m,azimuth_deg,elevation_deg\n"
+                                "0,a,150000,0.5,3\n", GOOD_RADARS,
+                                "m.csv line 2, column elevation_deg: radar 'a' has no "
+                                "sigma_elevation_deg"),
+    "empty elevation": ("time_s,radar,range_m,azimuth_deg,elevation_deg\n0,a,150000,0.5,\n",
+                        GOOD_RADARS.replace("[radars.b]", "sigma_elevation_deg = 1.0\n\n"
+                                            "[radars.b]"),
+                        "m.csv line 2, column elevation_deg: must be a finite number"),
+    "bad doppler": ("time_s,radar,range_m,azimuth_deg,radial_velocity_mps\n"
+                    "0,a,150000,0.5,fast\n", MIXED_RADARS,
+                    "m.csv line 2, column radial_velocity_mps: must be a finite number or empty"),
+    "elevation sigma range": (HEADER + GOOD_ROWS[0], GOOD_RADARS.replace(
+        "[radars.b]", "sigma_elevation_deg = 45.0\n\n[radars.b]"),
+        "r.toml, radar 'a', key sigma_elevation_deg: must be a finite number in (0, 20]"),
+}
+
+
+@pytest.mark.parametrize("case", list(NEW_BAD_CASES))
+def test_bad_3d_doppler_files(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                              case: str) -> None:
+    meas_text, radars_text, expected = NEW_BAD_CASES[case]
+    (tmp_path / "m.csv").write_text(meas_text)
+    (tmp_path / "r.toml").write_text(radars_text)
+    capsys.readouterr()
+    status = main(["track", "--input", str(tmp_path / "m.csv"), "--radars",
+                   str(tmp_path / "r.toml"), "--out", str(tmp_path / "t.csv")])
+    err = capsys.readouterr().err
+    assert status == 2 and err.count("\n") == 1 and expected in err, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["m.csv", "r.toml"]
+
+
+@pytest.mark.parametrize("args, name", [
+    (["--init", "kalman"], "--init"),
+    (["--init-k", "1"], "--init-k"),
+    (["--doppler", "maybe"], "--doppler"),
+    (["--sigma-v0", "0"], "--sigma-v0"),
+])
+def test_bad_track_options(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                           args: list[str], name: str) -> None:
+    (tmp_path / "m.csv").write_text(HEADER + "".join(GOOD_ROWS))
+    (tmp_path / "r.toml").write_text(GOOD_RADARS)
+    capsys.readouterr()
+    status = main(["track", "--input", str(tmp_path / "m.csv"), "--radars",
+                   str(tmp_path / "r.toml"), "--out", str(tmp_path / "t.csv"), *args])
+    err = capsys.readouterr().err
+    assert status == 2 and err.count("\n") == 1 and name in err, err
+    assert not (tmp_path / "t.csv").exists()
+
+
+def test_finite_memory_start_skips_other_radars_until_it_starts(tmp_path: Path) -> None:
+    """Radar a's first 3 plots make the start; b's plot in between gives no rows."""
+    lines = [HEADER, "0,a,150000,0.5\n", "5,b,94000,10.0\n", "10,a,152000,0.5\n",
+             "20,a,154000,0.5\n", "30,b,95000,10.2\n"]
+    (tmp_path / "m.csv").write_text("".join(lines))
+    (tmp_path / "r.toml").write_text(GOOD_RADARS)
+    out = tmp_path / "t.csv"
+    assert main(["track", "--input", str(tmp_path / "m.csv"), "--radars",
+                 str(tmp_path / "r.toml"), "--out", str(out), "--init", "finite-memory",
+                 "--method", "naive"]) == 0
+    rows = read_tracks(out)
+    assert [float(r["time_s"]) for r in rows] == [20.0, 30.0]
+    x, _ = state_from_row(rows[0])
+    # Range-only fit of 150, 152, 154 km over T = 10 s: r̂ = 154 km, V̂r = 200 m/s at 0.5°.
+    b = math.radians(0.5)
+    np.testing.assert_allclose(x[[0, 2]], 154000.0 * np.array([math.cos(b), math.sin(b)]),
+                               rtol=1e-12)
+    np.testing.assert_allclose(x[[1, 3]], 200.0 * np.array([math.cos(b), math.sin(b)]),
+                               rtol=1e-9)
