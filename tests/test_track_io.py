@@ -13,6 +13,8 @@ from __future__ import annotations
 
 import csv
 import math
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -367,6 +369,9 @@ def test_rrd_recording_of_a_tracked_file(tmp_path: Path) -> None:
     for r in ("R1", "R2", "R3"):
         assert rows[f"/world/measurements/{r}"] == 12
         assert f"/world/radars/{r}" in rows
+    exe = Path(sys.executable).with_name("rerun")
+    proc = subprocess.run([str(exe), "rrd", "verify", str(rrd)], capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
 
 
 MIXED_RADARS = GOOD_RADARS.replace(
