@@ -29,7 +29,7 @@ from scipy import stats
 
 from core.kalman_cv import CVBatch, quad_form_inv
 
-_SUMS = (
+_SUMS: tuple[str, ...] = (
     "ex",
     "ex2",
     "ey",
@@ -41,6 +41,8 @@ _SUMS = (
     "nees_pos",
     "nees_state",
 )
+#: Names of the running sums, in the row order of ``MetricsAccumulator.to_arrays``.
+SUM_NAMES: tuple[str, ...] = _SUMS
 
 
 class TrackMetrics(NamedTuple):
@@ -93,6 +95,33 @@ class MetricsAccumulator:
         add["nees_pos"][n] += nees_pos.sum()
         add["nees_state"][n] += quad_form_inv(P, e).sum()
         self.runs[n] += x.shape[0]
+
+    def to_arrays(self) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+        """The state as plain arrays: runs (N,) and sums (len(SUM_NAMES), N), copies.
+
+        This is what a sweep chunk ships between processes and stores on disk; the arrays
+        round-trip exactly, so ``from_arrays(*a.to_arrays())`` merges bit for bit like ``a``.
+        """
+        return self.runs.copy(), np.stack([self.sums[k] for k in _SUMS])
+
+    @classmethod
+    def from_arrays(
+        cls, runs: NDArray[np.int64], sums: NDArray[np.float64]
+    ) -> MetricsAccumulator:
+        """The accumulator whose state is ``runs`` (N,) and ``sums`` (len(SUM_NAMES), N)."""
+        runs = np.asarray(runs)
+        sums = np.asarray(sums)
+        steps = runs.shape[0]
+        if runs.shape != (steps,) or sums.shape != (len(_SUMS), steps):
+            raise ValueError(
+                f"accumulator arrays must be runs ({steps},) and sums ({len(_SUMS)}, {steps}),"
+                f" got {runs.shape} and {sums.shape}"
+            )
+        acc = cls(steps)
+        acc.runs[:] = runs
+        for i, k in enumerate(_SUMS):
+            acc.sums[k][:] = sums[i]
+        return acc
 
     def merge(self, other: MetricsAccumulator) -> None:
         """Add another accumulator's sums (same N) into this one."""

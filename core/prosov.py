@@ -156,6 +156,64 @@ def filter_block(
     return state
 
 
+def block_seed(seed: int, index: int) -> np.random.SeedSequence:
+    """The seed of block ``index``: the ``index``-th child of ``SeedSequence(seed)``.
+
+    ``SeedSequence(seed).spawn(n)[b]`` is ``SeedSequence(seed, spawn_key=(b,))`` whatever n,
+    so a block's noise depends on (seed, b) alone: a worker can draw block b without knowing
+    how many blocks there are or seeing the others.
+    """
+    return np.random.SeedSequence(seed, spawn_key=(index,))
+
+
+def run_block(
+    config: TrackingConfig,
+    index: int,
+    size: int,
+    truth: NDArray[np.float64] | None = None,
+) -> dict[str, MetricsAccumulator]:
+    """Block ``index`` of the Monte Carlo: ``size`` runs, every configured method.
+
+    The measurements are drawn from ``block_seed(config.seed, index)`` and shared by all
+    methods (common random numbers). Returns one fresh accumulator per method holding this
+    block's sums only, so the caller decides the order in which blocks are added up — the one
+    thing that could change the last bit of a result.
+
+    Args:
+        truth: ``config.target.truth()`` if the caller already has it.
+    """
+    check_int("index", index, low=0)
+    check_int("size", size, low=1)
+    if truth is None:
+        truth = config.target.truth()
+    steps = truth.shape[0]
+    rng = np.random.default_rng(block_seed(config.seed, index))
+    r_hat, beta_hat = polar_measurements(truth, config.sigma_r_m, config.sigma_beta_rad, size, rng)
+    out: dict[str, MetricsAccumulator] = {}
+    for method in config.methods:
+        block_acc = MetricsAccumulator(steps)
+        filter_block(
+            method, r_hat, beta_hat, config,
+            lambda n, st, a=block_acc: a.add(n, st, truth[n]),
+        )
+        out[method] = block_acc
+    return out
+
+
+def tracking_result(
+    config: TrackingConfig, accumulators: dict[str, MetricsAccumulator]
+) -> TrackingResult:
+    """The per-scan statistics of accumulators holding all ``config.runs`` runs."""
+    steps = config.target.steps
+    return TrackingResult(
+        config=config,
+        n=np.arange(1, steps + 1),
+        metrics={m: accumulators[m].result() for m in config.methods},
+        nees_pos_band95=nees_band(2, config.runs),
+        nees_state_band95=nees_band(4, config.runs),
+    )
+
+
 def run_tracking(
     config: TrackingConfig,
     progress: ProgressFn | None = None,
@@ -163,37 +221,24 @@ def run_tracking(
 ) -> TrackingResult:
     """Monte Carlo of every configured method; statistics accumulated block by block.
 
+    Block b (``run_block``) is added into a zero accumulator in the order b = 0, 1, …; a
+    parameter sweep (``core.sweep``) that computes the same blocks anywhere and adds them in
+    the same order gets the same result bit for bit.
+
     Args:
         progress: called as ``progress(runs_done, runs_total)`` after each block.
     """
     truth = config.target.truth()
     steps = truth.shape[0]
     acc = {m: MetricsAccumulator(steps) for m in config.methods}
-    sizes = block_sizes(config.runs, block)
-    children = np.random.SeedSequence(config.seed).spawn(len(sizes))
     done = 0
-    for size, child in zip(sizes, children, strict=True):
-        rng = np.random.default_rng(child)
-        r_hat, beta_hat = polar_measurements(
-            truth, config.sigma_r_m, config.sigma_beta_rad, size, rng
-        )
-        for method in config.methods:
-            block_acc = MetricsAccumulator(steps)
-            filter_block(
-                method, r_hat, beta_hat, config,
-                lambda n, st, a=block_acc: a.add(n, st, truth[n]),
-            )
+    for index, size in enumerate(block_sizes(config.runs, block)):
+        for method, block_acc in run_block(config, index, size, truth).items():
             acc[method].merge(block_acc)
         done += size
         if progress is not None:
             progress(done, config.runs)
-    return TrackingResult(
-        config=config,
-        n=np.arange(1, steps + 1),
-        metrics={m: a.result() for m, a in acc.items()},
-        nees_pos_band95=nees_band(2, config.runs),
-        nees_state_band95=nees_band(4, config.runs),
-    )
+    return tracking_result(config, acc)
 
 
 def prosov_configs(
