@@ -110,10 +110,12 @@ def build_parser() -> argparse.ArgumentParser:
                      help="write the figure (baseline σ and correlations, sweep)")
 
     from viz_app.cli_recording import add_commands
+    from viz_app.sweep import add_commands as add_sweep_commands
     from viz_app.track_io import add_commands as add_track_commands
 
     add_commands(sub)
     add_track_commands(sub)
+    add_sweep_commands(sub)
 
     tune = sub.add_parser("tune", help="Viser panel that re-runs the Prosov scene into Rerun")
     tune.add_argument("--host", default="127.0.0.1",
@@ -289,6 +291,10 @@ def main(argv: Sequence[str] | None = None) -> int:
 
         if args.command in TRACK_COMMANDS:
             return TRACK_COMMANDS[args.command](args)
+        from viz_app.sweep import COMMANDS as SWEEP_COMMANDS
+
+        if args.command in SWEEP_COMMANDS:
+            return SWEEP_COMMANDS[args.command](args)
     except ParameterError as exc:
         return _fail(str(exc))
     except OSError as exc:

@@ -1,0 +1,326 @@
+"""Parameter sweeps: exact reduction, Dask vs serial, worker death, resume, CLI errors, output.
+
+Every comparison here is bitwise (``np.array_equal``): a sweep adds each grid point's blocks
+in block order, so nothing about scheduling may change a single bit.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+from functools import partial
+from pathlib import Path
+
+import cloudpickle
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+from rerun.chunk import RrdReader
+
+from core.prosov import TrackingConfig, block_seed, block_sizes, prosov_configs, run_tracking
+from core.sweep import (
+    ChunkSums,
+    GridAxis,
+    SweepBase,
+    SweepSpec,
+    compute_chunk,
+    point_config,
+    reduce_chunks,
+    run_sweep_serial,
+)
+from core.validation import ParameterError
+from viz_app.cli import main
+from viz_app.sweep import ChunkStore, chunk_dir, parse_axis, run_sweep
+from viz_app.sweep_output import COLUMNS, METRIC_COLUMNS, sweep_table
+
+# Chunk functions defined here run on Dask workers, which cannot import this test module:
+# ship its functions by value.
+cloudpickle.register_pickle_by_value(sys.modules[__name__])
+
+METHODS = ("naive", "seed", "ducm", "ekf")
+
+
+def _spec(seed: int = 5, runs: int = 1300, block: int = 500) -> SweepSpec:
+    """2 × 2 points of 3 chunks each (500, 500, 300 runs), 12 scans: fast, yet several
+    chunks per point so order matters."""
+    base = SweepBase(runs=runs, seed=seed, steps=12, methods=METHODS)
+    axes = (GridAxis("sigma_beta_deg", (1.0, 2.5)), GridAxis("range_km", (60.0, 150.0)))
+    return SweepSpec(base=base, axes=axes, block=block)
+
+
+def _assert_results_equal(a, b) -> None:
+    assert len(a) == len(b)
+    for ra, rb in zip(a, b, strict=True):
+        assert ra.config == rb.config
+        assert ra.nees_pos_band95 == rb.nees_pos_band95
+        for m in ra.metrics:
+            for x, y, name in zip(ra.metrics[m], rb.metrics[m], ra.metrics[m]._fields,
+                                  strict=True):
+                assert np.array_equal(x, y, equal_nan=True), (m, name)
+
+
+@pytest.fixture(scope="module")
+def client():
+    """One 2-worker LocalCluster (2 processes, 1 thread each) for the Dask tests."""
+    from viz_app.sweep import dask_client
+
+    with dask_client("local", 2) as c:
+        c.wait_for_workers(2, timeout=60)
+        yield c
+
+
+@pytest.fixture(scope="module")
+def serial_results():
+    return run_sweep_serial(_spec())
+
+
+# ------------------------------------------------------------------ exact reduction
+
+
+def test_block_seed_is_the_spawned_child() -> None:
+    children = np.random.SeedSequence(9).spawn(5)
+    for b, child in enumerate(children):
+        assert np.array_equal(block_seed(9, b).generate_state(4), child.generate_state(4))
+
+
+def test_grid_point_equals_run_tracking_bitwise() -> None:
+    """A point reduced from its chunks, in any arrival order, is run_tracking exactly."""
+    (cfg,) = prosov_configs([1.7], runs=1300, seed=11, steps=12, methods=METHODS)
+    sizes = block_sizes(cfg.runs, 500)
+    chunks = [compute_chunk(cfg, b, s) for b, s in enumerate(sizes)]
+    expected = run_tracking(cfg, block=500)
+    for order in ([0, 1, 2], [2, 0, 1], [1, 2, 0]):
+        got = reduce_chunks(cfg, [chunks[i] for i in order], block=500)
+        _assert_results_equal([got], [expected])
+    with pytest.raises(ValueError, match="expected blocks"):
+        reduce_chunks(cfg, chunks[:2], block=500)
+
+
+def test_range_axis_at_150_km_is_the_prosov_target() -> None:
+    base = SweepBase(runs=10, steps=60)
+    (cfg,) = prosov_configs([1.0], runs=10)
+    assert point_config(base, {"range_km": 150.0}) == cfg
+    moved = point_config(base, {"range_km": 50.0}).target
+    assert (moved.x0_m, moved.y0_m, moved.vx_mps, moved.vy_mps) == (50e3, 0.0, 200.0, 0.0)
+
+
+def test_sweep_point_equals_reproduce_prosov_json(tmp_path: Path, capsys) -> None:
+    """One grid point of a sweep at the default block size equals ``reproduce prosov
+    --json`` with the same runs and seed, bit for bit (JSON floats round-trip exactly)."""
+    runs = 16_384 + 300  # two blocks of the default size
+    common = ["--runs", str(runs), "--seed", "3", "--steps", "8", "--methods", "naive", "ekf"]
+    assert main(["reproduce", "prosov", "--sigma-beta-deg", "2", "--json", *common]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    out = tmp_path / "one.parquet"
+    assert main(["sweep", "--grid", "sigma_beta_deg=1,2", "--scheduler", "serial",
+                 "--out", str(out), "--json", *common]) == 0
+    capsys.readouterr()
+    table = pq.read_table(out).to_pydict()
+    rows = [i for i, (sb, m) in enumerate(zip(table["sigma_beta_deg"], table["method"],
+                                               strict=True)) if sb == 2.0]
+    case = doc["cases"][0]
+    for method in ("naive", "ekf"):
+        idx = [i for i in rows if table["method"][i] == method]
+        for key in ("rmse_x", "std_x", "bias_range", "nees_pos", "sigma_x_filter"):
+            assert [table[key][i] for i in idx] == case["methods"][method][key], (method, key)
+
+
+# ------------------------------------------------------------------ Dask
+
+
+def test_two_worker_cluster_equals_serial(client, serial_results) -> None:
+    run = run_sweep(_spec(), store=None, client=client)
+    assert run.workers == 2 and run.computed == 12 and run.reused == 0
+    _assert_results_equal(run.results, serial_results)
+    a = sweep_table(_spec(), run.results)
+    b = sweep_table(_spec(), serial_results)
+    for col in COLUMNS:
+        assert a.column(col).equals(b.column(col)), col
+
+
+def _die_once(marker: str, victim: int, config: TrackingConfig, index: int,
+              size: int) -> ChunkSums:
+    """Chunk function that kills its worker process the first time it meets block
+    ``victim`` (the marker file records that it did), then computes normally."""
+    if index == victim and not os.path.exists(marker):
+        Path(marker).touch()
+        os._exit(1)
+    return compute_chunk(config, index, size)
+
+
+def test_worker_killed_mid_sweep_gives_the_identical_result(
+    client, serial_results, tmp_path: Path
+) -> None:
+    marker = tmp_path / "killed"
+    store = ChunkStore(tmp_path / "chunks")
+    run = run_sweep(_spec(), store, client=client, task=partial(_die_once, str(marker), 1))
+    assert marker.exists()  # a worker did die running a chunk
+    assert run.computed == 12
+    _assert_results_equal(run.results, serial_results)
+    client.wait_for_workers(2, timeout=60)  # the nanny restarts it for the next test
+
+
+def test_cli_on_a_tcp_scheduler_writes_table_figures_and_recording(
+    client, serial_results, tmp_path: Path, capsys
+) -> None:
+    out = tmp_path / "s.parquet"
+    rrd = tmp_path / "s.rrd"
+    code = main(["sweep", "--grid", "sigma_beta_deg=1,2.5", "range_km=60,150", "--runs", "1300",
+                 "--block", "500", "--seed", "5", "--steps", "12", "--methods", *METHODS,
+                 "--scheduler", client.scheduler_info()["address"], "--out", str(out),
+                 "--plot", str(tmp_path / "figs"), "--rrd", str(rrd), "--json"])
+    assert code == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["computed"] == 12 and doc["workers"] == 2
+    table = pq.read_table(out)
+    expected = sweep_table(_spec(), serial_results)
+    for col in COLUMNS:
+        assert table.column(col).equals(expected.column(col)), col
+    assert sorted(p.name for p in (tmp_path / "figs").iterdir()) == [
+        "sweep_bias_range.png", "sweep_nees_pos.png", "sweep_rmse_x.png"]
+    entities = {c.entity_path for c in RrdReader(str(rrd)).stream()}
+    for m in METHODS:
+        assert f"/sweep/heatmap/nees_pos/{m}" in entities
+        assert f"/sweep/final/rmse_x/{m}" in entities
+
+
+def test_bench_sweep_reports_efficiency_and_identical_results(capsys) -> None:
+    code = main(["bench-sweep", "--grid", "sigma_beta_deg=1,2", "--runs", "300", "--steps",
+                 "5", "--methods", "naive", "ekf", "--workers", "1", "2", "--json"])
+    assert code == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert [r["workers"] for r in doc["runs"]] == [1, 2]
+    assert all(r["identical_to_first"] for r in doc["runs"])
+    assert doc["runs"][0]["efficiency"] == 1.0 and doc["total_runs"] == 600
+
+
+# ------------------------------------------------------------------ resume
+
+
+def _sweep_cli(out: Path, *extra: str) -> list[str]:
+    return ["sweep", "--grid", "sigma_beta_deg=1,2.5", "--runs", "1300", "--block", "500",
+            "--steps", "12", "--methods", *METHODS, "--scheduler", "serial",
+            "--out", str(out), "--json", *extra]
+
+
+def test_rerun_computes_only_missing_chunks_and_ignores_stale_ones(tmp_path: Path,
+                                                                    capsys) -> None:
+    out = tmp_path / "s.parquet"
+    assert main(_sweep_cli(out)) == 0
+    first = json.loads(capsys.readouterr().out)
+    assert (first["computed"], first["reused"]) == (6, 0)
+    reference = pq.read_table(out)
+    files = sorted(chunk_dir(out).glob("*.npz"))
+    assert len(files) == 6
+    files[0].unlink()
+    files[3].unlink()
+    files[4].write_bytes(b"not a chunk")  # damaged files are recomputed, not trusted
+    files[5].write_bytes(files[5].read_bytes()[:200])  # a truncated zip
+    assert main(_sweep_cli(out)) == 0
+    second = json.loads(capsys.readouterr().out)
+    assert (second["computed"], second["reused"]) == (4, 2)
+    assert pq.read_table(out).equals(reference)
+    # Another seed: none of the stored chunks applies.
+    assert main(_sweep_cli(out, "--seed", "2")) == 0
+    third = json.loads(capsys.readouterr().out)
+    assert (third["computed"], third["reused"]) == (6, 0)
+    assert not pq.read_table(out).equals(reference)
+    assert len(list(chunk_dir(out).glob("*.npz"))) == 12
+
+
+def test_interrupted_sweep_resumes_where_it_stopped(tmp_path: Path, serial_results) -> None:
+    store = ChunkStore(tmp_path / "chunks")
+    calls = []
+
+    def crash_after_five(config: TrackingConfig, index: int, size: int) -> ChunkSums:
+        if len(calls) == 5:
+            raise KeyboardInterrupt
+        calls.append(index)
+        return compute_chunk(config, index, size)
+
+    with pytest.raises(KeyboardInterrupt):
+        run_sweep(_spec(), store, task=crash_after_five)
+    assert len(list(store.directory.glob("*.npz"))) == 5
+    assert not list(store.directory.glob("*.tmp*"))
+    run = run_sweep(_spec(), store)
+    assert (run.computed, run.reused) == (7, 5)
+    _assert_results_equal(run.results, serial_results)
+
+
+def test_more_runs_reuse_the_full_blocks_of_fewer(tmp_path: Path) -> None:
+    store = ChunkStore(tmp_path / "chunks")
+    run_sweep(_spec(runs=1000), store)  # blocks 500, 500 per point
+    run = run_sweep(_spec(runs=1300), store)  # blocks 500, 500, 300
+    assert (run.computed, run.reused) == (4, 8)
+
+
+# ------------------------------------------------------------------ grid syntax and errors
+
+
+def test_grid_ranges_include_stop_on_the_grid_in_decimal() -> None:
+    assert parse_axis("sigma_beta_deg=0.5:3:0.5").values == (0.5, 1.0, 1.5, 2.0, 2.5, 3.0)
+    assert parse_axis("range_km=50:300:40").values == (50, 90, 130, 170, 210, 250, 290)
+    assert parse_axis("sigma_beta_deg=0.1:0.3:0.1").values == (0.1, 0.2, 0.3)
+    assert parse_axis("period_s=5,10,2.5").values == (5.0, 10.0, 2.5)
+
+
+@pytest.mark.parametrize(
+    ("args", "names"),
+    [
+        (["--grid", "sigma_beta=1,2"], "--grid name"),
+        (["--grid", "sigma_beta_deg=0.5:3:0"], "--grid sigma_beta_deg step"),
+        (["--grid", "sigma_beta_deg=0:3:0.5"], "--grid sigma_beta_deg"),
+        (["--grid", "sigma_beta_deg=1:30:1"], "--grid sigma_beta_deg"),
+        (["--grid", "sigma_beta_deg=3:1:0.5"], "--grid sigma_beta_deg stop"),
+        (["--grid", "range_km=abc"], "--grid range_km value"),
+        (["--grid", "range_km=1:2"], "--grid range_km range"),
+        (["--grid", "range_km=10,10"], "--grid range_km"),
+        (["--grid", "range_km"], "--grid items"),
+        (["--grid", "range_km=1,2", "range_km=3"], "--grid range_km"),
+        (["--grid", "sigma_r_m=1:1e9:1"], "--grid sigma_r_m"),
+        (["--grid", "sigma_beta_deg=1,2", "--sigma-beta-deg", "2"], "--sigma-beta-deg"),
+        (["--scheduler", "localhost:8786"], "--scheduler"),
+        (["--workers", "0"], "--workers"),
+        (["--runs", "1"], "--runs"),
+        (["--methods", "kalman"], "--methods"),
+        (["--preset", "gorshkov"], "--preset"),
+    ],
+)
+def test_bad_input_is_one_line_exit_2_and_writes_nothing(
+    tmp_path: Path, capsys, args: list[str], names: str
+) -> None:
+    out = tmp_path / "s.parquet"
+    code = main(["sweep", "--out", str(out), "--scheduler", "serial", "--runs", "10", *args])
+    assert code == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("radarviz: error: "), err
+    assert names in err, err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_core_rejects_a_repeated_axis() -> None:
+    with pytest.raises(ParameterError, match="more than once"):
+        SweepSpec(axes=(GridAxis("range_km", (1.0,)), GridAxis("range_km", (2.0,))))
+
+
+# ------------------------------------------------------------------ output table
+
+
+def test_parquet_has_the_documented_columns(tmp_path: Path, capsys) -> None:
+    out = tmp_path / "s.parquet"
+    assert main(_sweep_cli(out)) == 0
+    capsys.readouterr()
+    table = pq.read_table(out)
+    assert tuple(table.column_names) == COLUMNS
+    assert set(METRIC_COLUMNS) <= set(COLUMNS)
+    assert table.num_rows == 2 * len(METHODS) * 12
+    meta = json.loads(table.schema.metadata[b"radarviz.sweep"])
+    assert meta["axes"] == [{"name": "sigma_beta_deg", "unit": "deg", "values": [1.0, 2.5]}]
+    assert meta["runs"] == 1300 and meta["block"] == 500
+    d = table.to_pydict()
+    assert set(d["method"]) == set(METHODS)
+    assert d["scan"][:12] == list(range(1, 13))
+    assert d["time_s"][:3] == [0.0, 10.0, 20.0]
+    assert set(d["runs"]) == {1300} and set(d["range_km"]) == {150.0}
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]  # no temporaries
