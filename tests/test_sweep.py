@@ -324,3 +324,38 @@ def test_parquet_has_the_documented_columns(tmp_path: Path, capsys) -> None:
     assert d["time_s"][:3] == [0.0, 10.0, 20.0]
     assert set(d["runs"]) == {1300} and set(d["range_km"]) == {150.0}
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]  # no temporaries
+
+
+def _always_die(config: TrackingConfig, index: int, size: int) -> ChunkSums:
+    """Chunk function whose block 1 kills every worker that runs it."""
+    if index == 1:
+        os._exit(1)
+    return compute_chunk(config, index, size)
+
+
+def test_a_chunk_that_keeps_killing_workers_is_one_line_and_keeps_the_rest(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys
+) -> None:
+    """Past ``allowed-failures`` Dask gives up on the chunk: the command says so in one line,
+    exits 1, writes no table, and the chunks that did finish are kept for a re-run."""
+    import dask
+
+    import viz_app.sweep as sweep_mod
+
+    real_run_sweep = sweep_mod.run_sweep
+
+    def run_with_bad_task(*args, **kwargs):
+        return real_run_sweep(*args, task=_always_die, **kwargs)
+
+    monkeypatch.setattr(sweep_mod, "run_sweep", run_with_bad_task)
+    out = tmp_path / "s.parquet"
+    with dask.config.set({"distributed.scheduler.allowed-failures": 0}):
+        status = main(["sweep", "--preset", "prosov", "--grid", "sigma_beta_deg=1",
+                       "--runs", "1200", "--block", "500", "--workers", "1", "--steps", "5",
+                       "--out", str(out), "--json"])
+    err = capsys.readouterr().err
+    assert status == 1
+    lines = [ln for ln in err.splitlines() if ln.startswith("radarviz: error:")]
+    assert len(lines) == 1 and "chunk 1 of grid point 0 killed its worker" in lines[0], err
+    assert not out.exists()
+    assert 0 < len(list(chunk_dir(out).glob("*.npz"))) <= 2

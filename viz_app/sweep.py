@@ -254,6 +254,10 @@ def _worker_chunk(
     return chunk, time.perf_counter() - wall0, time.process_time() - cpu0
 
 
+class SweepAbortedError(RuntimeError):
+    """The cluster gave up on a chunk (its workers kept dying); one line for the user."""
+
+
 @contextlib.contextmanager
 def dask_client(scheduler: str, workers: int) -> Iterator[Any]:
     """A ``distributed.Client``: on a new LocalCluster (``local``) or at an address.
@@ -375,7 +379,7 @@ def _run_on_dask(
     its running chunk with it; the scheduler resubmits that chunk elsewhere (up to
     ``distributed.scheduler.allowed-failures`` times), and being pure it comes back the same.
     """
-    from distributed import as_completed
+    from distributed import KilledWorker, as_completed
 
     # One config object per grid point is shipped with each of its chunks: a few hundred
     # bytes, cheaper than scattering it and simpler to survive worker restarts.
@@ -387,7 +391,19 @@ def _run_on_dask(
         )
         futures[fut] = i
     for fut in as_completed(list(futures)):
-        finished(futures[fut], fut.result())
+        try:
+            result = fut.result()
+        except KilledWorker:
+            # Give up on the sweep, not on the work: every chunk already finished is saved.
+            for other in futures:
+                other.cancel()
+            t = tasks[futures[fut]]
+            raise SweepAbortedError(
+                f"chunk {t.index} of grid point {t.point} killed its worker "
+                "more often than distributed.scheduler.allowed-failures allows; the finished "
+                "chunks are kept: re-run to resume"
+            ) from None
+        finished(futures[fut], result)
 
 
 # --------------------------------------------------------------------------- command line
@@ -536,7 +552,11 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         n = int(np.prod(spec.shape, dtype=np.int64))
         bar = ProgressBar(f"sweep {n} point(s)")
     wall0 = time.perf_counter()
-    run = run_sweep(spec, ChunkStore(chunk_dir(out)), scheduler, workers, progress=bar)
+    try:
+        run = run_sweep(spec, ChunkStore(chunk_dir(out)), scheduler, workers, progress=bar)
+    except SweepAbortedError as exc:
+        print(f"radarviz: error: {exc}", file=sys.stderr)
+        return 1
     write_parquet(sweep_table(spec, run.results), out)
     figures: list[str] = []
     if plot_dir is not None:
