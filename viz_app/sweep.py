@@ -399,9 +399,10 @@ def _run_on_dask(
                 other.cancel()
             t = tasks[futures[fut]]
             raise SweepAbortedError(
-                f"chunk {t.index} of grid point {t.point} killed its worker "
-                "more often than distributed.scheduler.allowed-failures allows; the finished "
-                "chunks are kept: re-run to resume"
+                f"Dask gave up on chunk {t.index} of grid point {t.point}: workers died "
+                "while it was on them more often than distributed.scheduler.allowed-failures "
+                "allows (a crash or out of memory?); the finished chunks are kept: re-run to "
+                "resume"
             ) from None
         finished(futures[fut], result)
 
