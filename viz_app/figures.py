@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 import math
-import os
-import secrets
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 from matplotlib.figure import Figure
+
+from viz_app.atomic import atomic_write
 
 DPI = 120
 
@@ -27,18 +27,8 @@ def write_figure_atomically(fig: Figure, path: Path, dpi: int = DPI) -> None:
             f"cannot write a figure as .{fmt} ({path}); use one of "
             + ", ".join("." + k for k in sorted(supported))
         )
-    tmp = path.parent / f".{path.name}.{secrets.token_hex(6)}.tmp{path.suffix}"
-    # O_EXCL with mode 0o666 keeps the usual umask-derived permissions of a new file.
-    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fig.savefig(fh, format=fmt, dpi=dpi)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
+    with atomic_write(path, fsync=True) as fh:
+        fig.savefig(fh, format=fmt, dpi=dpi)
 
 
 def finite_points(

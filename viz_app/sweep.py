@@ -23,7 +23,6 @@ import json
 import logging
 import os
 import re
-import secrets
 import sys
 import time
 import zipfile
@@ -51,6 +50,7 @@ from core.sweep import (
     reduce_chunks,
 )
 from core.validation import ParameterError, check_choice, check_int, check_real
+from viz_app.atomic import atomic_write
 from viz_app.sweep_bench import add_command as add_bench_command
 from viz_app.sweep_bench import cmd_bench_sweep
 
@@ -190,22 +190,16 @@ class ChunkStore:
         so a reader never sees half a chunk (an interrupted write leaves only a ``.tmp``)."""
         self.directory.mkdir(parents=True, exist_ok=True)
         final = self.path(key)
-        tmp = self.directory / f".{key}.{secrets.token_hex(4)}.tmp.npz"
-        try:
-            with open(tmp, "wb") as fh:
-                np.savez(
-                    fh,
-                    key=np.array(key),
-                    version=np.array(CHUNK_VERSION),
-                    index=np.array(chunk.index, dtype=np.int64),
-                    methods=np.array(chunk.methods),
-                    runs=chunk.runs,
-                    sums=chunk.sums,
-                )
-            os.replace(tmp, final)
-        except BaseException:
-            tmp.unlink(missing_ok=True)
-            raise
+        with atomic_write(final) as fh:
+            np.savez(
+                fh,
+                key=np.array(key),
+                version=np.array(CHUNK_VERSION),
+                index=np.array(chunk.index, dtype=np.int64),
+                methods=np.array(chunk.methods),
+                runs=chunk.runs,
+                sums=chunk.sums,
+            )
 
 
 # --------------------------------------------------------------------------- scheduling

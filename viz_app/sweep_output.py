@@ -22,8 +22,6 @@ runs, seed, block, methods). Heat maps show the last scan over the last two grid
 from __future__ import annotations
 
 import json
-import os
-import secrets
 from pathlib import Path
 from typing import Any
 
@@ -34,6 +32,7 @@ from numpy.typing import NDArray
 
 from core.prosov import TrackingResult
 from core.sweep import GRID_AXES, SweepSpec
+from viz_app.atomic import atomic_write
 
 #: The TrackMetrics fields written to the table, in column order.
 METRIC_COLUMNS: tuple[str, ...] = (
@@ -123,13 +122,8 @@ def sweep_table(spec: SweepSpec, results: list[TrackingResult]) -> pa.Table:
 
 def write_parquet(table: pa.Table, path: Path) -> None:
     """Write to a temporary file beside ``path``, then rename it onto ``path``."""
-    tmp = path.parent / f".{path.name}.{secrets.token_hex(6)}.tmp"
-    try:
-        pq.write_table(table, tmp)
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
+    with atomic_write(path) as fh:
+        pq.write_table(table, fh)
 
 
 def final_scan_grid(

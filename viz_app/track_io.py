@@ -53,11 +53,10 @@ import csv
 import math
 import os
 import resource
-import tempfile
 import time
 import tomllib
 from collections.abc import Callable, Iterable, Iterator
-from contextlib import ExitStack, contextmanager
+from contextlib import AbstractContextManager, ExitStack
 from dataclasses import dataclass
 from pathlib import Path
 from typing import IO
@@ -78,6 +77,7 @@ from core.track_stream import (
     prosov_single_run,
 )
 from core.validation import ParameterError, check_choice, check_int, check_real
+from viz_app.atomic import atomic_write
 
 REQUIRED_COLUMNS = ("time_s", "radar", "range_m", "azimuth_deg")
 OPTIONAL_COLUMNS = ("elevation_deg", "radial_velocity_mps")
@@ -323,22 +323,9 @@ def state_from_row(values: dict[str, str]) -> tuple[NDArray[np.float64], NDArray
 # --------------------------------------------------------------------------------------------
 
 
-@contextmanager
-def atomic_text(path: str | os.PathLike) -> Iterator[IO[str]]:
-    """A text file written beside ``path`` and renamed onto it on success, deleted on error."""
-    target = Path(path)
-    fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.",
-                               suffix=".tmp")
-    try:
-        umask = os.umask(0o022)
-        os.umask(umask)
-        os.chmod(fd, 0o666 & ~umask)  # mkstemp makes 0600; give the usual permissions
-        with os.fdopen(fd, "w", newline="", encoding="utf-8") as fh:
-            yield fh
-        os.replace(tmp, target)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+def atomic_text(path: str | os.PathLike) -> AbstractContextManager[IO[str]]:
+    """A UTF-8 text file (csv newlines) that appears at ``path`` only when complete."""
+    return atomic_write(path, "w", newline="", encoding="utf-8")
 
 
 def load_radars(path: str) -> dict[str, Radar]:
