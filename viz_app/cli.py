@@ -8,13 +8,13 @@ from __future__ import annotations
 
 import argparse
 import importlib
-import json
 import sys
 from collections.abc import Callable, Sequence
 from typing import Any, NoReturn
 
 from core.prosov import ALL_METHODS, MAX_SIGMA_BETA_DEG, prosov_configs, run_tracking
 from core.validation import ParameterError, check_int, check_real
+from viz_app.cli_args import integer, number, print_report
 
 EXIT_USAGE = 2
 #: Runs × cases above which a progress bar is drawn on standard error.
@@ -33,21 +33,6 @@ def _fail(message: str) -> int:
     return EXIT_USAGE
 
 
-def _number(text: str) -> float:
-    """argparse type: any float text, NaN included, so the range check can name it."""
-    try:
-        return float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-
-
-def _integer(text: str) -> int:
-    try:
-        return int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
-
-
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(
         prog="radarviz",
@@ -60,14 +45,14 @@ def build_parser() -> argparse.ArgumentParser:
     pro = rep_sub.add_parser(
         "prosov", help="converted-measurement Kalman filters (Prosov), Monte Carlo"
     )
-    pro.add_argument("--sigma-beta-deg", type=_number, nargs="+", default=[1.0, 2.0],
+    pro.add_argument("--sigma-beta-deg", type=number, nargs="+", default=[1.0, 2.0],
                      help="azimuth noise σβ in degrees, one case each (default: 1 2)")
-    pro.add_argument("--sigma-r-m", type=_number, default=250.0,
+    pro.add_argument("--sigma-r-m", type=number, default=250.0,
                      help="range noise σr in metres (default 250)")
-    pro.add_argument("--runs", type=_integer, default=1000, help="Monte Carlo runs (default 1000)")
-    pro.add_argument("--seed", type=_integer, default=1, help="random seed (default 1)")
-    pro.add_argument("--period", type=_number, default=10.0, help="scan period T in s (default 10)")
-    pro.add_argument("--steps", type=_integer, default=60, help="scans per run (default 60)")
+    pro.add_argument("--runs", type=integer, default=1000, help="Monte Carlo runs (default 1000)")
+    pro.add_argument("--seed", type=integer, default=1, help="random seed (default 1)")
+    pro.add_argument("--period", type=number, default=10.0, help="scan period T in s (default 10)")
+    pro.add_argument("--steps", type=integer, default=60, help="scans per run (default 60)")
     pro.add_argument("--methods", nargs="+", default=list(ALL_METHODS), metavar="METHOD",
                      help=f"methods to run (default all: {' '.join(ALL_METHODS)})")
     pro.add_argument("--json", action="store_true",
@@ -77,21 +62,21 @@ def build_parser() -> argparse.ArgumentParser:
     gor = rep_sub.add_parser(
         "gorshkov", help="finite-memory range / radial-velocity filter (Gorshkov), Monte Carlo"
     )
-    gor.add_argument("--trials", type=_integer, default=100_000,
+    gor.add_argument("--trials", type=integer, default=100_000,
                      help="Monte Carlo trials per radar (default 100000)")
-    gor.add_argument("--seed", type=_integer, default=1, help="random seed (default 1)")
+    gor.add_argument("--seed", type=integer, default=1, help="random seed (default 1)")
     gor.add_argument("--radars", nargs="+", default=None, metavar="RLS",
                      help="radar presets (default all: RLS1 … RLS6)")
-    gor.add_argument("--k-max", type=_integer, default=20,
+    gor.add_argument("--k-max", type=integer, default=20,
                      help="largest window length k (default 20; the experiment has 20 scans)")
-    gor.add_argument("--custom", nargs=3, type=_number, metavar=("SIGMA_R_M", "C0", "PERIOD_S"),
+    gor.add_argument("--custom", nargs=3, type=number, metavar=("SIGMA_R_M", "C0", "PERIOD_S"),
                      help="add a radar 'custom' with σr (m), C0 and T (s); σVr follows from "
                           "C0 = σr² / (T² σVr²)")
     gor.add_argument("--tracking-radar", default="RLS3",
                      help="preset of the Doppler-aided tracking comparison (default RLS3)")
-    gor.add_argument("--tracking-runs", type=_integer, default=1000,
+    gor.add_argument("--tracking-runs", type=integer, default=1000,
                      help="Monte Carlo runs of the tracking comparison (0 to skip; default 1000)")
-    gor.add_argument("--sigma-beta-deg", type=_number, default=1.0,
+    gor.add_argument("--sigma-beta-deg", type=number, default=1.0,
                      help="azimuth noise of the tracking comparison, degrees (default 1)")
     gor.add_argument("--json", action="store_true",
                      help="print only the JSON document on standard output")
@@ -100,10 +85,10 @@ def build_parser() -> argparse.ArgumentParser:
     vel = rep_sub.add_parser(
         "velocity", help="3D velocity from the radial velocities of 3 radars, Monte Carlo"
     )
-    vel.add_argument("--trials", type=_integer, default=200_000,
+    vel.add_argument("--trials", type=integer, default=200_000,
                      help="Monte Carlo trials of the baseline (default 200000; the sweep uses "
                           "at most 20000 per point)")
-    vel.add_argument("--seed", type=_integer, default=1, help="random seed (default 1)")
+    vel.add_argument("--seed", type=integer, default=1, help="random seed (default 1)")
     vel.add_argument("--json", action="store_true",
                      help="print only the JSON document on standard output")
     vel.add_argument("--plot", metavar="FILE.png",
@@ -120,16 +105,16 @@ def build_parser() -> argparse.ArgumentParser:
     tune = sub.add_parser("tune", help="Viser panel that re-runs the Prosov scene into Rerun")
     tune.add_argument("--host", default="127.0.0.1",
                       help="address to bind (default 127.0.0.1; anything else is exposed)")
-    tune.add_argument("--port", type=_integer, default=0, help="panel port (default: a free one)")
-    tune.add_argument("--viewer-port", type=_integer, default=0,
+    tune.add_argument("--port", type=integer, default=0, help="panel port (default: a free one)")
+    tune.add_argument("--viewer-port", type=integer, default=0,
                       help="web viewer port (default: a free one)")
     tune.add_argument("--no-browser", action="store_true", help="do not open a browser")
 
     bench = sub.add_parser("bench", help="speed of the batched filters vs filterpy")
     bench.add_argument("--json", action="store_true", help="print only JSON")
-    bench.add_argument("--runs", type=_integer, nargs="+", default=[10_000, 100_000],
+    bench.add_argument("--runs", type=integer, nargs="+", default=[10_000, 100_000],
                        help="run counts to time the batched filter at (default 10000 100000)")
-    bench.add_argument("--filterpy-runs", type=_integer, default=200,
+    bench.add_argument("--filterpy-runs", type=integer, default=200,
                        help="runs of the filterpy subsample (default 200)")
     return parser
 
@@ -148,13 +133,9 @@ def _emit(
     if args.plot:
         module, func = plot.split(":")
         getattr(importlib.import_module(module), func)(doc, args.plot)
-    if args.json:
-        json.dump(doc, sys.stdout, allow_nan=False)
-        sys.stdout.write("\n")
-    else:
-        print(table(doc))
-        if args.plot:
-            print(f"\nfigure written to {args.plot}")
+    print_report(doc, args.json, table, allow_nan=False)
+    if args.plot and not args.json:
+        print(f"\nfigure written to {args.plot}")
     return 0
 
 
@@ -259,11 +240,7 @@ def _cmd_bench(args: argparse.Namespace) -> int:
 
     tune_allocator()
     doc = run_bench(runs=args.runs, filterpy_runs=args.filterpy_runs)
-    if args.json:
-        json.dump(doc, sys.stdout)
-        sys.stdout.write("\n")
-    else:
-        print(format_bench(doc))
+    print_report(doc, args.json, format_bench)
     return 0
 
 

@@ -51,6 +51,7 @@ from core.sweep import (
 )
 from core.validation import ParameterError, check_choice, check_int, check_real
 from viz_app.atomic import atomic_write
+from viz_app.cli_args import integer, number
 from viz_app.sweep_bench import add_command as add_bench_command
 from viz_app.sweep_bench import cmd_bench_sweep
 
@@ -404,21 +405,6 @@ def _run_on_dask(
 # --------------------------------------------------------------------------- command line
 
 
-def _number(text: str) -> float:
-    """argparse type: any float text (NaN too), so the range check can name the flag."""
-    try:
-        return float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-
-
-def _integer(text: str) -> int:
-    try:
-        return int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
-
-
 def add_commands(sub: argparse._SubParsersAction) -> None:
     """Register ``sweep`` and ``bench-sweep`` on the ``radarviz`` parser."""
     add_bench_command(sub)
@@ -435,25 +421,25 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     sw.add_argument("--grid", nargs="+", default=[], metavar="NAME=SPEC",
                     help="grid axes, NAME=START:STOP:STEP (stop included when on the grid) or "
                          f"NAME=V1,V2,...; NAME one of {', '.join(GRID_AXES)}")
-    sw.add_argument("--runs", type=_integer, default=1000,
+    sw.add_argument("--runs", type=integer, default=1000,
                     help="Monte Carlo runs per grid point (default 1000)")
-    sw.add_argument("--seed", type=_integer, default=1,
+    sw.add_argument("--seed", type=integer, default=1,
                     help="random seed, the same at every grid point (default 1)")
-    sw.add_argument("--steps", type=_integer, default=None, help="scans per run (default 60)")
-    sw.add_argument("--sigma-beta-deg", type=_number, default=None,
+    sw.add_argument("--steps", type=integer, default=None, help="scans per run (default 60)")
+    sw.add_argument("--sigma-beta-deg", type=number, default=None,
                     help="σβ in degrees where the grid does not vary it (default 1)")
-    sw.add_argument("--sigma-r-m", type=_number, default=None,
+    sw.add_argument("--sigma-r-m", type=number, default=None,
                     help="σr in metres where the grid does not vary it (default 250)")
-    sw.add_argument("--range-km", type=_number, default=None,
+    sw.add_argument("--range-km", type=number, default=None,
                     help="initial range in km where the grid does not vary it (default 150)")
-    sw.add_argument("--period", type=_number, default=None,
+    sw.add_argument("--period", type=number, default=None,
                     help="scan period T in s where the grid does not vary it (default 10)")
     sw.add_argument("--methods", nargs="+", default=list(ALL_METHODS), metavar="METHOD",
                     help=f"methods to run (default all: {' '.join(ALL_METHODS)})")
     sw.add_argument("--scheduler", default="local", help=f"{SCHEDULER_HELP} (default local)")
-    sw.add_argument("--workers", type=_integer, default=None,
+    sw.add_argument("--workers", type=integer, default=None,
                     help="worker processes of the local cluster (default: CPU count)")
-    sw.add_argument("--block", type=_integer, default=BLOCK_RUNS,
+    sw.add_argument("--block", type=integer, default=BLOCK_RUNS,
                     help=f"runs per chunk (default {BLOCK_RUNS}, the block of reproduce prosov; "
                          "another value changes the last bits of the results)")
     sw.add_argument("--out", required=True, metavar="SWEEP.parquet",

@@ -14,9 +14,7 @@ says more about the machine than about the sweep — the report shows the load a
 from __future__ import annotations
 
 import argparse
-import json
 import os
-import sys
 from typing import Any
 
 import numpy as np
@@ -24,25 +22,24 @@ import numpy as np
 from core.prosov import ALL_METHODS, TrackingResult
 from core.sweep import SweepBase, SweepSpec
 from core.validation import ParameterError, check_int
+from viz_app.cli_args import integer, print_report
 
 DEFAULT_GRID = ("sigma_beta_deg=1,2", "range_km=100,150")
 DEFAULT_RUNS = 250_000
 
 
 def add_command(sub: argparse._SubParsersAction) -> None:
-    from viz_app.sweep import _integer
-
     b = sub.add_parser("bench-sweep", help="scaling of a sweep over 1, 2, … local Dask workers")
     b.add_argument("--grid", nargs="+", default=list(DEFAULT_GRID), metavar="NAME=SPEC",
                    help=f"grid axes as for sweep (default {' '.join(DEFAULT_GRID)})")
-    b.add_argument("--runs", type=_integer, default=DEFAULT_RUNS,
+    b.add_argument("--runs", type=integer, default=DEFAULT_RUNS,
                    help=f"runs per grid point (default {DEFAULT_RUNS}: 10^6 runs on the "
                         "default 4-point grid)")
-    b.add_argument("--seed", type=_integer, default=1, help="random seed (default 1)")
-    b.add_argument("--steps", type=_integer, default=60, help="scans per run (default 60)")
+    b.add_argument("--seed", type=integer, default=1, help="random seed (default 1)")
+    b.add_argument("--steps", type=integer, default=60, help="scans per run (default 60)")
     b.add_argument("--methods", nargs="+", default=list(ALL_METHODS), metavar="METHOD",
                    help="methods to run (default all)")
-    b.add_argument("--workers", type=_integer, nargs="+", default=[1, 2],
+    b.add_argument("--workers", type=integer, nargs="+", default=[1, 2],
                    help="worker counts to time, in this order; efficiency is relative to the "
                         "smallest (default 1 2)")
     b.add_argument("--json", action="store_true", help="print only JSON")
@@ -135,9 +132,5 @@ def cmd_bench_sweep(args: argparse.Namespace) -> int:
     spec.configs()
     tune_allocator()
     doc = run_bench(spec, list(args.workers))
-    if args.json:
-        json.dump(doc, sys.stdout)
-        sys.stdout.write("\n")
-    else:
-        print(format_bench(doc))
+    print_report(doc, args.json, format_bench)
     return 0

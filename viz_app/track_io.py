@@ -78,6 +78,7 @@ from core.track_stream import (
 )
 from core.validation import ParameterError, check_choice, check_int, check_real
 from viz_app.atomic import atomic_write
+from viz_app.cli_args import number
 
 REQUIRED_COLUMNS = ("time_s", "radar", "range_m", "azimuth_deg")
 OPTIONAL_COLUMNS = ("elevation_deg", "radial_velocity_mps")
@@ -543,13 +544,6 @@ def simulated_plots(
 # --------------------------------------------------------------------------------------------
 
 
-def _float_arg(text: str) -> float:
-    try:
-        return float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-
-
 def add_commands(sub: argparse._SubParsersAction) -> None:
     """Register ``track`` and ``simulate`` on the ``radarviz`` parser."""
     tr = sub.add_parser("track", help="track a measurement CSV file into a track CSV file")
@@ -568,9 +562,9 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
                     help="plots in the finite-memory start window (default 3)")
     tr.add_argument("--doppler", default="use", metavar="MODE",
                     help="radial velocities: use or ignore (default use)")
-    tr.add_argument("--sigma-a", type=_float_arg, default=0.0,
+    tr.add_argument("--sigma-a", type=number, default=0.0,
                     help="process-noise acceleration std, m/s² (default 0)")
-    tr.add_argument("--sigma-v0", type=_float_arg, default=1000.0,
+    tr.add_argument("--sigma-v0", type=number, default=1000.0,
                     help="initial velocity std, m/s (default 1000)")
 
     sim = sub.add_parser("simulate", help="write a preset's measurements and radars files")
@@ -581,7 +575,7 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     sim.add_argument("--radars-out", required=True, metavar="RADARS.toml",
                      help="radars TOML to write")
     sim.add_argument("--seed", type=int, default=1, help="random seed (default 1)")
-    sim.add_argument("--sigma-beta-deg", type=_float_arg, default=1.0,
+    sim.add_argument("--sigma-beta-deg", type=number, default=1.0,
                      help="prosov: azimuth noise σβ, degrees (default 1)")
     sim.add_argument("--scans", type=int, default=60,
                      help="fusion: scans per radar (default 60)")
