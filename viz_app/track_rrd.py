@@ -24,7 +24,6 @@ import math
 import os
 from collections import defaultdict
 from collections.abc import Iterable, Iterator
-from typing import Protocol
 
 import numpy as np
 import rerun as rr
@@ -38,6 +37,7 @@ from viz_app.recording import (
     log_radar_site,
     recording_file,
 )
+from viz_app.track_io import Radar
 
 #: Plots buffered before the recording is sent a chunk.
 RRD_CHUNK = 4096
@@ -45,16 +45,7 @@ RRD_CHUNK = 4096
 ARROW_SECONDS = 10.0
 
 
-class RadarLike(Protocol):
-    name: str
-    x_m: float
-    y_m: float
-    z_m: float
-    sigma_range_m: float
-    sigma_azimuth_deg: float
-
-
-def _label(r: RadarLike) -> str:
+def _label(r: Radar) -> str:
     return f"{r.name}: σr {r.sigma_range_m:g} m, σβ {r.sigma_azimuth_deg:g}°"
 
 
@@ -71,7 +62,7 @@ def measured_point(p: Plot) -> tuple[float, float, float]:
 class TrackRecorder:
     """Buffers plots and track states and sends them to a recording in chunks."""
 
-    def __init__(self, rec: rr.RecordingStream, radars: Iterable[RadarLike]):
+    def __init__(self, rec: rr.RecordingStream, radars: Iterable[Radar]):
         self.rec = rec
         self.count = 0
         self.chunk = 0
@@ -89,7 +80,7 @@ class TrackRecorder:
 
     @classmethod
     @contextlib.contextmanager
-    def to_file(cls, path: str | os.PathLike, radars: Iterable[RadarLike]
+    def to_file(cls, path: str | os.PathLike, radars: Iterable[Radar]
                 ) -> Iterator[TrackRecorder]:
         """A recorder writing ``path`` atomically (replaced if it exists)."""
         with recording_file(path, overwrite=True) as rec:
