@@ -37,6 +37,7 @@ from numpy.typing import NDArray
 
 from core.finite_memory import FiniteMemoryFit
 from core.polar_filters import UKFParams, wrap_angle
+from core.velocity import line_of_sight
 
 Vec = NDArray[np.float64]
 Mat = NDArray[np.float64]
@@ -129,12 +130,6 @@ def position_update(track: Track6, z: Vec, R: Mat) -> Track6:
     return joseph_update(track, z - track.x[POS], _H_POS, R)
 
 
-def polar3(d: Vec) -> tuple[float, float, float]:
-    """(r, β, ε) of the offset d = (x − xs, y − ys, z − zs)."""
-    rho = float(np.hypot(d[0], d[1]))
-    return float(np.hypot(rho, d[2])), float(np.arctan2(d[1], d[0])), float(np.arctan2(d[2], rho))
-
-
 def polar3_jacobian(d: Vec) -> Mat:
     """∂(r, β, ε)/∂state (3, 6) at the offset d (velocity columns are 0).
 
@@ -160,10 +155,10 @@ def ekf3_update(
     h(x) = (r, β, ε) of the predicted position minus the site, H = ∂h/∂x there
     (``polar3_jacobian``); the azimuth residual is wrapped to (−π, π].
     """
-    d = track.x[POS] - site
-    nu = z - np.array(polar3(d))
+    pos = track.x[POS]
+    nu = z - np.concatenate(line_of_sight(site[None], pos))  # (r, β, ε) of the prediction
     nu[1] = wrap_angle(nu[1])
-    return joseph_update(track, nu, polar3_jacobian(d), np.diag(np.square(sigmas)))
+    return joseph_update(track, nu, polar3_jacobian(pos - site), np.diag(np.square(sigmas)))
 
 
 def ukf3_update(
@@ -185,10 +180,7 @@ def ukf3_update(
     x, P = track.x, track.P
     L = np.linalg.cholesky(c * P)  # lower: its columns are filterpy's rows of the upper factor
     chi = np.concatenate([x[None], x + L.T, x - L.T])  # (13, 6)
-    d = chi[:, POS] - site
-    rho = np.hypot(d[:, 0], d[:, 1])
-    zeta = np.stack([np.hypot(rho, d[:, 2]), np.arctan2(d[:, 1], d[:, 0]),
-                     np.arctan2(d[:, 2], rho)], -1)
+    zeta = np.concatenate(line_of_sight(site[None], chi[:, POS]), axis=1)  # (13, 3): r, β, ε
     wm = np.full(2 * n + 1, w)
     wm[0] = wm0
     wc = wm.copy()
@@ -206,8 +198,9 @@ def ukf3_update(
     return Track6(x + K @ nu, _symmetric(P - K @ S @ K.T))
 
 
-def line_of_sight(azimuth: float, elevation: float) -> tuple[Vec, Vec, Vec]:
-    """Unit vectors u (along the line of sight), e_β = ∂u/∂β / cos ε and e_ε = ∂u/∂ε."""
+def los_frame(azimuth: float, elevation: float) -> tuple[Vec, Vec, Vec]:
+    """The orthonormal frame of a line of sight: u (along it), e_β = ∂u/∂β / cos ε and
+    e_ε = ∂u/∂ε."""
     ca, sa, ce, se = np.cos(azimuth), np.sin(azimuth), np.cos(elevation), np.sin(elevation)
     return (
         np.array([ce * ca, ce * sa, se]),
@@ -275,7 +268,7 @@ def finite_memory_start3(
 
     The fit over k plots (oldest first; ``ranges`` (k,), ``radial_velocities`` (k,) or None)
     gives r̂, V̂r at the newest plot with covariance R (``fit.R``). In the frame (u, e_β, e_ε)
-    of the newest measured line of sight (``line_of_sight``)::
+    of the newest measured line of sight (``los_frame``)::
 
         position = site + r̂ u,  var along = R11,  across: (r̂ cos ε σβ)², (r̂ σε)²
         velocity = V̂r u,        var along = R22,  across: σv0² each (nothing observed)
@@ -291,7 +284,7 @@ def finite_memory_start3(
         )
     z = ranges if radial_velocities is None else np.concatenate([ranges, radial_velocities])
     r_hat, vr_hat = fit.W[:2] @ z
-    u, e_b, e_e = line_of_sight(azimuth, elevation)
+    u, e_b, e_e = los_frame(azimuth, elevation)
     G = np.stack([u, e_b, e_e], -1)  # columns: the frame's axes in x, y, z
     cov_p = np.diag([fit.R[0, 0], (r_hat * np.cos(elevation) * sigma_azimuth) ** 2,
                      (r_hat * sigma_elevation) ** 2])

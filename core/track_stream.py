@@ -213,6 +213,8 @@ class MethodTrack3D:
 
     def __init__(self, method: str, sigma_a_mps2: float = 0.0, sigma_v0_mps: float = 1000.0):
         self.method = check_choice("method", method, METHODS_3D)
+        # ucm converts with its own debiasing; naive, and ekf/ukf for their start, naively.
+        self._convert = convert_ucm_3d if method == "ucm" else convert_naive_3d
         self.sigma_a = check_real("sigma_a_mps2", sigma_a_mps2, low=0.0, low_open=False)
         self.sigma_v0 = check_real("sigma_v0_mps", sigma_v0_mps, low=0.0)
         self.track: Track6 | None = None
@@ -226,8 +228,7 @@ class MethodTrack3D:
         plots, one vectorised call (``ekf``/``ukf`` use the naive point at the start only)."""
         cols = np.array([(p.range_m, p.azimuth_rad, p.elevation_rad, p.sigma_r_m,
                           p.sigma_azimuth_rad, p.sigma_elevation_rad) for p in plots]).T
-        conv = convert_ucm_3d if self.method == "ucm" else convert_naive_3d
-        c = conv(*cols)
+        c = self._convert(*cols)
         return c.z, c.R
 
     def add(
@@ -241,8 +242,7 @@ class MethodTrack3D:
         sigmas = np.array([p.sigma_r_m, p.sigma_azimuth_rad, p.sigma_elevation_rad])
         m = self.method
         if pre is None:
-            conv = convert_ucm_3d if m == "ucm" else convert_naive_3d  # ekf, ukf: naive start
-            pre = conv(*z, *sigmas)
+            pre = self._convert(*z, *sigmas)
         if self.track is None:
             track = cv6_init(pre[0] + site, pre[1], self.sigma_v0)
         else:
