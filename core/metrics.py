@@ -29,7 +29,8 @@ from scipy import stats
 
 from core.kalman_cv import CVBatch, quad_form_inv
 
-_SUMS: tuple[str, ...] = (
+#: Names of the running sums, in the row order of ``MetricsAccumulator.to_arrays``.
+SUM_NAMES: tuple[str, ...] = (
     "ex",
     "ex2",
     "ey",
@@ -41,8 +42,6 @@ _SUMS: tuple[str, ...] = (
     "nees_pos",
     "nees_state",
 )
-#: Names of the running sums, in the row order of ``MetricsAccumulator.to_arrays``.
-SUM_NAMES: tuple[str, ...] = _SUMS
 
 
 class TrackMetrics(NamedTuple):
@@ -70,7 +69,7 @@ class MetricsAccumulator:
     def __init__(self, steps: int) -> None:
         self.steps = steps
         self.runs = np.zeros(steps, dtype=np.int64)
-        self.sums: dict[str, NDArray[np.float64]] = {k: np.zeros(steps) for k in _SUMS}
+        self.sums: dict[str, NDArray[np.float64]] = {k: np.zeros(steps) for k in SUM_NAMES}
 
     def add(self, n: int, state: CVBatch, truth: NDArray[np.float64]) -> None:
         """Add one block of runs at scan index n (0-based); ``truth`` is the (4,) true state."""
@@ -102,7 +101,7 @@ class MetricsAccumulator:
         This is what a sweep chunk ships between processes and stores on disk; the arrays
         round-trip exactly, so ``from_arrays(*a.to_arrays())`` merges bit for bit like ``a``.
         """
-        return self.runs.copy(), np.stack([self.sums[k] for k in _SUMS])
+        return self.runs.copy(), np.stack([self.sums[k] for k in SUM_NAMES])
 
     @classmethod
     def from_arrays(
@@ -112,20 +111,20 @@ class MetricsAccumulator:
         runs = np.asarray(runs)
         sums = np.asarray(sums)
         steps = runs.shape[0]
-        if runs.shape != (steps,) or sums.shape != (len(_SUMS), steps):
+        if runs.shape != (steps,) or sums.shape != (len(SUM_NAMES), steps):
             raise ValueError(
-                f"accumulator arrays must be runs ({steps},) and sums ({len(_SUMS)}, {steps}),"
+                f"accumulator arrays must be runs ({steps},) and sums ({len(SUM_NAMES)}, {steps}),"
                 f" got {runs.shape} and {sums.shape}"
             )
         acc = cls(steps)
         acc.runs[:] = runs
-        for i, k in enumerate(_SUMS):
+        for i, k in enumerate(SUM_NAMES):
             acc.sums[k][:] = sums[i]
         return acc
 
     def merge(self, other: MetricsAccumulator) -> None:
         """Add another accumulator's sums (same N) into this one."""
-        for k in _SUMS:
+        for k in SUM_NAMES:
             self.sums[k] += other.sums[k]
         self.runs += other.runs
 
