@@ -143,19 +143,17 @@ class MethodTrack:
 
     def _converted(
         self, r: NDArray[np.float64], b: NDArray[np.float64], sr: float, sb: float,
-        rel: CVBatch | None, pre: NDArray[np.float64] | None,
+        rel: CVBatch | None, pre: NDArray[np.float64],
     ) -> tuple[NDArray[np.float64], ...]:
-        """Every method's converted point and covariance as five (M,) vectors."""
-        parts = np.empty((5, len(self.methods))) if pre is None else pre.copy()
-        for i, m in enumerate(self.methods):
-            if pre is not None and (m != "ducm" or rel is None):
-                continue
-            if rel is None:  # the start: ducm has no prediction yet and starts like ucm
-                c = convert_parts("ucm" if m == "ducm" else m, r, b, sr, sb)
-            else:
-                predicted = (rel.x[i : i + 1, 0], rel.x[i : i + 1, 2]) if m == "ducm" else None
-                c = convert_parts(m, r, b, sr, sb, predicted)
-            parts[:, i] = np.concatenate(np.broadcast_arrays(*c))
+        """Every method's converted point and covariance as five (M,) vectors: ``pre`` (this
+        plot's slice of ``precompute``) with ``ducm`` converted about the prediction ``rel``
+        (at the start, ``rel`` None, ``ducm`` keeps ``ucm``'s conversion)."""
+        parts = pre.copy()
+        if rel is not None:
+            for i, m in enumerate(self.methods):
+                if m == "ducm":
+                    c = convert_parts(m, r, b, sr, sb, (rel.x[i : i + 1, 0], rel.x[i : i + 1, 2]))
+                    parts[:, i] = np.concatenate(c)
         return tuple(parts)
 
     def start_from(self, x: NDArray[np.float64], P: NDArray[np.float64], time_s: float) -> None:
@@ -165,11 +163,11 @@ class MethodTrack:
         self.time_s = time_s
 
     def add(
-        self, p: Plot, use_doppler: bool = True, pre: NDArray[np.float64] | None = None
+        self, p: Plot, pre: NDArray[np.float64], use_doppler: bool = True
     ) -> CVBatch:
         """Filter one plot; returns the updated states (x (M, 4), P (M, 4, 4)), absolute frame.
 
-        ``pre``: this plot's (5, M) slice of ``precompute`` (None: convert here)."""
+        ``pre``: this plot's (5, M) slice of ``precompute``."""
         r = np.array([p.range_m])
         b = np.array([p.azimuth_rad])
         sr, sb, m = p.sigma_r_m, p.sigma_azimuth_rad, self.methods[0]
@@ -232,17 +230,15 @@ class MethodTrack3D:
         return c.z, c.R
 
     def add(
-        self, p: Plot, use_doppler: bool = True,
-        pre: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None,
+        self, p: Plot, pre: tuple[NDArray[np.float64], NDArray[np.float64]],
+        use_doppler: bool = True,
     ) -> Track6:
-        """Filter one plot; ``pre`` its (z, R) from ``precompute`` (None: convert here)."""
+        """Filter one plot; ``pre`` its radar-centred (z, R) from ``precompute``."""
         assert p.elevation_rad is not None
         site = np.asarray(p.site, dtype=np.float64)
         z = np.array([p.range_m, p.azimuth_rad, p.elevation_rad])
         sigmas = np.array([p.sigma_r_m, p.sigma_azimuth_rad, p.sigma_elevation_rad])
         m = self.method
-        if pre is None:
-            pre = self._convert(*z, *sigmas)
         if self.track is None:
             track = cv6_init(pre[0] + site, pre[1], self.sigma_v0)
         else:
@@ -362,10 +358,10 @@ class StreamTracker:
                 continue
             if self.three_d:
                 for m, tr in self._tracks3.items():
-                    tr.add(p, use_doppler, (pre3[m][0][i], pre3[m][1][i]))
+                    tr.add(p, (pre3[m][0][i], pre3[m][1][i]), use_doppler)
             else:
                 for g, pre in zip(self._groups, pre2, strict=True):
-                    g.add(p, use_doppler, pre[i])
+                    g.add(p, pre[i], use_doppler)
             self._started = True
             out.append(self._rows())
         return out

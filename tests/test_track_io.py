@@ -288,8 +288,8 @@ def test_ekf_matches_filterpy_on_the_file(tmp_path: Path) -> None:
 @pytest.mark.parametrize("init", ["first-plot", "finite-memory"])
 def test_fusion_file_round_trip_equals_in_memory(tmp_path: Path, init: str) -> None:
     """``simulate --preset fusion`` (3 radars, 3D, Doppler, staggered scans) tracked from the
-    file equals the same plots tracked in memory, plot by plot (``StreamTracker.add``: no
-    block vectorisation, so this also checks the block path against the one-plot path)."""
+    file equals the same plots tracked in memory, plot by plot (``StreamTracker.add``: blocks
+    of one plot, so this also checks the file's 1 024-plot blocks against single plots)."""
     meas, radars, out = tmp_path / "m.csv", tmp_path / "r.toml", tmp_path / "t.csv"
     assert main(["simulate", "--preset", "fusion", "--scans", "30", "--seed", "4", "--out",
                  str(meas), "--radars-out", str(radars)]) == 0
