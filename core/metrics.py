@@ -27,7 +27,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import stats
 
-from core.kalman_cv import CVBatch, quad_form_inv
+from radarviz.core.filters.cv import CVBatch, quad_form_inv
 
 #: Names of the running sums, in the row order of ``MetricsAccumulator.to_arrays``.
 SUM_NAMES: tuple[str, ...] = (
@@ -104,9 +104,7 @@ class MetricsAccumulator:
         return self.runs.copy(), np.stack([self.sums[k] for k in SUM_NAMES])
 
     @classmethod
-    def from_arrays(
-        cls, runs: NDArray[np.int64], sums: NDArray[np.float64]
-    ) -> MetricsAccumulator:
+    def from_arrays(cls, runs: NDArray[np.int64], sums: NDArray[np.float64]) -> MetricsAccumulator:
         """The accumulator whose state is ``runs`` (N,) and ``sums`` (len(SUM_NAMES), N)."""
         runs = np.asarray(runs)
         sums = np.asarray(sums)

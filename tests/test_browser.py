@@ -18,14 +18,20 @@ import numpy as np
 import pytest
 from matplotlib.image import imread
 
-from viz_app.cli_recording import free_port, viewer_url
-from viz_app.recording import recording_file
-from viz_app.scenes import record_preset
+from radarviz.viz_app.cli.recording import free_port, viewer_url
+from radarviz.viz_app.rerun.recording import recording_file
+from radarviz.viz_app.rerun.scenes import record_preset
 
 CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
 CHROMIUM_ARGS = [
-    "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-    "--disable-background-networking", "--disable-component-update", "--disable-sync",
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
 ]
 ARTIFACTS = Path(__file__).resolve().parents[1] / "test-artifacts"
 
@@ -38,8 +44,10 @@ def _browser_or_fail() -> None:
         have = False
     if not have:
         if os.environ.get("CI") == "true":
-            pytest.fail("CI=true but Debian chromium or python playwright is missing "
-                        "(.ci/run installs both)")
+            pytest.fail(
+                "CI=true but Debian chromium or python playwright is missing "
+                "(.ci/run installs both)"
+            )
         pytest.skip("chromium / playwright not installed (apt-get install chromium)")
 
 
@@ -81,7 +89,10 @@ def test_web_viewer_renders_a_recording(tmp_path: Path) -> None:
     exe = Path(sys.executable).with_name("radarviz")
     proc = subprocess.Popen(
         [str(exe), "view", str(rrd), "--port", str(grpc), "--web-port", str(web)],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
     )
     try:
         _wait_http(f"http://127.0.0.1:{web}/")

@@ -12,15 +12,36 @@ from pathlib import Path
 
 import pytest
 
-from viz_app.cli import main
+from radarviz.viz_app.cli.main import main
 
-METHOD_KEYS = {"sigma_x_filter", "rmse_x", "std_x", "bias_range", "bias_cross", "nees_pos",
-               "nees_state"}
+METHOD_KEYS = {
+    "sigma_x_filter",
+    "rmse_x",
+    "std_x",
+    "bias_range",
+    "bias_cross",
+    "nees_pos",
+    "nees_state",
+}
 
 
 def test_reproduce_prosov_json_document(capsys: pytest.CaptureFixture[str]) -> None:
-    code = main(["reproduce", "prosov", "--runs", "50", "--steps", "5", "--seed", "4",
-                 "--sigma-beta-deg", "1", "2", "--json"])
+    code = main(
+        [
+            "reproduce",
+            "prosov",
+            "--runs",
+            "50",
+            "--steps",
+            "5",
+            "--seed",
+            "4",
+            "--sigma-beta-deg",
+            "1",
+            "2",
+            "--json",
+        ]
+    )
     assert code == 0
     out = capsys.readouterr().out
     doc = json.loads(out)
@@ -76,10 +97,12 @@ def test_bad_input_is_one_line_and_exit_2(args: list[str], needle: str, capsys) 
 
 def test_console_script_exit_status_and_no_traceback() -> None:
     exe = Path(sys.executable).with_name("radarviz")
-    cmd = [str(exe)] if exe.exists() else [sys.executable, "-m", "viz_app.cli"]
+    cmd = [str(exe)] if exe.exists() else [sys.executable, "-m", "radarviz.viz_app.cli.main"]
     proc = subprocess.run(
         [*cmd, "reproduce", "prosov", "--sigma-beta-deg", "nan"],
-        capture_output=True, text=True, env={**os.environ, "PYTHONWARNINGS": "ignore"},
+        capture_output=True,
+        text=True,
+        env={**os.environ, "PYTHONWARNINGS": "ignore"},
     )
     assert proc.returncode == 2
     assert proc.stdout == ""
@@ -89,8 +112,18 @@ def test_console_script_exit_status_and_no_traceback() -> None:
 
 
 def test_unwritable_plot_path_is_an_error(tmp_path: Path, capsys) -> None:
-    code = main(["reproduce", "prosov", "--runs", "10", "--steps", "3",
-                 "--plot", str(tmp_path / "missing-dir" / "x.png")])
+    code = main(
+        [
+            "reproduce",
+            "prosov",
+            "--runs",
+            "10",
+            "--steps",
+            "3",
+            "--plot",
+            str(tmp_path / "missing-dir" / "x.png"),
+        ]
+    )
     assert code == 2
     err = capsys.readouterr().err
     assert err.startswith("radarviz: error:") and err.count("\n") == 1
@@ -101,16 +134,35 @@ def test_bench_json_keys(capsys) -> None:
     code = main(["bench", "--json", "--runs", "500", "1000", "--filterpy-runs", "3"])
     assert code == 0
     doc = json.loads(capsys.readouterr().out)
-    for key in ("kf_ns_per_step", "filterpy_ns_per_step", "speedup_vs_filterpy", "runs",
-                "peak_rss_mb"):
+    for key in (
+        "kf_ns_per_step",
+        "filterpy_ns_per_step",
+        "speedup_vs_filterpy",
+        "runs",
+        "peak_rss_mb",
+    ):
         assert key in doc
     assert doc["runs"] == [500, 1000] and len(doc["kf_ns_per_step"]) == 2
     assert doc["filterpy_ns_per_step"] > 0 and all(v > 0 for v in doc["speedup_vs_filterpy"])
 
 
 def test_reproduce_gorshkov_json_document(capsys) -> None:
-    code = main(["reproduce", "gorshkov", "--trials", "2000", "--seed", "5", "--radars", "RLS1",
-                 "RLS6", "--tracking-runs", "50", "--json"])
+    code = main(
+        [
+            "reproduce",
+            "gorshkov",
+            "--trials",
+            "2000",
+            "--seed",
+            "5",
+            "--radars",
+            "RLS1",
+            "RLS6",
+            "--tracking-runs",
+            "50",
+            "--json",
+        ]
+    )
     assert code == 0
     doc = json.loads(capsys.readouterr().out)
     assert doc["experiment"] == "gorshkov" and doc["trials"] == 2000 and doc["seed"] == 5
@@ -157,8 +209,25 @@ def test_gorshkov_bad_input(args: list[str], needle: str, capsys) -> None:
 
 
 def test_gorshkov_custom_radar_follows_c0(capsys) -> None:
-    code = main(["reproduce", "gorshkov", "--trials", "500", "--radars", "RLS2", "--custom",
-                 "250", "1", "10", "--k-max", "5", "--tracking-runs", "0", "--json"])
+    code = main(
+        [
+            "reproduce",
+            "gorshkov",
+            "--trials",
+            "500",
+            "--radars",
+            "RLS2",
+            "--custom",
+            "250",
+            "1",
+            "10",
+            "--k-max",
+            "5",
+            "--tracking-runs",
+            "0",
+            "--json",
+        ]
+    )
     assert code == 0
     doc = json.loads(capsys.readouterr().out)
     rls2, custom = doc["radars"]
@@ -172,8 +241,12 @@ def test_gorshkov_custom_radar_follows_c0(capsys) -> None:
 
 def test_reproduce_gorshkov_plot(tmp_path: Path, capsys) -> None:
     png = tmp_path / "g.png"
-    assert main(["reproduce", "gorshkov", "--trials", "500", "--tracking-runs", "0",
-                 "--plot", str(png)]) == 0
+    assert (
+        main(
+            ["reproduce", "gorshkov", "--trials", "500", "--tracking-runs", "0", "--plot", str(png)]
+        )
+        == 0
+    )
     assert "range gain peaks at" in capsys.readouterr().out
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert [p.name for p in tmp_path.iterdir()] == ["g.png"]

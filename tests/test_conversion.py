@@ -1,4 +1,4 @@
-"""Statistical and property tests of ``core.conversion`` (spec: shared/spec/conversion.md).
+"""Statistical and property tests of ``core.conversion.planar`` (spec: shared/spec/conversion.md).
 
 Monte Carlo checks.  Every comparison of a Monte Carlo estimate with a closed form goes through
 ``check_mc``, whose tolerance is ``Z`` times the estimate's own standard error (never a
@@ -34,7 +34,7 @@ from hypothesis.extra import numpy as hnp
 from numpy.polynomial.hermite_e import hermegauss
 from scipy.stats import norm
 
-from core import conversion as cv
+from radarviz.core.conversion import planar as cv
 
 DEG = math.pi / 180.0
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from filterpy.kalman import ExtendedKalmanFilter
 
-from core.doppler_tracking import (
+from radarviz.core.experiments.doppler_start import (
     DopplerTrackingConfig,
     doppler_los_update,
     doppler_target,
@@ -16,10 +16,10 @@ from core.doppler_tracking import (
     radial_velocity,
     run_doppler_tracking,
 )
-from core.finite_memory import finite_memory_fit, preset
-from core.kalman_cv import as_batch, cv_predict, transition_matrix
-from core.polar_filters import wrap_angle
-from core.validation import ParameterError
+from radarviz.core.filters.cv import as_batch, cv_predict, transition_matrix
+from radarviz.core.filters.polar import wrap_angle
+from radarviz.core.finite_memory.fit import finite_memory_fit, preset
+from radarviz.core.params import ParameterError
 
 Z = 4.5  # Monte Carlo tolerance in standard errors (a dozen asserts: false alarm < 1e-4)
 
@@ -65,8 +65,7 @@ def test_joint_doppler_ekf_equals_filterpy_step_by_step() -> None:
         ref.append(ekf)
     for n in range(1, 25):
         state = cv_predict(state, 10.0)
-        state = ekf_doppler_update(state, meas.r[:, n], meas.beta[:, n], meas.vr[:, n], sr, sb,
-                                   svr)
+        state = ekf_doppler_update(state, meas.r[:, n], meas.beta[:, n], meas.vr[:, n], sr, sb, svr)
         for m, ekf in enumerate(ref):
             ekf.predict()
             z = np.array([meas.r[m, n], meas.beta[m, n], meas.vr[m, n]])
@@ -92,8 +91,9 @@ def test_los_doppler_update_is_the_kalman_update_of_its_linear_model() -> None:
         S = h @ P[i] @ h + var
         K = P[i] @ h / S
         np.testing.assert_allclose(out.x[i], x[i] + K * (vr[i] - h @ x[i]), rtol=1e-12)
-        np.testing.assert_allclose(out.P[i], P[i] - np.outer(K, K) * S, rtol=1e-9,
-                                   atol=1e-9 * np.abs(P[i]).max())
+        np.testing.assert_allclose(
+            out.P[i], P[i] - np.outer(K, K) * S, rtol=1e-9, atol=1e-9 * np.abs(P[i]).max()
+        )
 
 
 @pytest.mark.parametrize("doppler", [False, True])
@@ -104,13 +104,14 @@ def test_finite_memory_start_covariance_matches_monte_carlo(doppler: bool) -> No
     sr, svr, T = radar.sigma_r_m, radar.sigma_vr_mps, radar.period_s
     sb = np.deg2rad(0.5)
     # A radially moving target (no tangential motion): the fit is then exact in the mean.
-    from core.scenario import ConstantVelocityTarget2D
+    from radarviz.core.scenarios.planar import ConstantVelocityTarget2D
 
     truth = ConstantVelocityTarget2D(60e3, 80e3, 150.0, 200.0, T, k).truth()
     meas = polar_doppler_measurements(truth, sr, sb, svr, runs, np.random.default_rng(3))
     fit = finite_memory_fit(k, sr, svr, T, with_doppler=doppler)
-    st = finite_memory_start(fit, meas.r, meas.vr if doppler else None, meas.beta[:, -1], sb,
-                             1000.0)
+    st = finite_memory_start(
+        fit, meas.r, meas.vr if doppler else None, meas.beta[:, -1], sb, 1000.0
+    )
     # Range and radial velocity of the start state are the fit's r̂ and V̂r (the measured line
     # of sight carries them), so their errors have mean 0 and covariance R exactly.
     b = meas.beta[:, -1]

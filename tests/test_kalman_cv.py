@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from filterpy.kalman import KalmanFilter
 
-from core.conversion import convert
-from core.kalman_cv import (
+from radarviz.core.conversion.planar import convert
+from radarviz.core.filters.cv import (
     as_batch,
     cv_init,
     cv_predict,
@@ -109,9 +109,7 @@ def test_init_follows_the_spec() -> None:
     R = np.array([[[4.0, 1.0], [1.0, 9.0]]])
     b = cv_init(np.array([[10.0, 20.0]]), R, sigma_v=1000.0)
     np.testing.assert_array_equal(b.x[0], [10.0, 0.0, 20.0, 0.0])
-    expected = np.array(
-        [[4.0, 0, 1.0, 0], [0, 1e6, 0, 0], [1.0, 0, 9.0, 0], [0, 0, 0, 1e6]]
-    )
+    expected = np.array([[4.0, 0, 1.0, 0], [0, 1e6, 0, 0], [1.0, 0, 9.0, 0], [0, 0, 0, 1e6]])
     np.testing.assert_array_equal(b.P[0], expected)
 
 

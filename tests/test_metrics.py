@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from core.kalman_cv import as_batch
-from core.metrics import MetricsAccumulator, delta_percent, nees_band
+from radarviz.core.filters.cv import as_batch
+from radarviz.core.metrics import MetricsAccumulator, delta_percent, nees_band
 
 
 def test_accumulator_equals_direct_statistics_over_blocks() -> None:

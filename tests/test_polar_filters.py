@@ -1,4 +1,4 @@
-"""Tests for ``core.polar_filters``: the batched polar EKF / UKF against filterpy, step by step.
+"""Tests for ``core.filters.polar``: the batched polar EKF / UKF against filterpy, step by step.
 
 Scenario (the spec's ``prosov`` geometry, rotated): a target 150 km from the radar at azimuth
 β0, moving radially outward at 200 m/s, T = 10 s, 30 scans, σr = 250 m, σβ = 1° or 2°,
@@ -24,9 +24,9 @@ import pytest
 from filterpy.common import Q_discrete_white_noise
 from filterpy.kalman import ExtendedKalmanFilter, MerweScaledSigmaPoints, UnscentedKalmanFilter
 
-import core.polar_filters as pf
-from core.conversion import convert_naive
-from core.kalman_cv import (
+import radarviz.core.filters.polar as pf
+from radarviz.core.conversion.planar import convert_naive
+from radarviz.core.filters.cv import (
     CVBatch,
     cv_init,
     cv_predict,
@@ -34,7 +34,13 @@ from core.kalman_cv import (
     quad_form_inv,
     transition_matrix,
 )
-from core.polar_filters import UKFParams, ekf_update, init_from_polar, ukf_update, wrap_angle
+from radarviz.core.filters.polar import (
+    UKFParams,
+    ekf_update,
+    init_from_polar,
+    ukf_update,
+    wrap_angle,
+)
 
 T = 10.0
 STEPS = 30
@@ -65,7 +71,7 @@ def measurements(
 
 
 # --------------------------------------------------------------------------------------------
-# filterpy reference: its own functions, written independently of core.polar_filters
+# filterpy reference: its own functions, written independently of core.filters.polar
 # --------------------------------------------------------------------------------------------
 
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import io
 
-from viz_app.progress import ProgressBar
+from radarviz.viz_app.cli.progress import ProgressBar
 
 
 def test_progress_bar_prints_deciles_off_terminal() -> None:

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from core.prosov import TrackingConfig, prosov_configs, run_tracking
-from core.scenario import prosov_target
-from core.validation import ParameterError
+from radarviz.core.experiments.prosov import TrackingConfig, prosov_configs, run_tracking
+from radarviz.core.params import ParameterError
+from radarviz.core.scenarios.planar import prosov_target
 
 #: z for the Monte Carlo tolerances below: with a few dozen asserts, a false alarm rate
 #: of 7e-6 per assert keeps the file's false alarm rate under 1e-3.
@@ -16,8 +16,9 @@ Z = 4.5
 
 @pytest.fixture(scope="module")
 def two_degree():
-    (cfg,) = prosov_configs([2.0], runs=20_000, seed=3, methods=("naive", "seed", "cmkf_d",
-                                                                 "ucm", "ducm"))
+    (cfg,) = prosov_configs(
+        [2.0], runs=20_000, seed=3, methods=("naive", "seed", "cmkf_d", "ucm", "ducm")
+    )
     return run_tracking(cfg)
 
 
@@ -59,8 +60,9 @@ def _delta_x_batches(sigma_beta_deg: float, batches: int = 8, runs: int = 2500) 
     """Δx_rmse(n) from independent batches (different seeds): (batches, N)."""
     out = []
     for b in range(batches):
-        (cfg,) = prosov_configs([sigma_beta_deg], runs=runs, seed=100 + b,
-                                methods=("naive", "seed"))
+        (cfg,) = prosov_configs(
+            [sigma_beta_deg], runs=runs, seed=100 + b, methods=("naive", "seed")
+        )
         out.append(run_tracking(cfg).delta_x_percent()["rmse"])
     return np.array(out)
 
@@ -99,8 +101,9 @@ def test_same_seed_is_bit_identical_and_seed_matters() -> None:
         for x, y in zip(a.metrics[name], b.metrics[name], strict=True):
             np.testing.assert_array_equal(x, y)
     (other,) = prosov_configs([1.0], runs=300, steps=8, seed=2, methods=("naive",))
-    assert not np.array_equal(run_tracking(other).metrics["naive"].rmse_x,
-                              a.metrics["naive"].rmse_x)
+    assert not np.array_equal(
+        run_tracking(other).metrics["naive"].rmse_x, a.metrics["naive"].rmse_x
+    )
 
 
 def test_all_methods_run_and_report_finite_statistics() -> None:

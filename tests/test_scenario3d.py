@@ -7,7 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from core.scenario3d import (
+from radarviz.core.params import ParameterError
+from radarviz.core.scenarios.multi_radar import (
     RadarSite,
     Scenario3D,
     Segment,
@@ -15,8 +16,7 @@ from core.scenario3d import (
     generate_measurements,
     polar_measurement,
 )
-from core.validation import ParameterError
-from core.velocity import estimate_velocity
+from radarviz.core.velocity.estimate import estimate_velocity
 
 DEG = math.pi / 180.0
 RADARS = (
@@ -24,8 +24,11 @@ RADARS = (
     RadarSite("B", (80e3, 0.0, 0.0), 100.0, 0.3 * DEG, 0.5 * DEG, 3.0, period=10.0),
     RadarSite("C", (40e3, 70e3, 0.0), 150.0, 0.5 * DEG, 1.0 * DEG, 5.0, period=5.0, t0=2.5),
 )
-TRAJ = Trajectory3D((40e3, 30e3, 10e3), (216.5, 125.0, 5.0),
-                    (Segment(60.0), Segment(90.0, turn_rate=2.0 * DEG), Segment(60.0)))
+TRAJ = Trajectory3D(
+    (40e3, 30e3, 10e3),
+    (216.5, 125.0, 5.0),
+    (Segment(60.0), Segment(90.0, turn_rate=2.0 * DEG), Segment(60.0)),
+)
 SCEN = Scenario3D(RADARS, TRAJ)
 
 
@@ -37,8 +40,7 @@ def test_noise_free_measurements_invert_to_the_truth() -> None:
         los = np.stack([ce * np.cos(m.azimuth), ce * np.sin(m.azimuth), np.sin(m.elevation)], -1)
         pos = np.asarray(m.radar.position) + m.range[:, None] * los
         np.testing.assert_allclose(pos, m.true_position, atol=1e-6)
-        np.testing.assert_allclose(np.sum(los * m.true_velocity, -1), m.radial_velocity,
-                                   atol=1e-9)
+        np.testing.assert_allclose(np.sum(los * m.true_velocity, -1), m.radial_velocity, atol=1e-9)
     # Where the three radars scan together, their radial velocities give the full velocity.
     a, b = meas["A"], meas["B"]
     common = np.intersect1d(a.t, b.t)[3]
@@ -49,7 +51,10 @@ def test_noise_free_measurements_invert_to_the_truth() -> None:
         np.array([r.position for r in RADARS]),
         [a.radial_velocity[rows[0]], b.radial_velocity[rows[1]], vrc],
         [a.azimuth[rows[0]], b.azimuth[rows[1]], azc],
-        [a.elevation[rows[0]], b.elevation[rows[1]], elc], 1.0, 0.01, 0.01,
+        [a.elevation[rows[0]], b.elevation[rows[1]], elc],
+        1.0,
+        0.01,
+        0.01,
     )
     np.testing.assert_allclose(est.velocity, c_vel[0], atol=1e-8)
 
@@ -63,8 +68,9 @@ def test_turn_keeps_speed_and_turns_by_rate_times_duration() -> None:
     assert heading[-1] - heading[0] == pytest.approx(90.0 * 2.0 * DEG, rel=1e-9)
     # Continuity, and position is the integral of velocity (trapezoid on a fine grid).
     step = np.diff(pos, axis=0)
-    np.testing.assert_allclose(step, 0.5 * (vel[1:] + vel[:-1]) * np.diff(t)[:, None], rtol=1e-4,
-                               atol=1e-3)
+    np.testing.assert_allclose(
+        step, 0.5 * (vel[1:] + vel[:-1]) * np.diff(t)[:, None], rtol=1e-4, atol=1e-3
+    )
 
 
 def test_measurements_are_seeded_and_noisy() -> None:

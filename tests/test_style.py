@@ -14,6 +14,7 @@ def test_ruff_check_is_clean() -> None:
     exe = Path(sys.executable).with_name("ruff")
     ruff = str(exe) if exe.exists() else shutil.which("ruff")
     assert ruff, "ruff is a test dependency: pip install -e '.[test]'"
-    proc = subprocess.run([ruff, "check", "core", "viz_app", "tests"], cwd=ROOT,
-                          capture_output=True, text=True)
+    proc = subprocess.run(
+        [ruff, "check", "core", "viz_app", "tests"], cwd=ROOT, capture_output=True, text=True
+    )
     assert proc.returncode == 0, proc.stdout + proc.stderr

@@ -18,8 +18,14 @@ import pyarrow.parquet as pq
 import pytest
 from rerun.chunk import RrdReader
 
-from core.prosov import TrackingConfig, block_seed, block_sizes, prosov_configs, run_tracking
-from core.sweep import (
+from radarviz.core.experiments.prosov import (
+    TrackingConfig,
+    block_seed,
+    block_sizes,
+    prosov_configs,
+    run_tracking,
+)
+from radarviz.core.experiments.sweep import (
     ChunkSums,
     GridAxis,
     SweepBase,
@@ -29,10 +35,10 @@ from core.sweep import (
     reduce_chunks,
     run_sweep_serial,
 )
-from core.validation import ParameterError
-from viz_app.cli import main
-from viz_app.sweep import ChunkStore, chunk_dir, parse_axis, run_sweep
-from viz_app.sweep_output import COLUMNS, METRIC_COLUMNS, sweep_table
+from radarviz.core.params import ParameterError
+from radarviz.viz_app.cli.main import main
+from radarviz.viz_app.sweep.output import COLUMNS, METRIC_COLUMNS, sweep_table
+from radarviz.viz_app.sweep.run import ChunkStore, chunk_dir, parse_axis, run_sweep
 
 # Chunk functions defined here run on Dask workers, which cannot import this test module:
 # ship its functions by value.
@@ -55,15 +61,14 @@ def _assert_results_equal(a, b) -> None:
         assert ra.config == rb.config
         assert ra.nees_pos_band95 == rb.nees_pos_band95
         for m in ra.metrics:
-            for x, y, name in zip(ra.metrics[m], rb.metrics[m], ra.metrics[m]._fields,
-                                  strict=True):
+            for x, y, name in zip(ra.metrics[m], rb.metrics[m], ra.metrics[m]._fields, strict=True):
                 assert np.array_equal(x, y, equal_nan=True), (m, name)
 
 
 @pytest.fixture(scope="module")
 def client():
     """One 2-worker LocalCluster (2 processes, 1 thread each) for the Dask tests."""
-    from viz_app.sweep import dask_client
+    from radarviz.viz_app.sweep.run import dask_client
 
     with dask_client("local", 2) as c:
         c.wait_for_workers(2, timeout=60)
@@ -113,12 +118,29 @@ def test_sweep_point_equals_reproduce_prosov_json(tmp_path: Path, capsys) -> Non
     assert main(["reproduce", "prosov", "--sigma-beta-deg", "2", "--json", *common]) == 0
     doc = json.loads(capsys.readouterr().out)
     out = tmp_path / "one.parquet"
-    assert main(["sweep", "--grid", "sigma_beta_deg=1,2", "--scheduler", "serial",
-                 "--out", str(out), "--json", *common]) == 0
+    assert (
+        main(
+            [
+                "sweep",
+                "--grid",
+                "sigma_beta_deg=1,2",
+                "--scheduler",
+                "serial",
+                "--out",
+                str(out),
+                "--json",
+                *common,
+            ]
+        )
+        == 0
+    )
     capsys.readouterr()
     table = pq.read_table(out).to_pydict()
-    rows = [i for i, (sb, m) in enumerate(zip(table["sigma_beta_deg"], table["method"],
-                                               strict=True)) if sb == 2.0]
+    rows = [
+        i
+        for i, (sb, m) in enumerate(zip(table["sigma_beta_deg"], table["method"], strict=True))
+        if sb == 2.0
+    ]
     case = doc["cases"][0]
     for method in ("naive", "ekf"):
         idx = [i for i in rows if table["method"][i] == method]
@@ -139,8 +161,7 @@ def test_two_worker_cluster_equals_serial(client, serial_results) -> None:
         assert a.column(col).equals(b.column(col)), col
 
 
-def _die_once(marker: str, victim: int, config: TrackingConfig, index: int,
-              size: int) -> ChunkSums:
+def _die_once(marker: str, victim: int, config: TrackingConfig, index: int, size: int) -> ChunkSums:
     """Chunk function that kills its worker process the first time it meets block
     ``victim`` (the marker file records that it did), then computes normally."""
     if index == victim and not os.path.exists(marker):
@@ -166,10 +187,33 @@ def test_cli_on_a_tcp_scheduler_writes_table_figures_and_recording(
 ) -> None:
     out = tmp_path / "s.parquet"
     rrd = tmp_path / "s.rrd"
-    code = main(["sweep", "--grid", "sigma_beta_deg=1,2.5", "range_km=60,150", "--runs", "1300",
-                 "--block", "500", "--seed", "5", "--steps", "12", "--methods", *METHODS,
-                 "--scheduler", client.scheduler_info()["address"], "--out", str(out),
-                 "--plot", str(tmp_path / "figs"), "--rrd", str(rrd), "--json"])
+    code = main(
+        [
+            "sweep",
+            "--grid",
+            "sigma_beta_deg=1,2.5",
+            "range_km=60,150",
+            "--runs",
+            "1300",
+            "--block",
+            "500",
+            "--seed",
+            "5",
+            "--steps",
+            "12",
+            "--methods",
+            *METHODS,
+            "--scheduler",
+            client.scheduler_info()["address"],
+            "--out",
+            str(out),
+            "--plot",
+            str(tmp_path / "figs"),
+            "--rrd",
+            str(rrd),
+            "--json",
+        ]
+    )
     assert code == 0
     doc = json.loads(capsys.readouterr().out)
     assert doc["computed"] == 12 and doc["workers"] == 2
@@ -178,7 +222,10 @@ def test_cli_on_a_tcp_scheduler_writes_table_figures_and_recording(
     for col in COLUMNS:
         assert table.column(col).equals(expected.column(col)), col
     assert sorted(p.name for p in (tmp_path / "figs").iterdir()) == [
-        "sweep_bias_range.png", "sweep_nees_pos.png", "sweep_rmse_x.png"]
+        "sweep_bias_range.png",
+        "sweep_nees_pos.png",
+        "sweep_rmse_x.png",
+    ]
     entities = {c.entity_path for c in RrdReader(str(rrd)).stream()}
     for m in METHODS:
         assert f"/sweep/heatmap/nees_pos/{m}" in entities
@@ -186,8 +233,24 @@ def test_cli_on_a_tcp_scheduler_writes_table_figures_and_recording(
 
 
 def test_bench_sweep_reports_efficiency_and_identical_results(capsys) -> None:
-    code = main(["bench-sweep", "--grid", "sigma_beta_deg=1,2", "--runs", "300", "--steps",
-                 "5", "--methods", "naive", "ekf", "--workers", "1", "2", "--json"])
+    code = main(
+        [
+            "bench-sweep",
+            "--grid",
+            "sigma_beta_deg=1,2",
+            "--runs",
+            "300",
+            "--steps",
+            "5",
+            "--methods",
+            "naive",
+            "ekf",
+            "--workers",
+            "1",
+            "2",
+            "--json",
+        ]
+    )
     assert code == 0
     doc = json.loads(capsys.readouterr().out)
     assert [r["workers"] for r in doc["runs"]] == [1, 2]
@@ -199,13 +262,28 @@ def test_bench_sweep_reports_efficiency_and_identical_results(capsys) -> None:
 
 
 def _sweep_cli(out: Path, *extra: str) -> list[str]:
-    return ["sweep", "--grid", "sigma_beta_deg=1,2.5", "--runs", "1300", "--block", "500",
-            "--steps", "12", "--methods", *METHODS, "--scheduler", "serial",
-            "--out", str(out), "--json", *extra]
+    return [
+        "sweep",
+        "--grid",
+        "sigma_beta_deg=1,2.5",
+        "--runs",
+        "1300",
+        "--block",
+        "500",
+        "--steps",
+        "12",
+        "--methods",
+        *METHODS,
+        "--scheduler",
+        "serial",
+        "--out",
+        str(out),
+        "--json",
+        *extra,
+    ]
 
 
-def test_rerun_computes_only_missing_chunks_and_ignores_stale_ones(tmp_path: Path,
-                                                                    capsys) -> None:
+def test_rerun_computes_only_missing_chunks_and_ignores_stale_ones(tmp_path: Path, capsys) -> None:
     out = tmp_path / "s.parquet"
     assert main(_sweep_cli(out)) == 0
     first = json.loads(capsys.readouterr().out)
@@ -340,7 +418,7 @@ def test_a_chunk_that_keeps_killing_workers_is_one_line_and_keeps_the_rest(
     exits 1, writes no table, and the chunks that did finish are kept for a re-run."""
     import dask
 
-    import viz_app.sweep as sweep_mod
+    import radarviz.viz_app.sweep.run as sweep_mod
 
     real_run_sweep = sweep_mod.run_sweep
 
@@ -350,9 +428,26 @@ def test_a_chunk_that_keeps_killing_workers_is_one_line_and_keeps_the_rest(
     monkeypatch.setattr(sweep_mod, "run_sweep", run_with_bad_task)
     out = tmp_path / "s.parquet"
     with dask.config.set({"distributed.scheduler.allowed-failures": 0}):
-        status = main(["sweep", "--preset", "prosov", "--grid", "sigma_beta_deg=1",
-                       "--runs", "1200", "--block", "500", "--workers", "1", "--steps", "5",
-                       "--out", str(out), "--json"])
+        status = main(
+            [
+                "sweep",
+                "--preset",
+                "prosov",
+                "--grid",
+                "sigma_beta_deg=1",
+                "--runs",
+                "1200",
+                "--block",
+                "500",
+                "--workers",
+                "1",
+                "--steps",
+                "5",
+                "--out",
+                str(out),
+                "--json",
+            ]
+        )
     err = capsys.readouterr().err
     assert status == 1
     lines = [ln for ln in err.splitlines() if ln.startswith("radarviz: error:")]
@@ -365,9 +460,29 @@ def test_a_chunk_that_keeps_killing_workers_is_one_line_and_keeps_the_rest(
     assert kept <= 2  # block 1 never finished
     # A re-run with a healthy chunk function resumes from what was kept.
     monkeypatch.setattr(sweep_mod, "run_sweep", real_run_sweep)
-    assert main(["sweep", "--preset", "prosov", "--grid", "sigma_beta_deg=1", "--runs", "1200",
-                 "--block", "500", "--scheduler", "serial", "--steps", "5", "--out", str(out),
-                 "--json"]) == 0
+    assert (
+        main(
+            [
+                "sweep",
+                "--preset",
+                "prosov",
+                "--grid",
+                "sigma_beta_deg=1",
+                "--runs",
+                "1200",
+                "--block",
+                "500",
+                "--scheduler",
+                "serial",
+                "--steps",
+                "5",
+                "--out",
+                str(out),
+                "--json",
+            ]
+        )
+        == 0
+    )
     doc = json.loads(capsys.readouterr().out)
     assert (doc["reused"], doc["computed"]) == (kept, 3 - kept)
     assert out.exists()

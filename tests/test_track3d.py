@@ -1,4 +1,5 @@
-"""3D tracks (``core.track3d``, ``core.track_stream``) and ``radarviz track`` on 3D files.
+"""3D tracks (``core.filters.track3d``, ``core.tracking.stream``) and ``radarviz track`` on 3D
+files.
 
 * EKF + Doppler: the ``ekf`` rows of a 3-radar file (one site above the ground, irregular
   steps with one dt = 0, a climbing target, seeded noise) equal filterpy's
@@ -33,12 +34,12 @@ from filterpy.kalman import (
 from filterpy.kalman import update as kf_update
 from scipy.stats import chi2
 
-from core.finite_memory import finite_memory_fit
-from core.track3d import finite_memory_start3
-from core.track_stream import StreamOptions, StreamTracker
-from core.velocity import BASELINE_VELOCITY_MPS
-from viz_app.cli import main
-from viz_app.track_io import TRACK_COLUMNS, fusion_plots, state_from_row
+from radarviz.core.filters.track3d import finite_memory_start3
+from radarviz.core.finite_memory.fit import finite_memory_fit
+from radarviz.core.tracking.stream import StreamOptions, StreamTracker
+from radarviz.core.velocity.estimate import BASELINE_VELOCITY_MPS
+from radarviz.viz_app.cli.main import main
+from radarviz.viz_app.io.plots import TRACK_COLUMNS, fusion_plots, state_from_row
 
 # Deterministic cross-checks: the same arithmetic in a different order (filterpy's explicit
 # (I − KH) P (I − KH)ᵀ against the multiplied-out Joseph form, inv(S) against solve, degrees
@@ -60,14 +61,17 @@ SITES: dict[str, tuple[tuple[float, float, float], float, float, float, float]] 
 
 def radars_toml(sites: dict = SITES, skip: tuple[tuple[str, str], ...] = ()) -> str:
     """The radars file; ``skip`` drops (radar, key) pairs."""
-    keys = ("sigma_range_m", "sigma_azimuth_deg", "sigma_elevation_deg",
-            "sigma_radial_velocity_mps")
+    keys = (
+        "sigma_range_m",
+        "sigma_azimuth_deg",
+        "sigma_elevation_deg",
+        "sigma_radial_velocity_mps",
+    )
     out = []
     for name, (site, *sigmas) in sites.items():
         out.append(f"[radars.{name}]")
         out += [f"{k} = {v!r}" for k, v in zip(("x_m", "y_m", "z_m"), site, strict=True)]
-        out += [f"{k} = {v!r}" for k, v in zip(keys, sigmas, strict=True)
-                if (name, k) not in skip]
+        out += [f"{k} = {v!r}" for k, v in zip(keys, sigmas, strict=True) if (name, k) not in skip]
         out.append("")
     return "\n".join(out)
 
@@ -96,8 +100,12 @@ def write_meas(
         d = [p0[0] + v[0] * t - sx, p0[1] + v[1] * t - sy, p0[2] + v[2] * t - sz]
         rho = math.hypot(d[0], d[1])
         r = math.hypot(rho, d[2])
-        cells = [repr(float(t)), name, repr(r + sr * e[0]),
-                 repr(math.degrees(math.atan2(d[1], d[0])) + sb * e[1])]
+        cells = [
+            repr(float(t)),
+            name,
+            repr(r + sr * e[0]),
+            repr(math.degrees(math.atan2(d[1], d[0])) + sb * e[1]),
+        ]
         if elevation:
             el = math.degrees(math.atan2(d[2], rho)) + se * e[2]
             cells.append("0.0" if zero_elevation else repr(el))
@@ -126,8 +134,10 @@ def close(a: np.ndarray, b: np.ndarray, rtol: float = RTOL) -> None:
 
 def run_track(tmp_path: Path, meas: Path, radars: Path, *args: str) -> list[dict[str, str]]:
     out = tmp_path / "t.csv"
-    assert main(["track", "--input", str(meas), "--radars", str(radars), "--out", str(out),
-                 *args]) == 0
+    assert (
+        main(["track", "--input", str(meas), "--radars", str(radars), "--out", str(out), *args])
+        == 0
+    )
     return read_tracks(out)
 
 
@@ -145,19 +155,29 @@ def transition(dt: float) -> np.ndarray:
 def plot_values(plot: dict[str, str]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Site (3,), z = (r, β, ε) in rad, σ = (σr, σβ, σε) in rad of one measurement row."""
     site, sr, sb, se, _ = SITES[plot["radar"]]
-    z = np.array([float(plot["range_m"]), math.radians(float(plot["azimuth_deg"])),
-                  math.radians(float(plot["elevation_deg"]))])
+    z = np.array(
+        [
+            float(plot["range_m"]),
+            math.radians(float(plot["azimuth_deg"])),
+            math.radians(float(plot["elevation_deg"])),
+        ]
+    )
     return np.array(site), z, np.array([sr, math.radians(sb), math.radians(se)])
 
 
-def spec_start(site: np.ndarray, z: np.ndarray, sig: np.ndarray, sigma_v0: float
-               ) -> tuple[np.ndarray, np.ndarray]:
+def spec_start(
+    site: np.ndarray, z: np.ndarray, sig: np.ndarray, sigma_v0: float
+) -> tuple[np.ndarray, np.ndarray]:
     """Naive 3D point, covariance J diag(σ²) Jᵀ, velocity 0 ± σv0 on each axis."""
     r, b, e = z
     cb, sb, ce, se = math.cos(b), math.sin(b), math.cos(e), math.sin(e)
-    J = np.array([[ce * cb, -r * ce * sb, -r * se * cb],
-                  [ce * sb, r * ce * cb, -r * se * sb],
-                  [se, 0.0, r * ce]])
+    J = np.array(
+        [
+            [ce * cb, -r * ce * sb, -r * se * cb],
+            [ce * sb, r * ce * cb, -r * se * sb],
+            [se, 0.0, r * ce],
+        ]
+    )
     x = np.zeros(6)
     x[POS] = site + r * np.array([ce * cb, ce * sb, se])
     P = np.zeros((6, 6))
@@ -197,8 +217,9 @@ def residual_polar(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return y
 
 
-def doppler_reference(x: np.ndarray, P: np.ndarray, plot: dict[str, str]
-                      ) -> tuple[np.ndarray, np.ndarray]:
+def doppler_reference(
+    x: np.ndarray, P: np.ndarray, plot: dict[str, str]
+) -> tuple[np.ndarray, np.ndarray]:
     """filterpy's linear update with V̂r = u(β̂, ε̂)·v + e, var e from the docstring."""
     _, _, sb_deg, se_deg, svr = SITES[plot["radar"]]
     b = math.radians(float(plot["azimuth_deg"]))
@@ -213,8 +234,7 @@ def doppler_reference(x: np.ndarray, P: np.ndarray, plot: dict[str, str]
         var += s * s * (float(g @ v) ** 2 + float(g @ Pvv @ g))
     H = np.zeros((1, 6))
     H[0, VEL] = u
-    return kf_update(x, P, np.array([float(plot["radial_velocity_mps"])]),
-                     np.array([[var]]), H)
+    return kf_update(x, P, np.array([float(plot["radial_velocity_mps"])]), np.array([[var]]), H)
 
 
 # --------------------------------------------------------------------------------------------
@@ -239,8 +259,9 @@ def test_ekf_doppler_matches_filterpy(tmp_path: Path, doppler: str) -> None:
     write_meas(meas, times, names, P0, V0, seed=12)
     radars.write_text(radars_toml())
     sigma_a, sigma_v0 = 0.3, 1000.0
-    rows = run_track(tmp_path, meas, radars, "--method", "ekf", "--sigma-a", str(sigma_a),
-                     "--doppler", doppler)
+    rows = run_track(
+        tmp_path, meas, radars, "--method", "ekf", "--sigma-a", str(sigma_a), "--doppler", doppler
+    )
     plots = read_csv(meas)
     assert len(rows) == len(plots)
     use = doppler == "use"
@@ -260,8 +281,7 @@ def test_ekf_doppler_matches_filterpy(tmp_path: Path, doppler: str) -> None:
                 # State (x, ẋ, y, ẏ, z, ż): three (p, ṗ) blocks, order_by_dim=True.
                 f.Q = Q_discrete_white_noise(2, dt=dt, var=sigma_a**2, block_size=3)
                 f.predict()
-            f.update(z, jac_polar(site), hx_polar(site), R=np.diag(sig**2),
-                     residual=residual_polar)
+            f.update(z, jac_polar(site), hx_polar(site), R=np.diag(sig**2), residual=residual_polar)
         if use:
             f.x, f.P = doppler_reference(f.x, f.P, plot)
         last_t = t
@@ -297,9 +317,16 @@ def test_ukf_matches_filterpy(tmp_path: Path) -> None:
     assert len(rows) == len(plots)
 
     points = MerweScaledSigmaPoints(6, alpha=1.0, beta=2.0, kappa=0.0)
-    f = UnscentedKalmanFilter(dim_x=6, dim_z=3, dt=1.0, hx=None,
-                              fx=lambda x, dt: transition(dt) @ x, points=points,
-                              z_mean_fn=ukf_z_mean, residual_z=residual_polar)
+    f = UnscentedKalmanFilter(
+        dim_x=6,
+        dim_z=3,
+        dt=1.0,
+        hx=None,
+        fx=lambda x, dt: transition(dt) @ x,
+        points=points,
+        z_mean_fn=ukf_z_mean,
+        residual_z=residual_polar,
+    )
     last_t = None
     for row, plot in zip(rows, plots, strict=True):
         t = float(plot["time_s"])
@@ -367,11 +394,11 @@ def test_zero_elevation_reduces_to_2d(tmp_path: Path, init: str, doppler: str) -
     write_meas(m3, times, names, p0, v, seed=31, sites=sites, zero_elevation=True)
     # Identical measurements but for the exact-zero elevation column.
     r2, r3 = read_csv(m2), read_csv(m3)
-    assert all(a.items() <= b.items() and b["elevation_deg"] == "0.0"
-               for a, b in zip(r2, r3, strict=True))
+    assert all(
+        a.items() <= b.items() and b["elevation_deg"] == "0.0" for a, b in zip(r2, r3, strict=True)
+    )
     radars.write_text(radars_toml(sites))
-    args = ("--method", "naive", "ekf", "--init", init, "--doppler", doppler,
-            "--sigma-a", "0.5")
+    args = ("--method", "naive", "ekf", "--init", init, "--doppler", doppler, "--sigma-a", "0.5")
     rows2 = run_track(tmp_path, m2, radars, *args)
     rows3 = run_track(tmp_path, m3, radars, *args)
     # Finite memory: no rows before a's third plot (plots a, a, b, then a: index 3).
@@ -398,8 +425,9 @@ def test_zero_elevation_reduces_to_2d(tmp_path: Path, init: str, doppler: str) -
 # --------------------------------------------------------------------------------------------
 
 
-def wls(k: int, T: float, ranges: np.ndarray, vrs: np.ndarray | None, sr: float,
-        svr: float) -> tuple[np.ndarray, np.ndarray]:
+def wls(
+    k: int, T: float, ranges: np.ndarray, vrs: np.ndarray | None, sr: float, svr: float
+) -> tuple[np.ndarray, np.ndarray]:
     """θ̂ = (r, Vr, a) at the newest plot and its covariance, by whitened lstsq."""
     j = np.arange(k - 1, -1, -1, dtype=float)  # lag of plot i = 1 (oldest) … k
     A = np.stack([np.ones(k), -T * j, 0.5 * (T * j) ** 2], -1) / sr
@@ -413,16 +441,27 @@ def wls(k: int, T: float, ranges: np.ndarray, vrs: np.ndarray | None, sr: float,
 
 def los_frame(b: float, e: float) -> np.ndarray:
     """Columns u, e_β, e_ε."""
-    return np.array([
-        [math.cos(e) * math.cos(b), -math.sin(b), -math.sin(e) * math.cos(b)],
-        [math.cos(e) * math.sin(b), math.cos(b), -math.sin(e) * math.sin(b)],
-        [math.sin(e), 0.0, math.cos(e)],
-    ])
+    return np.array(
+        [
+            [math.cos(e) * math.cos(b), -math.sin(b), -math.sin(e) * math.cos(b)],
+            [math.cos(e) * math.sin(b), math.cos(b), -math.sin(e) * math.sin(b)],
+            [math.sin(e), 0.0, math.cos(e)],
+        ]
+    )
 
 
 def check_start_in_los_frame(
-    x: np.ndarray, P: np.ndarray, site: np.ndarray, b: float, e: float, theta: np.ndarray,
-    R: np.ndarray, sb: float, se: float, sigma_v0: float, rtol: float = RTOL,
+    x: np.ndarray,
+    P: np.ndarray,
+    site: np.ndarray,
+    b: float,
+    e: float,
+    theta: np.ndarray,
+    R: np.ndarray,
+    sb: float,
+    se: float,
+    sigma_v0: float,
+    rtol: float = RTOL,
 ) -> None:
     """x = (site + r̂ u, V̂r u); P in the frame (u, e_β, e_ε): diag(R11, (r̂ cos ε σβ)²,
     (r̂ σε)²) for the position, diag(R22, σv0², σv0²) for the velocity, R12 between the
@@ -434,8 +473,7 @@ def check_start_in_los_frame(
     Lpp = G.T @ P[np.ix_(POS, POS)] @ G
     Lvv = G.T @ P[np.ix_(VEL, VEL)] @ G
     Lpv = G.T @ P[np.ix_(POS, VEL)] @ G
-    close(Lpp, np.diag([R[0, 0], (theta[0] * math.cos(e) * sb) ** 2, (theta[0] * se) ** 2]),
-          rtol)
+    close(Lpp, np.diag([R[0, 0], (theta[0] * math.cos(e) * sb) ** 2, (theta[0] * se) ** 2]), rtol)
     close(Lvv, np.diag([R[1, 1], sigma_v0**2, sigma_v0**2]), rtol)
     expected_pv = np.zeros((3, 3))
     expected_pv[0, 0] = R[0, 1]
@@ -463,8 +501,9 @@ def test_finite_memory_start3_vs_lstsq(k: int, doppler: bool) -> None:
     np.testing.assert_allclose(fit.R / scale, R / scale, rtol=0.0, atol=RTOL)
     zvec = ranges if vrs is None else np.concatenate([ranges, vrs])
     theta_fit = fit.W @ zvec
-    np.testing.assert_allclose(theta_fit / np.sqrt(np.diag(R)), theta / np.sqrt(np.diag(R)),
-                               rtol=RTOL, atol=RTOL)
+    np.testing.assert_allclose(
+        theta_fit / np.sqrt(np.diag(R)), theta / np.sqrt(np.diag(R)), rtol=RTOL, atol=RTOL
+    )
     check_start_in_los_frame(start.x, start.P, site, b, e, theta, R, sb, se, sigma_v0)
 
 
@@ -481,9 +520,22 @@ def test_finite_memory_start_on_the_file(tmp_path: Path, doppler: str) -> None:
     meas, radars = tmp_path / "m.csv", tmp_path / "r.toml"
     write_meas(meas, times, names, P0, V0, seed=51)
     radars.write_text(radars_toml())
-    rows = run_track(tmp_path, meas, radars, "--method", "ukf", "ekf", "--init",
-                     "finite-memory", "--init-k", str(k), "--doppler", doppler,
-                     "--sigma-v0", "700")
+    rows = run_track(
+        tmp_path,
+        meas,
+        radars,
+        "--method",
+        "ukf",
+        "ekf",
+        "--init",
+        "finite-memory",
+        "--init-k",
+        str(k),
+        "--doppler",
+        doppler,
+        "--sigma-v0",
+        "700",
+    )
     plots = read_csv(meas)
     kth = 2 * (k - 1)  # index of c's k-th plot
     assert len(rows) == 2 * (len(plots) - kth)
@@ -498,8 +550,9 @@ def test_finite_memory_start_on_the_file(tmp_path: Path, doppler: str) -> None:
     e = math.radians(float(win[-1]["elevation_deg"]))
     for row in rows[:2]:
         x, P = state_from_row(row)
-        check_start_in_los_frame(x, P, np.array(site), b, e, theta, R, math.radians(sb),
-                                 math.radians(se), 700.0)
+        check_start_in_los_frame(
+            x, P, np.array(site), b, e, theta, R, math.radians(sb), math.radians(se), 700.0
+        )
 
 
 # --------------------------------------------------------------------------------------------
@@ -520,7 +573,7 @@ def test_doppler_reduces_velocity_error_and_is_consistent() -> None:
         assert t_last < 200.0  # still on the straight, constant-velocity leg
         for use in (True, False):
             tracker = StreamTracker(("ekf",), True, StreamOptions(use_doppler=use))
-            (_, x, P), = tracker.add_block(plots)[-1]
+            ((_, x, P),) = tracker.add_block(plots)[-1]
             e = x[VEL] - truth_v
             err[use].append(e)
             if use:
@@ -532,8 +585,10 @@ def test_doppler_reduces_velocity_error_and_is_consistent() -> None:
     # from the runs. Doppler must win by more than 5 SE (a chance win of 5 SE has p < 3e-7).
     diff = sq_n - sq_d
     se_diff = diff.std(ddof=1) / math.sqrt(MC_RUNS)
-    print(f"velocity RMSE with Doppler {rmse_d:.3f} m/s, without {rmse_n:.3f} m/s, "
-          f"mean Δ(|e|²) {diff.mean():.2f} ± {se_diff:.2f}")
+    print(
+        f"velocity RMSE with Doppler {rmse_d:.3f} m/s, without {rmse_n:.3f} m/s, "
+        f"mean Δ(|e|²) {diff.mean():.2f} ± {se_diff:.2f}"
+    )
     assert rmse_d < rmse_n
     assert diff.mean() > 5.0 * se_diff
     # Velocity NEES (3 dof): Σ over runs ~ χ²(3 N) if consistent; two-sided 99.9% band.
@@ -548,13 +603,29 @@ def test_doppler_reduces_velocity_error_and_is_consistent() -> None:
 # --------------------------------------------------------------------------------------------
 
 
-def expect_error(tmp_path: Path, capsys: pytest.CaptureFixture[str], meas_text: str,
-                 radars_text: str, args: list[str], expected: list[str]) -> str:
+def expect_error(
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    meas_text: str,
+    radars_text: str,
+    args: list[str],
+    expected: list[str],
+) -> str:
     (tmp_path / "m.csv").write_text(meas_text)
     (tmp_path / "r.toml").write_text(radars_text)
     capsys.readouterr()
-    status = main(["track", "--input", str(tmp_path / "m.csv"), "--radars",
-                   str(tmp_path / "r.toml"), "--out", str(tmp_path / "t.csv"), *args])
+    status = main(
+        [
+            "track",
+            "--input",
+            str(tmp_path / "m.csv"),
+            "--radars",
+            str(tmp_path / "r.toml"),
+            "--out",
+            str(tmp_path / "t.csv"),
+            *args,
+        ]
+    )
     out, err = capsys.readouterr()
     assert status == 2
     assert out == ""
@@ -570,21 +641,41 @@ HEADER3 = "time_s,radar,range_m,azimuth_deg,elevation_deg,radial_velocity_mps\n"
 
 def test_2d_method_on_3d_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     text = HEADER3 + "0,a,100000,10,3,-100\n10,b,90000,20,4,-90\n"
-    expect_error(tmp_path, capsys, text, radars_toml(), ["--method", "ekf", "seed"],
-                 ["seed", "naive, ucm, ekf, ukf"])
+    expect_error(
+        tmp_path,
+        capsys,
+        text,
+        radars_toml(),
+        ["--method", "ekf", "seed"],
+        ["seed", "naive, ucm, ekf, ukf"],
+    )
 
 
-def test_finite_memory_unequal_steps(tmp_path: Path,
-                                     capsys: pytest.CaptureFixture[str]) -> None:
+def test_finite_memory_unequal_steps(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     # Radar a at 0, 10, 25 s (b's plots in between): a's third plot is line 5.
-    text = HEADER3 + ("0,a,100000,10,3,-100\n4,b,90000,20,4,-90\n10,a,99000,10,3,-100\n"
-                      "25,a,97500,10,3,-100\n30,a,97000,10,3,-100\n")
-    expect_error(tmp_path, capsys, text, radars_toml(), ["--init", "finite-memory"],
-                 ["m.csv line 5, column time_s"])
+    text = HEADER3 + (
+        "0,a,100000,10,3,-100\n4,b,90000,20,4,-90\n10,a,99000,10,3,-100\n"
+        "25,a,97500,10,3,-100\n30,a,97000,10,3,-100\n"
+    )
+    expect_error(
+        tmp_path,
+        capsys,
+        text,
+        radars_toml(),
+        ["--init", "finite-memory"],
+        ["m.csv line 5, column time_s"],
+    )
 
 
-def test_elevation_without_sigma_elevation(tmp_path: Path,
-                                           capsys: pytest.CaptureFixture[str]) -> None:
+def test_elevation_without_sigma_elevation(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     text = HEADER3 + "0,a,100000,10,3,-100\n10,b,90000,20,4,-90\n20,a,98000,10,3,-100\n"
-    expect_error(tmp_path, capsys, text, radars_toml(skip=(("b", "sigma_elevation_deg"),)),
-                 [], ["m.csv line 3, column elevation_deg", "sigma_elevation_deg", "'b'"])
+    expect_error(
+        tmp_path,
+        capsys,
+        text,
+        radars_toml(skip=(("b", "sigma_elevation_deg"),)),
+        [],
+        ["m.csv line 3, column elevation_deg", "sigma_elevation_deg", "'b'"],
+    )

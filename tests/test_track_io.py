@@ -1,8 +1,8 @@
-"""``radarviz simulate`` and ``radarviz track``: files in, files out (``viz_app.track_io``).
+"""``radarviz simulate`` and ``radarviz track``: files in, files out (``viz_app.io.plots``).
 
 * Round trip: the Prosov run written by ``simulate`` and tracked from the file equals the
-  in-memory tracks (``core.prosov.track_history`` on the same measurements) to 1e-9 relative;
-  the only differences are the azimuth's degrees → radians round trip (≈ 1 ulp).
+  in-memory tracks (``core.experiments.prosov.track_history`` on the same measurements) to 1e-9
+  relative; the only differences are the azimuth's degrees → radians round trip (≈ 1 ulp).
 * Bad files: exit 2, one line on standard error naming file, line and column, no output file
   (and no temporary file left beside it; an existing output is left untouched).
 * The ``ekf`` rows equal filterpy's ``ExtendedKalmanFilter`` run directly on the same file (two
@@ -22,11 +22,16 @@ import pytest
 from filterpy.common import Q_discrete_white_noise
 from filterpy.kalman import ExtendedKalmanFilter
 
-from core.kalman_cv import transition_matrix
-from core.prosov import ALL_METHODS, track_history
-from core.track_stream import METHODS_3D, StreamOptions, StreamTracker, prosov_single_run
-from viz_app.cli import main
-from viz_app.track_io import (
+from radarviz.core.experiments.prosov import ALL_METHODS, track_history
+from radarviz.core.filters.cv import transition_matrix
+from radarviz.core.tracking.stream import (
+    METHODS_3D,
+    StreamOptions,
+    StreamTracker,
+    prosov_single_run,
+)
+from radarviz.viz_app.cli.main import main
+from radarviz.viz_app.io.plots import (
     READ_BLOCK,
     TRACK_COLUMNS,
     parse_radars,
@@ -95,8 +100,24 @@ def close(a: np.ndarray, b: np.ndarray) -> None:
 @pytest.mark.parametrize("sigma_beta_deg", [1.0, 2.0])
 def test_simulate_then_track_equals_in_memory(tmp_path: Path, sigma_beta_deg: float) -> None:
     meas, radars, out = tmp_path / "m.csv", tmp_path / "r.toml", tmp_path / "t.csv"
-    assert main(["simulate", "--preset", "prosov", "--out", str(meas), "--radars-out",
-                 str(radars), "--seed", "3", "--sigma-beta-deg", str(sigma_beta_deg)]) == 0
+    assert (
+        main(
+            [
+                "simulate",
+                "--preset",
+                "prosov",
+                "--out",
+                str(meas),
+                "--radars-out",
+                str(radars),
+                "--seed",
+                "3",
+                "--sigma-beta-deg",
+                str(sigma_beta_deg),
+            ]
+        )
+        == 0
+    )
     assert main(["track", "--input", str(meas), "--radars", str(radars), "--out", str(out)]) == 0
     rows = read_tracks(out)
     times, r_hat, b_hat, cfg = prosov_single_run(3, sigma_beta_deg)
@@ -118,8 +139,7 @@ def test_method_subset_and_default_out(tmp_path: Path, monkeypatch: pytest.Monke
     (tmp_path / "m.csv").write_text(HEADER + "".join(GOOD_ROWS))
     (tmp_path / "r.toml").write_text(GOOD_RADARS)
     monkeypatch.chdir(tmp_path)
-    assert main(["track", "--input", "m.csv", "--radars", "r.toml", "--method", "ducm",
-                 "ukf"]) == 0
+    assert main(["track", "--input", "m.csv", "--radars", "r.toml", "--method", "ducm", "ukf"]) == 0
     rows = read_tracks(tmp_path / "tracks.csv")
     assert [r["method"] for r in rows] == ["ducm", "ukf"] * len(GOOD_ROWS)
 
@@ -129,42 +149,76 @@ def test_method_subset_and_default_out(tmp_path: Path, monkeypatch: pytest.Monke
 # --------------------------------------------------------------------------------------------
 
 BAD_CASES = {
-    "missing column": ("time_s,radar,azimuth_deg\n0,a,1\n", GOOD_RADARS,
-                       "m.csv line 1, column range_m: missing"),
-    "unknown column": ("time_s,radar,range_m,azimuth_deg,snr\n0,a,1,1,3\n", GOOD_RADARS,
-                       "m.csv line 1, column snr: unknown column"),
-    "non-numeric": (HEADER + GOOD_ROWS[0] + "10,a,abc,1\n", GOOD_RADARS,
-                    "m.csv line 3, column range_m: must be a finite number > 0 (got 'abc')"),
-    "nan": (HEADER + GOOD_ROWS[0] + "10,a,150000,nan\n", GOOD_RADARS,
-            "m.csv line 3, column azimuth_deg: must be a finite number"),
-    "unsorted": (HEADER + GOOD_ROWS[0] + GOOD_ROWS[2] + GOOD_ROWS[1], GOOD_RADARS,
-                 "m.csv line 4, column time_s: must not be before"),
-    "unknown radar": (HEADER + GOOD_ROWS[0] + "10,zz,150000,1\n", GOOD_RADARS,
-                      "m.csv line 3, column radar: unknown radar"),
+    "missing column": (
+        "time_s,radar,azimuth_deg\n0,a,1\n",
+        GOOD_RADARS,
+        "m.csv line 1, column range_m: missing",
+    ),
+    "unknown column": (
+        "time_s,radar,range_m,azimuth_deg,snr\n0,a,1,1,3\n",
+        GOOD_RADARS,
+        "m.csv line 1, column snr: unknown column",
+    ),
+    "non-numeric": (
+        HEADER + GOOD_ROWS[0] + "10,a,abc,1\n",
+        GOOD_RADARS,
+        "m.csv line 3, column range_m: must be a finite number > 0 (got 'abc')",
+    ),
+    "nan": (
+        HEADER + GOOD_ROWS[0] + "10,a,150000,nan\n",
+        GOOD_RADARS,
+        "m.csv line 3, column azimuth_deg: must be a finite number",
+    ),
+    "unsorted": (
+        HEADER + GOOD_ROWS[0] + GOOD_ROWS[2] + GOOD_ROWS[1],
+        GOOD_RADARS,
+        "m.csv line 4, column time_s: must not be before",
+    ),
+    "unknown radar": (
+        HEADER + GOOD_ROWS[0] + "10,zz,150000,1\n",
+        GOOD_RADARS,
+        "m.csv line 3, column radar: unknown radar",
+    ),
     "range zero": (HEADER + "0,a,0,1\n", GOOD_RADARS, "m.csv line 2, column range_m"),
     "range negative": (HEADER + "0,a,-5,1\n", GOOD_RADARS, "m.csv line 2, column range_m"),
     "azimuth": (HEADER + "0,a,1000,361\n", GOOD_RADARS, "m.csv line 2, column azimuth_deg"),
-    "elevation": ("time_s,radar,range_m,azimuth_deg,elevation_deg\n0,a,1000,1,x\n", GOOD_RADARS,
-                  "m.csv line 2, column elevation_deg"),
+    "elevation": (
+        "time_s,radar,range_m,azimuth_deg,elevation_deg\n0,a,1000,1,x\n",
+        GOOD_RADARS,
+        "m.csv line 2, column elevation_deg",
+    ),
     "short row": (HEADER + "0,a,1000\n", GOOD_RADARS, "m.csv line 2: expected 4 fields"),
     "no plots": (HEADER, GOOD_RADARS, "m.csv: no plots"),
-    "negative sigma": (HEADER + GOOD_ROWS[0], GOOD_RADARS.replace("100.0", "-1.0"),
-                       "r.toml, radar 'b', key sigma_range_m: must be a finite number > 0"),
-    "missing radar key": (HEADER + GOOD_ROWS[0], GOOD_RADARS.replace("z_m = 15.0\n", ""),
-                          "r.toml, radar 'b', key z_m: missing"),
+    "negative sigma": (
+        HEADER + GOOD_ROWS[0],
+        GOOD_RADARS.replace("100.0", "-1.0"),
+        "r.toml, radar 'b', key sigma_range_m: must be a finite number > 0",
+    ),
+    "missing radar key": (
+        HEADER + GOOD_ROWS[0],
+        GOOD_RADARS.replace("z_m = 15.0\n", ""),
+        "r.toml, radar 'b', key z_m: missing",
+    ),
     "bad toml": (HEADER + GOOD_ROWS[0], "[radars.a\n", "r.toml: not valid TOML"),
     # Many good rows, then a bad one: the tracks already written must be discarded.
-    "late error": (HEADER + "".join(f"{t},a,{150000 + 2000 * t},0.1\n" for t in range(300))
-                   + "5000,a,150000,1e400\n", GOOD_RADARS,
-                   "m.csv line 302, column azimuth_deg"),
+    "late error": (
+        HEADER
+        + "".join(f"{t},a,{150000 + 2000 * t},0.1\n" for t in range(300))
+        + "5000,a,150000,1e400\n",
+        GOOD_RADARS,
+        "m.csv line 302, column azimuth_deg",
+    ),
 }
 
 
 @pytest.mark.parametrize("case", list(BAD_CASES))
 @pytest.mark.parametrize("existing", [False, True])
 def test_bad_file_exit_2_one_line_no_output(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str],
-    case: str, existing: bool,
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+    case: str,
+    existing: bool,
 ) -> None:
     meas_text, radars_text, expected = BAD_CASES[case]
     (tmp_path / "m.csv").write_text(meas_text)
@@ -189,10 +243,36 @@ def test_unknown_method_and_preset(tmp_path: Path, capsys: pytest.CaptureFixture
     (tmp_path / "m.csv").write_text(HEADER + "".join(GOOD_ROWS))
     (tmp_path / "r.toml").write_text(GOOD_RADARS)
     out = tmp_path / "t.csv"
-    assert main(["track", "--input", str(tmp_path / "m.csv"), "--radars",
-                 str(tmp_path / "r.toml"), "--method", "kf", "--out", str(out)]) == 2
-    assert main(["simulate", "--preset", "nope", "--out", str(tmp_path / "x.csv"),
-                 "--radars-out", str(tmp_path / "x.toml")]) == 2
+    assert (
+        main(
+            [
+                "track",
+                "--input",
+                str(tmp_path / "m.csv"),
+                "--radars",
+                str(tmp_path / "r.toml"),
+                "--method",
+                "kf",
+                "--out",
+                str(out),
+            ]
+        )
+        == 2
+    )
+    assert (
+        main(
+            [
+                "simulate",
+                "--preset",
+                "nope",
+                "--out",
+                str(tmp_path / "x.csv"),
+                "--radars-out",
+                str(tmp_path / "x.toml"),
+            ]
+        )
+        == 2
+    )
     err = capsys.readouterr().err.splitlines()
     assert len(err) == 2 and "--method" in err[0] and "--preset" in err[1]
     assert not out.exists() and not (tmp_path / "x.csv").exists()
@@ -225,8 +305,24 @@ def test_ekf_matches_filterpy_on_the_file(tmp_path: Path) -> None:
     write_two_radar_file(meas)
     radars.write_text(GOOD_RADARS)
     sigma_a = 0.3
-    assert main(["track", "--input", str(meas), "--radars", str(radars), "--out", str(out),
-                 "--method", "ekf", "--sigma-a", str(sigma_a)]) == 0
+    assert (
+        main(
+            [
+                "track",
+                "--input",
+                str(meas),
+                "--radars",
+                str(radars),
+                "--out",
+                str(out),
+                "--method",
+                "ekf",
+                "--sigma-a",
+                str(sigma_a),
+            ]
+        )
+        == 0
+    )
     rows = read_tracks(out)
     sites = {"a": (0.0, 0.0, 250.0, 1.0), "b": (60000.0, -20000.0, 100.0, 0.5)}
     with open(meas, newline="") as fh:
@@ -259,8 +355,9 @@ def test_ekf_matches_filterpy_on_the_file(tmp_path: Path) -> None:
                 f.predict()
 
             def hx(x: np.ndarray, sx: float = sx, sy: float = sy) -> np.ndarray:
-                return np.array([math.hypot(x[0] - sx, x[2] - sy),
-                                 math.atan2(x[2] - sy, x[0] - sx)])
+                return np.array(
+                    [math.hypot(x[0] - sx, x[2] - sy), math.atan2(x[2] - sy, x[0] - sx)]
+                )
 
             def jac(x: np.ndarray, sx: float = sx, sy: float = sy) -> np.ndarray:
                 dx, dy = x[0] - sx, x[2] - sy
@@ -291,10 +388,42 @@ def test_fusion_file_round_trip_equals_in_memory(tmp_path: Path, init: str) -> N
     file equals the same plots tracked in memory, plot by plot (``StreamTracker.add``: blocks
     of one plot, so this also checks the file's 1 024-plot blocks against single plots)."""
     meas, radars, out = tmp_path / "m.csv", tmp_path / "r.toml", tmp_path / "t.csv"
-    assert main(["simulate", "--preset", "fusion", "--scans", "30", "--seed", "4", "--out",
-                 str(meas), "--radars-out", str(radars)]) == 0
-    assert main(["track", "--input", str(meas), "--radars", str(radars), "--out", str(out),
-                 "--sigma-a", "1.5", "--init", init]) == 0
+    assert (
+        main(
+            [
+                "simulate",
+                "--preset",
+                "fusion",
+                "--scans",
+                "30",
+                "--seed",
+                "4",
+                "--out",
+                str(meas),
+                "--radars-out",
+                str(radars),
+            ]
+        )
+        == 0
+    )
+    assert (
+        main(
+            [
+                "track",
+                "--input",
+                str(meas),
+                "--radars",
+                str(radars),
+                "--out",
+                str(out),
+                "--sigma-a",
+                "1.5",
+                "--init",
+                init,
+            ]
+        )
+        == 0
+    )
     rows = read_tracks(out)
     plots, _ = simulated_plots("fusion", seed=4, scans=30)
     tracker = StreamTracker(METHODS_3D, True, StreamOptions(sigma_a_mps2=1.5, init=init))
@@ -336,24 +465,54 @@ def test_tracking_streams_with_a_bounded_buffer() -> None:
         written[0] += 1
 
     radars = parse_radars(GOOD_RADARS, "r.toml")
-    plots, three_d, methods = track_lines(lines, "m.csv", radars, ("ucm",), StreamOptions(),
-                                          on_rows)
+    plots, three_d, methods = track_lines(
+        lines, "m.csv", radars, ("ucm",), StreamOptions(), on_rows
+    )
     assert (plots, three_d, methods) == (n, False, ("ucm",))
     assert written[0] == n
     assert READ_BLOCK - 1 <= lines.lag <= READ_BLOCK
 
 
-def test_rrd_recording_of_a_tracked_file(tmp_path: Path) -> None:
-    from tests.test_recording import _read
-
+def test_rrd_recording_of_a_tracked_file(tmp_path: Path, rrd_contents) -> None:
     meas, radars = tmp_path / "m.csv", tmp_path / "r.toml"
     out, rrd = tmp_path / "t.csv", tmp_path / "t.rrd"
-    assert main(["simulate", "--preset", "fusion", "--scans", "12", "--out", str(meas),
-                 "--radars-out", str(radars)]) == 0
+    assert (
+        main(
+            [
+                "simulate",
+                "--preset",
+                "fusion",
+                "--scans",
+                "12",
+                "--out",
+                str(meas),
+                "--radars-out",
+                str(radars),
+            ]
+        )
+        == 0
+    )
     rrd.write_text("old")  # replaced, like the track CSV
-    assert main(["track", "--input", str(meas), "--radars", str(radars), "--out", str(out),
-                 "--rrd", str(rrd), "--method", "ekf", "ucm"]) == 0
-    rows, cols = _read(rrd)
+    assert (
+        main(
+            [
+                "track",
+                "--input",
+                str(meas),
+                "--radars",
+                str(radars),
+                "--out",
+                str(out),
+                "--rrd",
+                str(rrd),
+                "--method",
+                "ekf",
+                "ucm",
+            ]
+        )
+        == 0
+    )
+    rows, cols = rrd_contents(rrd)
     tracks = read_tracks(out)
     for m in ("ekf", "ucm"):
         for part in ("position", "covariance", "velocity"):
@@ -363,8 +522,9 @@ def test_rrd_recording_of_a_tracked_file(tmp_path: Path) -> None:
         got = cols[f"/world/tracks/{m}/position"]
         assert got["plot"] == list(range(1, 37))
         pos = np.array([v[0] for v in got["Points3D:positions"]])
-        want = np.array([[float(r[k]) for k in ("x_m", "y_m", "z_m")]
-                         for r in tracks if r["method"] == m])
+        want = np.array(
+            [[float(r[k]) for k in ("x_m", "y_m", "z_m")] for r in tracks if r["method"] == m]
+        )
         np.testing.assert_allclose(pos, want, rtol=1e-6)  # the recording stores float32
     for r in ("R1", "R2", "R3"):
         assert rows[f"/world/measurements/{r}"] == 12
@@ -375,22 +535,43 @@ def test_rrd_recording_of_a_tracked_file(tmp_path: Path) -> None:
 
 
 MIXED_RADARS = GOOD_RADARS.replace(
-    "sigma_azimuth_deg = 1.0\n", "sigma_azimuth_deg = 1.0\nsigma_radial_velocity_mps = 2.0\n")
+    "sigma_azimuth_deg = 1.0\n", "sigma_azimuth_deg = 1.0\nsigma_radial_velocity_mps = 2.0\n"
+)
 
 
 def test_empty_radial_velocity_cells_skip_the_doppler_update(tmp_path: Path) -> None:
     """Radar a has Doppler, b has none (empty cells): a's rows change with --doppler, b's
     first update does not see a Doppler row."""
     meas, radars = tmp_path / "m.csv", tmp_path / "r.toml"
-    lines = ["time_s,radar,range_m,azimuth_deg,radial_velocity_mps\n",
-             "0,a,150000,0.5,190\n", "10,b,94000,10.0,\n", "20,a,152000,0.4,201\n"]
+    lines = [
+        "time_s,radar,range_m,azimuth_deg,radial_velocity_mps\n",
+        "0,a,150000,0.5,190\n",
+        "10,b,94000,10.0,\n",
+        "20,a,152000,0.4,201\n",
+    ]
     meas.write_text("".join(lines))
     radars.write_text(MIXED_RADARS)
     results = {}
     for mode in ("use", "ignore"):
         out = tmp_path / f"{mode}.csv"
-        assert main(["track", "--input", str(meas), "--radars", str(radars), "--out", str(out),
-                     "--method", "naive", "--doppler", mode]) == 0
+        assert (
+            main(
+                [
+                    "track",
+                    "--input",
+                    str(meas),
+                    "--radars",
+                    str(radars),
+                    "--out",
+                    str(out),
+                    "--method",
+                    "naive",
+                    "--doppler",
+                    mode,
+                ]
+            )
+            == 0
+        )
         results[mode] = [state_from_row(r)[0] for r in read_tracks(out)]
     use, ignore = results["use"], results["ignore"]
     # Plot 1 (a, Doppler 190 m/s along 0.5°): the velocity moves from 0 to ≈ 190 m/s.
@@ -400,54 +581,85 @@ def test_empty_radial_velocity_cells_skip_the_doppler_update(tmp_path: Path) -> 
 
 
 NEW_BAD_CASES = {
-    "doppler without sigma": ("time_s,radar,range_m,azimuth_deg,radial_velocity_mps\n"
-                              "0,a,150000,0.5,10\n", GOOD_RADARS,
-                              "m.csv line 2, column radial_velocity_mps: radar 'a' has no "
-                              "sigma_radial_velocity_mps"),
-    "elevation without sigma": ("time_s,radar,range_m,azimuth_deg,elevation_deg\n"
-                                "0,a,150000,0.5,3\n", GOOD_RADARS,
-                                "m.csv line 2, column elevation_deg: radar 'a' has no "
-                                "sigma_elevation_deg"),
-    "empty elevation": ("time_s,radar,range_m,azimuth_deg,elevation_deg\n0,a,150000,0.5,\n",
-                        GOOD_RADARS.replace("[radars.b]", "sigma_elevation_deg = 1.0\n\n"
-                                            "[radars.b]"),
-                        "m.csv line 2, column elevation_deg: must be a finite number"),
-    "bad doppler": ("time_s,radar,range_m,azimuth_deg,radial_velocity_mps\n"
-                    "0,a,150000,0.5,fast\n", MIXED_RADARS,
-                    "m.csv line 2, column radial_velocity_mps: must be a finite number or empty"),
-    "elevation sigma range": (HEADER + GOOD_ROWS[0], GOOD_RADARS.replace(
-        "[radars.b]", "sigma_elevation_deg = 45.0\n\n[radars.b]"),
-        "r.toml, radar 'a', key sigma_elevation_deg: must be a finite number in (0, 20]"),
+    "doppler without sigma": (
+        "time_s,radar,range_m,azimuth_deg,radial_velocity_mps\n0,a,150000,0.5,10\n",
+        GOOD_RADARS,
+        "m.csv line 2, column radial_velocity_mps: radar 'a' has no sigma_radial_velocity_mps",
+    ),
+    "elevation without sigma": (
+        "time_s,radar,range_m,azimuth_deg,elevation_deg\n0,a,150000,0.5,3\n",
+        GOOD_RADARS,
+        "m.csv line 2, column elevation_deg: radar 'a' has no sigma_elevation_deg",
+    ),
+    "empty elevation": (
+        "time_s,radar,range_m,azimuth_deg,elevation_deg\n0,a,150000,0.5,\n",
+        GOOD_RADARS.replace("[radars.b]", "sigma_elevation_deg = 1.0\n\n[radars.b]"),
+        "m.csv line 2, column elevation_deg: must be a finite number",
+    ),
+    "bad doppler": (
+        "time_s,radar,range_m,azimuth_deg,radial_velocity_mps\n0,a,150000,0.5,fast\n",
+        MIXED_RADARS,
+        "m.csv line 2, column radial_velocity_mps: must be a finite number or empty",
+    ),
+    "elevation sigma range": (
+        HEADER + GOOD_ROWS[0],
+        GOOD_RADARS.replace("[radars.b]", "sigma_elevation_deg = 45.0\n\n[radars.b]"),
+        "r.toml, radar 'a', key sigma_elevation_deg: must be a finite number in (0, 20]",
+    ),
 }
 
 
 @pytest.mark.parametrize("case", list(NEW_BAD_CASES))
-def test_bad_3d_doppler_files(tmp_path: Path, capsys: pytest.CaptureFixture[str],
-                              case: str) -> None:
+def test_bad_3d_doppler_files(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], case: str
+) -> None:
     meas_text, radars_text, expected = NEW_BAD_CASES[case]
     (tmp_path / "m.csv").write_text(meas_text)
     (tmp_path / "r.toml").write_text(radars_text)
     capsys.readouterr()
-    status = main(["track", "--input", str(tmp_path / "m.csv"), "--radars",
-                   str(tmp_path / "r.toml"), "--out", str(tmp_path / "t.csv")])
+    status = main(
+        [
+            "track",
+            "--input",
+            str(tmp_path / "m.csv"),
+            "--radars",
+            str(tmp_path / "r.toml"),
+            "--out",
+            str(tmp_path / "t.csv"),
+        ]
+    )
     err = capsys.readouterr().err
     assert status == 2 and err.count("\n") == 1 and expected in err, err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["m.csv", "r.toml"]
 
 
-@pytest.mark.parametrize("args, name", [
-    (["--init", "kalman"], "--init"),
-    (["--init-k", "1"], "--init-k"),
-    (["--doppler", "maybe"], "--doppler"),
-    (["--sigma-v0", "0"], "--sigma-v0"),
-])
-def test_bad_track_options(tmp_path: Path, capsys: pytest.CaptureFixture[str],
-                           args: list[str], name: str) -> None:
+@pytest.mark.parametrize(
+    "args, name",
+    [
+        (["--init", "kalman"], "--init"),
+        (["--init-k", "1"], "--init-k"),
+        (["--doppler", "maybe"], "--doppler"),
+        (["--sigma-v0", "0"], "--sigma-v0"),
+    ],
+)
+def test_bad_track_options(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], args: list[str], name: str
+) -> None:
     (tmp_path / "m.csv").write_text(HEADER + "".join(GOOD_ROWS))
     (tmp_path / "r.toml").write_text(GOOD_RADARS)
     capsys.readouterr()
-    status = main(["track", "--input", str(tmp_path / "m.csv"), "--radars",
-                   str(tmp_path / "r.toml"), "--out", str(tmp_path / "t.csv"), *args])
+    status = main(
+        [
+            "track",
+            "--input",
+            str(tmp_path / "m.csv"),
+            "--radars",
+            str(tmp_path / "r.toml"),
+            "--out",
+            str(tmp_path / "t.csv"),
+            *args,
+        ]
+    )
     err = capsys.readouterr().err
     assert status == 2 and err.count("\n") == 1 and name in err, err
     assert not (tmp_path / "t.csv").exists()
@@ -455,20 +667,41 @@ def test_bad_track_options(tmp_path: Path, capsys: pytest.CaptureFixture[str],
 
 def test_finite_memory_start_skips_other_radars_until_it_starts(tmp_path: Path) -> None:
     """Radar a's first 3 plots make the start; b's plot in between gives no rows."""
-    lines = [HEADER, "0,a,150000,0.5\n", "5,b,94000,10.0\n", "10,a,152000,0.5\n",
-             "20,a,154000,0.5\n", "30,b,95000,10.2\n"]
+    lines = [
+        HEADER,
+        "0,a,150000,0.5\n",
+        "5,b,94000,10.0\n",
+        "10,a,152000,0.5\n",
+        "20,a,154000,0.5\n",
+        "30,b,95000,10.2\n",
+    ]
     (tmp_path / "m.csv").write_text("".join(lines))
     (tmp_path / "r.toml").write_text(GOOD_RADARS)
     out = tmp_path / "t.csv"
-    assert main(["track", "--input", str(tmp_path / "m.csv"), "--radars",
-                 str(tmp_path / "r.toml"), "--out", str(out), "--init", "finite-memory",
-                 "--method", "naive"]) == 0
+    assert (
+        main(
+            [
+                "track",
+                "--input",
+                str(tmp_path / "m.csv"),
+                "--radars",
+                str(tmp_path / "r.toml"),
+                "--out",
+                str(out),
+                "--init",
+                "finite-memory",
+                "--method",
+                "naive",
+            ]
+        )
+        == 0
+    )
     rows = read_tracks(out)
     assert [float(r["time_s"]) for r in rows] == [20.0, 30.0]
     x, _ = state_from_row(rows[0])
     # Range-only fit of 150, 152, 154 km over T = 10 s: r̂ = 154 km, V̂r = 200 m/s at 0.5°.
     b = math.radians(0.5)
-    np.testing.assert_allclose(x[[0, 2]], 154000.0 * np.array([math.cos(b), math.sin(b)]),
-                               rtol=1e-12)
-    np.testing.assert_allclose(x[[1, 3]], 200.0 * np.array([math.cos(b), math.sin(b)]),
-                               rtol=1e-9)
+    np.testing.assert_allclose(
+        x[[0, 2]], 154000.0 * np.array([math.cos(b), math.sin(b)]), rtol=1e-12
+    )
+    np.testing.assert_allclose(x[[1, 3]], 200.0 * np.array([math.cos(b), math.sin(b)]), rtol=1e-9)

@@ -19,10 +19,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from core.prosov import run_tracking
-from core.validation import ParameterError
-from viz_app.cli_recording import free_port
-from viz_app.tune import (
+from radarviz.core.experiments.prosov import run_tracking
+from radarviz.core.params import ParameterError
+from radarviz.viz_app.cli.recording import free_port
+from radarviz.viz_app.tune.panel import (
     Coalescer,
     TuneParams,
     TuneSession,
@@ -47,9 +47,17 @@ def _os_threads() -> int:
 
 
 def test_params_validation_one_line_errors() -> None:
-    for bad in ({"sigma_r_m": 0.0}, {"sigma_beta_deg": -1.0}, {"sigma_beta_deg": float("nan")},
-                {"period_s": 0.0}, {"c0": 0.0}, {"runs": 1}, {"seed": -1}, {"methods": ()},
-                {"methods": ("kalman",)}):
+    for bad in (
+        {"sigma_r_m": 0.0},
+        {"sigma_beta_deg": -1.0},
+        {"sigma_beta_deg": float("nan")},
+        {"period_s": 0.0},
+        {"c0": 0.0},
+        {"runs": 1},
+        {"seed": -1},
+        {"methods": ()},
+        {"methods": ("kalman",)},
+    ):
         with pytest.raises(ParameterError) as info:
             replace(TuneParams(), **bad)
         assert "\n" not in str(info.value)
@@ -76,8 +84,9 @@ def test_simulation_matches_core_statistics() -> None:
     ref = run_tracking(p.config())
     for m in p.methods:
         for name in ("bias_range", "rmse_x", "sigma_x_filter", "nees_pos"):
-            np.testing.assert_allclose(getattr(mine.methods[m], name),
-                                       getattr(ref.metrics[m], name), rtol=1e-9, atol=1e-9)
+            np.testing.assert_allclose(
+                getattr(mine.methods[m], name), getattr(ref.metrics[m], name), rtol=1e-9, atol=1e-9
+            )
 
 
 # --- coalescing worker --------------------------------------------------------------------
@@ -221,10 +230,21 @@ def test_tune_panel_slider_makes_new_recording() -> None:
     exe = Path(sys.executable).with_name("radarviz")
     panel_port, viewer_port = free_port(), free_port()
     proc = subprocess.Popen(
-        [str(exe), "tune", "--no-browser", "--port", str(panel_port),
-         "--viewer-port", str(viewer_port)],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
-        cwd=ROOT, env={**os.environ, "PYTHONUNBUFFERED": "1"},
+        [
+            str(exe),
+            "tune",
+            "--no-browser",
+            "--port",
+            str(panel_port),
+            "--viewer-port",
+            str(viewer_port),
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+        cwd=ROOT,
+        env={**os.environ, "PYTHONUNBUFFERED": "1"},
     )
     lines: queue.Queue = queue.Queue()
     threading.Thread(target=_reader, args=(proc, lines), daemon=True).start()
@@ -234,9 +254,12 @@ def test_tune_panel_slider_makes_new_recording() -> None:
         panel = _expect(lines, r"^panel (\S+)", 60, log).group(1)
         viewer = _expect(lines, r"^viewer (\S+)", 10, log).group(1)
         first = _expect(lines, r"^run (\S+) sigma_beta_deg=2 ms=(\d+)", 60, log)
-        rerun_pids = [int(p) for p in subprocess.run(
-            ["pgrep", "-f", f"web-viewer-port {viewer_port}"], capture_output=True, text=True
-        ).stdout.split()]
+        rerun_pids = [
+            int(p)
+            for p in subprocess.run(
+                ["pgrep", "-f", f"web-viewer-port {viewer_port}"], capture_output=True, text=True
+            ).stdout.split()
+        ]
         assert rerun_pids, "the rerun web viewer child is not running"
         ARTIFACTS.mkdir(exist_ok=True)
         with sync_playwright() as p:

@@ -13,9 +13,9 @@ import json
 import numpy as np
 import pytest
 
-from core.conversion import convert_ucm_3d
-from core.validation import ParameterError
-from core.velocity import (
+from radarviz.core.conversion.planar import convert_ucm_3d
+from radarviz.core.params import ParameterError
+from radarviz.core.velocity.estimate import (
     M_WARN,
     GeometryError,
     baseline_problem,
@@ -32,7 +32,7 @@ from core.velocity import (
     velocity_problem,
     velocity_statistics,
 )
-from viz_app.cli import main
+from radarviz.viz_app.cli.main import main
 
 Z = 4.5
 DEG = np.pi / 180.0
@@ -47,7 +47,11 @@ S_AZ = np.array([0.1, 0.3, 0.5]) * DEG
 
 def _problem4(scale: float = 1.0, s4: tuple[float, float, float] = (2.0, 0.4, 0.2)):
     return velocity_problem(
-        SITES4, TARGET, VEL, [*S_VR, s4[0]], np.r_[S_EL, s4[1] * DEG] * scale,
+        SITES4,
+        TARGET,
+        VEL,
+        [*S_VR, s4[0]],
+        np.r_[S_EL, s4[1] * DEG] * scale,
         np.r_[S_AZ, s4[2] * DEG] * scale,
     )
 
@@ -121,8 +125,11 @@ def test_second_order_bias_matches_monte_carlo(weighted: bool) -> None:
     The tolerance adds 3 % of |bias| for the neglected O(σ⁴) terms (relative size ≈ m²).
     """
     scale = 2.0
-    pb = (baseline_problem()._replace(sigma_elevation=S_EL * scale, sigma_azimuth=S_AZ * scale)
-          if not weighted else _problem4(scale))
+    pb = (
+        baseline_problem()._replace(sigma_elevation=S_EL * scale, sigma_azimuth=S_AZ * scale)
+        if not weighted
+        else _problem4(scale)
+    )
     st = velocity_statistics(pb)
     mean, se = _antithetic_bias(pb, 400_000, 5)
     bias = st.bias_second_order
@@ -150,13 +157,18 @@ def test_wls_with_three_radars_equals_direct_solve() -> None:
     wls = velocity_statistics(baseline_problem()._replace(weighted=True))
     np.testing.assert_allclose(wls.gain, direct.gain, atol=1e-12)
     np.testing.assert_allclose(wls.covariance, direct.covariance, rtol=1e-10)
-    np.testing.assert_allclose(wls.bias_second_order, direct.bias_second_order, rtol=1e-8,
-                               atol=1e-14)
+    np.testing.assert_allclose(
+        wls.bias_second_order, direct.bias_second_order, rtol=1e-8, atol=1e-14
+    )
     rng = np.random.default_rng(0)
     C = direction_cosines(rng.uniform(-3, 3, (50, 3)), rng.uniform(0.05, 1.2, (50, 3)))
     vr = rng.normal(0, 100, (50, 3))
-    np.testing.assert_allclose(solve_velocity(C, vr, rng.uniform(0.1, 2, (50, 3))),
-                               solve_velocity(C, vr), rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(
+        solve_velocity(C, vr, rng.uniform(0.1, 2, (50, 3))),
+        solve_velocity(C, vr),
+        rtol=1e-9,
+        atol=1e-9,
+    )
 
 
 def test_wls_fourth_radar_improves_and_vanishes_when_useless() -> None:
@@ -210,8 +222,7 @@ def test_collinear_sites_with_target_on_their_line_raise() -> None:
     assert not geo.observable
     los = line_of_sight(sites, [50e3, 0.0, 0.0])
     with pytest.raises(GeometryError, match="not observable"):
-        estimate_velocity(sites, [100.0, 100.0, 100.0], los.azimuth, los.elevation, 1.0, 0.01,
-                          0.01)
+        estimate_velocity(sites, [100.0, 100.0, 100.0], los.azimuth, los.elevation, 1.0, 0.01, 0.01)
 
 
 def test_duplicate_sites_and_target_at_site_raise() -> None:
@@ -267,20 +278,36 @@ def test_fused_position_covariance_matches_monte_carlo() -> None:
     los = line_of_sight(SITES3, TARGET)
     rng = np.random.default_rng(21)
     z = rng.standard_normal((3, n, 3))
-    fused = fuse_positions(SITES3, los.range + z[0] * sr, los.azimuth + z[1] * sb,
-                           los.elevation + z[2] * se, sr, sb, se)
+    fused = fuse_positions(
+        SITES3,
+        los.range + z[0] * sr,
+        los.azimuth + z[1] * sb,
+        los.elevation + z[2] * se,
+        sr,
+        sb,
+        se,
+    )
     truth = fuse_positions(SITES3, los.range, los.azimuth, los.elevation, sr, sb, se)
     # Noise-free points are the target up to the debiasing scale e^(s/2) (≈ r σ²/2, metres).
     np.testing.assert_allclose(truth.points, np.broadcast_to(TARGET, (3, 3)), atol=10.0)
     err = fused.position - TARGET
     stats = summarize_errors(err)
     var_pred = np.diag(truth.covariance)
-    assert np.all(np.abs(stats.covariance.diagonal() - var_pred)
-                  < Z * var_pred * np.sqrt(2.0 / (n - 1)))
+    assert np.all(
+        np.abs(stats.covariance.diagonal() - var_pred) < Z * var_pred * np.sqrt(2.0 / (n - 1))
+    )
     assert np.all(np.abs(stats.mean) < Z * stats.mean_se)
     # Without the refinement, weights taken at each radar's own measurement bias the point.
-    raw = fuse_positions(SITES3, los.range + z[0] * sr, los.azimuth + z[1] * sb,
-                         los.elevation + z[2] * se, sr, sb, se, refine=False)
+    raw = fuse_positions(
+        SITES3,
+        los.range + z[0] * sr,
+        los.azimuth + z[1] * sb,
+        los.elevation + z[2] * se,
+        sr,
+        sb,
+        se,
+        refine=False,
+    )
     assert np.max(np.abs((raw.position - TARGET).mean(axis=0)) / stats.mean_se) > 10.0
     # Fusion is at least as good as every single radar: R_k − P is positive semi-definite.
     single = convert_ucm_3d(los.range, los.azimuth, los.elevation, sr, sb, se).R

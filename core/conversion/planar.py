@@ -1,0 +1,475 @@
+"""Polar-to-Cartesian converted measurements and their covariances.
+
+A radar at the origin measures range and azimuth ``r̂ = r + v_r``, ``β̂ = β + v_β`` with
+``v_r ~ N(0, σr²)`` and ``v_β ~ N(0, σβ²)`` independent; write ``s = σβ²`` (rad²). The tracker
+works in Cartesian coordinates, so each measurement is converted to ``x = r̂ cos β̂``,
+``y = r̂ sin β̂`` (Prosov, eq. 8). Because the map is nonlinear the converted point is biased:
+
+    E[cos β̂] = e^(−s/2) cos β,              E[sin β̂] = e^(−s/2) sin β
+    E[cos² β̂] = ½(1 + e^(−2s) cos 2β),       E[sin² β̂] = ½(1 − e^(−2s) cos 2β)
+    E[sin β̂ cos β̂] = ½ e^(−2s) sin 2β,      E[r̂²] = r² + σr²
+
+so ``E[r̂ cos β̂] = r cos β · e^(−s/2)``: the naive point is pulled towards the radar by ≈ r s/2.
+
+Every conversion here is a scale κ applied to the naive point plus a covariance R:
+
+=========  =================================  ===============================================
+name       point                              covariance
+=========  =================================  ===============================================
+naive      κ = 1 (eq. 8)                      first order J diag(σr², r̂² s) Jᵀ (eq. 9)
+seed       κ = 1 − s/2 (eq. 10 as printed)    eq. 11a–c (Lerro & Bar-Shalom averaged cov.)
+cmkf_d     κ = 1 − (e^(−s) − e^(−s/2))        eq. 11a–c
+ucm        κ = e^(s/2)                        exact true-conditioned cov., at the measurement
+ducm       κ = e^(s/2)                        exact true-conditioned cov., at the prediction
+=========  =================================  ===============================================
+
+What the analysis in ``shared/spec/conversion.md`` found, and what users should know:
+
+* eq. 10 (``seed``) has the opposite sign to the frequentist correction:
+  E[x_seed] ≈ r cos β (1 − s), twice the naive bias. It is the second-order posterior mean
+  of the true position given the measurement, not an unbiased measurement.
+* eq. 11 is exactly the posterior average of the naive point's true-conditioned covariance
+  (Lerro and Bar-Shalom 1993), which belongs with the opposite-sign correction (``cmkf_d``).
+* A covariance evaluated at the *measured* bearing correlates the Kalman gain with the
+  measurement error; ``ducm`` (Bordonaro, Willett, Bar-Shalom 2014) evaluates it at the
+  filter's predicted position instead.
+
+All functions broadcast over any leading batch shape ``(...)``. Angles are radians.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+METHODS_2D: tuple[str, ...] = ("naive", "seed", "cmkf_d", "ucm", "ducm")
+METHODS_3D: tuple[str, ...] = ("naive", "ucm")
+
+
+class Converted(NamedTuple):
+    """A batch of converted measurements.
+
+    Attributes:
+        z: (..., d) Cartesian points, d = 2 or 3.
+        R: (..., d, d) their covariances.
+    """
+
+    z: NDArray[np.float64]
+    R: NDArray[np.float64]
+
+
+def _sym2(r11: NDArray, r12: NDArray, r22: NDArray) -> NDArray[np.float64]:
+    """Stack three (...) arrays into (..., 2, 2) symmetric matrices."""
+    r11, r12, r22 = np.broadcast_arrays(r11, r12, r22)
+    row0 = np.stack([r11, r12], axis=-1)
+    row1 = np.stack([r12, r22], axis=-1)
+    return np.stack([row0, row1], axis=-2)
+
+
+def _f(a: ArrayLike) -> NDArray[np.float64]:
+    return np.asarray(a, dtype=np.float64)
+
+
+# --------------------------------------------------------------------------------------------
+# Exact moments (used by ucm / ducm and by the tests)
+# --------------------------------------------------------------------------------------------
+
+
+class _AngleMoments(NamedTuple):
+    """Moments of (cos θ̂, sin θ̂) for θ̂ ~ N(θ, s), written without cancellation."""
+
+    mc: NDArray[np.float64]  # E[cos θ̂] = e^(−s/2) cos θ
+    ms: NDArray[np.float64]  # E[sin θ̂] = e^(−s/2) sin θ
+    ecc: NDArray[np.float64]  # E[cos² θ̂] = ½(1 + e^(−2s) cos 2θ)
+    ess: NDArray[np.float64]  # E[sin² θ̂] = ½(1 − e^(−2s) cos 2θ)
+    esc: NDArray[np.float64]  # E[sin θ̂ cos θ̂] = ½ e^(−2s) sin 2θ
+    vcc: NDArray[np.float64]  # Var(cos θ̂) = ½ cos²θ (1 − e^(−s))² + ½ sin²θ (1 − e^(−2s))
+    vss: NDArray[np.float64]  # Var(sin θ̂) = ½ sin²θ (1 − e^(−s))² + ½ cos²θ (1 − e^(−2s))
+    csc: NDArray[np.float64]  # Cov(sin θ̂, cos θ̂) = −sin θ cos θ e^(−s) (1 − e^(−s))
+
+
+def _angle_moments(theta: NDArray, s: NDArray) -> _AngleMoments:
+    """One-angle moments; 1 − e^(−s) via expm1 so the O(s) variances keep full precision."""
+    return _angle_moments_cs(np.cos(theta), np.sin(theta), s)
+
+
+def _angle_moments_cs(c: NDArray, sn: NDArray, s: NDArray) -> _AngleMoments:
+    """``_angle_moments`` from cos θ and sin θ (callers often have them without trigonometry)."""
+    cc, ss, sc = c * c, sn * sn, sn * c
+    e_half, e1, e2 = np.exp(-s / 2.0), np.exp(-s), np.exp(-2.0 * s)
+    om1, om2 = -np.expm1(-s), -np.expm1(-2.0 * s)
+    return _AngleMoments(
+        mc=e_half * c,
+        ms=e_half * sn,
+        ecc=0.5 * (cc * (1.0 + e2) + ss * om2),
+        ess=0.5 * (ss * (1.0 + e2) + cc * om2),
+        esc=e2 * sc,
+        vcc=0.5 * (cc * om1 * om1 + ss * om2),
+        vss=0.5 * (ss * om1 * om1 + cc * om2),
+        csc=-e1 * om1 * sc,
+    )
+
+
+def scale_factor(method: str, sigma_beta: ArrayLike) -> NDArray[np.float64]:
+    """The scale κ a 2D method applies to the naive point ``r̂ (cos β̂, sin β̂)``."""
+    s = _f(sigma_beta) ** 2
+    if method == "naive":
+        return np.ones_like(s)
+    if method == "seed":
+        return 1.0 - s / 2.0  # Prosov eq. 10 as printed
+    if method == "cmkf_d":
+        return 1.0 - (np.exp(-s) - np.exp(-s / 2.0))  # Lerro & Bar-Shalom debiasing
+    if method in ("ucm", "ducm"):
+        return np.exp(s / 2.0)  # Mo et al. 1998: 1 / E[cos v_β]
+    raise ValueError(f"method must be one of {', '.join(METHODS_2D)} (got {method!r})")
+
+
+def naive_mean_given_truth(
+    r: ArrayLike, beta: ArrayLike, sigma_beta: ArrayLike
+) -> NDArray[np.float64]:
+    """E[r̂ (cos β̂, sin β̂) | r, β] = r e^(−s/2) (cos β, sin β).  Shape (..., 2)."""
+    r, beta, s = _f(r), _f(beta), _f(sigma_beta) ** 2
+    a = r * np.exp(-s / 2.0)
+    return np.stack([a * np.cos(beta), a * np.sin(beta)], axis=-1)
+
+
+def naive_cov_given_truth(
+    r: ArrayLike, beta: ArrayLike, sigma_r: ArrayLike, sigma_beta: ArrayLike
+) -> NDArray[np.float64]:
+    """Exact covariance of the naive point given the true (r, β).  Shape (..., 2, 2).
+
+    From the moments in the module docstring:
+
+        Cxx = (r² + σr²) ½(1 + e^(−2s) cos 2β) − r² e^(−s) cos² β
+        Cyy = (r² + σr²) ½(1 − e^(−2s) cos 2β) − r² e^(−s) sin² β
+        Cxy = (r² + σr²) ½ e^(−2s) sin 2β     − r² e^(−s) sin β cos β
+
+    Scaling the point by κ scales this by κ², so it also gives the ucm covariance.
+
+    Numerics: evaluated as σr² E[u uᵀ] + r² Cov(u), u = (cos β̂, sin β̂), which is the same
+    thing with the O(r²) cancellation removed (as written above, the radial variance loses
+    ~eps·r²/σr² relative precision and can come out ≤ 0 once r/σr ≳ 5e7 at small s).
+    """
+    r, beta = _f(r), _f(beta)
+    return _sym2(*_true_cov_parts(r, np.cos(beta), np.sin(beta), _f(sigma_r), _f(sigma_beta)))
+
+
+CovParts = tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]
+
+
+def _true_cov_parts(
+    r: NDArray, c: NDArray, sn: NDArray, sr: NDArray, sb: NDArray, scale: ArrayLike = 1.0
+) -> CovParts:
+    """(Cxx, Cxy, Cyy) of ``naive_cov_given_truth`` × ``scale``, bearing given by cos c, sin sn.
+
+    σr² E[u uᵀ] + r² Cov(u) regrouped by cos²β, sin²β and sin β cos β (every term of the
+    diagonal is non-negative, so nothing cancels), with the scalar coefficients folded first:
+
+        Cxx = cos²β · A + sin²β · B,   Cyy = sin²β · A + cos²β · B,   Cxy = sin β cos β · C
+        A = ½[σr² (1 + e^(−2s)) + r² (1 − e^(−s))²],   B = ½ (σr² + r²)(1 − e^(−2s))
+        C = σr² e^(−2s) − r² e^(−s) (1 − e^(−s))
+    """
+    s = sb * sb
+    k = _f(scale)
+    e1, e2 = np.exp(-s), np.exp(-2.0 * s)
+    om1, om2 = -np.expm1(-s), -np.expm1(-2.0 * s)
+    sr2 = sr * sr
+    r2 = r * r
+    a_const = (0.5 * k) * sr2 * (1.0 + e2)
+    A = r2 * ((0.5 * k) * om1 * om1)
+    A += a_const
+    B = r2 + sr2
+    B *= (0.5 * k) * om2
+    C = r2 * (-k * e1 * om1)
+    C += k * sr2 * e2
+    cc, ss = c * c, sn * sn
+    cxx = cc * A
+    cxx += ss * B
+    cyy = ss * A
+    cyy += cc * B
+    C = C * (sn * c)  # not in place: r and the bearing may broadcast against each other
+    return cxx, C, cyy
+
+
+# --------------------------------------------------------------------------------------------
+# Covariances named by the papers
+# --------------------------------------------------------------------------------------------
+
+
+def linearized_cov(
+    r: ArrayLike, beta: ArrayLike, sigma_r: ArrayLike, sigma_beta: ArrayLike
+) -> NDArray[np.float64]:
+    """First-order covariance J diag(σr², σβ²) Jᵀ of the naive point (Prosov eq. 9).
+
+    R11 = σr² cos²β + r² s sin²β
+    R22 = σr² sin²β + r² s cos²β
+    R12 = (σr² − r² s) sin β cos β
+    """
+    r, beta = _f(r), _f(beta)
+    return _sym2(*_linearized_parts(r, np.cos(beta), np.sin(beta), _f(sigma_r), _f(sigma_beta)))
+
+
+def _linearized_parts(r: NDArray, c: NDArray, sn: NDArray, sr: NDArray, sb: NDArray) -> CovParts:
+    sr2, rs = sr * sr, r * r * (sb * sb)
+    return sr2 * c * c + rs * sn * sn, (sr2 - rs) * sn * c, sr2 * sn * sn + rs * c * c
+
+
+def averaged_cov(
+    r: ArrayLike, beta: ArrayLike, sigma_r: ArrayLike, sigma_beta: ArrayLike
+) -> NDArray[np.float64]:
+    """Prosov eq. 11a–c, evaluated at the measurement (r, β) = (r̂, β̂).
+
+        c11 = r² e^(−2s) [cos²β (cosh 2s − cosh s) + sin²β (sinh 2s − sinh s)]
+            + σr² e^(−2s) [cos²β (2 cosh 2s − cosh s) + sin²β (2 sinh 2s − sinh s)]
+        c22 = the same with sin and cos exchanged
+        c12 = sin β cos β e^(−4s) [σr² + (r² + σr²)(1 − e^s)]
+
+    This is Lerro and Bar-Shalom's (1993) average of the naive point's true-conditioned
+    covariance over the posterior of (r, β) given the measurement (flat prior); the tests check
+    that identity by quadrature.
+    """
+    r, beta = _f(r), _f(beta)
+    return _sym2(*_averaged_parts(r, np.cos(beta), np.sin(beta), _f(sigma_r), _f(sigma_beta)))
+
+
+def _averaged_parts(r: NDArray, c: NDArray, sn: NDArray, sr: NDArray, sb: NDArray) -> CovParts:
+    sr2, s = sr * sr, sb * sb
+    c2, s2 = c * c, sn * sn
+    e2 = np.exp(-2.0 * s)
+    ch1, ch2, sh1, sh2 = np.cosh(s), np.cosh(2.0 * s), np.sinh(s), np.sinh(2.0 * s)
+    r2 = r * r
+    # cosh 2s − cosh s and sinh 2s − sinh s as products (no cancellation at small s).
+    sh_half = np.sinh(0.5 * s)
+    a_c, a_s = 2.0 * np.sinh(1.5 * s) * sh_half, 2.0 * np.cosh(1.5 * s) * sh_half
+    b_c, b_s = 2.0 * ch2 - ch1, 2.0 * sh2 - sh1
+    c11 = r2 * (e2 * (c2 * a_c + s2 * a_s)) + sr2 * e2 * (c2 * b_c + s2 * b_s)
+    c22 = r2 * (e2 * (s2 * a_c + c2 * a_s)) + sr2 * e2 * (s2 * b_c + c2 * b_s)
+    c12 = sn * c * np.exp(-4.0 * s) * (sr2 - (r2 + sr2) * np.expm1(s))
+    return c11, c12, c22
+
+
+# --------------------------------------------------------------------------------------------
+# The five 2D conversions
+# --------------------------------------------------------------------------------------------
+
+
+class ConvertedParts(NamedTuple):
+    """A batch of 2D converted measurements as separate (...) components.
+
+    The Monte Carlo filter loop uses this form directly (no (..., 2, 2) arrays to build and
+    take apart); ``Converted`` is the stacked form.
+    """
+
+    x: NDArray[np.float64]
+    y: NDArray[np.float64]
+    r00: NDArray[np.float64]
+    r01: NDArray[np.float64]
+    r11: NDArray[np.float64]
+
+    def stacked(self) -> Converted:
+        """(z (..., 2), R (..., 2, 2)) with one batch shape for both (all parts broadcast)."""
+        x, y, r00, r01, r11 = np.broadcast_arrays(self.x, self.y, self.r00, self.r01, self.r11)
+        return Converted(np.stack([x, y], axis=-1), _sym2(r00, r01, r11))
+
+
+def convert_parts(
+    method: str,
+    r: ArrayLike,
+    beta: ArrayLike,
+    sigma_r: ArrayLike,
+    sigma_beta: ArrayLike,
+    predicted_xy: tuple[ArrayLike, ArrayLike] | None = None,
+) -> ConvertedParts:
+    """Any of ``METHODS_2D`` as components; ``ducm`` needs ``predicted_xy = (x⁻, y⁻)``.
+
+    Args:
+        r, beta: (...) measured range (m) and azimuth (rad).
+        sigma_r, sigma_beta: σr (m) and σβ (rad), scalars or broadcastable to (...).
+        predicted_xy: the filter's predicted position, radar-centred, two (...) arrays.
+    """
+    r, beta = _f(r), _f(beta)
+    sr, sb = _f(sigma_r), _f(sigma_beta)
+    c, sn = np.cos(beta), np.sin(beta)
+    if method == "naive":
+        return ConvertedParts(r * c, r * sn, *_linearized_parts(r, c, sn, sr, sb))
+    if method in ("seed", "cmkf_d"):
+        kr = scale_factor(method, sb) * r
+        return ConvertedParts(kr * c, kr * sn, *_averaged_parts(r, c, sn, sr, sb))
+    if method == "ucm":
+        es = np.exp(sb * sb)
+        kr = np.sqrt(es) * r
+        return ConvertedParts(kr * c, kr * sn, *_true_cov_parts(r, c, sn, sr, sb, es))
+    if method == "ducm":
+        if predicted_xy is None:
+            raise ValueError("method ducm needs predicted_xy (the filter's predicted position)")
+        px, py = _f(predicted_xy[0]), _f(predicted_xy[1])
+        r_p = np.hypot(px, py)
+        es = np.exp(sb * sb)
+        kr = np.sqrt(es) * r
+        cov = _true_cov_parts(r_p, px / r_p, py / r_p, sr, sb, es)
+        return ConvertedParts(kr * c, kr * sn, *cov)
+    raise ValueError(f"method must be one of {', '.join(METHODS_2D)} (got {method!r})")
+
+
+def convert_naive(
+    r: ArrayLike, beta: ArrayLike, sigma_r: ArrayLike, sigma_beta: ArrayLike
+) -> Converted:
+    """Naive conversion (eq. 8) with the linearized covariance (eq. 9)."""
+    return convert_parts("naive", r, beta, sigma_r, sigma_beta).stacked()
+
+
+def convert_seed(
+    r: ArrayLike, beta: ArrayLike, sigma_r: ArrayLike, sigma_beta: ArrayLike
+) -> Converted:
+    """Prosov's "unbiased" conversion as published: κ = 1 − s/2 (eq. 10), covariance eq. 11.
+
+    Note: this *doubles* the bias of the converted point; see the module docstring.
+    """
+    return convert_parts("seed", r, beta, sigma_r, sigma_beta).stacked()
+
+
+def convert_cmkf_d(
+    r: ArrayLike, beta: ArrayLike, sigma_r: ArrayLike, sigma_beta: ArrayLike
+) -> Converted:
+    """Lerro and Bar-Shalom (1993) debiased conversion: κ = 1 − (e^(−s) − e^(−s/2)), eq. 11."""
+    return convert_parts("cmkf_d", r, beta, sigma_r, sigma_beta).stacked()
+
+
+def convert_ucm(
+    r: ArrayLike, beta: ArrayLike, sigma_r: ArrayLike, sigma_beta: ArrayLike
+) -> Converted:
+    """Unbiased conversion (Mo, Song, Zhou, Sun, Bar-Shalom 1998): κ = e^(s/2).
+
+    The covariance is the exact true-conditioned covariance of the unbiased point,
+    e^s · ``naive_cov_given_truth``, evaluated at the measured (r̂, β̂).
+    """
+    return convert_parts("ucm", r, beta, sigma_r, sigma_beta).stacked()
+
+
+def convert_ducm(
+    r: ArrayLike,
+    beta: ArrayLike,
+    sigma_r: ArrayLike,
+    sigma_beta: ArrayLike,
+    predicted_xy: ArrayLike,
+) -> Converted:
+    """Decorrelated unbiased conversion (Bordonaro, Willett, Bar-Shalom 2014).
+
+    Same point as ``ucm``; the covariance is evaluated at the filter's predicted position
+    ``predicted_xy`` (..., 2), radar-centred, so the gain is independent of this measurement's
+    error.
+    """
+    p = _f(predicted_xy)
+    return convert_parts("ducm", r, beta, sigma_r, sigma_beta, (p[..., 0], p[..., 1])).stacked()
+
+
+def convert(
+    method: str,
+    r: ArrayLike,
+    beta: ArrayLike,
+    sigma_r: ArrayLike,
+    sigma_beta: ArrayLike,
+    predicted_xy: ArrayLike | None = None,
+) -> Converted:
+    """Dispatch to one of ``METHODS_2D``; ``ducm`` needs ``predicted_xy`` (..., 2)."""
+    if method == "ducm":
+        if predicted_xy is None:
+            raise ValueError("method ducm needs predicted_xy (the filter's predicted position)")
+        return convert_ducm(r, beta, sigma_r, sigma_beta, predicted_xy)
+    return convert_parts(method, r, beta, sigma_r, sigma_beta).stacked()
+
+
+# --------------------------------------------------------------------------------------------
+# 3D: range, azimuth β, elevation ε;  x = r cos ε cos β, y = r cos ε sin β, z = r sin ε
+# --------------------------------------------------------------------------------------------
+
+
+def _point_3d(r: NDArray, az: NDArray, el: NDArray) -> NDArray[np.float64]:
+    ce = np.cos(el)
+    return np.stack([r * ce * np.cos(az), r * ce * np.sin(az), r * np.sin(el)], axis=-1)
+
+
+def convert_naive_3d(
+    r: ArrayLike,
+    azimuth: ArrayLike,
+    elevation: ArrayLike,
+    sigma_r: ArrayLike,
+    sigma_azimuth: ArrayLike,
+    sigma_elevation: ArrayLike,
+) -> Converted:
+    """Naive 3D conversion with the first-order covariance J diag(σr², σβ², σε²) Jᵀ."""
+    r, az, el = np.broadcast_arrays(_f(r), _f(azimuth), _f(elevation))
+    ca, sa, ce, se = np.cos(az), np.sin(az), np.cos(el), np.sin(el)
+    # Columns of J: ∂p/∂r, ∂p/∂β, ∂p/∂ε.
+    j_r = np.stack([ce * ca, ce * sa, se], axis=-1)
+    j_b = np.stack([-r * ce * sa, r * ce * ca, np.zeros_like(r * ca)], axis=-1)
+    j_e = np.stack([-r * se * ca, -r * se * sa, r * ce], axis=-1)
+    var_r = _f(sigma_r) ** 2
+    var_b = _f(sigma_azimuth) ** 2
+    var_e = _f(sigma_elevation) ** 2
+    cov = (
+        var_r[..., None, None] * j_r[..., :, None] * j_r[..., None, :]
+        + var_b[..., None, None] * j_b[..., :, None] * j_b[..., None, :]
+        + var_e[..., None, None] * j_e[..., :, None] * j_e[..., None, :]
+    )
+    return Converted(_point_3d(r, az, el), cov)
+
+
+def naive_cov_given_truth_3d(
+    r: ArrayLike,
+    azimuth: ArrayLike,
+    elevation: ArrayLike,
+    sigma_r: ArrayLike,
+    sigma_azimuth: ArrayLike,
+    sigma_elevation: ArrayLike,
+) -> NDArray[np.float64]:
+    """Exact covariance (..., 3, 3) of the naive 3D point given the true (r, β, ε).
+
+    With a = cos ε̂ cos β̂, b = cos ε̂ sin β̂, c = sin ε̂ and independent angle errors,
+    E[p pᵀ] = (r² + σr²) E[(a, b, c)(a, b, c)ᵀ], each entry a product of the one-angle moments.
+
+    Numerics: evaluated as σr² E[u uᵀ] + r² Cov(u), u = (a, b, c), with each entry of Cov(u)
+    from Cov(XY, X'Y') = Cov(X, X') E[YY'] + E[X] E[X'] Cov(Y, Y') for the independent
+    elevation (X) and azimuth (Y) factors, so no O(r²) terms cancel.
+    """
+    r = _f(r)
+    r2, sr2 = r * r, _f(sigma_r) ** 2
+    b = _angle_moments(_f(azimuth), _f(sigma_azimuth) ** 2)
+    e = _angle_moments(_f(elevation), _f(sigma_elevation) ** 2)
+    mc_e2 = e.mc * e.mc
+    # (second moment E[u_i u_j], covariance Cov(u_i, u_j)) for the upper triangle.
+    xx = (e.ecc * b.ecc, e.vcc * b.ecc + mc_e2 * b.vcc)
+    xy = (e.ecc * b.esc, e.vcc * b.esc + mc_e2 * b.csc)
+    yy = (e.ecc * b.ess, e.vcc * b.ess + mc_e2 * b.vss)
+    xz = (e.esc * b.mc, e.csc * b.mc)
+    yz = (e.esc * b.ms, e.csc * b.ms)
+    zz = (e.ess, e.vss)
+    entries = [sr2 * m2 + r2 * cv for m2, cv in (xx, xy, xz, yy, yz, zz)]
+    cxx, cxy, cxz, cyy, cyz, czz = np.broadcast_arrays(*entries)
+    rows = [[cxx, cxy, cxz], [cxy, cyy, cyz], [cxz, cyz, czz]]
+    return np.stack([np.stack(row, axis=-1) for row in rows], axis=-2)
+
+
+def convert_ucm_3d(
+    r: ArrayLike,
+    azimuth: ArrayLike,
+    elevation: ArrayLike,
+    sigma_r: ArrayLike,
+    sigma_azimuth: ArrayLike,
+    sigma_elevation: ArrayLike,
+) -> Converted:
+    """Unbiased 3D conversion: one factor e^(s/2) per angle in each coordinate.
+
+    κ = (e^((sβ+sε)/2), e^((sβ+sε)/2), e^(sε/2)) on (x, y, z); the covariance is the exact
+    true-conditioned one, D C D with D = diag(κ), evaluated at the measurement.
+    """
+    r, az, el = np.broadcast_arrays(_f(r), _f(azimuth), _f(elevation))
+    sb, se = _f(sigma_azimuth) ** 2, _f(sigma_elevation) ** 2
+    kxy = np.exp((sb + se) / 2.0)
+    kz = np.exp(se / 2.0) * np.ones_like(kxy)
+    kappa = np.stack([kxy, kxy, kz], axis=-1)
+    cov = naive_cov_given_truth_3d(r, az, el, sigma_r, sigma_azimuth, sigma_elevation)
+    cov = kappa[..., :, None] * cov * kappa[..., None, :]
+    return Converted(kappa * _point_3d(r, az, el), cov)

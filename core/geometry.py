@@ -1,0 +1,94 @@
+"""Radar geometry: lines of sight, their unit vectors and derivatives, radial velocity, angles.
+
+A radar at ``site`` sees a point p along the offset d = p − site. Azimuth β is counted in the
+x–y plane from +x towards +y, elevation ε above that plane::
+
+    r = |d|,   β = atan2(d_y, d_x),   ε = atan2(d_z, ρ),   ρ = √(d_x² + d_y²)
+    d = r u(β, ε),   u = (cos ε cos β, cos ε sin β, sin ε)       (the direction cosines)
+
+Derivatives of the unit vector, used by every linearisation in the project (the first-order
+covariance of a converted point, the EKF, the Doppler update, the velocity solve)::
+
+    ∂u/∂β = cos ε (−sin β, cos β, 0),     ∂u/∂ε = (−sin ε cos β, −sin ε sin β, cos ε)
+
+so ∂d/∂(r, β, ε) = [u, r ∂u/∂β, r ∂u/∂ε] (the columns of the polar-to-Cartesian Jacobian).
+In 2D (no elevation) the same formulas hold with ε = 0 and the z component dropped.
+
+Every function broadcasts over any leading batch shape ``(...)``; angles are radians.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+_TWO_PI = 2.0 * np.pi
+
+
+def _f(a: ArrayLike) -> NDArray[np.float64]:
+    return np.asarray(a, dtype=np.float64)
+
+
+def wrap_angle(a: ArrayLike) -> NDArray[np.float64]:
+    """Wrap angles (rad) to the interval (−π, π].  Elementwise, any shape.
+
+    ``a − 2π·ceil(a/(2π) − ½)``: subtract the whole turns that bring ``a`` nearest to 0, ties
+    (±π) going to +π. An angle already in (−π, π] is returned exactly (k = 0), tiny angles
+    included; and it is several times faster than ``np.mod``, which matters because every
+    update wraps a few (M,) vectors.
+    """
+    a = np.asarray(a, dtype=np.float64)
+    return a - _TWO_PI * np.ceil(a * (1.0 / _TWO_PI) - 0.5)
+
+
+class LineOfSight(NamedTuple):
+    """Range (m), azimuth and elevation (rad) of a target from each site, each (..., N)."""
+
+    range: NDArray[np.float64]
+    azimuth: NDArray[np.float64]
+    elevation: NDArray[np.float64]
+
+
+def line_of_sight(sites: ArrayLike, target: ArrayLike) -> LineOfSight:
+    """(r, β, ε) of ``target`` (..., 3) seen from ``sites`` (N, 3); shapes (..., N)."""
+    d = _f(target)[..., None, :] - _f(sites)
+    horiz = np.hypot(d[..., 0], d[..., 1])
+    return LineOfSight(
+        np.sqrt(horiz * horiz + d[..., 2] ** 2),
+        np.arctan2(d[..., 1], d[..., 0]),
+        np.arctan2(d[..., 2], horiz),
+    )
+
+
+def direction_cosines(azimuth: ArrayLike, elevation: ArrayLike) -> NDArray[np.float64]:
+    """u = (cos ε cos β, cos ε sin β, sin ε): (...) angles → (..., 3) unit vectors."""
+    az, el = _f(azimuth), _f(elevation)
+    ce = np.cos(el)
+    return np.stack(np.broadcast_arrays(ce * np.cos(az), ce * np.sin(az), np.sin(el)), axis=-1)
+
+
+class UnitVectorPartials(NamedTuple):
+    """∂u/∂β and ∂u/∂ε of the direction cosines, each (..., 3)."""
+
+    d_azimuth: NDArray[np.float64]
+    d_elevation: NDArray[np.float64]
+
+
+def unit_vector_partials(azimuth: ArrayLike, elevation: ArrayLike) -> UnitVectorPartials:
+    """∂u/∂β = cos ε (−sin β, cos β, 0) and ∂u/∂ε = (−sin ε cos β, −sin ε sin β, cos ε)."""
+    az, el = _f(azimuth), _f(elevation)
+    ca, sa, ce, se = np.cos(az), np.sin(az), np.cos(el), np.sin(el)
+    d_az = np.stack(np.broadcast_arrays(-ce * sa, ce * ca, np.zeros_like(ce * ca)), axis=-1)
+    d_el = np.stack(np.broadcast_arrays(-se * ca, -se * sa, ce), axis=-1)
+    return UnitVectorPartials(d_az, d_el)
+
+
+def radial_velocity(
+    position: ArrayLike, velocity: ArrayLike, site: ArrayLike = 0.0
+) -> NDArray[np.float64]:
+    """Vr = u·v = (d·v)/|d| with d = position − site: (..., D) vectors → (...), D = 2 or 3."""
+    d = _f(position) - _f(site)
+    v = _f(velocity)
+    return np.sum(d * v, axis=-1) / np.sqrt(np.sum(d * d, axis=-1))

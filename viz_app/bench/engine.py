@@ -1,0 +1,166 @@
+"""``radarviz bench``: speed of the batched filter against filterpy, measured in one run.
+
+Figures (ns per track-step = wall time / (runs × scans), one core):
+
+* ``kf_ns_per_step``: the batched converted-measurement filter end to end (``ucm`` conversion
+  of each measurement, predict, Joseph update), the code path of the Monte Carlo engine,
+  at each run count in ``runs``.
+* ``kf_filter_only_ns_per_step``: the same without the conversion (converted points given).
+* ``filterpy_ns_per_step``: filterpy ``KalmanFilter.predict`` + ``update`` on a subsample of
+  runs, with the converted points and covariances computed beforehand and not timed (so the
+  ratio is, if anything, unfair to the batched filter).
+* ``speedup_vs_filterpy`` = filterpy_ns_per_step / kf_ns_per_step.
+* ``gorshkov_s``: wall time of the whole Gorshkov experiment (six radars, 10⁵ trials each,
+  range only and range + Doppler, k = 1 … 20), best of ``repeats``.
+* ``peak_rss_mb``: peak resident memory of the process.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+from filterpy.kalman import KalmanFilter
+
+from radarviz.core.conversion.planar import convert_ucm
+from radarviz.core.experiments.prosov import BLOCK_RUNS, TrackingConfig, block_sizes, filter_block
+from radarviz.core.filters.cv import cv_init, cv_predict, cv_update, empty_batch, transition_matrix
+from radarviz.core.scenarios.planar import polar_measurements, prosov_target
+from radarviz.viz_app.runtime import peak_rss_mb
+from radarviz.viz_app.tune.panel import measure_tune_latency
+
+_H2 = np.array([[1.0, 0.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]])
+
+
+def _measurements(runs: int, steps: int, config: TrackingConfig, seed: int):
+    rng = np.random.default_rng(seed)
+    truth = config.target.truth()
+    return polar_measurements(truth, config.sigma_r_m, config.sigma_beta_rad, runs, rng)
+
+
+def bench_batched(runs: int, config: TrackingConfig, repeats: int = 3) -> tuple[float, float]:
+    """(end-to-end, filter-only) ns per track-step of the batched ucm filter; best of repeats."""
+    steps = config.target.steps
+    sr, sb, T = config.sigma_r_m, config.sigma_beta_rad, config.target.period_s
+    sizes = block_sizes(runs)
+    blocks = [_measurements(m, steps, config, seed=i) for i, m in enumerate(sizes)]
+    end_to_end = float("inf")
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        for r_hat, b_hat in blocks:
+            filter_block("ucm", r_hat, b_hat, config, lambda n, st: None)
+        end_to_end = min(end_to_end, time.perf_counter() - t0)
+    # Filter only: convert every block's measurements first, then time predict + update.
+    converted = []
+    for r_hat, b_hat in blocks:
+        c = convert_ucm(r_hat, b_hat, sr, sb)
+        converted.append(
+            (
+                np.ascontiguousarray(c.z.transpose(1, 0, 2)),
+                np.ascontiguousarray(c.R.transpose(1, 0, 2, 3)),
+            )
+        )
+    filter_only = float("inf")
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        for z, R in converted:
+            m = z.shape[1]
+            state = cv_init(z[0], R[0])
+            a, b = empty_batch(m), empty_batch(m)
+            for n in range(1, steps):
+                pred = cv_predict(state, T, out=a)
+                state = cv_update(pred, z[n], R[n], out=b)
+        filter_only = min(filter_only, time.perf_counter() - t0)
+    track_steps = runs * steps
+    return end_to_end / track_steps * 1e9, filter_only / track_steps * 1e9
+
+
+def bench_filterpy(runs: int, config: TrackingConfig) -> float:
+    """ns per step of filterpy's KalmanFilter (predict + update) on ``runs`` runs."""
+    steps = config.target.steps
+    sr, sb, T = config.sigma_r_m, config.sigma_beta_rad, config.target.period_s
+    r_hat, b_hat = _measurements(runs, steps, config, seed=12345)
+    c = convert_ucm(r_hat, b_hat, sr, sb)
+    F = transition_matrix(T)
+    elapsed = 0.0
+    for m in range(runs):
+        kf = KalmanFilter(dim_x=4, dim_z=2)
+        kf.F = F
+        kf.H = _H2
+        kf.Q = np.zeros((4, 4))
+        init = cv_init(c.z[m, :1], c.R[m, :1])
+        kf.x = init.x[0].copy()
+        kf.P = init.P[0].copy()
+        z, R = c.z[m], c.R[m]
+        t0 = time.perf_counter()
+        for n in range(1, steps):
+            kf.predict()
+            kf.update(z[n], R=R[n])
+        elapsed += time.perf_counter() - t0
+    return elapsed / (runs * (steps - 1)) * 1e9
+
+
+def bench_gorshkov(trials: int = 100_000, repeats: int = 2) -> float:
+    """Seconds for the whole Gorshkov Monte Carlo (all six presets), best of ``repeats``."""
+    from radarviz.core.finite_memory.fit import run_gorshkov
+
+    best = float("inf")
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        run_gorshkov(None, trials=trials, seed=1)
+        best = min(best, time.perf_counter() - t0)
+    return best
+
+
+def run_bench(runs: Sequence[int] = (10_000, 100_000), filterpy_runs: int = 200) -> dict[str, Any]:
+    """All figures of ``radarviz bench`` as a JSON-ready dict."""
+    config = TrackingConfig(runs=2, target=prosov_target())
+    gorshkov_s = bench_gorshkov()
+    fp = bench_filterpy(filterpy_runs, config)
+    kf, kf_only = [], []
+    for m in runs:
+        e2e, only = bench_batched(m, config)
+        kf.append(e2e)
+        kf_only.append(only)
+    return {
+        "runs": list(runs),
+        "scans": config.target.steps,
+        "block_runs": BLOCK_RUNS,
+        "kf_ns_per_step": kf,
+        "kf_filter_only_ns_per_step": kf_only,
+        "filterpy_runs": filterpy_runs,
+        "filterpy_ns_per_step": fp,
+        "speedup_vs_filterpy": [fp / v for v in kf],
+        "gorshkov_trials": 100_000,
+        "gorshkov_s": gorshkov_s,
+        "tune_median_ms": measure_tune_latency(),
+        "peak_rss_mb": peak_rss_mb(),
+    }
+
+
+def format_bench(doc: dict[str, Any]) -> str:
+    """Readable report of ``run_bench``."""
+    lines = [
+        f"filterpy KalmanFilter: {doc['filterpy_ns_per_step']:.0f} ns per step "
+        f"({doc['filterpy_runs']} runs × {doc['scans']} scans)",
+    ]
+    for m, e2e, only, sp in zip(
+        doc["runs"],
+        doc["kf_ns_per_step"],
+        doc["kf_filter_only_ns_per_step"],
+        doc["speedup_vs_filterpy"],
+        strict=True,
+    ):
+        lines.append(
+            f"batched ucm filter, {m:>7} runs: {e2e:6.1f} ns per track-step "
+            f"(filter only {only:6.1f})   speedup vs filterpy {sp:6.0f}×"
+        )
+    lines.append(
+        f"Gorshkov experiment (6 radars × {doc['gorshkov_trials']} trials, both variants): "
+        f"{doc['gorshkov_s']:.2f} s"
+    )
+    lines.append(f"tune: change → recording flushed, median {doc['tune_median_ms']:.0f} ms")
+    lines.append(f"peak RSS: {doc['peak_rss_mb']:.0f} MiB")
+    return "\n".join(lines)

@@ -1,0 +1,366 @@
+"""The ``radarviz`` command line.
+
+Bad input gets one line on standard error naming the parameter and its allowed range, and exit
+status 2; no traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from collections.abc import Callable, Sequence
+from typing import Any, NoReturn
+
+from radarviz.core.experiments.prosov import (
+    ALL_METHODS,
+    MAX_SIGMA_BETA_DEG,
+    prosov_configs,
+    run_tracking,
+)
+from radarviz.core.params import ParameterError, check_int, check_real
+from radarviz.viz_app.cli.args import integer, number, print_report
+
+EXIT_USAGE = 2
+#: Runs × cases above which a progress bar is drawn on standard error.
+PROGRESS_MIN_RUNS = 20_000
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse, but errors are one line (no usage dump) and exit with status 2."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(EXIT_USAGE, f"radarviz: error: {message}\n")
+
+
+def _fail(message: str) -> int:
+    print(f"radarviz: error: {message}", file=sys.stderr)
+    return EXIT_USAGE
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(
+        prog="radarviz",
+        description="Radar target-tracking research: converted measurements, Doppler, fusion.",
+    )
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+
+    rep = sub.add_parser("reproduce", help="reproduce a paper's experiment")
+    rep_sub = rep.add_subparsers(dest="experiment", required=True, parser_class=_Parser)
+    pro = rep_sub.add_parser(
+        "prosov", help="converted-measurement Kalman filters (Prosov), Monte Carlo"
+    )
+    pro.add_argument(
+        "--sigma-beta-deg",
+        type=number,
+        nargs="+",
+        default=[1.0, 2.0],
+        help="azimuth noise σβ in degrees, one case each (default: 1 2)",
+    )
+    pro.add_argument(
+        "--sigma-r-m", type=number, default=250.0, help="range noise σr in metres (default 250)"
+    )
+    pro.add_argument("--runs", type=integer, default=1000, help="Monte Carlo runs (default 1000)")
+    pro.add_argument("--seed", type=integer, default=1, help="random seed (default 1)")
+    pro.add_argument("--period", type=number, default=10.0, help="scan period T in s (default 10)")
+    pro.add_argument("--steps", type=integer, default=60, help="scans per run (default 60)")
+    pro.add_argument(
+        "--methods",
+        nargs="+",
+        default=list(ALL_METHODS),
+        metavar="METHOD",
+        help=f"methods to run (default all: {' '.join(ALL_METHODS)})",
+    )
+    pro.add_argument(
+        "--json", action="store_true", help="print only the JSON document on standard output"
+    )
+    pro.add_argument("--plot", metavar="FILE.png", help="write the figure (Figs. 1-2, bias, NEES)")
+
+    gor = rep_sub.add_parser(
+        "gorshkov", help="finite-memory range / radial-velocity filter (Gorshkov), Monte Carlo"
+    )
+    gor.add_argument(
+        "--trials",
+        type=integer,
+        default=100_000,
+        help="Monte Carlo trials per radar (default 100000)",
+    )
+    gor.add_argument("--seed", type=integer, default=1, help="random seed (default 1)")
+    gor.add_argument(
+        "--radars",
+        nargs="+",
+        default=None,
+        metavar="RLS",
+        help="radar presets (default all: RLS1 … RLS6)",
+    )
+    gor.add_argument(
+        "--k-max",
+        type=integer,
+        default=20,
+        help="largest window length k (default 20; the experiment has 20 scans)",
+    )
+    gor.add_argument(
+        "--custom",
+        nargs=3,
+        type=number,
+        metavar=("SIGMA_R_M", "C0", "PERIOD_S"),
+        help="add a radar 'custom' with σr (m), C0 and T (s); σVr follows from "
+        "C0 = σr² / (T² σVr²)",
+    )
+    gor.add_argument(
+        "--tracking-radar",
+        default="RLS3",
+        help="preset of the Doppler-aided tracking comparison (default RLS3)",
+    )
+    gor.add_argument(
+        "--tracking-runs",
+        type=integer,
+        default=1000,
+        help="Monte Carlo runs of the tracking comparison (0 to skip; default 1000)",
+    )
+    gor.add_argument(
+        "--sigma-beta-deg",
+        type=number,
+        default=1.0,
+        help="azimuth noise of the tracking comparison, degrees (default 1)",
+    )
+    gor.add_argument(
+        "--json", action="store_true", help="print only the JSON document on standard output"
+    )
+    gor.add_argument("--plot", metavar="FILE.png", help="write the figure (Figs. 1-3)")
+
+    vel = rep_sub.add_parser(
+        "velocity", help="3D velocity from the radial velocities of 3 radars, Monte Carlo"
+    )
+    vel.add_argument(
+        "--trials",
+        type=integer,
+        default=200_000,
+        help="Monte Carlo trials of the baseline (default 200000; the sweep uses "
+        "at most 20000 per point)",
+    )
+    vel.add_argument("--seed", type=integer, default=1, help="random seed (default 1)")
+    vel.add_argument(
+        "--json", action="store_true", help="print only the JSON document on standard output"
+    )
+    vel.add_argument(
+        "--plot", metavar="FILE.png", help="write the figure (baseline σ and correlations, sweep)"
+    )
+
+    from radarviz.viz_app.cli.recording import add_commands
+    from radarviz.viz_app.io.plots import add_commands as add_track_commands
+    from radarviz.viz_app.sweep.run import add_commands as add_sweep_commands
+
+    add_commands(sub)
+    add_track_commands(sub)
+    add_sweep_commands(sub)
+
+    tune = sub.add_parser("tune", help="Viser panel that re-runs the Prosov scene into Rerun")
+    tune.add_argument(
+        "--host",
+        default="127.0.0.1",
+        help="address to bind (default 127.0.0.1; anything else is exposed)",
+    )
+    tune.add_argument("--port", type=integer, default=0, help="panel port (default: a free one)")
+    tune.add_argument(
+        "--viewer-port", type=integer, default=0, help="web viewer port (default: a free one)"
+    )
+    tune.add_argument("--no-browser", action="store_true", help="do not open a browser")
+
+    bench = sub.add_parser("bench", help="speed of the batched filters vs filterpy")
+    bench.add_argument("--json", action="store_true", help="print only JSON")
+    bench.add_argument(
+        "--runs",
+        type=integer,
+        nargs="+",
+        default=[10_000, 100_000],
+        help="run counts to time the batched filter at (default 10000 100000)",
+    )
+    bench.add_argument(
+        "--filterpy-runs",
+        type=integer,
+        default=200,
+        help="runs of the filterpy subsample (default 200)",
+    )
+    return parser
+
+
+def _emit(
+    args: argparse.Namespace,
+    doc: dict[str, Any],
+    table: Callable[[dict[str, Any]], str],
+    plot: str,
+) -> int:
+    """Write the figure if asked, then print the JSON document or the table.
+
+    ``plot`` names the figure function as "module:function"; it is imported only when a
+    figure is asked for, so a table or JSON run does not load matplotlib.
+    """
+    if args.plot:
+        module, func = plot.split(":")
+        getattr(importlib.import_module(module), func)(doc, args.plot)
+    print_report(doc, args.json, table, allow_nan=False)
+    if args.plot and not args.json:
+        print(f"\nfigure written to {args.plot}")
+    return 0
+
+
+def _cmd_reproduce_prosov(args: argparse.Namespace) -> int:
+    for sb in args.sigma_beta_deg:
+        check_real("--sigma-beta-deg", sb, low=0.0, high=MAX_SIGMA_BETA_DEG)
+    check_real("--sigma-r-m", args.sigma_r_m, low=0.0, high=1e6)
+    check_int("--runs", args.runs, low=2)
+    check_int("--seed", args.seed, low=0)
+    check_real("--period", args.period, low=0.0, high=3600.0)
+    check_int("--steps", args.steps, low=2, high=100_000)
+    for m in args.methods:
+        if m not in ALL_METHODS:
+            raise ParameterError(f"--methods must be among {', '.join(ALL_METHODS)} (got {m!r})")
+    if args.plot is not None and not args.plot.strip():
+        raise ParameterError("--plot must name a file (got an empty string)")
+    configs = prosov_configs(
+        sigma_beta_deg=args.sigma_beta_deg,
+        runs=args.runs,
+        seed=args.seed,
+        period_s=args.period,
+        steps=args.steps,
+        sigma_r_m=args.sigma_r_m,
+        methods=args.methods,
+    )
+    from radarviz.viz_app.reports.prosov import format_prosov_table, prosov_document
+    from radarviz.viz_app.runtime import tune_allocator
+
+    tune_allocator()
+    results = []
+    show_progress = args.runs * len(configs) >= PROGRESS_MIN_RUNS
+    for cfg in configs:
+        bar = None
+        if show_progress:
+            from radarviz.viz_app.cli.progress import ProgressBar
+
+            bar = ProgressBar(f"prosov σβ={cfg.sigma_beta_deg:g}°")
+        results.append(run_tracking(cfg, progress=bar))
+    return _emit(
+        args,
+        prosov_document(results),
+        format_prosov_table,
+        "radarviz.viz_app.figures.prosov:plot_prosov",
+    )
+
+
+def _cmd_reproduce_gorshkov(args: argparse.Namespace) -> int:
+    from radarviz.core.experiments.doppler_start import DopplerTrackingConfig, run_doppler_tracking
+    from radarviz.core.finite_memory.fit import PRESETS, RadarPreset, run_gorshkov
+
+    check_int("--trials", args.trials, low=2, high=100_000_000)
+    check_int("--seed", args.seed, low=0)
+    k_max = check_int("--k-max", args.k_max, low=1, high=20)
+    radars: list = args.radars if args.radars is not None else list(PRESETS)
+    for name in radars:
+        if name not in PRESETS:
+            raise ParameterError(f"--radars must be among {', '.join(PRESETS)} (got {name!r})")
+    if args.custom is not None:
+        sr = check_real("--custom SIGMA_R_M", args.custom[0], low=0.0, high=1e6)
+        c0 = check_real("--custom C0", args.custom[1], low=0.0, high=1e8)
+        T = check_real("--custom PERIOD_S", args.custom[2], low=0.0, high=3600.0)
+        radars = [*radars, RadarPreset("custom", "-", sr, sr / (T * c0**0.5), T)]
+    if args.tracking_radar not in PRESETS:
+        raise ParameterError(
+            f"--tracking-radar must be one of {', '.join(PRESETS)} (got {args.tracking_radar!r})"
+        )
+    check_int("--tracking-runs", args.tracking_runs, low=0)
+    if args.tracking_runs == 1:
+        raise ParameterError("--tracking-runs must be 0 (skip) or an integer >= 2 (got 1)")
+    check_real("--sigma-beta-deg", args.sigma_beta_deg, low=0.0, high=MAX_SIGMA_BETA_DEG)
+    if args.plot is not None and not args.plot.strip():
+        raise ParameterError("--plot must name a file (got an empty string)")
+    from radarviz.viz_app.reports.gorshkov import format_gorshkov_table, gorshkov_document
+    from radarviz.viz_app.runtime import tune_allocator
+
+    tune_allocator()
+    result = run_gorshkov(radars, trials=args.trials, seed=args.seed, ks=range(1, k_max + 1))
+    tracking = None
+    if args.tracking_runs:
+        tracking = run_doppler_tracking(
+            DopplerTrackingConfig(
+                radar=args.tracking_radar,
+                sigma_beta_deg=args.sigma_beta_deg,
+                runs=args.tracking_runs,
+                seed=args.seed,
+            )
+        )
+    return _emit(
+        args,
+        gorshkov_document(result, tracking),
+        format_gorshkov_table,
+        "radarviz.viz_app.figures.gorshkov:plot_gorshkov",
+    )
+
+
+def _cmd_reproduce_velocity(args: argparse.Namespace) -> int:
+    from radarviz.core.velocity.estimate import run_velocity_experiment
+
+    check_int("--trials", args.trials, low=2, high=100_000_000)
+    check_int("--seed", args.seed, low=0)
+    if args.plot is not None and not args.plot.strip():
+        raise ParameterError("--plot must name a file (got an empty string)")
+    from radarviz.viz_app.reports.velocity import format_velocity_table, velocity_document
+    from radarviz.viz_app.runtime import tune_allocator
+
+    tune_allocator()
+    doc = velocity_document(run_velocity_experiment(args.trials, args.seed))
+    return _emit(
+        args, doc, format_velocity_table, "radarviz.viz_app.figures.velocity:plot_velocity"
+    )
+
+
+def _cmd_bench(args: argparse.Namespace) -> int:
+    for m in args.runs:
+        check_int("--runs", m, low=100, high=10_000_000)
+    check_int("--filterpy-runs", args.filterpy_runs, low=1, high=100_000)
+    from radarviz.viz_app.bench.engine import format_bench, run_bench
+    from radarviz.viz_app.runtime import tune_allocator
+
+    tune_allocator()
+    doc = run_bench(runs=args.runs, filterpy_runs=args.filterpy_runs)
+    print_report(doc, args.json, format_bench)
+    return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``radarviz`` console script; returns the exit status."""
+    args = build_parser().parse_args(argv)
+    try:
+        if args.command == "reproduce" and args.experiment == "prosov":
+            return _cmd_reproduce_prosov(args)
+        if args.command == "reproduce" and args.experiment == "gorshkov":
+            return _cmd_reproduce_gorshkov(args)
+        if args.command == "reproduce" and args.experiment == "velocity":
+            return _cmd_reproduce_velocity(args)
+        if args.command == "bench":
+            return _cmd_bench(args)
+        if args.command == "tune":
+            from radarviz.viz_app.tune.panel import cmd_tune
+
+            return cmd_tune(args.host, args.port, args.viewer_port, args.no_browser)
+        from radarviz.viz_app.cli.recording import COMMANDS
+
+        if args.command in COMMANDS:
+            return COMMANDS[args.command](args)
+        from radarviz.viz_app.io.plots import COMMANDS as TRACK_COMMANDS
+
+        if args.command in TRACK_COMMANDS:
+            return TRACK_COMMANDS[args.command](args)
+        from radarviz.viz_app.sweep.run import COMMANDS as SWEEP_COMMANDS
+
+        if args.command in SWEEP_COMMANDS:
+            return SWEEP_COMMANDS[args.command](args)
+    except ParameterError as exc:
+        return _fail(str(exc))
+    except OSError as exc:
+        return _fail(f"{exc.strerror or exc}: {exc.filename}" if exc.filename else str(exc))
+    return _fail(f"unknown command {args.command!r}")
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,171 @@
+"""``radarviz demo``, ``record`` and ``view``: write and serve Rerun recordings."""
+
+from __future__ import annotations
+
+import argparse
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import time
+import urllib.parse
+from pathlib import Path
+
+from radarviz.core.params import ParameterError, check_choice, check_int
+
+PRESETS = ("demo", "prosov", "gorshkov", "velocity")
+DEFAULT_DEMO_PATH = "recordings/demo.rrd"
+LOOPBACK = "127.0.0.1"
+
+
+def add_commands(sub: argparse._SubParsersAction) -> None:
+    """Register the three subcommands on the ``radarviz`` parser."""
+    demo = sub.add_parser("demo", help="headless demo: write a recording of every estimator")
+    demo.add_argument(
+        "--out",
+        default=DEFAULT_DEMO_PATH,
+        help=f"where to write the recording (default {DEFAULT_DEMO_PATH})",
+    )
+    demo.add_argument("--seed", type=int, default=1, help="random seed (default 1)")
+
+    rec = sub.add_parser("record", help="write one preset's recording")
+    rec.add_argument("--preset", required=True, help=f"one of {', '.join(PRESETS)}")
+    rec.add_argument("--out", required=True, help="path of the .rrd to write")
+    rec.add_argument("--overwrite", action="store_true", help="replace an existing file")
+    rec.add_argument("--seed", type=int, default=1, help="random seed (default 1)")
+
+    view = sub.add_parser("view", help="serve the Rerun web viewer for a recording")
+    view.add_argument(
+        "path",
+        nargs="?",
+        default=DEFAULT_DEMO_PATH,
+        help=f"recording to open (default {DEFAULT_DEMO_PATH})",
+    )
+    view.add_argument(
+        "--host",
+        default=LOOPBACK,
+        help="address to bind (default 127.0.0.1; anything else is exposed)",
+    )
+    view.add_argument("--port", type=int, default=0, help="gRPC port (default: a free one)")
+    view.add_argument(
+        "--web-port", type=int, default=0, help="web viewer port (default: a free one)"
+    )
+    view.add_argument(
+        "--native", action="store_true", help="open the native viewer instead (needs a display)"
+    )
+
+
+def _write(preset: str, out: str, overwrite: bool, seed: int) -> float:
+    from radarviz.viz_app.rerun.recording import recording_file
+    from radarviz.viz_app.rerun.scenes import record_preset
+    from radarviz.viz_app.runtime import tune_allocator
+
+    tune_allocator()
+    t0 = time.perf_counter()
+    with recording_file(out, overwrite=overwrite) as rec:
+        record_preset(rec, preset, seed=seed)
+    return time.perf_counter() - t0
+
+
+def cmd_demo(args: argparse.Namespace) -> int:
+    check_int("--seed", args.seed, low=0)
+    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    seconds = _write("demo", args.out, overwrite=True, seed=args.seed)
+    size = os.path.getsize(args.out) / 1e6
+    print(f"wrote {args.out} ({size:.1f} MB) in {seconds:.2f} s")
+    print(f"open it with:  radarviz view {args.out}    (web viewer on 127.0.0.1)")
+    print(f"          or:  rerun {args.out}            (native viewer, needs a display)")
+    return 0
+
+
+def cmd_record(args: argparse.Namespace) -> int:
+    check_choice("--preset", args.preset, PRESETS)
+    check_int("--seed", args.seed, low=0)
+    seconds = _write(args.preset, args.out, overwrite=args.overwrite, seed=args.seed)
+    print(f"wrote {args.out} ({os.path.getsize(args.out) / 1e6:.1f} MB) in {seconds:.2f} s")
+    return 0
+
+
+def free_port(host: str = LOOPBACK) -> int:
+    """A currently free TCP port on ``host`` (bind to port 0, read it, close)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind((host, 0))
+        return int(s.getsockname()[1])
+
+
+def viewer_url(host: str, web_port: int, grpc_port: int) -> str:
+    """The web viewer's address with the gRPC source it should connect to."""
+    source = f"rerun+http://{host}:{grpc_port}/proxy"
+    return f"http://{host}:{web_port}/?url={urllib.parse.quote(source, safe='')}"
+
+
+def rerun_executable() -> str:
+    exe = Path(sys.executable).with_name("rerun")
+    found = str(exe) if exe.exists() else shutil.which("rerun")
+    if not found:
+        raise ParameterError("the rerun viewer is not installed (pip install rerun-sdk)")
+    return found
+
+
+def serve_recording(path: str, host: str, grpc_port: int, web_port: int) -> subprocess.Popen:
+    """Start ``rerun --serve-web`` for ``path`` in its own process group."""
+    cmd = [
+        rerun_executable(),
+        "--serve-web",
+        path,
+        "--bind",
+        host,
+        "--port",
+        str(grpc_port),
+        "--web-viewer-port",
+        str(web_port),
+    ]
+    return subprocess.Popen(
+        cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, start_new_session=True
+    )
+
+
+def cmd_view(args: argparse.Namespace) -> int:
+    if not Path(args.path).is_file():
+        raise ParameterError(f"path must be an existing .rrd file (got {args.path!r})")
+    if args.native:
+        if not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"):
+            raise ParameterError(
+                "--native needs a display (DISPLAY is not set); "
+                "drop --native to serve the web viewer"
+            )
+        return subprocess.call([rerun_executable(), args.path])
+    if args.host != LOOPBACK:
+        print(
+            f"radarviz: warning: binding {args.host}: the viewer is reachable from other machines",
+            file=sys.stderr,
+        )
+    for name, port in (("--port", args.port), ("--web-port", args.web_port)):
+        check_int(name, port, low=0, high=65535)
+    grpc_port = args.port or free_port(args.host)
+    web_port = args.web_port or free_port(args.host)
+    proc = serve_recording(args.path, args.host, grpc_port, web_port)
+
+    def _stop(signum: int, frame: object) -> None:
+        raise SystemExit(0)  # unwinds into the finally below, which stops the viewer
+
+    signal.signal(signal.SIGTERM, _stop)
+    print(f"serving {args.path}")
+    print(f"open {viewer_url(args.host, web_port, grpc_port)}", flush=True)
+    print("stop with Ctrl-C", flush=True)
+    try:
+        return proc.wait()
+    except (KeyboardInterrupt, SystemExit):
+        return 0
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGTERM)
+            try:
+                proc.wait(timeout=5)
+            except subprocess.TimeoutExpired:
+                os.killpg(proc.pid, signal.SIGKILL)
+
+
+COMMANDS = {"demo": cmd_demo, "record": cmd_record, "view": cmd_view}

@@ -1,0 +1,150 @@
+"""The velocity experiment as a figure (``radarviz reproduce velocity --plot FILE``).
+
+Four panels from the JSON document of :mod:`viz_app.reports.velocity`:
+
+1. baseline σ of Vx, Vy, Vz: first order beside Monte Carlo (the Vz needle);
+2. baseline correlations ρxy, ρxz, ρyz: first order beside Monte Carlo;
+3. sweep: Monte Carlo σ / first-order σ (worst component) against target distance, one line per
+   altitude (dashed: the robust interquartile σ), log axes, the ±5 % band shaded;
+4. sweep: the geometry diagnostic m against distance, with the warning threshold.
+
+Built on :class:`matplotlib.figure.Figure` (never pyplot) and written atomically.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from matplotlib.axes import Axes
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+
+from radarviz.viz_app.figures.common import write_figure_atomically
+
+_AXES = ("Vx", "Vy", "Vz")
+_PAIRS = ((0, 1, "ρxy"), (0, 2, "ρxz"), (1, 2, "ρyz"))
+_FIRST, _MC = "tab:blue", "tab:orange"
+WIDTH_IN, HEIGHT_IN = 12.0, 8.5
+
+
+def _bars(
+    ax: Axes, labels: Sequence[str], first: Sequence[Any], mc: Sequence[Any], fmt: str
+) -> None:
+    x = np.arange(len(labels))
+    w = 0.38
+    f = [np.nan if v is None else float(v) for v in first]
+    m = [np.nan if v is None else float(v) for v in mc]
+    b1 = ax.bar(x - w / 2, f, w, color=_FIRST, label="first order")
+    b2 = ax.bar(x + w / 2, m, w, color=_MC, label="Monte Carlo")
+    for bars in (b1, b2):
+        ax.bar_label(bars, fmt=fmt, fontsize=8, padding=2)
+    ax.set_xticks(x, labels)
+    ax.axhline(0.0, color="0.3", lw=0.6)
+    ax.margins(y=0.15)
+    ax.legend(fontsize=9, frameon=False)
+
+
+def _sweep_series(
+    sweep: Sequence[Mapping[str, Any]], key: str
+) -> dict[float, tuple[list[float], list[float]]]:
+    """altitude → (distances, worst-component values of ``key``), finite values only."""
+    out: dict[float, tuple[list[float], list[float]]] = {}
+    for p in sweep:
+        vals = p.get(key)
+        if isinstance(vals, Sequence):
+            vals = [v for v in vals if v is not None]
+            val = max(vals, key=lambda r: abs(np.log(r))) if vals else None
+        else:
+            val = vals
+        if val is None or not np.isfinite(val) or val <= 0:
+            continue
+        xs, ys = out.setdefault(float(p["altitude_km"]), ([], []))
+        xs.append(float(p["distance_km"]))
+        ys.append(float(val))
+    return out
+
+
+def _build_figure(doc: Mapping[str, Any]) -> Figure:
+    fig = Figure(figsize=(WIDTH_IN, HEIGHT_IN), dpi=100, layout="constrained")
+    FigureCanvasAgg(fig)
+    axs = fig.subplots(2, 2)
+    b = doc["baseline"]
+    _bars(axs[0, 0], _AXES, b["sigma_first_order"], b["sigma_mc"], "%.2f")
+    axs[0, 0].set_ylabel("σ of the velocity error, m/s")
+    axs[0, 0].set_title(
+        f"Baseline σ (condition number {b['condition_number']:.2f}, m = {b['m']:.3f})", fontsize=10
+    )
+    cf, cm = b["corr_first_order"], b["corr_mc"]
+    _bars(
+        axs[0, 1],
+        [p[2] for p in _PAIRS],
+        [cf[i][j] for i, j, _ in _PAIRS],
+        [cm[i][j] for i, j, _ in _PAIRS],
+        "%.3f",
+    )
+    axs[0, 1].set_ylabel("correlation coefficient")
+    axs[0, 1].set_title("Baseline correlations of (Vx, Vy, Vz) errors", fontsize=10)
+
+    sweep = doc.get("sweep") or []
+    ratio = _sweep_series(sweep, "ratio_mc_to_linear")
+    robust = _sweep_series(sweep, "ratio_robust_to_linear")
+    mser = _sweep_series(sweep, "m")
+    colours = {h: f"C{i}" for i, h in enumerate(sorted(set(ratio) | set(mser)))}
+    ax = axs[1, 0]
+    ax.axhspan(0.95, 1.05, color="0.9", zorder=0, label="±5 %")
+    ax.axhline(1.0, color="0.4", lw=0.8)
+    for h, (xs, ys) in sorted(ratio.items()):
+        ax.plot(xs, ys, "o-", color=colours[h], lw=1.5, ms=4, label=f"h = {h:g} km")
+    for h, (xs, ys) in sorted(robust.items()):
+        ax.plot(xs, ys, "--", color=colours[h], lw=1.0)
+    ax.plot([], [], "k--", lw=1.0, label="robust (IQR) σ")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("horizontal distance of the target from the radars' centroid, km")
+    ax.set_ylabel("Monte Carlo σ / first-order σ (worst of Vx, Vy, Vz)")
+    ax.set_title(
+        f"Where the linear statistics stop holding ({doc.get('sweep_trials')} trials per point)",
+        fontsize=10,
+    )
+    ax.legend(fontsize=8, frameon=False, loc="upper left")
+    ax = axs[1, 1]
+    for h, (xs, ys) in sorted(mser.items()):
+        ax.plot(xs, ys, "o-", color=colours[h], lw=1.5, ms=4, label=f"h = {h:g} km")
+    m_warn = doc.get("m_warn")
+    if m_warn is not None:
+        ax.axhline(
+            float(m_warn),
+            color="tab:red",
+            ls="--",
+            lw=1.0,
+            label=f"warning threshold m = {float(m_warn):g}",
+        )
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("horizontal distance of the target from the radars' centroid, km")
+    ax.set_ylabel("m = max √(σε² + cos²ε σβ²) / σmin(C)")
+    ax.set_title("Geometry diagnostic m", fontsize=10)
+    ax.legend(fontsize=8, frameon=False, loc="upper left")
+    for a in axs.ravel():
+        a.grid(True, which="major", color="0.88", lw=0.6)
+    fig.suptitle(
+        f"Velocity vector from three radial velocities — {doc.get('trials')} trials, "
+        f"seed {doc.get('seed')}"
+    )
+    return fig
+
+
+def plot_velocity(doc: dict, path: str | os.PathLike) -> None:
+    """Draw the velocity document ``doc`` into the image file ``path`` (format from suffix).
+
+    Raises:
+        ValueError: ``doc`` has no baseline, or the suffix is not an image format.
+    """
+    if not isinstance(doc, Mapping) or not isinstance(doc.get("baseline"), Mapping):
+        raise ValueError("velocity document has no baseline: nothing to plot")
+    out = Path(os.fsdecode(os.fspath(path)))
+    write_figure_atomically(_build_figure(doc), out)

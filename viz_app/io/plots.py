@@ -1,0 +1,696 @@
+"""``radarviz track`` and ``radarviz simulate``: measurement files in, track files out.
+
+Measurement file (CSV, header line first, one row per plot of one target, times
+non-decreasing)::
+
+    time_s, radar, range_m, azimuth_deg [, elevation_deg] [, radial_velocity_mps]
+
+With ``elevation_deg`` the track is 3D (every row needs an elevation; methods ``naive``,
+``ucm``, ``ekf``, ``ukf``), without it 2D in the x–y plane (all seven methods; the sites' z is
+not used). A ``radial_velocity_mps`` cell may be left empty for a plot without Doppler (e.g. a
+radar that has none); a filled one is used as a second, scalar update (``--doppler ignore``
+turns that off).
+
+Radars file (TOML, read with ``tomllib``)::
+
+    [radars.NAME]
+    x_m = 0.0; y_m = 0.0; z_m = 0.0          # site, m
+    sigma_range_m = 250.0                    # > 0
+    sigma_azimuth_deg = 1.0                  # in (0, 20]
+    sigma_elevation_deg = 0.5                # in (0, 20]; needed by plots with an elevation
+    sigma_radial_velocity_mps = 1.0          # > 0; needed by plots with a radial velocity
+
+Each method keeps one track (``core.tracking.stream.StreamTracker``): started from the first plot
+(the spec's start: converted point, velocity 0 ± ``--sigma-v0``) or, with ``--init
+finite-memory``, from Gorshkov's least-squares fit over the first ``--init-k`` plots (one
+radar, one period), then predicted over each time step and updated, radar-centred.
+
+Track file (CSV), one row per plot and method, in plot order then ``--method`` order; the first
+plot's rows are the starting states (with ``--init finite-memory`` rows begin at the k-th
+plot)::
+
+    time_s, method, x_m, y_m, z_m, vx_mps, vy_mps, vz_mps,
+    p_xx, p_xy, p_xz, p_yy, p_yz, p_zz,                    position covariance (upper triangle)
+    p_vxvx, p_vxvy, p_vxvz, p_vyvy, p_vyvz, p_vzvz,        velocity covariance (upper triangle)
+    p_xvx, p_xvy, p_xvz, p_yvx, p_yvy, p_yvz, p_zvx, p_zvy, p_zvz   position–velocity block
+
+(m, m/s, m², m²/s, m²/s²; p_xvy is cov(x, vy)). In 2D, z, vz and every covariance entry
+involving them are 0. Floats are written with Python's shortest round-trip repr, so nothing is
+lost.
+
+``--out`` defaults to ``tracks.csv`` in the current directory and an existing file is replaced;
+``--rrd OUT.rrd`` also writes a Rerun recording (``viz_app.rerun.track_recording``). Both commands
+write to a temporary file beside the target and rename it when complete, so a bad input (one line on
+standard error naming file, line and column; exit 2) or a crash leaves no output and an
+existing file untouched. The measurement file is read row by row and the tracks written row by
+row: memory does not grow with the file (the recording buffers at most ``RRD_CHUNK`` plots).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import math
+import os
+import time
+import tomllib
+from collections.abc import Callable, Iterable, Iterator
+from contextlib import AbstractContextManager, ExitStack
+from dataclasses import dataclass
+from pathlib import Path
+from typing import IO
+
+import numpy as np
+from numpy.typing import NDArray
+
+from radarviz.core.experiments.prosov import ALL_METHODS, MAX_SIGMA_BETA_DEG
+from radarviz.core.params import ParameterError, check_choice, check_int, check_real
+from radarviz.core.scenarios.multi_radar import generate_measurements
+from radarviz.core.tracking.stream import (
+    INIT_MODES,
+    METHODS_3D,
+    Plot,
+    PlotError,
+    StateRow,
+    StreamOptions,
+    StreamTracker,
+    prosov_single_run,
+)
+from radarviz.viz_app.cli.args import number
+from radarviz.viz_app.io.atomic import atomic_write
+from radarviz.viz_app.runtime import peak_rss_mb
+
+REQUIRED_COLUMNS = ("time_s", "radar", "range_m", "azimuth_deg")
+OPTIONAL_COLUMNS = ("elevation_deg", "radial_velocity_mps")
+RADAR_KEYS = ("x_m", "y_m", "z_m", "sigma_range_m", "sigma_azimuth_deg")
+OPTIONAL_RADAR_KEYS = ("sigma_elevation_deg", "sigma_radial_velocity_mps")
+DEFAULT_TRACKS = "tracks.csv"
+SIM_PRESETS = ("prosov", "fusion")
+DOPPLER_MODES = ("use", "ignore")
+#: Plots read before they are tracked as one block (the bounded buffer: conversions are
+#: vectorised over a block).
+READ_BLOCK = 1024
+
+#: (name, index into the state (x, ẋ, y, ẏ, z, ż)) of the six output components.
+_COMPONENTS = (("x", 0), ("y", 2), ("z", 4), ("vx", 1), ("vy", 3), ("vz", 5))
+_PAIRS: tuple[tuple[int, int], ...] = (
+    tuple((i, j) for i in range(3) for j in range(i, 3))
+    + tuple((i, j) for i in range(3, 6) for j in range(i, 6))
+    + tuple((i, j) for i in range(3) for j in range(3, 6))
+)
+TRACK_COLUMNS: tuple[str, ...] = (
+    "time_s",
+    "method",
+    "x_m",
+    "y_m",
+    "z_m",
+    "vx_mps",
+    "vy_mps",
+    "vz_mps",
+    *(f"p_{_COMPONENTS[i][0]}{_COMPONENTS[j][0]}" for i, j in _PAIRS),
+)
+_STATE_INDEX = np.array([k for _, k in _COMPONENTS])
+_COV_ROWS = np.array([_COMPONENTS[i][1] for i, _ in _PAIRS])
+_COV_COLS = np.array([_COMPONENTS[j][1] for _, j in _PAIRS])
+
+
+@dataclass(frozen=True)
+class Radar:
+    """One radar of the radars file: site (m) and accuracies (m, degrees, m/s; None: absent)."""
+
+    name: str
+    x_m: float
+    y_m: float
+    z_m: float
+    sigma_range_m: float
+    sigma_azimuth_deg: float
+    sigma_elevation_deg: float | None = None
+    sigma_radial_velocity_mps: float | None = None
+
+
+# --------------------------------------------------------------------------------------------
+# Parsing and validation (pure: text in, values or one-line ParameterError out)
+# --------------------------------------------------------------------------------------------
+
+
+def _bad(where: str, column: str, what: str, got: object) -> ParameterError:
+    return ParameterError(f"{where}, column {column}: {what} (got {got!r})")
+
+
+_ANGLE_SIGMAS = ("sigma_azimuth_deg", "sigma_elevation_deg")
+
+
+def parse_radars(text: str, source: str) -> dict[str, Radar]:
+    """Radars from TOML text; errors name ``source``, the radar and the key."""
+    try:
+        doc = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ParameterError(f"{source}: not valid TOML: {exc}") from None
+    extra = sorted(set(doc) - {"radars"})
+    if extra:
+        raise ParameterError(
+            f"{source}: unknown top-level key {extra[0]!r} (expected [radars.NAME] tables)"
+        )
+    tables = doc.get("radars")
+    if not isinstance(tables, dict) or not tables:
+        raise ParameterError(f"{source}: no radars (expected [radars.NAME] tables)")
+    radars = {}
+    for name, table in tables.items():
+        where = f"{source}, radar {name!r}"
+        if not isinstance(table, dict):
+            raise ParameterError(f"{where}: must be a table [radars.{name}]")
+        for key in table:
+            if key not in RADAR_KEYS + OPTIONAL_RADAR_KEYS:
+                raise ParameterError(
+                    f"{where}, key {key}: unknown key "
+                    f"(expected {', '.join(RADAR_KEYS + OPTIONAL_RADAR_KEYS)})"
+                )
+        vals: dict[str, float] = {}
+        for key in RADAR_KEYS + OPTIONAL_RADAR_KEYS:
+            if key not in table:
+                if key in RADAR_KEYS:
+                    raise ParameterError(f"{where}, key {key}: missing")
+                continue
+            v = table[key]
+            if key.startswith("sigma_"):
+                high = MAX_SIGMA_BETA_DEG if key in _ANGLE_SIGMAS else None
+                rng = f"in (0, {high:g}]" if high else "> 0"
+                ok = _is_real(v) and math.isfinite(v) and 0 < v and (high is None or v <= high)
+            else:
+                rng, ok = "", _is_real(v) and math.isfinite(v)
+            if not ok:
+                raise ParameterError(
+                    f"{where}, key {key}: must be a finite number {rng}".rstrip() + f" (got {v!r})"
+                )
+            vals[key] = float(v)
+        radars[name] = Radar(name, *(vals.get(k) for k in RADAR_KEYS + OPTIONAL_RADAR_KEYS))
+    return radars
+
+
+def _is_real(v: object) -> bool:
+    return isinstance(v, int | float) and not isinstance(v, bool)
+
+
+def _number(text: str) -> float | None:
+    try:
+        v = float(text)
+    except ValueError:
+        return None
+    return v if math.isfinite(v) else None
+
+
+class PlotReader:
+    """Validated plots of a measurement CSV, one at a time (bounded memory).
+
+    The header is read on construction (``three_d``, ``doppler`` tell which optional columns
+    it has); iterating yields (line number, ``Plot``). Raises ``ParameterError``
+    "SOURCE line L, column C: …" at the first bad value.
+    """
+
+    def __init__(self, lines: Iterable[str], source: str, radars: dict[str, Radar]):
+        self.source, self.radars = source, radars
+        self._reader = reader = csv.reader(lines)
+        try:
+            header = next(reader, None)
+        except UnicodeDecodeError:
+            raise ParameterError(f"{source} line 1: not UTF-8 text") from None
+        if not header:
+            raise ParameterError(f"{source} line 1: missing header ({', '.join(REQUIRED_COLUMNS)})")
+        header = [h.strip() for h in header]
+        known = REQUIRED_COLUMNS + OPTIONAL_COLUMNS
+        for h in header:
+            if h not in known:
+                raise ParameterError(
+                    f"{source} line 1, column {h}: unknown column (expected {', '.join(known)})"
+                )
+            if header.count(h) > 1:
+                raise ParameterError(f"{source} line 1, column {h}: appears twice")
+        for h in REQUIRED_COLUMNS:
+            if h not in header:
+                raise ParameterError(f"{source} line 1, column {h}: missing")
+        self.header = header
+        self.three_d = "elevation_deg" in header
+        self.doppler = "radial_velocity_mps" in header
+
+    def __iter__(self) -> Iterator[tuple[int, Plot]]:
+        source, radars, reader, header = self.source, self.radars, self._reader, self.header
+        idx = {h: i for i, h in enumerate(header)}
+        i_t, i_radar, i_r, i_az = (idx[h] for h in REQUIRED_COLUMNS)
+        i_el = idx.get("elevation_deg")
+        i_vr = idx.get("radial_velocity_mps")
+        width = len(header)
+        last_t = -math.inf
+        count = 0
+        while True:
+            try:
+                row = next(reader, None)
+            except UnicodeDecodeError:
+                raise ParameterError(
+                    f"{source} line {reader.line_num + 1}: not UTF-8 text"
+                ) from None
+            except csv.Error as exc:
+                raise ParameterError(f"{source} line {reader.line_num}: {exc}") from None
+            if row is None:
+                break
+            line = reader.line_num
+            if not row or (len(row) == 1 and not row[0].strip()):
+                continue  # blank line
+            where = f"{source} line {line}"
+            if len(row) != width:
+                raise ParameterError(f"{where}: expected {width} fields, got {len(row)}")
+            t = _number(row[i_t])
+            if t is None:
+                raise _bad(where, "time_s", "must be a finite number", row[i_t])
+            if t < last_t:
+                raise _bad(
+                    where, "time_s", f"must not be before the previous time {last_t!r}", row[i_t]
+                )
+            name = row[i_radar].strip()
+            radar = radars.get(name)
+            if radar is None:
+                raise _bad(where, "radar", f"unknown radar (known: {', '.join(radars)})", name)
+            r = _number(row[i_r])
+            if r is None or r <= 0:
+                raise _bad(where, "range_m", "must be a finite number > 0", row[i_r])
+            az = _number(row[i_az])
+            if az is None or abs(az) > 360:
+                raise _bad(
+                    where, "azimuth_deg", "must be a finite number in [-360, 360]", row[i_az]
+                )
+            el = sigma_el = None
+            if i_el is not None:
+                el = _number(row[i_el])
+                if el is None or abs(el) > 90:
+                    raise _bad(
+                        where, "elevation_deg", "must be a finite number in [-90, 90]", row[i_el]
+                    )
+                sigma_el = radar.sigma_elevation_deg
+                if sigma_el is None:
+                    raise _bad(
+                        where,
+                        "elevation_deg",
+                        f"radar {name!r} has no sigma_elevation_deg in the radars file",
+                        row[i_el],
+                    )
+            vr = sigma_vr = None
+            if i_vr is not None and row[i_vr].strip():  # an empty cell: no Doppler here
+                vr = _number(row[i_vr])
+                if vr is None:
+                    raise _bad(
+                        where, "radial_velocity_mps", "must be a finite number or empty", row[i_vr]
+                    )
+                sigma_vr = radar.sigma_radial_velocity_mps
+                if sigma_vr is None:
+                    raise _bad(
+                        where,
+                        "radial_velocity_mps",
+                        f"radar {name!r} has no sigma_radial_velocity_mps in the radars file",
+                        row[i_vr],
+                    )
+            last_t = t
+            count += 1
+            yield (
+                line,
+                Plot(
+                    t,
+                    r,
+                    math.radians(az),
+                    radar.sigma_range_m,
+                    math.radians(radar.sigma_azimuth_deg),
+                    (radar.x_m, radar.y_m, radar.z_m),
+                    name,
+                    None if el is None else math.radians(el),
+                    0.0 if sigma_el is None else math.radians(sigma_el),
+                    vr,
+                    0.0 if sigma_vr is None else sigma_vr,
+                ),
+            )
+        if count == 0:
+            raise ParameterError(f"{source}: no plots after the header")
+
+
+def track_row(time_s: float, method: str, x: NDArray[np.float64], P: NDArray[np.float64]) -> list:
+    """One output row from a state x (6,) = (x, ẋ, y, ẏ, z, ż) and its P (6, 6)."""
+    return [time_s, method, *x[_STATE_INDEX].tolist(), *P[_COV_ROWS, _COV_COLS].tolist()]
+
+
+def state_from_row(values: dict[str, str]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The state x (6,) and P (6, 6) of one track-file row (the inverse of ``track_row``)."""
+    x = np.zeros(6)
+    x[_STATE_INDEX] = [float(values[c]) for c in TRACK_COLUMNS[2:8]]
+    P = np.zeros((6, 6))
+    P[_COV_ROWS, _COV_COLS] = [float(values[c]) for c in TRACK_COLUMNS[8:]]
+    P[_COV_COLS, _COV_ROWS] = P[_COV_ROWS, _COV_COLS]
+    return x, P
+
+
+# --------------------------------------------------------------------------------------------
+# Files
+# --------------------------------------------------------------------------------------------
+
+
+def atomic_text(path: str | os.PathLike) -> AbstractContextManager[IO[str]]:
+    """A UTF-8 text file (csv newlines) that appears at ``path`` only when complete."""
+    return atomic_write(path, "w", newline="", encoding="utf-8")
+
+
+def load_radars(path: str) -> dict[str, Radar]:
+    try:
+        text = Path(path).read_bytes().decode("utf-8")
+    except UnicodeDecodeError:
+        raise ParameterError(f"{path}: not UTF-8 text") from None
+    return parse_radars(text, path)
+
+
+@dataclass(frozen=True)
+class TrackSummary:
+    """What ``run_track`` did: plots read, rows written, 2D/3D, methods, wall time (s)."""
+
+    plots: int
+    rows: int
+    three_d: bool
+    methods: tuple[str, ...]
+    seconds: float
+
+
+def track_lines(
+    lines: Iterable[str],
+    source: str,
+    radars: dict[str, Radar],
+    methods: tuple[str, ...] | None,
+    options: StreamOptions,
+    on_rows: Callable[[Plot, list[StateRow]], None],
+) -> tuple[int, bool, tuple[str, ...]]:
+    """Track a measurement CSV given as lines; ``on_rows(plot, rows)`` after every plot.
+
+    Plots are read and tracked ``READ_BLOCK`` at a time, so at most that many are held.
+
+    ``methods`` None: every method of the file's kind (``ALL_METHODS`` in 2D, ``METHODS_3D``
+    in 3D). Returns (plots, three_d, methods). Tracker errors come back as
+    "SOURCE line L, column C: …".
+    """
+    reader = PlotReader(lines, source, radars)
+    if methods is None:
+        methods = METHODS_3D if reader.three_d else ALL_METHODS
+    try:
+        tracker = StreamTracker(methods, reader.three_d, options)
+    except ParameterError as exc:  # its only errors are about the methods: name the flag
+        raise ParameterError(f"--{exc}") from None
+    plots = 0
+    block: list[tuple[int, Plot]] = []
+
+    def run_block() -> None:
+        try:
+            rows = tracker.add_block([plot for _, plot in block])
+        except PlotError as exc:
+            line = block[exc.index][0]
+            raise ParameterError(f"{source} line {line}, column {exc.column}: {exc}") from None
+        for (_, plot), plot_rows in zip(block, rows, strict=True):
+            on_rows(plot, plot_rows)
+        block.clear()
+
+    for line, plot in reader:
+        block.append((line, plot))
+        plots += 1
+        if len(block) == READ_BLOCK:
+            run_block()
+    if block:
+        run_block()
+    return plots, reader.three_d, methods
+
+
+def run_track(
+    input_path: str,
+    radars_path: str,
+    out_path: str,
+    methods: tuple[str, ...] | None = None,
+    options: StreamOptions | None = None,
+    rrd_path: str | None = None,
+) -> TrackSummary:
+    """Track every plot of ``input_path`` into ``out_path`` (and ``rrd_path``)."""
+    options = options or StreamOptions()
+    radars = load_radars(radars_path)
+    start = time.perf_counter()
+    with ExitStack() as stack:
+        src = stack.enter_context(open(input_path, newline="", encoding="utf-8-sig"))
+        out = stack.enter_context(atomic_text(out_path))
+        w = csv.writer(out)
+        w.writerow(TRACK_COLUMNS)
+        logger = None
+        if rrd_path is not None:
+            from radarviz.viz_app.rerun.track_recording import (
+                TrackRecorder,  # Rerun only when asked for
+            )
+
+            logger = stack.enter_context(TrackRecorder.to_file(rrd_path, radars.values()))
+        written = 0
+
+        def on_rows(plot: Plot, rows: list[StateRow]) -> None:
+            nonlocal written
+            w.writerows([track_row(plot.time_s, m, x, P) for m, x, P in rows])
+            written += len(rows)
+            if logger is not None:
+                logger.add(plot, rows)
+
+        plots, three_d, used = track_lines(src, input_path, radars, methods, options, on_rows)
+    return TrackSummary(plots, written, three_d, tuple(used), time.perf_counter() - start)
+
+
+# --------------------------------------------------------------------------------------------
+# Simulation presets
+# --------------------------------------------------------------------------------------------
+
+
+def _radar_toml(radars: Iterable[Radar]) -> str:
+    out = []
+    for r in radars:
+        out.append(f"[radars.{r.name}]")
+        for key in RADAR_KEYS + OPTIONAL_RADAR_KEYS:
+            v = getattr(r, key)
+            if v is not None:
+                out.append(f"{key} = {float(v)!r}")
+        out.append("")
+    return "\n".join(out)
+
+
+def prosov_plots(seed: int = 1, sigma_beta_deg: float = 1.0) -> tuple[list[Plot], list[Radar]]:
+    """The Prosov scenario's one run (``prosov_single_run``): one 2D radar at the origin."""
+    times, r_hat, b_hat, cfg = prosov_single_run(seed, sigma_beta_deg)
+    radar = Radar("radar", 0.0, 0.0, 0.0, cfg.sigma_r_m, cfg.sigma_beta_deg)
+    plots = [
+        Plot(
+            float(t),
+            float(r),
+            math.radians(math.degrees(float(b))),
+            cfg.sigma_r_m,
+            math.radians(cfg.sigma_beta_deg),
+            radar="radar",
+        )
+        for t, r, b in zip(times, r_hat[0], b_hat[0], strict=True)
+    ]
+    return plots, [radar]
+
+
+def fusion_plots(seed: int = 1, scans: int = 60) -> tuple[list[Plot], list[Radar]]:
+    """The velocity paper's three 3D radars with Doppler, scans staggered by T/3, one target.
+
+    The target flies the paper's baseline track for 200 s, then holds a 0.005 rad/s turn (a
+    circle of ≈ 50 km radius) for as long as ``scans`` asks, so long files stay in coverage.
+    Each radar's measurements come from ``core.scenarios.multi_radar.generate_measurements``.
+    """
+    from dataclasses import replace
+
+    from radarviz.core.scenarios.multi_radar import Scenario3D, Segment, Trajectory3D
+    from radarviz.core.velocity.estimate import BASELINE_TARGET_M, BASELINE_VELOCITY_MPS
+    from radarviz.viz_app.rerun.scenes import fusion_scenario
+
+    base = fusion_scenario()
+    period = base.radars[0].period
+    n_radars = len(base.radars)
+    sites = tuple(replace(r, t0=k * period / n_radars) for k, r in enumerate(base.radars))
+    trajectory = Trajectory3D(
+        BASELINE_TARGET_M, BASELINE_VELOCITY_MPS, (Segment(200.0), Segment(1e12, turn_rate=0.005))
+    )
+    scenario = Scenario3D(sites, trajectory)
+    meas = generate_measurements(scenario, (scans - 1) * period + 2 * period / 3, seed=seed)
+    radars = [
+        Radar(
+            s.name,
+            *map(float, s.position),
+            s.sigma_r,
+            math.degrees(s.sigma_azimuth),
+            math.degrees(s.sigma_elevation),
+            s.sigma_vr,
+        )
+        for s in sites
+    ]
+    plots = []
+    for s in sites:
+        m = meas[s.name]
+        # Angles and σ through degrees and back, exactly as the file will give them.
+        sb, se = (math.radians(math.degrees(v)) for v in (s.sigma_azimuth, s.sigma_elevation))
+        for k in range(min(scans, m.t.size)):
+            plots.append(
+                Plot(
+                    float(m.t[k]),
+                    float(m.range[k]),
+                    math.radians(math.degrees(float(m.azimuth[k]))),
+                    s.sigma_r,
+                    sb,
+                    tuple(map(float, s.position)),
+                    s.name,
+                    math.radians(math.degrees(float(m.elevation[k]))),
+                    se,
+                    float(m.radial_velocity[k]),
+                    s.sigma_vr,
+                )
+            )
+    plots.sort(key=lambda p: p.time_s)  # stable: radars in order at equal times
+    return plots, radars
+
+
+def write_measurements(
+    meas_path: str, radars_path: str, plots: list[Plot], radars: list[Radar]
+) -> int:
+    """Plots as a measurement CSV and their radars as TOML, both atomic; returns plots."""
+    three_d = plots[0].elevation_rad is not None
+    doppler = any(p.radial_velocity_mps is not None for p in plots)
+    header = (
+        list(REQUIRED_COLUMNS)
+        + (["elevation_deg"] if three_d else [])
+        + (["radial_velocity_mps"] if doppler else [])
+    )
+    with atomic_text(meas_path) as fh, atomic_text(radars_path) as rh:
+        w = csv.writer(fh)
+        w.writerow(header)
+        for p in plots:
+            row = [p.time_s, p.radar, p.range_m, math.degrees(p.azimuth_rad)]
+            if three_d:
+                assert p.elevation_rad is not None
+                row.append(math.degrees(p.elevation_rad))
+            if doppler:
+                row.append("" if p.radial_velocity_mps is None else p.radial_velocity_mps)
+            w.writerow(row)
+        rh.write(_radar_toml(radars))
+    return len(plots)
+
+
+def simulated_plots(
+    preset: str, seed: int = 1, sigma_beta_deg: float = 1.0, scans: int = 60
+) -> tuple[list[Plot], list[Radar]]:
+    """A preset's plots and radars (the plots' angles already rounded through degrees, so
+    tracking them equals tracking the file ``simulate`` writes)."""
+    check_choice("--preset", preset, SIM_PRESETS)
+    if preset == "prosov":
+        return prosov_plots(seed, sigma_beta_deg)
+    return fusion_plots(seed, scans)
+
+
+# --------------------------------------------------------------------------------------------
+# Command line
+# --------------------------------------------------------------------------------------------
+
+
+def add_commands(sub: argparse._SubParsersAction) -> None:
+    """Register ``track`` and ``simulate`` on the ``radarviz`` parser."""
+    tr = sub.add_parser("track", help="track a measurement CSV file into a track CSV file")
+    tr.add_argument("--input", required=True, metavar="MEAS.csv", help="measurement CSV")
+    tr.add_argument("--radars", required=True, metavar="RADARS.toml", help="radar sites, σ")
+    tr.add_argument(
+        "--method",
+        nargs="+",
+        default=None,
+        metavar="METHOD",
+        help=f"methods (default all: {' '.join(ALL_METHODS)} in 2D, {' '.join(METHODS_3D)} in 3D)",
+    )
+    tr.add_argument(
+        "--out",
+        default=DEFAULT_TRACKS,
+        help=f"track CSV to write, replaced if it exists (default {DEFAULT_TRACKS})",
+    )
+    tr.add_argument(
+        "--rrd",
+        default=None,
+        metavar="OUT.rrd",
+        help="also write a Rerun recording of the plots and tracks (replaced)",
+    )
+    tr.add_argument(
+        "--init",
+        default="first-plot",
+        metavar="MODE",
+        help=f"track start: {' or '.join(INIT_MODES)} (default first-plot)",
+    )
+    tr.add_argument(
+        "--init-k", type=int, default=3, help="plots in the finite-memory start window (default 3)"
+    )
+    tr.add_argument(
+        "--doppler",
+        default="use",
+        metavar="MODE",
+        help="radial velocities: use or ignore (default use)",
+    )
+    tr.add_argument(
+        "--sigma-a",
+        type=number,
+        default=0.0,
+        help="process-noise acceleration std, m/s² (default 0)",
+    )
+    tr.add_argument(
+        "--sigma-v0", type=number, default=1000.0, help="initial velocity std, m/s (default 1000)"
+    )
+
+    sim = sub.add_parser("simulate", help="write a preset's measurements and radars files")
+    sim.add_argument(
+        "--preset",
+        required=True,
+        help="prosov (one 2D radar, the Prosov run) or fusion (three 3D radars with Doppler)",
+    )
+    sim.add_argument("--out", required=True, metavar="MEAS.csv", help="measurement CSV to write")
+    sim.add_argument(
+        "--radars-out", required=True, metavar="RADARS.toml", help="radars TOML to write"
+    )
+    sim.add_argument("--seed", type=int, default=1, help="random seed (default 1)")
+    sim.add_argument(
+        "--sigma-beta-deg",
+        type=number,
+        default=1.0,
+        help="prosov: azimuth noise σβ, degrees (default 1)",
+    )
+    sim.add_argument("--scans", type=int, default=60, help="fusion: scans per radar (default 60)")
+
+
+def cmd_track(args: argparse.Namespace) -> int:
+    options = StreamOptions(
+        sigma_a_mps2=check_real("--sigma-a", args.sigma_a, low=0.0, low_open=False),
+        sigma_v0_mps=check_real("--sigma-v0", args.sigma_v0, low=0.0),
+        use_doppler=check_choice("--doppler", args.doppler, DOPPLER_MODES) == "use",
+        init=check_choice("--init", args.init, INIT_MODES),
+        init_k=check_int("--init-k", args.init_k, low=2, high=1000),
+    )
+    methods = None if args.method is None else tuple(args.method)
+    s = run_track(args.input, args.radars, args.out, methods, options, args.rrd)
+    rate = s.plots / s.seconds if s.seconds > 0 else math.inf
+    extra = f" and {args.rrd}" if args.rrd else ""
+    print(
+        f"tracked {s.plots} plots ({'3D' if s.three_d else '2D'}) with {len(s.methods)} "
+        f"method(s) into {args.out}{extra}: {s.rows} rows, {s.seconds:.2f} s, "
+        f"{rate:.0f} plots/s, peak RSS {peak_rss_mb():.0f} MB"
+    )
+    return 0
+
+
+def cmd_simulate(args: argparse.Namespace) -> int:
+    check_choice("--preset", args.preset, SIM_PRESETS)
+    check_int("--seed", args.seed, low=0)
+    check_real("--sigma-beta-deg", args.sigma_beta_deg, low=0.0, high=MAX_SIGMA_BETA_DEG)
+    check_int("--scans", args.scans, low=2, high=10_000_000)
+    plots, radars = simulated_plots(args.preset, args.seed, args.sigma_beta_deg, args.scans)
+    n = write_measurements(args.out, args.radars_out, plots, radars)
+    print(f"wrote {n} plots to {args.out} and {len(radars)} radar(s) to {args.radars_out}")
+    return 0
+
+
+COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
+    "track": cmd_track,
+    "simulate": cmd_simulate,
+}
