@@ -37,7 +37,7 @@ from numpy.typing import NDArray
 
 from radarviz.core.filters.polar import UKFParams, wrap_angle
 from radarviz.core.finite_memory.fit import FiniteMemoryFit
-from radarviz.core.velocity.estimate import line_of_sight
+from radarviz.core.geometry import line_of_sight
 
 Vec = NDArray[np.float64]
 Mat = NDArray[np.float64]

@@ -69,6 +69,12 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from radarviz.core.conversion.planar import convert_ucm_3d, naive_cov_given_truth_3d
+from radarviz.core.geometry import (
+    LineOfSight,
+    direction_cosines,
+    line_of_sight,
+    unit_vector_partials,
+)
 from radarviz.core.params import ParameterError, check_int
 
 #: m above which the first-order statistics are flagged as unreliable. In the sweep of
@@ -135,40 +141,6 @@ def _sites(sites: ArrayLike) -> NDArray[np.float64]:
 # --------------------------------------------------------------------------------------------
 
 
-class LineOfSight(NamedTuple):
-    """Range, azimuth and elevation of the target from each site, each (..., N)."""
-
-    range: NDArray[np.float64]
-    azimuth: NDArray[np.float64]
-    elevation: NDArray[np.float64]
-
-
-def line_of_sight(sites: ArrayLike, target: ArrayLike) -> LineOfSight:
-    """(r, β, ε) of ``target`` (..., 3) seen from ``sites`` (N, 3); shapes (..., N)."""
-    d = _f(target)[..., None, :] - _f(sites)
-    horiz = np.hypot(d[..., 0], d[..., 1])
-    return LineOfSight(
-        np.sqrt(horiz * horiz + d[..., 2] ** 2),
-        np.arctan2(d[..., 1], d[..., 0]),
-        np.arctan2(d[..., 2], horiz),
-    )
-
-
-def direction_cosines(azimuth: ArrayLike, elevation: ArrayLike) -> NDArray[np.float64]:
-    """C with rows c_k = [cos ε cos β, cos ε sin β, sin ε]: (..., N) angles → (..., N, 3)."""
-    az, el = _f(azimuth), _f(elevation)
-    ce = np.cos(el)
-    return np.stack(np.broadcast_arrays(ce * np.cos(az), ce * np.sin(az), np.sin(el)), axis=-1)
-
-
-def _partials(azimuth: NDArray, elevation: NDArray) -> tuple[NDArray, NDArray]:
-    """u = ∂c/∂ε and w = ∂c/∂β, each (..., N, 3)."""
-    ca, sa, ce, se = np.cos(azimuth), np.sin(azimuth), np.cos(elevation), np.sin(elevation)
-    u = np.stack([-se * ca, -se * sa, ce], axis=-1)
-    w = np.stack([-ce * sa, ce * ca, np.zeros_like(ce * ca)], axis=-1)
-    return u, w
-
-
 def equivalent_variance(
     azimuth: ArrayLike,
     elevation: ArrayLike,
@@ -178,7 +150,7 @@ def equivalent_variance(
     sigma_azimuth: ArrayLike,
 ) -> NDArray[np.float64]:
     """σeq_k² = σVr_k² + g_ε,k² σε_k² + g_β,k² σβ_k², shape (..., N); ``velocity`` (..., 3)."""
-    u, w = _partials(_f(azimuth), _f(elevation))
+    w, u = unit_vector_partials(azimuth, elevation)
     v = _f(velocity)[..., None, :]
     g_e, g_b = np.sum(u * v, axis=-1), np.sum(w * v, axis=-1)
     return _f(sigma_vr) ** 2 + (g_e * _f(sigma_elevation)) ** 2 + (g_b * _f(sigma_azimuth)) ** 2
@@ -435,7 +407,7 @@ def velocity_statistics(problem: VelocityProblem) -> VelocityStats:
     se2, sb2 = pr.sigma_elevation**2, pr.sigma_azimuth**2
     ce = np.cos(el)
     h = 0.5 * (se2 * vr + sb2 * ce * (np.cos(az) * V[0] + np.sin(az) * V[1]))
-    u, w = _partials(az, el)
+    w, u = unit_vector_partials(az, el)
     g_e, g_b = u @ V, w @ V
     a_cols = A.T  # (N, 3): a_k
     d = se2 * g_e * np.sum(a_cols * u, axis=1) + sb2 * g_b * np.sum(a_cols * w, axis=1)
