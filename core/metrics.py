@@ -27,7 +27,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import stats
 
-from radarviz.core.filters.cv import CVBatch, quad_form_inv
+from radarviz.core.filters.state import CVBatch, quad_form_inv
 
 #: Names of the running sums, in the row order of ``MetricsAccumulator.to_arrays``.
 SUM_NAMES: tuple[str, ...] = (

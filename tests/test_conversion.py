@@ -35,6 +35,7 @@ from numpy.polynomial.hermite_e import hermegauss
 from scipy.stats import norm
 
 from radarviz.core.conversion import planar as cv
+from radarviz.core.conversion import spatial as cv3
 
 DEG = math.pi / 180.0
 
@@ -216,7 +217,9 @@ def test_naive_cov_given_truth_3d(cfg: tuple[float, ...]) -> None:
     m, m_se = mean_se(pts)
     check_mc(m, _spec_mean_3d(r, az, el, sa, se), m_se, f"naive 3D mean {cfg}")
     c, c_se = cov_se(pts)
-    exact = cv.naive_cov_given_truth_3d(r, az, el, sr, sa, se)
+    exact = cv3.naive_cov_given_truth_3d(
+        r, az, el, sigma_r_m=sr, sigma_azimuth_rad=sa, sigma_elevation_rad=se
+    )
     assert exact.shape == (3, 3)
     check_mc(upper(c), upper(exact), upper(c_se), f"naive 3D cov {cfg}")
 
@@ -323,17 +326,25 @@ def test_ucm_3d_unbiased_with_exact_covariance(cfg: tuple[float, ...]) -> None:
     rng = np.random.default_rng([6, CONFIGS_3D.index(cfg)])
     rh, ah = _polar_draws(rng, N_MC, r, az, sr, sa)
     eh = el + se * rng.standard_normal(N_MC)
-    z = cv.convert_ucm_3d(rh, ah, eh, sr, sa, se).z
+    z = cv3.convert_ucm_3d(rh, ah, eh, sigma_r_m=sr, sigma_azimuth_rad=sa, sigma_elevation_rad=se).z
     truth = _spec_point_3d(r, az, el)
     check_mean(z, truth, f"ucm 3D mean {cfg}")
 
     # convert_ucm_3d evaluates its covariance at the *measured* angles, so the formula is
     # tested at the truth: D · naive_cov_given_truth_3d · D with D the per-axis scales.
     d = _ucm_3d_scales(sa, se)
-    exact = d[:, None] * cv.naive_cov_given_truth_3d(r, az, el, sr, sa, se) * d[None, :]
+    exact = (
+        d[:, None]
+        * cv3.naive_cov_given_truth_3d(
+            r, az, el, sigma_r_m=sr, sigma_azimuth_rad=sa, sigma_elevation_rad=se
+        )
+        * d[None, :]
+    )
     c, c_se = cov_se(z)
     check_mc(upper(c), upper(exact), upper(c_se), f"ucm 3D cov {cfg}")
-    at_truth = cv.convert_ucm_3d(r, az, el, sr, sa, se)
+    at_truth = cv3.convert_ucm_3d(
+        r, az, el, sigma_r_m=sr, sigma_azimuth_rad=sa, sigma_elevation_rad=se
+    )
     assert rel_entrywise(at_truth.R, exact) < 1e-13
     np.testing.assert_allclose(at_truth.z, d * truth, rtol=1e-14)
 
@@ -409,7 +420,9 @@ def test_naive_3d_cov_is_j_diag_jt(cfg: tuple[float, ...]) -> None:
         np.array([1e-3 * r, 1e-5, 1e-5]),
     )
     ref = jac @ np.diag([sr**2, sa**2, se**2]) @ jac.T
-    out = cv.convert_naive_3d(r, az, el, sr, sa, se)
+    out = cv3.convert_naive_3d(
+        r, az, el, sigma_r_m=sr, sigma_azimuth_rad=sa, sigma_elevation_rad=se
+    )
     assert rel_entrywise(out.R, ref) < 1e-6
     np.testing.assert_allclose(out.z, _spec_point_3d(r, az, el), rtol=1e-15, atol=1e-12 * r)
 
@@ -461,7 +474,12 @@ def test_exact_covariances_high_precision(cfg: tuple[float, ...]) -> None:
     for got, ref in (
         (cv.naive_cov_given_truth(r, 0.0, sr, sb), naive),
         (cv.averaged_cov(r, 0.0, sr, sb), avg),
-        (cv.naive_cov_given_truth_3d(r, 0.0, 0.0, sr, sb, sb), naive3),
+        (
+            cv3.naive_cov_given_truth_3d(
+                r, 0.0, 0.0, sigma_r_m=sr, sigma_azimuth_rad=sb, sigma_elevation_rad=sb
+            ),
+            naive3,
+        ),
     ):
         ref_f = np.array([float(v) for v in ref])
         np.testing.assert_allclose(np.diagonal(got), ref_f, rtol=1e-12)
@@ -522,12 +540,15 @@ def test_2d_covariances_symmetric_pd(r, beta, sr, sb, rp, bp) -> None:
 @given(r=radius, az=angle, el=elevation, sr=sigma_r, sa=sigma_angle, se=sigma_angle)
 @example(r=1e7, az=0.0, el=0.0, sr=0.1, sa=1e-5, se=1e-5)  # negative variance before the fix
 def test_3d_covariances_symmetric_pd(r, az, el, sr, sa, se) -> None:
-    for name, fn in (("naive_3d", cv.convert_naive_3d), ("ucm_3d", cv.convert_ucm_3d)):
-        out = fn(r, az, el, sr, sa, se)
+    for name, fn in (("naive_3d", cv3.convert_naive_3d), ("ucm_3d", cv3.convert_ucm_3d)):
+        out = fn(r, az, el, sigma_r_m=sr, sigma_azimuth_rad=sa, sigma_elevation_rad=se)
         assert out.z.shape == (3,) and out.R.shape == (3, 3)
         assert_symmetric_pd(out.R, name)
     assert_symmetric_pd(
-        cv.naive_cov_given_truth_3d(r, az, el, sr, sa, se), "naive_cov_given_truth_3d"
+        cv3.naive_cov_given_truth_3d(
+            r, az, el, sigma_r_m=sr, sigma_azimuth_rad=sa, sigma_elevation_rad=se
+        ),
+        "naive_cov_given_truth_3d",
     )
 
 
@@ -585,22 +606,27 @@ def test_broadcasting_equals_elementwise(shape, seed, scalar_sigmas) -> None:
             2,
             method,
         )
-    for name, fn in (("naive_3d", cv.convert_naive_3d), ("ucm_3d", cv.convert_ucm_3d)):
-        args = (v["r"], v["beta"], v["el"], v["sr"], v["sb"], v["se"])
+
+    def sig(i: tuple[int, ...] | None = None) -> dict:
+        names = ("sigma_r_m", "sigma_azimuth_rad", "sigma_elevation_rad")
+        if i is None:
+            return {n: v[k] for n, k in zip(names, ("sr", "sb", "se"), strict=True)}
+        return {n: at(k, i) for n, k in zip(names, ("sr", "sb", "se"), strict=True)}
+
+    for name, fn in (("naive_3d", cv3.convert_naive_3d), ("ucm_3d", cv3.convert_ucm_3d)):
+        args = (v["r"], v["beta"], v["el"])
         _assert_batch_matches(
-            fn(*args),
-            lambda i, f=fn: f(
-                v["r"][i], v["beta"][i], v["el"][i], at("sr", i), at("sb", i), at("se", i)
-            ),
+            fn(*args, **sig()),
+            lambda i, f=fn: f(v["r"][i], v["beta"][i], v["el"][i], **sig(i)),
             shape,
             3,
             name,
         )
         # A scalar elevation broadcasts against batched range and azimuth.
-        mixed = fn(v["r"], v["beta"], 0.25, v["sr"], v["sb"], v["se"])
+        mixed = fn(v["r"], v["beta"], 0.25, **sig())
         _assert_batch_matches(
             mixed,
-            lambda i, f=fn: f(v["r"][i], v["beta"][i], 0.25, at("sr", i), at("sb", i), at("se", i)),
+            lambda i, f=fn: f(v["r"][i], v["beta"][i], 0.25, **sig(i)),
             shape,
             3,
             f"{name} scalar elevation",
@@ -609,8 +635,13 @@ def test_broadcasting_equals_elementwise(shape, seed, scalar_sigmas) -> None:
     assert cv.naive_mean_given_truth(v["r"], v["beta"], v["sb"]).shape == (*shape, 2)
     for fn2 in (cv.naive_cov_given_truth, cv.linearized_cov, cv.averaged_cov):
         assert fn2(v["r"], v["beta"], v["sr"], v["sb"]).shape == (*shape, 2, 2)
-    assert cv.naive_cov_given_truth_3d(
-        v["r"], v["beta"], v["el"], v["sr"], v["sb"], v["se"]
+    assert cv3.naive_cov_given_truth_3d(
+        v["r"],
+        v["beta"],
+        v["el"],
+        sigma_r_m=v["sr"],
+        sigma_azimuth_rad=v["sb"],
+        sigma_elevation_rad=v["se"],
     ).shape == (*shape, 3, 3)
 
 

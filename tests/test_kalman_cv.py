@@ -7,17 +7,9 @@ import pytest
 from filterpy.kalman import KalmanFilter
 
 from radarviz.core.conversion.planar import convert
-from radarviz.core.filters.cv import (
-    as_batch,
-    cv_init,
-    cv_predict,
-    cv_update,
-    empty_batch,
-    joseph_update_position,
-    process_noise,
-    quad_form_inv,
-    transition_matrix,
-)
+from radarviz.core.filters.position import cv_update, joseph_update_position
+from radarviz.core.filters.predict import cv_predict, process_noise, transition_matrix
+from radarviz.core.filters.state import as_batch, cv_init, empty_batch, quad_form_inv
 
 H2 = np.array([[1.0, 0.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]])
 
@@ -58,26 +50,70 @@ def test_batched_kf_equals_filterpy_step_by_step(method: str, sigma_a: float) ->
             np.testing.assert_allclose(state.P[m], kf.P, rtol=0, atol=1e-9 * np.abs(kf.P).max())
 
 
-def test_joseph_identity_holds_for_any_gain() -> None:
-    """P⁺ = (I − K H2) P (I − K H2)ᵀ + K R Kᵀ for an arbitrary (not optimal) gain K."""
+@pytest.mark.parametrize("dims", [2, 3])
+def test_joseph_identity_holds_for_any_gain(dims: int) -> None:
     rng = np.random.default_rng(3)
-    m = 50
-    P = _random_spd(rng, m, 4, 1e4)
-    R = _random_spd(rng, m, 2, 1e3)
-    K = rng.normal(size=(m, 4, 2)) * 0.1
-    state = as_batch(rng.normal(size=(m, 4)), P)
-    S = P[:, [0, 2]][:, :, [0, 2]] + R
-    nu = rng.normal(size=(m, 2))
+    m, n = 50, 2 * dims
+    H = np.zeros((dims, n))
+    H[np.arange(dims), np.arange(0, n, 2)] = 1.0
+    P = _random_spd(rng, m, n, 1e4)
+    R = _random_spd(rng, m, dims, 1e3)
+    K = rng.normal(size=(m, n, dims)) * 0.1
+    state = as_batch(rng.normal(size=(m, n)), P)
+    S = H @ P @ H.T + R
+    nu = rng.normal(size=(m, dims))
     out = joseph_update_position(
         state,
-        (nu[:, 0], nu[:, 1]),
+        [nu[:, i] for i in range(dims)],
         np.ascontiguousarray(K.transpose(1, 2, 0)),
-        (S[:, 0, 0], S[:, 0, 1], S[:, 1, 1]),
+        {(i, j): S[:, i, j] for i in range(dims) for j in range(i, dims)},
     )
-    A = np.eye(4) - K @ H2
+    A = np.eye(n) - K @ H
     expected = A @ P @ A.transpose(0, 2, 1) + K @ R @ K.transpose(0, 2, 1)
     np.testing.assert_allclose(out.P, expected, rtol=1e-10, atol=1e-10 * np.abs(expected).max())
     np.testing.assert_allclose(out.x, state.x + (K @ nu[:, :, None])[:, :, 0], rtol=1e-12)
+
+
+@pytest.mark.parametrize("sigma_a", [0.0, 0.7])
+def test_batched_3d_kf_equals_filterpy(sigma_a: float) -> None:
+    """The same engine in 3D (state (x, ẋ, y, ẏ, z, ż)) against filterpy's KalmanFilter."""
+    rng = np.random.default_rng(8)
+    runs, steps, T = 4, 30, 5.0
+    truth = np.array([40e3, 30e3, 8e3]) + np.outer(np.arange(steps) * T, [-150.0, 90.0, 5.0])
+    H = np.zeros((3, 6))
+    H[[0, 1, 2], [0, 2, 4]] = 1.0
+    R = _random_spd(rng, runs * steps, 3, 1e4).reshape(runs, steps, 3, 3)
+    z = truth + np.einsum("msij,msj->msi", np.linalg.cholesky(R), rng.normal(size=(runs, steps, 3)))
+    state = cv_init(z[:, 0], R[:, 0])
+    ref = []
+    for m in range(runs):
+        kf = KalmanFilter(dim_x=6, dim_z=3)
+        kf.F, kf.H, kf.Q = transition_matrix(T, 3), H, process_noise(T, sigma_a, 3)
+        kf.x, kf.P = state.x[m].copy(), state.P[m].copy()
+        ref.append(kf)
+    for n in range(1, steps):
+        state = cv_update(cv_predict(state, T, sigma_a), z[:, n], R[:, n])
+        for m, kf in enumerate(ref):
+            kf.predict()
+            kf.update(z[m, n], R=R[m, n])
+            np.testing.assert_allclose(state.x[m], kf.x, rtol=0, atol=1e-9 * np.abs(kf.x).max())
+            np.testing.assert_allclose(state.P[m], kf.P, rtol=0, atol=1e-9 * np.abs(kf.P).max())
+
+
+def test_any_leading_batch_shape_equals_the_flat_batch() -> None:
+    """A (3, 5) batch of tracks gives bit for bit the 15 tracks of a flat batch."""
+    rng = np.random.default_rng(4)
+    z = rng.normal(size=(3, 5, 3)) * 1e3
+    R = _random_spd(rng, 15, 3, 1e4).reshape(3, 5, 3, 3)
+    grid = cv_update(cv_predict(cv_init(z, R), 2.0, 0.3), z * 1.01, R)
+    flat = cv_update(
+        cv_predict(cv_init(z.reshape(15, 3), R.reshape(15, 3, 3)), 2.0, 0.3),
+        z.reshape(15, 3) * 1.01,
+        R.reshape(15, 3, 3),
+    )
+    assert grid.x.shape == (3, 5, 6) and grid.P.shape == (3, 5, 6, 6)
+    np.testing.assert_array_equal(grid.x.reshape(15, 6), flat.x)
+    np.testing.assert_array_equal(grid.P.reshape(15, 6, 6), flat.P)
 
 
 def test_update_keeps_covariance_symmetric_positive_definite() -> None:
@@ -107,7 +143,7 @@ def test_out_must_not_alias_the_input() -> None:
 
 def test_init_follows_the_spec() -> None:
     R = np.array([[[4.0, 1.0], [1.0, 9.0]]])
-    b = cv_init(np.array([[10.0, 20.0]]), R, sigma_v=1000.0)
+    b = cv_init(np.array([[10.0, 20.0]]), R, sigma_v0_mps=1000.0)
     np.testing.assert_array_equal(b.x[0], [10.0, 0.0, 20.0, 0.0])
     expected = np.array([[4.0, 0, 1.0, 0], [0, 1e6, 0, 0], [1.0, 0, 9.0, 0], [0, 0, 0, 1e6]])
     np.testing.assert_array_equal(b.P[0], expected)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from radarviz.core.filters.cv import as_batch
+from radarviz.core.filters.state import as_batch
 from radarviz.core.metrics import MetricsAccumulator, delta_percent, nees_band
 
 

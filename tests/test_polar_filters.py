@@ -1,9 +1,9 @@
-"""Tests for ``core.filters.polar``: the batched polar EKF / UKF against filterpy, step by step.
+"""The batched polar EKF / UKF (``core.filters.polar_ekf``, ``polar_ukf``) against filterpy.
 
 Scenario (the spec's ``prosov`` geometry, rotated): a target 150 km from the radar at azimuth
 β0, moving radially outward at 200 m/s, T = 10 s, 30 scans, σr = 250 m, σβ = 1° or 2°,
 optional process noise σa = 0.5 m/s². Tracks start from the first measurement
-(``init_from_polar``); every later scan is predict (``cv_predict``) + update.
+(the ``ekf``/``ukf`` methods' start); every later scan is predict (``cv_predict``) + update.
 
 Tolerance. The batched filters and filterpy evaluate the same equations in a different order,
 so they differ by rounding only: float64 ε ≈ 1.1e-16 per operation, amplified by the
@@ -24,23 +24,36 @@ import pytest
 from filterpy.common import Q_discrete_white_noise
 from filterpy.kalman import ExtendedKalmanFilter, MerweScaledSigmaPoints, UnscentedKalmanFilter
 
-import radarviz.core.filters.polar as pf
+import radarviz.core.filters.polar_ekf as ekf_module
+import radarviz.core.filters.polar_ukf as ukf_module
 from radarviz.core.conversion.planar import convert_naive
-from radarviz.core.filters.cv import (
-    CVBatch,
-    cv_init,
-    cv_predict,
-    empty_batch,
-    quad_form_inv,
-    transition_matrix,
-)
-from radarviz.core.filters.polar import (
-    UKFParams,
-    ekf_update,
-    init_from_polar,
-    ukf_update,
-    wrap_angle,
-)
+from radarviz.core.filters.methods import METHODS, PolarNoise, PolarPlot
+from radarviz.core.filters.polar_ukf import UKFParams
+from radarviz.core.filters.predict import cv_predict, transition_matrix
+from radarviz.core.filters.state import CVBatch, cv_init, empty_batch, quad_form_inv
+from radarviz.core.geometry import wrap_angle
+
+DEFAULT_UKF = UKFParams()
+
+
+def init_from_polar(r, b, sigma_r, sigma_beta, sigma_v=1000.0) -> CVBatch:
+    """The polar methods' start: the naive point of the first measurement."""
+    return METHODS["ekf"].start(
+        PolarPlot(r, b), PolarNoise(sigma_r, sigma_beta), sigma_v0_mps=sigma_v
+    )
+
+
+def ekf_update(pred, r, b, sigma_r, sigma_beta, out=None) -> CVBatch:
+    return ekf_module.ekf_update(
+        pred, (r, b), sigma_r_m=sigma_r, sigma_azimuth_rad=sigma_beta, out=out
+    )
+
+
+def ukf_update(pred, r, b, sigma_r, sigma_beta, params=DEFAULT_UKF, out=None) -> CVBatch:
+    return ukf_module.ukf_update(
+        pred, (r, b), sigma_r_m=sigma_r, sigma_azimuth_rad=sigma_beta, params=params, out=out
+    )
+
 
 T = 10.0
 STEPS = 30
@@ -49,7 +62,6 @@ R0 = 150e3
 SPEED = 200.0
 RTOL = 1e-9
 NEAR_PI = math.pi - 0.004  # σβ = 1°–2° is 0.017–0.035 rad: measurements straddle ±π
-DEFAULT_UKF = UKFParams()
 
 # --------------------------------------------------------------------------------------------
 # Scenario
@@ -71,7 +83,7 @@ def measurements(
 
 
 # --------------------------------------------------------------------------------------------
-# filterpy reference: its own functions, written independently of core.filters.polar
+# filterpy reference: its own functions, written independently of core.filters
 # --------------------------------------------------------------------------------------------
 
 
@@ -215,7 +227,8 @@ def test_near_pi_measurements_straddle() -> None:
 @pytest.mark.parametrize("kind", ["ekf", "ukf"])
 def test_comparison_catches_missing_wrap(kind: str, monkeypatch: pytest.MonkeyPatch) -> None:
     """Negative control: without angle wrapping the near-π comparison must fail."""
-    monkeypatch.setattr(pf, "wrap_angle", lambda a: np.asarray(a, dtype=np.float64))
+    for module in (ekf_module, ukf_module):
+        monkeypatch.setattr(module, "wrap_angle", lambda a: np.asarray(a, dtype=np.float64))
     with pytest.raises(AssertionError):
         compare_with_filterpy(kind, NEAR_PI, 1.0, 0.0)
 

@@ -1,4 +1,4 @@
-"""3D tracks (``core.filters.track3d``, ``core.tracking.stream``) and ``radarviz track`` on 3D
+"""3D tracks (``core.filters`` in 3D, ``core.tracking.stream``) and ``radarviz track`` on 3D
 files.
 
 * EKF + Doppler: the ``ekf`` rows of a 3-radar file (one site above the ground, irregular
@@ -11,7 +11,7 @@ files.
 * Zero elevation: a 3D file with ε̂ = 0 everywhere (target and sites at z = 0) gives the 2D
   file's x–y rows; z, ż stay 0. With Doppler only in the limit σε → 0: the 3D Doppler
   variance has the extra σε² (v̂z² + P_vzvz) of an unknown vertical velocity.
-* ``finite_memory_start3`` against an independent weighted least squares.
+* the 3D finite-memory start against an independent weighted least squares.
 * Monte Carlo on the ``fusion`` preset: Doppler reduces the velocity RMSE by many standard
   errors and the velocity NEES with Doppler lies in its χ² band.
 * Errors: exit 2, one line naming line and column, no output file.
@@ -34,8 +34,8 @@ from filterpy.kalman import (
 from filterpy.kalman import update as kf_update
 from scipy.stats import chi2
 
-from radarviz.core.filters.track3d import finite_memory_start3
 from radarviz.core.finite_memory.fit import finite_memory_fit
+from radarviz.core.finite_memory.start import finite_memory_start
 from radarviz.core.tracking.stream import StreamOptions, StreamTracker
 from radarviz.core.velocity.estimate import BASELINE_VELOCITY_MPS
 from radarviz.viz_app.cli.main import main
@@ -421,7 +421,7 @@ def test_zero_elevation_reduces_to_2d(tmp_path: Path, init: str, doppler: str) -
 
 
 # --------------------------------------------------------------------------------------------
-# 4. finite_memory_start3 against an independent least squares
+# 4. the 3D finite-memory start against an independent least squares
 # --------------------------------------------------------------------------------------------
 
 
@@ -481,7 +481,7 @@ def check_start_in_los_frame(
 
 
 @pytest.mark.parametrize("k,doppler", [(2, True), (5, True), (4, False), (7, False)])
-def test_finite_memory_start3_vs_lstsq(k: int, doppler: bool) -> None:
+def test_finite_memory_start_3d_vs_lstsq(k: int, doppler: bool) -> None:
     rng = np.random.default_rng(41 + k)
     T, sr, svr, sb, se, sigma_v0 = 4.0, 120.0, 1.5, math.radians(0.4), math.radians(0.7), 500.0
     site = np.array([1000.0, -2000.0, 300.0])
@@ -492,7 +492,17 @@ def test_finite_memory_start3_vs_lstsq(k: int, doppler: bool) -> None:
     b, e = math.radians(33.0), math.radians(12.0)  # newest measured line of sight
     fit = finite_memory_fit(k, sr, svr if doppler else None, T, doppler)
     assert fit.order == 3  # k = 2 with Doppler: 4 equations, still the full (r, Vr, a)
-    start = finite_memory_start3(fit, ranges, vrs, b, e, sb, se, sigma_v0, site)
+    start = finite_memory_start(
+        fit,
+        ranges,
+        vrs,
+        b,
+        e,
+        sigma_azimuth_rad=sb,
+        sigma_elevation_rad=se,
+        sigma_v0_mps=sigma_v0,
+        site=site,
+    )
     theta, R = wls(k, T, ranges, vrs, sr, svr)
     # Closed forms (eqs. 7–12, 15–20) against the LS solve: same numbers by another route,
     # agreeing to ~1e-14 here (k ≤ 7, T = 4 s), so RTOL. R's entries are compared relative to

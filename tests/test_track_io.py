@@ -23,7 +23,7 @@ from filterpy.common import Q_discrete_white_noise
 from filterpy.kalman import ExtendedKalmanFilter
 
 from radarviz.core.experiments.prosov import ALL_METHODS, track_history
-from radarviz.core.filters.cv import transition_matrix
+from radarviz.core.filters.predict import transition_matrix
 from radarviz.core.tracking.stream import (
     METHODS_3D,
     StreamOptions,

@@ -13,7 +13,7 @@ import json
 import numpy as np
 import pytest
 
-from radarviz.core.conversion.planar import convert_ucm_3d
+from radarviz.core.conversion.spatial import convert_ucm_3d
 from radarviz.core.params import ParameterError
 from radarviz.core.velocity.estimate import (
     M_WARN,
@@ -310,7 +310,14 @@ def test_fused_position_covariance_matches_monte_carlo() -> None:
     )
     assert np.max(np.abs((raw.position - TARGET).mean(axis=0)) / stats.mean_se) > 10.0
     # Fusion is at least as good as every single radar: R_k − P is positive semi-definite.
-    single = convert_ucm_3d(los.range, los.azimuth, los.elevation, sr, sb, se).R
+    single = convert_ucm_3d(
+        los.range,
+        los.azimuth,
+        los.elevation,
+        sigma_r_m=sr,
+        sigma_azimuth_rad=sb,
+        sigma_elevation_rad=se,
+    ).R
     for R_k in single:
         assert np.all(np.linalg.eigvalsh(R_k - truth.covariance) > -1e-6)
 

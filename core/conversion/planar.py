@@ -45,7 +45,6 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 METHODS_2D: tuple[str, ...] = ("naive", "seed", "cmkf_d", "ucm", "ducm")
-METHODS_3D: tuple[str, ...] = ("naive", "ucm")
 
 
 class Converted(NamedTuple):
@@ -379,97 +378,3 @@ def convert(
             raise ValueError("method ducm needs predicted_xy (the filter's predicted position)")
         return convert_ducm(r, beta, sigma_r, sigma_beta, predicted_xy)
     return convert_parts(method, r, beta, sigma_r, sigma_beta).stacked()
-
-
-# --------------------------------------------------------------------------------------------
-# 3D: range, azimuth β, elevation ε;  x = r cos ε cos β, y = r cos ε sin β, z = r sin ε
-# --------------------------------------------------------------------------------------------
-
-
-def _point_3d(r: NDArray, az: NDArray, el: NDArray) -> NDArray[np.float64]:
-    ce = np.cos(el)
-    return np.stack([r * ce * np.cos(az), r * ce * np.sin(az), r * np.sin(el)], axis=-1)
-
-
-def convert_naive_3d(
-    r: ArrayLike,
-    azimuth: ArrayLike,
-    elevation: ArrayLike,
-    sigma_r: ArrayLike,
-    sigma_azimuth: ArrayLike,
-    sigma_elevation: ArrayLike,
-) -> Converted:
-    """Naive 3D conversion with the first-order covariance J diag(σr², σβ², σε²) Jᵀ."""
-    r, az, el = np.broadcast_arrays(_f(r), _f(azimuth), _f(elevation))
-    ca, sa, ce, se = np.cos(az), np.sin(az), np.cos(el), np.sin(el)
-    # Columns of J: ∂p/∂r, ∂p/∂β, ∂p/∂ε.
-    j_r = np.stack([ce * ca, ce * sa, se], axis=-1)
-    j_b = np.stack([-r * ce * sa, r * ce * ca, np.zeros_like(r * ca)], axis=-1)
-    j_e = np.stack([-r * se * ca, -r * se * sa, r * ce], axis=-1)
-    var_r = _f(sigma_r) ** 2
-    var_b = _f(sigma_azimuth) ** 2
-    var_e = _f(sigma_elevation) ** 2
-    cov = (
-        var_r[..., None, None] * j_r[..., :, None] * j_r[..., None, :]
-        + var_b[..., None, None] * j_b[..., :, None] * j_b[..., None, :]
-        + var_e[..., None, None] * j_e[..., :, None] * j_e[..., None, :]
-    )
-    return Converted(_point_3d(r, az, el), cov)
-
-
-def naive_cov_given_truth_3d(
-    r: ArrayLike,
-    azimuth: ArrayLike,
-    elevation: ArrayLike,
-    sigma_r: ArrayLike,
-    sigma_azimuth: ArrayLike,
-    sigma_elevation: ArrayLike,
-) -> NDArray[np.float64]:
-    """Exact covariance (..., 3, 3) of the naive 3D point given the true (r, β, ε).
-
-    With a = cos ε̂ cos β̂, b = cos ε̂ sin β̂, c = sin ε̂ and independent angle errors,
-    E[p pᵀ] = (r² + σr²) E[(a, b, c)(a, b, c)ᵀ], each entry a product of the one-angle moments.
-
-    Numerics: evaluated as σr² E[u uᵀ] + r² Cov(u), u = (a, b, c), with each entry of Cov(u)
-    from Cov(XY, X'Y') = Cov(X, X') E[YY'] + E[X] E[X'] Cov(Y, Y') for the independent
-    elevation (X) and azimuth (Y) factors, so no O(r²) terms cancel.
-    """
-    r = _f(r)
-    r2, sr2 = r * r, _f(sigma_r) ** 2
-    b = _angle_moments(_f(azimuth), _f(sigma_azimuth) ** 2)
-    e = _angle_moments(_f(elevation), _f(sigma_elevation) ** 2)
-    mc_e2 = e.mc * e.mc
-    # (second moment E[u_i u_j], covariance Cov(u_i, u_j)) for the upper triangle.
-    xx = (e.ecc * b.ecc, e.vcc * b.ecc + mc_e2 * b.vcc)
-    xy = (e.ecc * b.esc, e.vcc * b.esc + mc_e2 * b.csc)
-    yy = (e.ecc * b.ess, e.vcc * b.ess + mc_e2 * b.vss)
-    xz = (e.esc * b.mc, e.csc * b.mc)
-    yz = (e.esc * b.ms, e.csc * b.ms)
-    zz = (e.ess, e.vss)
-    entries = [sr2 * m2 + r2 * cv for m2, cv in (xx, xy, xz, yy, yz, zz)]
-    cxx, cxy, cxz, cyy, cyz, czz = np.broadcast_arrays(*entries)
-    rows = [[cxx, cxy, cxz], [cxy, cyy, cyz], [cxz, cyz, czz]]
-    return np.stack([np.stack(row, axis=-1) for row in rows], axis=-2)
-
-
-def convert_ucm_3d(
-    r: ArrayLike,
-    azimuth: ArrayLike,
-    elevation: ArrayLike,
-    sigma_r: ArrayLike,
-    sigma_azimuth: ArrayLike,
-    sigma_elevation: ArrayLike,
-) -> Converted:
-    """Unbiased 3D conversion: one factor e^(s/2) per angle in each coordinate.
-
-    κ = (e^((sβ+sε)/2), e^((sβ+sε)/2), e^(sε/2)) on (x, y, z); the covariance is the exact
-    true-conditioned one, D C D with D = diag(κ), evaluated at the measurement.
-    """
-    r, az, el = np.broadcast_arrays(_f(r), _f(azimuth), _f(elevation))
-    sb, se = _f(sigma_azimuth) ** 2, _f(sigma_elevation) ** 2
-    kxy = np.exp((sb + se) / 2.0)
-    kz = np.exp(se / 2.0) * np.ones_like(kxy)
-    kappa = np.stack([kxy, kxy, kz], axis=-1)
-    cov = naive_cov_given_truth_3d(r, az, el, sigma_r, sigma_azimuth, sigma_elevation)
-    cov = kappa[..., :, None] * cov * kappa[..., None, :]
-    return Converted(kappa * _point_3d(r, az, el), cov)

@@ -1,35 +1,19 @@
-"""Doppler-aided tracking: a finite-memory track start, then an EKF with a radial-velocity row.
+"""Doppler-aided tracking: a finite-memory track start, then an EKF with a radial-velocity update.
 
 Gorshkov and Zavizhenets (2016) end with the remark that the first k = 3 finite-memory estimates
-(state and R) should initialise the Kalman filter that follows. This module does that for one
-2D radar measuring range r̂, azimuth β̂ and, optionally, Doppler radial velocity V̂r:
+(state and R) should initialise the Kalman filter that follows. This experiment does that for
+one 2D radar measuring range r̂, azimuth β̂ and, optionally, Doppler radial velocity V̂r, by
+Monte Carlo, range only beside range + Doppler on the same measurements:
 
 1. Start at scan k from the least-squares fit of (r, Vr, a) over scans 1 … k
-   (``core.finite_memory.fit``), range only or range + Doppler. In line-of-sight coordinates
-   (unit vectors u = (cos β, sin β) along the line of sight, w = (−sin β, cos β) across it, β
-   the newest measured azimuth):
+   (``core.finite_memory.start``).
+2. Continue with the polar EKF on (r̂, β̂) (``core.filters.polar_ekf``) and, for the Doppler
+   variant, then a second, scalar update with V̂r along the measured line of sight
+   (``core.filters.doppler``; its docstring says why not the textbook EKF row).
 
-       position = r̂ u,          var along = R11,  var across = r̂² σβ²
-       velocity = V̂r u,         var along = R22,  var across = σv0²  (nothing observed)
-       cov(position along, velocity along) = R12
-
-   (the acceleration is dropped: the filter that follows is constant velocity).
-2. Continue with the polar EKF on (r̂, β̂) (``core.filters.polar.ekf_update``) and, for the
-   Doppler variant, then a second, scalar update with V̂r (``doppler_los_update``).
-
-Why the Doppler row is not the textbook EKF row. The joint EKF on (r̂, β̂, V̂r) linearises
-
-       Vr = (x ẋ + y ẏ) / r,   ∂Vr/∂(x, ẋ, y, ẏ) = ((ẋ − Vr x/r)/r, x/r, (ẏ − Vr y/r)/r, y/r)
-
-at the prediction. Its position derivative is (tangential speed)/r, which at the start is
-taken as 0 (the cross-range velocity is unobserved) while a cross-range position error of
-r σβ really moves Vr by v_t σβ: metres per second against σVr = 1 m/s for the CMW radars.
-That filter diverges there (RLS6, σβ = 1°: position NEES above 10³ by scan 10; it is kept as
-``ekf_doppler_update``, checked against filterpy, for the record). Using the *measured*
-line of sight instead makes the row linear in the velocity, with the bearing error moved into
-its variance, and it stays consistent for RLS1–RLS4; for RLS5–RLS6 at σβ = 1° its NEES
-still sits at 3–10 (the range-only EKF's at 2.5–4.4): the precise radars' errors are far
-from Gaussian after the polar-to-Cartesian step, and the app says so rather than hiding it.
+The line-of-sight update stays consistent for RLS1–RLS4; for RLS5–RLS6 at σβ = 1° its NEES
+still sits at 3–10 (the range-only EKF's at 2.5–4.4): the precise radars' errors are far from
+Gaussian after the polar-to-Cartesian step, and the app says so rather than hiding it.
 """
 
 from __future__ import annotations
@@ -40,9 +24,13 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
-from radarviz.core.filters.cv import CVBatch, as_batch, cv_predict, empty_batch
-from radarviz.core.filters.polar import ekf_update, wrap_angle
+from radarviz.core.filters.doppler import doppler_update
+from radarviz.core.filters.polar_ekf import ekf_update
+from radarviz.core.filters.run import run_scans
+from radarviz.core.filters.state import CVBatch
 from radarviz.core.finite_memory.fit import FiniteMemoryFit, finite_memory_fit, preset
+from radarviz.core.finite_memory.start import finite_memory_start
+from radarviz.core.geometry import radial_velocity
 from radarviz.core.metrics import MetricsAccumulator, TrackMetrics, nees_band
 from radarviz.core.params import check_int, check_real
 from radarviz.core.scenarios.planar import ConstantVelocityTarget2D
@@ -102,12 +90,6 @@ class PolarDopplerMeasurements(NamedTuple):
     vr: NDArray[np.float64]
 
 
-def radial_velocity(truth: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Vr = (x ẋ + y ẏ)/r of states (..., 4)."""
-    x, vx, y, vy = truth[..., 0], truth[..., 1], truth[..., 2], truth[..., 3]
-    return (x * vx + y * vy) / np.hypot(x, y)
-
-
 def polar_doppler_measurements(
     truth: NDArray[np.float64],
     sigma_r: float,
@@ -120,95 +102,12 @@ def polar_doppler_measurements(
     steps = truth.shape[0]
     r = np.hypot(truth[:, 0], truth[:, 2])
     beta = np.arctan2(truth[:, 2], truth[:, 0])
-    vr = radial_velocity(truth)
+    vr = radial_velocity(truth[:, 0::2], truth[:, 1::2])
     return PolarDopplerMeasurements(
         r + sigma_r * rng.standard_normal((runs, steps)),
         beta + sigma_beta * rng.standard_normal((runs, steps)),
         vr + sigma_vr * rng.standard_normal((runs, steps)),
     )
-
-
-def finite_memory_start(
-    fit: FiniteMemoryFit,
-    ranges: NDArray[np.float64],
-    radial_velocities: NDArray[np.float64] | None,
-    beta: NDArray[np.float64],
-    sigma_beta: float,
-    sigma_v0: float,
-) -> CVBatch:
-    """CV track states at the newest of k scans from the finite-memory fit (module docstring).
-
-    Args:
-        fit: a full-order (3-parameter) or at least 2-parameter fit over k scans.
-        ranges: (M, k) oldest first.  radial_velocities: (M, k) or None (range only).
-        beta: (M,) azimuth at the newest scan (rad).
-    """
-    if fit.order < 2:
-        raise ValueError(
-            f"a track start needs range and radial velocity; k = {fit.k} fits only "
-            f"{fit.order} parameter"
-        )
-    z = ranges if radial_velocities is None else np.concatenate([ranges, radial_velocities], 1)
-    W = fit.W[:2]
-    theta = z @ W.T  # (M, 2): r̂, V̂r at the newest scan
-    r_hat, vr_hat = theta[:, 0], theta[:, 1]
-    c, s = np.cos(beta), np.sin(beta)
-    m = ranges.shape[0]
-    x = np.zeros((m, 4))
-    x[:, 0], x[:, 2] = r_hat * c, r_hat * s
-    x[:, 1], x[:, 3] = vr_hat * c, vr_hat * s
-    # Covariance in (pos along, vel along, pos across, vel across), then rotated.
-    L = np.zeros((m, 4, 4))
-    L[:, 0, 0], L[:, 1, 1] = fit.R[0, 0], fit.R[1, 1]
-    L[:, 0, 1] = L[:, 1, 0] = fit.R[0, 1]
-    L[:, 2, 2] = r_hat**2 * sigma_beta**2
-    L[:, 3, 3] = sigma_v0**2
-    # State (x, ẋ, y, ẏ) = G (along p, along v, across p, across v).
-    G = np.zeros((m, 4, 4))
-    G[:, 0, 0], G[:, 0, 2] = c, -s
-    G[:, 2, 0], G[:, 2, 2] = s, c
-    G[:, 1, 1], G[:, 1, 3] = c, -s
-    G[:, 3, 1], G[:, 3, 3] = s, c
-    P = G @ L @ G.transpose(0, 2, 1)
-    return as_batch(x, 0.5 * (P + P.transpose(0, 2, 1)))
-
-
-def ekf_doppler_update(
-    state: CVBatch,
-    r: NDArray[np.float64],
-    beta: NDArray[np.float64],
-    vr: NDArray[np.float64],
-    sigma_r: float,
-    sigma_beta: float,
-    sigma_vr: float,
-) -> CVBatch:
-    """EKF update of every run with (r̂, β̂, V̂r); Joseph form, bearing residual wrapped.
-
-    h(x) = (√(x² + y²), atan2(y, x), (x ẋ + y ẏ)/r),   H = ∂h/∂x at the prediction
-    S = H P Hᵀ + R,  K = P Hᵀ S⁻¹,  x⁺ = x + K (z − h(x)),
-    P⁺ = (I − K H) P (I − K H)ᵀ + K R Kᵀ,   R = diag(σr², σβ², σVr²)
-    """
-    x, P = state.x, state.P
-    px, vx, py, vy = x[:, 0], x[:, 1], x[:, 2], x[:, 3]
-    rp = np.hypot(px, py)
-    vrp = (px * vx + py * vy) / rp
-    m = state.runs
-    H = np.zeros((m, 3, 4))
-    H[:, 0, 0], H[:, 0, 2] = px / rp, py / rp
-    H[:, 1, 0], H[:, 1, 2] = -py / rp**2, px / rp**2
-    H[:, 2, 0] = (vx - vrp * px / rp) / rp
-    H[:, 2, 1] = px / rp
-    H[:, 2, 2] = (vy - vrp * py / rp) / rp
-    H[:, 2, 3] = py / rp
-    R = np.diag([sigma_r**2, sigma_beta**2, sigma_vr**2])
-    PHt = P @ H.transpose(0, 2, 1)
-    S = H @ PHt + R
-    K = np.linalg.solve(S, PHt.transpose(0, 2, 1)).transpose(0, 2, 1)  # P Hᵀ S⁻¹, S symmetric
-    nu = np.stack([r - rp, wrap_angle(beta - np.arctan2(py, px)), vr - vrp], axis=-1)
-    x_new = x + (K @ nu[:, :, None])[:, :, 0]
-    A = np.eye(4) - K @ H
-    P_new = A @ P @ A.transpose(0, 2, 1) + K @ R @ K.transpose(0, 2, 1)
-    return as_batch(x_new, 0.5 * (P_new + P_new.transpose(0, 2, 1)))
 
 
 class DopplerTrackingResult(NamedTuple):
@@ -240,40 +139,8 @@ def _vr_stats(state: CVBatch, truth_n: NDArray[np.float64]) -> tuple[float, floa
     vrp = (px * vx + py * vy) / rp
     g = np.stack([(vx - vrp * px / rp) / rp, px / rp, (vy - vrp * py / rp) / rp, py / rp], -1)
     var = np.einsum("mi,mij,mj->m", g, P, g)
-    err = vrp - radial_velocity(truth_n)
+    err = vrp - radial_velocity(truth_n[0::2], truth_n[1::2])
     return float((err * err).sum()), float(var.sum())
-
-
-def doppler_los_update(
-    state: CVBatch,
-    vr: NDArray[np.float64],
-    beta: NDArray[np.float64],
-    sigma_vr: float,
-    sigma_beta: float,
-) -> CVBatch:
-    """Doppler as a linear velocity measurement along the *measured* line of sight.
-
-        V̂r = u(β̂)·v + e,   H = (0, cos β̂, 0, sin β̂),
-        var e = σVr² + (ŵ·v̂)² σβ² + σβ² wᵀ P_vv w       (the bearing error tilts u: δVr ≈ v_t δβ)
-
-    Linear in the state, so the Kalman update is exact given that variance: no dependence on
-    the predicted position, which is what makes the EKF row fail when σVr is small (see the
-    module docstring). Joseph form.
-    """
-    x, P = state.x, state.P
-    c, s = np.cos(beta), np.sin(beta)
-    vt = -s * x[:, 1] + c * x[:, 3]
-    p_vt = s * s * P[:, 1, 1] - 2.0 * s * c * P[:, 1, 3] + c * c * P[:, 3, 3]
-    r_e = sigma_vr**2 + (vt * vt + p_vt) * sigma_beta**2
-    h = np.zeros((state.runs, 4))
-    h[:, 1], h[:, 3] = c, s
-    Ph = np.einsum("mij,mj->mi", P, h)
-    S = np.einsum("mi,mi->m", h, Ph) + r_e
-    K = Ph / S[:, None]
-    x_new = x + K * (vr - (c * x[:, 1] + s * x[:, 3]))[:, None]
-    A = np.eye(4) - K[:, :, None] * h[:, None, :]
-    P_new = A @ P @ A.transpose(0, 2, 1) + r_e[:, None, None] * K[:, :, None] * K[:, None, :]
-    return as_batch(x_new, 0.5 * (P_new + P_new.transpose(0, 2, 1)))
 
 
 def run_doppler_tracking(config: DopplerTrackingConfig) -> DopplerTrackingResult:
@@ -296,21 +163,41 @@ def run_doppler_tracking(config: DopplerTrackingConfig) -> DopplerTrackingResult
             meas.r[:, :k],
             meas.vr[:, :k] if doppler else None,
             meas.beta[:, k - 1],
-            sb,
-            config.sigma_v0_mps,
+            sigma_azimuth_rad=sb,
+            sigma_v0_mps=config.sigma_v0_mps,
         )
         acc = MetricsAccumulator(steps)
         sq, var = np.full(steps, np.nan), np.full(steps, np.nan)
-        acc.add(k - 1, state, truth[k - 1])
-        sq[k - 1], var[k - 1] = _vr_stats(state, truth[k - 1])
-        buf_a, buf_b = empty_batch(config.runs), empty_batch(config.runs)
-        for n in range(k, steps):
-            pred = cv_predict(state, T, config.sigma_a_mps2, out=buf_a)
-            state = ekf_update(pred, meas.r[:, n], meas.beta[:, n], sr, sb, out=buf_b)
-            if doppler:
-                state = doppler_los_update(state, meas.vr[:, n], meas.beta[:, n], svr, sb)
+
+        def update(n: int, pred: CVBatch, out: CVBatch, doppler: bool = doppler) -> CVBatch:
+            post = ekf_update(
+                pred, (meas.r[:, n], meas.beta[:, n]), sigma_r_m=sr, sigma_azimuth_rad=sb, out=out
+            )
+            if not doppler:
+                return post
+            return doppler_update(
+                post, meas.vr[:, n], meas.beta[:, n], sigma_vr_mps=svr, sigma_azimuth_rad=sb
+            )
+
+        def on_scan(
+            n: int,
+            state: CVBatch,
+            acc: MetricsAccumulator = acc,
+            sq: NDArray[np.float64] = sq,
+            var: NDArray[np.float64] = var,
+        ) -> None:
             acc.add(n, state, truth[n])
             sq[n], var[n] = _vr_stats(state, truth[n])
+
+        run_scans(
+            state,
+            steps,
+            T,
+            update,
+            sigma_a_mps2=config.sigma_a_mps2,
+            first_scan=k - 1,
+            on_scan=on_scan,
+        )
         metrics[variant] = acc.result()
         rmse_vr[variant] = np.sqrt(sq / config.runs)
         sig_vr[variant] = np.sqrt(var / config.runs)

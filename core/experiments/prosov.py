@@ -18,9 +18,9 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from radarviz.core.conversion.planar import METHODS_2D, convert, convert_parts
-from radarviz.core.filters.cv import CVBatch, cv_init, cv_predict, cv_update_parts, empty_batch
-from radarviz.core.filters.polar import ekf_update, init_from_polar, ukf_update
+from radarviz.core.filters.methods import ALL_METHODS, PolarNoise, PolarPlot, method_named
+from radarviz.core.filters.run import run_scans
+from radarviz.core.filters.state import CVBatch
 from radarviz.core.metrics import MetricsAccumulator, TrackMetrics, delta_percent, nees_band
 from radarviz.core.params import ParameterError, check_choice, check_int, check_real
 from radarviz.core.scenarios.planar import (
@@ -29,8 +29,6 @@ from radarviz.core.scenarios.planar import (
     prosov_target,
 )
 
-POLAR_METHODS: tuple[str, ...] = ("ekf", "ukf")
-ALL_METHODS: tuple[str, ...] = METHODS_2D + POLAR_METHODS
 #: Runs per block: large enough that vector operations dominate Python overhead, small enough
 #: that a block's working set stays in cache.
 BLOCK_RUNS = 16384
@@ -115,7 +113,7 @@ def block_sizes(runs: int, block: int = BLOCK_RUNS) -> list[int]:
 
 
 def filter_block(
-    method: str,
+    name: str,
     r_hat: NDArray[np.float64],
     beta_hat: NDArray[np.float64],
     config: TrackingConfig,
@@ -132,31 +130,20 @@ def filter_block(
     (``ducm`` starts like ``ucm``: there is no prediction yet) or, for the EKF and UKF, the
     naive point with its linearized covariance; velocity 0 with std ``sigma_v0_mps``.
     """
-    sr, sb = config.sigma_r_m, config.sigma_beta_rad
     T, qa = config.target.period_s, config.sigma_a_mps2
-    m, steps = r_hat.shape
-    if method in POLAR_METHODS:
-        state = init_from_polar(r_hat[:, 0], beta_hat[:, 0], sr, sb, config.sigma_v0_mps)
-    else:
-        first = convert("ucm" if method == "ducm" else method, r_hat[:, 0], beta_hat[:, 0], sr, sb)
-        state = cv_init(first.z, first.R, config.sigma_v0_mps)
-    on_scan(0, state)
+    steps = r_hat.shape[1]
+    kind = method_named(name)
+    noise = PolarNoise(config.sigma_r_m, config.sigma_beta_rad)
+    state = kind.start(
+        PolarPlot(r_hat[:, 0], beta_hat[:, 0]), noise, sigma_v0_mps=config.sigma_v0_mps
+    )
     # Scan-major copies, so each scan's measurements are contiguous vectors.
     r_scans, b_scans = np.ascontiguousarray(r_hat.T), np.ascontiguousarray(beta_hat.T)
-    # Two buffers: prediction into one, update into the other, every scan.
-    pred_buf, post_buf = empty_batch(m), empty_batch(m)
-    for n in range(1, steps):
-        pred = cv_predict(state, T, qa, out=pred_buf)
-        r_n, b_n = r_scans[n], b_scans[n]
-        if method == "ekf":
-            state = ekf_update(pred, r_n, b_n, sr, sb, out=post_buf)
-        elif method == "ukf":
-            state = ukf_update(pred, r_n, b_n, sr, sb, out=post_buf)
-        else:
-            predicted = (pred.x[:, 0], pred.x[:, 2]) if method == "ducm" else None
-            c = convert_parts(method, r_n, b_n, sr, sb, predicted)
-            state = cv_update_parts(pred, c.x, c.y, c.r00, c.r01, c.r11, out=post_buf)
-        on_scan(n, state)  # state lives in post_buf; the next prediction writes pred_buf
+
+    def update(n: int, pred: CVBatch, out: CVBatch) -> CVBatch:
+        return kind.update(pred, PolarPlot(r_scans[n], b_scans[n]), noise, out=out)
+
+    state = run_scans(state, steps, T, update, sigma_a_mps2=qa, on_scan=on_scan)
     return state
 
 

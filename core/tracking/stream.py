@@ -3,35 +3,31 @@
 ``filter_block`` (``core.experiments.prosov``) runs one method over a whole (M, N) array of
 scans with a fixed period. A measurement file is different: plots come one at a time, from radars
 that need not sit at the origin, with any time step, optionally with elevation (3D) and Doppler
-radial velocity. ``StreamTracker`` keeps one track per method and takes one ``Plot`` at a time:
+radial velocity. ``StreamTracker`` keeps one track per method and takes one ``Plot`` at a time,
+with the same engine as the Monte Carlo (``core.filters``): a track is a batch of one.
 
-* **2D** (no elevation): ``MethodTrack`` runs the ``core.experiments.prosov`` filters on
-  batches of one.
-  First plot: the spec's start (``filter_block``'s): the method's converted point (``ducm``
-  starts like ``ucm``; ``ekf``/``ukf`` from the naive point with its linearized covariance),
-  velocity 0 with std ``sigma_v0``, shifted by the radar site. Later plots: predict with
-  dt = t − t_previous (``cv_predict``; dt = 0, equal times, skips the prediction), then update
-  radar-centred: the prediction is shifted by −site, updated with the same functions as
-  ``filter_block`` (so ``ducm``, ``ekf`` and ``ukf`` linearise about the prediction as seen from
-  the radar) and shifted back. A shift by a site at the origin is exact, so a file from a
-  radar at the origin gives ``filter_block``'s tracks.
-* **3D** (elevation on every plot): ``core.filters.track3d`` with the 3D conversions
-  ``naive`` and ``ucm`` (``core.conversion.planar``), the 3D ``ekf`` and ``ukf``; the same
-  start and radar-centred updates. ``seed``, ``cmkf_d`` and ``ducm`` are the 2D papers'
-  conversions and have no 3D form here: asking for them with elevations is an error.
+* **Groups.** The converted-measurement methods share one batch (one row per method): the
+  prediction and the position update are one set of vector operations for all of them, only
+  the conversion is per method. ``ekf`` and ``ukf`` are a batch of one each. The batched
+  arithmetic is elementwise, so each row's result is bit for bit that of a batch of one.
+* **2D** (no elevation): all methods of ``core.filters.methods``; **3D** (elevation on every
+  plot): the methods that exist in 3D (``METHODS_3D``). Asking for a 2D-only method with
+  elevations is an error.
+* **First plot**: the method's start (``Method.start``), shifted by the radar site. Later plots:
+  predict with dt = t − t_previous (dt = 0, equal times, skips the prediction), then update
+  with the plot's radar as ``site`` (the polar updates and ``ducm`` linearise about the
+  prediction as seen from that radar). A file from a radar at the origin gives
+  ``filter_block``'s tracks.
 * **Doppler**: a plot's radial velocity, when present and ``use_doppler``, is a second, scalar
-  update after the position update (``doppler_los_update`` /
-  ``core.filters.track3d.doppler_update``: linear along the measured line of sight). On the
-  first plot it follows the start.
-* **Start** ``"finite-memory"`` (issue 3, Gorshkov and Zavizhenets' remark): the first
-  ``init_k`` plots of the first plot's radar, which must be equally spaced in time, are fitted
-  by least squares for (r, Vr, a) (``core.finite_memory.fit``; range only when they carry no
-  Doppler) and every method starts at the k-th of them from ``finite_memory_start`` (2D) /
-  ``finite_memory_start3`` (3D). No track exists before: the plots up to the start (other
-  radars' included, which are not used) give no rows.
+  update after the position update (``core.filters.doppler``: linear along the measured line
+  of sight). On the first plot it follows the start.
+* **Start** ``"finite-memory"`` (Gorshkov and Zavizhenets' remark): the first ``init_k`` plots
+  of the first plot's radar, which must be equally spaced in time, are fitted by least squares
+  for (r, Vr, a) (``core.finite_memory``; range only when they carry no Doppler) and every
+  method starts at the k-th of them (``core.finite_memory.start``). No track exists before:
+  the plots up to the start (other radars' included, which are not used) give no rows.
 
-``add`` returns each method's state in the 3D layout x = (x, ẋ, y, ẏ, z, ż), P (6, 6); a 2D
-track's z, ż and their covariance entries are 0.
+State rows are always in the 3D layout (x, ẋ, y, ẏ, z, ż), z = ż = 0 for 2D tracks.
 """
 
 from __future__ import annotations
@@ -42,31 +38,27 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from radarviz.core.conversion.planar import convert_naive_3d, convert_parts, convert_ucm_3d
-from radarviz.core.experiments.doppler_start import doppler_los_update, finite_memory_start
-from radarviz.core.experiments.prosov import ALL_METHODS, POLAR_METHODS, TrackingConfig
-from radarviz.core.filters.cv import CVBatch, cv_init, cv_predict, cv_update_parts
-from radarviz.core.filters.polar import ekf_update, init_from_polar, ukf_update
-from radarviz.core.filters.track3d import (
-    Track6,
-    cv6_init,
-    cv6_predict,
-    doppler_update,
-    ekf3_update,
-    finite_memory_start3,
-    position_update,
-    ukf3_update,
+from radarviz.core.experiments.prosov import TrackingConfig
+from radarviz.core.filters.doppler import doppler_update
+from radarviz.core.filters.methods import (
+    ALL_METHODS,
+    METHODS,
+    METHODS_3D,
+    Parts,
+    PolarNoise,
+    PolarPlot,
+    stack_parts,
 )
+from radarviz.core.filters.polar_ekf import site_offsets
+from radarviz.core.filters.position import cv_update_parts
+from radarviz.core.filters.predict import cv_predict
+from radarviz.core.filters.state import CVBatch, cv_init
 from radarviz.core.finite_memory.fit import finite_memory_fit
+from radarviz.core.finite_memory.start import finite_memory_start
 from radarviz.core.params import ParameterError, check_choice, check_int, check_real
 from radarviz.core.scenarios.planar import polar_measurements, prosov_target
 
-#: Methods with a 3D form.
-METHODS_3D: tuple[str, ...] = ("naive", "ucm", "ekf", "ukf")
 INIT_MODES: tuple[str, ...] = ("first-plot", "finite-memory")
-
-#: (6,) state of the 3D layout → index in the 2D state (x, ẋ, y, ẏ): the first four.
-_TO_6 = np.array([0, 1, 2, 3])
 
 StateRow = tuple[str, NDArray[np.float64], NDArray[np.float64]]
 
@@ -101,198 +93,133 @@ class PlotError(ParameterError):
         self.index = index
 
 
-class MethodTrack:
-    """One 2D track (M = 1) per method of a group, updated plot by plot.
+class MethodGroup:
+    """The tracks of one target for methods that share an update kind, as one batch.
 
     ``methods`` is either one polar method (``ekf``, ``ukf``) or any number of converted-
-    measurement methods (``METHODS_2D``): those share one batch of M = len(methods) runs, so the
-    prediction and the Kalman update are one set of vector operations for all of them (only
-    the conversion is per method). The batched arithmetic is elementwise, so each run's result
-    is bit for bit that of a batch of one.
+    measurement methods; ``dims`` is 2 or 3. The batch has one row per method.
     """
 
     def __init__(
-        self, methods: tuple[str, ...], sigma_a_mps2: float = 0.0, sigma_v0_mps: float = 1000.0
+        self,
+        methods: tuple[str, ...],
+        dims: int,
+        sigma_a_mps2: float = 0.0,
+        sigma_v0_mps: float = 1000.0,
     ):
         for m in methods:
             check_choice("method", m, ALL_METHODS)
-        if not methods or (any(m in POLAR_METHODS for m in methods) and len(methods) > 1):
+        kinds = {METHODS[m].kind for m in methods}
+        if not methods or len(kinds) > 1 or (kinds != {"converted"} and len(methods) > 1):
             raise ValueError("methods must be one polar method or only converted methods")
         self.methods = tuple(methods)
+        self.kinds = [METHODS[m] for m in methods]
+        self.converted = kinds == {"converted"}
+        self.dims = dims
         self.sigma_a = check_real("sigma_a_mps2", sigma_a_mps2, low=0.0, low_open=False)
         self.sigma_v0 = check_real("sigma_v0_mps", sigma_v0_mps, low=0.0)
         self.state: CVBatch | None = None
         self.time_s: float | None = None
 
-    def precompute(self, plots: list[Plot]) -> NDArray[np.float64]:
-        """Every method's converted point and covariance for a block of plots, (B, 5, M).
+    def _polar(self, plots: list[Plot]) -> tuple[PolarPlot, PolarNoise]:
+        """A block's (r̂, β̂[, ε̂]) and noise std as (B,) arrays."""
+        col = {
+            name: np.array([getattr(p, name) for p in plots], dtype=np.float64)
+            for name in (
+                "range_m",
+                "azimuth_rad",
+                "sigma_r_m",
+                "sigma_azimuth_rad",
+                "sigma_elevation_rad",
+            )
+        }
+        el = None
+        if self.dims == 3:
+            el = np.array([p.elevation_rad for p in plots], dtype=np.float64)
+        return (
+            PolarPlot(col["range_m"], col["azimuth_rad"], el),
+            PolarNoise(col["sigma_r_m"], col["sigma_azimuth_rad"], col["sigma_elevation_rad"]),
+        )
+
+    def precompute(self, plots: list[Plot]) -> Parts | None:
+        """Every converted method's radar-centred point and covariance for a block of plots,
+        each (B, M); None for a polar group.
 
         The conversions do not depend on the track, so a block of plots is converted in one
         vectorised call per method (the per-plot calls dominated the time). ``ducm``, which
-        needs the prediction, gets ``ucm``'s conversion: what it uses at the start.
+        needs the prediction, gets its start conversion here (``ucm``'s) and is converted
+        again about the prediction in ``add``.
         """
-        r = np.array([p.range_m for p in plots])
-        b = np.array([p.azimuth_rad for p in plots])
-        sr = np.array([p.sigma_r_m for p in plots])
-        sb = np.array([p.sigma_azimuth_rad for p in plots])
-        out = np.empty((len(plots), 5, len(self.methods)))
-        for i, m in enumerate(self.methods):
-            if m in POLAR_METHODS:
-                continue
-            c = convert_parts("ucm" if m == "ducm" else m, r, b, sr, sb)
-            out[:, :, i] = np.stack(np.broadcast_arrays(*c), -1)
-        return out
-
-    def _converted(
-        self,
-        r: NDArray[np.float64],
-        b: NDArray[np.float64],
-        sr: float,
-        sb: float,
-        rel: CVBatch | None,
-        pre: NDArray[np.float64],
-    ) -> tuple[NDArray[np.float64], ...]:
-        """Every method's converted point and covariance as five (M,) vectors: ``pre`` (this
-        plot's slice of ``precompute``) with ``ducm`` converted about the prediction ``rel``
-        (at the start, ``rel`` None, ``ducm`` keeps ``ucm``'s conversion)."""
-        parts = pre.copy()
-        if rel is not None:
-            for i, m in enumerate(self.methods):
-                if m == "ducm":
-                    c = convert_parts(m, r, b, sr, sb, (rel.x[i : i + 1, 0], rel.x[i : i + 1, 2]))
-                    parts[:, i] = np.concatenate(c)
-        return tuple(parts)
+        if not self.converted:
+            return None
+        plot, noise = self._polar(plots)
+        return stack_parts(
+            [k.convert(plot, noise, conversion=k.start_conversion) for k in self.kinds]
+        )
 
     def start_from(self, x: NDArray[np.float64], P: NDArray[np.float64], time_s: float) -> None:
-        """Start every method of the group at x (4,), P (4, 4) (absolute frame)."""
+        """Start every method of the group at x (n,), P (n, n) (absolute frame)."""
         m = len(self.methods)
         self.state = CVBatch(np.tile(x, (m, 1)), np.tile(P, (m, 1, 1)))
         self.time_s = time_s
 
-    def add(self, p: Plot, pre: NDArray[np.float64], use_doppler: bool = True) -> CVBatch:
-        """Filter one plot; returns the updated states (x (M, 4), P (M, 4, 4)), absolute frame.
-
-        ``pre``: this plot's (5, M) slice of ``precompute``."""
-        r = np.array([p.range_m])
-        b = np.array([p.azimuth_rad])
-        sr, sb, m = p.sigma_r_m, p.sigma_azimuth_rad, self.methods[0]
-        sx, sy = p.site[0], p.site[1]
+    def add(self, p: Plot, pre: Parts | None, use_doppler: bool = True) -> CVBatch:
+        """Filter one plot; ``pre`` this plot's slice of ``precompute`` (z (M,), R (M,))."""
+        m = len(self.methods)
+        site = np.asarray(p.site[: self.dims], dtype=np.float64)
+        plot, noise = self._polar([p])
         if self.state is None:
-            if m in POLAR_METHODS:
-                state = init_from_polar(r, b, sr, sb, self.sigma_v0)
+            if self.converted:
+                assert pre is not None
+                z, R = pre
+                zs = np.stack([z[i] + site[i] for i in range(self.dims)], -1)
+                Rm = np.empty((m, self.dims, self.dims))
+                for (i, j), v in R.items():
+                    Rm[:, i, j] = Rm[:, j, i] = v
+                state = cv_init(zs, Rm, self.sigma_v0)
             else:
-                zx, zy, r00, r01, r11 = self._converted(r, b, sr, sb, None, pre)
-                R = np.stack([np.stack([r00, r01], -1), np.stack([r01, r11], -1)], -2)
-                state = cv_init(np.stack([zx, zy], -1), R, self.sigma_v0)
+                state = self.kinds[0].start(plot, noise, sigma_v0_mps=self.sigma_v0, site=site)
         else:
             assert self.time_s is not None
             dt = p.time_s - self.time_s
             if dt < 0:
                 raise ValueError(f"times must not decrease (got {p.time_s} after {self.time_s})")
             pred = cv_predict(self.state, dt, self.sigma_a) if dt > 0 else self.state
-            rel = CVBatch(pred.x.copy(), pred.P)
-            rel.x[:, 0] -= sx
-            rel.x[:, 2] -= sy
-            if m == "ekf":
-                state = ekf_update(rel, r, b, sr, sb)
-            elif m == "ukf":
-                state = ukf_update(rel, r, b, sr, sb)
+            if self.converted:
+                assert pre is not None
+                z, R = [v.copy() for v in pre[0]], {k: v.copy() for k, v in pre[1].items()}
+                for i, kind in enumerate(self.kinds):
+                    if kind.about_prediction:
+                        row = CVBatch(pred.x[i : i + 1], pred.P[i : i + 1])
+                        zi, Ri = kind.convert(plot, noise, site_offsets(row, site))
+                        for a in range(self.dims):
+                            z[a][i] = zi[a][0]
+                        for key, v in Ri.items():
+                            R[key][i] = v[0]
+                state = cv_update_parts(pred, [z[a] + site[a] for a in range(self.dims)], R)
             else:
-                state = cv_update_parts(rel, *self._converted(r, b, sr, sb, rel, pre))
-        state.x[:, 0] += sx
-        state.x[:, 2] += sy
+                state = self.kinds[0].update(pred, plot, noise, site=site)
         if use_doppler and p.radial_velocity_mps is not None:
             # Linear in the velocity: the position frame does not matter.
-            state = doppler_los_update(
+            state = doppler_update(
                 state,
-                np.full(len(self.methods), p.radial_velocity_mps),
-                b,
-                p.sigma_radial_velocity_mps,
-                sb,
+                np.full(m, p.radial_velocity_mps),
+                p.azimuth_rad,
+                0.0 if p.elevation_rad is None else p.elevation_rad,
+                sigma_vr_mps=p.sigma_radial_velocity_mps,
+                sigma_azimuth_rad=p.sigma_azimuth_rad,
+                sigma_elevation_rad=p.sigma_elevation_rad,
             )
         self.state, self.time_s = state, p.time_s
         return state
 
 
-class MethodTrack3D:
-    """One 3D track of one method (``METHODS_3D``), updated plot by plot
-    (``core.filters.track3d``)."""
-
-    def __init__(self, method: str, sigma_a_mps2: float = 0.0, sigma_v0_mps: float = 1000.0):
-        self.method = check_choice("method", method, METHODS_3D)
-        # ucm converts with its own debiasing; naive, and ekf/ukf for their start, naively.
-        self._convert = convert_ucm_3d if method == "ucm" else convert_naive_3d
-        self.sigma_a = check_real("sigma_a_mps2", sigma_a_mps2, low=0.0, low_open=False)
-        self.sigma_v0 = check_real("sigma_v0_mps", sigma_v0_mps, low=0.0)
-        self.track: Track6 | None = None
-        self.time_s: float | None = None
-
-    def start_from(self, track: Track6, time_s: float) -> None:
-        self.track, self.time_s = track, time_s
-
-    def precompute(self, plots: list[Plot]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """The method's radar-centred converted points z (B, 3) and R (B, 3, 3) for a block of
-        plots, one vectorised call (``ekf``/``ukf`` use the naive point at the start only)."""
-        cols = np.array(
-            [
-                (
-                    p.range_m,
-                    p.azimuth_rad,
-                    p.elevation_rad,
-                    p.sigma_r_m,
-                    p.sigma_azimuth_rad,
-                    p.sigma_elevation_rad,
-                )
-                for p in plots
-            ]
-        ).T
-        c = self._convert(*cols)
-        return c.z, c.R
-
-    def add(
-        self,
-        p: Plot,
-        pre: tuple[NDArray[np.float64], NDArray[np.float64]],
-        use_doppler: bool = True,
-    ) -> Track6:
-        """Filter one plot; ``pre`` its radar-centred (z, R) from ``precompute``."""
-        assert p.elevation_rad is not None
-        site = np.asarray(p.site, dtype=np.float64)
-        z = np.array([p.range_m, p.azimuth_rad, p.elevation_rad])
-        sigmas = np.array([p.sigma_r_m, p.sigma_azimuth_rad, p.sigma_elevation_rad])
-        m = self.method
-        if self.track is None:
-            track = cv6_init(pre[0] + site, pre[1], self.sigma_v0)
-        else:
-            assert self.time_s is not None
-            dt = p.time_s - self.time_s
-            if dt < 0:
-                raise ValueError(f"times must not decrease (got {p.time_s} after {self.time_s})")
-            pred = cv6_predict(self.track, dt, self.sigma_a) if dt > 0 else self.track
-            if m == "ekf":
-                track = ekf3_update(pred, site, z, sigmas)
-            elif m == "ukf":
-                track = ukf3_update(pred, site, z, sigmas)
-            else:
-                track = position_update(pred, pre[0] + site, pre[1])
-        if use_doppler and p.radial_velocity_mps is not None:
-            track = doppler_update(
-                track,
-                p.radial_velocity_mps,
-                p.azimuth_rad,
-                p.elevation_rad,
-                p.sigma_radial_velocity_mps,
-                p.sigma_azimuth_rad,
-                p.sigma_elevation_rad,
-            )
-        self.track, self.time_s = track, p.time_s
-        return track
-
-
 def track_groups(methods: tuple[str, ...]) -> list[tuple[str, ...]]:
-    """Split methods into ``MethodTrack`` groups: the converted ones together, each polar alone."""
-    converted = tuple(m for m in methods if m not in POLAR_METHODS)
-    return ([converted] if converted else []) + [(m,) for m in methods if m in POLAR_METHODS]
+    """Split methods into ``MethodGroup`` groups: the converted ones together, each polar
+    alone."""
+    converted = tuple(m for m in methods if METHODS[m].kind == "converted")
+    polar = [(m,) for m in methods if METHODS[m].kind != "converted"]
+    return ([converted] if converted else []) + polar
 
 
 @dataclass(frozen=True)
@@ -344,15 +271,13 @@ class StreamTracker:
         self.three_d = three_d
         self.options = options
         o = options
-        if three_d:
-            self._tracks3 = {m: MethodTrack3D(m, o.sigma_a_mps2, o.sigma_v0_mps) for m in methods}
-        else:
-            self._groups = [
-                MethodTrack(g, o.sigma_a_mps2, o.sigma_v0_mps) for g in track_groups(self.methods)
-            ]
-            self._where = {
-                m: (k, i) for k, tr in enumerate(self._groups) for i, m in enumerate(tr.methods)
-            }
+        dims = 3 if three_d else 2
+        self._groups = [
+            MethodGroup(g, dims, o.sigma_a_mps2, o.sigma_v0_mps) for g in track_groups(self.methods)
+        ]
+        self._where = {
+            m: (k, i) for k, tr in enumerate(self._groups) for i, m in enumerate(tr.methods)
+        }
         self._window: list[Plot] | None = [] if o.init == "finite-memory" else None
         self._started = False
 
@@ -372,10 +297,7 @@ class StreamTracker:
                     "elevation_deg", "every plot of a 3D track needs an elevation", index=i
                 )
         use_doppler = self.options.use_doppler
-        if self.three_d:
-            pre3 = {m: tr.precompute(plots) for m, tr in self._tracks3.items()}
-        else:
-            pre2 = [g.precompute(plots) for g in self._groups]
+        pre = [g.precompute(plots) for g in self._groups]
         out: list[list[StateRow]] = []
         for i, p in enumerate(plots):
             if self._window is not None and not self._started:
@@ -386,12 +308,11 @@ class StreamTracker:
                     raise
                 out.append(self._rows() if self._started else [])
                 continue
-            if self.three_d:
-                for m, tr in self._tracks3.items():
-                    tr.add(p, (pre3[m][0][i], pre3[m][1][i]), use_doppler)
-            else:
-                for g, pre in zip(self._groups, pre2, strict=True):
-                    g.add(p, pre[i], use_doppler)
+            for g, parts in zip(self._groups, pre, strict=True):
+                row = None
+                if parts is not None:
+                    row = ([z[i] for z in parts[0]], {k: v[i] for k, v in parts[1].items()})
+                g.add(p, row, use_doppler)
             self._started = True
             out.append(self._rows())
         return out
@@ -399,19 +320,15 @@ class StreamTracker:
     def _rows(self) -> list[StateRow]:
         rows = []
         for m in self.methods:
-            if self.three_d:
-                t = self._tracks3[m].track
-                assert t is not None
-                rows.append((m, t.x, t.P))
-            else:
-                k, i = self._where[m]
-                st = self._groups[k].state
-                assert st is not None
-                x6 = np.zeros(6)
-                P6 = np.zeros((6, 6))
-                x6[_TO_6] = st.x[i]
-                P6[:4, :4] = st.P[i]
-                rows.append((m, x6, P6))
+            k, i = self._where[m]
+            st = self._groups[k].state
+            assert st is not None
+            n = st.x.shape[-1]
+            x6 = np.zeros(6)
+            P6 = np.zeros((6, 6))
+            x6[:n] = st.x[i]
+            P6[:n, :n] = st.P[i]
+            rows.append((m, x6, P6))
         return rows
 
     def _fill_window(self, p: Plot) -> None:
@@ -449,41 +366,24 @@ class StreamTracker:
             raise PlotError(
                 "range_m",
                 f"the finite-memory start over k = {k} range-only plots fits only "
-                f"{fit.order} parameter; use --init-k 3 or more",
+                f"{fit.order} parameter; init_k must be 3 or more",
             )
         ranges = np.array([q.range_m for q in win])
         vrs = np.array([q.radial_velocity_mps for q in win], dtype=float) if doppler else None
-        site = np.asarray(p.site, dtype=np.float64)
-        o = self.options
-        if self.three_d:
-            assert p.elevation_rad is not None
-            start = finite_memory_start3(
-                fit,
-                ranges,
-                vrs,
-                p.azimuth_rad,
-                p.elevation_rad,
-                p.sigma_azimuth_rad,
-                p.sigma_elevation_rad,
-                o.sigma_v0_mps,
-                site,
-            )
-            for tr in self._tracks3.values():
-                tr.start_from(Track6(start.x.copy(), start.P.copy()), p.time_s)
-        else:
-            s = finite_memory_start(
-                fit,
-                ranges[None],
-                None if vrs is None else vrs[None],
-                np.array([p.azimuth_rad]),
-                p.sigma_azimuth_rad,
-                o.sigma_v0_mps,
-            )
-            x = s.x[0].copy()
-            x[0] += site[0]
-            x[2] += site[1]
-            for g in self._groups:
-                g.start_from(x, s.P[0].copy(), p.time_s)
+        dims = 3 if self.three_d else 2
+        start = finite_memory_start(
+            fit,
+            ranges,
+            vrs,
+            p.azimuth_rad,
+            p.elevation_rad if self.three_d else None,
+            sigma_azimuth_rad=p.sigma_azimuth_rad,
+            sigma_elevation_rad=p.sigma_elevation_rad,
+            sigma_v0_mps=self.options.sigma_v0_mps,
+            site=np.asarray(p.site[:dims], dtype=np.float64),
+        )
+        for g in self._groups:
+            g.start_from(start.x.copy(), start.P.copy(), p.time_s)
         self._started = True
         self._window = None
 

@@ -52,7 +52,7 @@ the distribution, and the sample σ only approaches it while such draws are vani
 (small m). Geometries where C is singular (fewer than 3 radars or distinct sites,
 coplanar lines of sight, the target at a site) raise :class:`GeometryError`.
 
-Position. Each radar's (r, β, ε) is converted by :func:`core.conversion.planar.convert_ucm_3d`,
+Position. Each radar's (r, β, ε) is converted by :func:`core.conversion.spatial.convert_ucm_3d`,
 shifted by its site, and the points are fused by information-weighted least squares
 P = (Σ R_k⁻¹)⁻¹, p̂ = P Σ R_k⁻¹ (s_k + z_k), with R_k re-evaluated at the first-pass fused
 point (:func:`fuse_positions`).
@@ -68,7 +68,7 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from radarviz.core.conversion.planar import convert_ucm_3d, naive_cov_given_truth_3d
+from radarviz.core.conversion.spatial import convert_ucm_3d, ucm_cov_3d
 from radarviz.core.geometry import (
     LineOfSight,
     direction_cosines,
@@ -651,7 +651,7 @@ def fuse_positions(
 ) -> FusedPosition:
     """Fuse the radars' (r, β, ε) (..., N) into one point; per-radar σ's (N,).
 
-    Each measurement is converted by :func:`core.conversion.planar.convert_ucm_3d` (unbiased point,
+    Each measurement is converted by :func:`core.conversion.spatial.convert_ucm_3d` (unbiased point,
     covariance R_k at the measurement) and shifted by its site s_k; then
     P = (Σ R_k⁻¹)⁻¹, p̂ = P Σ R_k⁻¹ (s_k + z_k). One radar is enough (N ≥ 1).
 
@@ -678,7 +678,8 @@ def fuse_positions(
             "a radar sees the target at zero range or at its zenith: "
             "its position covariance is singular"
         )
-    conv = convert_ucm_3d(r, az, el, sr, sb, se)
+    sig = {"sigma_r_m": sr, "sigma_azimuth_rad": sb, "sigma_elevation_rad": se}
+    conv = convert_ucm_3d(r, az, el, **sig)
     pts = conv.z + s
     pos, P = _fuse(conv.R, pts)
     if refine:
@@ -687,10 +688,8 @@ def fuse_positions(
             raise GeometryError(
                 "the fused point is at a site or its zenith: position covariance singular"
             )
-        kxy = np.exp((sb * sb + se * se) / 2.0)
-        kappa = np.stack([kxy, kxy, np.exp(se * se / 2.0)], axis=-1)
-        R = naive_cov_given_truth_3d(los.range, los.azimuth, los.elevation, sr, sb, se)
-        pos, P = _fuse(kappa[:, :, None] * R * kappa[:, None, :], pts)
+        R = ucm_cov_3d(los.range, los.azimuth, los.elevation, **sig)
+        pos, P = _fuse(R, pts)
     return FusedPosition(pos, P, pts)
 
 

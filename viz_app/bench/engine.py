@@ -26,7 +26,10 @@ from filterpy.kalman import KalmanFilter
 
 from radarviz.core.conversion.planar import convert_ucm
 from radarviz.core.experiments.prosov import BLOCK_RUNS, TrackingConfig, block_sizes, filter_block
-from radarviz.core.filters.cv import cv_init, cv_predict, cv_update, empty_batch, transition_matrix
+from radarviz.core.filters.position import cv_update
+from radarviz.core.filters.predict import transition_matrix
+from radarviz.core.filters.run import run_scans
+from radarviz.core.filters.state import cv_init
 from radarviz.core.scenarios.planar import polar_measurements, prosov_target
 from radarviz.viz_app.runtime import peak_rss_mb
 from radarviz.viz_app.tune.panel import measure_tune_latency
@@ -66,12 +69,12 @@ def bench_batched(runs: int, config: TrackingConfig, repeats: int = 3) -> tuple[
     for _ in range(repeats):
         t0 = time.perf_counter()
         for z, R in converted:
-            m = z.shape[1]
-            state = cv_init(z[0], R[0])
-            a, b = empty_batch(m), empty_batch(m)
-            for n in range(1, steps):
-                pred = cv_predict(state, T, out=a)
-                state = cv_update(pred, z[n], R[n], out=b)
+            run_scans(
+                cv_init(z[0], R[0]),
+                steps,
+                T,
+                lambda n, pred, out, z=z, R=R: cv_update(pred, z[n], R[n], out=out),
+            )
         filter_only = min(filter_only, time.perf_counter() - t0)
     track_steps = runs * steps
     return end_to_end / track_steps * 1e9, filter_only / track_steps * 1e9

@@ -28,7 +28,7 @@ from collections.abc import Iterable, Iterator
 import numpy as np
 import rerun as rr
 
-from radarviz.core.filters.track3d import POS, VEL
+from radarviz.core.filters.state import position_index, velocity_index
 from radarviz.core.tracking.stream import Plot, StateRow
 from radarviz.viz_app.io.plots import Radar
 from radarviz.viz_app.rerun.recording import (
@@ -122,6 +122,7 @@ class TrackRecorder:
                 continue
             n, t, xs, ps = zip(*items, strict=True)
             x, P = np.array(xs), np.array(ps)
+            POS, VEL = list(position_index(3)), list(velocity_index(3))
             pos, vel = x[:, POS], x[:, VEL]
             cov = P[:, POS][:, :, POS]
             rgb = colour(method)

@@ -50,7 +50,7 @@ from radarviz.core.experiments.prosov import (
     block_sizes,
     filter_block,
 )
-from radarviz.core.filters.cv import CVBatch
+from radarviz.core.filters.state import CVBatch
 from radarviz.core.finite_memory.fit import PRESETS, c0_ratio
 from radarviz.core.metrics import nees_band
 from radarviz.core.params import ParameterError, check_choice, check_int, check_real

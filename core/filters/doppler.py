@@ -1,0 +1,129 @@
+"""Doppler radial velocity as a linear velocity measurement along the measured line of sight.
+
+A radar measuring V̂r (and, in the same plot, β̂ and ε̂) sees the target's velocity v
+projected on the line of sight u(β, ε) (``core.geometry``). Using the *measured* direction
+û = u(β̂, ε̂) makes the measurement linear in the state::
+
+    V̂r = û·v + e,   H = û on the velocity components (0 on the position),
+    var e = σVr² + σβ² ((g_β·v̂)² + g_βᵀ P_vv g_β) + σε² ((g_ε·v̂)² + g_εᵀ P_vv g_ε),
+    g_β = ∂u/∂β,  g_ε = ∂u/∂ε                  (a small angle error δ tilts u by g δ, so
+                                                V̂r moves by g·v δ)
+
+In 2D (no elevation) ε = 0 and the σε term is absent. The Kalman update is then exact given
+that variance; it needs no predicted position, which is what makes the textbook EKF row
+∂Vr/∂x fail when σVr is small (its position derivative is (tangential speed)/r, taken as 0
+at a start where the cross-range velocity is unobserved; see ``docs/finite_memory.md``).
+Joseph form, written out for the scalar measurement::
+
+    U = P hᵀ,  S = h U + var e,  K = U / S,  x⁺ = x + K (V̂r − û·v̂),
+    P⁺ = P − K Uᵀ + (K S − U) Kᵀ          (symmetrised)
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from radarviz.core.filters.state import (
+    CVBatch,
+    dense_joseph_update,
+    target_batch,
+    use_dense,
+    velocity_index,
+)
+
+
+def doppler_update(
+    state: CVBatch,
+    radial_velocity_mps: ArrayLike,
+    azimuth_rad: ArrayLike,
+    elevation_rad: ArrayLike = 0.0,
+    *,
+    sigma_vr_mps: ArrayLike,
+    sigma_azimuth_rad: ArrayLike,
+    sigma_elevation_rad: ArrayLike = 0.0,
+    out: CVBatch | None = None,
+) -> CVBatch:
+    """Doppler update of every track of a 2D or 3D batch (module docstring).
+
+    Args:
+        state: the batch after this plot's position update (or its prediction).
+        radial_velocity_mps: measured V̂r, (...) or scalar.
+        azimuth_rad, elevation_rad: the plot's measured angles (elevation 0 in 2D).
+        sigma_vr_mps, sigma_azimuth_rad, sigma_elevation_rad: the plot's noise std.
+        out: optional preallocated batch to write into (must not alias ``state``).
+    """
+    x, P = state.x, state.P
+    dims, n = state.dims, x.shape[-1]
+    vel = velocity_index(dims)
+    az = np.asarray(azimuth_rad, dtype=np.float64)
+    el = np.asarray(elevation_rad, dtype=np.float64)
+    ca, sa, ce, se = np.cos(az), np.sin(az), np.cos(el), np.sin(el)
+    # u = (cos ε cos β, cos ε sin β, sin ε), ∂u/∂β = cos ε (−sin β, cos β, 0),
+    # ∂u/∂ε = (−sin ε cos β, −sin ε sin β, cos ε)  (``core.geometry``), first ``dims`` axes.
+    u = (ce * ca, ce * sa, se)[:dims]
+    g_b = (-ce * sa, ce * ca)
+    v = [x[..., i] for i in vel]
+    Pvv = [[P[..., i, j] for j in vel] for i in vel]
+    var_r = np.asarray(sigma_vr_mps, dtype=np.float64) ** 2
+
+    def angle_term(g: tuple) -> NDArray[np.float64]:
+        """(g·v̂)² + gᵀ P_vv g for the first len(g) velocity axes."""
+        k = len(g)
+        gv = g[0] * v[0]
+        gPg = g[0] * g[0] * Pvv[0][0]
+        for a in range(1, k):
+            gv = gv + g[a] * v[a]
+            gPg = gPg + g[a] * g[a] * Pvv[a][a]
+            for b in range(a):
+                gPg = gPg + 2.0 * g[a] * g[b] * Pvv[a][b]
+        return gv * gv + gPg
+
+    r_e = var_r + np.asarray(sigma_azimuth_rad, dtype=np.float64) ** 2 * angle_term(g_b)
+    if dims == 3:
+        g_e = (-se * ca, -se * sa, ce)
+        r_e = r_e + np.asarray(sigma_elevation_rad, dtype=np.float64) ** 2 * angle_term(g_e)
+    pred_vr = u[0] * v[0]
+    for a in range(1, dims):
+        pred_vr = pred_vr + u[a] * v[a]
+    if use_dense(state):  # the same update as matrix products (small batches)
+        H = np.zeros((*state.batch_shape, 1, n))
+        for a in range(dims):
+            H[..., 0, vel[a]] = u[a]
+        nu1 = (np.asarray(radial_velocity_mps, dtype=np.float64) - pred_vr)[..., None]
+        return dense_joseph_update(
+            state,
+            np.broadcast_to(nu1, (*state.batch_shape, 1)),
+            H,
+            np.broadcast_to(r_e, state.batch_shape)[..., None, None],
+            out,
+        )
+    # U = P hᵀ (h = u on the velocity), S = h U + var e, K = U / S.
+    U = []
+    for i in range(n):
+        acc = P[..., i, vel[0]] * u[0]
+        for a in range(1, dims):
+            acc = acc + P[..., i, vel[a]] * u[a]
+        U.append(acc)
+    S = u[0] * U[vel[0]]
+    for a in range(1, dims):
+        S = S + u[a] * U[vel[a]]
+    S = S + r_e
+    inv_S = 1.0 / S
+    K = [U[i] * inv_S for i in range(n)]
+    nu = np.asarray(radial_velocity_mps, dtype=np.float64) - pred_vr
+    out = target_batch(state, out)
+    for i in range(n):
+        out.x[..., i] = x[..., i] + K[i] * nu
+    # P⁺ = P − K Uᵀ + (K S − U) Kᵀ, symmetrised: average of entries (i, j) and (j, i).
+    V = [K[i] * S - U[i] for i in range(n)]
+    oP = out.P
+    for i in range(n):
+        for j in range(i, n):
+            a = P[..., i, j] - K[i] * U[j] + V[i] * K[j]
+            if i != j:
+                b = P[..., j, i] - K[j] * U[i] + V[j] * K[i]
+                a = 0.5 * (a + b)
+                oP[..., j, i] = a
+            oP[..., i, j] = a
+    return out

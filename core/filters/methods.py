@@ -1,0 +1,212 @@
+"""The method registry: each tracking method's start and update, in one table.
+
+A method is one way to bring a polar radar plot (r̂, β̂[, ε̂]) into the constant-velocity
+filter (``core.filters.state``, ``core.filters.predict``):
+
+=========  =========  ====  ===========================================================
+name       kind       dims  what it does
+=========  =========  ====  ===========================================================
+naive      converted  2, 3  r̂ u(β̂, ε̂), first-order covariance (Prosov eqs. 8–9)
+seed       converted  2     × (1 − s/2), covariance eq. 11 (Prosov eqs. 10–11 as printed)
+cmkf_d     converted  2     × (1 − e^(−s) + e^(−s/2)), eq. 11 (Lerro & Bar-Shalom 1993)
+ucm        converted  2, 3  × e^(s/2), exact covariance at the measurement (Mo et al. 1998)
+ducm       converted  2     ucm's point, covariance at the prediction (Bordonaro et al. 2014)
+ekf        ekf        2, 3  polar measurement filtered directly, linearised at the prediction
+ukf        ukf        2, 3  polar measurement filtered directly, scaled sigma points
+=========  =========  ====  ===========================================================
+
+(s = σβ², rad².) Every method starts a track from its first plot the same way: the method's
+converted point and covariance (``ducm``, having no prediction yet, starts like ``ucm``;
+``ekf`` and ``ukf`` from the naive point), velocity 0 with std σv0. Converted methods then
+update with the position update (``core.filters.position``), the polar ones with
+``core.filters.polar_ekf`` / ``core.filters.polar_ukf``. Doppler, when a plot has it, is a
+second update of the same kind for every method (``core.filters.doppler``).
+
+Every function works on a batch of any leading shape and takes the radar's ``site``, so a
+Monte Carlo of 10⁵ runs, the streaming tracker's single track (a batch of one) and the panel
+all run the same code.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from radarviz.core.conversion.planar import convert_parts
+from radarviz.core.conversion.spatial import convert_naive_3d, convert_ucm_3d
+from radarviz.core.filters.polar_ekf import ekf_update, site_offsets
+from radarviz.core.filters.polar_ukf import ukf_update
+from radarviz.core.filters.position import cv_update_parts, upper_entries
+from radarviz.core.filters.state import CVBatch, Vec, cv_init
+
+Parts = tuple[list[Vec], dict[tuple[int, int], Vec]]
+
+
+class PolarPlot(NamedTuple):
+    """Measured polar coordinates of a batch of plots, each (...): m, rad; 2D: no elevation."""
+
+    range_m: ArrayLike
+    azimuth_rad: ArrayLike
+    elevation_rad: ArrayLike | None = None
+
+    @property
+    def dims(self) -> int:
+        return 2 if self.elevation_rad is None else 3
+
+    def vectors(self) -> list[ArrayLike]:
+        out = [self.range_m, self.azimuth_rad]
+        return out if self.elevation_rad is None else [*out, self.elevation_rad]
+
+
+class PolarNoise(NamedTuple):
+    """Measurement noise std of the plots: σr (m), σβ (rad), σε (rad; 0 in 2D)."""
+
+    sigma_r_m: ArrayLike
+    sigma_azimuth_rad: ArrayLike
+    sigma_elevation_rad: ArrayLike = 0.0
+
+
+def _parts_2d(name: str, plot: PolarPlot, noise: PolarNoise, predicted: list[Vec] | None) -> Parts:
+    c = convert_parts(
+        name,
+        plot.range_m,
+        plot.azimuth_rad,
+        noise.sigma_r_m,
+        noise.sigma_azimuth_rad,
+        None if predicted is None else (predicted[0], predicted[1]),
+    )
+    return [c.x, c.y], {(0, 0): c.r00, (0, 1): c.r01, (1, 1): c.r11}
+
+
+def _parts_3d(convert3: Callable) -> Callable:
+    def parts(name: str, plot: PolarPlot, noise: PolarNoise, predicted: list[Vec] | None) -> Parts:
+        c = convert3(plot.range_m, plot.azimuth_rad, plot.elevation_rad, **noise._asdict())
+        return [c.z[..., i] for i in range(3)], upper_entries(c.R)
+
+    return parts
+
+
+_CONVERT_3D = {"naive": _parts_3d(convert_naive_3d), "ucm": _parts_3d(convert_ucm_3d)}
+
+
+@dataclass(frozen=True)
+class Method:
+    """One tracking method.
+
+    Attributes:
+        name: the name used everywhere (CLI, files, recordings).
+        kind: ``"converted"``, ``"ekf"`` or ``"ukf"``: which update it uses.
+        dims: the dimensions it exists in (2: (r, β); 3: (r, β, ε)).
+        start_conversion: the conversion of its first plot.
+        about_prediction: its covariance is evaluated at the predicted position (``ducm``).
+        summary: one line for help texts.
+    """
+
+    name: str
+    kind: str
+    dims: tuple[int, ...]
+    start_conversion: str
+    about_prediction: bool
+    summary: str
+
+    def convert(
+        self,
+        plot: PolarPlot,
+        noise: PolarNoise,
+        predicted: list[Vec] | None = None,
+        conversion: str | None = None,
+    ) -> Parts:
+        """Radar-centred converted point (d components) and covariance (upper entries).
+
+        ``predicted``: the predicted position minus the site, needed by ``ducm``.
+        ``conversion``: another conversion than the method's own (the start's).
+        """
+        name = conversion or self.name
+        if plot.dims == 2:
+            return _parts_2d(name, plot, noise, predicted)
+        return _CONVERT_3D[name](name, plot, noise, predicted)
+
+    def start(
+        self,
+        plot: PolarPlot,
+        noise: PolarNoise,
+        *,
+        sigma_v0_mps: float,
+        site: ArrayLike | None = None,
+    ) -> CVBatch:
+        """Tracks started at their first plot (module docstring)."""
+        z, R = self.convert(plot, noise, conversion=self.start_conversion)
+        d = len(z)
+        zs = np.stack(np.broadcast_arrays(*_shifted(z, site)), axis=-1)
+        Rm = np.empty((*zs.shape[:-1], d, d))
+        for (i, j), v in R.items():
+            Rm[..., i, j] = Rm[..., j, i] = v
+        return cv_init(zs, Rm, sigma_v0_mps)
+
+    def update(
+        self,
+        pred: CVBatch,
+        plot: PolarPlot,
+        noise: PolarNoise,
+        *,
+        site: ArrayLike | None = None,
+        out: CVBatch | None = None,
+    ) -> CVBatch:
+        """The measurement update of the predicted batch ``pred`` with this scan's plots."""
+        if self.kind == "ekf":
+            return ekf_update(pred, plot.vectors(), site=site, out=out, **noise._asdict())
+        if self.kind == "ukf":
+            return ukf_update(pred, plot.vectors(), site=site, out=out, **noise._asdict())
+        predicted = site_offsets(pred, site) if self.about_prediction else None
+        z, R = self.convert(plot, noise, predicted)
+        return cv_update_parts(pred, _shifted(z, site), R, out)
+
+
+def _shifted(z: list[Vec], site: ArrayLike | None) -> list[Vec]:
+    """Radar-centred components z plus the site (unchanged for a radar at the origin)."""
+    if site is None:
+        return z
+    s = np.asarray(site, dtype=np.float64)
+    return [z[i] + s[..., i] for i in range(len(z))]
+
+
+METHODS: dict[str, Method] = {
+    m.name: m
+    for m in (
+        Method("naive", "converted", (2, 3), "naive", False, "converted point, linearised cov."),
+        Method("seed", "converted", (2,), "seed", False, "Prosov's eq. 10 correction, eq. 11"),
+        Method("cmkf_d", "converted", (2,), "cmkf_d", False, "Lerro & Bar-Shalom debiased"),
+        Method("ucm", "converted", (2, 3), "ucm", False, "Mo et al. unbiased conversion"),
+        Method("ducm", "converted", (2,), "ucm", True, "Bordonaro et al. decorrelated ucm"),
+        Method("ekf", "ekf", (2, 3), "naive", False, "polar EKF"),
+        Method("ukf", "ukf", (2, 3), "naive", False, "polar UKF"),
+    )
+}
+#: Every method, in display order.
+ALL_METHODS: tuple[str, ...] = tuple(METHODS)
+#: The methods that filter the polar measurement directly.
+POLAR_METHODS: tuple[str, ...] = tuple(n for n, m in METHODS.items() if m.kind != "converted")
+#: The methods that exist in 3D.
+METHODS_3D: tuple[str, ...] = tuple(n for n, m in METHODS.items() if 3 in m.dims)
+
+
+def method_named(name: str) -> Method:
+    """The registered method ``name`` (ValueError naming the choices otherwise)."""
+    try:
+        return METHODS[name]
+    except KeyError:
+        raise ValueError(f"method must be one of {', '.join(ALL_METHODS)} (got {name!r})") from None
+
+
+def stack_parts(parts: Sequence[Parts]) -> tuple[list[NDArray], dict[tuple[int, int], NDArray]]:
+    """Several methods' converted parts, each (...), stacked along a new last batch axis."""
+    z = [
+        np.stack(np.broadcast_arrays(*(p[0][i] for p in parts)), -1)
+        for i in range(len(parts[0][0]))
+    ]
+    R = {k: np.stack(np.broadcast_arrays(*(p[1][k] for p in parts)), -1) for k in parts[0][1]}
+    return z, R

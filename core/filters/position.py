@@ -1,0 +1,177 @@
+"""Kalman update with a Cartesian position measurement (the converted-measurement update).
+
+The measurement picks the position out of the state, H = H_pos (d × n: ones at the position
+indexes (0, 2[, 4])), with noise covariance R (d × d)::
+
+    S = H P⁻ Hᵀ + R,   K = P⁻ Hᵀ S⁻¹,   x⁺ = x⁻ + K (z − H x⁻)
+    P⁺ = (I − K H) P⁻ (I − K H)ᵀ + K R Kᵀ                     (Joseph form)
+
+This is the update of every converted-measurement method (Prosov's naive and corrected
+conversions, Lerro & Bar-Shalom's, Mo et al.'s, Bordonaro et al.'s) and, after the exact
+change of variables in ``core.filters.polar_ekf``, of the polar EKF too: one implementation.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from radarviz.core.filters.state import (
+    CVBatch,
+    Vec,
+    dense_joseph_update,
+    mirror_upper,
+    position_index,
+    sym,
+    symmetric_inverse,
+    target_batch,
+    use_dense,
+)
+
+
+def joseph_update_position(
+    state: CVBatch,
+    innovation: Sequence[Vec],
+    K: NDArray[np.float64],
+    S: dict[tuple[int, int], Vec],
+    out: CVBatch | None = None,
+) -> CVBatch:
+    """Joseph-form update for a position measurement (H = H_pos), any gain K.
+
+        x⁺ = x + K ν
+        P⁺ = (I − K H) P (I − K H)ᵀ + K R Kᵀ,            S = H P Hᵀ + R
+           = P − K Uᵀ + (K S − U) Kᵀ,                     U = P Hᵀ  (the position columns of P)
+
+    The second line is the Joseph form multiplied out: an identity for *any* gain K, so an
+    error δK in the gain changes P only at second order (the reason to prefer Joseph over
+    P − K H P); the term K S − U vanishes for the optimal gain up to rounding. It costs about
+    half the vector operations of forming (I − K H) P first.
+
+    Args:
+        state: the predicted batch, x (..., n), P (..., n, n).
+        innovation: the d components of ν, each (...).
+        K: the (n, d, ...) component-major gain.
+        S: the upper-triangle entries (i, j), i <= j, of the innovation covariance, each (...).
+        out: optional preallocated batch to write into (must not alias ``state``).
+    """
+    # Written with explicit output buffers (``out=``, in-place operators): each line is one
+    # pass over the batch with no temporary to allocate and copy, which matters more than the
+    # arithmetic at these sizes (1.5× faster than the same formulas as plain expressions).
+    x, P = state.x, state.P
+    n, d = x.shape[-1], len(innovation)
+    pos = position_index(state.dims)
+    out = target_batch(state, out)
+    tmp = np.empty(state.batch_shape)
+    for i in range(n):
+        o = out.x[..., i]
+        np.multiply(K[i, 0], innovation[0], out=o)
+        o += x[..., i]
+        for k in range(1, d):
+            np.multiply(K[i, k], innovation[k], out=tmp)
+            o += tmp
+    U = [[P[..., i, pos[k]] for i in range(n)] for k in range(d)]
+    # V = K S − U, column by column.
+    V: list[list[Vec]] = [[] for _ in range(d)]
+    for i in range(n):
+        for j in range(d):
+            v = K[i, 0] * sym(S, 0, j)
+            for k in range(1, d):
+                np.multiply(K[i, k], sym(S, k, j), out=tmp)
+                v += tmp
+            v -= U[j][i]
+            V[j].append(v)
+    oP = out.P
+    for i in range(n):
+        for j in range(i, n):
+            # P⁺[i, j] = P[i, j] − Σ_k K[i, k] U[j, k] + Σ_k V[i, k] K[j, k]
+            o = oP[..., i, j]
+            np.multiply(K[i, 0], U[0][j], out=o)
+            np.subtract(P[..., i, j], o, out=o)
+            for k in range(1, d):
+                np.multiply(K[i, k], U[k][j], out=tmp)
+                o -= tmp
+            for k in range(d):
+                np.multiply(V[k][i], K[j, k], out=tmp)
+                o += tmp
+    mirror_upper(oP)
+    return out
+
+
+def position_gain(state: CVBatch, S: dict[tuple[int, int], Vec]) -> NDArray[np.float64]:
+    """K = P Hᵀ S⁻¹ (n, d, ...) component-major, S⁻¹ written out (``symmetric_inverse``)."""
+    P = state.P
+    n, dims = P.shape[-1], state.dims
+    pos = position_index(dims)
+    inv = symmetric_inverse(S, dims)
+    K = np.empty((n, dims, *state.batch_shape))
+    tmp = np.empty(state.batch_shape)
+    for i in range(n):
+        for j in range(dims):
+            o = K[i, j]
+            np.multiply(P[..., i, pos[0]], sym(inv, 0, j), out=o)
+            for k in range(1, dims):
+                np.multiply(P[..., i, pos[k]], sym(inv, k, j), out=tmp)
+                o += tmp
+    return K
+
+
+def innovation_update(
+    state: CVBatch,
+    innovation: Sequence[Vec],
+    R: dict[tuple[int, int], Vec],
+    out: CVBatch | None = None,
+) -> CVBatch:
+    """The position update given its innovation ν (d components) and noise R (upper entries).
+
+        S = H P Hᵀ + R,   K = P Hᵀ S⁻¹   (S⁻¹ written out),   then the Joseph form.
+
+    Small batches take the dense path (``core.filters.state.dense_joseph_update``).
+    """
+    P = state.P
+    pos = position_index(state.dims)
+    d = len(pos)
+    if use_dense(state):
+        shape = state.batch_shape
+        Rm = np.empty((*shape, d, d))
+        for (i, j), v in R.items():
+            Rm[..., i, j] = Rm[..., j, i] = v
+        H = np.zeros((d, 2 * d))
+        H[np.arange(d), pos] = 1.0
+        nu = np.stack(np.broadcast_arrays(*innovation), -1).reshape(*shape, d)
+        return dense_joseph_update(state, nu, H, Rm, out)
+    S = {(i, j): P[..., pos[i], pos[j]] + R[i, j] for i in range(d) for j in range(i, d)}
+    K = position_gain(state, S)
+    return joseph_update_position(state, innovation, K, S, out)
+
+
+def cv_update_parts(
+    state: CVBatch,
+    z: Sequence[Vec],
+    R: dict[tuple[int, int], Vec],
+    out: CVBatch | None = None,
+) -> CVBatch:
+    """Kalman update with a position measurement given as components (the fast path).
+
+    Args:
+        state: predicted batch (..., n).
+        z: the d components of the measured position, each (...).
+        R: upper-triangle entries (i, j), i <= j, of its covariance, each (...).
+    """
+    pos = position_index(state.dims)
+    nu = [z[i] - state.x[..., pos[i]] for i in range(len(pos))]
+    return innovation_update(state, nu, R, out)
+
+
+def upper_entries(R: NDArray[np.float64]) -> dict[tuple[int, int], Vec]:
+    """The upper-triangle entries of (..., d, d) matrices as a dict of (...) arrays."""
+    d = R.shape[-1]
+    return {(i, j): R[..., i, j] for i in range(d) for j in range(i, d)}
+
+
+def cv_update(state: CVBatch, z: ArrayLike, R: ArrayLike, out: CVBatch | None = None) -> CVBatch:
+    """Kalman update with Cartesian positions z (..., d) and covariances R (..., d, d)."""
+    z = np.asarray(z, dtype=np.float64)
+    R = np.asarray(R, dtype=np.float64)
+    return cv_update_parts(state, [z[..., i] for i in range(z.shape[-1])], upper_entries(R), out)
