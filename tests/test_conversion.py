@@ -1,4 +1,4 @@
-"""Statistical and property tests of ``core.conversion.planar`` (spec: shared/spec/conversion.md).
+"""Statistical and property tests of ``core.conversion.planar`` (the math: docs/conversion.md).
 
 Monte Carlo checks.  Every comparison of a Monte Carlo estimate with a closed form goes through
 ``check_mc``, whose tolerance is ``Z`` times the estimate's own standard error (never a
@@ -123,14 +123,14 @@ def _polar_draws(
     return r + sr * rng.standard_normal(n), beta + sb * rng.standard_normal(n)
 
 
-def _spec_point_3d(r, az, el) -> np.ndarray:
-    """The spec's map x = r cos ε cos β, y = r cos ε sin β, z = r sin ε (test-side copy)."""
+def _polar_point_3d(r, az, el) -> np.ndarray:
+    """The polar map x = r cos ε cos β, y = r cos ε sin β, z = r sin ε (test-side copy)."""
     return np.stack(
         [r * np.cos(el) * np.cos(az), r * np.cos(el) * np.sin(az), r * np.sin(el)], axis=-1
     )
 
 
-def _spec_mean_3d(r, az, el, sb, se) -> np.ndarray:
+def _naive_mean_3d(r, az, el, sb, se) -> np.ndarray:
     """E[naive 3D point | truth] from the one-angle moments E[cos θ̂] = e^(−s/2) cos θ etc."""
     ea, ee = math.exp(-(sb**2) / 2), math.exp(-(se**2) / 2)
     return r * np.array(
@@ -149,7 +149,7 @@ def _ucm_3d_scales(sb: float, se: float) -> np.ndarray:
 
 
 # ---------------------------------------------------------------------------------------------
-# 1. The exact moments of the spec
+# 1. The exact moments (docs/conversion.md, section 3)
 # ---------------------------------------------------------------------------------------------
 
 MOMENT_BETAS = (0.0, 0.7, 2.5)
@@ -213,9 +213,9 @@ def test_naive_cov_given_truth_3d(cfg: tuple[float, ...]) -> None:
     rng = np.random.default_rng([3, CONFIGS_3D.index(cfg)])
     rh, ah = _polar_draws(rng, N_MC, r, az, sr, sa)
     eh = el + se * rng.standard_normal(N_MC)
-    pts = _spec_point_3d(rh, ah, eh)
+    pts = _polar_point_3d(rh, ah, eh)
     m, m_se = mean_se(pts)
-    check_mc(m, _spec_mean_3d(r, az, el, sa, se), m_se, f"naive 3D mean {cfg}")
+    check_mc(m, _naive_mean_3d(r, az, el, sa, se), m_se, f"naive 3D mean {cfg}")
     c, c_se = cov_se(pts)
     exact = cv3.naive_cov_given_truth_3d(
         r, az, el, sigma_r_m=sr, sigma_azimuth_rad=sa, sigma_elevation_rad=se
@@ -236,8 +236,9 @@ BIAS_CONFIGS = (
 )
 
 
-def test_spec_quoted_naive_bias() -> None:
-    """'pulled towards the radar by about r·s/2 (23 m at 150 km and σβ = 1°, 91 m at 2°)'."""
+def test_quoted_naive_bias() -> None:
+    """docs/conversion.md: 'pulled towards the radar by about r·s/2 (23 m at 150 km and σβ = 1°,
+    91 m at 2°)'."""
     for sb, quoted in ((1 * DEG, 23), (2 * DEG, 91)):
         s = sb * sb
         pull = 150e3 * (1 - math.exp(-s / 2))  # exact, from E[cos β̂] = e^(−s/2) cos β
@@ -327,7 +328,7 @@ def test_ucm_3d_unbiased_with_exact_covariance(cfg: tuple[float, ...]) -> None:
     rh, ah = _polar_draws(rng, N_MC, r, az, sr, sa)
     eh = el + se * rng.standard_normal(N_MC)
     z = cv3.convert_ucm_3d(rh, ah, eh, sigma_r_m=sr, sigma_azimuth_rad=sa, sigma_elevation_rad=se).z
-    truth = _spec_point_3d(r, az, el)
+    truth = _polar_point_3d(r, az, el)
     check_mean(z, truth, f"ucm 3D mean {cfg}")
 
     # convert_ucm_3d evaluates its covariance at the *measured* angles, so the formula is
@@ -415,7 +416,7 @@ def test_linearized_cov_is_j_diag_jt(cfg: tuple[float, ...]) -> None:
 def test_naive_3d_cov_is_j_diag_jt(cfg: tuple[float, ...]) -> None:
     r, az, el, sr, sa, se = cfg
     jac = _num_jacobian(
-        lambda p: _spec_point_3d(p[0], p[1], p[2]),
+        lambda p: _polar_point_3d(p[0], p[1], p[2]),
         np.array([r, az, el]),
         np.array([1e-3 * r, 1e-5, 1e-5]),
     )
@@ -424,7 +425,7 @@ def test_naive_3d_cov_is_j_diag_jt(cfg: tuple[float, ...]) -> None:
         r, az, el, sigma_r_m=sr, sigma_azimuth_rad=sa, sigma_elevation_rad=se
     )
     assert rel_entrywise(out.R, ref) < 1e-6
-    np.testing.assert_allclose(out.z, _spec_point_3d(r, az, el), rtol=1e-15, atol=1e-12 * r)
+    np.testing.assert_allclose(out.z, _polar_point_3d(r, az, el), rtol=1e-15, atol=1e-12 * r)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -442,7 +443,7 @@ EXTREME = (  # r, σr, σβ: r²s spans 1e4..1e13 m² against σr² = 1e-2 m²
 
 @pytest.mark.parametrize("cfg", EXTREME, ids=str)
 def test_exact_covariances_high_precision(cfg: tuple[float, ...]) -> None:
-    """At β = 0 (and ε = 0) the spec's formulas need only exp: evaluate them in Decimal.
+    """At β = 0 (and ε = 0) the exact-moment formulas need only exp: evaluate them in Decimal.
 
     Written as E[p pᵀ] − E[p] E[p]ᵀ, the radial variance cancels O(r²) terms down to
     ~σr² + r² s²/2; float64 loses eps·r²/σr² of it (once 56 %, and negative in 3D, here).

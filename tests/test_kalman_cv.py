@@ -141,7 +141,7 @@ def test_out_must_not_alias_the_input() -> None:
         cv_predict(b, 1.0, out=empty_batch(4))
 
 
-def test_init_follows_the_spec() -> None:
+def test_init_is_the_first_plot_start() -> None:
     R = np.array([[[4.0, 1.0], [1.0, 9.0]]])
     b = cv_init(np.array([[10.0, 20.0]]), R, sigma_v0_mps=1000.0)
     np.testing.assert_array_equal(b.x[0], [10.0, 0.0, 20.0, 0.0])

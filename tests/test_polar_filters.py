@@ -1,6 +1,6 @@
 """The batched polar EKF / UKF (``core.filters.polar_ekf``, ``polar_ukf``) against filterpy.
 
-Scenario (the spec's ``prosov`` geometry, rotated): a target 150 km from the radar at azimuth
+Scenario (the ``prosov`` preset's geometry, rotated): a target 150 km from the radar at azimuth
 β0, moving radially outward at 200 m/s, T = 10 s, 30 scans, σr = 250 m, σβ = 1° or 2°,
 optional process noise σa = 0.5 m/s². Tracks start from the first measurement
 (the ``ekf``/``ukf`` methods' start); every later scan is predict (``cv_predict``) + update.

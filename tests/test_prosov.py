@@ -1,4 +1,4 @@
-"""The Prosov reproduction: the spec's bias pattern and the paper's Δx claim."""
+"""The Prosov reproduction: the filter bias pattern (docs/conversion.md) and the Δx claim."""
 
 from __future__ import annotations
 
@@ -25,7 +25,7 @@ def two_degree():
 def test_filter_bias_pattern(two_degree) -> None:
     """Net range bias ≈ r(κ − 1 + s/2): naive +rs/2, seed ≈ 0, cmkf_d and ucm +rs, ducm small.
 
-    The spec's pattern is a first-order approximation, so the bands are relative to r·s (not
+    The pattern r(κ − 1 + s/2) is a first-order approximation, so the bands are relative to r·s (not
     Monte Carlo bands); the Monte Carlo error is added on top. Averaged over scans 30–60, where
     the filter has converged.
     """

@@ -165,7 +165,7 @@ def plot_values(plot: dict[str, str]) -> tuple[np.ndarray, np.ndarray, np.ndarra
     return np.array(site), z, np.array([sr, math.radians(sb), math.radians(se)])
 
 
-def spec_start(
+def first_plot_start(
     site: np.ndarray, z: np.ndarray, sig: np.ndarray, sigma_v0: float
 ) -> tuple[np.ndarray, np.ndarray]:
     """Naive 3D point, covariance J diag(σ²) Jᵀ, velocity 0 ± σv0 on each axis."""
@@ -273,7 +273,7 @@ def test_ekf_doppler_matches_filterpy(tmp_path: Path, doppler: str) -> None:
         t = float(plot["time_s"])
         site, z, sig = plot_values(plot)
         if last_t is None:
-            f.x, f.P = spec_start(site, z, sig, sigma_v0)
+            f.x, f.P = first_plot_start(site, z, sig, sigma_v0)
         else:
             dt = t - last_t
             if dt > 0:
@@ -332,7 +332,7 @@ def test_ukf_matches_filterpy(tmp_path: Path) -> None:
         t = float(plot["time_s"])
         site, z, sig = plot_values(plot)
         if last_t is None:
-            f.x, f.P = spec_start(site, z, sig, sigma_v0)
+            f.x, f.P = first_plot_start(site, z, sig, sigma_v0)
         else:
             dt = t - last_t
             if dt > 0:

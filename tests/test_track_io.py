@@ -338,7 +338,7 @@ def test_ekf_matches_filterpy_on_the_file(tmp_path: Path) -> None:
         r, b = float(plot["range_m"]), math.radians(float(plot["azimuth_deg"]))
         z = np.array([r, b])
         if last_t is None:
-            # The spec's start: naive point, linearized covariance, velocity 0 ± 1000 m/s.
+            # The first-plot start: naive point, linearized covariance, velocity 0 ± 1000 m/s.
             c, s = math.cos(b), math.sin(b)
             J = np.array([[c, -r * s], [s, r * c]])
             Rxy = J @ np.diag([sr**2, sb**2]) @ J.T

@@ -78,7 +78,7 @@ def _antithetic_bias(problem, pairs: int, seed: int) -> tuple[np.ndarray, np.nda
 
 
 def test_equivalent_variance_matches_direct_linearisation() -> None:
-    """σeq² from the spec's g_ε, g_β equals the finite-difference Jacobian of c(ε, β) · V."""
+    """σeq² from g_ε, g_β (docs/velocity.md) equals the finite-difference Jacobian of c · V."""
     st = velocity_statistics(baseline_problem())
     los = st.geometry.los
     h = 1e-6

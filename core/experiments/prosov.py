@@ -1,7 +1,7 @@
 """The Prosov experiment: converted-measurement Kalman filters by Monte Carlo.
 
 One radar at the origin, a target starting at 150 km on the x axis moving radially outward at
-200 m/s, σr = 250 m, σβ = 1° or 2°, T = 10 s, 60 scans (``shared/spec/conversion.md``). Every
+200 m/s, σr = 250 m, σβ = 1° or 2°, T = 10 s, 60 scans (``docs/conversion.md``). Every
 method filters the *same* noisy measurements (common random numbers), so differences between
 methods are not Monte Carlo noise of the measurements.
 
@@ -244,7 +244,7 @@ def prosov_configs(
     sigma_r_m: float = 250.0,
     methods: Sequence[str] = ALL_METHODS,
 ) -> list[TrackingConfig]:
-    """The seed's experiment, one configuration per σβ (the paper: 1° and 2°)."""
+    """The paper's experiment, one configuration per σβ (the paper: 1° and 2°)."""
     check_real("period_s", period_s, low=0.0)
     check_int("steps", steps, low=2)
     target = prosov_target(period_s, steps)

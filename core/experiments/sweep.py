@@ -92,7 +92,7 @@ class GridAxis:
 class SweepBase:
     """The fixed parameters of a sweep; a grid axis overrides the field of the same name.
 
-    The defaults are the Prosov experiment (``shared/spec/conversion.md``): σr = 250 m,
+    The defaults are the Prosov experiment (``docs/conversion.md``): σr = 250 m,
     σβ = 1°, target at 150 km moving outward at 200 m/s, T = 10 s, 60 scans.
     """
 

@@ -1,10 +1,10 @@
 """Finite-memory (sliding-window) least-squares filter of range and radial velocity.
 
-Gorshkov and Zavizhenets (2016), ``shared/spec/finite_memory.md``. Once per scan (period T) a
-radar measures range ``r_i`` (variance Dr = σr²) and Doppler radial velocity ``Vr_i``
-(variance DVr = σVr²), i = 1 … k with i = 1 the oldest. The state at the newest sample,
-θ = (r, Vr, a), is the least-squares fit of a quadratic trajectory to the last k scans. With the
-lag j = k − i:
+Gorshkov and Zavizhenets (2016); the model, the closed forms and the findings are in
+``docs/finite_memory.md``. Once per scan (period T) a radar measures range ``r_i`` (variance
+Dr = σr²) and Doppler radial velocity ``Vr_i`` (variance DVr = σVr²), i = 1 … k with i = 1 the
+oldest. The state at the newest sample, θ = (r, Vr, a), is the least-squares fit of a
+quadratic trajectory to the last k scans. With the lag j = k − i:
 
     r(t_i)  = r − Vr·T·j + a·T²·j²/2        row [1, −T j, T² j²/2],  weight 1/Dr
     Vr(t_i) = Vr − a·T·j                     row [0, 1, −T j],         weight 1/DVr

@@ -51,7 +51,7 @@ class ConstantVelocityTarget2D:
 
 
 def prosov_target(period_s: float = 10.0, steps: int = 60) -> ConstantVelocityTarget2D:
-    """The seed's experiment: r0 = 150 km, β0 = 0, moving radially outward at 200 m/s."""
+    """Prosov's experiment: r0 = 150 km, β0 = 0, moving radially outward at 200 m/s."""
     return ConstantVelocityTarget2D(150e3, 0.0, 200.0, 0.0, period_s, steps)
 
 

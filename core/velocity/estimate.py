@@ -1,8 +1,9 @@
 """Full 3D velocity vector (and fused position) from the radial velocities of N ≥ 3 radars.
 
-``shared/spec/velocity.md``. Radar k at site s_k (ECS Cartesian, m) sees the target at p with
-azimuth β_k (from x towards y), elevation ε_k (from the horizontal plane) and range r_k, and
-measures the radial velocity Vr_k = c_k · V with the unit line of sight
+The model, its derivation and the findings are in ``docs/velocity.md``. Radar k at site s_k
+(ECS Cartesian, m) sees the target at p with azimuth β_k (from x towards y), elevation ε_k (from
+the horizontal plane) and range r_k, and measures the radial velocity Vr_k = c_k · V with the
+unit line of sight
 
     c_k = [cos ε_k cos β_k,  cos ε_k sin β_k,  sin ε_k]          (row k of C, N × 3)
 
@@ -705,7 +706,8 @@ def _fuse(R: NDArray, pts: NDArray) -> tuple[NDArray[np.float64], NDArray[np.flo
 # The experiment (preset ``velocity``)
 # --------------------------------------------------------------------------------------------
 
-#: Baseline geometry of the spec: three ground radars, target, velocity, accuracies.
+#: Baseline geometry (the paper gives no numbers; ``docs/velocity.md``): three ground radars,
+#: target, velocity, accuracies.
 BASELINE_SITES_M: tuple[tuple[float, float, float], ...] = (
     (0.0, 0.0, 0.0),
     (80e3, 0.0, 0.0),
@@ -726,7 +728,7 @@ SWEEP_TRIALS = 20_000
 
 
 def baseline_problem(target_m: ArrayLike = BASELINE_TARGET_M) -> VelocityProblem:
-    """The spec's baseline scenario (direct solve, N = 3), optionally with another target."""
+    """The baseline scenario (direct solve, N = 3), optionally with another target."""
     return velocity_problem(
         BASELINE_SITES_M,
         target_m,

@@ -21,7 +21,7 @@ Radars file (TOML, read with ``tomllib``)::
     sigma_radial_velocity_mps = 1.0          # > 0; needed by plots with a radial velocity
 
 Each method keeps one track (``core.tracking.stream.StreamTracker``): started from the first plot
-(the spec's start: converted point, velocity 0 ± ``--sigma-v0``) or, with ``--init
+(the first-plot start: converted point, velocity 0 ± ``--sigma-v0``) or, with ``--init
 finite-memory``, from Gorshkov's least-squares fit over the first ``--init-k`` plots (one
 radar, one period), then predicted over each time step and updated, radar-centred.
 

@@ -27,7 +27,7 @@ def _variants(get: str, ro: FilterStats, rd: FilterStats) -> dict[str, Any]:
 
 
 def tracking_document(result: DopplerTrackingResult) -> dict[str, Any]:
-    """The Doppler-aided tracking part: issue-2 metrics per variant, per scan."""
+    """The Doppler-aided tracking part: the ``core.metrics`` statistics per variant, per scan."""
     cfg = result.config
     variants = {}
     for name, m in result.metrics.items():
