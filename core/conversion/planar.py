@@ -23,7 +23,7 @@ ucm        κ = e^(s/2)                        exact true-conditioned cov., at t
 ducm       κ = e^(s/2)                        exact true-conditioned cov., at the prediction
 =========  =================================  ===============================================
 
-What the analysis in ``shared/spec/conversion.md`` found, and what users should know:
+What the analysis found (``docs/conversion.md``), and what users should know:
 
 * eq. 10 (``seed``) has the opposite sign to the frequentist correction:
   E[x_seed] ≈ r cos β (1 − s), twice the naive bias. It is the second-order posterior mean

@@ -115,7 +115,7 @@ class DopplerTrackingResult(NamedTuple):
 
     Attributes:
         config: what was run.  n: (N,) scans 1 … N.
-        metrics: variant → the issue-2 metrics (position bias, RMSE, filter σ, NEES).
+        metrics: variant → the Prosov experiment's metrics (position bias, RMSE, filter σ, NEES).
         rmse_vr / sigma_vr_filter: variant → (N,) RMSE of the track's radial velocity and the
             filter's σ of it (√(g P gᵀ), g = ∂Vr/∂state).
         start_fits: variant → the finite-memory fit used for the start.

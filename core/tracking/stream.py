@@ -228,9 +228,10 @@ class StreamOptions:
 
     Attributes:
         sigma_a_mps2: process-noise acceleration std (0: constant velocity exactly).
-        sigma_v0_mps: velocity std of the start (the spec's 1000 m/s).
+        sigma_v0_mps: velocity std of the start (the papers' 1000 m/s).
         use_doppler: use the plots' radial velocities (when they have them).
-        init: ``"first-plot"`` (the spec's start) or ``"finite-memory"`` (issue 3's).
+        init: ``"first-plot"`` (the papers' start) or ``"finite-memory"`` (Gorshkov and
+            Zavizhenets' window fit, ``docs/finite_memory.md``).
         init_k: plots in the finite-memory window (≥ 2 with Doppler, ≥ 3 without).
     """
 
