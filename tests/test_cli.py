@@ -6,6 +6,7 @@ import contextlib
 import json
 import math
 import os
+import resource
 import subprocess
 import sys
 from pathlib import Path
@@ -129,21 +130,66 @@ def test_unwritable_plot_path_is_an_error(tmp_path: Path, capsys) -> None:
     assert err.startswith("radarviz: error:") and err.count("\n") == 1
 
 
-def test_bench_json_keys(capsys) -> None:
-    """Smoke test of the benchmark's interface (figures are reported, never asserted)."""
+def _high_water_rss_mib() -> float:
+    """This process's peak resident memory so far, from the kernel (VmHWM, in KiB)."""
+    for line in Path("/proc/self/status").read_text().splitlines():
+        if line.startswith("VmHWM:"):
+            return int(line.split()[1]) / 1024.0
+    pytest.skip("no VmHWM in /proc/self/status")
+
+
+def test_bench_figures_are_consistent(capsys) -> None:
+    """The benchmark's figures agree with each other and with what was asked.
+
+    Speed itself is never asserted (it is measured by running the benchmark, not by a timed
+    unit test); what can be wrong without the machine being slow is checked instead: the run
+    counts, the ratio filterpy / ours, the units of the peak memory, and the table printing
+    the same numbers as the JSON to its precision."""
+    from radarviz.core.experiments.prosov import BLOCK_RUNS
+    from radarviz.core.scenarios.planar import prosov_target
+    from radarviz.viz_app.bench.engine import format_bench
+
+    rss_before = _high_water_rss_mib()
     code = main(["bench", "--json", "--runs", "500", "1000", "--filterpy-runs", "3"])
     assert code == 0
+    ru_after = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
     doc = json.loads(capsys.readouterr().out)
-    for key in (
-        "kf_ns_per_step",
-        "filterpy_ns_per_step",
-        "speedup_vs_filterpy",
-        "runs",
-        "peak_rss_mb",
-    ):
-        assert key in doc
-    assert doc["runs"] == [500, 1000] and len(doc["kf_ns_per_step"]) == 2
-    assert doc["filterpy_ns_per_step"] > 0 and all(v > 0 for v in doc["speedup_vs_filterpy"])
+
+    assert doc["runs"] == [500, 1000] and doc["filterpy_runs"] == 3
+    assert doc["scans"] == prosov_target().steps and doc["block_runs"] == BLOCK_RUNS
+    kf, kf_only, fp = (
+        doc["kf_ns_per_step"],
+        doc["kf_filter_only_ns_per_step"],
+        doc["filterpy_ns_per_step"],
+    )
+    assert len(kf) == len(kf_only) == len(doc["speedup_vs_filterpy"]) == 2
+    for name in ("kf_ns_per_step", "kf_filter_only_ns_per_step", "speedup_vs_filterpy"):
+        assert all(math.isfinite(v) and v > 0 for v in doc[name]), (name, doc[name])
+    for name in ("filterpy_ns_per_step", "gorshkov_s", "tune_median_ms"):
+        assert math.isfinite(doc[name]) and doc[name] > 0, (name, doc[name])
+    # JSON keeps full precision: the ratio is exact to rounding.
+    for ours, ratio in zip(kf, doc["speedup_vs_filterpy"], strict=True):
+        assert ratio == pytest.approx(fp / ours, rel=1e-12)
+    # Peak RSS is this process's (the CLI ran in it), in MiB: at least the kernel's high-water
+    # mark before the run, at most the one after, and below the machine's memory.
+    physical_mib = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") / 2**20
+    assert rss_before <= doc["peak_rss_mb"] <= ru_after < physical_mib
+
+    # The table prints fp to 1 ns, ours to 0.1 ns and the speed-up to 1: its speed-up must be
+    # its own fp / ours within what that rounding allows.
+    table = format_bench(doc).splitlines()
+    fp_printed = float(table[0].split("filterpy KalmanFilter:")[1].split("ns")[0])
+    assert fp_printed == round(fp)
+    rows = [line for line in table if line.startswith("batched ucm filter")]
+    assert len(rows) == 2
+    for line, runs in zip(rows, doc["runs"], strict=True):
+        head, tail = line.split(" runs:")
+        assert int(head.split(",")[1]) == runs
+        ours = float(tail.split("ns")[0])
+        speedup = float(tail.split("speedup vs filterpy")[1].rstrip("×"))
+        ratio = fp_printed / ours
+        assert abs(speedup - ratio) <= 0.5 + ratio * (0.5 / fp_printed + 0.05 / ours), line
+    assert f"peak RSS: {doc['peak_rss_mb']:.0f} MiB" in table
 
 
 def test_reproduce_gorshkov_json_document(capsys) -> None:

@@ -1,4 +1,4 @@
-"""The code base stays ruff clean (the configuration is in pyproject.toml)."""
+"""The code base stays ruff clean: lint and format (the configuration is in pyproject.toml)."""
 
 from __future__ import annotations
 
@@ -7,14 +7,22 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[1]
+PATHS = ["core", "viz_app", "tests"]
 
 
-def test_ruff_check_is_clean() -> None:
+def _ruff() -> str:
     exe = Path(sys.executable).with_name("ruff")
     ruff = str(exe) if exe.exists() else shutil.which("ruff")
     assert ruff, "ruff is a test dependency: pip install -e '.[test]'"
-    proc = subprocess.run(
-        [ruff, "check", "core", "viz_app", "tests"], cwd=ROOT, capture_output=True, text=True
-    )
+    return ruff
+
+
+@pytest.mark.parametrize(
+    "command", [["check"], ["format", "--check"]], ids=["ruff check", "ruff format --check"]
+)
+def test_ruff_is_clean(command: list[str]) -> None:
+    proc = subprocess.run([_ruff(), *command, *PATHS], cwd=ROOT, capture_output=True, text=True)
     assert proc.returncode == 0, proc.stdout + proc.stderr

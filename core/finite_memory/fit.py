@@ -58,8 +58,6 @@ C0_MIN, C0_MAX = 1e-12, 1e12
 METHODS: tuple[str, ...] = ("closed", "numeric")
 #: Monte Carlo trials per block of :func:`run_gorshkov` (bounds the working set).
 BLOCK_TRIALS = 65_536
-#: Names of the state components, in the order of R, W and every estimate.
-STATE_NAMES: tuple[str, ...] = ("r", "Vr", "a")
 
 
 # --------------------------------------------------------------------------------------------

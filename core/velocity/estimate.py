@@ -89,6 +89,7 @@ COND_MAX = 1e8
 SITE_TOL_M = 1e-6
 #: Monte Carlo trials per block (bounds the working set).
 BLOCK_TRIALS = 1 << 17
+#: Names of the velocity components, in the order of every vector and matrix here.
 AXES: tuple[str, ...] = ("Vx", "Vy", "Vz")
 
 

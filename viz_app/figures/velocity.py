@@ -23,9 +23,9 @@ from matplotlib.axes import Axes
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
+from radarviz.core.velocity.estimate import AXES
 from radarviz.viz_app.figures.common import write_figure_atomically
 
-_AXES = ("Vx", "Vy", "Vz")
 _PAIRS = ((0, 1, "ρxy"), (0, 2, "ρxz"), (1, 2, "ρyz"))
 _FIRST, _MC = "tab:blue", "tab:orange"
 WIDTH_IN, HEIGHT_IN = 12.0, 8.5
@@ -73,7 +73,7 @@ def _build_figure(doc: Mapping[str, Any]) -> Figure:
     FigureCanvasAgg(fig)
     axs = fig.subplots(2, 2)
     b = doc["baseline"]
-    _bars(axs[0, 0], _AXES, b["sigma_first_order"], b["sigma_mc"], "%.2f")
+    _bars(axs[0, 0], AXES, b["sigma_first_order"], b["sigma_mc"], "%.2f")
     axs[0, 0].set_ylabel("σ of the velocity error, m/s")
     axs[0, 0].set_title(
         f"Baseline σ (condition number {b['condition_number']:.2f}, m = {b['m']:.3f})", fontsize=10

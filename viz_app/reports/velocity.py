@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from radarviz.core.velocity.estimate import (
+    AXES,
     BASELINE_SIGMA_AZ_DEG,
     BASELINE_SIGMA_EL_DEG,
     BASELINE_SIGMA_VR_MPS,
@@ -112,7 +113,7 @@ def format_velocity_table(doc: dict[str, Any]) -> str:
         f"Velocity from 3 radial velocities: {doc['trials']} trials, seed {doc['seed']}",
         f"  condition number of C = {b['condition_number']:.3f},  m = {b['m']:.4f} "
         f"(warning above {doc['m_warn']:g})",
-        f"  {'':<28}" + "".join(f"{k:>10}" for k in ("Vx", "Vy", "Vz")),
+        f"  {'':<28}" + "".join(f"{k:>10}" for k in AXES),
         row("σ first order, m/s", b["sigma_first_order"]),
         row("σ Monte Carlo, m/s", b["sigma_mc"]),
         row("bias Monte Carlo, m/s", b["bias_mc"]),

@@ -167,73 +167,18 @@ def log_points(
 def ellipsoid_axes(cov: NDArray[np.float64]) -> tuple[NDArray, NDArray]:
     """Half sizes (..., 3) (1σ) and rotation quaternions (..., 4) xyzw of covariances (..., 3, 3).
 
-    The eigenvector matrix is made a proper rotation (det = +1) before conversion.
+    cov = V diag(λ) Vᵀ (``eigh``): the ellipsoid's half axes are √λ along the columns of V.
+    V is orthogonal but its determinant may be −1 (a reflection, which no quaternion
+    represents); negating its last column keeps cov = V diag(λ) Vᵀ and makes det V = +1, a
+    proper rotation. scipy's ``as_quat`` is scalar last, (x, y, z, w), Rerun's order.
     """
+    from scipy.spatial.transform import Rotation  # ~0.5 s to import: only when drawing
+
     w, v = np.linalg.eigh(cov)
     half = np.sqrt(np.clip(w, 0.0, None))
-    det = np.linalg.det(v)
-    v[..., :, 2] *= np.sign(det)[..., None]
-    return half, _quaternion_xyzw(v)
-
-
-def _quaternion_xyzw(R: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Rotation matrices (..., 3, 3) → unit quaternions (..., 4) as (x, y, z, w)."""
-    m = R
-    t = m[..., 0, 0] + m[..., 1, 1] + m[..., 2, 2]
-    q = np.empty((*m.shape[:-2], 4))
-    # Shepperd's method, choosing the largest of w, x, y, z for stability.
-    cands = np.stack([t, m[..., 0, 0], m[..., 1, 1], m[..., 2, 2]], axis=-1)
-    k = np.argmax(cands, axis=-1)
-    for idx in range(4):
-        sel = k == idx
-        if not np.any(sel):
-            continue
-        a = m[sel]
-        if idx == 0:
-            s = np.sqrt(1.0 + a[:, 0, 0] + a[:, 1, 1] + a[:, 2, 2]) * 2.0
-            q[sel] = np.stack(
-                [
-                    (a[:, 2, 1] - a[:, 1, 2]) / s,
-                    (a[:, 0, 2] - a[:, 2, 0]) / s,
-                    (a[:, 1, 0] - a[:, 0, 1]) / s,
-                    0.25 * s,
-                ],
-                -1,
-            )
-        elif idx == 1:
-            s = np.sqrt(1.0 + a[:, 0, 0] - a[:, 1, 1] - a[:, 2, 2]) * 2.0
-            q[sel] = np.stack(
-                [
-                    0.25 * s,
-                    (a[:, 0, 1] + a[:, 1, 0]) / s,
-                    (a[:, 0, 2] + a[:, 2, 0]) / s,
-                    (a[:, 2, 1] - a[:, 1, 2]) / s,
-                ],
-                -1,
-            )
-        elif idx == 2:
-            s = np.sqrt(1.0 + a[:, 1, 1] - a[:, 0, 0] - a[:, 2, 2]) * 2.0
-            q[sel] = np.stack(
-                [
-                    (a[:, 0, 1] + a[:, 1, 0]) / s,
-                    0.25 * s,
-                    (a[:, 1, 2] + a[:, 2, 1]) / s,
-                    (a[:, 0, 2] - a[:, 2, 0]) / s,
-                ],
-                -1,
-            )
-        else:
-            s = np.sqrt(1.0 + a[:, 2, 2] - a[:, 0, 0] - a[:, 1, 1]) * 2.0
-            q[sel] = np.stack(
-                [
-                    (a[:, 0, 2] + a[:, 2, 0]) / s,
-                    (a[:, 1, 2] + a[:, 2, 1]) / s,
-                    0.25 * s,
-                    (a[:, 1, 0] - a[:, 0, 1]) / s,
-                ],
-                -1,
-            )
-    return q / np.linalg.norm(q, axis=-1, keepdims=True)
+    v[..., :, 2] *= np.sign(np.linalg.det(v))[..., None]
+    quat = Rotation.from_matrix(v.reshape(-1, 3, 3)).as_quat()
+    return half, quat.reshape(*v.shape[:-2], 4)
 
 
 def position_cov_3d(P: NDArray[np.float64]) -> NDArray[np.float64]:
