@@ -120,7 +120,7 @@ Graph = dict[str, dict[str, Import]]
 
 
 def _module_name(rel: Path) -> str:
-    """Installed dotted name of a source file: core/filters/cv.py -> radarviz.core.filters.cv."""
+    """Installed dotted name of a source file: core/filters/state.py -> radarviz.core.filters.state."""
     parts = list(rel.with_suffix("").parts)
     parts[0] = SOURCE_ROOTS[parts[0]]
     if parts[-1] == "__init__":
@@ -247,7 +247,7 @@ def _is_file_io(qualified: str | None) -> bool:
 def test_sources_are_found() -> None:
     """The walk sees the tree it guards (a wrong ROOT would make every rule pass vacuously)."""
     modules = _project_modules()
-    for expected in ("radarviz.core.params", "radarviz.core.filters.cv", "radarviz.viz_app.cli"):
+    for expected in ("radarviz.core.params", "radarviz.core.filters.state", "radarviz.viz_app.cli"):
         assert expected in modules, f"{expected} not found under {ROOT}"
     assert any(imp.target == "rerun" for imp in _all_imports()), "no 'import rerun' seen"
 
