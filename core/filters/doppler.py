@@ -63,9 +63,14 @@ def doppler_update(
     # ∂u/∂ε = (−sin ε cos β, −sin ε sin β, cos ε)  (``core.geometry``), first ``dims`` axes.
     u = (ce * ca, ce * sa, se)[:dims]
     g_b = (-ce * sa, ce * ca)
+    g_e = (-se * ca, -se * sa, ce)
+    var_vr = np.asarray(sigma_vr_mps, dtype=np.float64) ** 2
+    var_b = np.asarray(sigma_azimuth_rad, dtype=np.float64) ** 2
+    var_e = np.asarray(sigma_elevation_rad, dtype=np.float64) ** 2
+    if use_dense(state):  # the same update as matrix products (small batches)
+        return _dense(state, radial_velocity_mps, u, g_b, g_e, var_vr, var_b, var_e, out)
     v = [x[..., i] for i in vel]
     Pvv = [[P[..., i, j] for j in vel] for i in vel]
-    var_r = np.asarray(sigma_vr_mps, dtype=np.float64) ** 2
 
     def angle_term(g: tuple) -> NDArray[np.float64]:
         """(g·v̂)² + gᵀ P_vv g for the first len(g) velocity axes."""
@@ -79,25 +84,12 @@ def doppler_update(
                 gPg = gPg + 2.0 * g[a] * g[b] * Pvv[a][b]
         return gv * gv + gPg
 
-    r_e = var_r + np.asarray(sigma_azimuth_rad, dtype=np.float64) ** 2 * angle_term(g_b)
+    r_e = var_vr + var_b * angle_term(g_b)
     if dims == 3:
-        g_e = (-se * ca, -se * sa, ce)
-        r_e = r_e + np.asarray(sigma_elevation_rad, dtype=np.float64) ** 2 * angle_term(g_e)
+        r_e = r_e + var_e * angle_term(g_e)
     pred_vr = u[0] * v[0]
     for a in range(1, dims):
         pred_vr = pred_vr + u[a] * v[a]
-    if use_dense(state):  # the same update as matrix products (small batches)
-        H = np.zeros((*state.batch_shape, 1, n))
-        for a in range(dims):
-            H[..., 0, vel[a]] = u[a]
-        nu1 = (np.asarray(radial_velocity_mps, dtype=np.float64) - pred_vr)[..., None]
-        return dense_joseph_update(
-            state,
-            np.broadcast_to(nu1, (*state.batch_shape, 1)),
-            H,
-            np.broadcast_to(r_e, state.batch_shape)[..., None, None],
-            out,
-        )
     # U = P hᵀ (h = u on the velocity), S = h U + var e, K = U / S.
     U = []
     for i in range(n):
@@ -127,3 +119,46 @@ def doppler_update(
                 oP[..., j, i] = a
             oP[..., i, j] = a
     return out
+
+
+def _dense(
+    state: CVBatch,
+    radial_velocity_mps: ArrayLike,
+    u: tuple,
+    g_b: tuple,
+    g_e: tuple,
+    var_vr: NDArray[np.float64],
+    var_b: NDArray[np.float64],
+    var_e: NDArray[np.float64],
+    out: CVBatch | None,
+) -> CVBatch:
+    """``doppler_update`` for small batches: the variance and the update as matrix products."""
+    dims, n = state.dims, state.x.shape[-1]
+    shape = state.batch_shape
+    vel = list(velocity_index(dims))
+    v = state.x[..., vel]  # (..., d)
+    Pvv = state.P[..., vel, :][..., vel]  # (..., d, d)
+
+    def vectors(g: tuple) -> NDArray[np.float64]:
+        """The first ``dims`` components of g as one (..., dims) array (a missing one is 0)."""
+        comps = [g[a] if a < len(g) else 0.0 for a in range(dims)]
+        return np.stack(np.broadcast_arrays(*comps, np.zeros(shape))[:dims], -1)
+
+    def angle_term(g: NDArray[np.float64]) -> NDArray[np.float64]:
+        gv = np.sum(g * v, -1)
+        return gv * gv + (g[..., None, :] @ Pvv @ g[..., :, None])[..., 0, 0]
+
+    u_v = vectors(u)
+    r_e = var_vr + var_b * angle_term(vectors(g_b))
+    if dims == 3:
+        r_e = r_e + var_e * angle_term(vectors(g_e))
+    H = np.zeros((*shape, 1, n))
+    H[..., 0, vel] = u_v
+    nu = np.asarray(radial_velocity_mps, dtype=np.float64) - np.sum(u_v * v, -1)
+    return dense_joseph_update(
+        state,
+        np.broadcast_to(nu, shape)[..., None],
+        H,
+        np.broadcast_to(r_e, shape)[..., None, None],
+        out,
+    )

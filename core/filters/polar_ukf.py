@@ -277,7 +277,7 @@ def _ukf_dense(
     n, m = x.shape[-1], state.dims
     pos = list(position_index(m))
     c, wm0, wc0, w = params.weights(n)
-    cols = np.swapaxes(np.linalg.cholesky(c * P), -1, -2)  # row k: column k of the factor
+    cols = np.linalg.cholesky(c * P).mT  # row k: column k of the factor
     chi = np.concatenate([x[..., None, :], x[..., None, :] + cols, x[..., None, :] - cols], -2)
     offsets = chi[..., pos]
     if site is not None:
@@ -298,11 +298,11 @@ def _ukf_dense(
         R[..., a, a] = var[a]
     S = np.einsum("p,...pi,...pj->...ij", wc, dz, dz) + R
     Pxz = np.einsum("p,...pi,...pj->...ij", wc, dx, dz)
-    K = np.swapaxes(np.linalg.solve(S, np.swapaxes(Pxz, -1, -2)), -1, -2)
+    K = np.linalg.solve(S, Pxz.mT).mT
     nu = np.stack(meas, -1) - z_mean
     nu[..., 1] = wrap_angle(nu[..., 1])
-    P_new = P - K @ S @ np.swapaxes(K, -1, -2)
+    P_new = P - K @ S @ K.mT
     out = target_batch(state, out)
     out.x[...] = x + (K @ nu[..., None])[..., 0]
-    out.P[...] = 0.5 * (P_new + np.swapaxes(P_new, -1, -2))
+    out.P[...] = 0.5 * (P_new + P_new.mT)
     return out

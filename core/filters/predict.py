@@ -11,6 +11,8 @@ discrete white-noise acceleration with std σa on each axis (filterpy's
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 from numpy.typing import NDArray
 
@@ -35,6 +37,16 @@ def process_noise(period_s: float, sigma_a_mps2: float, dims: int = 2) -> NDArra
     return out
 
 
+@functools.lru_cache(maxsize=64)
+def _dense_model(period_s: float, sigma_a_mps2: float, dims: int) -> tuple[NDArray, NDArray]:
+    """F and Q for the dense path; a track's steps repeat (a few scan periods), so they are
+    made once (read-only)."""
+    F = transition_matrix(period_s, dims)
+    Q = process_noise(period_s, sigma_a_mps2, dims)
+    F.flags.writeable = Q.flags.writeable = False
+    return F, Q
+
+
 def cv_predict(
     state: CVBatch, period_s: float, sigma_a_mps2: float = 0.0, out: CVBatch | None = None
 ) -> CVBatch:
@@ -49,12 +61,10 @@ def cv_predict(
     x, P = state.x, state.P
     out = target_batch(state, out)
     if use_dense(state):
-        F = transition_matrix(T, state.dims)
-        P_new = F @ P @ F.T
-        if sigma_a_mps2:
-            P_new += process_noise(T, sigma_a_mps2, state.dims)
+        F, Q = _dense_model(T, float(sigma_a_mps2), state.dims)
+        P_new = F @ P @ F.T + Q
         out.x[...] = x @ F.T
-        out.P[...] = 0.5 * (P_new + np.swapaxes(P_new, -1, -2))
+        out.P[...] = 0.5 * (P_new + P_new.mT)
         return out
     ox, oP = out.x, out.P
     T2 = T * T

@@ -15,6 +15,7 @@ product per track: that is what makes 10⁵ runs cheap (see ``radarviz bench``).
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import numpy as np
@@ -47,7 +48,7 @@ class CVBatch(NamedTuple):
     @property
     def runs(self) -> int:
         """Number of tracks in the batch (the product of the batch shape)."""
-        return int(np.prod(self.x.shape[:-1], dtype=np.int64))
+        return math.prod(self.x.shape[:-1])
 
 
 def position_index(dims: int) -> tuple[int, ...]:
@@ -224,11 +225,11 @@ def dense_joseph_update(
         innovation: ν (..., k).  H: (..., k, n) or (k, n).  R: (..., k, k).
     """
     x, P = state.x, state.P
-    U = P @ np.swapaxes(H, -1, -2)
+    U = P @ H.mT
     S = H @ U + R
-    K = np.swapaxes(np.linalg.solve(S, np.swapaxes(U, -1, -2)), -1, -2)  # U S⁻¹, S symmetric
-    P_new = P - K @ np.swapaxes(U, -1, -2) + (K @ S - U) @ np.swapaxes(K, -1, -2)
+    K = np.linalg.solve(S, U.mT).mT  # U S⁻¹ (S symmetric)
+    P_new = P - K @ U.mT + (K @ S - U) @ K.mT
     out = target_batch(state, out)
     out.x[...] = x + (K @ innovation[..., None])[..., 0]
-    out.P[...] = 0.5 * (P_new + np.swapaxes(P_new, -1, -2))
+    out.P[...] = 0.5 * (P_new + P_new.mT)
     return out
