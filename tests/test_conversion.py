@@ -201,9 +201,9 @@ def test_naive_moments_given_truth_2d(cfg: tuple[float, ...]) -> None:
     rh, bh = _polar_draws(rng, N_MC, r, beta, sr, sb)
     pts = np.stack([rh * np.cos(bh), rh * np.sin(bh)], axis=-1)
     m, m_se = mean_se(pts)
-    check_mc(m, cv.naive_mean_given_truth(r, beta, sb), m_se, f"naive mean {cfg}")
+    check_mc(m, cv.naive_mean_given_truth(r, beta, sigma_azimuth_rad=sb), m_se, f"naive mean {cfg}")
     c, c_se = cov_se(pts)
-    exact = cv.naive_cov_given_truth(r, beta, sr, sb)
+    exact = cv.naive_cov_given_truth(r, beta, sigma_r_m=sr, sigma_azimuth_rad=sb)
     check_mc(upper(c), upper(exact), upper(c_se), f"naive cov {cfg}")
 
 
@@ -254,14 +254,16 @@ def test_conversion_bias_given_truth(cfg: tuple[float, ...]) -> None:
     rh, bh = _polar_draws(rng, N_MC, r, beta, sr, sb)
     truth = r * np.array([math.cos(beta), math.sin(beta)])
     radial = truth / r
-    naive_mean = cv.naive_mean_given_truth(r, beta, sb)
+    naive_mean = cv.naive_mean_given_truth(r, beta, sigma_azimuth_rad=sb)
 
     rad_bias: dict[str, np.ndarray] = {}  # per-draw radial error, per method
     exact_rad: dict[str, float] = {}
     for method in cv.METHODS_2D:
-        z = cv.convert(method, rh, bh, sr, sb, predicted_xy=truth).z
+        z = cv.convert(method, rh, bh, sigma_r_m=sr, sigma_azimuth_rad=sb, predicted_xy=truth).z
         assert z.shape == (N_MC, 2)
-        expected = cv.scale_factor(method, sb) * naive_mean  # closed form κ·E[naive]
+        expected = (
+            cv.scale_factor(method, sigma_azimuth_rad=sb) * naive_mean
+        )  # closed form κ·E[naive]
         check_mean(z, expected, f"{method} mean {cfg}")
         rad_bias[method] = (z - truth) @ radial
         exact_rad[method] = float((expected - truth) @ radial)
@@ -283,7 +285,10 @@ def test_conversion_bias_given_truth(cfg: tuple[float, ...]) -> None:
     # ucm / ducm: exactly unbiased, so their MC check above was a check against the truth.
     for method in ("ucm", "ducm"):
         np.testing.assert_allclose(
-            cv.scale_factor(method, sb) * naive_mean, truth, rtol=1e-14, atol=1e-9 * r
+            cv.scale_factor(method, sigma_azimuth_rad=sb) * naive_mean,
+            truth,
+            rtol=1e-14,
+            atol=1e-9 * r,
         )
 
 
@@ -305,20 +310,25 @@ def test_ucm_covariance_given_truth(cfg: tuple[float, ...]) -> None:
     rng = np.random.default_rng([5, UCM_CONFIGS.index(cfg)])
     rh, bh = _polar_draws(rng, N_MC, r, beta, sr, sb)
     truth = r * np.array([math.cos(beta), math.sin(beta)])
-    exact = math.exp(s) * cv.naive_cov_given_truth(r, beta, sr, sb)
+    exact = math.exp(s) * cv.naive_cov_given_truth(r, beta, sigma_r_m=sr, sigma_azimuth_rad=sb)
 
-    c, c_se = cov_se(cv.convert_ucm(rh, bh, sr, sb).z)
+    c, c_se = cov_se(cv.convert("ucm", rh, bh, sigma_r_m=sr, sigma_azimuth_rad=sb).z)
     check_mc(upper(c), upper(exact), upper(c_se), f"ucm cov {cfg}")
     if sb >= 0.3:  # power: without the e^s factor the covariance is rejected
-        wrong = cv.naive_cov_given_truth(r, beta, sr, sb)
+        wrong = cv.naive_cov_given_truth(r, beta, sigma_r_m=sr, sigma_azimuth_rad=sb)
         assert np.any(np.abs(upper(c) - upper(wrong)) > Z * upper(c_se))
 
     # ducm evaluated at the true position: exactly the true-conditioned covariance, for every
     # measurement (it does not depend on r̂, β̂).
-    ducm = cv.convert_ducm(rh[:1000], bh[:1000], sr, sb, predicted_xy=truth)
+    ducm = cv.convert(
+        "ducm", rh[:1000], bh[:1000], sigma_r_m=sr, sigma_azimuth_rad=sb, predicted_xy=truth
+    )
     assert rel_entrywise(np.broadcast_to(ducm.R, (1000, 2, 2)), exact) < 1e-13
     # ... and ucm evaluated at the truth gives the same matrix.
-    assert rel_entrywise(cv.convert_ucm(r, beta, sr, sb).R, exact) < 1e-13
+    assert (
+        rel_entrywise(cv.convert("ucm", r, beta, sigma_r_m=sr, sigma_azimuth_rad=sb).R, exact)
+        < 1e-13
+    )
 
 
 @pytest.mark.parametrize("cfg", CONFIGS_3D, ids=str)
@@ -371,12 +381,18 @@ def test_averaged_cov_is_posterior_average(cfg: tuple[float, ...]) -> None:
     w = w / math.sqrt(2 * math.pi)  # -> expectation over a standard normal
     r = r_hat + sr * x[:, None]
     b = b_hat + sb * x[None, :]
-    avg = np.einsum("i,j,ijkl->kl", w, w, cv.naive_cov_given_truth(r, b, sr, sb))
-    assert rel_entrywise(cv.averaged_cov(r_hat, b_hat, sr, sb), avg) < 1e-10
+    avg = np.einsum(
+        "i,j,ijkl->kl", w, w, cv.naive_cov_given_truth(r, b, sigma_r_m=sr, sigma_azimuth_rad=sb)
+    )
+    assert (
+        rel_entrywise(cv.averaged_cov(r_hat, b_hat, sigma_r_m=sr, sigma_azimuth_rad=sb), avg)
+        < 1e-10
+    )
     # seed and cmkf_d both report exactly this matrix.
     for method in ("seed", "cmkf_d"):
         np.testing.assert_array_equal(
-            cv.convert(method, r_hat, b_hat, sr, sb).R, cv.averaged_cov(r_hat, b_hat, sr, sb)
+            cv.convert(method, r_hat, b_hat, sigma_r_m=sr, sigma_azimuth_rad=sb).R,
+            cv.averaged_cov(r_hat, b_hat, sigma_r_m=sr, sigma_azimuth_rad=sb),
         )
 
 
@@ -406,9 +422,11 @@ def test_linearized_cov_is_j_diag_jt(cfg: tuple[float, ...]) -> None:
         np.array([1e-3 * r, 1e-5]),
     )
     ref = jac @ np.diag([sr**2, sb**2]) @ jac.T
-    assert rel_entrywise(cv.linearized_cov(r, beta, sr, sb), ref) < 1e-6
-    naive = cv.convert_naive(r, beta, sr, sb)
-    np.testing.assert_array_equal(naive.R, cv.linearized_cov(r, beta, sr, sb))
+    assert rel_entrywise(cv.linearized_cov(r, beta, sigma_r_m=sr, sigma_azimuth_rad=sb), ref) < 1e-6
+    naive = cv.convert("naive", r, beta, sigma_r_m=sr, sigma_azimuth_rad=sb)
+    np.testing.assert_array_equal(
+        naive.R, cv.linearized_cov(r, beta, sigma_r_m=sr, sigma_azimuth_rad=sb)
+    )
     np.testing.assert_allclose(naive.z, [r * math.cos(beta), r * math.sin(beta)], rtol=1e-15)
 
 
@@ -473,8 +491,8 @@ def test_exact_covariances_high_precision(cfg: tuple[float, ...]) -> None:
     naive3 = [m2 * ecc * ecc - R * R * ex(-S) * ex(-S), m2 * ecc * ess, m2 * ess]
 
     for got, ref in (
-        (cv.naive_cov_given_truth(r, 0.0, sr, sb), naive),
-        (cv.averaged_cov(r, 0.0, sr, sb), avg),
+        (cv.naive_cov_given_truth(r, 0.0, sigma_r_m=sr, sigma_azimuth_rad=sb), naive),
+        (cv.averaged_cov(r, 0.0, sigma_r_m=sr, sigma_azimuth_rad=sb), avg),
         (
             cv3.naive_cov_given_truth_3d(
                 r, 0.0, 0.0, sigma_r_m=sr, sigma_azimuth_rad=sb, sigma_elevation_rad=sb
@@ -530,11 +548,16 @@ def assert_symmetric_pd(cov: np.ndarray, what: str) -> None:
 def test_2d_covariances_symmetric_pd(r, beta, sr, sb, rp, bp) -> None:
     predicted = np.array([rp * math.cos(bp), rp * math.sin(bp)])
     for method in cv.METHODS_2D:
-        out = cv.convert(method, r, beta, sr, sb, predicted_xy=predicted)
+        out = cv.convert(
+            method, r, beta, sigma_r_m=sr, sigma_azimuth_rad=sb, predicted_xy=predicted
+        )
         assert out.z.shape == (2,) and out.R.shape == (2, 2)
         assert np.all(np.isfinite(out.z))
         assert_symmetric_pd(out.R, method)
-    assert_symmetric_pd(cv.naive_cov_given_truth(r, beta, sr, sb), "naive_cov_given_truth")
+    assert_symmetric_pd(
+        cv.naive_cov_given_truth(r, beta, sigma_r_m=sr, sigma_azimuth_rad=sb),
+        "naive_cov_given_truth",
+    )
 
 
 @settings(max_examples=300, deadline=None)
@@ -597,11 +620,23 @@ def test_broadcasting_equals_elementwise(shape, seed, scalar_sigmas) -> None:
         return v[k] if v[k].ndim == 0 else v[k][idx]
 
     for method in cv.METHODS_2D:
-        batched = cv.convert(method, v["r"], v["beta"], v["sr"], v["sb"], predicted_xy=v["pred"])
+        batched = cv.convert(
+            method,
+            v["r"],
+            v["beta"],
+            sigma_r_m=v["sr"],
+            sigma_azimuth_rad=v["sb"],
+            predicted_xy=v["pred"],
+        )
         _assert_batch_matches(
             batched,
             lambda i, m=method: cv.convert(
-                m, v["r"][i], v["beta"][i], at("sr", i), at("sb", i), predicted_xy=v["pred"][i]
+                m,
+                v["r"][i],
+                v["beta"][i],
+                sigma_r_m=at("sr", i),
+                sigma_azimuth_rad=at("sb", i),
+                predicted_xy=v["pred"][i],
             ),
             shape,
             2,
@@ -633,9 +668,16 @@ def test_broadcasting_equals_elementwise(shape, seed, scalar_sigmas) -> None:
             f"{name} scalar elevation",
         )
     # The helper functions carry the batch shape too.
-    assert cv.naive_mean_given_truth(v["r"], v["beta"], v["sb"]).shape == (*shape, 2)
+    assert cv.naive_mean_given_truth(v["r"], v["beta"], sigma_azimuth_rad=v["sb"]).shape == (
+        *shape,
+        2,
+    )
     for fn2 in (cv.naive_cov_given_truth, cv.linearized_cov, cv.averaged_cov):
-        assert fn2(v["r"], v["beta"], v["sr"], v["sb"]).shape == (*shape, 2, 2)
+        assert fn2(v["r"], v["beta"], sigma_r_m=v["sr"], sigma_azimuth_rad=v["sb"]).shape == (
+            *shape,
+            2,
+            2,
+        )
     assert cv3.naive_cov_given_truth_3d(
         v["r"],
         v["beta"],
@@ -653,8 +695,8 @@ def test_broadcasting_equals_elementwise(shape, seed, scalar_sigmas) -> None:
 
 def test_unknown_method_names_the_allowed_ones() -> None:
     for call in (
-        lambda: cv.convert("bogus", 1e3, 0.1, 10.0, 0.01),
-        lambda: cv.scale_factor("bogus", 0.01),
+        lambda: cv.convert("bogus", 1e3, 0.1, sigma_r_m=10.0, sigma_azimuth_rad=0.01),
+        lambda: cv.scale_factor("bogus", sigma_azimuth_rad=0.01),
     ):
         with pytest.raises(ValueError) as info:
             call()
@@ -666,12 +708,21 @@ def test_unknown_method_names_the_allowed_ones() -> None:
 
 def test_ducm_needs_predicted_position() -> None:
     with pytest.raises(ValueError, match="predicted_xy"):
-        cv.convert("ducm", 1e3, 0.1, 10.0, 0.01)
+        cv.convert("ducm", 1e3, 0.1, sigma_r_m=10.0, sigma_azimuth_rad=0.01)
 
 
 def test_point_and_covariance_share_the_batch_shape() -> None:
     """Scalar measurement, batched σ (or one prediction, batched measurements): z and R agree."""
-    c = cv.convert("naive", 1e5, 0.3, 250.0, np.array([0.01, 0.02, 0.03]))
+    c = cv.convert(
+        "naive", 1e5, 0.3, sigma_r_m=250.0, sigma_azimuth_rad=np.array([0.01, 0.02, 0.03])
+    )
     assert c.z.shape == (3, 2) and c.R.shape == (3, 2, 2)
-    d = cv.convert("ducm", np.array([1e5, 2e5]), 0.1, 250.0, 0.01, np.array([1e5, 1e4]))
+    d = cv.convert(
+        "ducm",
+        np.array([1e5, 2e5]),
+        0.1,
+        sigma_r_m=250.0,
+        sigma_azimuth_rad=0.01,
+        predicted_xy=np.array([1e5, 1e4]),
+    )
     assert d.z.shape == (2, 2) and d.R.shape == (2, 2, 2)

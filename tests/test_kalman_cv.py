@@ -29,7 +29,7 @@ def test_batched_kf_equals_filterpy_step_by_step(method: str, sigma_a: float) ->
     beta_true = 0.4 + 0.002 * np.arange(steps)
     r_hat = r_true + sr * rng.standard_normal((runs, steps))
     b_hat = beta_true + sb * rng.standard_normal((runs, steps))
-    c = convert(method, r_hat, b_hat, sr, sb)
+    c = convert(method, r_hat, b_hat, sigma_r_m=sr, sigma_azimuth_rad=sb)
     state = cv_init(c.z[:, 0], c.R[:, 0])
     ref = []
     for m in range(runs):

@@ -120,7 +120,7 @@ Graph = dict[str, dict[str, Import]]
 
 
 def _module_name(rel: Path) -> str:
-    """Installed dotted name of a source file: core/filters/state.py -> radarviz.core.filters.state."""
+    """Installed dotted name of a source file: core/params.py -> radarviz.core.params."""
     parts = list(rel.with_suffix("").parts)
     parts[0] = SOURCE_ROOTS[parts[0]]
     if parts[-1] == "__init__":

@@ -26,7 +26,7 @@ from filterpy.kalman import ExtendedKalmanFilter, MerweScaledSigmaPoints, Unscen
 
 import radarviz.core.filters.polar_ekf as ekf_module
 import radarviz.core.filters.polar_ukf as ukf_module
-from radarviz.core.conversion.planar import convert_naive
+from radarviz.core.conversion.planar import convert
 from radarviz.core.filters.methods import METHODS, PolarNoise, PolarPlot
 from radarviz.core.filters.polar_ukf import UKFParams
 from radarviz.core.filters.predict import cv_predict, transition_matrix
@@ -292,7 +292,7 @@ def test_init_from_polar() -> None:
     b = np.array([0.3, -3.1, math.pi])
     sr, sb = 250.0, math.radians(2.0)
     state = init_from_polar(r, b, sr, sb, sigma_v=300.0)
-    conv = convert_naive(r, b, sr, sb)
+    conv = convert("naive", r, b, sigma_r_m=sr, sigma_azimuth_rad=sb)
     ref = cv_init(conv.z, conv.R, 300.0)
     np.testing.assert_array_equal(state.x, ref.x)
     np.testing.assert_array_equal(state.P, ref.P)

@@ -111,31 +111,38 @@ def _angle_moments_cs(c: NDArray, sn: NDArray, s: NDArray) -> _AngleMoments:
     )
 
 
-def scale_factor(method: str, sigma_beta: ArrayLike) -> NDArray[np.float64]:
+#: The scale κ(s), s = σβ², that each 2D method applies to the naive point.
+_SCALES = {
+    "naive": lambda s: np.ones_like(s),
+    "seed": lambda s: 1.0 - s / 2.0,  # Prosov eq. 10 as printed
+    "cmkf_d": lambda s: 1.0 - (np.exp(-s) - np.exp(-s / 2.0)),  # Lerro & Bar-Shalom debiasing
+    "ucm": lambda s: np.exp(s / 2.0),  # Mo et al. 1998: 1 / E[cos v_β]
+    "ducm": lambda s: np.exp(s / 2.0),
+}
+
+
+def scale_factor(method: str, *, sigma_azimuth_rad: ArrayLike) -> NDArray[np.float64]:
     """The scale κ a 2D method applies to the naive point ``r̂ (cos β̂, sin β̂)``."""
-    s = _f(sigma_beta) ** 2
-    if method == "naive":
-        return np.ones_like(s)
-    if method == "seed":
-        return 1.0 - s / 2.0  # Prosov eq. 10 as printed
-    if method == "cmkf_d":
-        return 1.0 - (np.exp(-s) - np.exp(-s / 2.0))  # Lerro & Bar-Shalom debiasing
-    if method in ("ucm", "ducm"):
-        return np.exp(s / 2.0)  # Mo et al. 1998: 1 / E[cos v_β]
-    raise ValueError(f"method must be one of {', '.join(METHODS_2D)} (got {method!r})")
+    return _SCALES[_method(method)](_f(sigma_azimuth_rad) ** 2)
+
+
+def _method(method: str) -> str:
+    if method not in METHODS_2D:
+        raise ValueError(f"method must be one of {', '.join(METHODS_2D)} (got {method!r})")
+    return method
 
 
 def naive_mean_given_truth(
-    r: ArrayLike, beta: ArrayLike, sigma_beta: ArrayLike
+    r: ArrayLike, beta: ArrayLike, *, sigma_azimuth_rad: ArrayLike
 ) -> NDArray[np.float64]:
     """E[r̂ (cos β̂, sin β̂) | r, β] = r e^(−s/2) (cos β, sin β).  Shape (..., 2)."""
-    r, beta, s = _f(r), _f(beta), _f(sigma_beta) ** 2
+    r, beta, s = _f(r), _f(beta), _f(sigma_azimuth_rad) ** 2
     a = r * np.exp(-s / 2.0)
     return np.stack([a * np.cos(beta), a * np.sin(beta)], axis=-1)
 
 
 def naive_cov_given_truth(
-    r: ArrayLike, beta: ArrayLike, sigma_r: ArrayLike, sigma_beta: ArrayLike
+    r: ArrayLike, beta: ArrayLike, *, sigma_r_m: ArrayLike, sigma_azimuth_rad: ArrayLike
 ) -> NDArray[np.float64]:
     """Exact covariance of the naive point given the true (r, β).  Shape (..., 2, 2).
 
@@ -152,7 +159,9 @@ def naive_cov_given_truth(
     ~eps·r²/σr² relative precision and can come out ≤ 0 once r/σr ≳ 5e7 at small s).
     """
     r, beta = _f(r), _f(beta)
-    return _sym2(*_true_cov_parts(r, np.cos(beta), np.sin(beta), _f(sigma_r), _f(sigma_beta)))
+    return _sym2(
+        *_true_cov_parts(r, np.cos(beta), np.sin(beta), _f(sigma_r_m), _f(sigma_azimuth_rad))
+    )
 
 
 CovParts = tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]
@@ -198,7 +207,7 @@ def _true_cov_parts(
 
 
 def linearized_cov(
-    r: ArrayLike, beta: ArrayLike, sigma_r: ArrayLike, sigma_beta: ArrayLike
+    r: ArrayLike, beta: ArrayLike, *, sigma_r_m: ArrayLike, sigma_azimuth_rad: ArrayLike
 ) -> NDArray[np.float64]:
     """First-order covariance J diag(σr², σβ²) Jᵀ of the naive point (Prosov eq. 9).
 
@@ -207,7 +216,9 @@ def linearized_cov(
     R12 = (σr² − r² s) sin β cos β
     """
     r, beta = _f(r), _f(beta)
-    return _sym2(*_linearized_parts(r, np.cos(beta), np.sin(beta), _f(sigma_r), _f(sigma_beta)))
+    return _sym2(
+        *_linearized_parts(r, np.cos(beta), np.sin(beta), _f(sigma_r_m), _f(sigma_azimuth_rad))
+    )
 
 
 def _linearized_parts(r: NDArray, c: NDArray, sn: NDArray, sr: NDArray, sb: NDArray) -> CovParts:
@@ -216,7 +227,7 @@ def _linearized_parts(r: NDArray, c: NDArray, sn: NDArray, sr: NDArray, sb: NDAr
 
 
 def averaged_cov(
-    r: ArrayLike, beta: ArrayLike, sigma_r: ArrayLike, sigma_beta: ArrayLike
+    r: ArrayLike, beta: ArrayLike, *, sigma_r_m: ArrayLike, sigma_azimuth_rad: ArrayLike
 ) -> NDArray[np.float64]:
     """Prosov eq. 11a–c, evaluated at the measurement (r, β) = (r̂, β̂).
 
@@ -230,7 +241,9 @@ def averaged_cov(
     that identity by quadrature.
     """
     r, beta = _f(r), _f(beta)
-    return _sym2(*_averaged_parts(r, np.cos(beta), np.sin(beta), _f(sigma_r), _f(sigma_beta)))
+    return _sym2(
+        *_averaged_parts(r, np.cos(beta), np.sin(beta), _f(sigma_r_m), _f(sigma_azimuth_rad))
+    )
 
 
 def _averaged_parts(r: NDArray, c: NDArray, sn: NDArray, sr: NDArray, sb: NDArray) -> CovParts:
@@ -273,108 +286,96 @@ class ConvertedParts(NamedTuple):
         return Converted(np.stack([x, y], axis=-1), _sym2(r00, r01, r11))
 
 
+def _naive(r, c, sn, sr, sb, predicted) -> ConvertedParts:
+    """Naive conversion (eq. 8) with the linearized covariance (eq. 9)."""
+    return ConvertedParts(r * c, r * sn, *_linearized_parts(r, c, sn, sr, sb))
+
+
+def _averaged(method: str):
+    """Prosov's correction as printed (``seed``: κ = 1 − s/2, eq. 10; it *doubles* the bias of
+    the converted point, see the module docstring) or Lerro & Bar-Shalom's (``cmkf_d``:
+    κ = 1 − (e^(−s) − e^(−s/2))), both with the averaged covariance of eq. 11."""
+
+    def parts(r, c, sn, sr, sb, predicted) -> ConvertedParts:
+        kr = _SCALES[method](sb * sb) * r
+        return ConvertedParts(kr * c, kr * sn, *_averaged_parts(r, c, sn, sr, sb))
+
+    return parts
+
+
+def _ucm(r, c, sn, sr, sb, predicted) -> ConvertedParts:
+    """Unbiased conversion (Mo, Song, Zhou, Sun, Bar-Shalom 1998): κ = e^(s/2); covariance the
+    exact true-conditioned covariance of the unbiased point, e^s · ``naive_cov_given_truth``,
+    evaluated at the measured (r̂, β̂)."""
+    es = np.exp(sb * sb)
+    kr = np.sqrt(es) * r
+    return ConvertedParts(kr * c, kr * sn, *_true_cov_parts(r, c, sn, sr, sb, es))
+
+
+def _ducm(r, c, sn, sr, sb, predicted) -> ConvertedParts:
+    """Decorrelated unbiased conversion (Bordonaro, Willett, Bar-Shalom 2014): ucm's point,
+    the covariance evaluated at the filter's predicted position (radar-centred), so the gain
+    is independent of this measurement's error."""
+    if predicted is None:
+        raise ValueError("method ducm needs predicted_xy (the filter's predicted position)")
+    px, py = _f(predicted[0]), _f(predicted[1])
+    r_p = np.hypot(px, py)
+    es = np.exp(sb * sb)
+    kr = np.sqrt(es) * r
+    return ConvertedParts(kr * c, kr * sn, *_true_cov_parts(r_p, px / r_p, py / r_p, sr, sb, es))
+
+
+_CONVERSIONS = {
+    "naive": _naive,
+    "seed": _averaged("seed"),
+    "cmkf_d": _averaged("cmkf_d"),
+    "ucm": _ucm,
+    "ducm": _ducm,
+}
+
+
 def convert_parts(
     method: str,
     r: ArrayLike,
     beta: ArrayLike,
-    sigma_r: ArrayLike,
-    sigma_beta: ArrayLike,
-    predicted_xy: tuple[ArrayLike, ArrayLike] | None = None,
+    *,
+    sigma_r_m: ArrayLike,
+    sigma_azimuth_rad: ArrayLike,
+    predicted_xy: ArrayLike | tuple[ArrayLike, ArrayLike] | None = None,
 ) -> ConvertedParts:
-    """Any of ``METHODS_2D`` as components; ``ducm`` needs ``predicted_xy = (x⁻, y⁻)``.
+    """Any of ``METHODS_2D`` as components; ``ducm`` needs ``predicted_xy``.
 
     Args:
         r, beta: (...) measured range (m) and azimuth (rad).
-        sigma_r, sigma_beta: σr (m) and σβ (rad), scalars or broadcastable to (...).
-        predicted_xy: the filter's predicted position, radar-centred, two (...) arrays.
+        sigma_r_m, sigma_azimuth_rad: σr and σβ, scalars or broadcastable to (...).
+        predicted_xy: the filter's predicted position, radar-centred: two (...) arrays, or one
+            (..., 2) array.
     """
     r, beta = _f(r), _f(beta)
-    sr, sb = _f(sigma_r), _f(sigma_beta)
     c, sn = np.cos(beta), np.sin(beta)
-    if method == "naive":
-        return ConvertedParts(r * c, r * sn, *_linearized_parts(r, c, sn, sr, sb))
-    if method in ("seed", "cmkf_d"):
-        kr = scale_factor(method, sb) * r
-        return ConvertedParts(kr * c, kr * sn, *_averaged_parts(r, c, sn, sr, sb))
-    if method == "ucm":
-        es = np.exp(sb * sb)
-        kr = np.sqrt(es) * r
-        return ConvertedParts(kr * c, kr * sn, *_true_cov_parts(r, c, sn, sr, sb, es))
-    if method == "ducm":
-        if predicted_xy is None:
-            raise ValueError("method ducm needs predicted_xy (the filter's predicted position)")
-        px, py = _f(predicted_xy[0]), _f(predicted_xy[1])
-        r_p = np.hypot(px, py)
-        es = np.exp(sb * sb)
-        kr = np.sqrt(es) * r
-        cov = _true_cov_parts(r_p, px / r_p, py / r_p, sr, sb, es)
-        return ConvertedParts(kr * c, kr * sn, *cov)
-    raise ValueError(f"method must be one of {', '.join(METHODS_2D)} (got {method!r})")
-
-
-def convert_naive(
-    r: ArrayLike, beta: ArrayLike, sigma_r: ArrayLike, sigma_beta: ArrayLike
-) -> Converted:
-    """Naive conversion (eq. 8) with the linearized covariance (eq. 9)."""
-    return convert_parts("naive", r, beta, sigma_r, sigma_beta).stacked()
-
-
-def convert_seed(
-    r: ArrayLike, beta: ArrayLike, sigma_r: ArrayLike, sigma_beta: ArrayLike
-) -> Converted:
-    """Prosov's "unbiased" conversion as published: κ = 1 − s/2 (eq. 10), covariance eq. 11.
-
-    Note: this *doubles* the bias of the converted point; see the module docstring.
-    """
-    return convert_parts("seed", r, beta, sigma_r, sigma_beta).stacked()
-
-
-def convert_cmkf_d(
-    r: ArrayLike, beta: ArrayLike, sigma_r: ArrayLike, sigma_beta: ArrayLike
-) -> Converted:
-    """Lerro and Bar-Shalom (1993) debiased conversion: κ = 1 − (e^(−s) − e^(−s/2)), eq. 11."""
-    return convert_parts("cmkf_d", r, beta, sigma_r, sigma_beta).stacked()
-
-
-def convert_ucm(
-    r: ArrayLike, beta: ArrayLike, sigma_r: ArrayLike, sigma_beta: ArrayLike
-) -> Converted:
-    """Unbiased conversion (Mo, Song, Zhou, Sun, Bar-Shalom 1998): κ = e^(s/2).
-
-    The covariance is the exact true-conditioned covariance of the unbiased point,
-    e^s · ``naive_cov_given_truth``, evaluated at the measured (r̂, β̂).
-    """
-    return convert_parts("ucm", r, beta, sigma_r, sigma_beta).stacked()
-
-
-def convert_ducm(
-    r: ArrayLike,
-    beta: ArrayLike,
-    sigma_r: ArrayLike,
-    sigma_beta: ArrayLike,
-    predicted_xy: ArrayLike,
-) -> Converted:
-    """Decorrelated unbiased conversion (Bordonaro, Willett, Bar-Shalom 2014).
-
-    Same point as ``ucm``; the covariance is evaluated at the filter's predicted position
-    ``predicted_xy`` (..., 2), radar-centred, so the gain is independent of this measurement's
-    error.
-    """
-    p = _f(predicted_xy)
-    return convert_parts("ducm", r, beta, sigma_r, sigma_beta, (p[..., 0], p[..., 1])).stacked()
+    predicted = predicted_xy
+    if predicted is not None and not isinstance(predicted, tuple):
+        p = _f(predicted)
+        predicted = (p[..., 0], p[..., 1])
+    fn = _CONVERSIONS[_method(method)]
+    return fn(r, c, sn, _f(sigma_r_m), _f(sigma_azimuth_rad), predicted)
 
 
 def convert(
     method: str,
     r: ArrayLike,
     beta: ArrayLike,
-    sigma_r: ArrayLike,
-    sigma_beta: ArrayLike,
+    *,
+    sigma_r_m: ArrayLike,
+    sigma_azimuth_rad: ArrayLike,
     predicted_xy: ArrayLike | None = None,
 ) -> Converted:
-    """Dispatch to one of ``METHODS_2D``; ``ducm`` needs ``predicted_xy`` (..., 2)."""
-    if method == "ducm":
-        if predicted_xy is None:
-            raise ValueError("method ducm needs predicted_xy (the filter's predicted position)")
-        return convert_ducm(r, beta, sigma_r, sigma_beta, predicted_xy)
-    return convert_parts(method, r, beta, sigma_r, sigma_beta).stacked()
+    """``convert_parts`` stacked: z (..., 2) and R (..., 2, 2)."""
+    return convert_parts(
+        method,
+        r,
+        beta,
+        sigma_r_m=sigma_r_m,
+        sigma_azimuth_rad=sigma_azimuth_rad,
+        predicted_xy=predicted_xy,
+    ).stacked()

@@ -75,9 +75,9 @@ def _parts_2d(name: str, plot: PolarPlot, noise: PolarNoise, predicted: list[Vec
         name,
         plot.range_m,
         plot.azimuth_rad,
-        noise.sigma_r_m,
-        noise.sigma_azimuth_rad,
-        None if predicted is None else (predicted[0], predicted[1]),
+        sigma_r_m=noise.sigma_r_m,
+        sigma_azimuth_rad=noise.sigma_azimuth_rad,
+        predicted_xy=None if predicted is None else (predicted[0], predicted[1]),
     )
     return [c.x, c.y], {(0, 0): c.r00, (0, 1): c.r01, (1, 1): c.r11}
 

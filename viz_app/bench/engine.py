@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 from filterpy.kalman import KalmanFilter
 
-from radarviz.core.conversion.planar import convert_ucm
+from radarviz.core.conversion.planar import convert
 from radarviz.core.experiments.prosov import BLOCK_RUNS, TrackingConfig, block_sizes, filter_block
 from radarviz.core.filters.position import cv_update
 from radarviz.core.filters.predict import transition_matrix
@@ -58,7 +58,7 @@ def bench_batched(runs: int, config: TrackingConfig, repeats: int = 3) -> tuple[
     # Filter only: convert every block's measurements first, then time predict + update.
     converted = []
     for r_hat, b_hat in blocks:
-        c = convert_ucm(r_hat, b_hat, sr, sb)
+        c = convert("ucm", r_hat, b_hat, sigma_r_m=sr, sigma_azimuth_rad=sb)
         converted.append(
             (
                 np.ascontiguousarray(c.z.transpose(1, 0, 2)),
@@ -85,7 +85,7 @@ def bench_filterpy(runs: int, config: TrackingConfig) -> float:
     steps = config.target.steps
     sr, sb, T = config.sigma_r_m, config.sigma_beta_rad, config.target.period_s
     r_hat, b_hat = _measurements(runs, steps, config, seed=12345)
-    c = convert_ucm(r_hat, b_hat, sr, sb)
+    c = convert("ucm", r_hat, b_hat, sigma_r_m=sr, sigma_azimuth_rad=sb)
     F = transition_matrix(T)
     elapsed = 0.0
     for m in range(runs):

@@ -72,7 +72,7 @@ def log_prosov(
     # One displayed run (its own seed stream, so it does not depend on ``runs``).
     rng = np.random.default_rng(np.random.SeedSequence([seed, 7]))
     r_hat, b_hat = polar_measurements(truth, sr, sb, 1, rng)
-    naive = convert_parts("naive", r_hat[0], b_hat[0], sr, sb)
+    naive = convert_parts("naive", r_hat[0], b_hat[0], sigma_r_m=sr, sigma_azimuth_rad=sb)
     log_points(
         rec,
         "world/measurements/radar",
@@ -83,7 +83,7 @@ def log_prosov(
         radius=150.0,
     )
     for method in ("seed", "cmkf_d", "ucm"):
-        c = convert_parts(method, r_hat[0], b_hat[0], sr, sb)
+        c = convert_parts(method, r_hat[0], b_hat[0], sigma_r_m=sr, sigma_azimuth_rad=sb)
         log_points(
             rec,
             f"world/converted/{method}",
@@ -101,7 +101,7 @@ def log_prosov(
     rng = np.random.default_rng(np.random.SeedSequence([seed, 11]))
     r_c, b_c = polar_measurements(truth[:1], sr, sb, cloud_points, rng)
     for method in ("naive", "seed", "cmkf_d", "ucm"):
-        c = convert_parts(method, r_c[:, 0], b_c[:, 0], sr, sb)
+        c = convert_parts(method, r_c[:, 0], b_c[:, 0], sigma_r_m=sr, sigma_azimuth_rad=sb)
         log_cloud(rec, method, np.stack([c.x, c.y], -1), truth[0, [0, 2]])
 
     for name, m in result.metrics.items():

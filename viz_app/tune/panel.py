@@ -194,7 +194,9 @@ def simulate(params: TuneParams) -> TuneResult:
     r_hat, b_hat = polar_measurements(
         truth, cfg.sigma_r_m, cfg.sigma_beta_rad, size, np.random.default_rng(child)
     )
-    naive = convert_parts("naive", r_hat[0], b_hat[0], cfg.sigma_r_m, cfg.sigma_beta_rad)
+    naive = convert_parts(
+        "naive", r_hat[0], b_hat[0], sigma_r_m=cfg.sigma_r_m, sigma_azimuth_rad=cfg.sigma_beta_rad
+    )
     result = TuneResult(
         params=params,
         truth=truth,
