@@ -75,10 +75,18 @@ def test_closed_forms_equal_numerical_least_squares(c0: float, period: float) ->
         for dop in (True, False):
             if not dop and k < 3:
                 continue
-            Rc = ls_covariance_closed(k, sr, sv, period, dop)
-            Rn = ls_covariance_numeric(k, sr, sv, period, dop)
-            Wc = ls_weights_closed(k, sr, sv, period, dop)
-            Wn = ls_weights_numeric(k, sr, sv, period, dop)
+            Rc = ls_covariance_closed(
+                k, sigma_r_m=sr, sigma_vr_mps=sv, period_s=period, with_doppler=dop
+            )
+            Rn = ls_covariance_numeric(
+                k, sigma_r_m=sr, sigma_vr_mps=sv, period_s=period, with_doppler=dop
+            )
+            Wc = ls_weights_closed(
+                k, sigma_r_m=sr, sigma_vr_mps=sv, period_s=period, with_doppler=dop
+            )
+            Wn = ls_weights_numeric(
+                k, sigma_r_m=sr, sigma_vr_mps=sv, period_s=period, with_doppler=dop
+            )
             assert Rc.shape == (3, 3) and Wc.shape == (3, 2 * k if dop else k)
             assert _cov_rel_err(Rc, Rn) < 1e-10, (k, dop)
             assert _weights_rel_err(Wc, Wn) < 1e-10, (k, dop)
@@ -123,13 +131,34 @@ def test_both_routes_against_exact_rational_least_squares(c0: float) -> None:
             if not dop and k < 3:
                 continue
             Re, We = _exact_least_squares(k, sr, sv, T, dop)
-            closed = ls_covariance_closed(k, sr, sv, T, dop), ls_weights_closed(k, sr, sv, T, dop)
+            closed = (
+                ls_covariance_closed(
+                    k, sigma_r_m=sr, sigma_vr_mps=sv, period_s=T, with_doppler=dop
+                ),
+                ls_weights_closed(k, sigma_r_m=sr, sigma_vr_mps=sv, period_s=T, with_doppler=dop),
+            )
             assert _cov_rel_err(closed[0], Re) < 1e-13, (k, dop)
             assert _weights_rel_err(closed[1], We) < 1e-13, (k, dop)
             # The numerical route is as good as the problem's conditioning (~1/sqrt(C0)).
             tol = 1e-9 if c0 < 1e-6 else 1e-12
-            assert _cov_rel_err(ls_covariance_numeric(k, sr, sv, T, dop), Re) < tol
-            assert _weights_rel_err(ls_weights_numeric(k, sr, sv, T, dop), We) < tol
+            assert (
+                _cov_rel_err(
+                    ls_covariance_numeric(
+                        k, sigma_r_m=sr, sigma_vr_mps=sv, period_s=T, with_doppler=dop
+                    ),
+                    Re,
+                )
+                < tol
+            )
+            assert (
+                _weights_rel_err(
+                    ls_weights_numeric(
+                        k, sigma_r_m=sr, sigma_vr_mps=sv, period_s=T, with_doppler=dop
+                    ),
+                    We,
+                )
+                < tol
+            )
 
 
 @pytest.mark.parametrize("dop", [True, False])
@@ -203,11 +232,13 @@ def test_reduced_order_closed_values() -> None:
 
 def test_closed_form_needs_enough_samples() -> None:
     with pytest.raises(ParameterError, match=r"^k must be an integer in \[2, "):
-        ls_covariance_closed(1, 250.0, 15.0, 10.0)
+        ls_covariance_closed(1, sigma_r_m=250.0, sigma_vr_mps=15.0, period_s=10.0)
     with pytest.raises(ParameterError, match=r"^k must be an integer in \[3, "):
-        ls_weights_closed(2, 250.0, None, 10.0, with_doppler=False)
+        ls_weights_closed(2, sigma_r_m=250.0, sigma_vr_mps=None, period_s=10.0, with_doppler=False)
     with pytest.raises(ParameterError, match=r"^order must be an integer in \[1, 2\]"):
-        ls_covariance_numeric(1, 250.0, 15.0, 10.0, True, order=3)
+        ls_covariance_numeric(
+            1, sigma_r_m=250.0, sigma_vr_mps=15.0, period_s=10.0, with_doppler=True, order=3
+        )
 
 
 # --------------------------------------------------------------------------------------------
@@ -243,7 +274,7 @@ def test_sliding_window_estimates_match_window_by_window(dop: bool) -> None:
     rng = np.random.default_rng(3)
     r = truth[:, 0] + rng.normal(0, 250.0, (6, n))
     v = truth[:, 1] + rng.normal(0, 15.0, (6, n)) if dop else None
-    out = sliding_window_estimates(r, v, k, 250.0, 15.0, T)
+    out = sliding_window_estimates(r, v, k, sigma_r_m=250.0, sigma_vr_mps=15.0, period_s=T)
     assert out.estimates.shape == (6, n, 3) and out.R.shape == (n, 3, 3)
     assert list(out.window) == [1, 2, 3, 4] + [5] * 8
     assert list(out.order[:3]) == ([2, 3, 3] if dop else [1, 2, 3])
@@ -259,8 +290,10 @@ def test_sliding_window_estimates_match_window_by_window(dop: bool) -> None:
 
 
 def test_weights_accessor() -> None:
-    W = finite_memory_weights(4, 250.0, 15.0, 10.0)
-    assert np.array_equal(W, ls_weights_closed(4, 250.0, 15.0, 10.0))
+    W = finite_memory_weights(4, sigma_r_m=250.0, sigma_vr_mps=15.0, period_s=10.0)
+    assert np.array_equal(
+        W, ls_weights_closed(4, sigma_r_m=250.0, sigma_vr_mps=15.0, period_s=10.0)
+    )
 
 
 # --------------------------------------------------------------------------------------------
@@ -399,16 +432,16 @@ def test_monte_carlo_is_reproducible() -> None:
         ({"k": 0}, "k"),
         ({"k": -3}, "k"),
         ({"k": 2.5}, "k"),
-        ({"sigma_r": 0.0}, "sigma_r"),
-        ({"sigma_r": -250.0}, "sigma_r"),
-        ({"sigma_r": math.nan}, "sigma_r"),
-        ({"sigma_vr": 0.0}, "sigma_vr"),
-        ({"sigma_vr": math.inf}, "sigma_vr"),
-        ({"sigma_vr": None}, "sigma_vr"),
-        ({"period": 0.0}, "period"),
-        ({"period": math.nan}, "period"),
-        ({"sigma_r": 1e-200}, "sigma_r"),
-        ({"sigma_vr": 1e-200}, "C0"),
+        ({"sigma_r_m": 0.0}, "sigma_r_m"),
+        ({"sigma_r_m": -250.0}, "sigma_r_m"),
+        ({"sigma_r_m": math.nan}, "sigma_r_m"),
+        ({"sigma_vr_mps": 0.0}, "sigma_vr_mps"),
+        ({"sigma_vr_mps": math.inf}, "sigma_vr_mps"),
+        ({"sigma_vr_mps": None}, "sigma_vr_mps"),
+        ({"period_s": 0.0}, "period_s"),
+        ({"period_s": math.nan}, "period_s"),
+        ({"sigma_r_m": 1e-200}, "sigma_r_m"),
+        ({"sigma_vr_mps": 1e-200}, "C0"),
         ({"method": "exact"}, "method"),
         ({"with_doppler": "yes"}, "with_doppler"),
     ],
@@ -416,9 +449,9 @@ def test_monte_carlo_is_reproducible() -> None:
 def test_bad_fit_input(kwargs: dict, name: str) -> None:
     args = {
         "k": 4,
-        "sigma_r": 250.0,
-        "sigma_vr": 15.0,
-        "period": 10.0,
+        "sigma_r_m": 250.0,
+        "sigma_vr_mps": 15.0,
+        "period_s": 10.0,
         "with_doppler": True,
         "method": "closed",
     } | kwargs

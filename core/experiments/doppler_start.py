@@ -44,7 +44,7 @@ from radarviz.core.filters.cv import CVBatch, as_batch, cv_predict, empty_batch
 from radarviz.core.filters.polar import ekf_update, wrap_angle
 from radarviz.core.finite_memory.fit import FiniteMemoryFit, finite_memory_fit, preset
 from radarviz.core.metrics import MetricsAccumulator, TrackMetrics, nees_band
-from radarviz.core.params import check_int, check_real
+from radarviz.core.params import check, check_int, default
 from radarviz.core.scenarios.planar import ConstantVelocityTarget2D
 
 VARIANTS: tuple[str, ...] = ("range_only", "range_doppler")
@@ -69,24 +69,22 @@ class DopplerTrackingConfig:
     """
 
     radar: str = "RLS3"
-    sigma_beta_deg: float = 1.0
-    runs: int = 1000
-    seed: int = 1
-    steps: int = 60
+    sigma_beta_deg: float = default("sigma_beta_deg")
+    runs: int = default("runs")
+    seed: int = default("seed")
+    steps: int = default("steps")
     start_scans: int = 3
-    sigma_v0_mps: float = 1000.0
-    sigma_a_mps2: float = 0.0
+    sigma_v0_mps: float = default("sigma_v0_mps")
+    sigma_a_mps2: float = default("sigma_a_mps2")
     target: ConstantVelocityTarget2D | None = field(default=None)
 
     def __post_init__(self) -> None:
+        """Every field but ``radar``, ``start_scans`` and ``target`` is checked against
+        ``core.params.PARAMETERS``; ``start_scans`` must fit in the run."""
         preset(self.radar)
-        check_real("sigma_beta_deg", self.sigma_beta_deg, low=0.0, high=20.0)
-        check_int("runs", self.runs, low=2)
-        check_int("seed", self.seed, low=0)
-        check_int("steps", self.steps, low=2)
+        for name in ("sigma_beta_deg", "runs", "seed", "steps", "sigma_v0_mps", "sigma_a_mps2"):
+            check(name, getattr(self, name))
         check_int("start_scans", self.start_scans, low=2, high=self.steps)
-        check_real("sigma_v0_mps", self.sigma_v0_mps, low=0.0)
-        check_real("sigma_a_mps2", self.sigma_a_mps2, low=0.0, low_open=False)
 
     def scenario(self) -> ConstantVelocityTarget2D:
         if self.target is not None:
