@@ -45,7 +45,6 @@ from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.linalg import solve_triangular
 
 from radarviz.core.params import (
     ParameterError,
@@ -200,8 +199,11 @@ def _numeric(p: _Params, order: int | None) -> tuple[int, NDArray, NDArray]:
     The columns are scaled by S = diag(1, 1/T, 1/T²), i.e. φ = (r, Vr T, a T²), so that
     A = Q^½ H S has the T-free rows [1, −j, j²/2]/σr and [0, 1, −j]/(T σVr). With A = Qₐ Rₐ
     (reduced QR), R_φ = Rₐ⁻¹ Rₐ⁻ᵀ and W_φ = Rₐ⁻¹ Qₐᵀ Q^½; then R = S R_φ S, W = S W_φ.
-    No normal-equation matrix HᵀQH is ever formed.
+    No normal-equation matrix HᵀQH is ever formed. (``scipy.linalg`` is imported here: it
+    is most of the package's import time and only this numerical reference needs it.)
     """
+    from scipy.linalg import solve_triangular
+
     top = max_order(p.k, p.with_doppler)
     n = top if order is None else check_int("order", order, low=1, high=top)
     j = np.arange(p.k - 1, -1, -1, dtype=np.float64)
