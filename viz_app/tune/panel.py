@@ -64,7 +64,9 @@ from radarviz.viz_app.rerun.recording import (
     log_text,
     log_track,
     log_truth,
+    recording_file,
 )
+from radarviz.viz_app.rerun.viewer import free_port, rerun_executable, viewer_url
 
 LOOPBACK = "127.0.0.1"
 TUNE_SERIES = ("bias_range", "rmse_x", "nees_pos")
@@ -522,8 +524,6 @@ class TuneSession:
 
     def save(self, directory: Path = RECORDINGS_DIR) -> Path:
         """Write the last good parameters' scene to ``directory`` atomically."""
-        from radarviz.viz_app.rerun.recording import recording_file
-
         good = self.last_good
         if good is None:
             raise ParameterError("nothing to save yet: no run has finished")
@@ -726,8 +726,6 @@ def wait_port(host: str, port: int, timeout: float = 30.0) -> None:
 def start_rerun(host: str, grpc_port: int, web_port: int | None) -> subprocess.Popen:
     """``rerun --serve-web`` (or ``--serve-grpc`` when ``web_port`` is None) in its own
     process group, bound to ``host``."""
-    from radarviz.viz_app.rerun.viewer import rerun_executable
-
     cmd = [rerun_executable()]
     cmd += (
         ["--serve-grpc"]
@@ -760,8 +758,6 @@ def measure_tune_latency(changes: int = 10, runs: int = 200, steps: int = 60) ->
     Starts ``rerun --serve-grpc`` on 127.0.0.1, then submits ``changes`` σβ changes one
     after another through the same worker path as the panel (one warm-up run first).
     """
-    from radarviz.viz_app.rerun.viewer import free_port
-
     port = free_port(LOOPBACK)
     proc = start_rerun(LOOPBACK, port, None)
     times: list[float] = []
@@ -794,7 +790,6 @@ def cmd_tune(
     """Run the panel, the gRPC server and the web viewer until SIGTERM / Ctrl-C."""
     import viser
 
-    from radarviz.viz_app.rerun.viewer import free_port, viewer_url
     from radarviz.viz_app.runtime import tune_allocator
 
     check_int("--port", port, low=0, high=65535)
