@@ -1,23 +1,62 @@
-"""Parameter checks shared by ``core`` and the command line.
+"""The parameter table, and the checks shared by ``core`` and the command line.
+
+One quantity has one name from the command line to the kernel, and the name carries the unit:
+``sigma_beta_deg`` is σβ in degrees wherever it appears (a flag ``--sigma-beta-deg``, a field of
+``TrackingConfig``, a slider of the tuning panel). :data:`PARAMETERS` holds, for each such
+name, its unit, kind, allowed interval, default and a one-line meaning; the experiment configs
+take their defaults from it and validate through :func:`check`, the CLI builds its flags from it
+(``viz_app.cli.params.add_parameter``) and the panel its controls.
 
 Every check raises :class:`ParameterError` with one line that names the parameter, the allowed
-range and the offending value, e.g. ``sigma_beta_deg must be a finite number in (0, 20] (got -1)``.
-The CLI prints that line and exits with status 2; the panel shows it and keeps the last result.
+range and the offending value, e.g. ``sigma_beta_deg must be a finite number in (0, 20] (got -1)``,
+and records the name in ``ParameterError.parameter``. ``core`` never names a command-line flag:
+the CLI maps ``parameter`` to the flag it registered for it, prints
+``--sigma-beta-deg must be a finite number in (0, 20] (got -1)`` and exits with status 2; the
+panel shows the line and keeps the last result.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Iterable
+from dataclasses import dataclass
 from numbers import Integral, Real
+from typing import Literal
 
 
 class ParameterError(ValueError):
-    """A parameter is outside its allowed range. The message is one line, fit for a user."""
+    """A parameter is outside its allowed range. The message is one line, fit for a user.
+
+    Attributes:
+        parameter: the name the message starts with (a :data:`PARAMETERS` key when the value
+            was checked against the table), or None for an error about no single parameter.
+    """
+
+    def __init__(self, message: str, parameter: str | None = None) -> None:
+        super().__init__(message)
+        self.parameter = parameter
+
+    def renamed(self, label: str) -> str:
+        """The message with the leading parameter name replaced by ``label`` (e.g. a flag)."""
+        text = str(self)
+        if self.parameter and text.startswith(self.parameter):
+            return label + text[len(self.parameter) :]
+        return text
 
 
 def _fmt(value: object) -> str:
     return repr(value) if isinstance(value, str) else str(value)
+
+
+def interval_text(
+    low: float | None, high: float | None, *, low_open: bool = True, high_open: bool = False
+) -> str:
+    """The interval as the messages print it: ``in (0, 20]``, ``> 0``, ``>= 0``."""
+    if low is not None and high is None:
+        return f"> {low:g}" if low_open else f">= {low:g}"
+    lo_s = "-inf" if low is None else f"{low:g}"
+    hi_s = "inf" if high is None else f"{high:g}"
+    return f"in {'(' if low_open else '['}{lo_s}, {hi_s}{')' if high_open else ']'}"
 
 
 def check_real(
@@ -28,48 +67,226 @@ def check_real(
     high: float | None = None,
     low_open: bool = True,
     high_open: bool = False,
+    parameter: str | None = None,
 ) -> float:
     """Return ``value`` as float if it is a finite real in the interval, else raise.
 
     The default interval is ``(low, high]``: most of our parameters are strictly positive
-    (σ, T) with an inclusive upper limit.
+    (σ, T) with an inclusive upper limit. ``parameter`` (default ``name``) is what the error
+    records in ``ParameterError.parameter``.
     """
-    lo_b = "(" if low_open else "["
-    hi_b = ")" if high_open else "]"
-    lo_s = "-inf" if low is None else f"{low:g}"
-    hi_s = "inf" if high is None else f"{high:g}"
-    if low is not None and high is None:
-        rng = f"> {lo_s}" if low_open else f">= {lo_s}"
-    else:
-        rng = f"in {lo_b}{lo_s}, {hi_s}{hi_b}"
-    msg = f"{name} must be a finite number {rng} (got {_fmt(value)})"
+    rng = interval_text(low, high, low_open=low_open, high_open=high_open)
+    err = ParameterError(
+        f"{name} must be a finite number {rng} (got {_fmt(value)})", parameter or name
+    )
     if isinstance(value, bool) or not isinstance(value, Real):
-        raise ParameterError(msg)
+        raise err
     v = float(value)
     if not math.isfinite(v):
-        raise ParameterError(msg)
+        raise err
     if low is not None and (v <= low if low_open else v < low):
-        raise ParameterError(msg)
+        raise err
     if high is not None and (v >= high if high_open else v > high):
-        raise ParameterError(msg)
+        raise err
     return v
 
 
-def check_int(name: str, value: object, *, low: int, high: int | None = None) -> int:
+def check_int(
+    name: str,
+    value: object,
+    *,
+    low: int,
+    high: int | None = None,
+    parameter: str | None = None,
+) -> int:
     """Return ``value`` as int if it is an integer in ``[low, high]``, else raise."""
     rng = f">= {low}" if high is None else f"in [{low}, {high}]"
-    msg = f"{name} must be an integer {rng} (got {_fmt(value)})"
+    err = ParameterError(f"{name} must be an integer {rng} (got {_fmt(value)})", parameter or name)
     if isinstance(value, bool) or not isinstance(value, Integral):
-        raise ParameterError(msg)
+        raise err
     v = int(value)
     if v < low or (high is not None and v > high):
-        raise ParameterError(msg)
+        raise err
     return v
 
 
-def check_choice(name: str, value: object, choices: Iterable[str]) -> str:
+def check_choice(
+    name: str, value: object, choices: Iterable[str], *, parameter: str | None = None
+) -> str:
     """Return ``value`` if it is one of ``choices``, else raise naming them all."""
     options = tuple(choices)
     if not isinstance(value, str) or value not in options:
-        raise ParameterError(f"{name} must be one of {', '.join(options)} (got {_fmt(value)})")
+        raise ParameterError(
+            f"{name} must be one of {', '.join(options)} (got {_fmt(value)})", parameter or name
+        )
     return value
+
+
+_TABLE_DEFAULT: object = object()
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """One entry of the parameter table.
+
+    Attributes:
+        name: the one name of the quantity, with its unit suffix (``sigma_beta_deg``).
+        symbol: how the papers write it (``σβ``).
+        meaning: a few words (``azimuth noise std``).
+        unit: ``deg``, ``m``, ``s`` … ('' for a count or a ratio).
+        kind: ``real`` (a finite float) or ``int``.
+        low, high: the allowed interval's ends (None: unbounded on that side).
+        low_open, high_open: whether an end is excluded.
+        default: the value used where none is given (None: the quantity has no default).
+    """
+
+    name: str
+    symbol: str
+    meaning: str
+    unit: str
+    kind: Literal["real", "int"]
+    low: float | None
+    high: float | None
+    low_open: bool = True
+    high_open: bool = False
+    default: float | int | None = None
+
+    def interval(self, high: float | None = None) -> str:
+        """``in (0, 20]``, ``>= 2``, … (``high`` tightens the upper end for one use)."""
+        hi = self.high if high is None else high
+        if self.kind == "int":
+            lo = int(self.low if self.low is not None else 0)
+            return f">= {lo}" if hi is None else f"in [{lo}, {int(hi)}]"
+        return interval_text(self.low, hi, low_open=self.low_open, high_open=self.high_open)
+
+    def help(self, default: object = _TABLE_DEFAULT, *, high: float | None = None) -> str:
+        """One line for a flag's help or a control's hint: symbol, meaning, unit, range, default.
+
+        E.g. ``σβ, azimuth noise std (deg), in (0, 20], default 1``. ``default`` replaces the
+        table's default in the line (a list prints as its values; None leaves it out); ``high``
+        the upper end, for a use with its own (see :func:`check`).
+        """
+        unit = f" ({self.unit})" if self.unit else ""
+        d = self.default if default is _TABLE_DEFAULT else default
+        tail = "" if d is None else f", default {_fmt_default(d)}"
+        return f"{self.symbol}, {self.meaning}{unit}, {self.interval(high)}{tail}"
+
+    def check(self, value: object, *, high: float | None = None) -> float | int:
+        """Validate ``value`` against this entry (``high`` tightens the upper end)."""
+        hi = self.high if high is None else high
+        if self.kind == "int":
+            low = int(self.low if self.low is not None else 0)
+            return check_int(self.name, value, low=low, high=None if hi is None else int(hi))
+        return check_real(
+            self.name,
+            value,
+            low=self.low,
+            high=hi,
+            low_open=self.low_open,
+            high_open=self.high_open,
+        )
+
+
+def _fmt_default(value: object) -> str:
+    if isinstance(value, list | tuple):
+        return " ".join(_fmt_default(v) for v in value)
+    if isinstance(value, float):
+        return f"{value:g}"
+    return _fmt(value)
+
+
+def _real(
+    name: str,
+    symbol: str,
+    meaning: str,
+    unit: str,
+    low: float | None,
+    high: float | None,
+    default: float | None,
+    *,
+    low_open: bool = True,
+) -> Parameter:
+    return Parameter(name, symbol, meaning, unit, "real", low, high, low_open, False, default)
+
+
+def _int(
+    name: str, symbol: str, meaning: str, low: int, high: int | None, default: int
+) -> Parameter:
+    return Parameter(name, symbol, meaning, "", "int", low, high, False, False, default)
+
+
+#: Upper limit of an angle σ accepted anywhere: beyond it a Cartesian Gaussian is meaningless.
+MAX_SIGMA_ANGLE_DEG = 20.0
+
+#: The parameter table. Defaults are the Prosov experiment (one radar at the origin, target at
+#: 150 km moving radially outward at 200 m/s, σr = 250 m, σβ = 1°, T = 10 s, 60 scans, Q = 0).
+PARAMETERS: dict[str, Parameter] = {
+    p.name: p
+    for p in (
+        _real("sigma_r_m", "σr", "range noise std", "m", 0.0, 1e6, 250.0),
+        _real("sigma_beta_deg", "σβ", "azimuth noise std", "deg", 0.0, MAX_SIGMA_ANGLE_DEG, 1.0),
+        _real(
+            "sigma_elevation_deg",
+            "σε",
+            "elevation noise std",
+            "deg",
+            0.0,
+            MAX_SIGMA_ANGLE_DEG,
+            None,
+        ),
+        _real("sigma_vr_mps", "σVr", "radial-velocity noise std", "m/s", 0.0, 1e6, None),
+        _real("period_s", "T", "scan period", "s", 0.0, 3600.0, 10.0),
+        _int("steps", "N", "scans per run", 2, 100_000, 60),
+        _int("runs", "M", "Monte Carlo runs", 2, None, 1000),
+        _int("trials", "M", "Monte Carlo trials", 2, 100_000_000, 100_000),
+        _int("seed", "seed", "root of numpy.random.SeedSequence", 0, None, 1),
+        _real("c0", "C0", "σr² / (T² σVr²), range vs Doppler accuracy", "", 0.0, 1e8, 1.0),
+        _real(
+            "sigma_a_mps2",
+            "σa",
+            "process-noise acceleration std",
+            "m/s²",
+            0.0,
+            None,
+            0.0,
+            low_open=False,
+        ),
+        _real("sigma_v0_mps", "σv0", "initial velocity std of a track", "m/s", 0.0, None, 1000.0),
+        _real("target_range_m", "r0", "initial target range", "m", 0.0, 1e8, 150e3),
+        _real(
+            "target_speed_mps",
+            "v",
+            "target speed, radially outward",
+            "m/s",
+            0.0,
+            1e5,
+            200.0,
+            low_open=False,
+        ),
+    )
+}
+
+
+def parameter(name: str) -> Parameter:
+    """The table entry ``name`` (KeyError names the known ones)."""
+    try:
+        return PARAMETERS[name]
+    except KeyError:
+        raise KeyError(f"no parameter {name!r} (known: {', '.join(PARAMETERS)})") from None
+
+
+def default(name: str) -> float | int:
+    """The table default of ``name`` (for dataclass field defaults)."""
+    d = parameter(name).default
+    if d is None:
+        raise KeyError(f"parameter {name!r} has no default")
+    return d
+
+
+def check(name: str, value: object, *, high: float | None = None) -> float | int:
+    """Validate ``value`` against the table entry ``name``; raise ``ParameterError`` naming it.
+
+    ``high`` tightens the upper end where one use needs less than the table allows (the tuning
+    panel's run count); the error still names ``name``.
+    """
+    return parameter(name).check(value, high=high)

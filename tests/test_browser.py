@@ -18,9 +18,9 @@ import numpy as np
 import pytest
 from matplotlib.image import imread
 
-from radarviz.viz_app.cli.recording import free_port, viewer_url
 from radarviz.viz_app.rerun.recording import recording_file
 from radarviz.viz_app.rerun.scenes import record_preset
+from radarviz.viz_app.rerun.viewer import free_port, viewer_url
 
 CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
 CHROMIUM_ARGS = [

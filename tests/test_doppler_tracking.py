@@ -68,8 +68,15 @@ def test_finite_memory_start_covariance_matches_monte_carlo(doppler: bool) -> No
     from radarviz.core.scenarios.planar import ConstantVelocityTarget2D
 
     truth = ConstantVelocityTarget2D(60e3, 80e3, 150.0, 200.0, T, k).truth()
-    meas = polar_doppler_measurements(truth, sr, sb, svr, runs, np.random.default_rng(3))
-    fit = finite_memory_fit(k, sr, svr, T, with_doppler=doppler)
+    meas = polar_doppler_measurements(
+        truth,
+        sigma_r_m=sr,
+        sigma_azimuth_rad=sb,
+        sigma_vr_mps=svr,
+        runs=runs,
+        rng=np.random.default_rng(3),
+    )
+    fit = finite_memory_fit(k, sigma_r_m=sr, sigma_vr_mps=svr, period_s=T, with_doppler=doppler)
     st = finite_memory_start(
         fit,
         meas.r,

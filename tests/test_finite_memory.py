@@ -75,10 +75,18 @@ def test_closed_forms_equal_numerical_least_squares(c0: float, period: float) ->
         for dop in (True, False):
             if not dop and k < 3:
                 continue
-            Rc = ls_covariance_closed(k, sr, sv, period, dop)
-            Rn = ls_covariance_numeric(k, sr, sv, period, dop)
-            Wc = ls_weights_closed(k, sr, sv, period, dop)
-            Wn = ls_weights_numeric(k, sr, sv, period, dop)
+            Rc = ls_covariance_closed(
+                k, sigma_r_m=sr, sigma_vr_mps=sv, period_s=period, with_doppler=dop
+            )
+            Rn = ls_covariance_numeric(
+                k, sigma_r_m=sr, sigma_vr_mps=sv, period_s=period, with_doppler=dop
+            )
+            Wc = ls_weights_closed(
+                k, sigma_r_m=sr, sigma_vr_mps=sv, period_s=period, with_doppler=dop
+            )
+            Wn = ls_weights_numeric(
+                k, sigma_r_m=sr, sigma_vr_mps=sv, period_s=period, with_doppler=dop
+            )
             assert Rc.shape == (3, 3) and Wc.shape == (3, 2 * k if dop else k)
             assert _cov_rel_err(Rc, Rn) < 1e-10, (k, dop)
             assert _weights_rel_err(Wc, Wn) < 1e-10, (k, dop)
@@ -123,13 +131,34 @@ def test_both_routes_against_exact_rational_least_squares(c0: float) -> None:
             if not dop and k < 3:
                 continue
             Re, We = _exact_least_squares(k, sr, sv, T, dop)
-            closed = ls_covariance_closed(k, sr, sv, T, dop), ls_weights_closed(k, sr, sv, T, dop)
+            closed = (
+                ls_covariance_closed(
+                    k, sigma_r_m=sr, sigma_vr_mps=sv, period_s=T, with_doppler=dop
+                ),
+                ls_weights_closed(k, sigma_r_m=sr, sigma_vr_mps=sv, period_s=T, with_doppler=dop),
+            )
             assert _cov_rel_err(closed[0], Re) < 1e-13, (k, dop)
             assert _weights_rel_err(closed[1], We) < 1e-13, (k, dop)
             # The numerical route is as good as the problem's conditioning (~1/sqrt(C0)).
             tol = 1e-9 if c0 < 1e-6 else 1e-12
-            assert _cov_rel_err(ls_covariance_numeric(k, sr, sv, T, dop), Re) < tol
-            assert _weights_rel_err(ls_weights_numeric(k, sr, sv, T, dop), We) < tol
+            assert (
+                _cov_rel_err(
+                    ls_covariance_numeric(
+                        k, sigma_r_m=sr, sigma_vr_mps=sv, period_s=T, with_doppler=dop
+                    ),
+                    Re,
+                )
+                < tol
+            )
+            assert (
+                _weights_rel_err(
+                    ls_weights_numeric(
+                        k, sigma_r_m=sr, sigma_vr_mps=sv, period_s=T, with_doppler=dop
+                    ),
+                    We,
+                )
+                < tol
+            )
 
 
 @pytest.mark.parametrize("dop", [True, False])
@@ -138,7 +167,9 @@ def test_numerical_least_squares_is_least_squares(k: int, dop: bool) -> None:
     """W H = I (exactly unbiased for a polynomial of the fitted order), R = W Q⁻¹ Wᵀ, and R
     equals the normal-equation inverse (HᵀQH)⁻¹ computed independently."""
     sr, sv, T = 250.0, 15.0, 10.0
-    fit = finite_memory_fit(k, sr, sv, T, dop, method="numeric")
+    fit = finite_memory_fit(
+        k, sigma_r_m=sr, sigma_vr_mps=sv, period_s=T, with_doppler=dop, method="numeric"
+    )
     n = fit.order
     H = design_matrix(k, T, dop, order=n)
     W, R = fit.W[:n], fit.R[:n, :n]
@@ -170,7 +201,9 @@ def test_design_matrix_rows() -> None:
 )
 def test_reduced_order(k: int, dop: bool, order: int, method: str) -> None:
     sr, sv, T = 250.0, 15.0, 10.0
-    fit = finite_memory_fit(k, sr, sv, T, dop, method=method)
+    fit = finite_memory_fit(
+        k, sigma_r_m=sr, sigma_vr_mps=sv, period_s=T, with_doppler=dop, method=method
+    )
     assert isinstance(fit, FiniteMemoryFit)
     assert (fit.k, fit.with_doppler, fit.order, fit.method) == (k, dop, order, method)
     assert fit.R.shape == (3, 3) and fit.W.shape == (3, 2 * k if dop else k)
@@ -179,7 +212,12 @@ def test_reduced_order(k: int, dop: bool, order: int, method: str) -> None:
     assert np.all(np.isfinite(fit.R[np.ix_(fitted, fitted)]))
     assert np.all(np.isnan(fit.W[~fitted])) and np.all(np.isfinite(fit.W[fitted]))
     other = finite_memory_fit(
-        k, sr, sv, T, dop, method="numeric" if method == "closed" else "closed"
+        k,
+        sigma_r_m=sr,
+        sigma_vr_mps=sv,
+        period_s=T,
+        with_doppler=dop,
+        method="numeric" if method == "closed" else "closed",
     )
     # Rounding is relative to the matrix's scale: an exact zero of one form is ~1e-16·|R| in
     # the other.
@@ -193,21 +231,25 @@ def test_reduced_order(k: int, dop: bool, order: int, method: str) -> None:
 
 def test_reduced_order_closed_values() -> None:
     sr, sv, T = 250.0, 15.0, 10.0
-    one = finite_memory_fit(1, sr, sv, T, True)
+    one = finite_memory_fit(1, sigma_r_m=sr, sigma_vr_mps=sv, period_s=T, with_doppler=True)
     assert one.R[0, 0] == sr**2 and one.R[1, 1] == sv**2 and one.R[0, 1] == 0.0
     assert np.array_equal(one.W[:2], np.eye(2))
-    two = finite_memory_fit(2, sr, None, T, False)  # r̂ = r₂, V̂r = (r₂ − r₁)/T
+    two = finite_memory_fit(
+        2, sigma_r_m=sr, sigma_vr_mps=None, period_s=T, with_doppler=False
+    )  # r̂ = r₂, V̂r = (r₂ − r₁)/T
     assert np.array_equal(two.W[:2], [[0.0, 1.0], [-0.1, 0.1]])
     assert two.R[1, 1] == pytest.approx(2 * sr**2 / T**2, rel=1e-15)
 
 
 def test_closed_form_needs_enough_samples() -> None:
     with pytest.raises(ParameterError, match=r"^k must be an integer in \[2, "):
-        ls_covariance_closed(1, 250.0, 15.0, 10.0)
+        ls_covariance_closed(1, sigma_r_m=250.0, sigma_vr_mps=15.0, period_s=10.0)
     with pytest.raises(ParameterError, match=r"^k must be an integer in \[3, "):
-        ls_weights_closed(2, 250.0, None, 10.0, with_doppler=False)
+        ls_weights_closed(2, sigma_r_m=250.0, sigma_vr_mps=None, period_s=10.0, with_doppler=False)
     with pytest.raises(ParameterError, match=r"^order must be an integer in \[1, 2\]"):
-        ls_covariance_numeric(1, 250.0, 15.0, 10.0, True, order=3)
+        ls_covariance_numeric(
+            1, sigma_r_m=250.0, sigma_vr_mps=15.0, period_s=10.0, with_doppler=True, order=3
+        )
 
 
 # --------------------------------------------------------------------------------------------
@@ -218,7 +260,7 @@ def test_closed_form_needs_enough_samples() -> None:
 def test_estimate_recovers_a_quadratic_exactly_and_broadcasts() -> None:
     truth = quadratic_truth(100e3, -300.0, 5.0, 10.0, 8)
     rng = np.random.default_rng(0)
-    fit = finite_memory_fit(8, 250.0, 15.0, 10.0, True)
+    fit = finite_memory_fit(8, sigma_r_m=250.0, sigma_vr_mps=15.0, period_s=10.0, with_doppler=True)
     est = finite_memory_estimate(truth[:, 0], truth[:, 1], fit)
     assert np.allclose(est, truth[-1], rtol=1e-12, atol=1e-9)
     r = truth[:, 0] + rng.normal(0, 250.0, (4, 5, 8))
@@ -226,7 +268,9 @@ def test_estimate_recovers_a_quadratic_exactly_and_broadcasts() -> None:
     batch = finite_memory_estimate(r, v, fit)
     assert batch.shape == (4, 5, 3)
     assert np.allclose(batch[2, 3], fit.W @ np.concatenate([r[2, 3], v[2, 3]]), rtol=1e-13)
-    fit2 = finite_memory_fit(2, 250.0, None, 10.0, False)
+    fit2 = finite_memory_fit(
+        2, sigma_r_m=250.0, sigma_vr_mps=None, period_s=10.0, with_doppler=False
+    )
     ro = finite_memory_estimate(r[..., -2:], None, fit2)
     assert ro.shape == (4, 5, 3) and np.all(np.isnan(ro[..., 2]))
     assert np.all(np.isfinite(ro[..., :2]))
@@ -243,13 +287,13 @@ def test_sliding_window_estimates_match_window_by_window(dop: bool) -> None:
     rng = np.random.default_rng(3)
     r = truth[:, 0] + rng.normal(0, 250.0, (6, n))
     v = truth[:, 1] + rng.normal(0, 15.0, (6, n)) if dop else None
-    out = sliding_window_estimates(r, v, k, 250.0, 15.0, T)
+    out = sliding_window_estimates(r, v, k, sigma_r_m=250.0, sigma_vr_mps=15.0, period_s=T)
     assert out.estimates.shape == (6, n, 3) and out.R.shape == (n, 3, 3)
     assert list(out.window) == [1, 2, 3, 4] + [5] * 8
     assert list(out.order[:3]) == ([2, 3, 3] if dop else [1, 2, 3])
     for scan in range(n):
         w = min(scan + 1, k)
-        fit = finite_memory_fit(w, 250.0, 15.0, T, dop)
+        fit = finite_memory_fit(w, sigma_r_m=250.0, sigma_vr_mps=15.0, period_s=T, with_doppler=dop)
         lo = scan + 1 - w
         ref = finite_memory_estimate(
             r[:, lo : scan + 1], None if v is None else v[:, lo : scan + 1], fit
@@ -259,8 +303,10 @@ def test_sliding_window_estimates_match_window_by_window(dop: bool) -> None:
 
 
 def test_weights_accessor() -> None:
-    W = finite_memory_weights(4, 250.0, 15.0, 10.0)
-    assert np.array_equal(W, ls_weights_closed(4, 250.0, 15.0, 10.0))
+    W = finite_memory_weights(4, sigma_r_m=250.0, sigma_vr_mps=15.0, period_s=10.0)
+    assert np.array_equal(
+        W, ls_weights_closed(4, sigma_r_m=250.0, sigma_vr_mps=15.0, period_s=10.0)
+    )
 
 
 # --------------------------------------------------------------------------------------------
@@ -271,7 +317,16 @@ def test_weights_accessor() -> None:
 def _analytic_sigma(name: str, dop: bool, ks: range = range(1, 21)) -> np.ndarray:
     p = PRESETS[name]
     return np.array(
-        [finite_memory_fit(k, p.sigma_r_m, p.sigma_vr_mps, p.period_s, dop).sigma for k in ks]
+        [
+            finite_memory_fit(
+                k,
+                sigma_r_m=p.sigma_r_m,
+                sigma_vr_mps=p.sigma_vr_mps,
+                period_s=p.period_s,
+                with_doppler=dop,
+            ).sigma
+            for k in ks
+        ]
     )
 
 
@@ -325,9 +380,17 @@ def test_range_gain_peak(name: str, k_paper: int, percent_paper: int) -> None:
 
 def test_doppler_gives_velocity_at_k1_with_error_sigma_vr() -> None:
     for p in PRESETS.values():
-        fit = finite_memory_fit(1, p.sigma_r_m, p.sigma_vr_mps, p.period_s, True)
+        fit = finite_memory_fit(
+            1,
+            sigma_r_m=p.sigma_r_m,
+            sigma_vr_mps=p.sigma_vr_mps,
+            period_s=p.period_s,
+            with_doppler=True,
+        )
         assert fit.order == 2 and fit.sigma[1] == p.sigma_vr_mps and fit.sigma[0] == p.sigma_r_m
-        ro = finite_memory_fit(1, p.sigma_r_m, None, p.period_s, False)
+        ro = finite_memory_fit(
+            1, sigma_r_m=p.sigma_r_m, sigma_vr_mps=None, period_s=p.period_s, with_doppler=False
+        )
         assert ro.order == 1 and np.isnan(ro.sigma[1])
 
 
@@ -425,8 +488,20 @@ def test_monte_carlo_range_gain_peak_matches_analytic(
     its error is uncorrelated with the difference e_ro − e_rd and Cov(e_ro, e_rd) = σ_rd².)"""
     rad = gorshkov.radars[list(PRESETS).index(name)]
     p = rad.preset
-    fit_ro = finite_memory_fit(k, p.sigma_r_m, p.sigma_vr_mps, p.period_s, False)
-    fit_rd = finite_memory_fit(k, p.sigma_r_m, p.sigma_vr_mps, p.period_s, True)
+    fit_ro = finite_memory_fit(
+        k,
+        sigma_r_m=p.sigma_r_m,
+        sigma_vr_mps=p.sigma_vr_mps,
+        period_s=p.period_s,
+        with_doppler=False,
+    )
+    fit_rd = finite_memory_fit(
+        k,
+        sigma_r_m=p.sigma_r_m,
+        sigma_vr_mps=p.sigma_vr_mps,
+        period_s=p.period_s,
+        with_doppler=True,
+    )
     cov = p.sigma_r_m**2 * float(fit_ro.W[0, :k] @ fit_rd.W[0, :k])
     c = cov / (fit_ro.sigma[0] * fit_rd.sigma[0])
     ratio = fit_rd.sigma[0] / fit_ro.sigma[0]
@@ -459,16 +534,16 @@ def test_monte_carlo_is_reproducible() -> None:
         ({"k": 0}, "k"),
         ({"k": -3}, "k"),
         ({"k": 2.5}, "k"),
-        ({"sigma_r": 0.0}, "sigma_r"),
-        ({"sigma_r": -250.0}, "sigma_r"),
-        ({"sigma_r": math.nan}, "sigma_r"),
-        ({"sigma_vr": 0.0}, "sigma_vr"),
-        ({"sigma_vr": math.inf}, "sigma_vr"),
-        ({"sigma_vr": None}, "sigma_vr"),
-        ({"period": 0.0}, "period"),
-        ({"period": math.nan}, "period"),
-        ({"sigma_r": 1e-200}, "sigma_r"),
-        ({"sigma_vr": 1e-200}, "C0"),
+        ({"sigma_r_m": 0.0}, "sigma_r_m"),
+        ({"sigma_r_m": -250.0}, "sigma_r_m"),
+        ({"sigma_r_m": math.nan}, "sigma_r_m"),
+        ({"sigma_vr_mps": 0.0}, "sigma_vr_mps"),
+        ({"sigma_vr_mps": math.inf}, "sigma_vr_mps"),
+        ({"sigma_vr_mps": None}, "sigma_vr_mps"),
+        ({"period_s": 0.0}, "period_s"),
+        ({"period_s": math.nan}, "period_s"),
+        ({"sigma_r_m": 1e-200}, "sigma_r_m"),
+        ({"sigma_vr_mps": 1e-200}, "C0"),
         ({"method": "exact"}, "method"),
         ({"with_doppler": "yes"}, "with_doppler"),
     ],
@@ -476,9 +551,9 @@ def test_monte_carlo_is_reproducible() -> None:
 def test_bad_fit_input(kwargs: dict, name: str) -> None:
     args = {
         "k": 4,
-        "sigma_r": 250.0,
-        "sigma_vr": 15.0,
-        "period": 10.0,
+        "sigma_r_m": 250.0,
+        "sigma_vr_mps": 15.0,
+        "period_s": 10.0,
         "with_doppler": True,
         "method": "closed",
     } | kwargs
@@ -508,5 +583,9 @@ def test_bad_preset_and_experiment_input() -> None:
             run_gorshkov(**({"trials": 10} | kwargs))
     with pytest.raises(ParameterError, match=r"^radial_velocities must be None"):
         finite_memory_estimate(
-            np.zeros(3), np.zeros(3), finite_memory_fit(3, 1.0, None, 1.0, False)
+            np.zeros(3),
+            np.zeros(3),
+            finite_memory_fit(
+                3, sigma_r_m=1.0, sigma_vr_mps=None, period_s=1.0, with_doppler=False
+            ),
         )

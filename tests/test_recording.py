@@ -117,9 +117,8 @@ def test_demo_writes_a_recording_headless(tmp_path: Path, capsys) -> None:
 def test_velocity_preset_logs_the_fused_velocity_and_flags_bad_geometry(
     tmp_path: Path, rrd_contents
 ) -> None:
-    from radarviz.core.scenarios.multi_radar import generate_measurements
+    from radarviz.core.scenarios.multi_radar import fusion_scenario, generate_measurements
     from radarviz.core.velocity.estimate import M_WARN
-    from radarviz.viz_app.rerun.scenes import fusion_scenario
 
     out = tmp_path / "v.rrd"
     assert main(["record", "--preset", "velocity", "--out", str(out), "--seed", "2"]) == 0

@@ -19,10 +19,21 @@ from radarviz.core.scenarios.multi_radar import (
 from radarviz.core.velocity.estimate import estimate_velocity
 
 DEG = math.pi / 180.0
+
+
+def _sigmas(r_m: float, az_deg: float, el_deg: float, vr_mps: float) -> dict[str, float]:
+    return {
+        "sigma_r_m": r_m,
+        "sigma_azimuth_rad": az_deg * DEG,
+        "sigma_elevation_rad": el_deg * DEG,
+        "sigma_vr_mps": vr_mps,
+    }
+
+
 RADARS = (
-    RadarSite("A", (0.0, 0.0, 0.0), 50.0, 0.1 * DEG, 0.2 * DEG, 1.0, period=5.0),
-    RadarSite("B", (80e3, 0.0, 0.0), 100.0, 0.3 * DEG, 0.5 * DEG, 3.0, period=10.0),
-    RadarSite("C", (40e3, 70e3, 0.0), 150.0, 0.5 * DEG, 1.0 * DEG, 5.0, period=5.0, t0=2.5),
+    RadarSite("A", (0.0, 0.0, 0.0), **_sigmas(50.0, 0.1, 0.2, 1.0), period_s=5.0),
+    RadarSite("B", (80e3, 0.0, 0.0), **_sigmas(100.0, 0.3, 0.5, 3.0), period_s=10.0),
+    RadarSite("C", (40e3, 70e3, 0.0), **_sigmas(150.0, 0.5, 1.0, 5.0), period_s=5.0, t0_s=2.5),
 )
 TRAJ = Trajectory3D(
     (40e3, 30e3, 10e3),
@@ -52,9 +63,9 @@ def test_noise_free_measurements_invert_to_the_truth() -> None:
         [a.radial_velocity[rows[0]], b.radial_velocity[rows[1]], vrc],
         [a.azimuth[rows[0]], b.azimuth[rows[1]], azc],
         [a.elevation[rows[0]], b.elevation[rows[1]], elc],
-        1.0,
-        0.01,
-        0.01,
+        sigma_vr_mps=1.0,
+        sigma_azimuth_rad=0.01,
+        sigma_elevation_rad=0.01,
     )
     np.testing.assert_allclose(est.velocity, c_vel[0], atol=1e-8)
 
@@ -80,12 +91,14 @@ def test_measurements_are_seeded_and_noisy() -> None:
     assert np.array_equal(m1["B"].range, m2["B"].range)
     assert not np.array_equal(m1["B"].range, m3["B"].range)
     err = m1["A"].range - np.linalg.norm(m1["A"].true_position, axis=-1)
-    assert 0 < np.std(err) < 5 * RADARS[0].sigma_r
+    assert 0 < np.std(err) < 5 * RADARS[0].sigma_r_m
 
 
 def test_bad_scenarios_raise_one_line() -> None:
-    with pytest.raises(ParameterError, match="period of radar 'X'"):
-        RadarSite("X", (0.0, 0.0, 0.0), 1.0, 0.01, 0.01, 1.0, period=0.0)
+    with pytest.raises(ParameterError, match=r"period_s must be a finite number in \(0, 3600\]"):
+        RadarSite("X", (0.0, 0.0, 0.0), **_sigmas(1.0, 0.5, 0.5, 1.0), period_s=0.0)
+    with pytest.raises(TypeError):  # the accuracies are keyword-only: no silent swap
+        RadarSite("X", (0.0, 0.0, 0.0), 1.0, 0.01, 0.01, 1.0, 10.0)  # type: ignore[misc]
     with pytest.raises(ParameterError, match="unique"):
         Scenario3D((RADARS[0], RADARS[0]), TRAJ)
     with pytest.raises(ParameterError, match="times must be"):

@@ -469,7 +469,7 @@ def test_a_chunk_that_keeps_killing_workers_is_one_line_and_keeps_the_rest(
     exits 1, writes no table, and the chunks that did finish are kept for a re-run."""
     import dask
 
-    import radarviz.viz_app.sweep.run as sweep_mod
+    import radarviz.viz_app.cli.sweep as sweep_mod
 
     real_run_sweep = sweep_mod.run_sweep
 

@@ -490,7 +490,9 @@ def test_finite_memory_start_3d_vs_lstsq(k: int, doppler: bool) -> None:
     ranges = 80e3 - 150.0 * tt + 0.8 * tt**2 + sr * rng.standard_normal(k)
     vrs = -150.0 + 1.6 * tt + svr * rng.standard_normal(k) if doppler else None
     b, e = math.radians(33.0), math.radians(12.0)  # newest measured line of sight
-    fit = finite_memory_fit(k, sr, svr if doppler else None, T, doppler)
+    fit = finite_memory_fit(
+        k, sigma_r_m=sr, sigma_vr_mps=svr if doppler else None, period_s=T, with_doppler=doppler
+    )
     assert fit.order == 3  # k = 2 with Doppler: 4 equations, still the full (r, Vr, a)
     start = finite_memory_start(
         fit,

@@ -425,7 +425,7 @@ def test_fusion_file_round_trip_equals_in_memory(tmp_path: Path, init: str) -> N
         == 0
     )
     rows = read_tracks(out)
-    plots, _ = simulated_plots("fusion", seed=4, scans=30)
+    plots, _ = simulated_plots("fusion", seed=4, steps=30)
     tracker = StreamTracker(METHODS_3D, True, StreamOptions(sigma_a_mps2=1.5, init=init))
     expected = [(p.time_s, r) for p in plots for r in tracker.add(p)]
     assert len(plots) == 90

@@ -21,7 +21,7 @@ import pytest
 
 from radarviz.core.experiments.prosov import run_tracking
 from radarviz.core.params import ParameterError
-from radarviz.viz_app.cli.recording import free_port
+from radarviz.viz_app.rerun.viewer import free_port
 from radarviz.viz_app.tune.panel import (
     Coalescer,
     TuneParams,
@@ -148,7 +148,8 @@ def test_bad_value_shows_error_and_keeps_last_good() -> None:
     finally:
         w.stop()
     assert s.last_good is good
-    assert s.last_error is not None and "σr" in s.last_error and "\n" not in s.last_error
+    assert s.last_error is not None and "\n" not in s.last_error
+    assert s.last_error.startswith("sigma_r_m must be a finite number in (0, 1e+06] (got -5.0)")
     assert "ucm" in s.status_markdown()
 
 

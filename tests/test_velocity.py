@@ -43,6 +43,10 @@ VEL = np.array([216.5, 125.0, 0.0])
 S_VR = np.array([1.0, 3.0, 5.0])
 S_EL = np.array([0.2, 0.5, 1.0]) * DEG
 S_AZ = np.array([0.1, 0.3, 0.5]) * DEG
+ANGLES = {"sigma_azimuth_rad": S_AZ, "sigma_elevation_rad": S_EL}
+SIGMAS = {"sigma_vr_mps": S_VR, **ANGLES}
+#: One σ for every radar: σVr 1 m/s, both angles 0.01 rad.
+SIG1 = {"sigma_vr_mps": 1.0, "sigma_azimuth_rad": 0.01, "sigma_elevation_rad": 0.01}
 
 
 def _problem4(scale: float = 1.0, s4: tuple[float, float, float] = (2.0, 0.4, 0.2)):
@@ -50,9 +54,9 @@ def _problem4(scale: float = 1.0, s4: tuple[float, float, float] = (2.0, 0.4, 0.
         SITES4,
         TARGET,
         VEL,
-        [*S_VR, s4[0]],
-        np.r_[S_EL, s4[1] * DEG] * scale,
-        np.r_[S_AZ, s4[2] * DEG] * scale,
+        sigma_vr_mps=[*S_VR, s4[0]],
+        sigma_azimuth_rad=np.r_[S_AZ, s4[2] * DEG] * scale,
+        sigma_elevation_rad=np.r_[S_EL, s4[1] * DEG] * scale,
     )
 
 
@@ -65,9 +69,13 @@ def _antithetic_bias(problem, pairs: int, seed: int) -> tuple[np.ndarray, np.nda
     rng = np.random.default_rng(seed)
     n = problem.sites.shape[0]
     z = rng.standard_normal((3, pairs, n))
-    d = (z[0] * problem.sigma_vr, z[1] * problem.sigma_elevation, z[2] * problem.sigma_azimuth)
-    e1 = perturbed_velocity(problem, *d) - problem.velocity
-    e2 = perturbed_velocity(problem, *(-x for x in d)) - problem.velocity
+    d = {
+        "d_vr_mps": z[0] * problem.sigma_vr_mps,
+        "d_elevation_rad": z[1] * problem.sigma_elevation_rad,
+        "d_azimuth_rad": z[2] * problem.sigma_azimuth_rad,
+    }
+    e1 = perturbed_velocity(problem, **d) - problem.velocity
+    e2 = perturbed_velocity(problem, **{k: -x for k, x in d.items()}) - problem.velocity
     a = 0.5 * (e1 + e2)
     return a.mean(axis=0), a.std(axis=0, ddof=1) / np.sqrt(pairs)
 
@@ -126,7 +134,9 @@ def test_second_order_bias_matches_monte_carlo(weighted: bool) -> None:
     """
     scale = 2.0
     pb = (
-        baseline_problem()._replace(sigma_elevation=S_EL * scale, sigma_azimuth=S_AZ * scale)
+        baseline_problem()._replace(
+            sigma_elevation_rad=S_EL * scale, sigma_azimuth_rad=S_AZ * scale
+        )
         if not weighted
         else _problem4(scale)
     )
@@ -184,7 +194,7 @@ def test_wls_fourth_radar_improves_and_vanishes_when_useless() -> None:
 
 def test_direct_solve_needs_exactly_three() -> None:
     with pytest.raises(ParameterError, match="exactly 3 radars"):
-        velocity_problem(SITES4, TARGET, VEL, 1.0, 0.01, 0.01, weighted=False)
+        velocity_problem(SITES4, TARGET, VEL, **SIG1, weighted=False)
 
 
 # --------------------------------------------------------------------------------------------
@@ -200,41 +210,43 @@ def _one_line(exc: pytest.ExceptionInfo) -> str:
 
 def test_fewer_than_three_radars_raise() -> None:
     with pytest.raises(GeometryError, match="at least 3 radars") as exc:
-        velocity_problem(SITES3[:2], TARGET, VEL, 1.0, 0.01, 0.01)
+        velocity_problem(SITES3[:2], TARGET, VEL, **SIG1)
     _one_line(exc)
     with pytest.raises(GeometryError, match="at least 3 radars"):
-        estimate_velocity(SITES3[:2], [1, 2], [0, 1], [0.1, 0.1], 1.0, 0.01, 0.01)
+        estimate_velocity(SITES3[:2], [1, 2], [0, 1], [0.1, 0.1], **SIG1)
 
 
 def test_coplanar_lines_of_sight_flag_and_raise() -> None:
     """Ground radars and a target on the ground: all lines of sight horizontal, Vz unseen."""
-    geo = diagnose_geometry(SITES3, [40e3, 30e3, 0.0], S_EL, S_AZ)
+    geo = diagnose_geometry(SITES3, [40e3, 30e3, 0.0], **ANGLES)
     assert not geo.observable and "coplanar" in geo.reason
     assert geo.m == np.inf and geo.warning is None
     with pytest.raises(GeometryError, match="coplanar") as exc:
-        velocity_statistics(velocity_problem(SITES3, [40e3, 30e3, 0.0], VEL, S_VR, S_EL, S_AZ))
+        velocity_statistics(velocity_problem(SITES3, [40e3, 30e3, 0.0], VEL, **SIGMAS))
     _one_line(exc)
 
 
 def test_collinear_sites_with_target_on_their_line_raise() -> None:
     sites = np.array([[0.0, 0, 0], [10e3, 0, 0], [20e3, 0, 0]])
-    geo = diagnose_geometry(sites, [50e3, 0.0, 0.0], S_EL, S_AZ)
+    geo = diagnose_geometry(sites, [50e3, 0.0, 0.0], **ANGLES)
     assert not geo.observable
     los = line_of_sight(sites, [50e3, 0.0, 0.0])
     with pytest.raises(GeometryError, match="not observable"):
-        estimate_velocity(sites, [100.0, 100.0, 100.0], los.azimuth, los.elevation, 1.0, 0.01, 0.01)
+        estimate_velocity(sites, [100.0, 100.0, 100.0], los.azimuth, los.elevation, **SIG1)
 
 
 def test_duplicate_sites_and_target_at_site_raise() -> None:
     dup = np.array([[0.0, 0, 0], [80e3, 0, 0], [80e3, 0, 0]])
     with pytest.raises(GeometryError, match="radars 1 and 2 share a site") as exc:
-        velocity_statistics(velocity_problem(dup, TARGET, VEL, S_VR, S_EL, S_AZ))
+        velocity_statistics(velocity_problem(dup, TARGET, VEL, **SIGMAS))
     _one_line(exc)
     # Four radars, two co-located: still three distinct lines of sight, so observable.
     dup4 = np.vstack([SITES3, SITES3[:1]])
-    assert diagnose_geometry(dup4, TARGET, 0.01, 0.01).observable
+    assert diagnose_geometry(
+        dup4, TARGET, sigma_azimuth_rad=0.01, sigma_elevation_rad=0.01
+    ).observable
     with pytest.raises(GeometryError, match="target is at the site of radar 1"):
-        velocity_statistics(velocity_problem(SITES3, SITES3[1], VEL, S_VR, S_EL, S_AZ))
+        velocity_statistics(velocity_problem(SITES3, SITES3[1], VEL, **SIGMAS))
 
 
 def test_far_target_warns_instead_of_a_confident_ellipsoid() -> None:
@@ -247,12 +259,12 @@ def test_far_target_warns_instead_of_a_confident_ellipsoid() -> None:
 
 
 def test_bad_parameters_raise_parameter_error() -> None:
-    with pytest.raises(ParameterError, match="sigma_vr must be > 0"):
-        velocity_problem(SITES3, TARGET, VEL, [1.0, 0.0, 1.0], S_EL, S_AZ)
+    with pytest.raises(ParameterError, match="sigma_vr_mps must be > 0"):
+        velocity_problem(SITES3, TARGET, VEL, **{**SIGMAS, "sigma_vr_mps": [1.0, 0.0, 1.0]})
     with pytest.raises(ParameterError, match="target must be finite"):
-        velocity_problem(SITES3, [np.nan, 0, 0], VEL, S_VR, S_EL, S_AZ)
+        velocity_problem(SITES3, [np.nan, 0, 0], VEL, **SIGMAS)
     with pytest.raises(ParameterError, match=r"sites must have shape \(N, 3\)"):
-        velocity_problem(np.zeros((3, 2)), TARGET, VEL, S_VR, S_EL, S_AZ)
+        velocity_problem(np.zeros((3, 2)), TARGET, VEL, **SIGMAS)
 
 
 # --------------------------------------------------------------------------------------------
@@ -265,10 +277,11 @@ def test_estimate_velocity_noise_free_is_exact(sites: np.ndarray) -> None:
     los = line_of_sight(sites, TARGET)
     vr = direction_cosines(los.azimuth, los.elevation) @ VEL
     n = sites.shape[0]
-    est = estimate_velocity(sites, vr, los.azimuth, los.elevation, np.ones(n), 0.005, 0.003)
+    sig = {"sigma_vr_mps": np.ones(n), "sigma_azimuth_rad": 0.003, "sigma_elevation_rad": 0.005}
+    est = estimate_velocity(sites, vr, los.azimuth, los.elevation, **sig)
     np.testing.assert_allclose(est.velocity, VEL, atol=1e-9)
     assert est.warning is None and est.m < M_WARN
-    pb = velocity_problem(sites, TARGET, VEL, np.ones(n), 0.005, 0.003)
+    pb = velocity_problem(sites, TARGET, VEL, **sig)
     np.testing.assert_allclose(est.covariance, velocity_statistics(pb).covariance, rtol=1e-9)
 
 
@@ -283,11 +296,12 @@ def test_fused_position_covariance_matches_monte_carlo() -> None:
         los.range + z[0] * sr,
         los.azimuth + z[1] * sb,
         los.elevation + z[2] * se,
-        sr,
-        sb,
-        se,
+        sigma_r_m=sr,
+        sigma_azimuth_rad=sb,
+        sigma_elevation_rad=se,
     )
-    truth = fuse_positions(SITES3, los.range, los.azimuth, los.elevation, sr, sb, se)
+    sig = {"sigma_r_m": sr, "sigma_azimuth_rad": sb, "sigma_elevation_rad": se}
+    truth = fuse_positions(SITES3, los.range, los.azimuth, los.elevation, **sig)
     # Noise-free points are the target up to the debiasing scale e^(s/2) (≈ r σ²/2, metres).
     np.testing.assert_allclose(truth.points, np.broadcast_to(TARGET, (3, 3)), atol=10.0)
     err = fused.position - TARGET
@@ -303,9 +317,7 @@ def test_fused_position_covariance_matches_monte_carlo() -> None:
         los.range + z[0] * sr,
         los.azimuth + z[1] * sb,
         los.elevation + z[2] * se,
-        sr,
-        sb,
-        se,
+        **sig,
         refine=False,
     )
     assert np.max(np.abs((raw.position - TARGET).mean(axis=0)) / stats.mean_se) > 10.0

@@ -32,7 +32,7 @@ from radarviz.core.finite_memory.fit import FiniteMemoryFit, finite_memory_fit, 
 from radarviz.core.finite_memory.start import finite_memory_start
 from radarviz.core.geometry import radial_velocity
 from radarviz.core.metrics import MetricsAccumulator, TrackMetrics, nees_band
-from radarviz.core.params import check_int, check_real
+from radarviz.core.params import check, check_int, default
 from radarviz.core.scenarios.planar import ConstantVelocityTarget2D
 
 VARIANTS: tuple[str, ...] = ("range_only", "range_doppler")
@@ -57,24 +57,22 @@ class DopplerTrackingConfig:
     """
 
     radar: str = "RLS3"
-    sigma_beta_deg: float = 1.0
-    runs: int = 1000
-    seed: int = 1
-    steps: int = 60
+    sigma_beta_deg: float = default("sigma_beta_deg")
+    runs: int = default("runs")
+    seed: int = default("seed")
+    steps: int = default("steps")
     start_scans: int = 3
-    sigma_v0_mps: float = 1000.0
-    sigma_a_mps2: float = 0.0
+    sigma_v0_mps: float = default("sigma_v0_mps")
+    sigma_a_mps2: float = default("sigma_a_mps2")
     target: ConstantVelocityTarget2D | None = field(default=None)
 
     def __post_init__(self) -> None:
+        """Every field but ``radar``, ``start_scans`` and ``target`` is checked against
+        ``core.params.PARAMETERS``; ``start_scans`` must fit in the run."""
         preset(self.radar)
-        check_real("sigma_beta_deg", self.sigma_beta_deg, low=0.0, high=20.0)
-        check_int("runs", self.runs, low=2)
-        check_int("seed", self.seed, low=0)
-        check_int("steps", self.steps, low=2)
+        for name in ("sigma_beta_deg", "runs", "seed", "steps", "sigma_v0_mps", "sigma_a_mps2"):
+            check(name, getattr(self, name))
         check_int("start_scans", self.start_scans, low=2, high=self.steps)
-        check_real("sigma_v0_mps", self.sigma_v0_mps, low=0.0)
-        check_real("sigma_a_mps2", self.sigma_a_mps2, low=0.0, low_open=False)
 
     def scenario(self) -> ConstantVelocityTarget2D:
         if self.target is not None:
@@ -92,9 +90,10 @@ class PolarDopplerMeasurements(NamedTuple):
 
 def polar_doppler_measurements(
     truth: NDArray[np.float64],
-    sigma_r: float,
-    sigma_beta: float,
-    sigma_vr: float,
+    *,
+    sigma_r_m: float,
+    sigma_azimuth_rad: float,
+    sigma_vr_mps: float,
     runs: int,
     rng: np.random.Generator,
 ) -> PolarDopplerMeasurements:
@@ -104,9 +103,9 @@ def polar_doppler_measurements(
     beta = np.arctan2(truth[:, 2], truth[:, 0])
     vr = radial_velocity(truth[:, 0::2], truth[:, 1::2])
     return PolarDopplerMeasurements(
-        r + sigma_r * rng.standard_normal((runs, steps)),
-        beta + sigma_beta * rng.standard_normal((runs, steps)),
-        vr + sigma_vr * rng.standard_normal((runs, steps)),
+        r + sigma_r_m * rng.standard_normal((runs, steps)),
+        beta + sigma_azimuth_rad * rng.standard_normal((runs, steps)),
+        vr + sigma_vr_mps * rng.standard_normal((runs, steps)),
     )
 
 
@@ -152,11 +151,13 @@ def run_doppler_tracking(config: DopplerTrackingConfig) -> DopplerTrackingResult
     truth = target.truth()
     steps, k = truth.shape[0], config.start_scans
     rng = np.random.default_rng(np.random.SeedSequence(config.seed))
-    meas = polar_doppler_measurements(truth, sr, sb, svr, config.runs, rng)
+    meas = polar_doppler_measurements(
+        truth, sigma_r_m=sr, sigma_azimuth_rad=sb, sigma_vr_mps=svr, runs=config.runs, rng=rng
+    )
     metrics, rmse_vr, sig_vr, fits = {}, {}, {}, {}
     for variant in VARIANTS:
         doppler = variant == "range_doppler"
-        fit = finite_memory_fit(k, sr, svr, T, with_doppler=doppler)
+        fit = finite_memory_fit(k, sigma_r_m=sr, sigma_vr_mps=svr, period_s=T, with_doppler=doppler)
         fits[variant] = fit
         state = finite_memory_start(
             fit,

@@ -22,7 +22,14 @@ from radarviz.core.filters.methods import ALL_METHODS, PolarNoise, PolarPlot, me
 from radarviz.core.filters.run import run_scans
 from radarviz.core.filters.state import CVBatch
 from radarviz.core.metrics import MetricsAccumulator, TrackMetrics, delta_percent, nees_band
-from radarviz.core.params import ParameterError, check_choice, check_int, check_real
+from radarviz.core.params import (
+    MAX_SIGMA_ANGLE_DEG,
+    ParameterError,
+    check,
+    check_choice,
+    check_int,
+    default,
+)
 from radarviz.core.scenarios.planar import (
     ConstantVelocityTarget2D,
     polar_measurements,
@@ -32,8 +39,8 @@ from radarviz.core.scenarios.planar import (
 #: Runs per block: large enough that vector operations dominate Python overhead, small enough
 #: that a block's working set stays in cache.
 BLOCK_RUNS = 16384
-#: Upper limit of σβ accepted anywhere: beyond it a Cartesian Gaussian is meaningless.
-MAX_SIGMA_BETA_DEG = 20.0
+#: Upper limit of σβ accepted anywhere (``core.params.PARAMETERS["sigma_beta_deg"].high``).
+MAX_SIGMA_BETA_DEG = MAX_SIGMA_ANGLE_DEG
 
 ProgressFn = Callable[[int, int], None]
 
@@ -41,6 +48,9 @@ ProgressFn = Callable[[int, int], None]
 @dataclass(frozen=True)
 class TrackingConfig:
     """One Monte Carlo tracking experiment with a single 2D radar at the origin.
+
+    Every field is a ``core.params.PARAMETERS`` entry: its default comes from there and it is
+    validated against it (once, here).
 
     Attributes:
         sigma_r_m: range noise σr, m.
@@ -53,24 +63,22 @@ class TrackingConfig:
         methods: which filters to run, from ``ALL_METHODS``.
     """
 
-    sigma_r_m: float = 250.0
-    sigma_beta_deg: float = 1.0
-    runs: int = 1000
-    seed: int = 1
+    sigma_r_m: float = default("sigma_r_m")
+    sigma_beta_deg: float = default("sigma_beta_deg")
+    runs: int = default("runs")
+    seed: int = default("seed")
     target: ConstantVelocityTarget2D = field(default_factory=prosov_target)
-    sigma_a_mps2: float = 0.0
-    sigma_v0_mps: float = 1000.0
+    sigma_a_mps2: float = default("sigma_a_mps2")
+    sigma_v0_mps: float = default("sigma_v0_mps")
     methods: tuple[str, ...] = ALL_METHODS
 
     def __post_init__(self) -> None:
-        check_real("sigma_r_m", self.sigma_r_m, low=0.0, high=1e6)
-        check_real("sigma_beta_deg", self.sigma_beta_deg, low=0.0, high=MAX_SIGMA_BETA_DEG)
-        check_int("runs", self.runs, low=2)
-        check_int("seed", self.seed, low=0)
-        check_real("sigma_a_mps2", self.sigma_a_mps2, low=0.0, low_open=False)
-        check_real("sigma_v0_mps", self.sigma_v0_mps, low=0.0)
+        for name in ("sigma_r_m", "sigma_beta_deg", "runs", "seed", "sigma_a_mps2", "sigma_v0_mps"):
+            check(name, getattr(self, name))
         if not self.methods:
-            raise ParameterError(f"methods must name at least one of {', '.join(ALL_METHODS)}")
+            raise ParameterError(
+                f"methods must name at least one of {', '.join(ALL_METHODS)}", "methods"
+            )
         for m in self.methods:
             check_choice("method", m, ALL_METHODS)
 
@@ -179,7 +187,13 @@ def run_block(
         truth = config.target.truth()
     steps = truth.shape[0]
     rng = np.random.default_rng(block_seed(config.seed, index))
-    r_hat, beta_hat = polar_measurements(truth, config.sigma_r_m, config.sigma_beta_rad, size, rng)
+    r_hat, beta_hat = polar_measurements(
+        truth,
+        sigma_r_m=config.sigma_r_m,
+        sigma_azimuth_rad=config.sigma_beta_rad,
+        runs=size,
+        rng=rng,
+    )
     out: dict[str, MetricsAccumulator] = {}
     for method in config.methods:
         block_acc = MetricsAccumulator(steps)
@@ -237,16 +251,18 @@ def run_tracking(
 
 def prosov_configs(
     sigma_beta_deg: Sequence[float] = (1.0, 2.0),
-    runs: int = 1000,
-    seed: int = 1,
-    period_s: float = 10.0,
-    steps: int = 60,
-    sigma_r_m: float = 250.0,
+    runs: int = default("runs"),
+    seed: int = default("seed"),
+    period_s: float = default("period_s"),
+    steps: int = default("steps"),
+    *,
+    sigma_r_m: float = default("sigma_r_m"),
     methods: Sequence[str] = ALL_METHODS,
 ) -> list[TrackingConfig]:
-    """The paper's experiment, one configuration per σβ (the paper: 1° and 2°)."""
-    check_real("period_s", period_s, low=0.0)
-    check_int("steps", steps, low=2)
+    """The paper's experiment, one configuration per σβ (the paper: 1° and 2°).
+
+    Each value is validated once, by the target (period, scans) and the configs (the rest).
+    """
     target = prosov_target(period_s, steps)
     return [
         TrackingConfig(

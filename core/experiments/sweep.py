@@ -30,7 +30,6 @@ from numpy.typing import NDArray
 from radarviz.core.experiments.prosov import (
     ALL_METHODS,
     BLOCK_RUNS,
-    MAX_SIGMA_BETA_DEG,
     TrackingConfig,
     TrackingResult,
     block_sizes,
@@ -38,7 +37,7 @@ from radarviz.core.experiments.prosov import (
     tracking_result,
 )
 from radarviz.core.metrics import SUM_NAMES, MetricsAccumulator
-from radarviz.core.params import ParameterError, check_int, check_real
+from radarviz.core.params import PARAMETERS, ParameterError, check, check_int, check_real, default
 from radarviz.core.scenarios.planar import ConstantVelocityTarget2D
 
 #: Bump when a chunk's meaning changes (sums, filters, noise draw), so stored chunks of an
@@ -57,13 +56,21 @@ class AxisSpec(NamedTuple):
     high: float
 
 
-#: The parameters a grid may vary. ``range_km`` moves the target's start along the x axis:
-#: it starts at (range_km · 1000, 0) m and keeps the preset's motion, 200 m/s radially outward.
+def _axis(name: str, scale: float = 1.0, unit: str | None = None) -> AxisSpec:
+    """The grid axis of table parameter ``name``, its values in units of ``scale`` × its unit."""
+    p = PARAMETERS[name]
+    assert p.low is not None and p.high is not None
+    return AxisSpec(unit or p.unit, f"{p.meaning} {p.symbol}", p.low / scale, p.high / scale)
+
+
+#: The parameters a grid may vary, with the bounds of the parameter table. ``range_km`` is
+#: ``target_range_m`` in km: the target starts at (range_km · 1000, 0) m and keeps the preset's
+#: motion, 200 m/s radially outward.
 GRID_AXES: dict[str, AxisSpec] = {
-    "sigma_beta_deg": AxisSpec("deg", "azimuth noise σβ", 0.0, MAX_SIGMA_BETA_DEG),
-    "sigma_r_m": AxisSpec("m", "range noise σr", 0.0, 1e6),
-    "range_km": AxisSpec("km", "initial target range r0 (target at (r0, 0))", 0.0, 1e5),
-    "period_s": AxisSpec("s", "scan period T", 0.0, 3600.0),
+    "sigma_beta_deg": _axis("sigma_beta_deg"),
+    "sigma_r_m": _axis("sigma_r_m"),
+    "range_km": _axis("target_range_m", 1000.0, "km"),
+    "period_s": _axis("period_s"),
 }
 
 
@@ -96,22 +103,22 @@ class SweepBase:
     σβ = 1°, target at 150 km moving outward at 200 m/s, T = 10 s, 60 scans.
     """
 
-    sigma_r_m: float = 250.0
-    sigma_beta_deg: float = 1.0
-    range_km: float = 150.0
-    period_s: float = 10.0
-    steps: int = 60
-    speed_mps: float = 200.0
-    runs: int = 1000
-    seed: int = 1
+    sigma_r_m: float = default("sigma_r_m")
+    sigma_beta_deg: float = default("sigma_beta_deg")
+    range_km: float = default("target_range_m") / 1000.0
+    period_s: float = default("period_s")
+    steps: int = default("steps")
+    speed_mps: float = default("target_speed_mps")
+    runs: int = default("runs")
+    seed: int = default("seed")
     methods: tuple[str, ...] = ALL_METHODS
 
     def __post_init__(self) -> None:
         for name, spec in GRID_AXES.items():
             check_real(name, getattr(self, name), low=spec.low, high=spec.high)
-        check_int("steps", self.steps, low=2, high=100_000)
-        check_int("runs", self.runs, low=2)
-        check_int("seed", self.seed, low=0)
+        for name in ("steps", "runs", "seed"):
+            check(name, getattr(self, name))
+        check("target_speed_mps", self.speed_mps)
 
 
 #: The presets a sweep can start from.

@@ -45,9 +45,15 @@ from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.linalg import solve_triangular
 
-from radarviz.core.params import ParameterError, check_choice, check_int, check_real
+from radarviz.core.params import (
+    ParameterError,
+    check,
+    check_choice,
+    check_int,
+    check_real,
+    default,
+)
 
 #: Largest window accepted; far beyond any radar use, small enough for dense (3, 2k) weights.
 MAX_K = 10_000
@@ -86,7 +92,9 @@ class RadarPreset:
     @property
     def c0(self) -> float:
         """C0 = σr² / (T² σVr²), the ratio of range to velocity information."""
-        return c0_ratio(self.sigma_r_m, self.sigma_vr_mps, self.period_s)
+        return c0_ratio(
+            sigma_r_m=self.sigma_r_m, sigma_vr_mps=self.sigma_vr_mps, period_s=self.period_s
+        )
 
 
 PRESETS: dict[str, RadarPreset] = {
@@ -108,9 +116,9 @@ def preset(name: str) -> RadarPreset:
     return PRESETS[check_choice("preset", name, PRESETS)]
 
 
-def c0_ratio(sigma_r: float, sigma_vr: float, period: float) -> float:
-    """C0 = σr² / (T² σVr²)."""
-    ratio = sigma_r / (period * sigma_vr)
+def c0_ratio(*, sigma_r_m: float, sigma_vr_mps: float, period_s: float) -> float:
+    """C0 = σr² / (T² σVr²): σr in m, σVr in m/s, T in s (dimensionless)."""
+    ratio = sigma_r_m / (period_s * sigma_vr_mps)
     return ratio * ratio  # not ** 2: a float power raises OverflowError instead of giving inf
 
 
@@ -121,9 +129,9 @@ def c0_ratio(sigma_r: float, sigma_vr: float, period: float) -> float:
 
 class _Params(NamedTuple):
     k: int
-    sigma_r: float
-    sigma_vr: float  # NaN for range only
-    period: float
+    sigma_r_m: float
+    sigma_vr_mps: float  # NaN for range only
+    period_s: float
     with_doppler: bool
     c0: float  # NaN for range only
 
@@ -135,26 +143,27 @@ def max_order(k: int, with_doppler: bool) -> int:
 
 def _check(
     k: object,
-    sigma_r: object,
-    sigma_vr: object,
-    period: object,
+    sigma_r_m: object,
+    sigma_vr_mps: object,
+    period_s: object,
     with_doppler: object,
     k_min: int = 1,
 ) -> _Params:
     kk = check_int("k", k, low=k_min, high=MAX_K)
     if not isinstance(with_doppler, bool | np.bool_):
         raise ParameterError(f"with_doppler must be True or False (got {with_doppler!r})")
-    sr = check_real("sigma_r", sigma_r, low=0.0)
-    T = check_real("period", period, low=0.0)
+    sr = check_real("sigma_r_m", sigma_r_m, low=0.0)
+    T = check_real("period_s", period_s, low=0.0)
     t4 = T * T * T * T
     if not (math.isfinite(sr * sr) and sr * sr > 0.0 and math.isfinite(t4) and t4 > 0.0):
         raise ParameterError(
-            f"sigma_r and period must keep σr² and T⁴ finite and > 0 (got {sr:g}, {T:g})"
+            f"sigma_r_m and period_s must keep σr² and T⁴ finite and > 0 (got {sr:g}, {T:g})",
+            "sigma_r_m",
         )
     if not with_doppler:
         return _Params(kk, sr, math.nan, T, False, math.nan)
-    sv = check_real("sigma_vr", sigma_vr, low=0.0)
-    c0 = c0_ratio(sr, sv, T)
+    sv = check_real("sigma_vr_mps", sigma_vr_mps, low=0.0)
+    c0 = c0_ratio(sigma_r_m=sr, sigma_vr_mps=sv, period_s=T)
     if not C0_MIN <= c0 <= C0_MAX:
         raise ParameterError(f"C0 = σr²/(T² σVr²) must be in [{C0_MIN:g}, {C0_MAX:g}] (got {c0:g})")
     return _Params(kk, sr, sv, T, True, c0)
@@ -174,7 +183,7 @@ def design_matrix(k: int, period: float, with_doppler: bool, order: int = 3) -> 
     p = _check(k, 1.0, 1.0, period, with_doppler)
     order = check_int("order", order, low=1, high=3)
     j = np.arange(p.k - 1, -1, -1, dtype=np.float64)
-    T = p.period
+    T = p.period_s
     rows = np.stack([np.ones_like(j), -T * j, 0.5 * (T * j) ** 2], axis=-1)
     if with_doppler:
         vrows = np.stack([np.zeros_like(j), np.ones_like(j), -T * j], axis=-1)
@@ -188,22 +197,25 @@ def _numeric(p: _Params, order: int | None) -> tuple[int, NDArray, NDArray]:
     The columns are scaled by S = diag(1, 1/T, 1/T²), i.e. φ = (r, Vr T, a T²), so that
     A = Q^½ H S has the T-free rows [1, −j, j²/2]/σr and [0, 1, −j]/(T σVr). With A = Qₐ Rₐ
     (reduced QR), R_φ = Rₐ⁻¹ Rₐ⁻ᵀ and W_φ = Rₐ⁻¹ Qₐᵀ Q^½; then R = S R_φ S, W = S W_φ.
-    No normal-equation matrix HᵀQH is ever formed.
+    No normal-equation matrix HᵀQH is ever formed. (``scipy.linalg`` is imported here: it
+    is most of the package's import time and only this numerical reference needs it.)
     """
+    from scipy.linalg import solve_triangular
+
     top = max_order(p.k, p.with_doppler)
     n = top if order is None else check_int("order", order, low=1, high=top)
     j = np.arange(p.k - 1, -1, -1, dtype=np.float64)
-    cols = np.stack([np.ones_like(j), -j, 0.5 * j * j], axis=-1)[:, :n] / p.sigma_r
-    sqrt_q = np.full(p.k, 1.0 / p.sigma_r)
+    cols = np.stack([np.ones_like(j), -j, 0.5 * j * j], axis=-1)[:, :n] / p.sigma_r_m
+    sqrt_q = np.full(p.k, 1.0 / p.sigma_r_m)
     if p.with_doppler:
-        s_v = 1.0 / (p.period * p.sigma_vr)
+        s_v = 1.0 / (p.period_s * p.sigma_vr_mps)
         vcols = np.stack([np.zeros_like(j), np.ones_like(j), -j], axis=-1)[:, :n] * s_v
         cols = np.concatenate([cols, vcols], axis=0)
-        sqrt_q = np.concatenate([sqrt_q, np.full(p.k, 1.0 / p.sigma_vr)])
+        sqrt_q = np.concatenate([sqrt_q, np.full(p.k, 1.0 / p.sigma_vr_mps)])
     q_a, r_a = np.linalg.qr(cols, mode="reduced")
     r_inv = solve_triangular(r_a, np.eye(n), lower=False)
     w_phi = solve_triangular(r_a, q_a.T, lower=False) * sqrt_q
-    scale = (1.0, 1.0 / p.period, 1.0 / p.period**2)[:n]
+    scale = (1.0, 1.0 / p.period_s, 1.0 / p.period_s**2)[:n]
     s = np.asarray(scale)
     R = np.full((3, 3), np.nan)
     W = np.full((3, cols.shape[0]), np.nan)
@@ -214,9 +226,10 @@ def _numeric(p: _Params, order: int | None) -> tuple[int, NDArray, NDArray]:
 
 def ls_covariance_numeric(
     k: int,
-    sigma_r: float,
-    sigma_vr: float | None,
-    period: float,
+    *,
+    sigma_r_m: float,
+    sigma_vr_mps: float | None,
+    period_s: float,
     with_doppler: bool = True,
     order: int | None = None,
 ) -> NDArray[np.float64]:
@@ -226,19 +239,20 @@ def ls_covariance_numeric(
         order: number of parameters fitted (1 = r, 2 = r, Vr, 3 = r, Vr, a); ``None`` fits as
             many as the window allows (:func:`max_order`).
     """
-    return _numeric(_check(k, sigma_r, sigma_vr, period, with_doppler), order)[1]
+    return _numeric(_check(k, sigma_r_m, sigma_vr_mps, period_s, with_doppler), order)[1]
 
 
 def ls_weights_numeric(
     k: int,
-    sigma_r: float,
-    sigma_vr: float | None,
-    period: float,
+    *,
+    sigma_r_m: float,
+    sigma_vr_mps: float | None,
+    period_s: float,
     with_doppler: bool = True,
     order: int | None = None,
 ) -> NDArray[np.float64]:
     """W = R Hᵀ Q by least squares.  Shape (3, 2k) or (3, k), NaN rows for unfitted parameters."""
-    return _numeric(_check(k, sigma_r, sigma_vr, period, with_doppler), order)[2]
+    return _numeric(_check(k, sigma_r_m, sigma_vr_mps, period_s, with_doppler), order)[2]
 
 
 # --------------------------------------------------------------------------------------------
@@ -335,9 +349,10 @@ def _closed_weights(k: int, c0: float, T: float, with_doppler: bool) -> NDArray[
 
 def ls_covariance_closed(
     k: int,
-    sigma_r: float,
-    sigma_vr: float | None,
-    period: float,
+    *,
+    sigma_r_m: float,
+    sigma_vr_mps: float | None,
+    period_s: float,
     with_doppler: bool = True,
 ) -> NDArray[np.float64]:
     """R of the full (r, Vr, a) fit from the closed forms.  Shape (3, 3).
@@ -352,19 +367,20 @@ def ls_covariance_closed(
         R23 = 360Dr / [T³ k(k+1)(60C0 + k² − 4)]                                     (12)
 
     Range + Doppler needs k ≥ 2 (at k = 1, k(k² − 1) = 0: two equations cannot fix three
-    parameters). Range only (``with_doppler=False``, ``sigma_vr`` ignored) is derived, not
+    parameters). Range only (``with_doppler=False``, ``sigma_vr_mps`` ignored) is derived, not
     printed: it is the C0 → 0 limit of the same formulas, e.g. R11 = 3Dr(3k²−3k+2)/(k(k+1)(k+2)),
     and needs k ≥ 3. For smaller k use :func:`finite_memory_fit` (reduced order).
     """
-    p = _check(k, sigma_r, sigma_vr, period, with_doppler, k_min=2 if with_doppler else 3)
-    return _closed_cov(p.k, p.sigma_r**2, p.c0 if with_doppler else 0.0, p.period)
+    p = _check(k, sigma_r_m, sigma_vr_mps, period_s, with_doppler, k_min=2 if with_doppler else 3)
+    return _closed_cov(p.k, p.sigma_r_m**2, p.c0 if with_doppler else 0.0, p.period_s)
 
 
 def ls_weights_closed(
     k: int,
-    sigma_r: float,
-    sigma_vr: float | None,
-    period: float,
+    *,
+    sigma_r_m: float,
+    sigma_vr_mps: float | None,
+    period_s: float,
     with_doppler: bool = True,
 ) -> NDArray[np.float64]:
     """W of the full (r, Vr, a) fit from the closed forms.  Shape (3, 2k) or (3, k).
@@ -383,16 +399,16 @@ def ls_weights_closed(
 
     Validity as for :func:`ls_covariance_closed` (range only: C0 = 0, k ≥ 3).
     """
-    p = _check(k, sigma_r, sigma_vr, period, with_doppler, k_min=2 if with_doppler else 3)
-    return _closed_weights(p.k, p.c0 if with_doppler else 0.0, p.period, with_doppler)
+    p = _check(k, sigma_r_m, sigma_vr_mps, period_s, with_doppler, k_min=2 if with_doppler else 3)
+    return _closed_weights(p.k, p.c0 if with_doppler else 0.0, p.period_s, with_doppler)
 
 
 def _reduced_closed(p: _Params) -> tuple[int, NDArray, NDArray]:
     """Closed forms of the reduced fits (k = 1 both variants, k = 2 range only), padded."""
-    dr, T = p.sigma_r**2, p.period
+    dr, T = p.sigma_r_m**2, p.period_s
     R = np.full((3, 3), np.nan)
     if p.with_doppler:  # k = 1: r̂ = r₁, V̂r = Vr₁
-        R[:2, :2] = np.diag([dr, p.sigma_vr**2])
+        R[:2, :2] = np.diag([dr, p.sigma_vr_mps**2])
         W = np.full((3, 2), np.nan)
         W[:2] = np.eye(2)
         return 2, R, W
@@ -440,9 +456,10 @@ class FiniteMemoryFit(NamedTuple):
 
 def finite_memory_fit(
     k: int,
-    sigma_r: float,
-    sigma_vr: float | None,
-    period: float,
+    *,
+    sigma_r_m: float,
+    sigma_vr_mps: float | None,
+    period_s: float,
     with_doppler: bool = True,
     method: str = "closed",
 ) -> FiniteMemoryFit:
@@ -450,9 +467,11 @@ def finite_memory_fit(
 
     ``method="closed"`` uses eqs. 7–12 / 15–20 (and their C0 = 0 limit for range only) for the
     full order and the elementary formulas for the reduced ones; ``"numeric"`` solves the least
-    squares (:func:`ls_covariance_numeric`). ``sigma_vr`` is ignored (may be None) range only.
+    squares (:func:`ls_covariance_numeric`). ``sigma_vr_mps`` is ignored (may be None) range
+    only. σr in m, σVr in m/s, T in s; pass them by keyword (they are still accepted by position
+    for the callers in ``core.tracking.stream`` and ``core.experiments.doppler_start``).
     """
-    p = _check(k, sigma_r, sigma_vr, period, with_doppler)
+    p = _check(k, sigma_r_m, sigma_vr_mps, period_s, with_doppler)
     check_choice("method", method, METHODS)
     if method == "numeric":
         n, R, W = _numeric(p, None)
@@ -462,22 +481,30 @@ def finite_memory_fit(
         c0 = p.c0 if p.with_doppler else 0.0
         n, R, W = (
             3,
-            _closed_cov(p.k, p.sigma_r**2, c0, p.period),
-            _closed_weights(p.k, c0, p.period, p.with_doppler),
+            _closed_cov(p.k, p.sigma_r_m**2, c0, p.period_s),
+            _closed_weights(p.k, c0, p.period_s, p.with_doppler),
         )
     return FiniteMemoryFit(p.k, bool(p.with_doppler), n, R, W, method)
 
 
 def finite_memory_weights(
     k: int,
-    sigma_r: float,
-    sigma_vr: float | None,
-    period: float,
+    *,
+    sigma_r_m: float,
+    sigma_vr_mps: float | None,
+    period_s: float,
     with_doppler: bool = True,
     method: str = "closed",
 ) -> NDArray[np.float64]:
     """Just W of :func:`finite_memory_fit`.  Shape (3, 2k) or (3, k)."""
-    return finite_memory_fit(k, sigma_r, sigma_vr, period, with_doppler, method).W
+    return finite_memory_fit(
+        k,
+        sigma_r_m=sigma_r_m,
+        sigma_vr_mps=sigma_vr_mps,
+        period_s=period_s,
+        with_doppler=with_doppler,
+        method=method,
+    ).W
 
 
 def finite_memory_estimate(
@@ -534,9 +561,10 @@ def sliding_window_estimates(
     ranges: ArrayLike,
     radial_velocities: ArrayLike | None,
     k: int,
-    sigma_r: float,
-    sigma_vr: float | None,
-    period: float,
+    *,
+    sigma_r_m: float,
+    sigma_vr_mps: float | None,
+    period_s: float,
     method: str = "closed",
 ) -> SlidingEstimates:
     """Estimates at every scan n = 1 … N from the last min(n, k) samples.
@@ -564,7 +592,14 @@ def sliding_window_estimates(
     R = np.full((n_scans, 3, 3), np.nan)
     order = np.zeros(n_scans, dtype=np.int64)
     for w in range(1, min(kk, n_scans) + 1):
-        fit = finite_memory_fit(w, sigma_r, sigma_vr, period, with_doppler, method)
+        fit = finite_memory_fit(
+            w,
+            sigma_r_m=sigma_r_m,
+            sigma_vr_mps=sigma_vr_mps,
+            period_s=period_s,
+            with_doppler=with_doppler,
+            method=method,
+        )
         if w < kk:  # the single scan n = w
             idx = [w - 1]
             rw = r[..., None, :w]
@@ -712,8 +747,8 @@ def _resolve_presets(presets: Iterable[RadarPreset | str] | None) -> list[RadarP
 
 def run_gorshkov(
     presets: Iterable[RadarPreset | str] | None = None,
-    trials: int = 100_000,
-    seed: int = 1,
+    trials: int = default("trials"),
+    seed: int = default("seed"),
     ks: Sequence[int] = range(1, 21),
     r0: float = 100_000.0,
     vr0: float = -300.0,
@@ -743,8 +778,8 @@ def run_gorshkov(
         method: "closed" or "numeric" weights.
     """
     radars = _resolve_presets(presets)
-    trials = check_int("trials", trials, low=2)
-    seed = check_int("seed", seed, low=0)
+    trials = int(check("trials", trials))
+    seed = int(check("seed", seed))
     n_points = check_int("n_points", n_points, low=1, high=MAX_K)
     block = check_int("block", block, low=1)
     ks_list = [check_int("k", k, low=1, high=n_points) for k in ks]
@@ -762,7 +797,14 @@ def run_gorshkov(
         truth = quadratic_truth(r0, vr0, a0, T, n_points)
         fits = {
             dop: [
-                finite_memory_fit(k, rad.sigma_r_m, rad.sigma_vr_mps, T, dop, method)
+                finite_memory_fit(
+                    k,
+                    sigma_r_m=rad.sigma_r_m,
+                    sigma_vr_mps=rad.sigma_vr_mps,
+                    period_s=T,
+                    with_doppler=dop,
+                    method=method,
+                )
                 for k in ks_list
             ]
             for dop in (False, True)

@@ -15,43 +15,70 @@ Radar k at site s_k scans at t = t0_k + j T_k (its own period and phase) and mea
 
     r = |p − s|,  β = atan2(dy, dx),  ε = atan2(dz, √(dx² + dy²)),  Vr = (p − s) · v / r
 
-plus independent Gaussian noise (σr, σβ, σε, σVr). Angles are radians. Measurements are seeded:
-radar k of ``scenario.radars`` draws from child k of ``SeedSequence(seed)``.
+plus independent Gaussian noise (σr, σβ, σε, σVr: ``SIGMA_FIELDS``). Angles are radians.
+Measurements are seeded: radar k of ``scenario.radars`` draws from child k of
+``SeedSequence(seed)``.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import KW_ONLY, dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from radarviz.core.params import ParameterError, check_int, check_real
+from radarviz.core.params import ParameterError, check, check_int, check_real
+from radarviz.core.velocity.estimate import (
+    BASELINE_SIGMA_AZ_DEG,
+    BASELINE_SIGMA_EL_DEG,
+    BASELINE_SIGMA_VR_MPS,
+    BASELINE_SITES_M,
+    BASELINE_TARGET_M,
+    BASELINE_VELOCITY_MPS,
+)
+
+#: The accuracy fields of a :class:`RadarSite`, in the order its noise is drawn.
+SIGMA_FIELDS: tuple[str, ...] = (
+    "sigma_r_m",
+    "sigma_azimuth_rad",
+    "sigma_elevation_rad",
+    "sigma_vr_mps",
+)
 
 
 @dataclass(frozen=True)
 class RadarSite:
-    """A radar: name, site (m, ECS), accuracies (m, rad, rad, m/s), scan period and phase (s)."""
+    """A radar: name, site (m, ECS), accuracies, scan period and phase.
+
+    The accuracies and timing are keyword-only (``RadarSite("R1", (0, 0, 0), sigma_r_m=50,
+    sigma_azimuth_rad=…, sigma_elevation_rad=…, sigma_vr_mps=1, period_s=10)``) so two angle
+    σ's cannot be swapped by position. A σ of 0 means that measurement is exact.
+    """
 
     name: str
     position: tuple[float, float, float]
-    sigma_r: float
-    sigma_azimuth: float
-    sigma_elevation: float
-    sigma_vr: float
-    period: float
-    t0: float = 0.0
+    _: KW_ONLY
+    sigma_r_m: float
+    sigma_azimuth_rad: float
+    sigma_elevation_rad: float
+    sigma_vr_mps: float
+    period_s: float
+    t0_s: float = 0.0
 
     def __post_init__(self) -> None:
         if len(self.position) != 3 or not all(math.isfinite(float(c)) for c in self.position):
             raise ParameterError(f"position of radar {self.name!r} must be 3 finite numbers")
-        for field in ("sigma_r", "sigma_azimuth", "sigma_elevation", "sigma_vr"):
+        for field in SIGMA_FIELDS:
             check_real(
-                f"{field} of radar {self.name!r}", getattr(self, field), low=0.0, low_open=False
+                f"{field} of radar {self.name!r}",
+                getattr(self, field),
+                low=0.0,
+                low_open=False,
+                parameter=field,
             )
-        check_real(f"period of radar {self.name!r}", self.period, low=0.0)
-        check_real(f"t0 of radar {self.name!r}", self.t0, low=None)
+        check("period_s", self.period_s)
+        check_real(f"t0_s of radar {self.name!r}", self.t0_s, low=None, parameter="t0_s")
 
 
 @dataclass(frozen=True)
@@ -163,9 +190,9 @@ def polar_measurement(
 
 def scan_times(radar: RadarSite, t_end: float) -> NDArray[np.float64]:
     """t0 + j T for j = 0, 1, … while ≤ t_end (and ≥ 0)."""
-    j0 = max(0, math.ceil(-radar.t0 / radar.period))
-    j1 = math.floor((t_end - radar.t0) / radar.period + 1e-9)
-    return radar.t0 + radar.period * np.arange(j0, j1 + 1, dtype=np.float64)
+    j0 = max(0, math.ceil(-radar.t0_s / radar.period_s))
+    j1 = math.floor((t_end - radar.t0_s) / radar.period_s + 1e-9)
+    return radar.t0_s + radar.period_s * np.arange(j0, j1 + 1, dtype=np.float64)
 
 
 def generate_measurements(
@@ -189,9 +216,37 @@ def generate_measurements(
         r, az, el, vr = polar_measurement(radar.position, pos, vel)
         if children is not None:
             z = np.random.default_rng(children[k]).standard_normal((4, t.size))
-            r = r + radar.sigma_r * z[0]
-            az = az + radar.sigma_azimuth * z[1]
-            el = el + radar.sigma_elevation * z[2]
-            vr = vr + radar.sigma_vr * z[3]
+            r = r + radar.sigma_r_m * z[0]
+            az = az + radar.sigma_azimuth_rad * z[1]
+            el = el + radar.sigma_elevation_rad * z[2]
+            vr = vr + radar.sigma_vr_mps * z[3]
         out[radar.name] = RadarMeasurements(radar, t, r, az, el, vr, pos, vel)
     return out
+
+
+def fusion_scenario(period_s: float = 10.0) -> Scenario3D:
+    """The velocity paper's baseline radars and target; the target turns for 100 s mid-way.
+
+    Three radars at the baseline sites (``core.velocity.estimate.BASELINE_SITES_M``) with
+    σr = 50, 100, 150 m and the baseline angle and radial-velocity accuracies, all scanning at
+    ``period_s``; the target flies the baseline track for 200 s, turns at 0.02 rad/s for 100 s,
+    then flies straight on.
+    """
+    radars = tuple(
+        RadarSite(
+            f"R{k + 1}",
+            tuple(site),
+            sigma_r_m=50.0 * (k + 1),
+            sigma_azimuth_rad=float(np.deg2rad(BASELINE_SIGMA_AZ_DEG[k])),
+            sigma_elevation_rad=float(np.deg2rad(BASELINE_SIGMA_EL_DEG[k])),
+            sigma_vr_mps=BASELINE_SIGMA_VR_MPS[k],
+            period_s=period_s,
+        )
+        for k, site in enumerate(BASELINE_SITES_M)
+    )
+    trajectory = Trajectory3D(
+        BASELINE_TARGET_M,
+        BASELINE_VELOCITY_MPS,
+        (Segment(200.0), Segment(100.0, turn_rate=0.02), Segment(1e6)),
+    )
+    return Scenario3D(radars, trajectory)

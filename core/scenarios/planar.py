@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from radarviz.core.params import check_int, check_real
+from radarviz.core.params import check, check_real, default
 
 
 @dataclass(frozen=True)
@@ -34,8 +34,8 @@ class ConstantVelocityTarget2D:
     steps: int
 
     def __post_init__(self) -> None:
-        check_real("period_s", self.period_s, low=0.0)
-        check_int("steps", self.steps, low=2)
+        check("period_s", self.period_s)
+        check("steps", self.steps)
         for name in ("x0_m", "y0_m", "vx_mps", "vy_mps"):
             check_real(name, getattr(self, name))
 
@@ -50,15 +50,28 @@ class ConstantVelocityTarget2D:
         return out
 
 
-def prosov_target(period_s: float = 10.0, steps: int = 60) -> ConstantVelocityTarget2D:
-    """Prosov's experiment: r0 = 150 km, β0 = 0, moving radially outward at 200 m/s."""
-    return ConstantVelocityTarget2D(150e3, 0.0, 200.0, 0.0, period_s, steps)
+def prosov_target(
+    period_s: float = default("period_s"),
+    steps: int = default("steps"),
+    *,
+    target_range_m: float = default("target_range_m"),
+    target_speed_mps: float = default("target_speed_mps"),
+) -> ConstantVelocityTarget2D:
+    """Prosov's experiment: r0 = 150 km, β0 = 0, moving radially outward at 200 m/s.
+
+    The defaults come from ``core.params.PARAMETERS``; the target starts at (r0, 0) and moves
+    along +x at ``target_speed_mps``.
+    """
+    check("target_range_m", target_range_m)
+    check("target_speed_mps", target_speed_mps)
+    return ConstantVelocityTarget2D(target_range_m, 0.0, target_speed_mps, 0.0, period_s, steps)
 
 
 def polar_measurements(
     truth: NDArray[np.float64],
-    sigma_r: float,
-    sigma_beta: float,
+    *,
+    sigma_r_m: float,
+    sigma_azimuth_rad: float,
     runs: int,
     rng: np.random.Generator,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -66,8 +79,11 @@ def polar_measurements(
 
     Args:
         truth: (N, 4) true states (x, ẋ, y, ẏ).
-        sigma_r: range noise σr, m.  sigma_beta: azimuth noise σβ, rad.
+        sigma_r_m: range noise σr, m.  sigma_azimuth_rad: azimuth noise σβ, rad.
         runs: M.  rng: the generator all noise is drawn from (ranges first, then azimuths).
+
+    Pass the σ's by keyword. (They are still accepted by position for the callers in
+    ``core.tracking.stream`` and the tuning panel's ``simulate``.)
 
     Returns:
         (r̂, β̂), each (M, N): r̂ = r + v_r, β̂ = β + v_β, v ~ N(0, σ²) independent.
@@ -76,6 +92,6 @@ def polar_measurements(
     r = np.hypot(x, y)
     beta = np.arctan2(y, x)
     steps = truth.shape[0]
-    r_hat = r + sigma_r * rng.standard_normal((runs, steps))
-    beta_hat = beta + sigma_beta * rng.standard_normal((runs, steps))
+    r_hat = r + sigma_r_m * rng.standard_normal((runs, steps))
+    beta_hat = beta + sigma_azimuth_rad * rng.standard_normal((runs, steps))
     return r_hat, beta_hat

@@ -359,7 +359,11 @@ class StreamTracker:
         period = win[1].time_s - win[0].time_s
         try:
             fit = finite_memory_fit(
-                k, p.sigma_r_m, p.sigma_radial_velocity_mps if doppler else None, period, doppler
+                k,
+                sigma_r_m=p.sigma_r_m,
+                sigma_vr_mps=p.sigma_radial_velocity_mps if doppler else None,
+                period_s=period,
+                with_doppler=doppler,
             )
         except ParameterError as exc:
             raise PlotError("time_s", f"finite-memory start: {exc}") from None
@@ -401,6 +405,8 @@ def prosov_single_run(
     config = TrackingConfig(sigma_beta_deg=sigma_beta_deg, seed=seed, target=prosov_target())
     truth = config.target.truth()
     rng = np.random.default_rng(np.random.SeedSequence([seed, 7]))
-    r_hat, b_hat = polar_measurements(truth, config.sigma_r_m, config.sigma_beta_rad, 1, rng)
+    r_hat, b_hat = polar_measurements(
+        truth, sigma_r_m=config.sigma_r_m, sigma_azimuth_rad=config.sigma_beta_rad, runs=1, rng=rng
+    )
     times = np.arange(truth.shape[0]) * config.target.period_s
     return times, r_hat, b_hat, config

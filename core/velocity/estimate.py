@@ -76,7 +76,7 @@ from radarviz.core.geometry import (
     line_of_sight,
     unit_vector_partials,
 )
-from radarviz.core.params import ParameterError, check_int
+from radarviz.core.params import ParameterError, check, check_int
 
 #: m above which the first-order statistics are flagged as unreliable. In the sweep of
 #: ``radarviz reproduce velocity`` the Monte Carlo σ exceeds the first-order σ by ≈ m² (1 % at
@@ -147,15 +147,24 @@ def equivalent_variance(
     azimuth: ArrayLike,
     elevation: ArrayLike,
     velocity: ArrayLike,
-    sigma_vr: ArrayLike,
-    sigma_elevation: ArrayLike,
-    sigma_azimuth: ArrayLike,
+    *,
+    sigma_vr_mps: ArrayLike,
+    sigma_azimuth_rad: ArrayLike,
+    sigma_elevation_rad: ArrayLike,
 ) -> NDArray[np.float64]:
-    """σeq_k² = σVr_k² + g_ε,k² σε_k² + g_β,k² σβ_k², shape (..., N); ``velocity`` (..., 3)."""
+    """σeq_k² = σVr_k² + g_ε,k² σε_k² + g_β,k² σβ_k², shape (..., N); ``velocity`` (..., 3).
+
+    Azimuth and elevation (rad) are those of the lines of sight; the σ's are keyword-only so
+    the two angle accuracies cannot be swapped silently.
+    """
     w, u = unit_vector_partials(azimuth, elevation)
     v = _f(velocity)[..., None, :]
     g_e, g_b = np.sum(u * v, axis=-1), np.sum(w * v, axis=-1)
-    return _f(sigma_vr) ** 2 + (g_e * _f(sigma_elevation)) ** 2 + (g_b * _f(sigma_azimuth)) ** 2
+    return (
+        _f(sigma_vr_mps) ** 2
+        + (g_e * _f(sigma_elevation_rad)) ** 2
+        + (g_b * _f(sigma_azimuth_rad)) ** 2
+    )
 
 
 # --------------------------------------------------------------------------------------------
@@ -239,8 +248,9 @@ class Geometry(NamedTuple):
 def diagnose_geometry(
     sites: ArrayLike,
     target: ArrayLike,
-    sigma_elevation: ArrayLike,
-    sigma_azimuth: ArrayLike,
+    *,
+    sigma_azimuth_rad: ArrayLike,
+    sigma_elevation_rad: ArrayLike,
 ) -> Geometry:
     """Diagnose one geometry; flags (never raises) on singular C. Sites (N, 3), target (3,).
 
@@ -250,8 +260,8 @@ def diagnose_geometry(
     s = _sites(sites)
     n = s.shape[0]
     p = _finite("target", target, (3,))
-    se = _positive("sigma_elevation", sigma_elevation, n)
-    sb = _positive("sigma_azimuth", sigma_azimuth, n)
+    sb = _positive("sigma_azimuth_rad", sigma_azimuth_rad, n)
+    se = _positive("sigma_elevation_rad", sigma_elevation_rad, n)
     los = line_of_sight(s, p)
     reason = None
     at_site = np.flatnonzero(los.range < SITE_TOL_M)
@@ -321,9 +331,9 @@ class VelocityProblem(NamedTuple):
     sites: NDArray[np.float64]
     target: NDArray[np.float64]
     velocity: NDArray[np.float64]
-    sigma_vr: NDArray[np.float64]
-    sigma_elevation: NDArray[np.float64]
-    sigma_azimuth: NDArray[np.float64]
+    sigma_vr_mps: NDArray[np.float64]
+    sigma_azimuth_rad: NDArray[np.float64]
+    sigma_elevation_rad: NDArray[np.float64]
     weighted: bool
 
 
@@ -331,10 +341,10 @@ def velocity_problem(
     sites: ArrayLike,
     target: ArrayLike,
     velocity: ArrayLike,
-    sigma_vr: ArrayLike,
-    sigma_elevation: ArrayLike,
-    sigma_azimuth: ArrayLike,
     *,
+    sigma_vr_mps: ArrayLike,
+    sigma_azimuth_rad: ArrayLike,
+    sigma_elevation_rad: ArrayLike,
     weighted: bool | None = None,
 ) -> VelocityProblem:
     """Check and pack a scenario. ``weighted`` defaults to N > 3 (direct solve for N = 3)."""
@@ -345,13 +355,13 @@ def velocity_problem(
     if not weighted and n != 3:
         raise ParameterError(f"the direct solve needs exactly 3 radars (got {n}); use weighted")
     return VelocityProblem(
-        s,
-        _finite("target", target, (3,)),
-        _finite("velocity", velocity, (3,)),
-        _positive("sigma_vr", sigma_vr, n),
-        _positive("sigma_elevation", sigma_elevation, n),
-        _positive("sigma_azimuth", sigma_azimuth, n),
-        bool(weighted),
+        sites=s,
+        target=_finite("target", target, (3,)),
+        velocity=_finite("velocity", velocity, (3,)),
+        sigma_vr_mps=_positive("sigma_vr_mps", sigma_vr_mps, n),
+        sigma_azimuth_rad=_positive("sigma_azimuth_rad", sigma_azimuth_rad, n),
+        sigma_elevation_rad=_positive("sigma_elevation_rad", sigma_elevation_rad, n),
+        weighted=bool(weighted),
     )
 
 
@@ -392,12 +402,15 @@ def velocity_statistics(problem: VelocityProblem) -> VelocityStats:
         GeometryError: C is singular (see :func:`diagnose_geometry`).
     """
     pr = problem
+    sb, se = pr.sigma_azimuth_rad, pr.sigma_elevation_rad
     geo = require_observable(
-        diagnose_geometry(pr.sites, pr.target, pr.sigma_elevation, pr.sigma_azimuth)
+        diagnose_geometry(pr.sites, pr.target, sigma_azimuth_rad=sb, sigma_elevation_rad=se)
     )
     C, az, el = geo.C, geo.los.azimuth, geo.los.elevation
     V = pr.velocity
-    var_eq = equivalent_variance(az, el, V, pr.sigma_vr, pr.sigma_elevation, pr.sigma_azimuth)
+    var_eq = equivalent_variance(
+        az, el, V, sigma_vr_mps=pr.sigma_vr_mps, sigma_azimuth_rad=sb, sigma_elevation_rad=se
+    )
     weights = 1.0 / var_eq if pr.weighted else np.ones_like(var_eq)
     A = velocity_gain(C, weights if pr.weighted else None)
     cov = (A * var_eq) @ A.T
@@ -406,7 +419,7 @@ def velocity_statistics(problem: VelocityProblem) -> VelocityStats:
     corr = cov / np.outer(sigma, sigma)
 
     vr = C @ V
-    se2, sb2 = pr.sigma_elevation**2, pr.sigma_azimuth**2
+    se2, sb2 = se**2, sb**2
     ce = np.cos(el)
     h = 0.5 * (se2 * vr + sb2 * ce * (np.cos(az) * V[0] + np.sin(az) * V[1]))
     w, u = unit_vector_partials(az, el)
@@ -442,9 +455,10 @@ def velocity_statistics(problem: VelocityProblem) -> VelocityStats:
 
 def perturbed_velocity(
     problem: VelocityProblem,
-    d_vr: ArrayLike,
-    d_elevation: ArrayLike,
-    d_azimuth: ArrayLike,
+    *,
+    d_vr_mps: ArrayLike,
+    d_azimuth_rad: ArrayLike,
+    d_elevation_rad: ArrayLike,
     weights: ArrayLike | None = None,
 ) -> NDArray[np.float64]:
     """V̂ (..., 3) from measurements perturbed by the given errors, each (..., N).
@@ -454,8 +468,8 @@ def perturbed_velocity(
     """
     los = line_of_sight(problem.sites, problem.target)
     C = direction_cosines(los.azimuth, los.elevation)
-    vr = C @ problem.velocity + _f(d_vr)
-    C_hat = direction_cosines(los.azimuth + _f(d_azimuth), los.elevation + _f(d_elevation))
+    vr = C @ problem.velocity + _f(d_vr_mps)
+    C_hat = direction_cosines(los.azimuth + _f(d_azimuth_rad), los.elevation + _f(d_elevation_rad))
     if not problem.weighted:
         return solve_velocity(C_hat, vr)
     if weights is None:
@@ -463,9 +477,9 @@ def perturbed_velocity(
             los.azimuth,
             los.elevation,
             problem.velocity,
-            problem.sigma_vr,
-            problem.sigma_elevation,
-            problem.sigma_azimuth,
+            sigma_vr_mps=problem.sigma_vr_mps,
+            sigma_azimuth_rad=problem.sigma_azimuth_rad,
+            sigma_elevation_rad=problem.sigma_elevation_rad,
         )
     return solve_velocity(C_hat, vr, np.broadcast_to(_f(weights), vr.shape))
 
@@ -504,9 +518,9 @@ def velocity_errors(
         z = rng.standard_normal((3, b, n))
         est = perturbed_velocity(
             problem,
-            z[0] * problem.sigma_vr,
-            z[1] * problem.sigma_elevation,
-            z[2] * problem.sigma_azimuth,
+            d_vr_mps=z[0] * problem.sigma_vr_mps,
+            d_elevation_rad=z[1] * problem.sigma_elevation_rad,
+            d_azimuth_rad=z[2] * problem.sigma_azimuth_rad,
         )
         out[start : start + b] = est - problem.velocity
     return out
@@ -569,9 +583,10 @@ def estimate_velocity(
     radial_velocity: ArrayLike,
     azimuth: ArrayLike,
     elevation: ArrayLike,
-    sigma_vr: ArrayLike,
-    sigma_elevation: ArrayLike,
-    sigma_azimuth: ArrayLike,
+    *,
+    sigma_vr_mps: ArrayLike,
+    sigma_azimuth_rad: ArrayLike,
+    sigma_elevation_rad: ArrayLike,
 ) -> VelocityEstimate:
     """Estimate V from measured (Vr_k, β_k, ε_k), k = 1 … N ≥ 3, each (N,).
 
@@ -587,9 +602,11 @@ def estimate_velocity(
     vr = _finite("radial_velocity", radial_velocity, (n,))
     az = _finite("azimuth", azimuth, (n,))
     el = _finite("elevation", elevation, (n,))
-    sv_ = _positive("sigma_vr", sigma_vr, n)
-    se = _positive("sigma_elevation", sigma_elevation, n)
-    sb = _positive("sigma_azimuth", sigma_azimuth, n)
+    sigmas = {
+        "sigma_vr_mps": _positive("sigma_vr_mps", sigma_vr_mps, n),
+        "sigma_azimuth_rad": (sb := _positive("sigma_azimuth_rad", sigma_azimuth_rad, n)),
+        "sigma_elevation_rad": (se := _positive("sigma_elevation_rad", sigma_elevation_rad, n)),
+    }
     C = direction_cosines(az, el)
     if len(_distinct_sites(s)) < 3:
         i, j = _first_duplicate(s)
@@ -606,13 +623,13 @@ def estimate_velocity(
         )
     if n == 3:
         v = solve_velocity(C, vr)
-        var_eq = equivalent_variance(az, el, v, sv_, se, sb)
+        var_eq = equivalent_variance(az, el, v, **sigmas)
         A = velocity_gain(C)
     else:
         v0 = solve_velocity(C, vr, np.ones(n))
-        w = 1.0 / equivalent_variance(az, el, v0, sv_, se, sb)
+        w = 1.0 / equivalent_variance(az, el, v0, **sigmas)
         v = solve_velocity(C, vr, w)
-        var_eq = equivalent_variance(az, el, v, sv_, se, sb)
+        var_eq = equivalent_variance(az, el, v, **sigmas)
         A = velocity_gain(C, 1.0 / var_eq)
     cov = (A * var_eq) @ A.T
     m = float(np.max(np.sqrt(se * se + (np.cos(el) * sb) ** 2)) / svals[2])
@@ -645,10 +662,10 @@ def fuse_positions(
     range_: ArrayLike,
     azimuth: ArrayLike,
     elevation: ArrayLike,
-    sigma_r: ArrayLike,
-    sigma_azimuth: ArrayLike,
-    sigma_elevation: ArrayLike,
     *,
+    sigma_r_m: ArrayLike,
+    sigma_azimuth_rad: ArrayLike,
+    sigma_elevation_rad: ArrayLike,
     refine: bool = True,
 ) -> FusedPosition:
     """Fuse the radars' (r, β, ε) (..., N) into one point; per-radar σ's (N,).
@@ -671,9 +688,9 @@ def fuse_positions(
     if s.ndim != 2 or s.shape[1] != 3 or s.shape[0] < 1:
         raise ParameterError(f"sites must have shape (N, 3) with N >= 1 (got {s.shape})")
     n = s.shape[0]
-    sr = _positive("sigma_r", sigma_r, n)
-    sb = _positive("sigma_azimuth", sigma_azimuth, n)
-    se = _positive("sigma_elevation", sigma_elevation, n)
+    sr = _positive("sigma_r_m", sigma_r_m, n)
+    sb = _positive("sigma_azimuth_rad", sigma_azimuth_rad, n)
+    se = _positive("sigma_elevation_rad", sigma_elevation_rad, n)
     r, az, el = _f(range_), _f(azimuth), _f(elevation)
     if np.any(r <= 0.0) or np.any(np.abs(np.cos(el)) < 1e-9):
         raise GeometryError(
@@ -734,9 +751,9 @@ def baseline_problem(target_m: ArrayLike = BASELINE_TARGET_M) -> VelocityProblem
         BASELINE_SITES_M,
         target_m,
         BASELINE_VELOCITY_MPS,
-        BASELINE_SIGMA_VR_MPS,
-        np.deg2rad(BASELINE_SIGMA_EL_DEG),
-        np.deg2rad(BASELINE_SIGMA_AZ_DEG),
+        sigma_vr_mps=BASELINE_SIGMA_VR_MPS,
+        sigma_azimuth_rad=np.deg2rad(BASELINE_SIGMA_AZ_DEG),
+        sigma_elevation_rad=np.deg2rad(BASELINE_SIGMA_EL_DEG),
     )
 
 
@@ -782,8 +799,8 @@ def run_velocity_experiment(
     altitudes_km: tuple[float, ...] = SWEEP_ALTITUDES_KM,
 ) -> VelocityExperiment:
     """Run the baseline and the sweep (``sweep_trials`` defaults to min(trials, SWEEP_TRIALS))."""
-    trials = check_int("trials", trials, low=2)
-    seed = check_int("seed", seed, low=0)
+    trials = int(check("trials", trials))
+    seed = int(check("seed", seed))
     st = (
         min(trials, SWEEP_TRIALS)
         if sweep_trials is None

@@ -40,7 +40,13 @@ _H2 = np.array([[1.0, 0.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]])
 def _measurements(runs: int, steps: int, config: TrackingConfig, seed: int):
     rng = np.random.default_rng(seed)
     truth = config.target.truth()
-    return polar_measurements(truth, config.sigma_r_m, config.sigma_beta_rad, runs, rng)
+    return polar_measurements(
+        truth,
+        sigma_r_m=config.sigma_r_m,
+        sigma_azimuth_rad=config.sigma_beta_rad,
+        runs=runs,
+        rng=rng,
+    )
 
 
 def bench_batched(runs: int, config: TrackingConfig, repeats: int = 3) -> tuple[float, float]:

@@ -9,58 +9,22 @@ the smallest worker count timed.)
 It also sums the chunks' own wall and CPU seconds. On an idle machine they are equal; when
 chunk wall time exceeds CPU time, another process was taking the cores and the efficiency
 says more about the machine than about the sweep — the report shows the load average too.
+The command's flags are in ``viz_app.cli.sweep``.
 """
 
 from __future__ import annotations
 
-import argparse
 import os
 from typing import Any
 
 import numpy as np
 
-from radarviz.core.experiments.prosov import ALL_METHODS, TrackingResult
-from radarviz.core.experiments.sweep import SweepBase, SweepSpec
-from radarviz.core.params import ParameterError, check_int
-from radarviz.viz_app.cli.args import integer, print_report
+from radarviz.core.experiments.prosov import TrackingResult
+from radarviz.core.experiments.sweep import SweepSpec
+from radarviz.viz_app.sweep.run import run_sweep
 
 DEFAULT_GRID = ("sigma_beta_deg=1,2", "range_km=100,150")
 DEFAULT_RUNS = 250_000
-
-
-def add_command(sub: argparse._SubParsersAction) -> None:
-    b = sub.add_parser("bench-sweep", help="scaling of a sweep over 1, 2, … local Dask workers")
-    b.add_argument(
-        "--grid",
-        nargs="+",
-        default=list(DEFAULT_GRID),
-        metavar="NAME=SPEC",
-        help=f"grid axes as for sweep (default {' '.join(DEFAULT_GRID)})",
-    )
-    b.add_argument(
-        "--runs",
-        type=integer,
-        default=DEFAULT_RUNS,
-        help=f"runs per grid point (default {DEFAULT_RUNS}: 10^6 runs on the default 4-point grid)",
-    )
-    b.add_argument("--seed", type=integer, default=1, help="random seed (default 1)")
-    b.add_argument("--steps", type=integer, default=60, help="scans per run (default 60)")
-    b.add_argument(
-        "--methods",
-        nargs="+",
-        default=list(ALL_METHODS),
-        metavar="METHOD",
-        help="methods to run (default all)",
-    )
-    b.add_argument(
-        "--workers",
-        type=integer,
-        nargs="+",
-        default=[1, 2],
-        help="worker counts to time, in this order; efficiency is relative to the "
-        "smallest (default 1 2)",
-    )
-    b.add_argument("--json", action="store_true", help="print only JSON")
 
 
 def _same(a: list[TrackingResult], b: list[TrackingResult]) -> bool:
@@ -75,8 +39,6 @@ def _same(a: list[TrackingResult], b: list[TrackingResult]) -> bool:
 def run_bench(spec: SweepSpec, worker_counts: list[int]) -> dict[str, Any]:
     """Time the sweep on each worker count, in the order given (later runs may find the
     machine warmer); efficiency relative to the smallest count."""
-    from radarviz.viz_app.sweep.run import run_sweep
-
     rows: list[dict[str, Any]] = []
     reference: list[TrackingResult] | None = None
     for w in worker_counts:
@@ -129,29 +91,3 @@ def format_bench(doc: dict[str, Any]) -> str:
             f"{lo:6.2f} / {hi:<6.2f}  {r['identical_to_first']}"
         )
     return "\n".join(lines)
-
-
-def cmd_bench_sweep(args: argparse.Namespace) -> int:
-    from radarviz.viz_app.runtime import tune_allocator
-    from radarviz.viz_app.sweep.run import parse_grid
-
-    axes = parse_grid(args.grid)
-    check_int("--runs", args.runs, low=2, high=10**10)
-    check_int("--seed", args.seed, low=0)
-    check_int("--steps", args.steps, low=2, high=100_000)
-    for w in args.workers:
-        check_int("--workers", w, low=1, high=1024)
-    for m in args.methods:
-        if m not in ALL_METHODS:
-            raise ParameterError(f"--methods must be among {', '.join(ALL_METHODS)} (got {m!r})")
-    spec = SweepSpec(
-        base=SweepBase(
-            runs=args.runs, seed=args.seed, steps=args.steps, methods=tuple(args.methods)
-        ),
-        axes=axes,
-    )
-    spec.configs()
-    tune_allocator()
-    doc = run_bench(spec, list(args.workers))
-    print_report(doc, args.json, format_bench)
-    return 0

@@ -1,7 +1,13 @@
 """The ``radarviz`` command line.
 
-Bad input gets one line on standard error naming the parameter and its allowed range, and exit
-status 2; no traceback.
+Bad input gets one line on standard error naming the flag and its allowed range, and exit
+status 2; no traceback. The flags of table parameters (σr, σβ, T, scans, runs, seed, …) are
+built from ``core.params.PARAMETERS`` (``viz_app.cli.params.add_parameter``) and checked once,
+by the core config that receives them; the ``ParameterError`` it raises names the parameter,
+which is printed as the flag of this command.
+
+Only numpy-level modules are imported to build the parser: matplotlib, Rerun, Viser, Dask and
+scipy.stats load when a command needs them (``tests/test_cli.py`` checks this).
 """
 
 from __future__ import annotations
@@ -12,14 +18,11 @@ import sys
 from collections.abc import Callable, Sequence
 from typing import Any, NoReturn
 
-from radarviz.core.experiments.prosov import (
-    ALL_METHODS,
-    MAX_SIGMA_BETA_DEG,
-    prosov_configs,
-    run_tracking,
-)
-from radarviz.core.params import ParameterError, check_int, check_real
+from radarviz.core.experiments.prosov import ALL_METHODS, prosov_configs, run_tracking
+from radarviz.core.params import ParameterError, check, check_int, check_real
+from radarviz.viz_app.cli import recording, sweep, track
 from radarviz.viz_app.cli.args import integer, number, print_report
+from radarviz.viz_app.cli.params import add_parameter, cli_message
 
 EXIT_USAGE = 2
 #: Runs × cases above which a progress bar is drawn on standard error.
@@ -50,20 +53,12 @@ def build_parser() -> argparse.ArgumentParser:
     pro = rep_sub.add_parser(
         "prosov", help="converted-measurement Kalman filters (Prosov), Monte Carlo"
     )
-    pro.add_argument(
-        "--sigma-beta-deg",
-        type=number,
-        nargs="+",
-        default=[1.0, 2.0],
-        help="azimuth noise σβ in degrees, one case each (default: 1 2)",
-    )
-    pro.add_argument(
-        "--sigma-r-m", type=number, default=250.0, help="range noise σr in metres (default 250)"
-    )
-    pro.add_argument("--runs", type=integer, default=1000, help="Monte Carlo runs (default 1000)")
-    pro.add_argument("--seed", type=integer, default=1, help="random seed (default 1)")
-    pro.add_argument("--period", type=number, default=10.0, help="scan period T in s (default 10)")
-    pro.add_argument("--steps", type=integer, default=60, help="scans per run (default 60)")
+    add_parameter(pro, "sigma_beta_deg", nargs="+", default=[1.0, 2.0], note="one case each")
+    add_parameter(pro, "sigma_r_m")
+    add_parameter(pro, "runs")
+    add_parameter(pro, "seed")
+    add_parameter(pro, "period_s", "--period", "--period-s")
+    add_parameter(pro, "steps")
     pro.add_argument(
         "--methods",
         nargs="+",
@@ -79,13 +74,8 @@ def build_parser() -> argparse.ArgumentParser:
     gor = rep_sub.add_parser(
         "gorshkov", help="finite-memory range / radial-velocity filter (Gorshkov), Monte Carlo"
     )
-    gor.add_argument(
-        "--trials",
-        type=integer,
-        default=100_000,
-        help="Monte Carlo trials per radar (default 100000)",
-    )
-    gor.add_argument("--seed", type=integer, default=1, help="random seed (default 1)")
+    add_parameter(gor, "trials", note="per radar")
+    add_parameter(gor, "seed")
     gor.add_argument(
         "--radars",
         nargs="+",
@@ -118,12 +108,7 @@ def build_parser() -> argparse.ArgumentParser:
         default=1000,
         help="Monte Carlo runs of the tracking comparison (0 to skip; default 1000)",
     )
-    gor.add_argument(
-        "--sigma-beta-deg",
-        type=number,
-        default=1.0,
-        help="azimuth noise of the tracking comparison, degrees (default 1)",
-    )
+    add_parameter(gor, "sigma_beta_deg", note="of the tracking comparison")
     gor.add_argument(
         "--json", action="store_true", help="print only the JSON document on standard output"
     )
@@ -132,14 +117,10 @@ def build_parser() -> argparse.ArgumentParser:
     vel = rep_sub.add_parser(
         "velocity", help="3D velocity from the radial velocities of 3 radars, Monte Carlo"
     )
-    vel.add_argument(
-        "--trials",
-        type=integer,
-        default=200_000,
-        help="Monte Carlo trials of the baseline (default 200000; the sweep uses "
-        "at most 20000 per point)",
+    add_parameter(
+        vel, "trials", default=200_000, note="of the baseline; the sweep uses at most 20000 a point"
     )
-    vel.add_argument("--seed", type=integer, default=1, help="random seed (default 1)")
+    add_parameter(vel, "seed")
     vel.add_argument(
         "--json", action="store_true", help="print only the JSON document on standard output"
     )
@@ -147,13 +128,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--plot", metavar="FILE.png", help="write the figure (baseline σ and correlations, sweep)"
     )
 
-    from radarviz.viz_app.cli.recording import add_commands
-    from radarviz.viz_app.io.plots import add_commands as add_track_commands
-    from radarviz.viz_app.sweep.run import add_commands as add_sweep_commands
-
-    add_commands(sub)
-    add_track_commands(sub)
-    add_sweep_commands(sub)
+    for module in (recording, track, sweep):
+        module.add_commands(sub)
 
     tune = sub.add_parser("tune", help="Viser panel that re-runs the Prosov scene into Rerun")
     tune.add_argument(
@@ -206,13 +182,6 @@ def _emit(
 
 
 def _cmd_reproduce_prosov(args: argparse.Namespace) -> int:
-    for sb in args.sigma_beta_deg:
-        check_real("--sigma-beta-deg", sb, low=0.0, high=MAX_SIGMA_BETA_DEG)
-    check_real("--sigma-r-m", args.sigma_r_m, low=0.0, high=1e6)
-    check_int("--runs", args.runs, low=2)
-    check_int("--seed", args.seed, low=0)
-    check_real("--period", args.period, low=0.0, high=3600.0)
-    check_int("--steps", args.steps, low=2, high=100_000)
     for m in args.methods:
         if m not in ALL_METHODS:
             raise ParameterError(f"--methods must be among {', '.join(ALL_METHODS)} (got {m!r})")
@@ -222,7 +191,7 @@ def _cmd_reproduce_prosov(args: argparse.Namespace) -> int:
         sigma_beta_deg=args.sigma_beta_deg,
         runs=args.runs,
         seed=args.seed,
-        period_s=args.period,
+        period_s=args.period_s,
         steps=args.steps,
         sigma_r_m=args.sigma_r_m,
         methods=args.methods,
@@ -252,8 +221,6 @@ def _cmd_reproduce_gorshkov(args: argparse.Namespace) -> int:
     from radarviz.core.experiments.doppler_start import DopplerTrackingConfig, run_doppler_tracking
     from radarviz.core.finite_memory.fit import PRESETS, RadarPreset, run_gorshkov
 
-    check_int("--trials", args.trials, low=2, high=100_000_000)
-    check_int("--seed", args.seed, low=0)
     k_max = check_int("--k-max", args.k_max, low=1, high=20)
     radars: list = args.radars if args.radars is not None else list(PRESETS)
     for name in radars:
@@ -271,24 +238,26 @@ def _cmd_reproduce_gorshkov(args: argparse.Namespace) -> int:
     check_int("--tracking-runs", args.tracking_runs, low=0)
     if args.tracking_runs == 1:
         raise ParameterError("--tracking-runs must be 0 (skip) or an integer >= 2 (got 1)")
-    check_real("--sigma-beta-deg", args.sigma_beta_deg, low=0.0, high=MAX_SIGMA_BETA_DEG)
     if args.plot is not None and not args.plot.strip():
         raise ParameterError("--plot must name a file (got an empty string)")
+    # The tracking comparison's config is built (and so checked) before the long Monte Carlo;
+    # with --tracking-runs 0 σβ is still checked, so a bad value is an error either way.
+    tracking_config = None
+    if args.tracking_runs:
+        tracking_config = DopplerTrackingConfig(
+            radar=args.tracking_radar,
+            sigma_beta_deg=args.sigma_beta_deg,
+            runs=args.tracking_runs,
+            seed=args.seed,
+        )
+    else:
+        check("sigma_beta_deg", args.sigma_beta_deg)
     from radarviz.viz_app.reports.gorshkov import format_gorshkov_table, gorshkov_document
     from radarviz.viz_app.runtime import tune_allocator
 
     tune_allocator()
     result = run_gorshkov(radars, trials=args.trials, seed=args.seed, ks=range(1, k_max + 1))
-    tracking = None
-    if args.tracking_runs:
-        tracking = run_doppler_tracking(
-            DopplerTrackingConfig(
-                radar=args.tracking_radar,
-                sigma_beta_deg=args.sigma_beta_deg,
-                runs=args.tracking_runs,
-                seed=args.seed,
-            )
-        )
+    tracking = None if tracking_config is None else run_doppler_tracking(tracking_config)
     return _emit(
         args,
         gorshkov_document(result, tracking),
@@ -300,8 +269,6 @@ def _cmd_reproduce_gorshkov(args: argparse.Namespace) -> int:
 def _cmd_reproduce_velocity(args: argparse.Namespace) -> int:
     from radarviz.core.velocity.estimate import run_velocity_experiment
 
-    check_int("--trials", args.trials, low=2, high=100_000_000)
-    check_int("--seed", args.seed, low=0)
     if args.plot is not None and not args.plot.strip():
         raise ParameterError("--plot must name a file (got an empty string)")
     from radarviz.viz_app.reports.velocity import format_velocity_table, velocity_document
@@ -343,20 +310,11 @@ def main(argv: Sequence[str] | None = None) -> int:
             from radarviz.viz_app.tune.panel import cmd_tune
 
             return cmd_tune(args.host, args.port, args.viewer_port, args.no_browser)
-        from radarviz.viz_app.cli.recording import COMMANDS
-
-        if args.command in COMMANDS:
-            return COMMANDS[args.command](args)
-        from radarviz.viz_app.io.plots import COMMANDS as TRACK_COMMANDS
-
-        if args.command in TRACK_COMMANDS:
-            return TRACK_COMMANDS[args.command](args)
-        from radarviz.viz_app.sweep.run import COMMANDS as SWEEP_COMMANDS
-
-        if args.command in SWEEP_COMMANDS:
-            return SWEEP_COMMANDS[args.command](args)
+        for module in (recording, track, sweep):
+            if args.command in module.COMMANDS:
+                return module.COMMANDS[args.command](args)
     except ParameterError as exc:
-        return _fail(str(exc))
+        return _fail(cli_message(args, exc))
     except OSError as exc:
         return _fail(f"{exc.strerror or exc}: {exc.filename}" if exc.filename else str(exc))
     return _fail(f"unknown command {args.command!r}")

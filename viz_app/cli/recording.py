@@ -4,20 +4,23 @@ from __future__ import annotations
 
 import argparse
 import os
-import shutil
 import signal
-import socket
 import subprocess
 import sys
 import time
-import urllib.parse
 from pathlib import Path
 
 from radarviz.core.params import ParameterError, check_choice, check_int
+from radarviz.viz_app.rerun.viewer import (
+    LOOPBACK,
+    free_port,
+    rerun_executable,
+    serve_recording,
+    viewer_url,
+)
 
 PRESETS = ("demo", "prosov", "gorshkov", "velocity")
 DEFAULT_DEMO_PATH = "recordings/demo.rrd"
-LOOPBACK = "127.0.0.1"
 
 
 def add_commands(sub: argparse._SubParsersAction) -> None:
@@ -86,45 +89,6 @@ def cmd_record(args: argparse.Namespace) -> int:
     seconds = _write(args.preset, args.out, overwrite=args.overwrite, seed=args.seed)
     print(f"wrote {args.out} ({os.path.getsize(args.out) / 1e6:.1f} MB) in {seconds:.2f} s")
     return 0
-
-
-def free_port(host: str = LOOPBACK) -> int:
-    """A currently free TCP port on ``host`` (bind to port 0, read it, close)."""
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind((host, 0))
-        return int(s.getsockname()[1])
-
-
-def viewer_url(host: str, web_port: int, grpc_port: int) -> str:
-    """The web viewer's address with the gRPC source it should connect to."""
-    source = f"rerun+http://{host}:{grpc_port}/proxy"
-    return f"http://{host}:{web_port}/?url={urllib.parse.quote(source, safe='')}"
-
-
-def rerun_executable() -> str:
-    exe = Path(sys.executable).with_name("rerun")
-    found = str(exe) if exe.exists() else shutil.which("rerun")
-    if not found:
-        raise ParameterError("the rerun viewer is not installed (pip install rerun-sdk)")
-    return found
-
-
-def serve_recording(path: str, host: str, grpc_port: int, web_port: int) -> subprocess.Popen:
-    """Start ``rerun --serve-web`` for ``path`` in its own process group."""
-    cmd = [
-        rerun_executable(),
-        "--serve-web",
-        path,
-        "--bind",
-        host,
-        "--port",
-        str(grpc_port),
-        "--web-viewer-port",
-        str(web_port),
-    ]
-    return subprocess.Popen(
-        cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, start_new_session=True
-    )
 
 
 def cmd_view(args: argparse.Namespace) -> int:

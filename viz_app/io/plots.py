@@ -39,7 +39,8 @@ involving them are 0. Floats are written with Python's shortest round-trip repr,
 lost.
 
 ``--out`` defaults to ``tracks.csv`` in the current directory and an existing file is replaced;
-``--rrd OUT.rrd`` also writes a Rerun recording (``viz_app.rerun.track_recording``). Both commands
+``--rrd OUT.rrd`` also writes a Rerun recording (``viz_app.rerun.track_recording``, handed in by
+the command, ``viz_app.cli.track``: this module never imports Rerun). Both commands
 write to a temporary file beside the target and rename it when complete, so a bad input (one line on
 standard error naming file, line and column; exit 2) or a crash leaves no output and an
 existing file untouched. The measurement file is read row by row and the tracks written row by
@@ -48,7 +49,6 @@ row: memory does not grow with the file (the recording buffers at most ``RRD_CHU
 
 from __future__ import annotations
 
-import argparse
 import csv
 import math
 import os
@@ -56,18 +56,23 @@ import time
 import tomllib
 from collections.abc import Callable, Iterable, Iterator
 from contextlib import AbstractContextManager, ExitStack
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import IO
+from typing import IO, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 
-from radarviz.core.experiments.prosov import ALL_METHODS, MAX_SIGMA_BETA_DEG
-from radarviz.core.params import ParameterError, check_choice, check_int, check_real
-from radarviz.core.scenarios.multi_radar import generate_measurements
+from radarviz.core.experiments.prosov import ALL_METHODS
+from radarviz.core.params import PARAMETERS, ParameterError, check, check_choice, default
+from radarviz.core.scenarios.multi_radar import (
+    Scenario3D,
+    Segment,
+    Trajectory3D,
+    fusion_scenario,
+    generate_measurements,
+)
 from radarviz.core.tracking.stream import (
-    INIT_MODES,
     METHODS_3D,
     Plot,
     PlotError,
@@ -76,9 +81,8 @@ from radarviz.core.tracking.stream import (
     StreamTracker,
     prosov_single_run,
 )
-from radarviz.viz_app.cli.args import number
+from radarviz.core.velocity.estimate import BASELINE_TARGET_M, BASELINE_VELOCITY_MPS
 from radarviz.viz_app.io.atomic import atomic_write
-from radarviz.viz_app.runtime import peak_rss_mb
 
 REQUIRED_COLUMNS = ("time_s", "radar", "range_m", "azimuth_deg")
 OPTIONAL_COLUMNS = ("elevation_deg", "radial_velocity_mps")
@@ -87,6 +91,8 @@ OPTIONAL_RADAR_KEYS = ("sigma_elevation_deg", "sigma_radial_velocity_mps")
 DEFAULT_TRACKS = "tracks.csv"
 SIM_PRESETS = ("prosov", "fusion")
 DOPPLER_MODES = ("use", "ignore")
+#: Most scans per radar ``simulate`` writes (files stream; the Monte Carlo limit does not apply).
+MAX_SIMULATE_STEPS = 10_000_000
 #: Plots read before they are tracked as one block (the bounded buffer: conversions are
 #: vectorised over a block).
 READ_BLOCK = 1024
@@ -173,7 +179,7 @@ def parse_radars(text: str, source: str) -> dict[str, Radar]:
                 continue
             v = table[key]
             if key.startswith("sigma_"):
-                high = MAX_SIGMA_BETA_DEG if key in _ANGLE_SIGMAS else None
+                high = PARAMETERS["sigma_beta_deg"].high if key in _ANGLE_SIGMAS else None
                 rng = f"in (0, {high:g}]" if high else "> 0"
                 ok = _is_real(v) and math.isfinite(v) and 0 < v and (high is None or v <= high)
             else:
@@ -419,15 +425,26 @@ def track_lines(
     return plots, reader.three_d, methods
 
 
+class RowObserver(Protocol):
+    """What ``run_track`` can hand every plot and its track rows to (e.g. a Rerun recorder)."""
+
+    def add(self, plot: Plot, rows: list[StateRow]) -> None: ...
+
+
+#: Given the radars, a context manager yielding a :class:`RowObserver`; it is entered before the
+#: first plot and left (flushed, closed) after the last, or on an error.
+ObserverFactory = Callable[[Iterable[Radar]], AbstractContextManager[RowObserver]]
+
+
 def run_track(
     input_path: str,
     radars_path: str,
     out_path: str,
     methods: tuple[str, ...] | None = None,
     options: StreamOptions | None = None,
-    rrd_path: str | None = None,
+    observer: ObserverFactory | None = None,
 ) -> TrackSummary:
-    """Track every plot of ``input_path`` into ``out_path`` (and ``rrd_path``)."""
+    """Track every plot of ``input_path`` into ``out_path``; ``observer`` also sees each plot."""
     options = options or StreamOptions()
     radars = load_radars(radars_path)
     start = time.perf_counter()
@@ -436,13 +453,7 @@ def run_track(
         out = stack.enter_context(atomic_text(out_path))
         w = csv.writer(out)
         w.writerow(TRACK_COLUMNS)
-        logger = None
-        if rrd_path is not None:
-            from radarviz.viz_app.rerun.track_recording import (
-                TrackRecorder,  # Rerun only when asked for
-            )
-
-            logger = stack.enter_context(TrackRecorder.to_file(rrd_path, radars.values()))
+        logger = None if observer is None else stack.enter_context(observer(radars.values()))
         written = 0
 
         def on_rows(plot: Plot, rows: list[StateRow]) -> None:
@@ -491,36 +502,32 @@ def prosov_plots(seed: int = 1, sigma_beta_deg: float = 1.0) -> tuple[list[Plot]
     return plots, [radar]
 
 
-def fusion_plots(seed: int = 1, scans: int = 60) -> tuple[list[Plot], list[Radar]]:
+def fusion_plots(seed: int = 1, steps: int = 60) -> tuple[list[Plot], list[Radar]]:
     """The velocity paper's three 3D radars with Doppler, scans staggered by T/3, one target.
 
     The target flies the paper's baseline track for 200 s, then holds a 0.005 rad/s turn (a
-    circle of ≈ 50 km radius) for as long as ``scans`` asks, so long files stay in coverage.
-    Each radar's measurements come from ``core.scenarios.multi_radar.generate_measurements``.
+    circle of ≈ 50 km radius) for as long as ``steps`` (scans per radar) asks, so long files
+    stay in coverage. Each radar's measurements come from
+    ``core.scenarios.multi_radar.generate_measurements``.
     """
-    from dataclasses import replace
-
-    from radarviz.core.scenarios.multi_radar import Scenario3D, Segment, Trajectory3D
-    from radarviz.core.velocity.estimate import BASELINE_TARGET_M, BASELINE_VELOCITY_MPS
-    from radarviz.viz_app.rerun.scenes import fusion_scenario
-
+    steps = int(check("steps", steps, high=MAX_SIMULATE_STEPS))
     base = fusion_scenario()
-    period = base.radars[0].period
+    period = base.radars[0].period_s
     n_radars = len(base.radars)
-    sites = tuple(replace(r, t0=k * period / n_radars) for k, r in enumerate(base.radars))
+    sites = tuple(replace(r, t0_s=k * period / n_radars) for k, r in enumerate(base.radars))
     trajectory = Trajectory3D(
         BASELINE_TARGET_M, BASELINE_VELOCITY_MPS, (Segment(200.0), Segment(1e12, turn_rate=0.005))
     )
     scenario = Scenario3D(sites, trajectory)
-    meas = generate_measurements(scenario, (scans - 1) * period + 2 * period / 3, seed=seed)
+    meas = generate_measurements(scenario, (steps - 1) * period + 2 * period / 3, seed=seed)
     radars = [
         Radar(
             s.name,
             *map(float, s.position),
-            s.sigma_r,
-            math.degrees(s.sigma_azimuth),
-            math.degrees(s.sigma_elevation),
-            s.sigma_vr,
+            s.sigma_r_m,
+            math.degrees(s.sigma_azimuth_rad),
+            math.degrees(s.sigma_elevation_rad),
+            s.sigma_vr_mps,
         )
         for s in sites
     ]
@@ -528,21 +535,23 @@ def fusion_plots(seed: int = 1, scans: int = 60) -> tuple[list[Plot], list[Radar
     for s in sites:
         m = meas[s.name]
         # Angles and σ through degrees and back, exactly as the file will give them.
-        sb, se = (math.radians(math.degrees(v)) for v in (s.sigma_azimuth, s.sigma_elevation))
-        for k in range(min(scans, m.t.size)):
+        sb, se = (
+            math.radians(math.degrees(v)) for v in (s.sigma_azimuth_rad, s.sigma_elevation_rad)
+        )
+        for k in range(min(steps, m.t.size)):
             plots.append(
                 Plot(
                     float(m.t[k]),
                     float(m.range[k]),
                     math.radians(math.degrees(float(m.azimuth[k]))),
-                    s.sigma_r,
+                    s.sigma_r_m,
                     sb,
                     tuple(map(float, s.position)),
                     s.name,
                     math.radians(math.degrees(float(m.elevation[k]))),
                     se,
                     float(m.radial_velocity[k]),
-                    s.sigma_vr,
+                    s.sigma_vr_mps,
                 )
             )
     plots.sort(key=lambda p: p.time_s)  # stable: radars in order at equal times
@@ -576,121 +585,20 @@ def write_measurements(
 
 
 def simulated_plots(
-    preset: str, seed: int = 1, sigma_beta_deg: float = 1.0, scans: int = 60
+    preset: str,
+    seed: int = default("seed"),
+    sigma_beta_deg: float = default("sigma_beta_deg"),
+    steps: int = default("steps"),
 ) -> tuple[list[Plot], list[Radar]]:
     """A preset's plots and radars (the plots' angles already rounded through degrees, so
-    tracking them equals tracking the file ``simulate`` writes)."""
-    check_choice("--preset", preset, SIM_PRESETS)
+    tracking them equals tracking the file ``simulate`` writes).
+
+    ``prosov`` uses ``sigma_beta_deg`` (its run has 60 scans), ``fusion`` uses ``steps``; the
+    other value is still checked, so a bad one is an error whatever the preset.
+    """
+    check_choice("preset", preset, SIM_PRESETS)
     if preset == "prosov":
+        check("steps", steps, high=MAX_SIMULATE_STEPS)
         return prosov_plots(seed, sigma_beta_deg)
-    return fusion_plots(seed, scans)
-
-
-# --------------------------------------------------------------------------------------------
-# Command line
-# --------------------------------------------------------------------------------------------
-
-
-def add_commands(sub: argparse._SubParsersAction) -> None:
-    """Register ``track`` and ``simulate`` on the ``radarviz`` parser."""
-    tr = sub.add_parser("track", help="track a measurement CSV file into a track CSV file")
-    tr.add_argument("--input", required=True, metavar="MEAS.csv", help="measurement CSV")
-    tr.add_argument("--radars", required=True, metavar="RADARS.toml", help="radar sites, σ")
-    tr.add_argument(
-        "--method",
-        nargs="+",
-        default=None,
-        metavar="METHOD",
-        help=f"methods (default all: {' '.join(ALL_METHODS)} in 2D, {' '.join(METHODS_3D)} in 3D)",
-    )
-    tr.add_argument(
-        "--out",
-        default=DEFAULT_TRACKS,
-        help=f"track CSV to write, replaced if it exists (default {DEFAULT_TRACKS})",
-    )
-    tr.add_argument(
-        "--rrd",
-        default=None,
-        metavar="OUT.rrd",
-        help="also write a Rerun recording of the plots and tracks (replaced)",
-    )
-    tr.add_argument(
-        "--init",
-        default="first-plot",
-        metavar="MODE",
-        help=f"track start: {' or '.join(INIT_MODES)} (default first-plot)",
-    )
-    tr.add_argument(
-        "--init-k", type=int, default=3, help="plots in the finite-memory start window (default 3)"
-    )
-    tr.add_argument(
-        "--doppler",
-        default="use",
-        metavar="MODE",
-        help="radial velocities: use or ignore (default use)",
-    )
-    tr.add_argument(
-        "--sigma-a",
-        type=number,
-        default=0.0,
-        help="process-noise acceleration std, m/s² (default 0)",
-    )
-    tr.add_argument(
-        "--sigma-v0", type=number, default=1000.0, help="initial velocity std, m/s (default 1000)"
-    )
-
-    sim = sub.add_parser("simulate", help="write a preset's measurements and radars files")
-    sim.add_argument(
-        "--preset",
-        required=True,
-        help="prosov (one 2D radar, the Prosov run) or fusion (three 3D radars with Doppler)",
-    )
-    sim.add_argument("--out", required=True, metavar="MEAS.csv", help="measurement CSV to write")
-    sim.add_argument(
-        "--radars-out", required=True, metavar="RADARS.toml", help="radars TOML to write"
-    )
-    sim.add_argument("--seed", type=int, default=1, help="random seed (default 1)")
-    sim.add_argument(
-        "--sigma-beta-deg",
-        type=number,
-        default=1.0,
-        help="prosov: azimuth noise σβ, degrees (default 1)",
-    )
-    sim.add_argument("--scans", type=int, default=60, help="fusion: scans per radar (default 60)")
-
-
-def cmd_track(args: argparse.Namespace) -> int:
-    options = StreamOptions(
-        sigma_a_mps2=check_real("--sigma-a", args.sigma_a, low=0.0, low_open=False),
-        sigma_v0_mps=check_real("--sigma-v0", args.sigma_v0, low=0.0),
-        use_doppler=check_choice("--doppler", args.doppler, DOPPLER_MODES) == "use",
-        init=check_choice("--init", args.init, INIT_MODES),
-        init_k=check_int("--init-k", args.init_k, low=2, high=1000),
-    )
-    methods = None if args.method is None else tuple(args.method)
-    s = run_track(args.input, args.radars, args.out, methods, options, args.rrd)
-    rate = s.plots / s.seconds if s.seconds > 0 else math.inf
-    extra = f" and {args.rrd}" if args.rrd else ""
-    print(
-        f"tracked {s.plots} plots ({'3D' if s.three_d else '2D'}) with {len(s.methods)} "
-        f"method(s) into {args.out}{extra}: {s.rows} rows, {s.seconds:.2f} s, "
-        f"{rate:.0f} plots/s, peak RSS {peak_rss_mb():.0f} MB"
-    )
-    return 0
-
-
-def cmd_simulate(args: argparse.Namespace) -> int:
-    check_choice("--preset", args.preset, SIM_PRESETS)
-    check_int("--seed", args.seed, low=0)
-    check_real("--sigma-beta-deg", args.sigma_beta_deg, low=0.0, high=MAX_SIGMA_BETA_DEG)
-    check_int("--scans", args.scans, low=2, high=10_000_000)
-    plots, radars = simulated_plots(args.preset, args.seed, args.sigma_beta_deg, args.scans)
-    n = write_measurements(args.out, args.radars_out, plots, radars)
-    print(f"wrote {n} plots to {args.out} and {len(radars)} radar(s) to {args.radars_out}")
-    return 0
-
-
-COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
-    "track": cmd_track,
-    "simulate": cmd_simulate,
-}
+    check("sigma_beta_deg", sigma_beta_deg)
+    return fusion_plots(seed, steps)

@@ -10,20 +10,12 @@ from radarviz.core.experiments.doppler_start import DopplerTrackingConfig, run_d
 from radarviz.core.experiments.prosov import TrackingConfig, run_tracking, track_history
 from radarviz.core.finite_memory.fit import run_gorshkov
 from radarviz.core.scenarios.multi_radar import (
-    RadarSite,
-    Scenario3D,
-    Segment,
-    Trajectory3D,
+    SIGMA_FIELDS,
+    fusion_scenario,
     generate_measurements,
 )
 from radarviz.core.scenarios.planar import polar_measurements
 from radarviz.core.velocity.estimate import (
-    BASELINE_SIGMA_AZ_DEG,
-    BASELINE_SIGMA_EL_DEG,
-    BASELINE_SIGMA_VR_MPS,
-    BASELINE_SITES_M,
-    BASELINE_TARGET_M,
-    BASELINE_VELOCITY_MPS,
     M_WARN,
     GeometryError,
     estimate_velocity,
@@ -71,7 +63,7 @@ def log_prosov(
 
     # One displayed run (its own seed stream, so it does not depend on ``runs``).
     rng = np.random.default_rng(np.random.SeedSequence([seed, 7]))
-    r_hat, b_hat = polar_measurements(truth, sr, sb, 1, rng)
+    r_hat, b_hat = polar_measurements(truth, sigma_r_m=sr, sigma_azimuth_rad=sb, runs=1, rng=rng)
     naive = convert_parts("naive", r_hat[0], b_hat[0], sigma_r_m=sr, sigma_azimuth_rad=sb)
     log_points(
         rec,
@@ -99,7 +91,9 @@ def log_prosov(
 
     # Monte Carlo cloud of converted points at the first scan.
     rng = np.random.default_rng(np.random.SeedSequence([seed, 11]))
-    r_c, b_c = polar_measurements(truth[:1], sr, sb, cloud_points, rng)
+    r_c, b_c = polar_measurements(
+        truth[:1], sigma_r_m=sr, sigma_azimuth_rad=sb, runs=cloud_points, rng=rng
+    )
     for method in ("naive", "seed", "cmkf_d", "ucm"):
         c = convert_parts(method, r_c[:, 0], b_c[:, 0], sigma_r_m=sr, sigma_azimuth_rad=sb)
         log_cloud(rec, method, np.stack([c.x, c.y], -1), truth[0, [0, 2]])
@@ -198,28 +192,6 @@ def log_gorshkov(
     log_text(rec, f"Gorshkov: {trials} trials per radar; Doppler start: {tracking_runs} runs")
 
 
-def fusion_scenario(period_s: float = 10.0) -> Scenario3D:
-    """The velocity paper's baseline radars and target; the target turns for 100 s mid-way."""
-    radars = tuple(
-        RadarSite(
-            f"R{k + 1}",
-            tuple(site),
-            50.0 * (k + 1),
-            float(np.deg2rad(BASELINE_SIGMA_AZ_DEG[k])),
-            float(np.deg2rad(BASELINE_SIGMA_EL_DEG[k])),
-            BASELINE_SIGMA_VR_MPS[k],
-            period_s,
-        )
-        for k, site in enumerate(BASELINE_SITES_M)
-    )
-    trajectory = Trajectory3D(
-        BASELINE_TARGET_M,
-        BASELINE_VELOCITY_MPS,
-        (Segment(200.0), Segment(100.0, turn_rate=0.02), Segment(1e6)),
-    )
-    return Scenario3D(radars, trajectory)
-
-
 def log_fusion(rec: rr.RecordingStream, seed: int = 1, scans: int = 60) -> None:
     """Several radars, one target: fused position and the full velocity vector per scan.
 
@@ -228,7 +200,7 @@ def log_fusion(rec: rr.RecordingStream, seed: int = 1, scans: int = 60) -> None:
     geometry metric m says the linear statistics do not hold, which goes to the text log.
     """
     scenario = fusion_scenario()
-    period = scenario.radars[0].period
+    period = scenario.radars[0].period_s
     meas = generate_measurements(scenario, (scans - 1) * period, seed=seed)
     radars = scenario.radars
     sites = np.array([r.position for r in radars])
@@ -240,26 +212,24 @@ def log_fusion(rec: rr.RecordingStream, seed: int = 1, scans: int = 60) -> None:
             rec,
             r.name,
             r.position,
-            f"{r.name}  σr {r.sigma_r:g} m, σβ {np.rad2deg(r.sigma_azimuth):g}°, "
-            f"σε {np.rad2deg(r.sigma_elevation):g}°, σVr {r.sigma_vr:g} m/s, T {r.period:g} s",
+            f"{r.name}  σr {r.sigma_r_m:g} m, σβ {np.rad2deg(r.sigma_azimuth_rad):g}°, "
+            f"σε {np.rad2deg(r.sigma_elevation_rad):g}°, σVr {r.sigma_vr_mps:g} m/s, "
+            f"T {r.period_s:g} s",
         )
     log_truth(rec, n, t, first.true_position, root="world/fusion/truth")
     stack = {
         k: np.stack([meas[r.name].__dict__[k] for r in radars], axis=-1)
         for k in ("range", "azimuth", "elevation", "radial_velocity")
     }
-    sig = {
-        k: np.array([getattr(r, k) for r in radars])
-        for k in ("sigma_r", "sigma_azimuth", "sigma_elevation", "sigma_vr")
-    }
+    sig = {k: np.array([getattr(r, k) for r in radars]) for k in SIGMA_FIELDS}
+    angle_sigmas = {k: sig[k] for k in ("sigma_azimuth_rad", "sigma_elevation_rad")}
     fused = fuse_positions(
         sites,
         stack["range"],
         stack["azimuth"],
         stack["elevation"],
-        sig["sigma_r"],
-        sig["sigma_azimuth"],
-        sig["sigma_elevation"],
+        sigma_r_m=sig["sigma_r_m"],
+        **angle_sigmas,
     )
     for k, r in enumerate(radars):
         log_points(
@@ -281,9 +251,8 @@ def log_fusion(rec: rr.RecordingStream, seed: int = 1, scans: int = 60) -> None:
                 stack["radial_velocity"][i],
                 stack["azimuth"][i],
                 stack["elevation"][i],
-                sig["sigma_vr"],
-                sig["sigma_elevation"],
-                sig["sigma_azimuth"],
+                sigma_vr_mps=sig["sigma_vr_mps"],
+                **angle_sigmas,
             )
         except GeometryError as exc:
             log_text(rec, f"velocity at scan {n[i]}: {exc}", level="WARN", scan=int(n[i]))

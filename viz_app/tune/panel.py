@@ -45,7 +45,6 @@ from radarviz.core.conversion.planar import convert_parts
 from radarviz.core.experiments.prosov import (
     ALL_METHODS,
     BLOCK_RUNS,
-    MAX_SIGMA_BETA_DEG,
     TrackingConfig,
     block_sizes,
     filter_block,
@@ -53,7 +52,7 @@ from radarviz.core.experiments.prosov import (
 from radarviz.core.filters.state import CVBatch
 from radarviz.core.finite_memory.fit import PRESETS, c0_ratio
 from radarviz.core.metrics import nees_band
-from radarviz.core.params import ParameterError, check_choice, check_int, check_real
+from radarviz.core.params import PARAMETERS, ParameterError, check, check_choice, check_int, default
 from radarviz.core.scenarios.planar import polar_measurements, prosov_target
 from radarviz.viz_app.rerun.recording import (
     APPLICATION_ID,
@@ -65,12 +64,26 @@ from radarviz.viz_app.rerun.recording import (
     log_text,
     log_track,
     log_truth,
+    recording_file,
 )
+from radarviz.viz_app.rerun.viewer import free_port, rerun_executable, viewer_url
 
 LOOPBACK = "127.0.0.1"
 TUNE_SERIES = ("bias_range", "rmse_x", "nees_pos")
 #: Largest run count the panel accepts (one block of the Monte Carlo engine).
 MAX_TUNE_RUNS = min(5000, BLOCK_RUNS)
+#: The panel's tighter upper ends of table parameters (fast re-runs; seeds a number input holds).
+TUNE_LIMITS: dict[str, float] = {"runs": MAX_TUNE_RUNS, "seed": 2**32 - 1, "steps": 1000}
+#: Controls built from the parameter table, in panel order: name → (kind of input, step,
+#: label; None: the table's symbol and unit, e.g. "σβ (deg)").
+TUNE_CONTROLS: dict[str, tuple[str, float, str | None]] = {
+    "sigma_r_m": ("number", 1.0, None),
+    "sigma_beta_deg": ("slider", 0.1, None),
+    "period_s": ("number", 0.5, None),
+    "c0": ("number", 0.01, None),
+    "runs": ("number", 1, "Monte Carlo runs"),
+    "seed": ("number", 1, "seed"),
+}
 RECORDINGS_DIR = Path("recordings")
 
 
@@ -83,26 +96,25 @@ RECORDINGS_DIR = Path("recordings")
 class TuneParams:
     """What the panel controls. Validated on construction (ParameterError, one line).
 
+    Every numeric field is a ``core.params.PARAMETERS`` entry and is checked against it (with
+    the panel's tighter ``TUNE_LIMITS``), so a bad value reads as on the command line:
+    ``sigma_r_m must be a finite number in (0, 1e+06] (got -5)``. The panel starts at σβ = 2°
+    (where the methods differ visibly) and 200 runs; the rest are the table's defaults.
     ``c0`` is C0 = σr² / (T² σVr²); σVr follows from it (:attr:`sigma_vr_mps`).
     """
 
-    sigma_r_m: float = 250.0
+    sigma_r_m: float = default("sigma_r_m")
     sigma_beta_deg: float = 2.0
-    period_s: float = 10.0
-    c0: float = 1.0
+    period_s: float = default("period_s")
+    c0: float = default("c0")
     methods: tuple[str, ...] = ALL_METHODS
     runs: int = 200
-    seed: int = 1
-    steps: int = 60
+    seed: int = default("seed")
+    steps: int = default("steps")
 
     def __post_init__(self) -> None:
-        check_real("σr (m)", self.sigma_r_m, low=0.0, high=1e6)
-        check_real("σβ (deg)", self.sigma_beta_deg, low=0.0, high=MAX_SIGMA_BETA_DEG)
-        check_real("T (s)", self.period_s, low=0.0, high=3600.0)
-        check_real("C0", self.c0, low=0.0, high=1e8)
-        check_int("runs", self.runs, low=2, high=MAX_TUNE_RUNS)
-        check_int("seed", self.seed, low=0, high=2**32 - 1)
-        check_int("scans", self.steps, low=2, high=1000)
+        for name in ("sigma_r_m", "sigma_beta_deg", "period_s", "c0", "runs", "seed", "steps"):
+            check(name, getattr(self, name), high=TUNE_LIMITS.get(name))
         if not self.methods:
             raise ParameterError(f"methods: select at least one of {', '.join(ALL_METHODS)}")
         for m in self.methods:
@@ -142,7 +154,7 @@ def preset_values(name: str) -> dict[str, float]:
     return {
         "sigma_r_m": p.sigma_r_m,
         "period_s": p.period_s,
-        "c0": c0_ratio(p.sigma_r_m, p.sigma_vr_mps, p.period_s),
+        "c0": c0_ratio(sigma_r_m=p.sigma_r_m, sigma_vr_mps=p.sigma_vr_mps, period_s=p.period_s),
     }
 
 
@@ -192,7 +204,11 @@ def simulate(params: TuneParams) -> TuneResult:
     (size,) = block_sizes(runs)  # runs <= MAX_TUNE_RUNS <= BLOCK_RUNS: one block
     (child,) = np.random.SeedSequence(cfg.seed).spawn(1)
     r_hat, b_hat = polar_measurements(
-        truth, cfg.sigma_r_m, cfg.sigma_beta_rad, size, np.random.default_rng(child)
+        truth,
+        sigma_r_m=cfg.sigma_r_m,
+        sigma_azimuth_rad=cfg.sigma_beta_rad,
+        runs=size,
+        rng=np.random.default_rng(child),
     )
     naive = convert_parts(
         "naive", r_hat[0], b_hat[0], sigma_r_m=cfg.sigma_r_m, sigma_azimuth_rad=cfg.sigma_beta_rad
@@ -514,8 +530,6 @@ class TuneSession:
 
     def save(self, directory: Path = RECORDINGS_DIR) -> Path:
         """Write the last good parameters' scene to ``directory`` atomically."""
-        from radarviz.viz_app.rerun.recording import recording_file
-
         good = self.last_good
         if good is None:
             raise ParameterError("nothing to save yet: no run has finished")
@@ -531,6 +545,48 @@ class TuneSession:
 # --------------------------------------------------------------------------------------------
 # Viser panel
 # --------------------------------------------------------------------------------------------
+
+
+def control_spec(name: str) -> dict[str, Any]:
+    """Label, bounds, step and hint of the panel input for table parameter ``name``.
+
+    The label is the symbol and unit (``σβ (deg)``), the hint the table's help line. Number
+    inputs get the table's ends as min and max (an open end is not enforced by the input: the
+    check then reports it); the slider runs from the table's low end to its high end.
+    """
+    p = PARAMETERS[name]
+    kind, step, label = TUNE_CONTROLS[name]
+    high = TUNE_LIMITS.get(name, p.high)
+    return {
+        "kind": kind,
+        "label": label or (f"{p.symbol} ({p.unit})" if p.unit else p.symbol),
+        "min": p.low,
+        "max": high,
+        "step": step,
+        "hint": p.help(),
+    }
+
+
+def add_control(gui: Any, name: str, initial: float) -> Any:
+    """A Viser input for table parameter ``name`` (:func:`control_spec`) starting at ``initial``."""
+    spec = control_spec(name)
+    if spec["kind"] == "slider":
+        return gui.add_slider(
+            spec["label"],
+            min=spec["min"],
+            max=spec["max"],
+            step=spec["step"],
+            initial_value=initial,
+            hint=spec["hint"],
+        )
+    return gui.add_number(
+        spec["label"],
+        initial,
+        min=spec["min"],
+        max=spec["max"],
+        step=spec["step"],
+        hint=spec["hint"],
+    )
 
 
 class TunePanel:
@@ -553,17 +609,13 @@ class TunePanel:
             initial_value="custom",
             hint="RLS1 … RLS6 fill σr, T and C0 (from σVr)",
         )
-        self.sigma_r = gui.add_number("σr (m)", p.sigma_r_m, step=1.0)
-        self.sigma_beta = gui.add_slider(
-            "σβ (deg)", min=0.0, max=MAX_SIGMA_BETA_DEG, step=0.1, initial_value=p.sigma_beta_deg
+        self.controls = {name: add_control(gui, name, getattr(p, name)) for name in TUNE_CONTROLS}
+        self.sigma_r, self.sigma_beta, self.period, self.c0, self.runs, self.seed = (
+            self.controls.values()
         )
-        self.period = gui.add_number("T (s)", p.period_s, step=0.5)
-        self.c0 = gui.add_number("C0", p.c0, step=0.01, hint="C0 = σr² / (T² σVr²); σVr follows C0")
         self.sigma_vr = gui.add_number(
             "σVr (m/s) = σr/(T√C0)", round(p.sigma_vr_mps, 4), disabled=True
         )
-        self.runs = gui.add_number("Monte Carlo runs", p.runs, step=1)
-        self.seed = gui.add_number("seed", p.seed, step=1)
         gui.add_markdown("**methods shown**")
         self.methods = {m: gui.add_checkbox(m, m in p.methods) for m in ALL_METHODS}
         self.save_button = gui.add_button("save recording")
@@ -592,12 +644,7 @@ class TunePanel:
 
     def raw(self) -> dict[str, Any]:
         return {
-            "sigma_r_m": self.sigma_r.value,
-            "sigma_beta_deg": self.sigma_beta.value,
-            "period_s": self.period.value,
-            "c0": self.c0.value,
-            "runs": self.runs.value,
-            "seed": self.seed.value,
+            **{name: h.value for name, h in self.controls.items()},
             "steps": self._steps,
             "methods": tuple(m for m, h in self.methods.items() if h.value),
         }
@@ -685,8 +732,6 @@ def wait_port(host: str, port: int, timeout: float = 30.0) -> None:
 def start_rerun(host: str, grpc_port: int, web_port: int | None) -> subprocess.Popen:
     """``rerun --serve-web`` (or ``--serve-grpc`` when ``web_port`` is None) in its own
     process group, bound to ``host``."""
-    from radarviz.viz_app.cli.recording import rerun_executable
-
     cmd = [rerun_executable()]
     cmd += (
         ["--serve-grpc"]
@@ -719,8 +764,6 @@ def measure_tune_latency(changes: int = 10, runs: int = 200, steps: int = 60) ->
     Starts ``rerun --serve-grpc`` on 127.0.0.1, then submits ``changes`` σβ changes one
     after another through the same worker path as the panel (one warm-up run first).
     """
-    from radarviz.viz_app.cli.recording import free_port
-
     port = free_port(LOOPBACK)
     proc = start_rerun(LOOPBACK, port, None)
     times: list[float] = []
@@ -753,7 +796,6 @@ def cmd_tune(
     """Run the panel, the gRPC server and the web viewer until SIGTERM / Ctrl-C."""
     import viser
 
-    from radarviz.viz_app.cli.recording import free_port, viewer_url
     from radarviz.viz_app.runtime import tune_allocator
 
     check_int("--port", port, low=0, high=65535)
