@@ -19,6 +19,7 @@ Every function broadcasts over any leading batch shape ``(...)``; angles are rad
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import NamedTuple
 
 import numpy as np
@@ -51,15 +52,26 @@ class LineOfSight(NamedTuple):
     elevation: NDArray[np.float64]
 
 
+def polar_coordinates(offset: Sequence[ArrayLike]) -> list[NDArray[np.float64]]:
+    """(r, β) of 2D offsets (dx, dy), or (r, β, ε) of 3D offsets (dx, dy, dz), componentwise.
+
+    The one place where a radar's polar coordinates of a point are computed: measurement
+    generation, the EKF's predicted measurement and the UKF's sigma points all call it, so
+    they agree to the last bit. Each component is a (...) array.
+    """
+    dx, dy = _f(offset[0]), _f(offset[1])
+    rho = np.hypot(dx, dy)
+    azimuth = np.arctan2(dy, dx)
+    if len(offset) == 2:
+        return [rho, azimuth]
+    dz = _f(offset[2])
+    return [np.sqrt(rho * rho + dz * dz), azimuth, np.arctan2(dz, rho)]
+
+
 def line_of_sight(sites: ArrayLike, target: ArrayLike) -> LineOfSight:
     """(r, β, ε) of ``target`` (..., 3) seen from ``sites`` (N, 3); shapes (..., N)."""
     d = _f(target)[..., None, :] - _f(sites)
-    horiz = np.hypot(d[..., 0], d[..., 1])
-    return LineOfSight(
-        np.sqrt(horiz * horiz + d[..., 2] ** 2),
-        np.arctan2(d[..., 1], d[..., 0]),
-        np.arctan2(d[..., 2], horiz),
-    )
+    return LineOfSight(*polar_coordinates([d[..., 0], d[..., 1], d[..., 2]]))
 
 
 def direction_cosines(azimuth: ArrayLike, elevation: ArrayLike) -> NDArray[np.float64]:

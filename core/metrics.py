@@ -27,6 +27,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from radarviz.core.filters.state import CVBatch, quad_form_inv
+from radarviz.core.geometry import polar_coordinates
 
 #: Names of the running sums, in the row order of ``MetricsAccumulator.to_arrays``.
 SUM_NAMES: tuple[str, ...] = (
@@ -75,7 +76,7 @@ class MetricsAccumulator:
         x, P = state.x, state.P
         ex = x[:, 0] - truth[0]
         ey = x[:, 2] - truth[2]
-        bearing = np.arctan2(truth[2], truth[0])
+        bearing = polar_coordinates([truth[0], truth[2]])[1]
         c, s = np.cos(bearing), np.sin(bearing)
         # Position NEES from the 2 × 2 block written out: (Pyy ex² − 2 Pxy ex ey + Pxx ey²) / det
         pxx, pxy, pyy = P[:, 0, 0], P[:, 0, 2], P[:, 2, 2]

@@ -44,6 +44,8 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from radarviz.core.geometry import polar_coordinates
+
 METHODS_2D: tuple[str, ...] = ("naive", "seed", "cmkf_d", "ucm", "ducm")
 
 
@@ -319,7 +321,7 @@ def _ducm(r, c, sn, sr, sb, predicted) -> ConvertedParts:
     if predicted is None:
         raise ValueError("method ducm needs predicted_xy (the filter's predicted position)")
     px, py = _f(predicted[0]), _f(predicted[1])
-    r_p = np.hypot(px, py)
+    r_p = polar_coordinates([px, py])[0]
     es = np.exp(sb * sb)
     kr = np.sqrt(es) * r
     return ConvertedParts(kr * c, kr * sn, *_true_cov_parts(r_p, px / r_p, py / r_p, sr, sb, es))

@@ -30,7 +30,7 @@ from radarviz.core.filters.run import run_scans
 from radarviz.core.filters.state import CVBatch
 from radarviz.core.finite_memory.fit import FiniteMemoryFit, finite_memory_fit, preset
 from radarviz.core.finite_memory.start import finite_memory_start
-from radarviz.core.geometry import radial_velocity
+from radarviz.core.geometry import polar_coordinates, radial_velocity
 from radarviz.core.metrics import MetricsAccumulator, TrackMetrics, nees_band
 from radarviz.core.params import check, check_int, default
 from radarviz.core.scenarios.planar import ConstantVelocityTarget2D
@@ -99,8 +99,7 @@ def polar_doppler_measurements(
 ) -> PolarDopplerMeasurements:
     """Noisy (r̂, β̂, V̂r) for ``runs`` runs of the (N, 4) truth; independent Gaussian errors."""
     steps = truth.shape[0]
-    r = np.hypot(truth[:, 0], truth[:, 2])
-    beta = np.arctan2(truth[:, 2], truth[:, 0])
+    r, beta = polar_coordinates([truth[:, 0], truth[:, 2]])
     vr = radial_velocity(truth[:, 0::2], truth[:, 1::2])
     return PolarDopplerMeasurements(
         r + sigma_r_m * rng.standard_normal((runs, steps)),
@@ -134,7 +133,7 @@ def _vr_stats(state: CVBatch, truth_n: NDArray[np.float64]) -> tuple[float, floa
     """(Σ (V̂r − Vr)², Σ g P gᵀ) over the runs of one scan."""
     x, P = state.x, state.P
     px, vx, py, vy = x[:, 0], x[:, 1], x[:, 2], x[:, 3]
-    rp = np.hypot(px, py)
+    rp = polar_coordinates([px, py])[0]
     vrp = (px * vx + py * vy) / rp
     g = np.stack([(vx - vrp * px / rp) / rp, px / rp, (vy - vrp * py / rp) / rp, py / rp], -1)
     var = np.einsum("mi,mij,mj->m", g, P, g)

@@ -43,7 +43,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from radarviz.core.filters.position import innovation_update
 from radarviz.core.filters.state import CVBatch, Vec, position_index
-from radarviz.core.geometry import wrap_angle
+from radarviz.core.geometry import polar_coordinates, wrap_angle
 
 
 def site_offsets(state: CVBatch, site: ArrayLike | None) -> list[Vec]:
@@ -98,11 +98,11 @@ def ekf_update(
     if state.dims == 2:
         px, py = site_offsets(state, site)
         # Predicted measurement h(x⁻) and the columns u = (c, sn), r ∂u/∂β = (−py, px) of J.
-        rp = np.sqrt(px * px + py * py)
+        rp, bp = polar_coordinates([px, py])
         c = px / rp
         sn = py / rp
         nu_r = meas[0] - rp
-        nu_b = wrap_angle(meas[1] - np.arctan2(py, px))
+        nu_b = wrap_angle(meas[1] - bp)
         # Innovation mapped to metres, ν' = J ν.
         nu = (c * nu_r - py * nu_b, sn * nu_r + px * nu_b)
         # R' = J R Jᵀ (Prosov eq. 9 at the predicted r, β).
@@ -113,16 +113,16 @@ def ekf_update(
         }
     else:
         dx, dy, dz = site_offsets(state, site)
-        rho = np.sqrt(dx * dx + dy * dy)
-        rp = np.sqrt(rho * rho + dz * dz)
+        rp, bp, ep = polar_coordinates([dx, dy, dz])
+        rho = np.hypot(dx, dy)
         var_e = np.asarray(sigma_elevation_rad, dtype=np.float64) ** 2
         # Columns of J: u = d/r, r ∂u/∂β = (−dy, dx, 0), r ∂u/∂ε = (−dz dx/ρ, −dz dy/ρ, ρ).
         u = (dx / rp, dy / rp, dz / rp)
         jb = (-dy, dx, np.zeros_like(dx))
         je = (-dz * dx / rho, -dz * dy / rho, rho)
         nu_r = meas[0] - rp
-        nu_b = wrap_angle(meas[1] - np.arctan2(dy, dx))
-        nu_e = meas[2] - np.arctan2(dz, rho)
+        nu_b = wrap_angle(meas[1] - bp)
+        nu_e = meas[2] - ep
         nu = tuple(u[i] * nu_r + jb[i] * nu_b + je[i] * nu_e for i in range(3))
         Rp = {
             (i, j): u[i] * u[j] * var_r + jb[i] * jb[j] * var_b + je[i] * je[j] * var_e

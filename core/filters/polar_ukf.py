@@ -44,7 +44,7 @@ from radarviz.core.filters.state import (
     target_batch,
     use_dense,
 )
-from radarviz.core.geometry import wrap_angle
+from radarviz.core.geometry import polar_coordinates, wrap_angle
 
 
 class UKFParams(NamedTuple):
@@ -115,14 +115,6 @@ def cholesky_columns(P: NDArray[np.float64], scale: float) -> dict[tuple[int, in
     return L
 
 
-def _polar(q: list[Vec]) -> list[Vec]:
-    """(r, β) of 2D offsets, (r, β, ε) of 3D ones."""
-    if len(q) == 2:
-        return [np.sqrt(q[0] * q[0] + q[1] * q[1]), np.arctan2(q[1], q[0])]
-    rho = np.sqrt(q[0] * q[0] + q[1] * q[1])
-    return [np.sqrt(rho * rho + q[2] * q[2]), np.arctan2(q[1], q[0]), np.arctan2(q[2], rho)]
-
-
 def ukf_update(
     state: CVBatch,
     measurement: Sequence[ArrayLike],
@@ -163,12 +155,12 @@ def ukf_update(
 
     # Sigma points through h. χ_{k±} = x⁻ ± column k moves position axis a only if 2a >= k.
     p0 = site_offsets(state, site)
-    h0 = _polar(p0)
+    h0 = polar_coordinates(p0)
     Z: list[list[Vec]] = [[] for _ in range(m)]  # Z[c][2k], Z[c][2k+1]: component c of ζ_{k±}
     for k in range(n - 1):
         for sign in (1.0, -1.0):
             q = [p0[a] + sign * col[pa, k] if pa >= k else p0[a] for a, pa in enumerate(pos)]
-            for comp, value in enumerate(_polar(q)):
+            for comp, value in enumerate(polar_coordinates(q)):
                 Z[comp].append(value)
     del q
     npts = 2 * (n - 1)
@@ -282,7 +274,7 @@ def _ukf_dense(
     offsets = chi[..., pos]
     if site is not None:
         offsets = offsets - np.asarray(site, dtype=np.float64)
-    zeta = np.stack(_polar([offsets[..., a] for a in range(m)]), -1)  # (..., 2n+1, m)
+    zeta = np.stack(polar_coordinates([offsets[..., a] for a in range(m)]), -1)  # (..., 2n+1, m)
     wm = np.full(2 * n + 1, w)
     wm[0] = wm0
     wc = wm.copy()

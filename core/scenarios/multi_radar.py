@@ -28,6 +28,7 @@ from dataclasses import KW_ONLY, dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from radarviz.core.geometry import polar_coordinates
 from radarviz.core.params import ParameterError, check, check_int, check_real
 from radarviz.core.velocity.estimate import (
     BASELINE_SIGMA_AZ_DEG,
@@ -182,10 +183,9 @@ def polar_measurement(
 ) -> tuple[NDArray, NDArray, NDArray, NDArray]:
     """Noise-free (r, β, ε, Vr) of (..., 3) position and velocity seen from ``site`` (3,)."""
     d = np.asarray(position, float) - np.asarray(site, float)
-    horiz = np.hypot(d[..., 0], d[..., 1])
-    r = np.sqrt(horiz * horiz + d[..., 2] ** 2)
+    r, azimuth, elevation = polar_coordinates([d[..., 0], d[..., 1], d[..., 2]])
     vr = np.sum(d * np.asarray(velocity, float), axis=-1) / r
-    return r, np.arctan2(d[..., 1], d[..., 0]), np.arctan2(d[..., 2], horiz), vr
+    return r, azimuth, elevation, vr
 
 
 def scan_times(radar: RadarSite, t_end: float) -> NDArray[np.float64]:

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from radarviz.core.geometry import polar_coordinates
 from radarviz.core.params import check, check_real, default
 
 
@@ -88,9 +89,7 @@ def polar_measurements(
     Returns:
         (r̂, β̂), each (M, N): r̂ = r + v_r, β̂ = β + v_β, v ~ N(0, σ²) independent.
     """
-    x, y = truth[:, 0], truth[:, 2]
-    r = np.hypot(x, y)
-    beta = np.arctan2(y, x)
+    r, beta = polar_coordinates([truth[:, 0], truth[:, 2]])
     steps = truth.shape[0]
     r_hat = r + sigma_r_m * rng.standard_normal((runs, steps))
     beta_hat = beta + sigma_azimuth_rad * rng.standard_normal((runs, steps))
