@@ -90,21 +90,21 @@ def scan_sums(
         c[i], s[i] = np.cos(bearing), np.sin(bearing)
     t = truth[:, None, :]
     terms = np.empty((len(SUM_NAMES), k, m))
-    ex, ex2, ey, ey2, er, ec, pxx_t, pyy_t, nees_pos_t, nees_state_t = terms
+    ex, ex2, ey, ey2, er, ec, pxx, pyy, nees_pos, nees_state = terms
     np.subtract(x[..., 0], t[..., 0], out=ex)
     np.subtract(x[..., 2], t[..., 2], out=ey)
     np.multiply(ex, ex, out=ex2)
     np.multiply(ey, ey, out=ey2)
     np.add(c * ex, s * ey, out=er)
     np.subtract(c * ey, s * ex, out=ec)
+    pxx[...], pyy[...] = P[..., 0, 0], P[..., 2, 2]
+    pxy = P[..., 0, 2].copy()
     # Position NEES from the 2 × 2 block written out: (Pyy ex² − 2 Pxy ex ey + Pxx ey²) / det
-    pxx, pxy, pyy = P[..., 0, 0], P[..., 0, 2], P[..., 2, 2]
-    pxx_t[...], pyy_t[...] = pxx, pyy
     np.divide(
-        pyy * ex * ex - 2.0 * pxy * ex * ey + pxx * ey * ey, pxx * pyy - pxy * pxy, out=nees_pos_t
+        pyy * ex * ex - 2.0 * pxy * ex * ey + pxx * ey * ey, pxx * pyy - pxy * pxy, out=nees_pos
     )
     e = x - t
-    nees_state_t[...] = quad_form_inv(P.reshape(k * m, 4, 4), e.reshape(k * m, 4)).reshape(k, m)
+    nees_state[...] = quad_form_inv(P.reshape(k * m, 4, 4), e.reshape(k * m, 4)).reshape(k, m)
     return terms.sum(axis=-1)
 
 
@@ -135,25 +135,29 @@ class MetricsAccumulator:
         """Add one block of runs at scan index n (0-based); ``truth`` is the (4,) true state."""
         x, P = state.x, state.P
         m = x.shape[0]
-        xs, ps, ts = self._stage
-        if self._staged and xs.shape[1] != m:
-            self._flush()
-        if m >= STAGE_ROWS:  # big enough to be one efficient pass on its own
-            self._add_sums([n], scan_sums(x[None], P[None], np.asarray(truth)[None]))
-        else:
-            if not self._staged and xs.shape[1] != m:
-                depth = max(1, STAGE_ROWS // max(m, 1))
-                self._stage = xs, ps, ts = (
-                    np.empty((depth, m, 4)),
-                    np.empty((depth, m, 4, 4)),
-                    np.empty((depth, 4)),
-                )
-            k = len(self._staged)
-            xs[k], ps[k], ts[k] = x, P, truth
-            self._staged.append(n)
-            if len(self._staged) == xs.shape[0]:
-                self._flush()
         self.runs[n] += m
+        if m >= STAGE_ROWS:  # big enough to be one efficient pass on its own
+            self._flush()
+            self._add_sums([n], scan_sums(x[None], P[None], np.asarray(truth)[None]))
+            return
+        staged = self._staged
+        xs, ps, ts = self._stage
+        if xs.shape[1] != m or not len(ts):  # a new block size: sum the staged, stage anew
+            self._flush()
+            depth = max(1, STAGE_ROWS // max(m, 1))
+            self._stage = xs, ps, ts = (
+                np.empty((depth, m, 4)),
+                np.empty((depth, m, 4, 4)),
+                np.empty((depth, 4)),
+            )
+            staged = self._staged
+        k = len(staged)
+        xs[k] = x
+        ps[k] = P
+        ts[k] = truth
+        staged.append(n)
+        if k + 1 == len(ts):
+            self._flush()
 
     def _flush(self) -> None:
         """Turn the staged scans into sums."""
