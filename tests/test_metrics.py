@@ -59,3 +59,33 @@ def test_nees_band_coverage_is_95_percent() -> None:
 
 def test_delta_percent() -> None:
     np.testing.assert_allclose(delta_percent(np.array([102.0]), np.array([100.0])), [2.0])
+
+
+def test_staged_sums_equal_scan_by_scan_sums_bit_for_bit(monkeypatch) -> None:
+    """Staging scans (``STAGE_ROWS``) forms the same sums, added in the same order, as adding
+    every scan on its own — with blocks of changing size (an empty one too), scans out of
+    order and repeated."""
+    import radarviz.core.metrics as metrics
+
+    rng = np.random.default_rng(4)
+    steps = 7
+    truth = np.array([[1e5 + 2e3 * n, 200.0, 3e3 * n, 10.0] for n in range(steps)])
+    adds = []
+    for n, m in [(0, 50), (1, 50), (3, 0), (3, 50), (2, 50), (2, 31), (4, 300), (5, 300), (4, 2)]:
+        a = rng.normal(size=(m, 4, 4))
+        P = a @ a.transpose(0, 2, 1) * 100.0 + np.eye(4) * 50.0
+        x = truth[n] + rng.normal(size=(m, 4)) * [200.0, 5.0, 300.0, 5.0]
+        adds.append((n, as_batch(x, P)))
+
+    def accumulate() -> tuple[np.ndarray, np.ndarray]:
+        acc = MetricsAccumulator(steps)
+        for n, st in adds:
+            acc.add(n, st, truth[n])
+        return acc.to_arrays()
+
+    staged = accumulate()
+    monkeypatch.setattr(metrics, "STAGE_ROWS", 1)  # every scan summed as it arrives
+    one_by_one = accumulate()
+    np.testing.assert_array_equal(staged[0], one_by_one[0])
+    np.testing.assert_array_equal(staged[1], one_by_one[1])
+    assert staged[0].tolist() == [50, 50, 81, 50, 302, 300, 0]

@@ -5,7 +5,17 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from radarviz.core.experiments.prosov import TrackingConfig, prosov_configs, run_tracking
+from radarviz.core.experiments.prosov import (
+    ALL_METHODS,
+    BLOCK_RUNS,
+    TrackingConfig,
+    conversion_cloud,
+    displayed_measurements,
+    prosov_configs,
+    prosov_scene,
+    run_tracking,
+    track_history,
+)
 from radarviz.core.params import ParameterError
 from radarviz.core.scenarios.planar import prosov_target
 
@@ -128,3 +138,60 @@ def test_bad_config_is_one_clear_line(kwargs: dict, needle: str) -> None:
     with pytest.raises(ParameterError) as err:
         TrackingConfig(**kwargs)
     assert needle in str(err.value) and "\n" not in str(err.value)
+
+
+def _assert_same_metrics(a, b) -> None:
+    assert a.metrics.keys() == b.metrics.keys()
+    for m in a.metrics:
+        for name in a.metrics[m]._fields:
+            np.testing.assert_array_equal(getattr(a.metrics[m], name), getattr(b.metrics[m], name))
+
+
+@pytest.mark.parametrize(("runs", "block"), [(2, BLOCK_RUNS), (300, BLOCK_RUNS), (300, 128)])
+def test_scene_is_run_tracking_plus_the_displayed_run_alone(runs: int, block: int) -> None:
+    """The displayed run rides in the Monte Carlo's first block; neither changes the other.
+
+    Its statistics equal ``run_tracking``'s bit for bit. Its tracks equal ``track_history`` of
+    that run alone to rounding: a batch of one is filtered by batched matrix products and a
+    block by vector operations, and even two small batches may round differently (numpy's
+    matmul picks its kernel by shape); ``tests/test_engine.py`` bounds the difference. Its
+    measurements do not depend on the number of runs.
+    """
+    cfg = TrackingConfig(sigma_beta_deg=1.5, runs=runs, seed=4)
+    scene = prosov_scene(cfg, block=block)
+    _assert_same_metrics(scene.result, run_tracking(cfg, block=block))
+    single_cfg = TrackingConfig(sigma_beta_deg=1.5, seed=4)
+    r_hat, beta_hat = displayed_measurements(single_cfg)
+    times = np.arange(single_cfg.target.steps) * single_cfg.target.period_s
+    other_runs = TrackingConfig(sigma_beta_deg=1.5, seed=4, runs=runs + 7)
+    np.testing.assert_array_equal(r_hat, displayed_measurements(other_runs)[0])
+    np.testing.assert_array_equal(scene.r_hat_m, r_hat[0])
+    np.testing.assert_array_equal(scene.beta_hat_rad, beta_hat[0])
+    np.testing.assert_array_equal(scene.times_s, times)
+    np.testing.assert_array_equal(scene.truth, cfg.target.truth())
+    np.testing.assert_array_equal(
+        scene.converted_xy_m["naive"],
+        np.stack([r_hat[0] * np.cos(beta_hat[0]), r_hat[0] * np.sin(beta_hat[0])], -1),
+    )
+    assert set(scene.tracks) == set(ALL_METHODS)
+    for method, track in scene.tracks.items():
+        xs, ps = track_history(method, r_hat, beta_hat, single_cfg)
+        for n in range(len(times)):  # each scan on the scale of its own entries
+            for got, ref in ((track.x[n], xs[0, n]), (track.P[n], ps[0, n])):
+                atol = 1e-9 * np.abs(ref).max()
+                np.testing.assert_allclose(got, ref, rtol=0, atol=atol, err_msg=method)
+
+
+def test_conversion_cloud_is_centred_where_each_conversion_puts_it() -> None:
+    """At scan 1 (r = 150 km, β = 0) the mean along x of a cloud scaled by κ is κ r e^(−s/2):
+    r e^(−s/2) naive, r for ``ucm`` (κ = e^(s/2)), r (1 − s/2) e^(−s/2) for ``seed``
+    (eq. 10). Tolerances are Z Monte Carlo standard errors."""
+    cfg = TrackingConfig(sigma_beta_deg=2.0, seed=2)
+    points = 20_000
+    cloud = conversion_cloud(cfg, points)
+    r, s = 150e3, np.deg2rad(2.0) ** 2
+    shrink = np.exp(-s / 2.0)
+    for method, expected in (("naive", r * shrink), ("ucm", r), ("seed", r * (1 - s / 2) * shrink)):
+        x = cloud[method][:, 0]
+        assert abs(x.mean() - expected) < Z * x.std(ddof=1) / np.sqrt(points), method
+    assert conversion_cloud(cfg, 10)["ucm"].shape == (10, 2)

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from radarviz.core.experiments.prosov import TrackingConfig, run_tracking
+from radarviz.core.experiments.prosov import ALL_METHODS, TrackingConfig, prosov_scene, run_tracking
 from radarviz.viz_app.cli.main import main
 from radarviz.viz_app.rerun.recording import ellipsoid_axes, recording_file
 from radarviz.viz_app.rerun.scenes import log_prosov
@@ -106,12 +106,39 @@ def test_record_refuses_to_overwrite_and_leaves_no_temporary(
     assert sorted(p.name for p in tmp_path.iterdir()) == ["g.rrd"]
 
 
-def test_demo_writes_a_recording_headless(tmp_path: Path, capsys) -> None:
+def test_demo_writes_a_recording_headless(tmp_path: Path, capsys, rrd_contents) -> None:
+    """The demo holds the three presets' documented entities, one row per scan, and its
+    Prosov part is core's scene (σβ = 2°, 500 runs, seed 1): the statistics and the displayed
+    run's tracks."""
     out = tmp_path / "sub" / "demo.rrd"
     assert main(["demo", "--out", str(out)]) == 0
     printed = capsys.readouterr().out
     assert f"wrote {out}" in printed and "radarviz view" in printed
     assert out.stat().st_size < 20e6
+    rows, cols = rrd_contents(out)
+    per_scan = ["/world/truth/position", "/world/measurements/radar", "/plots/nees_pos/band95_hi"]
+    per_scan += [
+        f"/world/tracks/{m}/{part}" for m in ALL_METHODS for part in ("position", "velocity")
+    ]
+    per_scan += [f"/plots/rmse_x/{m}" for m in ALL_METHODS]
+    per_scan += [
+        "/world/fusion/position",
+        "/world/fusion/truth/position",
+        "/plots/fused_velocity/m",
+    ]
+    for path in per_scan:
+        assert rows.get(path) == 60, (path, rows.get(path))
+    assert rows.get("/plots/finite_memory/gain_r/RLS6") == 20  # k = 1 … 20 scans in the window
+    scene = prosov_scene(TrackingConfig(sigma_beta_deg=2.0, runs=500, seed=1))
+    np.testing.assert_array_equal(
+        [v[0] for v in cols["/plots/rmse_x/naive"]["Scalars:scalars"]],
+        scene.result.metrics["naive"].rmse_x,
+    )
+    for m in ("seed", "ukf"):
+        logged = np.array([p[0] for p in cols[f"/world/tracks/{m}/position"]["Points3D:positions"]])
+        np.testing.assert_array_equal(
+            logged[:, :2], scene.tracks[m].x[:, [0, 2]].astype(np.float32)
+        )
 
 
 def test_velocity_preset_logs_the_fused_velocity_and_flags_bad_geometry(

@@ -22,13 +22,17 @@ import pytest
 from filterpy.common import Q_discrete_white_noise
 from filterpy.kalman import ExtendedKalmanFilter
 
-from radarviz.core.experiments.prosov import ALL_METHODS, track_history
+from radarviz.core.experiments.prosov import (
+    ALL_METHODS,
+    TrackingConfig,
+    displayed_measurements,
+    track_history,
+)
 from radarviz.core.filters.predict import transition_matrix
 from radarviz.core.tracking.stream import (
     METHODS_3D,
     StreamOptions,
     StreamTracker,
-    prosov_single_run,
 )
 from radarviz.viz_app.cli.main import main
 from radarviz.viz_app.io.plots import (
@@ -120,7 +124,9 @@ def test_simulate_then_track_equals_in_memory(tmp_path: Path, sigma_beta_deg: fl
     )
     assert main(["track", "--input", str(meas), "--radars", str(radars), "--out", str(out)]) == 0
     rows = read_tracks(out)
-    times, r_hat, b_hat, cfg = prosov_single_run(3, sigma_beta_deg)
+    cfg = TrackingConfig(sigma_beta_deg=sigma_beta_deg, seed=3)
+    r_hat, b_hat = displayed_measurements(cfg)
+    times = np.arange(cfg.target.steps) * cfg.target.period_s
     n = len(times)
     assert len(rows) == n * len(ALL_METHODS)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["m.csv", "r.toml", "t.csv"]

@@ -8,17 +8,29 @@ methods are not Monte Carlo noise of the measurements.
 Runs are processed in blocks of ``BLOCK_RUNS``; block b draws its noise from the b-th child of
 ``numpy.random.SeedSequence(seed)``, so a result is reproducible bit for bit for the same seed
 and the first runs of a long experiment are the runs of a short one.
+
+``prosov_scene`` is the picture every viewer draws (``radarviz demo``, ``record --preset
+prosov``, ``tune``): the Monte Carlo statistics and one displayed run with every method's
+filtered states.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
 
-from radarviz.core.filters.methods import ALL_METHODS, PolarNoise, PolarPlot, method_named
+from radarviz.core.conversion.planar import convert_parts
+from radarviz.core.filters.methods import (
+    ALL_METHODS,
+    MethodGroup,
+    PolarNoise,
+    PolarPlot,
+    method_groups,
+)
 from radarviz.core.filters.run import run_scans
 from radarviz.core.filters.state import CVBatch
 from radarviz.core.metrics import MetricsAccumulator, TrackMetrics, delta_percent, nees_band
@@ -41,6 +53,15 @@ from radarviz.core.scenarios.planar import (
 BLOCK_RUNS = 16384
 #: Upper limit of σβ accepted anywhere (``core.params.PARAMETERS["sigma_beta_deg"].high``).
 MAX_SIGMA_BETA_DEG = MAX_SIGMA_ANGLE_DEG
+#: The displayed run draws its noise from ``SeedSequence([seed, DISPLAY_STREAM])``: a stream of
+#: its own, apart from the Monte Carlo blocks' ``SeedSequence(seed)`` children, so the run a
+#: viewer draws depends on the seed and σ only, not on the number of runs or the block size.
+DISPLAY_STREAM = 7
+#: The Monte Carlo cloud of converted points (``conversion_cloud``) draws from
+#: ``SeedSequence([seed, CLOUD_STREAM])``.
+CLOUD_STREAM = 11
+#: Conversions shown point by point (they need no prediction, unlike ``ducm``).
+SHOWN_CONVERSIONS: tuple[str, ...] = ("naive", "seed", "cmkf_d", "ucm")
 
 ProgressFn = Callable[[int, int], None]
 
@@ -138,21 +159,39 @@ def filter_block(
     (``ducm`` starts like ``ucm``: there is no prediction yet) or, for the EKF and UKF, the
     naive point with its linearized covariance; velocity 0 with std ``sigma_v0_mps``.
     """
+    group = MethodGroup((name,))
+    squeeze = group.converted  # a converted group has a leading method axis of length 1
+
+    def one(n: int, state: CVBatch) -> None:
+        on_scan(n, CVBatch(state.x[0], state.P[0]) if squeeze else state)
+
+    state = filter_group(group, r_hat, beta_hat, config, one)
+    return CVBatch(state.x[0], state.P[0]) if squeeze else state
+
+
+def filter_group(
+    group: MethodGroup,
+    r_hat: NDArray[np.float64],
+    beta_hat: NDArray[np.float64],
+    config: TrackingConfig,
+    on_scan: Callable[[int, CVBatch], None],
+) -> CVBatch:
+    """``filter_block`` for a group of methods at once: the converted methods of ``group`` are
+    one batch (k, m) (row i: method i), so their predictions and updates are one set of vector
+    operations; each row is what ``filter_block`` gives for its method alone."""
     T, qa = config.target.period_s, config.sigma_a_mps2
     steps = r_hat.shape[1]
-    kind = method_named(name)
     noise = PolarNoise(config.sigma_r_m, config.sigma_beta_rad)
-    state = kind.start(
+    state = group.start(
         PolarPlot(r_hat[:, 0], beta_hat[:, 0]), noise, sigma_v0_mps=config.sigma_v0_mps
     )
     # Scan-major copies, so each scan's measurements are contiguous vectors.
     r_scans, b_scans = np.ascontiguousarray(r_hat.T), np.ascontiguousarray(beta_hat.T)
 
     def update(n: int, pred: CVBatch, out: CVBatch) -> CVBatch:
-        return kind.update(pred, PolarPlot(r_scans[n], b_scans[n]), noise, out=out)
+        return group.update(pred, PolarPlot(r_scans[n], b_scans[n]), noise, out=out)
 
-    state = run_scans(state, steps, T, update, sigma_a_mps2=qa, on_scan=on_scan)
-    return state
+    return run_scans(state, steps, T, update, sigma_a_mps2=qa, on_scan=on_scan)
 
 
 def block_seed(seed: int, index: int) -> np.random.SeedSequence:
@@ -163,6 +202,74 @@ def block_seed(seed: int, index: int) -> np.random.SeedSequence:
     how many blocks there are or seeing the others.
     """
     return np.random.SeedSequence(seed, spawn_key=(index,))
+
+
+def block_measurements(
+    config: TrackingConfig, index: int, size: int, truth: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Block ``index``'s measured ranges and azimuths, each (size, N), from ``block_seed``."""
+    rng = np.random.default_rng(block_seed(config.seed, index))
+    return polar_measurements(
+        truth,
+        sigma_r_m=config.sigma_r_m,
+        sigma_azimuth_rad=config.sigma_beta_rad,
+        runs=size,
+        rng=rng,
+    )
+
+
+class DisplayedTrack(NamedTuple):
+    """One method's filtered states of the displayed run: x (N, 4) as (x, ẋ, y, ẏ) in m and
+    m/s, and P (N, 4, 4) their covariances."""
+
+    x: NDArray[np.float64]
+    P: NDArray[np.float64]
+
+
+def _run_block(
+    config: TrackingConfig,
+    index: int,
+    size: int,
+    truth: NDArray[np.float64],
+    shown: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None,
+) -> tuple[dict[str, MetricsAccumulator], dict[str, DisplayedTrack]]:
+    """``run_block``, and with ``shown = (r̂, β̂)`` (1, N) also the states of that run.
+
+    The shown run is filtered as one more row of the block, after its ``size`` runs, by the
+    same ``filter_block`` call: every row of a batch is filtered on its own (element-wise
+    arithmetic), so its states are the ones ``track_history`` gives for it alone and the
+    block's statistics are ``run_block``'s — bit for bit both (``tests/test_prosov.py``),
+    for one pass over the scans instead of two (at a few hundred runs a pass costs about the
+    same for 1 run as for all of them).
+    """
+    check_int("index", index, low=0)
+    check_int("size", size, low=1)
+    steps = truth.shape[0]
+    r_hat, beta_hat = block_measurements(config, index, size, truth)
+    if shown is not None:
+        r_hat, beta_hat = np.concatenate([r_hat, shown[0]]), np.concatenate([beta_hat, shown[1]])
+    out = {method: MetricsAccumulator(steps) for method in config.methods}
+    tracks: dict[str, DisplayedTrack] = {}
+    if shown is not None:
+        tracks = {
+            m: DisplayedTrack(np.empty((steps, 4)), np.empty((steps, 4, 4))) for m in config.methods
+        }
+    for names in method_groups(config.methods):
+        group = MethodGroup(names)
+
+        def on_scan(n: int, st: CVBatch, group: MethodGroup = group) -> None:
+            rows = (
+                [(group.names[i], st.x[i], st.P[i]) for i in range(len(group.names))]
+                if group.converted
+                else [(group.names[0], st.x, st.P)]
+            )
+            for method, x, P in rows:
+                out[method].add(n, CVBatch(x[:size], P[:size]), truth[n])
+                if shown is not None:
+                    tracks[method].x[n], tracks[method].P[n] = x[size], P[size]
+
+        filter_group(group, r_hat, beta_hat, config, on_scan)
+    return out, tracks
 
 
 def run_block(
@@ -181,31 +288,9 @@ def run_block(
     Args:
         truth: ``config.target.truth()`` if the caller already has it.
     """
-    check_int("index", index, low=0)
-    check_int("size", size, low=1)
     if truth is None:
         truth = config.target.truth()
-    steps = truth.shape[0]
-    rng = np.random.default_rng(block_seed(config.seed, index))
-    r_hat, beta_hat = polar_measurements(
-        truth,
-        sigma_r_m=config.sigma_r_m,
-        sigma_azimuth_rad=config.sigma_beta_rad,
-        runs=size,
-        rng=rng,
-    )
-    out: dict[str, MetricsAccumulator] = {}
-    for method in config.methods:
-        block_acc = MetricsAccumulator(steps)
-        filter_block(
-            method,
-            r_hat,
-            beta_hat,
-            config,
-            lambda n, st, a=block_acc: a.add(n, st, truth[n]),
-        )
-        out[method] = block_acc
-    return out
+    return _run_block(config, index, size, truth)[0]
 
 
 def tracking_result(
@@ -222,6 +307,31 @@ def tracking_result(
     )
 
 
+def _monte_carlo(
+    config: TrackingConfig,
+    truth: NDArray[np.float64],
+    progress: ProgressFn | None,
+    block: int,
+    shown: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None,
+) -> tuple[TrackingResult, dict[str, DisplayedTrack]]:
+    """Blocks 0, 1, … added into zero accumulators in that order; ``shown`` rides in block 0."""
+    steps = truth.shape[0]
+    acc = {m: MetricsAccumulator(steps) for m in config.methods}
+    tracks: dict[str, DisplayedTrack] = {}
+    done = 0
+    for index, size in enumerate(block_sizes(config.runs, block)):
+        block_acc, block_tracks = _run_block(
+            config, index, size, truth, shown if index == 0 else None
+        )
+        tracks.update(block_tracks)
+        for method, a in block_acc.items():
+            acc[method].merge(a)
+        done += size
+        if progress is not None:
+            progress(done, config.runs)
+    return tracking_result(config, acc), tracks
+
+
 def run_tracking(
     config: TrackingConfig,
     progress: ProgressFn | None = None,
@@ -236,17 +346,102 @@ def run_tracking(
     Args:
         progress: called as ``progress(runs_done, runs_total)`` after each block.
     """
+    return _monte_carlo(config, config.target.truth(), progress, block)[0]
+
+
+def displayed_measurements(
+    config: TrackingConfig, truth: NDArray[np.float64] | None = None
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The displayed run's measured r̂ and β̂, each (1, N) in m and rad (``DISPLAY_STREAM``).
+
+    The same numbers as ``core.tracking.stream.prosov_single_run`` for the same seed and σ.
+    """
+    if truth is None:
+        truth = config.target.truth()
+    rng = np.random.default_rng(np.random.SeedSequence([config.seed, DISPLAY_STREAM]))
+    return polar_measurements(
+        truth, sigma_r_m=config.sigma_r_m, sigma_azimuth_rad=config.sigma_beta_rad, runs=1, rng=rng
+    )
+
+
+@dataclass(frozen=True)
+class ProsovScene:
+    """What a viewer shows of one configuration: the statistics and one displayed run.
+
+    Attributes:
+        result: the Monte Carlo statistics, equal bit for bit to ``run_tracking(config)``.
+        truth: (N, 4) true states (x, ẋ, y, ẏ).
+        times_s: (N,) scan times 0, T, 2T, … in s.
+        r_hat_m, beta_hat_rad: (N,) the displayed run's measured range (m) and azimuth (rad).
+        converted_xy_m: conversion method → (N, 2) its converted points of the displayed run,
+            for ``SHOWN_CONVERSIONS`` (``naive`` is the plain polar-to-Cartesian point).
+        tracks: method → the displayed run's filtered states, for every configured method.
+    """
+
+    result: TrackingResult
+    truth: NDArray[np.float64]
+    times_s: NDArray[np.float64]
+    r_hat_m: NDArray[np.float64]
+    beta_hat_rad: NDArray[np.float64]
+    converted_xy_m: dict[str, NDArray[np.float64]]
+    tracks: dict[str, DisplayedTrack]
+
+    @property
+    def config(self) -> TrackingConfig:
+        return self.result.config
+
+
+def prosov_scene(
+    config: TrackingConfig, progress: ProgressFn | None = None, block: int = BLOCK_RUNS
+) -> ProsovScene:
+    """The Prosov scene of ``config``: Monte Carlo statistics and one displayed run.
+
+    The displayed run's measurements come from ``displayed_measurements`` (its own seed
+    stream, ``DISPLAY_STREAM``), so it is the same run for any number of Monte Carlo runs.
+    Each method filters it with ``filter_block`` as one more row of the Monte Carlo's first
+    block (see ``_run_block``): its states equal ``track_history(method, r̂, β̂, config)`` bit
+    for bit, and ``result`` equals ``run_tracking(config, block=block)`` bit for bit.
+
+    Args:
+        progress: called as ``progress(runs_done, runs_total)`` after each block.
+    """
     truth = config.target.truth()
-    steps = truth.shape[0]
-    acc = {m: MetricsAccumulator(steps) for m in config.methods}
-    done = 0
-    for index, size in enumerate(block_sizes(config.runs, block)):
-        for method, block_acc in run_block(config, index, size, truth).items():
-            acc[method].merge(block_acc)
-        done += size
-        if progress is not None:
-            progress(done, config.runs)
-    return tracking_result(config, acc)
+    r_hat, beta_hat = displayed_measurements(config, truth)
+    result, tracks = _monte_carlo(config, truth, progress, block, (r_hat, beta_hat))
+    sr, sb = config.sigma_r_m, config.sigma_beta_rad
+    converted = {}
+    for method in SHOWN_CONVERSIONS:
+        c = convert_parts(method, r_hat[0], beta_hat[0], sigma_r_m=sr, sigma_azimuth_rad=sb)
+        converted[method] = np.stack([c.x, c.y], -1)
+    return ProsovScene(
+        result=result,
+        truth=truth,
+        times_s=np.arange(truth.shape[0]) * config.target.period_s,
+        r_hat_m=r_hat[0],
+        beta_hat_rad=beta_hat[0],
+        converted_xy_m=converted,
+        tracks=tracks,
+    )
+
+
+def conversion_cloud(config: TrackingConfig, points: int) -> dict[str, NDArray[np.float64]]:
+    """``points`` noisy measurements of the first true position, converted by each of
+    ``SHOWN_CONVERSIONS``: method → (points, 2) in m (seed stream ``CLOUD_STREAM``).
+
+    The cloud shows each conversion's bias at a glance: E[cos β̂] = cos β · e^(−σβ²/2), so the
+    ``naive`` cloud's mean sits r (1 − e^(−σβ²/2)) short of the truth along the line of sight;
+    ``ucm``'s scale e^(σβ²/2) removes that bias, ``seed``'s 1 − σβ²/2 doubles it.
+    """
+    check_int("points", points, low=1)
+    truth = config.target.truth()[:1]
+    rng = np.random.default_rng(np.random.SeedSequence([config.seed, CLOUD_STREAM]))
+    sr, sb = config.sigma_r_m, config.sigma_beta_rad
+    r_c, b_c = polar_measurements(truth, sigma_r_m=sr, sigma_azimuth_rad=sb, runs=points, rng=rng)
+    out = {}
+    for method in SHOWN_CONVERSIONS:
+        c = convert_parts(method, r_c[:, 0], b_c[:, 0], sigma_r_m=sr, sigma_azimuth_rad=sb)
+        out[method] = np.stack([c.x, c.y], -1)
+    return out
 
 
 def prosov_configs(

@@ -34,7 +34,7 @@ from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
 from radarviz.core.conversion.planar import convert_parts
 from radarviz.core.conversion.spatial import convert_naive_3d, convert_ucm_3d
@@ -202,11 +202,107 @@ def method_named(name: str) -> Method:
         raise ValueError(f"method must be one of {', '.join(ALL_METHODS)} (got {name!r})") from None
 
 
-def stack_parts(parts: Sequence[Parts]) -> tuple[list[NDArray], dict[tuple[int, int], NDArray]]:
-    """Several methods' converted parts, each (...), stacked along a new last batch axis."""
-    z = [
-        np.stack(np.broadcast_arrays(*(p[0][i] for p in parts)), -1)
-        for i in range(len(parts[0][0]))
-    ]
-    R = {k: np.stack(np.broadcast_arrays(*(p[1][k] for p in parts)), -1) for k in parts[0][1]}
+def stack_parts(parts: Sequence[Parts]) -> Parts:
+    """Several methods' converted parts, each (...), stacked along a new leading axis (k, ...)."""
+    d = len(parts[0][0])
+    z = [np.stack(np.broadcast_arrays(*(p[0][i] for p in parts))) for i in range(d)]
+    R = {key: np.stack(np.broadcast_arrays(*(p[1][key] for p in parts))) for key in parts[0][1]}
     return z, R
+
+
+def method_groups(names: Sequence[str]) -> list[tuple[str, ...]]:
+    """Split methods into groups that share one batch: the converted ones together (one
+    position update for all of them), each polar method alone."""
+    converted = tuple(n for n in names if METHODS[n].kind == "converted")
+    polar = [(n,) for n in names if METHODS[n].kind != "converted"]
+    return ([converted] if converted else []) + polar
+
+
+class MethodGroup:
+    """Methods that share an update kind, filtered as one batch with a leading method axis.
+
+    For converted methods the batch is (k, ...): row i is method i, and the prediction and the
+    position update are one set of operations for all of them (only the conversions are per
+    method); rows do not interact. A polar group has one method and no extra axis.
+
+    Args:
+        names: one polar method, or any number of converted ones (``method_groups``).
+    """
+
+    def __init__(self, names: Sequence[str]):
+        self.names = tuple(names)
+        self.kinds = [method_named(n) for n in self.names]
+        self.converted = all(k.kind == "converted" for k in self.kinds)
+        if not self.names or (not self.converted and len(self.names) > 1):
+            raise ValueError("a method group is one polar method or only converted methods")
+
+    @staticmethod
+    def _predicted(pred: CVBatch, row: int, site: ArrayLike | None) -> list[Vec]:
+        """Row ``row``'s predicted position minus the site."""
+        return site_offsets(CVBatch(pred.x[row], pred.P[row]), site)
+
+    def start_parts(self, plot: PolarPlot, noise: PolarNoise) -> Parts:
+        """Every method's start conversion, stacked (k, ...) (converted groups only)."""
+        return stack_parts(
+            [k.convert(plot, noise, conversion=k.start_conversion) for k in self.kinds]
+        )
+
+    def start(
+        self,
+        plot: PolarPlot,
+        noise: PolarNoise,
+        *,
+        sigma_v0_mps: float,
+        site: ArrayLike | None = None,
+        parts: Parts | None = None,
+    ) -> CVBatch:
+        """The group's tracks started at their first plot; ``parts``: ``start_parts`` if
+        the caller has them already."""
+        if not self.converted:
+            return self.kinds[0].start(plot, noise, sigma_v0_mps=sigma_v0_mps, site=site)
+        z, R = parts if parts is not None else self.start_parts(plot, noise)
+        d = len(z)
+        zs = np.stack(np.broadcast_arrays(*_shifted(z, site)), axis=-1)
+        Rm = np.empty((*zs.shape[:-1], d, d))
+        for (i, j), v in R.items():
+            Rm[..., i, j] = Rm[..., j, i] = v
+        return cv_init(zs, Rm, sigma_v0_mps)
+
+    def update(
+        self,
+        pred: CVBatch,
+        plot: PolarPlot,
+        noise: PolarNoise,
+        *,
+        site: ArrayLike | None = None,
+        out: CVBatch | None = None,
+        parts: Parts | None = None,
+    ) -> CVBatch:
+        """The update of the group's predicted batch with this scan's plots.
+
+        ``parts``: the methods' conversions of these plots, stacked (k, ...), if the caller
+        has them (``start_parts``: a method converted about the prediction is redone here).
+        """
+        if not self.converted:
+            return self.kinds[0].update(pred, plot, noise, site=site, out=out)
+        if parts is None:
+            z, R = stack_parts(
+                [
+                    k.convert(plot, noise, self._predicted(pred, i, site))
+                    if k.about_prediction
+                    else k.convert(plot, noise)
+                    for i, k in enumerate(self.kinds)
+                ]
+            )
+        else:
+            z, R = parts
+            if any(k.about_prediction for k in self.kinds):
+                z, R = [v.copy() for v in z], {key: v.copy() for key, v in R.items()}
+                for i, kind in enumerate(self.kinds):
+                    if kind.about_prediction:  # ducm: its covariance at this row's prediction
+                        zi, Ri = kind.convert(plot, noise, self._predicted(pred, i, site))
+                        for a in range(len(z)):
+                            z[a][i] = np.reshape(zi[a], z[a][i].shape)
+                        for key, v in Ri.items():
+                            R[key][i] = np.reshape(v, R[key][i].shape)
+        return cv_update_parts(pred, _shifted(z, site), R, out)

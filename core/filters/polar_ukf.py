@@ -38,6 +38,8 @@ from radarviz.core.filters.polar_ekf import polar_measurement_vectors, site_offs
 from radarviz.core.filters.state import (
     CVBatch,
     Vec,
+    cov_components,
+    mean_components,
     position_index,
     sym,
     symmetric_inverse,
@@ -97,15 +99,16 @@ def cholesky_columns(P: NDArray[np.float64], scale: float) -> dict[tuple[int, in
     track (numpy warns "invalid value"); the last pivot is never formed, so it is not checked.
     """
     n = P.shape[-1]
+    Pc = cov_components(P)
     L: dict[tuple[int, int], Vec] = {}
     for j in range(n - 1):
-        d = P[..., j, j].copy()
+        d = Pc[j, j].copy()
         for k in range(j):
             d -= L[j, k] * L[j, k]
         np.sqrt(d, out=d)
         L[j, j] = d
         for i in range(j + 1, n):
-            e = P[..., i, j].copy()
+            e = Pc[i, j].copy()
             for k in range(j):
                 e -= L[i, k] * L[j, k]
             e /= d
@@ -205,6 +208,8 @@ def ukf_update(
     D = [[Z[comp][2 * k] - Z[comp][2 * k + 1] for k in range(n - 1)] for comp in range(m)]
     del Z
     inv = symmetric_inverse(S, m, scale=w)  # folds the weight W of Pxz into S⁻¹
+    inv = {(a, b): sym(inv, a, b) for a in range(m) for b in range(m)}
+    Sf = {(a, b): sym(S, a, b) for a in range(m) for b in range(m)}
     K: list[list[Vec]] = [[] for _ in range(m)]  # K[e][i]: gain row i, column e
     for i in range(n):
         a_row = []
@@ -214,23 +219,22 @@ def ukf_update(
                 a += col[i, k] * D[comp][k]
             a_row.append(a)
         for e in range(m):
-            g = a_row[0] * sym(inv, 0, e)
+            g = a_row[0] * inv[0, e]
             for comp in range(1, m):
-                g = g + a_row[comp] * sym(inv, comp, e)
+                g = g + a_row[comp] * inv[comp, e]
             K[e].append(g)
     del D, col, inv
     nu = [residual(comp, meas[comp]) for comp in range(m)]
     out = target_batch(state, out)
+    xc, oxc = mean_components(x), mean_components(out.x)
     for i in range(n):
-        acc = x[..., i] + K[0][i] * nu[0]
+        acc = xc[i] + K[0][i] * nu[0]
         for e in range(1, m):
             acc = acc + K[e][i] * nu[e]
-        out.x[..., i] = acc
+        oxc[i] = acc
     # P⁺ = P⁻ − K S Kᵀ with (K S Kᵀ)_ij = K_i · (S K_jᵀ), averaged with its transpose.
-    W = [
-        [sum_terms([sym(S, a, e) * K[e][j] for e in range(m)]) for j in range(n)] for a in range(m)
-    ]
-    oP = out.P
+    W = [[sum_terms([Sf[a, e] * K[e][j] for e in range(m)]) for j in range(n)] for a in range(m)]
+    Pc, oPc = cov_components(P), cov_components(out.P)
     for i in range(n):
         for j in range(i, n):
             if i == j:
@@ -240,9 +244,9 @@ def ukf_update(
                     [K[a][i] * W[a][j] for a in range(m)] + [K[a][j] * W[a][i] for a in range(m)]
                 )
                 ksk *= 0.5
-            oP[..., i, j] = P[..., i, j] - ksk
+            oPc[i, j] = Pc[i, j] - ksk
             if i != j:
-                oP[..., j, i] = oP[..., i, j]
+                oPc[j, i] = oPc[i, j]
     return out
 
 

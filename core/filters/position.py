@@ -21,7 +21,9 @@ from numpy.typing import ArrayLike, NDArray
 from radarviz.core.filters.state import (
     CVBatch,
     Vec,
+    cov_components,
     dense_joseph_update,
+    mean_components,
     mirror_upper,
     position_index,
     sym,
@@ -63,56 +65,60 @@ def joseph_update_position(
     n, d = x.shape[-1], len(innovation)
     pos = position_index(state.dims)
     out = target_batch(state, out)
+    xc, Pc = mean_components(x), cov_components(P)
+    oxc, oPc = mean_components(out.x), cov_components(out.P)
     tmp = np.empty(state.batch_shape)
+    Kl = [[K[i, k] for k in range(d)] for i in range(n)]
+    Sf = {(i, j): sym(S, i, j) for i in range(d) for j in range(d)}
     for i in range(n):
-        o = out.x[..., i]
-        np.multiply(K[i, 0], innovation[0], out=o)
-        o += x[..., i]
+        o = oxc[i]
+        np.multiply(Kl[i][0], innovation[0], out=o)
+        o += xc[i]
         for k in range(1, d):
-            np.multiply(K[i, k], innovation[k], out=tmp)
+            np.multiply(Kl[i][k], innovation[k], out=tmp)
             o += tmp
-    U = [[P[..., i, pos[k]] for i in range(n)] for k in range(d)]
+    U = [[Pc[i, pos[k]] for i in range(n)] for k in range(d)]
     # V = K S − U, column by column.
     V: list[list[Vec]] = [[] for _ in range(d)]
     for i in range(n):
         for j in range(d):
-            v = K[i, 0] * sym(S, 0, j)
+            v = Kl[i][0] * Sf[0, j]
             for k in range(1, d):
-                np.multiply(K[i, k], sym(S, k, j), out=tmp)
+                np.multiply(Kl[i][k], Sf[k, j], out=tmp)
                 v += tmp
             v -= U[j][i]
             V[j].append(v)
-    oP = out.P
     for i in range(n):
         for j in range(i, n):
             # P⁺[i, j] = P[i, j] − Σ_k K[i, k] U[j, k] + Σ_k V[i, k] K[j, k]
-            o = oP[..., i, j]
-            np.multiply(K[i, 0], U[0][j], out=o)
-            np.subtract(P[..., i, j], o, out=o)
+            o = oPc[i, j]
+            np.multiply(Kl[i][0], U[0][j], out=o)
+            np.subtract(Pc[i, j], o, out=o)
             for k in range(1, d):
-                np.multiply(K[i, k], U[k][j], out=tmp)
+                np.multiply(Kl[i][k], U[k][j], out=tmp)
                 o -= tmp
             for k in range(d):
-                np.multiply(V[k][i], K[j, k], out=tmp)
+                np.multiply(V[k][i], Kl[j][k], out=tmp)
                 o += tmp
-    mirror_upper(oP)
+    mirror_upper(out.P)
     return out
 
 
 def position_gain(state: CVBatch, S: dict[tuple[int, int], Vec]) -> NDArray[np.float64]:
     """K = P Hᵀ S⁻¹ (n, d, ...) component-major, S⁻¹ written out (``symmetric_inverse``)."""
-    P = state.P
-    n, dims = P.shape[-1], state.dims
+    Pc = cov_components(state.P)
+    n, dims = state.P.shape[-1], state.dims
     pos = position_index(dims)
     inv = symmetric_inverse(S, dims)
+    invf = {(i, j): sym(inv, i, j) for i in range(dims) for j in range(dims)}
     K = np.empty((n, dims, *state.batch_shape))
     tmp = np.empty(state.batch_shape)
     for i in range(n):
         for j in range(dims):
             o = K[i, j]
-            np.multiply(P[..., i, pos[0]], sym(inv, 0, j), out=o)
+            np.multiply(Pc[i, pos[0]], invf[0, j], out=o)
             for k in range(1, dims):
-                np.multiply(P[..., i, pos[k]], sym(inv, k, j), out=tmp)
+                np.multiply(Pc[i, pos[k]], invf[k, j], out=tmp)
                 o += tmp
     return K
 
@@ -141,7 +147,8 @@ def innovation_update(
         H[np.arange(d), pos] = 1.0
         nu = np.stack(np.broadcast_arrays(*innovation), -1).reshape(*shape, d)
         return dense_joseph_update(state, nu, H, Rm, out)
-    S = {(i, j): P[..., pos[i], pos[j]] + R[i, j] for i in range(d) for j in range(i, d)}
+    Pc = cov_components(P)
+    S = {(i, j): Pc[pos[i], pos[j]] + R[i, j] for i in range(d) for j in range(i, d)}
     K = position_gain(state, S)
     return joseph_update_position(state, innovation, K, S, out)
 

@@ -16,7 +16,14 @@ import functools
 import numpy as np
 from numpy.typing import NDArray
 
-from radarviz.core.filters.state import CVBatch, mirror_upper, target_batch, use_dense
+from radarviz.core.filters.state import (
+    CVBatch,
+    cov_components,
+    mean_components,
+    mirror_upper,
+    target_batch,
+    use_dense,
+)
 
 
 def transition_matrix(period_s: float, dims: int = 2) -> NDArray[np.float64]:
@@ -66,46 +73,47 @@ def cv_predict(
         out.x[...] = x @ F.T
         out.P[...] = 0.5 * (P_new + P_new.mT)
         return out
-    ox, oP = out.x, out.P
+    xc, Pc = mean_components(x), cov_components(P)
+    ox, oP = mean_components(out.x), cov_components(out.P)
     T2 = T * T
     tmp = np.empty(state.batch_shape)
     dims = state.dims
     for a in range(dims):
         p, v = 2 * a, 2 * a + 1
-        np.multiply(x[..., v], T, out=ox[..., p])
-        ox[..., p] += x[..., p]
-        ox[..., v] = x[..., v]
-        ppv, pvv = P[..., p, v], P[..., v, v]
-        d = oP[..., p, p]
+        np.multiply(xc[v], T, out=ox[p])
+        ox[p] += xc[p]
+        ox[v] = xc[v]
+        ppv, pvv = Pc[p, v], Pc[v, v]
+        d = oP[p, p]
         np.multiply(ppv, 2.0 * T, out=d)
-        d += P[..., p, p]
+        d += Pc[p, p]
         np.multiply(pvv, T2, out=tmp)
         d += tmp
-        d = oP[..., p, v]
+        d = oP[p, v]
         np.multiply(pvv, T, out=d)
         d += ppv
-        oP[..., v, v] = pvv
+        oP[v, v] = pvv
     for a in range(dims):
         for b in range(a + 1, dims):
             pa, va, pb, vb = 2 * a, 2 * a + 1, 2 * b, 2 * b + 1
-            vv = P[..., va, vb]
-            d = oP[..., pa, pb]
-            np.add(P[..., va, pb], P[..., pa, vb], out=d)
+            vv = Pc[va, vb]
+            d = oP[pa, pb]
+            np.add(Pc[va, pb], Pc[pa, vb], out=d)
             d *= T
-            d += P[..., pa, pb]
+            d += Pc[pa, pb]
             np.multiply(vv, T2, out=tmp)
             d += tmp
-            np.multiply(vv, T, out=oP[..., pa, vb])
-            oP[..., pa, vb] += P[..., pa, vb]
-            np.multiply(vv, T, out=oP[..., va, pb])
-            oP[..., va, pb] += P[..., va, pb]
-            oP[..., va, vb] = vv
+            np.multiply(vv, T, out=oP[pa, vb])
+            oP[pa, vb] += Pc[pa, vb]
+            np.multiply(vv, T, out=oP[va, pb])
+            oP[va, pb] += Pc[va, pb]
+            oP[va, vb] = vv
     if sigma_a_mps2:
         q = sigma_a_mps2**2
         for a in range(dims):
             p, v = 2 * a, 2 * a + 1
-            oP[..., p, p] += q * T2 * T2 / 4.0
-            oP[..., p, v] += q * T2 * T / 2.0
-            oP[..., v, v] += q * T2
-    mirror_upper(oP)
+            oP[p, p] += q * T2 * T2 / 4.0
+            oP[p, v] += q * T2 * T / 2.0
+            oP[v, v] += q * T2
+    mirror_upper(out.P)
     return out

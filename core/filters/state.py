@@ -120,12 +120,30 @@ def target_batch(state: CVBatch, out: CVBatch | None) -> CVBatch:
     return out
 
 
+def mean_components(x: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The (n, ...) component-major view of x (..., n): ``xc[i]`` is ``x[..., i]``."""
+    nd = x.ndim
+    return x.transpose(nd - 1, *range(nd - 1))
+
+
+def cov_components(P: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The (n, n, ...) component-major view of P (..., n, n): ``Pc[i, j]`` is ``P[..., i, j]``.
+
+    For a batch made by ``empty_batch`` this is its storage, so ``Pc[i, j]`` is a contiguous
+    block, and indexing it with two integers costs less than ``P[..., i, j]``: the
+    component-wise updates index a few hundred times per call.
+    """
+    nd = P.ndim
+    return P.transpose(nd - 2, nd - 1, *range(nd - 2))
+
+
 def mirror_upper(P: NDArray[np.float64]) -> None:
     """Copy the upper triangle of (..., n, n) into the lower one, in place."""
     n = P.shape[-1]
+    Pc = cov_components(P)
     for i in range(n):
         for j in range(i + 1, n):
-            P[..., j, i] = P[..., i, j]
+            Pc[j, i] = Pc[i, j]
 
 
 def quad_form_inv(P: NDArray[np.float64], e: NDArray[np.float64]) -> NDArray[np.float64]:

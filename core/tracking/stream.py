@@ -8,8 +8,8 @@ with the same engine as the Monte Carlo (``core.filters``): a track is a batch o
 
 * **Groups.** The converted-measurement methods share one batch (one row per method): the
   prediction and the position update are one set of vector operations for all of them, only
-  the conversion is per method. ``ekf`` and ``ukf`` are a batch of one each. The batched
-  arithmetic is elementwise, so each row's result is bit for bit that of a batch of one.
+  the conversion is per method. ``ekf`` and ``ukf`` are a batch of one each. Rows do not
+  interact: each row's result is that of a batch of one, to rounding.
 * **2D** (no elevation): all methods of ``core.filters.methods``; **3D** (elevation on every
   plot): the methods that exist in 3D (``METHODS_3D``). Asking for a 2D-only method with
   elevations is an error.
@@ -38,25 +38,21 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from radarviz.core.experiments.prosov import TrackingConfig
 from radarviz.core.filters.doppler import doppler_update
 from radarviz.core.filters.methods import (
     ALL_METHODS,
-    METHODS,
     METHODS_3D,
+    MethodGroup,
     Parts,
     PolarNoise,
     PolarPlot,
-    stack_parts,
+    method_groups,
 )
-from radarviz.core.filters.polar_ekf import site_offsets
-from radarviz.core.filters.position import cv_update_parts
 from radarviz.core.filters.predict import cv_predict
-from radarviz.core.filters.state import CVBatch, cv_init
+from radarviz.core.filters.state import CVBatch
 from radarviz.core.finite_memory.fit import finite_memory_fit
 from radarviz.core.finite_memory.start import finite_memory_start
 from radarviz.core.params import ParameterError, check_choice, check_int, check_real
-from radarviz.core.scenarios.planar import polar_measurements, prosov_target
 
 INIT_MODES: tuple[str, ...] = ("first-plot", "finite-memory")
 
@@ -93,11 +89,12 @@ class PlotError(ParameterError):
         self.index = index
 
 
-class MethodGroup:
+class TrackGroup:
     """The tracks of one target for methods that share an update kind, as one batch.
 
     ``methods`` is either one polar method (``ekf``, ``ukf``) or any number of converted-
-    measurement methods; ``dims`` is 2 or 3. The batch has one row per method.
+    measurement methods (``core.filters.methods.MethodGroup``); ``dims`` is 2 or 3. The
+    batch has one row per method.
     """
 
     def __init__(
@@ -109,12 +106,8 @@ class MethodGroup:
     ):
         for m in methods:
             check_choice("method", m, ALL_METHODS)
-        kinds = {METHODS[m].kind for m in methods}
-        if not methods or len(kinds) > 1 or (kinds != {"converted"} and len(methods) > 1):
-            raise ValueError("methods must be one polar method or only converted methods")
+        self.group = MethodGroup(methods)
         self.methods = tuple(methods)
-        self.kinds = [METHODS[m] for m in methods]
-        self.converted = kinds == {"converted"}
         self.dims = dims
         self.sigma_a = check_real("sigma_a_mps2", sigma_a_mps2, low=0.0, low_open=False)
         self.sigma_v0 = check_real("sigma_v0_mps", sigma_v0_mps, low=0.0)
@@ -143,19 +136,16 @@ class MethodGroup:
 
     def precompute(self, plots: list[Plot]) -> Parts | None:
         """Every converted method's radar-centred point and covariance for a block of plots,
-        each (B, M); None for a polar group.
+        each (M, B); None for a polar group.
 
         The conversions do not depend on the track, so a block of plots is converted in one
         vectorised call per method (the per-plot calls dominated the time). ``ducm``, which
         needs the prediction, gets its start conversion here (``ucm``'s) and is converted
-        again about the prediction in ``add``.
+        again about the prediction by ``MethodGroup.update``.
         """
-        if not self.converted:
+        if not self.group.converted:
             return None
-        plot, noise = self._polar(plots)
-        return stack_parts(
-            [k.convert(plot, noise, conversion=k.start_conversion) for k in self.kinds]
-        )
+        return self.group.start_parts(*self._polar(plots))
 
     def start_from(self, x: NDArray[np.float64], P: NDArray[np.float64], time_s: float) -> None:
         """Start every method of the group at x (n,), P (n, n) (absolute frame)."""
@@ -169,36 +159,14 @@ class MethodGroup:
         site = np.asarray(p.site[: self.dims], dtype=np.float64)
         plot, noise = self._polar([p])
         if self.state is None:
-            if self.converted:
-                assert pre is not None
-                z, R = pre
-                zs = np.stack([z[i] + site[i] for i in range(self.dims)], -1)
-                Rm = np.empty((m, self.dims, self.dims))
-                for (i, j), v in R.items():
-                    Rm[:, i, j] = Rm[:, j, i] = v
-                state = cv_init(zs, Rm, self.sigma_v0)
-            else:
-                state = self.kinds[0].start(plot, noise, sigma_v0_mps=self.sigma_v0, site=site)
+            state = self.group.start(plot, noise, sigma_v0_mps=self.sigma_v0, site=site, parts=pre)
         else:
             assert self.time_s is not None
             dt = p.time_s - self.time_s
             if dt < 0:
                 raise ValueError(f"times must not decrease (got {p.time_s} after {self.time_s})")
             pred = cv_predict(self.state, dt, self.sigma_a) if dt > 0 else self.state
-            if self.converted:
-                assert pre is not None
-                z, R = [v.copy() for v in pre[0]], {k: v.copy() for k, v in pre[1].items()}
-                for i, kind in enumerate(self.kinds):
-                    if kind.about_prediction:
-                        row = CVBatch(pred.x[i : i + 1], pred.P[i : i + 1])
-                        zi, Ri = kind.convert(plot, noise, site_offsets(row, site))
-                        for a in range(self.dims):
-                            z[a][i] = zi[a][0]
-                        for key, v in Ri.items():
-                            R[key][i] = v[0]
-                state = cv_update_parts(pred, [z[a] + site[a] for a in range(self.dims)], R)
-            else:
-                state = self.kinds[0].update(pred, plot, noise, site=site)
+            state = self.group.update(pred, plot, noise, site=site, parts=pre)
         if use_doppler and p.radial_velocity_mps is not None:
             # Linear in the velocity: the position frame does not matter.
             state = doppler_update(
@@ -212,14 +180,6 @@ class MethodGroup:
             )
         self.state, self.time_s = state, p.time_s
         return state
-
-
-def track_groups(methods: tuple[str, ...]) -> list[tuple[str, ...]]:
-    """Split methods into ``MethodGroup`` groups: the converted ones together, each polar
-    alone."""
-    converted = tuple(m for m in methods if METHODS[m].kind == "converted")
-    polar = [(m,) for m in methods if METHODS[m].kind != "converted"]
-    return ([converted] if converted else []) + polar
 
 
 @dataclass(frozen=True)
@@ -274,7 +234,7 @@ class StreamTracker:
         o = options
         dims = 3 if three_d else 2
         self._groups = [
-            MethodGroup(g, dims, o.sigma_a_mps2, o.sigma_v0_mps) for g in track_groups(self.methods)
+            TrackGroup(g, dims, o.sigma_a_mps2, o.sigma_v0_mps) for g in method_groups(self.methods)
         ]
         self._where = {
             m: (k, i) for k, tr in enumerate(self._groups) for i, m in enumerate(tr.methods)
@@ -312,7 +272,7 @@ class StreamTracker:
             for g, parts in zip(self._groups, pre, strict=True):
                 row = None
                 if parts is not None:
-                    row = ([z[i] for z in parts[0]], {k: v[i] for k, v in parts[1].items()})
+                    row = ([z[:, i] for z in parts[0]], {k: v[:, i] for k, v in parts[1].items()})
                 g.add(p, row, use_doppler)
             self._started = True
             out.append(self._rows())
@@ -391,22 +351,3 @@ class StreamTracker:
             g.start_from(start.x.copy(), start.P.copy(), p.time_s)
         self._started = True
         self._window = None
-
-
-def prosov_single_run(
-    seed: int = 1, sigma_beta_deg: float = 1.0
-) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], TrackingConfig]:
-    """The Prosov scenario's one displayed run (the viewer's seed stream ``[seed, 7]``).
-
-    Returns times (N,) in s, r̂ (1, N) in m, β̂ (1, N) in rad and the configuration, ready for
-    ``core.experiments.prosov.track_history``.
-    """
-    check_int("seed", seed, low=0)
-    config = TrackingConfig(sigma_beta_deg=sigma_beta_deg, seed=seed, target=prosov_target())
-    truth = config.target.truth()
-    rng = np.random.default_rng(np.random.SeedSequence([seed, 7]))
-    r_hat, b_hat = polar_measurements(
-        truth, sigma_r_m=config.sigma_r_m, sigma_azimuth_rad=config.sigma_beta_rad, runs=1, rng=rng
-    )
-    times = np.arange(truth.shape[0]) * config.target.period_s
-    return times, r_hat, b_hat, config

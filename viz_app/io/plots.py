@@ -63,7 +63,7 @@ from typing import IO, Protocol
 import numpy as np
 from numpy.typing import NDArray
 
-from radarviz.core.experiments.prosov import ALL_METHODS
+from radarviz.core.experiments.prosov import ALL_METHODS, TrackingConfig, displayed_measurements
 from radarviz.core.params import PARAMETERS, ParameterError, check, check_choice, default
 from radarviz.core.scenarios.multi_radar import (
     Scenario3D,
@@ -79,7 +79,6 @@ from radarviz.core.tracking.stream import (
     StateRow,
     StreamOptions,
     StreamTracker,
-    prosov_single_run,
 )
 from radarviz.core.velocity.estimate import BASELINE_TARGET_M, BASELINE_VELOCITY_MPS
 from radarviz.viz_app.io.atomic import atomic_write
@@ -485,8 +484,11 @@ def _radar_toml(radars: Iterable[Radar]) -> str:
 
 
 def prosov_plots(seed: int = 1, sigma_beta_deg: float = 1.0) -> tuple[list[Plot], list[Radar]]:
-    """The Prosov scenario's one run (``prosov_single_run``): one 2D radar at the origin."""
-    times, r_hat, b_hat, cfg = prosov_single_run(seed, sigma_beta_deg)
+    """The Prosov scene's displayed run (``displayed_measurements``): one 2D radar at the
+    origin."""
+    cfg = TrackingConfig(sigma_beta_deg=sigma_beta_deg, seed=seed)
+    r_hat, b_hat = displayed_measurements(cfg)
+    times = np.arange(cfg.target.steps) * cfg.target.period_s
     radar = Radar("radar", 0.0, 0.0, 0.0, cfg.sigma_r_m, cfg.sigma_beta_deg)
     plots = [
         Plot(

@@ -2,19 +2,25 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 import rerun as rr
 
-from radarviz.core.conversion.planar import convert_parts
 from radarviz.core.experiments.doppler_start import DopplerTrackingConfig, run_doppler_tracking
-from radarviz.core.experiments.prosov import TrackingConfig, run_tracking, track_history
+from radarviz.core.experiments.prosov import (
+    SHOWN_CONVERSIONS,
+    ProsovScene,
+    TrackingConfig,
+    conversion_cloud,
+    prosov_scene,
+)
 from radarviz.core.finite_memory.fit import run_gorshkov
 from radarviz.core.scenarios.multi_radar import (
     SIGMA_FIELDS,
     fusion_scenario,
     generate_measurements,
 )
-from radarviz.core.scenarios.planar import polar_measurements
 from radarviz.core.velocity.estimate import (
     M_WARN,
     GeometryError,
@@ -35,6 +41,58 @@ from radarviz.viz_app.rerun.recording import (
 )
 
 PROSOV_SERIES = ("bias_range", "rmse_x", "sigma_x_filter", "nees_pos", "delta_x")
+#: The per-scan statistics ``log_prosov`` draws, each at ``plots/<metric>/<method>``.
+PROSOV_METRICS = ("bias_range", "rmse_x", "sigma_x_filter", "nees_pos")
+
+
+def log_scene_run(rec: rr.RecordingStream, scene: ProsovScene) -> None:
+    """The scene's displayed run: truth, its measurements (naive points) and one track per
+    method, at ``world/truth``, ``world/measurements/radar`` and ``world/tracks/<method>``."""
+    scans = np.arange(1, len(scene.times_s) + 1)
+    times = scene.times_s
+    log_truth(rec, scans, times, scene.truth[:, [0, 2]])
+    log_points(
+        rec,
+        "world/measurements/radar",
+        scans,
+        times,
+        scene.converted_xy_m["naive"],
+        (0, 0, 0),
+        radius=150.0,
+    )
+    for method, track in scene.tracks.items():
+        log_track(rec, method, scans, times, track.x, track.P, scene.config.target.period_s)
+
+
+def log_scene_series(rec: rr.RecordingStream, scene: ProsovScene, metrics: Sequence[str]) -> None:
+    """Each method's per-scan ``metrics`` at ``plots/<metric>/<method>``; with ``nees_pos``
+    also its 95% band at ``plots/nees_pos/band95_lo`` and ``band95_hi``."""
+    times = scene.times_s
+    scans = np.arange(1, len(times) + 1)
+    for name, m in scene.result.metrics.items():
+        rgb = colour(name)
+        for metric in metrics:
+            log_series(rec, f"plots/{metric}/{name}", scans, times, getattr(m, metric), rgb, name)
+    if "nees_pos" in metrics:
+        for tag, v in zip(("lo", "hi"), scene.result.nees_pos_band95, strict=True):
+            log_series(
+                rec,
+                f"plots/nees_pos/band95_{tag}",
+                scans,
+                times,
+                np.full(len(scans), v),
+                (160, 160, 160),
+                "95% band",
+            )
+
+
+def scene_figures(scene: ProsovScene) -> dict[str, float]:
+    """Key figures for status lines: bias in range (m) and position NEES at the last scan."""
+    metrics = scene.result.metrics
+    return {
+        **{f"{n}.bias_range_m": float(m.bias_range[-1]) for n, m in metrics.items()},
+        **{f"{n}.nees_pos": float(m.nees_pos[-1]) for n, m in metrics.items()},
+    }
 
 
 def log_prosov(
@@ -44,85 +102,40 @@ def log_prosov(
     seed: int = 1,
     cloud_points: int = 2000,
 ) -> dict[str, float]:
-    """The Prosov scene: one radar, truth, one run's tracks per method, MC statistics and cloud.
+    """The Prosov scene (``core.experiments.prosov.prosov_scene``): one radar, truth, the
+    displayed run's converted points and tracks per method, MC statistics and the cloud.
 
     Returns the key figures (bias and NEES at the last scan per method) for status lines.
     """
     cfg = TrackingConfig(sigma_beta_deg=sigma_beta_deg, runs=runs, seed=seed)
-    result = run_tracking(cfg)
-    target = cfg.target
-    truth = target.truth()
-    scans = np.arange(1, target.steps + 1)
-    times = (scans - 1) * target.period_s
-    sr, sb = cfg.sigma_r_m, cfg.sigma_beta_rad
+    scene = prosov_scene(cfg)
+    result = scene.result
+    times = scene.times_s
+    scans = np.arange(1, len(times) + 1)
 
     log_radar_site(
-        rec, "radar", (0.0, 0.0, 0.0), f"radar  σr = {sr:g} m, σβ = {cfg.sigma_beta_deg:g}°"
-    )
-    log_truth(rec, scans, times, truth[:, [0, 2]])
-
-    # One displayed run (its own seed stream, so it does not depend on ``runs``).
-    rng = np.random.default_rng(np.random.SeedSequence([seed, 7]))
-    r_hat, b_hat = polar_measurements(truth, sigma_r_m=sr, sigma_azimuth_rad=sb, runs=1, rng=rng)
-    naive = convert_parts("naive", r_hat[0], b_hat[0], sigma_r_m=sr, sigma_azimuth_rad=sb)
-    log_points(
         rec,
-        "world/measurements/radar",
-        scans,
-        times,
-        np.stack([naive.x, naive.y], -1),
-        (0, 0, 0),
-        radius=150.0,
+        "radar",
+        (0.0, 0.0, 0.0),
+        f"radar  σr = {cfg.sigma_r_m:g} m, σβ = {cfg.sigma_beta_deg:g}°",
     )
-    for method in ("seed", "cmkf_d", "ucm"):
-        c = convert_parts(method, r_hat[0], b_hat[0], sigma_r_m=sr, sigma_azimuth_rad=sb)
-        log_points(
-            rec,
-            f"world/converted/{method}",
-            scans,
-            times,
-            np.stack([c.x, c.y], -1),
-            colour(method),
-            radius=150.0,
-        )
-    for method in cfg.methods:
-        xs, ps = track_history(method, r_hat, b_hat, cfg)
-        log_track(rec, method, scans, times, xs[0], ps[0], target.period_s)
+    log_scene_run(rec, scene)
+    for method in SHOWN_CONVERSIONS:
+        if method != "naive":  # the naive points are the measurements
+            log_points(
+                rec,
+                f"world/converted/{method}",
+                scans,
+                times,
+                scene.converted_xy_m[method],
+                colour(method),
+                radius=150.0,
+            )
+    for method, points in conversion_cloud(cfg, cloud_points).items():
+        log_cloud(rec, method, points, scene.truth[0, [0, 2]])
 
-    # Monte Carlo cloud of converted points at the first scan.
-    rng = np.random.default_rng(np.random.SeedSequence([seed, 11]))
-    r_c, b_c = polar_measurements(
-        truth[:1], sigma_r_m=sr, sigma_azimuth_rad=sb, runs=cloud_points, rng=rng
-    )
-    for method in ("naive", "seed", "cmkf_d", "ucm"):
-        c = convert_parts(method, r_c[:, 0], b_c[:, 0], sigma_r_m=sr, sigma_azimuth_rad=sb)
-        log_cloud(rec, method, np.stack([c.x, c.y], -1), truth[0, [0, 2]])
-
-    for name, m in result.metrics.items():
-        rgb = colour(name)
-        log_series(rec, f"plots/bias_range/{name}", scans, times, m.bias_range, rgb, name)
-        log_series(rec, f"plots/rmse_x/{name}", scans, times, m.rmse_x, rgb, name)
-        log_series(rec, f"plots/sigma_x_filter/{name}", scans, times, m.sigma_x_filter, rgb, name)
-        log_series(rec, f"plots/nees_pos/{name}", scans, times, m.nees_pos, rgb, name)
+    log_scene_series(rec, scene, PROSOV_METRICS)
     lo, hi = result.nees_pos_band95
-    log_series(
-        rec,
-        "plots/nees_pos/band95_lo",
-        scans,
-        times,
-        np.full(len(scans), lo),
-        (160, 160, 160),
-        "95% band",
-    )
-    log_series(
-        rec,
-        "plots/nees_pos/band95_hi",
-        scans,
-        times,
-        np.full(len(scans), hi),
-        (160, 160, 160),
-        "95% band",
-    )
     if "seed" in result.metrics and "naive" in result.metrics:
         for reading, values in result.delta_x_percent().items():
             log_series(rec, f"plots/delta_x/{reading}", scans, times, values, None, f"Δx {reading}")
@@ -136,10 +149,7 @@ def log_prosov(
                 level="WARN",
                 scan=int(scans[-1]),
             )
-    return {
-        **{f"{n}.bias_range_m": float(m.bias_range[-1]) for n, m in result.metrics.items()},
-        **{f"{n}.nees_pos": float(m.nees_pos[-1]) for n, m in result.metrics.items()},
-    }
+    return scene_figures(scene)
 
 
 def log_gorshkov(

@@ -33,7 +33,7 @@ import threading
 import time
 import uuid
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -41,31 +41,32 @@ import numpy as np
 import rerun as rr
 from numpy.typing import NDArray
 
-from radarviz.core.conversion.planar import convert_parts
 from radarviz.core.experiments.prosov import (
     ALL_METHODS,
     BLOCK_RUNS,
+    ProsovScene,
     TrackingConfig,
-    block_sizes,
-    filter_block,
+    prosov_scene,
 )
-from radarviz.core.filters.state import CVBatch
 from radarviz.core.finite_memory.fit import PRESETS, c0_ratio
-from radarviz.core.metrics import nees_band
-from radarviz.core.params import PARAMETERS, ParameterError, check, check_choice, check_int, default
-from radarviz.core.scenarios.planar import polar_measurements, prosov_target
+from radarviz.core.params import (
+    PARAMETERS,
+    ParameterError,
+    check,
+    check_choice,
+    check_int,
+    default,
+)
+from radarviz.core.scenarios.planar import prosov_target
 from radarviz.viz_app.rerun.recording import (
     APPLICATION_ID,
     colour,
     default_blueprint,
-    log_points,
     log_radar_site,
-    log_series,
     log_text,
-    log_track,
-    log_truth,
     recording_file,
 )
+from radarviz.viz_app.rerun.scenes import log_scene_run, log_scene_series, scene_figures
 from radarviz.viz_app.rerun.viewer import free_port, rerun_executable, viewer_url
 
 LOOPBACK = "127.0.0.1"
@@ -163,93 +164,25 @@ def preset_values(name: str) -> dict[str, float]:
 # --------------------------------------------------------------------------------------------
 
 
-@dataclass
-class MethodSummary:
-    """Per-scan statistics of one method (same definitions as ``core.metrics``) and run 0."""
-
-    bias_range: NDArray[np.float64]
-    rmse_x: NDArray[np.float64]
-    sigma_x_filter: NDArray[np.float64]
-    nees_pos: NDArray[np.float64]
-    x0: NDArray[np.float64]  # (N, 4) states of the displayed run
-    p0: NDArray[np.float64]  # (N, 4, 4) their covariances
-
-
-@dataclass
+@dataclass(frozen=True)
 class TuneResult:
+    """One run of the panel: its parameters and the Prosov scene core made of them."""
+
     params: TuneParams
-    truth: NDArray[np.float64]
-    measured: NDArray[np.float64]  # (N, 2) naive-converted measurements of run 0
-    methods: dict[str, MethodSummary] = field(default_factory=dict)
-    nees_band95: tuple[float, float] = (0.0, 0.0)
+    scene: ProsovScene
 
     def figures(self) -> dict[str, float]:
         """Key figures at the last scan, named like ``log_prosov``'s."""
-        out = {f"{n}.bias_range_m": float(m.bias_range[-1]) for n, m in self.methods.items()}
-        out.update({f"{n}.nees_pos": float(m.nees_pos[-1]) for n, m in self.methods.items()})
-        return out
+        return scene_figures(self.scene)
 
 
 def simulate(params: TuneParams) -> TuneResult:
-    """The Prosov Monte Carlo in one pass per method, keeping run 0's states for display.
+    """The Prosov scene of ``params`` (``core.experiments.prosov.prosov_scene``).
 
-    Same noise as ``core.experiments.prosov.run_tracking`` for the same seed (first block of
-    ``SeedSequence(seed)``), but the per-scan statistics are computed at the end from the
-    kept states instead of per scan, and the state NEES is not computed: that halves the cost
-    at the panel's run counts, where per-scan Python overhead dominates.
+    The statistics are ``run_tracking``'s (``core.metrics``) and the displayed run is the one
+    ``radarviz record --preset prosov`` and ``radarviz demo`` draw for the same seed and σ.
     """
-    cfg = params.config()
-    truth = cfg.target.truth()
-    steps, runs = truth.shape[0], cfg.runs
-    (size,) = block_sizes(runs)  # runs <= MAX_TUNE_RUNS <= BLOCK_RUNS: one block
-    (child,) = np.random.SeedSequence(cfg.seed).spawn(1)
-    r_hat, b_hat = polar_measurements(
-        truth,
-        sigma_r_m=cfg.sigma_r_m,
-        sigma_azimuth_rad=cfg.sigma_beta_rad,
-        runs=size,
-        rng=np.random.default_rng(child),
-    )
-    naive = convert_parts(
-        "naive", r_hat[0], b_hat[0], sigma_r_m=cfg.sigma_r_m, sigma_azimuth_rad=cfg.sigma_beta_rad
-    )
-    result = TuneResult(
-        params=params,
-        truth=truth,
-        measured=np.stack([naive.x, naive.y], -1),
-        nees_band95=nees_band(2, runs),
-    )
-    bearing = np.arctan2(truth[:, 2], truth[:, 0])
-    c, s = np.cos(bearing)[:, None], np.sin(bearing)[:, None]
-    X = np.empty((steps, runs, 4))
-    PP = np.empty((3, steps, runs))
-    x0 = np.empty((steps, 4))
-    p0 = np.empty((steps, 4, 4))
-    for method in cfg.methods:
-
-        def keep(n: int, st: CVBatch) -> None:
-            X[n] = st.x
-            PP[0, n] = st.P[:, 0, 0]
-            PP[1, n] = st.P[:, 0, 2]
-            PP[2, n] = st.P[:, 2, 2]
-            x0[n] = st.x[0]
-            p0[n] = st.P[0]
-
-        filter_block(method, r_hat, b_hat, cfg, keep)
-        ex = X[:, :, 0] - truth[:, 0, None]
-        ey = X[:, :, 2] - truth[:, 2, None]
-        pxx, pxy, pyy = PP
-        with np.errstate(invalid="ignore", divide="ignore"):
-            nees = (pyy * ex * ex - 2.0 * pxy * ex * ey + pxx * ey * ey) / (pxx * pyy - pxy * pxy)
-        result.methods[method] = MethodSummary(
-            bias_range=(c * ex + s * ey).mean(axis=1),
-            rmse_x=np.sqrt((ex * ex).mean(axis=1)),
-            sigma_x_filter=np.sqrt(pxx.mean(axis=1)),
-            nees_pos=nees.mean(axis=1),
-            x0=x0.copy(),
-            p0=p0.copy(),
-        )
-    return result
+    return TuneResult(params, prosov_scene(params.config()))
 
 
 _BLUEPRINTS: dict[float, Any] = {}
@@ -281,17 +214,15 @@ def send_blueprint(rec: rr.RecordingStream, path_length_m: float) -> None:
 
 
 def log_tuning_scene(rec: rr.RecordingStream, params: TuneParams) -> TuneResult:
-    """Simulate ``params`` and log the scene (radar, truth, run 0's tracks, MC statistics).
+    """Simulate ``params`` and log the scene (radar, truth, the displayed run, MC statistics).
 
     Sends the blueprint too. Returns the simulation result (``result.figures()`` are the key
     figures for the status line).
     """
     result = simulate(params)
+    scene = result.scene
     p = params
-    steps = p.steps
-    scans = np.arange(1, steps + 1)
-    times = (scans - 1) * p.period_s
-    send_blueprint(rec, abs(result.truth[-1, 0] - result.truth[0, 0]))
+    send_blueprint(rec, abs(scene.truth[-1, 0] - scene.truth[0, 0]))
     log_radar_site(
         rec,
         "radar",
@@ -299,30 +230,11 @@ def log_tuning_scene(rec: rr.RecordingStream, params: TuneParams) -> TuneResult:
         f"radar  σr = {p.sigma_r_m:g} m, σβ = {p.sigma_beta_deg:g}°, T = {p.period_s:g} s, "
         f"C0 = {p.c0:.4g} (σVr = {p.sigma_vr_mps:.3g} m/s)",
     )
-    log_truth(rec, scans, times, result.truth[:, [0, 2]])
-    log_points(
-        rec, "world/measurements/radar", scans, times, result.measured, (0, 0, 0), radius=150.0
-    )
-    for name, m in result.methods.items():
-        log_track(rec, name, scans, times, m.x0, m.p0, p.period_s)
-        rgb = colour(name)
-        log_series(rec, f"plots/bias_range/{name}", scans, times, m.bias_range, rgb, name)
-        log_series(rec, f"plots/rmse_x/{name}", scans, times, m.rmse_x, rgb, name)
-        log_series(rec, f"plots/nees_pos/{name}", scans, times, m.nees_pos, rgb, name)
-    lo, hi = result.nees_band95
-    for tag, v in (("lo", lo), ("hi", hi)):
-        log_series(
-            rec,
-            f"plots/nees_pos/band95_{tag}",
-            scans,
-            times,
-            np.full(steps, v),
-            (160, 160, 160),
-            "95% band",
-        )
+    log_scene_run(rec, scene)
+    log_scene_series(rec, scene, TUNE_SERIES)
     log_text(
         rec,
-        f"tune: {p.runs} Monte Carlo runs × {steps} scans, σr = {p.sigma_r_m:g} m, "
+        f"tune: {p.runs} Monte Carlo runs × {p.steps} scans, σr = {p.sigma_r_m:g} m, "
         f"σβ = {p.sigma_beta_deg:g}°, T = {p.period_s:g} s, seed {p.seed}",
     )
     return result
@@ -523,7 +435,7 @@ class TuneSession:
                 f"| {m} | {good.figures[f'{m}.bias_range_m']:.1f} "
                 f"| {good.figures[f'{m}.nees_pos']:.2f} |"
             )
-        lo, hi = good.result.nees_band95
+        lo, hi = good.result.scene.result.nees_pos_band95
         lines.append("")
         lines.append(f"last scan; NEES 95% band [{lo:.2f}, {hi:.2f}]")
         return "\n".join(lines)
@@ -683,7 +595,8 @@ class TunePanel:
             self._draw(good.result)
 
     def _draw(self, result: TuneResult) -> None:
-        """Geometry in km: radar (origin), truth path, measurements and run 0's tracks."""
+        """Geometry in km: radar (origin), truth path, the displayed run's measurements and
+        tracks."""
         scene = self.server.scene
         km = 1e-3
 
@@ -692,17 +605,19 @@ class TunePanel:
             p[:, :2] = xy * km
             return np.stack([p[:-1], p[1:]], axis=1)
 
+        shown = result.scene
         scene.add_line_segments(
-            "/truth", segments(result.truth[:, [0, 2]]), (20, 20, 20), thickness=0.6
+            "/truth", segments(shown.truth[:, [0, 2]]), (20, 20, 20), thickness=0.6
         )
-        meas = np.zeros((len(result.measured), 3), dtype=np.float32)
-        meas[:, :2] = result.measured * km
+        measured = shown.converted_xy_m["naive"]
+        meas = np.zeros((len(measured), 3), dtype=np.float32)
+        meas[:, :2] = measured * km
         scene.add_point_cloud("/measurements", meas, (90, 90, 90), point_size=0.8)
         for m in ALL_METHODS:
-            if m in result.methods:
-                x0 = result.methods[m].x0
+            if m in shown.tracks:
+                x = shown.tracks[m].x
                 scene.add_line_segments(
-                    f"/tracks/{m}", segments(x0[:, [0, 2]]), colour(m), thickness=0.4
+                    f"/tracks/{m}", segments(x[:, [0, 2]]), colour(m), thickness=0.4
                 )
             else:
                 with contextlib.suppress(Exception):
