@@ -254,7 +254,9 @@ def _run_block(
         tracks = {
             m: DisplayedTrack(np.empty((steps, 4)), np.empty((steps, 4, 4))) for m in config.methods
         }
-    for names in method_groups(config.methods):
+    # Methods share a batch while it stays within a block's size (cache-sized, see BLOCK_RUNS).
+    n_rows = r_hat.shape[0]
+    for names in method_groups(config.methods, max_group=max(1, BLOCK_RUNS // n_rows)):
         group = MethodGroup(names)
 
         def on_scan(n: int, st: CVBatch, group: MethodGroup = group) -> None:

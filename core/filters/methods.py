@@ -203,19 +203,35 @@ def method_named(name: str) -> Method:
 
 
 def stack_parts(parts: Sequence[Parts]) -> Parts:
-    """Several methods' converted parts, each (...), stacked along a new leading axis (k, ...)."""
+    """Several methods' converted parts, each (...), stacked along a new leading axis (k, ...).
+
+    One method's parts become views with a leading axis of 1 (no copy: the Monte Carlo's
+    single-method loop converts every scan)."""
     d = len(parts[0][0])
+    if len(parts) == 1:
+        z1, R1 = parts[0]
+        keys = list(R1)
+        arrays = np.broadcast_arrays(*z1, *(R1[k] for k in keys))
+        return [a[None] for a in arrays[:d]], {
+            k: a[None] for k, a in zip(keys, arrays[d:], strict=True)
+        }
     z = [np.stack(np.broadcast_arrays(*(p[0][i] for p in parts))) for i in range(d)]
     R = {key: np.stack(np.broadcast_arrays(*(p[1][key] for p in parts))) for key in parts[0][1]}
     return z, R
 
 
-def method_groups(names: Sequence[str]) -> list[tuple[str, ...]]:
+def method_groups(names: Sequence[str], max_group: int | None = None) -> list[tuple[str, ...]]:
     """Split methods into groups that share one batch: the converted ones together (one
-    position update for all of them), each polar method alone."""
-    converted = tuple(n for n in names if METHODS[n].kind == "converted")
-    polar = [(n,) for n in names if METHODS[n].kind != "converted"]
-    return ([converted] if converted else []) + polar
+    position update for all of them; at most ``max_group`` per group), each polar method alone.
+
+    Batching methods pays where numpy's per-call cost dominates (a few hundred tracks); with
+    10⁴ tracks per method a group's working set would leave the cache, so callers with large
+    batches pass a small ``max_group``.
+    """
+    converted = [n for n in names if METHODS[n].kind == "converted"]
+    size = max(1, len(converted) if max_group is None else max_group)
+    groups = [tuple(converted[i : i + size]) for i in range(0, len(converted), size)]
+    return groups + [(n,) for n in names if METHODS[n].kind != "converted"]
 
 
 class MethodGroup:
