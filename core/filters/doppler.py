@@ -141,11 +141,13 @@ def _dense(
 
     def vectors(g: tuple) -> NDArray[np.float64]:
         """The first ``dims`` components of g as one (..., dims) array (a missing one is 0)."""
-        comps = [g[a] if a < len(g) else 0.0 for a in range(dims)]
-        return np.stack(np.broadcast_arrays(*comps, np.zeros(shape))[:dims], -1)
+        arr = np.zeros((*shape, dims))
+        for a in range(min(dims, len(g))):
+            arr[..., a] = g[a]
+        return arr
 
     def angle_term(g: NDArray[np.float64]) -> NDArray[np.float64]:
-        gv = np.sum(g * v, -1)
+        gv = (g[..., None, :] @ v[..., :, None])[..., 0, 0]
         return gv * gv + (g[..., None, :] @ Pvv @ g[..., :, None])[..., 0, 0]
 
     u_v = vectors(u)
@@ -154,11 +156,8 @@ def _dense(
         r_e = r_e + var_e * angle_term(vectors(g_e))
     H = np.zeros((*shape, 1, n))
     H[..., 0, vel] = u_v
-    nu = np.asarray(radial_velocity_mps, dtype=np.float64) - np.sum(u_v * v, -1)
-    return dense_joseph_update(
-        state,
-        np.broadcast_to(nu, shape)[..., None],
-        H,
-        np.broadcast_to(r_e, shape)[..., None, None],
-        out,
-    )
+    nu = np.empty((*shape, 1))
+    nu[..., 0] = radial_velocity_mps - (u_v[..., None, :] @ v[..., :, None])[..., 0, 0]
+    R = np.empty((*shape, 1, 1))
+    R[..., 0, 0] = r_e
+    return dense_joseph_update(state, nu, H, R, out)

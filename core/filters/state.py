@@ -245,7 +245,10 @@ def dense_joseph_update(
     x, P = state.x, state.P
     U = P @ H.mT
     S = H @ U + R
-    K = np.linalg.solve(S, U.mT).mT  # U S⁻¹ (S symmetric)
+    if S.shape[-1] == 1:  # a scalar measurement (Doppler): S⁻¹ is a division
+        K = U / S
+    else:
+        K = np.linalg.solve(S, U.mT).mT  # U S⁻¹ (S symmetric)
     P_new = P - K @ U.mT + (K @ S - U) @ K.mT
     out = target_batch(state, out)
     out.x[...] = x + (K @ innovation[..., None])[..., 0]

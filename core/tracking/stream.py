@@ -153,11 +153,18 @@ class TrackGroup:
         self.state = CVBatch(np.tile(x, (m, 1)), np.tile(P, (m, 1, 1)))
         self.time_s = time_s
 
-    def add(self, p: Plot, pre: Parts | None, use_doppler: bool = True) -> CVBatch:
-        """Filter one plot; ``pre`` this plot's slice of ``precompute`` (z (M,), R (M,))."""
+    def add(
+        self,
+        p: Plot,
+        pre: Parts | None,
+        use_doppler: bool = True,
+        polar: tuple[PolarPlot, PolarNoise] | None = None,
+    ) -> CVBatch:
+        """Filter one plot; ``pre`` this plot's slice of ``precompute`` (z (M,), R (M,));
+        ``polar``: the plot as (1,) arrays if the caller has them (every group shares them)."""
         m = len(self.methods)
         site = np.asarray(p.site[: self.dims], dtype=np.float64)
-        plot, noise = self._polar([p])
+        plot, noise = polar if polar is not None else self._polar([p])
         if self.state is None:
             state = self.group.start(plot, noise, sigma_v0_mps=self.sigma_v0, site=site, parts=pre)
         else:
@@ -269,11 +276,12 @@ class StreamTracker:
                     raise
                 out.append(self._rows() if self._started else [])
                 continue
+            polar = self._groups[0]._polar([p])  # the plot as (1,) arrays, shared by all groups
             for g, parts in zip(self._groups, pre, strict=True):
                 row = None
                 if parts is not None:
                     row = ([z[:, i] for z in parts[0]], {k: v[:, i] for k, v in parts[1].items()})
-                g.add(p, row, use_doppler)
+                g.add(p, row, use_doppler, polar)
             self._started = True
             out.append(self._rows())
         return out
