@@ -139,13 +139,8 @@ class Method:
         site: ArrayLike | None = None,
     ) -> CVBatch:
         """Tracks started at their first plot (module docstring)."""
-        z, R = self.convert(plot, noise, conversion=self.start_conversion)
-        d = len(z)
-        zs = np.stack(np.broadcast_arrays(*_shifted(z, site)), axis=-1)
-        Rm = np.empty((*zs.shape[:-1], d, d))
-        for (i, j), v in R.items():
-            Rm[..., i, j] = Rm[..., j, i] = v
-        return cv_init(zs, Rm, sigma_v0_mps)
+        parts = self.convert(plot, noise, conversion=self.start_conversion)
+        return start_from_parts(parts, sigma_v0_mps=sigma_v0_mps, site=site)
 
     def update(
         self,
@@ -164,6 +159,20 @@ class Method:
         predicted = site_offsets(pred, site) if self.about_prediction else None
         z, R = self.convert(plot, noise, predicted)
         return cv_update_parts(pred, _shifted(z, site), R, out)
+
+
+def start_from_parts(
+    parts: Parts, *, sigma_v0_mps: float, site: ArrayLike | None = None
+) -> CVBatch:
+    """Tracks started at converted points: position z + site with covariance R, velocity 0
+    with std σv0 (``cv_init``)."""
+    z, R = parts
+    d = len(z)
+    zs = np.stack(np.broadcast_arrays(*_shifted(z, site)), axis=-1)
+    Rm = np.empty((*zs.shape[:-1], d, d))
+    for (i, j), v in R.items():
+        Rm[..., i, j] = Rm[..., j, i] = v
+    return cv_init(zs, Rm, sigma_v0_mps)
 
 
 def _shifted(z: list[Vec], site: ArrayLike | None) -> list[Vec]:
@@ -276,13 +285,8 @@ class MethodGroup:
         the caller has them already."""
         if not self.converted:
             return self.kinds[0].start(plot, noise, sigma_v0_mps=sigma_v0_mps, site=site)
-        z, R = parts if parts is not None else self.start_parts(plot, noise)
-        d = len(z)
-        zs = np.stack(np.broadcast_arrays(*_shifted(z, site)), axis=-1)
-        Rm = np.empty((*zs.shape[:-1], d, d))
-        for (i, j), v in R.items():
-            Rm[..., i, j] = Rm[..., j, i] = v
-        return cv_init(zs, Rm, sigma_v0_mps)
+        parts = parts if parts is not None else self.start_parts(plot, noise)
+        return start_from_parts(parts, sigma_v0_mps=sigma_v0_mps, site=site)
 
     def update(
         self,
