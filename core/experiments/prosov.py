@@ -356,7 +356,7 @@ def displayed_measurements(
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """The displayed run's measured r̂ and β̂, each (1, N) in m and rad (``DISPLAY_STREAM``).
 
-    The same numbers as ``core.tracking.stream.prosov_single_run`` for the same seed and σ.
+    ``radarviz simulate --preset prosov`` writes this run as a measurement file.
     """
     if truth is None:
         truth = config.target.truth()
