@@ -141,9 +141,12 @@ def _dense(
 
     def vectors(g: tuple) -> NDArray[np.float64]:
         """The first ``dims`` components of g as one (..., dims) array (a missing one is 0)."""
+        comps = [g[a] if a < len(g) else 0.0 for a in range(dims)]
+        if all(np.ndim(c) == 0 for c in comps):  # one direction for the whole batch
+            return np.broadcast_to(np.array(comps, dtype=np.float64), (*shape, dims))
         arr = np.zeros((*shape, dims))
-        for a in range(min(dims, len(g))):
-            arr[..., a] = g[a]
+        for a in range(dims):
+            arr[..., a] = comps[a]
         return arr
 
     def angle_term(g: NDArray[np.float64]) -> NDArray[np.float64]:

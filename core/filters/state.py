@@ -114,6 +114,8 @@ def target_batch(state: CVBatch, out: CVBatch | None) -> CVBatch:
     and faulting them in costs more than the arithmetic. Loops ping-pong between two batches.
     """
     if out is None:
+        if use_dense(state):  # the dense path needs no component-major storage
+            return CVBatch(np.empty(state.x.shape), np.empty(state.P.shape))
         return empty_batch(state.batch_shape, state.dims)
     if out.x.shape != state.x.shape or np.shares_memory(out.P, state.P):
         raise ValueError("out must be a separate batch with the same number of runs")
