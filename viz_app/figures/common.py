@@ -14,6 +14,22 @@ from radarviz.viz_app.io.atomic import atomic_write
 DPI = 120
 
 
+#: The series colours of every figure, in order (matplotlib's tab10): a series keeps its
+#: position, hence its colour, in every panel.
+PALETTE: tuple[str, ...] = (
+    "tab:blue",
+    "tab:orange",
+    "tab:green",
+    "tab:red",
+    "tab:purple",
+    "tab:brown",
+    "tab:pink",
+    "tab:gray",
+    "tab:olive",
+    "tab:cyan",
+)
+
+
 def write_figure_atomically(fig: Figure, path: Path, dpi: int = DPI) -> None:
     """Render into a temporary file beside ``path``, then rename it onto ``path``.
 

@@ -31,22 +31,10 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.ticker import LogFormatter, MaxNLocator
 
-from radarviz.viz_app.figures.common import finite_points, write_figure_atomically
+from radarviz.viz_app.figures.common import PALETTE, finite_points, write_figure_atomically
 
 #: Radar presets in display order; each keeps its colour in every panel (and in any subset).
 RADAR_ORDER: tuple[str, ...] = ("RLS1", "RLS2", "RLS3", "RLS4", "RLS5", "RLS6")
-_PALETTE: tuple[str, ...] = (
-    "tab:blue",
-    "tab:orange",
-    "tab:green",
-    "tab:red",
-    "tab:purple",
-    "tab:brown",
-    "tab:pink",
-    "tab:gray",
-    "tab:olive",
-    "tab:cyan",
-)
 #: Rows: key in the document, symbol, unit.
 _STATES: tuple[tuple[str, str, str], ...] = (
     ("r", "r", "m"),
@@ -124,9 +112,9 @@ def _radar_colours(names: Sequence[str]) -> dict[str, str]:
         if name in colours:
             continue
         if name in RADAR_ORDER:
-            colours[name] = _PALETTE[RADAR_ORDER.index(name)]
+            colours[name] = PALETTE[RADAR_ORDER.index(name)]
         else:
-            colours[name] = _PALETTE[(len(RADAR_ORDER) + extra) % len(_PALETTE)]
+            colours[name] = PALETTE[(len(RADAR_ORDER) + extra) % len(PALETTE)]
             extra += 1
     return colours
 

@@ -27,22 +27,10 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 from matplotlib.ticker import LogFormatter
 
-from radarviz.viz_app.figures.common import finite_points, write_figure_atomically
+from radarviz.viz_app.figures.common import PALETTE, finite_points, write_figure_atomically
 
 #: Methods in display order; each keeps its colour in every panel.
 METHOD_ORDER: tuple[str, ...] = ("naive", "seed", "cmkf_d", "ucm", "ducm", "ekf", "ukf")
-_PALETTE: tuple[str, ...] = (
-    "tab:blue",
-    "tab:orange",
-    "tab:green",
-    "tab:red",
-    "tab:purple",
-    "tab:brown",
-    "tab:pink",
-    "tab:gray",
-    "tab:olive",
-    "tab:cyan",
-)
 #: The three readings of σ̂x in Δx(n): key in the document, label, colour.
 _READINGS: tuple[tuple[str, str, str], ...] = (
     ("filter", "filter (P-based)", "tab:blue"),
@@ -79,9 +67,9 @@ def _method_colours(cases: Sequence[Mapping[str, Any]]) -> dict[str, str]:
     known = [m for m in METHOD_ORDER if m in present]
     extra = [m for m in present if m not in METHOD_ORDER]
     # Known methods keep their slot even when others are absent; extras come after them.
-    colours = {m: _PALETTE[METHOD_ORDER.index(m)] for m in known}
+    colours = {m: PALETTE[METHOD_ORDER.index(m)] for m in known}
     for i, m in enumerate(extra):
-        colours[m] = _PALETTE[(len(METHOD_ORDER) + i) % len(_PALETTE)]
+        colours[m] = PALETTE[(len(METHOD_ORDER) + i) % len(PALETTE)]
     return colours
 
 
