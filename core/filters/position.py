@@ -13,6 +13,7 @@ change of variables in ``core.filters.polar_ekf``, of the polar EKF too: one imp
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 
 import numpy as np
@@ -123,6 +124,15 @@ def position_gain(state: CVBatch, S: dict[tuple[int, int], Vec]) -> NDArray[np.f
     return K
 
 
+@functools.lru_cache(maxsize=2)
+def position_matrix(dims: int) -> NDArray[np.float64]:
+    """H_pos (d, 2d): picks the position out of the state (read-only, made once per d)."""
+    H = np.zeros((dims, 2 * dims))
+    H[np.arange(dims), position_index(dims)] = 1.0
+    H.flags.writeable = False
+    return H
+
+
 def innovation_update(
     state: CVBatch,
     innovation: Sequence[Vec],
@@ -143,8 +153,7 @@ def innovation_update(
         Rm = np.empty((*shape, d, d))
         for (i, j), v in R.items():
             Rm[..., i, j] = Rm[..., j, i] = v
-        H = np.zeros((d, 2 * d))
-        H[np.arange(d), pos] = 1.0
+        H = position_matrix(state.dims)
         nu = np.stack(np.broadcast_arrays(*innovation), -1).reshape(*shape, d)
         return dense_joseph_update(state, nu, H, Rm, out)
     Pc = cov_components(P)

@@ -89,6 +89,27 @@ class PlotError(ParameterError):
         self.index = index
 
 
+def polar_arrays(plots: list[Plot], dims: int) -> tuple[PolarPlot, PolarNoise]:
+    """A block's (r̂, β̂[, ε̂]) and noise std as (B,) arrays (ε̂ only when ``dims`` is 3)."""
+    col = {
+        name: np.array([getattr(p, name) for p in plots], dtype=np.float64)
+        for name in (
+            "range_m",
+            "azimuth_rad",
+            "sigma_r_m",
+            "sigma_azimuth_rad",
+            "sigma_elevation_rad",
+        )
+    }
+    el = None
+    if dims == 3:
+        el = np.array([p.elevation_rad for p in plots], dtype=np.float64)
+    return (
+        PolarPlot(col["range_m"], col["azimuth_rad"], el),
+        PolarNoise(col["sigma_r_m"], col["sigma_azimuth_rad"], col["sigma_elevation_rad"]),
+    )
+
+
 class TrackGroup:
     """The tracks of one target for methods that share an update kind, as one batch.
 
@@ -114,26 +135,6 @@ class TrackGroup:
         self.state: CVBatch | None = None
         self.time_s: float | None = None
 
-    def _polar(self, plots: list[Plot]) -> tuple[PolarPlot, PolarNoise]:
-        """A block's (r̂, β̂[, ε̂]) and noise std as (B,) arrays."""
-        col = {
-            name: np.array([getattr(p, name) for p in plots], dtype=np.float64)
-            for name in (
-                "range_m",
-                "azimuth_rad",
-                "sigma_r_m",
-                "sigma_azimuth_rad",
-                "sigma_elevation_rad",
-            )
-        }
-        el = None
-        if self.dims == 3:
-            el = np.array([p.elevation_rad for p in plots], dtype=np.float64)
-        return (
-            PolarPlot(col["range_m"], col["azimuth_rad"], el),
-            PolarNoise(col["sigma_r_m"], col["sigma_azimuth_rad"], col["sigma_elevation_rad"]),
-        )
-
     def precompute(self, plots: list[Plot]) -> Parts | None:
         """Every converted method's radar-centred point and covariance for a block of plots,
         each (M, B); None for a polar group.
@@ -145,7 +146,7 @@ class TrackGroup:
         """
         if not self.group.converted:
             return None
-        return self.group.start_parts(*self._polar(plots))
+        return self.group.start_parts(*polar_arrays(plots, self.dims))
 
     def start_from(self, x: NDArray[np.float64], P: NDArray[np.float64], time_s: float) -> None:
         """Start every method of the group at x (n,), P (n, n) (absolute frame)."""
@@ -164,7 +165,7 @@ class TrackGroup:
         ``polar``: the plot as (1,) arrays if the caller has them (every group shares them)."""
         m = len(self.methods)
         site = np.asarray(p.site[: self.dims], dtype=np.float64)
-        plot, noise = polar if polar is not None else self._polar([p])
+        plot, noise = polar if polar is not None else polar_arrays([p], self.dims)
         if self.state is None:
             state = self.group.start(plot, noise, sigma_v0_mps=self.sigma_v0, site=site, parts=pre)
         else:
@@ -276,7 +277,7 @@ class StreamTracker:
                     raise
                 out.append(self._rows() if self._started else [])
                 continue
-            polar = self._groups[0]._polar([p])  # the plot as (1,) arrays, shared by all groups
+            polar = polar_arrays([p], 3 if self.three_d else 2)  # shared by all groups
             for g, parts in zip(self._groups, pre, strict=True):
                 row = None
                 if parts is not None:
