@@ -10,24 +10,14 @@ from typing import Any
 from matplotlib.figure import Figure
 
 from radarviz.viz_app.io.atomic import atomic_write
+from radarviz.viz_app.palette import RADAR_SEQUENCE, hex_colour
 
 DPI = 120
 
 
-#: The series colours of every figure, in order (matplotlib's tab10): a series keeps its
-#: position, hence its colour, in every panel.
-PALETTE: tuple[str, ...] = (
-    "tab:blue",
-    "tab:orange",
-    "tab:green",
-    "tab:red",
-    "tab:purple",
-    "tab:brown",
-    "tab:pink",
-    "tab:gray",
-    "tab:olive",
-    "tab:cyan",
-)
+#: The series colours of every figure, in order: the radar sequence of ``viz_app.palette``
+#: (Okabe–Ito). A series keeps its position, hence its colour, in every panel.
+PALETTE: tuple[str, ...] = tuple(hex_colour(c) for c in RADAR_SEQUENCE)
 
 
 def write_figure_atomically(fig: Figure, path: Path, dpi: int = DPI) -> None:

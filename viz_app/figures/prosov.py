@@ -28,14 +28,15 @@ from matplotlib.patches import Patch
 from matplotlib.ticker import LogFormatter
 
 from radarviz.viz_app.figures.common import PALETTE, finite_points, write_figure_atomically
+from radarviz.viz_app.palette import OKABE_ITO, hex_colour, rgb
 
 #: Methods in display order; each keeps its colour in every panel.
 METHOD_ORDER: tuple[str, ...] = ("naive", "seed", "cmkf_d", "ucm", "ducm", "ekf", "ukf")
 #: The three readings of σ̂x in Δx(n): key in the document, label, colour.
 _READINGS: tuple[tuple[str, str, str], ...] = (
-    ("filter", "filter (P-based)", "tab:blue"),
-    ("rmse", "RMSE", "tab:red"),
-    ("std", "std", "tab:green"),
+    ("filter", "filter (P-based)", hex_colour(OKABE_ITO["blue"])),
+    ("rmse", "RMSE", hex_colour(OKABE_ITO["vermillion"])),
+    ("std", "std", hex_colour(OKABE_ITO["bluish_green"])),
 )
 #: The paper's stated bound on |Δx| over its window, by σβ in degrees.
 PAPER_BOUND_PERCENT: dict[float, float] = {1.0: 2.1, 2.0: 18.0}
@@ -67,9 +68,9 @@ def _method_colours(cases: Sequence[Mapping[str, Any]]) -> dict[str, str]:
     known = [m for m in METHOD_ORDER if m in present]
     extra = [m for m in present if m not in METHOD_ORDER]
     # Known methods keep their slot even when others are absent; extras come after them.
-    colours = {m: PALETTE[METHOD_ORDER.index(m)] for m in known}
+    colours = {m: hex_colour(rgb(m)) for m in known}
     for i, m in enumerate(extra):
-        colours[m] = PALETTE[(len(METHOD_ORDER) + i) % len(PALETTE)]
+        colours[m] = PALETTE[i % len(PALETTE)]
     return colours
 
 

@@ -24,10 +24,11 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from radarviz.core.velocity.estimate import AXES
-from radarviz.viz_app.figures.common import write_figure_atomically
+from radarviz.viz_app.figures.common import PALETTE, write_figure_atomically
+from radarviz.viz_app.palette import OKABE_ITO, hex_colour
 
 _PAIRS = ((0, 1, "ρxy"), (0, 2, "ρxz"), (1, 2, "ρyz"))
-_FIRST, _MC = "tab:blue", "tab:orange"
+_FIRST, _MC = hex_colour(OKABE_ITO["blue"]), hex_colour(OKABE_ITO["orange"])
 WIDTH_IN, HEIGHT_IN = 12.0, 8.5
 
 
@@ -93,7 +94,7 @@ def _build_figure(doc: Mapping[str, Any]) -> Figure:
     ratio = _sweep_series(sweep, "ratio_mc_to_linear")
     robust = _sweep_series(sweep, "ratio_robust_to_linear")
     mser = _sweep_series(sweep, "m")
-    colours = {h: f"C{i}" for i, h in enumerate(sorted(set(ratio) | set(mser)))}
+    colours = {h: PALETTE[i % len(PALETTE)] for i, h in enumerate(sorted(set(ratio) | set(mser)))}
     ax = axs[1, 0]
     ax.axhspan(0.95, 1.05, color="0.9", zorder=0, label="±5 %")
     ax.axhline(1.0, color="0.4", lw=0.8)
@@ -118,7 +119,7 @@ def _build_figure(doc: Mapping[str, Any]) -> Figure:
     if m_warn is not None:
         ax.axhline(
             float(m_warn),
-            color="tab:red",
+            color=hex_colour(OKABE_ITO["vermillion"]),
             ls="--",
             lw=1.0,
             label=f"warning threshold m = {float(m_warn):g}",

@@ -38,25 +38,14 @@ import rerun as rr
 import rerun.blueprint as rrb
 from numpy.typing import NDArray
 
-APPLICATION_ID = "radarviz"
+from radarviz.viz_app.palette import rgb
 
-#: One colour per method, used in every view.
-METHOD_COLOURS: dict[str, tuple[int, int, int]] = {
-    "naive": (31, 119, 180),
-    "seed": (255, 127, 14),
-    "cmkf_d": (44, 160, 44),
-    "ucm": (214, 39, 40),
-    "ducm": (148, 103, 189),
-    "ekf": (140, 86, 75),
-    "ukf": (227, 119, 194),
-    "range_only": (127, 127, 127),
-    "range_doppler": (23, 190, 207),
-    "truth": (20, 20, 20),
-}
+APPLICATION_ID = "radarviz"
 
 
 def colour(name: str) -> tuple[int, int, int]:
-    return METHOD_COLOURS.get(name, (100, 100, 100))
+    """A method's (or other named thing's) colour from the one palette (``viz_app.palette``)."""
+    return rgb(name)
 
 
 def new_recording(recording_id: str | None = None) -> rr.RecordingStream:
