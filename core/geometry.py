@@ -104,3 +104,18 @@ def radial_velocity(
     d = _f(position) - _f(site)
     v = _f(velocity)
     return np.sum(d * v, axis=-1) / np.sqrt(np.sum(d * d, axis=-1))
+
+
+def range_cross_basis(site: ArrayLike, target: ArrayLike) -> NDArray[np.float64]:
+    """Rows (cross-range unit, range unit) of the planar frame of ``target`` seen from ``site``.
+
+    u = (target − site) / |target − site| points away from the radar (down-range); c = (−u_y,
+    u_x) is u turned 90° counter-clockwise (cross-range, the direction of increasing azimuth).
+    For an offset d from the target, ``B @ d`` is (cross-range, down-range) in m, and a
+    covariance P of positions becomes B P Bᵀ in that frame. Shapes: site (2,) or (..., 2),
+    target (..., 2); result (..., 2, 2).
+    """
+    d = _f(target) - _f(site)
+    u = d / np.linalg.norm(d, axis=-1, keepdims=True)
+    c = np.stack([-u[..., 1], u[..., 0]], axis=-1)
+    return np.stack([c, u], axis=-2)

@@ -192,6 +192,13 @@ def test_conversion_cloud_is_centred_where_each_conversion_puts_it() -> None:
     r, s = 150e3, np.deg2rad(2.0) ** 2
     shrink = np.exp(-s / 2.0)
     for method, expected in (("naive", r * shrink), ("ucm", r), ("seed", r * (1 - s / 2) * shrink)):
-        x = cloud[method][:, 0]
+        x = cloud.points[method][0, :, 0]
         assert abs(x.mean() - expected) < Z * x.std(ddof=1) / np.sqrt(points), method
-    assert conversion_cloud(cfg, 10)["ucm"].shape == (10, 2)
+        # At β = 0 down-range is +x: the reported offset is that mean minus r, and its 95%
+        # half-width 1.96 standard errors.
+        down = cloud.offset_mean_m[method][0, 1]
+        np.testing.assert_allclose(down, x.mean() - r, rtol=0, atol=1e-6)
+        se = x.std(ddof=1) / np.sqrt(points)
+        np.testing.assert_allclose(cloud.offset_half_width95_m[method][0, 1], 1.959964 * se)
+    steps = cfg.target.truth().shape[0]
+    assert conversion_cloud(cfg, 10).points["ucm"].shape == (steps, 10, 2)

@@ -55,7 +55,7 @@ OTHER_COLOURS: dict[str, tuple[int, int, int]] = {
     "band": (150, 150, 150),
     "range_only": OKABE_ITO["vermillion"],
     "range_doppler": OKABE_ITO["blue"],
-    "fused": OKABE_ITO["vermillion"],
+    "fused": OKABE_ITO["reddish_purple"],
 }
 
 FALLBACK: tuple[int, int, int] = (100, 100, 100)

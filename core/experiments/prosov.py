@@ -33,6 +33,7 @@ from radarviz.core.filters.methods import (
 )
 from radarviz.core.filters.run import run_scans
 from radarviz.core.filters.state import CVBatch
+from radarviz.core.geometry import range_cross_basis
 from radarviz.core.metrics import MetricsAccumulator, TrackMetrics, delta_percent, nees_band
 from radarviz.core.params import (
     MAX_SIGMA_ANGLE_DEG,
@@ -426,24 +427,50 @@ def prosov_scene(
     )
 
 
-def conversion_cloud(config: TrackingConfig, points: int) -> dict[str, NDArray[np.float64]]:
-    """``points`` noisy measurements of the first true position, converted by each of
-    ``SHOWN_CONVERSIONS``: method → (points, 2) in m (seed stream ``CLOUD_STREAM``).
+class ConversionCloud(NamedTuple):
+    """A Monte Carlo cloud of converted points at every scan of the true trajectory.
+
+    Attributes:
+        points: method → (N, P, 2) converted points in m (P noisy measurements per scan).
+        offset_mean_m: method → (N, 2) the cloud's mean offset from the true position in the
+            target frame (cross-range, down-range), m (``core.geometry.range_cross_basis``):
+            the conversion's bias, seen from the radar.
+        offset_half_width95_m: method → (N, 2) half-width of that mean's 95% confidence
+            interval per axis, 1.96 s / √P with s the sample std of the offsets (the P draws
+            are independent, so the mean's standard error is s / √P; P is in the thousands, so
+            the normal quantile).
+    """
+
+    points: dict[str, NDArray[np.float64]]
+    offset_mean_m: dict[str, NDArray[np.float64]]
+    offset_half_width95_m: dict[str, NDArray[np.float64]]
+
+
+def conversion_cloud(config: TrackingConfig, points: int) -> ConversionCloud:
+    """``points`` noisy measurements of every true position, converted by each of
+    ``SHOWN_CONVERSIONS`` (seed stream ``CLOUD_STREAM``).
 
     The cloud shows each conversion's bias at a glance: E[cos β̂] = cos β · e^(−σβ²/2), so the
     ``naive`` cloud's mean sits r (1 − e^(−σβ²/2)) short of the truth along the line of sight;
     ``ucm``'s scale e^(σβ²/2) removes that bias, ``seed``'s 1 − σβ²/2 doubles it.
     """
-    check_int("points", points, low=1)
-    truth = config.target.truth()[:1]
+    check_int("points", points, low=2)
+    truth = config.target.truth()
+    true_xy = truth[:, [0, 2]]
+    basis = range_cross_basis(np.zeros(2), true_xy)  # (N, 2, 2)
     rng = np.random.default_rng(np.random.SeedSequence([config.seed, CLOUD_STREAM]))
     sr, sb = config.sigma_r_m, config.sigma_beta_rad
+    # (P, N): one row per draw, one column per scan.
     r_c, b_c = polar_measurements(truth, sigma_r_m=sr, sigma_azimuth_rad=sb, runs=points, rng=rng)
-    out = {}
+    cloud, mean, half = {}, {}, {}
     for method in SHOWN_CONVERSIONS:
-        c = convert_parts(method, r_c[:, 0], b_c[:, 0], sigma_r_m=sr, sigma_azimuth_rad=sb)
-        out[method] = np.stack([c.x, c.y], -1)
-    return out
+        c = convert_parts(method, r_c.T, b_c.T, sigma_r_m=sr, sigma_azimuth_rad=sb)
+        xy = np.stack([c.x, c.y], -1)  # (N, P, 2)
+        offsets = np.einsum("nij,npj->npi", basis, xy - true_xy[:, None, :])
+        cloud[method] = xy
+        mean[method] = offsets.mean(axis=1)
+        half[method] = 1.959964 * offsets.std(axis=1, ddof=1) / np.sqrt(points)
+    return ConversionCloud(cloud, mean, half)
 
 
 def prosov_configs(

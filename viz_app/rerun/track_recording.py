@@ -27,17 +27,14 @@ from collections.abc import Iterable, Iterator
 
 import numpy as np
 import rerun as rr
+import rerun.blueprint as rrb
 
 from radarviz.core.filters.state import position_index, velocity_index
 from radarviz.core.tracking.stream import Plot, StateRow
 from radarviz.viz_app.io.plots import Radar
-from radarviz.viz_app.rerun.recording import (
-    colour,
-    default_blueprint,
-    ellipsoid_axes,
-    log_radar_site,
-    recording_file,
-)
+from radarviz.viz_app.palette import radar_rgb
+from radarviz.viz_app.rerun.recording import colour, ellipsoid_axes, log_text, recording_file
+from radarviz.viz_app.rerun.shapes import MARKER, SMALL_MARKER, THIN_LINE
 
 #: Plots buffered before the recording is sent a chunk.
 RRD_CHUNK = 4096
@@ -67,16 +64,89 @@ class TrackRecorder:
         self.count = 0
         self.chunk = 0
         radars = list(radars)
+        for j, r in enumerate(radars):
+            rec.log(
+                f"world/radars/{r.name}",
+                rr.Points3D(
+                    [(r.x_m, r.y_m, r.z_m)],
+                    radii=[MARKER],
+                    colors=[radar_rgb(j)],
+                    labels=[_label(r)],
+                ),
+                static=True,
+            )
+        self.radars = radars
+        self._lo = np.full(3, np.inf)
+        self._hi = np.full(3, -np.inf)
         for r in radars:
-            log_radar_site(rec, r.name, (r.x_m, r.y_m, r.z_m), _label(r))
+            self._extend(np.array([[r.x_m, r.y_m, r.z_m]]))
         self._meas: dict[str, list[tuple[int, float, tuple[float, float, float]]]] = defaultdict(
             list
         )
         self._tracks: dict[str, list[tuple[int, float, np.ndarray, np.ndarray]]] = defaultdict(list)
         # Each method's last drawn position: the next chunk's path strip starts there.
         self._last: dict[str, np.ndarray] = {}
-        centre = np.mean([[r.x_m, r.y_m, r.z_m] for r in radars], axis=0) if radars else (0, 0, 0)
-        rec.send_blueprint(default_blueprint(("sigma_pos_m", "speed_mps"), centre))
+
+    def _extend(self, pts: np.ndarray) -> None:
+        ok = np.all(np.isfinite(pts), axis=1)
+        if ok.any():
+            self._lo = np.minimum(self._lo, pts[ok].min(axis=0))
+            self._hi = np.maximum(self._hi, pts[ok].max(axis=0))
+
+    def close(self) -> None:
+        """Send what is buffered, a summary line in the log and the blueprint: a 3D view
+        framed on every radar and plot, the whole run in the time series."""
+        self.flush()
+        log_text(
+            self.rec,
+            f"{self.count} plots from {len(self.radars)} radar(s): "
+            + ", ".join(r.name for r in self.radars),
+            scan=max(self.count, 1),
+            timeline="plot",
+        )
+        lo = np.where(np.isfinite(self._lo), self._lo, 0.0)
+        hi = np.where(np.isfinite(self._hi), self._hi, 0.0)
+        centre = (lo + hi) / 2.0
+        size = max(float((hi - lo).max()), 1e3)
+        eye = centre + size * np.array([0.3, -1.0, 0.9])
+        whole = rrb.VisibleTimeRange(
+            "plot", start=rrb.TimeRangeBoundary.infinite(), end=rrb.TimeRangeBoundary.infinite()
+        )
+        plots = [
+            rrb.TimeSeriesView(
+                origin=f"plots/{name}",
+                name=title,
+                time_ranges=whole,
+                plot_legend=rrb.PlotLegend(corner="RightTop"),
+            )
+            for name, title in (
+                ("sigma_pos_m", "√trace of the position covariance, m"),
+                ("speed_mps", "track speed, m/s"),
+            )
+        ]
+        self.rec.send_blueprint(
+            rrb.Blueprint(
+                rrb.Horizontal(
+                    rrb.Vertical(
+                        rrb.Spatial3DView(
+                            origin="world",
+                            name="radars, plots and tracks, m",
+                            eye_controls=rrb.EyeControls3D(
+                                position=tuple(eye),
+                                look_target=tuple(centre),
+                                eye_up=(0.0, 0.0, 1.0),
+                            ),
+                        ),
+                        rrb.TextLogView(origin="log", name="log"),
+                        row_shares=[4, 1],
+                    ),
+                    rrb.Vertical(*plots),
+                    column_shares=[3, 2],
+                ),
+                rrb.TimePanel(timeline="plot", state="collapsed"),
+                collapse_panels=True,
+            )
+        )
 
     @classmethod
     @contextlib.contextmanager
@@ -85,7 +155,7 @@ class TrackRecorder:
         with recording_file(path, overwrite=True) as rec:
             recorder = cls(rec, radars)
             yield recorder
-            recorder.flush()
+            recorder.close()
 
     def add(self, plot: Plot, rows: list[StateRow]) -> None:
         self.count += 1
@@ -95,7 +165,7 @@ class TrackRecorder:
         if self.count % RRD_CHUNK == 0:
             self.flush()
 
-    def _indexes(self, n: list[int], t: list[float]) -> list[rr.TimeColumn]:
+    def indexes(self, n: list[int], t: list[float]) -> list[rr.TimeColumn]:
         return [
             rr.TimeColumn("plot", sequence=np.asarray(n, dtype=np.int64)),
             rr.TimeColumn("time", duration=np.asarray(t, dtype=np.float64)),
@@ -108,13 +178,14 @@ class TrackRecorder:
             if not items:
                 continue
             n, t, pts = zip(*items, strict=True)
+            self._extend(np.array(pts))
             rec.send_columns(
                 f"world/measurements/{radar}",
-                indexes=self._indexes(list(n), list(t)),
+                indexes=self.indexes(list(n), list(t)),
                 columns=rr.Points3D.columns(
                     positions=np.array(pts),
-                    radii=[150.0] * len(pts),
-                    colors=[(90, 90, 90)] * len(pts),
+                    radii=[SMALL_MARKER] * len(pts),
+                    colors=[colour("measurement")] * len(pts),
                 ),
             )
         for method, items in self._tracks.items():
@@ -127,12 +198,12 @@ class TrackRecorder:
             cov = P[:, POS][:, :, POS]
             rgb = colour(method)
             k = len(pos)
-            idx = self._indexes(list(n), list(t))
+            idx = self.indexes(list(n), list(t))
             base = f"world/tracks/{method}"
             rec.send_columns(
                 f"{base}/position",
                 indexes=idx,
-                columns=rr.Points3D.columns(positions=pos, colors=[rgb] * k, radii=[250.0] * k),
+                columns=rr.Points3D.columns(positions=pos, colors=[rgb] * k, radii=[MARKER] * k),
             )
             half, quat = ellipsoid_axes(cov)
             rec.send_columns(
@@ -155,7 +226,9 @@ class TrackRecorder:
             strip = pos if method not in self._last else np.vstack([self._last[method], pos])
             self._last[method] = pos[-1]
             rec.log(
-                f"{base}/path/{self.chunk:06d}", rr.LineStrips3D([strip], colors=[rgb]), static=True
+                f"{base}/path/{self.chunk:06d}",
+                rr.LineStrips3D([strip], colors=[rgb], radii=[THIN_LINE]),
+                static=True,
             )
             if self.chunk == 0:
                 for series in ("sigma_pos_m", "speed_mps"):

@@ -305,12 +305,18 @@ def record_sweep(spec: SweepSpec, results: list[TrackingResult], path: Path) -> 
             for metric, _, _ in HEATMAPS
         ]
         series = [
-            rrb.TimeSeriesView(origin=f"sweep/final/{metric}", name=f"{metric} (last)")
-            for metric, _, _ in HEATMAPS
+            rrb.TimeSeriesView(
+                origin=f"sweep/final/{metric}",
+                name=f"{title}, against grid point",
+                plot_legend=rrb.PlotLegend(corner="RightTop"),
+            )
+            for metric, title, _ in HEATMAPS
         ]
+        # The heat maps are static; the series of the last-scan values live on grid_point.
         rec.send_blueprint(
             rrb.Blueprint(
                 rrb.Horizontal(rrb.Tabs(*tabs), rrb.Vertical(*series), column_shares=[3, 2]),
+                rrb.TimePanel(timeline="grid_point", state="collapsed"),
                 collapse_panels=True,
             )
         )

@@ -39,6 +39,7 @@ from typing import Any
 
 import numpy as np
 import rerun as rr
+import rerun.blueprint as rrb
 from numpy.typing import NDArray
 
 from radarviz.core.experiments.prosov import (
@@ -58,19 +59,18 @@ from radarviz.core.params import (
     default,
 )
 from radarviz.core.scenarios.planar import prosov_target
+from radarviz.viz_app.rerun import prosov_scene as prosov_views
+from radarviz.viz_app.rerun.prosov_scene import METHODS_SHOWN, TargetFrame
 from radarviz.viz_app.rerun.recording import (
     APPLICATION_ID,
     colour,
-    default_blueprint,
-    log_radar_site,
     log_text,
     recording_file,
 )
-from radarviz.viz_app.rerun.scenes import log_scene_run, log_scene_series, scene_figures
+from radarviz.viz_app.rerun.scenes import blueprint, scene_figures, text_log_view
 from radarviz.viz_app.rerun.viewer import free_port, rerun_executable, viewer_url
 
 LOOPBACK = "127.0.0.1"
-TUNE_SERIES = ("bias_range", "rmse_x", "nees_pos")
 #: Largest run count the panel accepts (one block of the Monte Carlo engine).
 MAX_TUNE_RUNS = min(5000, BLOCK_RUNS)
 #: The panel's tighter upper ends of table parameters (fast re-runs; seeds a number input holds).
@@ -185,13 +185,15 @@ def simulate(params: TuneParams) -> TuneResult:
     return TuneResult(params, prosov_scene(params.config()))
 
 
-_BLUEPRINTS: dict[float, Any] = {}
+_BLUEPRINTS: dict[TargetFrame, Any] = {}
 _BLUEPRINT_LOCK = threading.Lock()
+#: Converted points per scan behind each cloud mean the panel draws.
+TUNE_CLOUD_POINTS = 1000
 
 
-def send_blueprint(rec: rr.RecordingStream, path_length_m: float) -> None:
-    """Send the tuning blueprint; the top-down extent is rounded up to a power of two times
-    50 km, and each extent's blueprint is built once.
+def send_blueprint(rec: rr.RecordingStream, frame: TargetFrame) -> None:
+    """Send the tuning blueprint (the Prosov tab framed by ``frame``); each frame's blueprint
+    is built once (``prosov_views.target_frame`` rounds its bounds to a few steps).
 
     ``rec.send_blueprint`` builds a new in-memory blueprint stream on every call, and
     rerun-sdk 0.41 never frees it (two native threads each); reusing the built storage keeps
@@ -199,43 +201,36 @@ def send_blueprint(rec: rr.RecordingStream, path_length_m: float) -> None:
     """
     from rerun.blueprint.api import create_in_memory_blueprint
 
-    extent = 50e3 * 2.0 ** max(0, math.ceil(math.log2(max(3.0 * path_length_m, 1.0) / 50e3)))
     with _BLUEPRINT_LOCK:
-        storage = _BLUEPRINTS.get(extent)
+        storage = _BLUEPRINTS.get(frame)
         if storage is None:
-            bp = default_blueprint(
-                TUNE_SERIES, centre=(150e3 + extent / 6.0, 0.0, 0.0), extent_m=extent
+            bp = blueprint(
+                prosov_views.views(frame, METHODS_SHOWN),
+                rrb.Vertical(text_log_view(), name="log"),
             )
             storage = create_in_memory_blueprint(
                 application_id=APPLICATION_ID, blueprint=bp
             ).storage
-            _BLUEPRINTS[extent] = storage
+            _BLUEPRINTS[frame] = storage
     rr.bindings.send_blueprint(storage, True, True, recording=rec.to_native())
 
 
 def log_tuning_scene(rec: rr.RecordingStream, params: TuneParams) -> TuneResult:
-    """Simulate ``params`` and log the scene (radar, truth, the displayed run, MC statistics).
+    """Simulate ``params`` and log the Prosov scene (``prosov_scene.log_scene``: the map, the
+    target frame of every method, the Monte Carlo statistics) and its blueprint.
 
-    Sends the blueprint too. Returns the simulation result (``result.figures()`` are the key
-    figures for the status line).
+    Returns the simulation result (``result.figures()`` are the key figures for the status
+    line).
     """
     result = simulate(params)
-    scene = result.scene
     p = params
-    send_blueprint(rec, abs(scene.truth[-1, 0] - scene.truth[0, 0]))
-    log_radar_site(
-        rec,
-        "radar",
-        (0.0, 0.0, 0.0),
-        f"radar  σr = {p.sigma_r_m:g} m, σβ = {p.sigma_beta_deg:g}°, T = {p.period_s:g} s, "
-        f"C0 = {p.c0:.4g} (σVr = {p.sigma_vr_mps:.3g} m/s)",
-    )
-    log_scene_run(rec, scene)
-    log_scene_series(rec, scene, TUNE_SERIES)
+    frame = prosov_views.log_scene(rec, result.scene, TUNE_CLOUD_POINTS)
+    send_blueprint(rec, frame)
     log_text(
         rec,
         f"tune: {p.runs} Monte Carlo runs × {p.steps} scans, σr = {p.sigma_r_m:g} m, "
-        f"σβ = {p.sigma_beta_deg:g}°, T = {p.period_s:g} s, seed {p.seed}",
+        f"σβ = {p.sigma_beta_deg:g}°, T = {p.period_s:g} s, C0 = {p.c0:.4g} "
+        f"(σVr = {p.sigma_vr_mps:.3g} m/s), seed {p.seed}",
     )
     return result
 

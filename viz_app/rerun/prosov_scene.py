@@ -1,0 +1,537 @@
+"""The Prosov scene in Rerun: the situation in km and each method in the target's frame.
+
+Entity paths (``{m}`` a method: naive, seed, cmkf_d, ucm, ducm, ekf, ukf)::
+
+    prosov/map                         static transform: metres drawn as km, north up
+    prosov/map/radar                   the radar site
+    prosov/map/truth/path              the whole true trajectory (static)
+    prosov/map/truth/position          the true target per scan
+    prosov/map/measurements            the displayed run's plots, converted naively, per scan
+    prosov/map/tracks/{m}/path         the displayed run's track (static strip)
+    prosov/map/tracks/{m}/position     its estimate per scan
+    prosov/target                      static transform: the target frame (below), drawn with
+                                       down-range up and exaggerated RANGE ×k (k in view names)
+    prosov/target/{m}/truth            the true target: the frame's origin (static)
+    prosov/target/{m}/covariance       the method's 1σ position ellipse per scan
+    prosov/target/{m}/estimate         the method's estimate per scan
+    prosov/target/{m}/measurement      the scan's converted measurement (the method's own
+                                       conversion; the naive point for filters fed polar plots)
+    prosov/target/{m}/cloud            Monte Carlo cloud of those converted points per scan
+    prosov/target/{m}/cloud_mean       the cloud's mean per scan
+    prosov/bias/{c}                    conversion c's mean down-range offset ± 95% CI per scan
+    prosov/legend                      one labelled swatch per method (static)
+    plots/prosov/{metric}/{m}          per-scan Monte Carlo statistics (names carry units)
+    plots/prosov/delta_x_percent/{reading}   Prosov's Δx(n), seed against naive
+
+The target frame at scan n: origin at the true target, axes (cross-range, down-range) in m,
+``core.geometry.range_cross_basis``. Every method's view has the same bounds, fixed over the
+run, chosen so the largest 1σ ellipse fills most of the view; the method's colour is the same
+in every view, plot and figure (``viz_app.palette``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import rerun as rr
+import rerun.blueprint as rrb
+from numpy.typing import NDArray
+
+from radarviz.core.experiments.prosov import (
+    SHOWN_CONVERSIONS,
+    ConversionCloud,
+    ProsovScene,
+    TrackingConfig,
+    conversion_cloud,
+    prosov_scene,
+)
+from radarviz.core.filters.methods import ALL_METHODS
+from radarviz.core.geometry import range_cross_basis
+from radarviz.viz_app.palette import rgb
+from radarviz.viz_app.rerun.recording import indexes, log_series, log_text
+from radarviz.viz_app.rerun.shapes import (
+    CLOUD_MARKER,
+    LINE,
+    MARKER,
+    SMALL_MARKER,
+    THIN_LINE,
+    ellipse_outline,
+    flip_y,
+    pale,
+)
+
+ROOT = "prosov"
+#: The methods drawn, in the palette's order.
+METHODS_SHOWN: tuple[str, ...] = ALL_METHODS
+#: Per-scan statistics drawn, each at ``plots/prosov/<name>/<method>``: (name, attribute of
+#: ``core.metrics.TrackMetrics``, view title).
+SERIES: tuple[tuple[str, str, str], ...] = (
+    ("bias_range_m", "bias_range", "track bias along range, m"),
+    ("rmse_x_m", "rmse_x", "track RMSE in x, m"),
+    ("nees_pos", "nees_pos", "position NEES (2 dof), 95% band grey"),
+)
+#: Cloud points drawn per scan and method, and points behind each mean.
+CLOUD_SHOWN = 250
+CLOUD_POINTS = 4000
+#: Down-range exaggerations tried, smallest first.
+_EXAGGERATIONS = (1, 2, 5, 10, 20, 50, 100)
+
+
+@dataclass(frozen=True)
+class TargetFrame:
+    """How the target-frame views are drawn: the down-range exaggeration and the bounds.
+
+    Attributes:
+        exaggeration: down-range distances are drawn ×k (stated in every view's name).
+        cross_half_m: the views show cross-range ±cross_half_m.
+        range_half_m: … and down-range ±range_half_m (true metres).
+        bias_half_m: the bias forest plot shows down-range offsets ±bias_half_m.
+        map_extent_m: (x0, x1, y0, y1) of the situation map, m.
+    """
+
+    exaggeration: int
+    cross_half_m: float
+    range_half_m: float
+    bias_half_m: float
+    map_extent_m: tuple[float, float, float, float]
+
+    @property
+    def bias_row_m(self) -> float:
+        """Row spacing of the forest plot: its rows fill a view about 2.3 times wider than
+        high."""
+        return 2.0 * self.bias_half_m / 2.3 / (len(SHOWN_CONVERSIONS) + 1)
+
+
+def target_frame(scene: ProsovScene, cloud: ConversionCloud) -> TargetFrame:
+    """Bounds that hold every method's 1σ ellipse at every scan, and an exaggeration that
+    makes the down-range spread (σr, the conversion biases) visible next to the cross-range one.
+
+    The cross-range spread r σβ is tens of times σr at the paper's ranges: drawn to scale, a
+    1σ ellipse is a line and a 100 m bias invisible. k is the largest of 1, 2, 5, 10, … not
+    above a third of the ellipses' cross-range / down-range axis ratio at the last scan.
+    """
+    half_cross = 0.0
+    ratios = []
+    for track in scene.tracks.values():
+        cov = _frame_cov(scene, track.P)
+        half_cross = max(half_cross, float(np.sqrt(cov[:, 0, 0]).max()))
+        ratios.append(float(np.sqrt(cov[-1, 0, 0] / cov[-1, 1, 1])))
+    ratio = float(np.median(ratios))
+    k = max([e for e in _EXAGGERATIONS if e <= max(ratio / 3.0, 1.0)])
+    cross = 1.1 * half_cross
+    # Views are about 2.3 times wider than high; the down-range bound follows.
+    reach = max(
+        float(
+            np.abs(cloud.offset_mean_m[c][:, 1]).max() + cloud.offset_half_width95_m[c][:, 1].max()
+        )
+        for c in SHOWN_CONVERSIONS
+    )
+    xy = scene.truth[:, [0, 2]]
+    x1 = float(xy[:, 0].max()) * 1.05
+    x0 = min(float(xy[:, 0].min()), 0.0) - 0.2 * x1
+    half_y = max(float(np.abs(xy[:, 1]).max()), 0.12 * (x1 - x0))
+    return TargetFrame(
+        k,
+        nice_ceiling(cross),
+        nice_ceiling(cross) / 2.3 / k,
+        nice_ceiling(max(1.3 * reach, 1.0)),
+        (x0, x1, -half_y, half_y),
+    )
+
+
+def nice_ceiling(v: float) -> float:
+    """The smallest of 1, 1.5, 2, 3, 5, 7 × 10ⁿ at or above ``v`` (> 0): bounds that change in
+    steps, so a panel re-using a view's blueprint needs only a few of them."""
+    exp = 10.0 ** np.floor(np.log10(v))
+    return float(min(m * exp for m in (1.0, 1.5, 2.0, 3.0, 5.0, 7.0, 10.0) if m * exp >= v))
+
+
+def _basis(scene: ProsovScene) -> NDArray[np.float64]:
+    """(N, 2, 2) rows (cross-range, down-range) at each scan's true position."""
+    return range_cross_basis(np.zeros(2), scene.truth[:, [0, 2]])
+
+
+def _to_frame(scene: ProsovScene, xy: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Points (N, ..., 2) → offsets from the truth in the target frame, (N, ..., 2) m."""
+    b = _basis(scene)
+    d = xy - scene.truth[:, None, [0, 2]] if xy.ndim == 3 else xy - scene.truth[:, [0, 2]]
+    return np.einsum("nij,n...j->n...i", b, d)
+
+
+def _frame_cov(scene: ProsovScene, P: NDArray[np.float64]) -> NDArray[np.float64]:
+    b = _basis(scene)
+    pos = P[:, [0, 2], :][:, :, [0, 2]]
+    return b @ pos @ np.swapaxes(b, -1, -2)
+
+
+def _scan_axes(scene: ProsovScene) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+    return np.arange(1, len(scene.times_s) + 1), scene.times_s
+
+
+def log_map(rec: rr.RecordingStream, scene: ProsovScene, label: str) -> None:
+    """The situation in km: radar, true path, the displayed run's plots and tracks."""
+    scans, times = _scan_axes(scene)
+    idx = indexes(scans, times)
+    n = len(scans)
+    base = f"{ROOT}/map"
+    rec.log(base, flip_y(1e-3), static=True)
+    rec.log(
+        f"{base}/radar",
+        rr.Points2D([[0.0, 0.0]], radii=[MARKER], colors=[rgb("truth")], labels=[label]),
+        static=True,
+    )
+    truth = scene.truth[:, [0, 2]]
+    rec.log(
+        f"{base}/truth/path",
+        rr.LineStrips2D([truth], colors=[rgb("truth")], radii=[THIN_LINE]),
+        static=True,
+    )
+    rec.send_columns(
+        f"{base}/truth/position",
+        indexes=idx,
+        columns=rr.Points2D.columns(positions=truth, radii=[MARKER] * n, colors=[rgb("truth")] * n),
+    )
+    rec.send_columns(
+        f"{base}/measurements",
+        indexes=idx,
+        columns=rr.Points2D.columns(
+            positions=scene.converted_xy_m["naive"],
+            radii=[SMALL_MARKER] * n,
+            colors=[rgb("measurement")] * n,
+        ),
+    )
+    for m, track in scene.tracks.items():
+        xy = track.x[:, [0, 2]]
+        rec.log(
+            f"{base}/tracks/{m}/path",
+            rr.LineStrips2D([xy], colors=[rgb(m)], radii=[THIN_LINE]),
+            static=True,
+        )
+        rec.send_columns(
+            f"{base}/tracks/{m}/position",
+            indexes=idx,
+            columns=rr.Points2D.columns(
+                positions=xy, radii=[SMALL_MARKER] * n, colors=[rgb(m)] * n
+            ),
+        )
+
+
+def log_target_frame(
+    rec: rr.RecordingStream, scene: ProsovScene, frame: TargetFrame, cloud: ConversionCloud
+) -> None:
+    """Each method in the target frame: its 1σ ellipse, estimate, the scan's converted
+    measurement, and the Monte Carlo cloud of converted points with its mean."""
+    scans, times = _scan_axes(scene)
+    idx = indexes(scans, times)
+    n = len(scans)
+    rec.log(
+        ROOT + "/target",
+        flip_y(1.0) if frame.exaggeration == 1 else _exaggerate(frame),
+        static=True,
+    )
+    shown = CLOUD_SHOWN
+    measured = {c: _to_frame(scene, scene.converted_xy_m[c]) for c in SHOWN_CONVERSIONS}
+    clouds = {c: _to_frame(scene, cloud.points[c][:, :shown]) for c in SHOWN_CONVERSIONS}
+    means = cloud.offset_mean_m
+    for m, track in scene.tracks.items():
+        base = f"{ROOT}/target/{m}"
+        colour = rgb(m)
+        own = m in SHOWN_CONVERSIONS
+        source = m if own else "naive"  # filters fed polar plots: show them naively, in grey
+        tone = colour if own else rgb("measurement")
+        rec.log(
+            f"{base}/truth",
+            rr.Points2D([[0.0, 0.0]], radii=[MARKER], colors=[rgb("truth")]),
+            static=True,
+        )
+        est = _to_frame(scene, track.x[:, [0, 2]])
+        cov = _frame_cov(scene, track.P)
+        rec.send_columns(
+            f"{base}/covariance",
+            indexes=idx,
+            columns=rr.LineStrips2D.columns(
+                strips=list(ellipse_outline(est, cov)), colors=[colour] * n, radii=[LINE] * n
+            ),
+        )
+        rec.send_columns(
+            f"{base}/estimate",
+            indexes=idx,
+            columns=rr.Points2D.columns(positions=est, radii=[MARKER] * n, colors=[colour] * n),
+        )
+        rec.send_columns(
+            f"{base}/measurement",
+            indexes=idx,
+            columns=rr.Points2D.columns(
+                positions=measured[source], radii=[SMALL_MARKER] * n, colors=[tone] * n
+            ),
+        )
+        pts = clouds[source]
+        rec.send_columns(
+            f"{base}/cloud",
+            indexes=idx,
+            columns=rr.Points2D.columns(
+                positions=pts.reshape(-1, 2),
+                radii=[CLOUD_MARKER] * pts.shape[0] * pts.shape[1],
+                colors=[pale(tone, 0.55)] * pts.shape[0] * pts.shape[1],
+            ).partition([pts.shape[1]] * n),
+        )
+        rec.send_columns(
+            f"{base}/cloud_mean",
+            indexes=idx,
+            columns=rr.LineStrips2D.columns(
+                strips=list(_crosses(means[source], frame).reshape(-1, 2, 2)),
+                colors=[rgb("truth")] * (2 * n),
+                radii=[LINE] * (2 * n),
+            ).partition([2] * n),
+        )
+    _log_bias(rec, cloud, frame, idx)
+
+
+def _crosses(centre: NDArray[np.float64], frame: TargetFrame) -> NDArray[np.float64]:
+    """(N, 2, 2, 2): two strokes of an × at each centre, 3% of the view's width wide (the
+    down-range stroke shortened by the exaggeration, so the × looks square)."""
+    a = 0.03 * frame.cross_half_m
+    b = a / frame.exaggeration
+    d1 = np.array([[-a, -b], [a, b]])
+    d2 = np.array([[-a, b], [a, -b]])
+    return centre[:, None, None, :] + np.stack([d1, d2])[None]
+
+
+def _exaggerate(frame: TargetFrame) -> rr.Transform3D:
+    return rr.Transform3D(mat3x3=np.diag([1.0, -float(frame.exaggeration), 1.0]))
+
+
+def _log_bias(
+    rec: rr.RecordingStream,
+    cloud: ConversionCloud,
+    frame: TargetFrame,
+    idx: list[rr.TimeColumn],
+) -> None:
+    """A forest plot per scan: each conversion's mean down-range offset from the truth (m)
+    with its 95% confidence interval, one row per conversion, the truth at 0 (true scale)."""
+    base = f"{ROOT}/bias"
+    rec.log(base, flip_y(1.0), static=True)
+    rows = len(SHOWN_CONVERSIONS)
+    row = frame.bias_row_m
+    top, bottom = row * 0.6, -(rows - 0.4) * row
+    rec.log(
+        f"{base}/truth",
+        rr.LineStrips2D([[[0.0, top], [0.0, bottom]]], colors=[rgb("truth")], radii=[THIN_LINE]),
+        static=True,
+    )
+    for i, c in enumerate(SHOWN_CONVERSIONS):
+        down = cloud.offset_mean_m[c][:, 1]
+        hw = cloud.offset_half_width95_m[c][:, 1]
+        n = len(down)
+        y = np.full(n, -i * row)
+        rec.send_columns(
+            f"{base}/{c}/mean",
+            indexes=idx,
+            columns=rr.Points2D.columns(
+                positions=np.stack([down, y], -1),
+                radii=[MARKER] * n,
+                colors=[rgb(c)] * n,
+                labels=[c] * n,
+            ),
+        )
+        ends = np.stack([np.stack([down - hw, y], -1), np.stack([down + hw, y], -1)], 1)
+        rec.send_columns(
+            f"{base}/{c}/ci95",
+            indexes=idx,
+            columns=rr.LineStrips2D.columns(
+                strips=list(ends), colors=[rgb(c)] * n, radii=[LINE] * n
+            ),
+        )
+
+
+def log_legend(rec: rr.RecordingStream, names: Sequence[str], entity: str) -> None:
+    """A legend as a view of its own: one labelled swatch per name, in a row, never over
+    data."""
+    rec.log(entity, flip_y(1.0), static=True)
+    rec.log(
+        f"{entity}/swatches",
+        rr.Points2D(
+            [[i * 100.0, 0.0] for i in range(len(names))],
+            radii=[MARKER],
+            colors=[rgb(m) for m in names],
+            labels=list(names),
+            show_labels=True,
+        ),
+        static=True,
+    )
+
+
+def log_statistics(rec: rr.RecordingStream, scene: ProsovScene) -> None:
+    """Each method's per-scan Monte Carlo statistics, the NEES band and Prosov's Δx(n)."""
+    scans, times = _scan_axes(scene)
+    result = scene.result
+    for name, m in result.metrics.items():
+        for entity, attr, _ in SERIES:
+            log_series(
+                rec,
+                f"plots/{ROOT}/{entity}/{name}",
+                scans,
+                times,
+                getattr(m, attr),
+                rgb(name),
+                name,
+            )
+    for tag, v in zip(("lo", "hi"), result.nees_pos_band95, strict=True):
+        log_series(
+            rec,
+            f"plots/{ROOT}/nees_pos/band95_{tag}",
+            scans,
+            times,
+            np.full(len(scans), v),
+            rgb("band"),
+            f"95% band {tag}",
+        )
+    if "seed" in result.metrics and "naive" in result.metrics:
+        for reading, values in result.delta_x_percent().items():
+            log_series(
+                rec,
+                f"plots/{ROOT}/delta_x_percent/{reading}",
+                scans,
+                times,
+                values,
+                READING_COLOURS[reading],
+                f"Δx, {reading} reading",
+            )
+
+
+#: Δx's three readings of σ̂x (as in the Prosov figure).
+READING_COLOURS: dict[str, tuple[int, int, int]] = {
+    "filter": rgb("seed"),
+    "rmse": rgb("naive"),
+    "std": rgb("ucm"),
+}
+
+
+def radar_label(cfg: TrackingConfig) -> str:
+    return f"radar  σr {cfg.sigma_r_m:g} m, σβ {cfg.sigma_beta_deg:g}°"
+
+
+def log_prosov(
+    rec: rr.RecordingStream,
+    sigma_beta_deg: float = 2.0,
+    runs: int = 500,
+    seed: int = 1,
+    cloud_points: int = CLOUD_POINTS,
+) -> TargetFrame:
+    """The Prosov scene (``core.experiments.prosov.prosov_scene``) at σβ, M runs.
+
+    Returns the target frame the views need (``views``).
+    """
+    cfg = TrackingConfig(sigma_beta_deg=sigma_beta_deg, runs=runs, seed=seed)
+    scene = prosov_scene(cfg)
+    frame = log_scene(rec, scene, cloud_points)
+    log_text(rec, f"Prosov: {runs} Monte Carlo runs, σβ = {sigma_beta_deg:g}°, seed {seed}")
+    lo, hi = scene.result.nees_pos_band95
+    for name, m in scene.result.metrics.items():
+        if m.nees_pos[-1] > 2 * hi:
+            log_text(
+                rec,
+                f"{name}: NEES {m.nees_pos[-1]:.1f} at the last scan, far above the "
+                f"95% band [{lo:.2f}, {hi:.2f}]: its covariance is not credible",
+                level="WARN",
+                scan=len(scene.times_s),
+            )
+    return frame
+
+
+def log_scene(rec: rr.RecordingStream, scene: ProsovScene, cloud_points: int) -> TargetFrame:
+    """Everything of one Prosov scene: the map, the target frame, the legend, the plots."""
+    cloud = conversion_cloud(scene.config, cloud_points)
+    frame = target_frame(scene, cloud)
+    log_map(rec, scene, radar_label(scene.config))
+    log_target_frame(rec, scene, frame, cloud)
+    log_legend(rec, list(scene.tracks), f"{ROOT}/legend")
+    log_statistics(rec, scene)
+    return frame
+
+
+# --- views -----------------------------------------------------------------------------------
+
+
+def _space(name: str, contents: str, bounds: rrb.VisualBounds2D, **kw) -> rrb.Spatial2DView:
+    return rrb.Spatial2DView(
+        origin=ROOT, contents=[f"$origin/{contents}/**"], name=name, visual_bounds=bounds, **kw
+    )
+
+
+def method_view(method: str, frame: TargetFrame) -> rrb.Spatial2DView:
+    """One method in the target frame at the current scan."""
+    k = frame.exaggeration
+    bounds = rrb.VisualBounds2D(
+        x_range=[-frame.cross_half_m, frame.cross_half_m],
+        y_range=[-frame.range_half_m * k, frame.range_half_m * k],
+    )
+    scale = f", down-range ×{k}" if k != 1 else ""
+    return _space(f"{method}: target frame, 1σ ellipse, m{scale}", f"target/{method}", bounds)
+
+
+def map_view(scene_extent_m: tuple[float, float, float, float]) -> rrb.Spatial2DView:
+    """The situation in km, every scan up to the cursor."""
+    x0, x1, y0, y1 = (v * 1e-3 for v in scene_extent_m)
+    return _space(
+        "situation, km (north up)",
+        "map",
+        rrb.VisualBounds2D(x_range=[x0, x1], y_range=[-y1, -y0]),
+        time_ranges=rrb.VisibleTimeRange(
+            "scan",
+            start=rrb.TimeRangeBoundary.infinite(),
+            end=rrb.TimeRangeBoundary.cursor_relative(),
+        ),
+    )
+
+
+def bias_view(frame: TargetFrame) -> rrb.Spatial2DView:
+    """The forest plot, framed on ±``frame.bias_half_m``."""
+    rows = len(SHOWN_CONVERSIONS)
+    row = frame.bias_row_m
+    return _space(
+        "conversion bias along range at the scan: MC mean ± 95% CI, m",
+        "bias",
+        rrb.VisualBounds2D(
+            x_range=[-frame.bias_half_m, frame.bias_half_m], y_range=[-row, rows * row]
+        ),
+    )
+
+
+def legend_view() -> rrb.Spatial2DView:
+    return _space(
+        "methods",
+        "legend",
+        rrb.VisualBounds2D(x_range=[-40.0, 660.0], y_range=[-10.0, 30.0]),
+    )
+
+
+def series_views() -> list[rrb.TimeSeriesView]:
+    views = [
+        rrb.TimeSeriesView(
+            origin=f"plots/{ROOT}/{entity}", name=title, plot_legend=rrb.PlotLegend(visible=False)
+        )
+        for entity, _, title in SERIES
+    ]
+    views.append(
+        rrb.TimeSeriesView(
+            origin=f"plots/{ROOT}/delta_x_percent",
+            name="Δx = (σ̂x seed − σ̂x naive) / σ̂x naive, %",
+            plot_legend=rrb.PlotLegend(corner="LeftBottom"),
+        )
+    )
+    return views
+
+
+def views(frame: TargetFrame, methods: Sequence[str]) -> rrb.Container:
+    """The Prosov tab: one target-frame view per method, the bias forest plot, the situation
+    map, the legend and the per-scan statistics."""
+    cells = [method_view(m, frame) for m in methods] + [bias_view(frame)]
+    return rrb.Horizontal(
+        rrb.Vertical(legend_view(), rrb.Grid(*cells, grid_columns=2), row_shares=[1, 12]),
+        rrb.Vertical(map_view(frame.map_extent_m), *series_views(), row_shares=[2, 2, 2, 2, 2]),
+        column_shares=[3, 2],
+        name="Prosov: converted measurements",
+    )

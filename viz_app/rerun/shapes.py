@@ -1,0 +1,51 @@
+"""Drawing helpers shared by the scenes: covariance outlines, marker sizes, view transforms.
+
+Rerun's 2D views draw y downwards (image convention). A scene that wants y up (north, or
+down-range) logs a static ``Transform3D`` with a negative y scale on its root entity and puts
+the view's origin one level above it, so the transform applies; positions stay in metres,
+which is what hover shows.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import rerun as rr
+from numpy.typing import NDArray
+
+#: Marker radii in screen points: they stay visible at any zoom.
+MARKER = rr.Radius.ui_points(5.0)
+SMALL_MARKER = rr.Radius.ui_points(3.0)
+CLOUD_MARKER = rr.Radius.ui_points(1.5)
+LINE = rr.Radius.ui_points(1.5)
+THIN_LINE = rr.Radius.ui_points(0.8)
+
+#: Points on a drawn ellipse outline.
+ELLIPSE_SEGMENTS = 64
+
+
+def ellipse_outline(
+    centre: NDArray[np.float64], cov: NDArray[np.float64], n_sigma: float = 1.0
+) -> NDArray[np.float64]:
+    """Closed outlines of the nσ ellipses of 2×2 covariances: (..., ELLIPSE_SEGMENTS + 1, 2).
+
+    With cov = L Lᵀ (Cholesky), the points c + n L (cos t, sin t) trace {x : (x − c)ᵀ cov⁻¹
+    (x − c) = n²}. ``Ellipses2D`` has no rotation, hence line strips. Shapes: centre
+    (..., 2), cov (..., 2, 2); a singular covariance is drawn through its eigen-decomposition.
+    """
+    w, v = np.linalg.eigh(cov)
+    half = np.sqrt(np.clip(w, 0.0, None))  # (..., 2)
+    t = np.linspace(0.0, 2.0 * np.pi, ELLIPSE_SEGMENTS + 1)
+    circle = np.stack([np.cos(t), np.sin(t)], axis=-1)  # (S, 2)
+    # x = c + n V diag(half) u for u on the unit circle.
+    scaled = circle[..., None, :, :] * half[..., None, :]  # (..., S, 2)
+    return centre[..., None, :] + n_sigma * np.einsum("...ij,...sj->...si", v, scaled)
+
+
+def flip_y(scale: float = 1.0) -> rr.Transform3D:
+    """A transform drawing a child's (x, y) as (scale x, −scale y): y up in a 2D view."""
+    return rr.Transform3D(mat3x3=np.diag([scale, -scale, 1.0]))
+
+
+def pale(rgb: tuple[int, int, int], amount: float = 0.6) -> tuple[int, int, int]:
+    """``rgb`` mixed with white: a cloud in a method's hue that never hides its outline."""
+    return tuple(round(c + (255 - c) * amount) for c in rgb)  # type: ignore[return-value]

@@ -1,0 +1,407 @@
+"""The multi-radar velocity scene in Rerun: the situation in km, the velocity in m/s.
+
+Entity paths (``{r}`` a radar: R1, R2, R3)::
+
+    velocity/map                        static transform: metres drawn as km
+    velocity/map/radars/{r}             radar site (static, the radar's colour)
+    velocity/map/truth/path             the true trajectory (static)
+    velocity/map/truth/position         the true target per scan
+    velocity/map/fused/position         the fused position per scan
+    velocity/map/lines_of_sight/{r}     radar → fused position per scan
+    velocity/vector/truth               the true velocity V (m/s, from the origin) per scan
+    velocity/vector/fused               the estimate V̂ per scan
+    velocity/vector/radial/{r}          each radar's measured radial velocity along its line of
+                                        sight, V̂r u: the projections V̂ is solved from
+    velocity/vector/line_of_sight/{r}   that line of sight through the origin
+    velocity/error/estimate             V̂ − V per scan (m/s), about the origin
+    velocity/error/covariance           its 1σ ellipsoid (first order)
+    velocity/error/axes                 reference axes ±1 m/s … (static)
+    velocity/legend                     one labelled swatch per radar (static)
+    plots/velocity/error_mps/{vx,vy,vz} V̂ − V per axis
+    plots/velocity/sigma_mps/{vx,vy,vz} first-order 1σ per axis
+    plots/velocity/geometry_m/{m,m_warn} the geometry metric m and its warning level
+
+Scans whose geometry is flagged (m above ``core.velocity.estimate.M_WARN``) are drawn grey,
+left out of the plots and noted in the text log; a scan whose geometry is singular gets no
+estimate.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numpy as np
+import rerun as rr
+import rerun.blueprint as rrb
+from numpy.typing import NDArray
+
+from radarviz.core.scenarios.multi_radar import SIGMA_FIELDS, fusion_scenario, generate_measurements
+from radarviz.core.velocity.estimate import (
+    M_WARN,
+    GeometryError,
+    estimate_velocity,
+    fuse_positions,
+)
+from radarviz.viz_app.palette import OKABE_ITO, radar_rgb, rgb
+from radarviz.viz_app.rerun.recording import ellipsoid_axes, indexes, log_series, log_text
+from radarviz.viz_app.rerun.shapes import LINE, MARKER, SMALL_MARKER, THIN_LINE
+
+ROOT = "velocity"
+#: Colours of the velocity components (none is a radar's).
+AXIS_COLOURS: dict[str, tuple[int, int, int]] = {
+    "vx": OKABE_ITO["orange"],
+    "vy": OKABE_ITO["sky_blue"],
+    "vz": (90, 90, 90),
+}
+
+
+@dataclass(frozen=True)
+class VelocityFrame:
+    """What the views need to frame the scene.
+
+    Attributes:
+        map_centre_km, map_size_km: centre and largest extent of sites and path.
+        speed_mps: the largest true speed (the vector view's scale).
+        error_half_mps: the error view's half-size: 1.6 × the largest 1σ axis of unflagged scans.
+        radars: the radar names, in colour order.
+    """
+
+    map_centre_km: tuple[float, float, float]
+    map_size_km: float
+    speed_mps: float
+    error_half_mps: float
+    radars: tuple[str, ...]
+
+
+def log_velocity_scene(rec: rr.RecordingStream, seed: int = 1, scans: int = 50) -> VelocityFrame:
+    """Several radars, one target: fused position and the full velocity vector per scan.
+
+    Each scan the radars' (r, β, ε) are fused into one position and their radial velocities
+    give the velocity vector (``core.velocity.estimate``); its 1σ ellipsoid is drawn unless the
+    geometry metric m says the linear statistics do not hold, which goes to the text log.
+    """
+    scenario = fusion_scenario()
+    period = scenario.radars[0].period_s
+    meas = generate_measurements(scenario, (scans - 1) * period, seed=seed)
+    radars = scenario.radars
+    names = tuple(r.name for r in radars)
+    sites = np.array([r.position for r in radars])
+    first = meas[radars[0].name]
+    n = np.arange(1, len(first.t) + 1)
+    t = first.t
+    idx = indexes(n, t)
+    k = len(n)
+    stack = {
+        f: np.stack([meas[r.name].__dict__[f] for r in radars], axis=-1)
+        for f in ("range", "azimuth", "elevation", "radial_velocity")
+    }
+    sig = {f: np.array([getattr(r, f) for r in radars]) for f in SIGMA_FIELDS}
+    angle_sigmas = {f: sig[f] for f in ("sigma_azimuth_rad", "sigma_elevation_rad")}
+    fused = fuse_positions(
+        sites,
+        stack["range"],
+        stack["azimuth"],
+        stack["elevation"],
+        sigma_r_m=sig["sigma_r_m"],
+        **angle_sigmas,
+    )
+    vel = np.full((k, 3), np.nan)
+    cov = np.full((k, 3, 3), np.nan)
+    m = np.full(k, np.nan)
+    flagged = np.zeros(k, dtype=bool)  # drawn grey: the linear statistics may not hold
+    for i in range(k):
+        try:
+            est = estimate_velocity(
+                sites,
+                stack["radial_velocity"][i],
+                stack["azimuth"][i],
+                stack["elevation"][i],
+                sigma_vr_mps=sig["sigma_vr_mps"],
+                **angle_sigmas,
+            )
+        except GeometryError as exc:
+            log_text(rec, f"velocity at scan {n[i]}: {exc}", level="WARN", scan=int(n[i]))
+            continue
+        m[i] = est.m
+        vel[i], cov[i] = est.velocity, est.covariance
+        if est.warning:
+            flagged[i] = True
+            log_text(rec, f"velocity at scan {n[i]}: {est.warning}", level="WARN", scan=int(n[i]))
+
+    # --- the situation, km ---
+    base = f"{ROOT}/map"
+    rec.log(base, rr.Transform3D(scale=1e-3), static=True)
+    for j, r in enumerate(radars):
+        rec.log(
+            f"{base}/radars/{r.name}",
+            rr.Points3D([r.position], radii=[MARKER], colors=[radar_rgb(j)], labels=[r.name]),
+            static=True,
+        )
+    rec.log(
+        f"{base}/truth/path",
+        rr.LineStrips3D([first.true_position], colors=[rgb("truth")], radii=[THIN_LINE]),
+        static=True,
+    )
+    rec.send_columns(
+        f"{base}/truth/position",
+        indexes=idx,
+        columns=rr.Points3D.columns(
+            positions=first.true_position, radii=[MARKER] * k, colors=[rgb("truth")] * k
+        ),
+    )
+    rec.send_columns(
+        f"{base}/fused/position",
+        indexes=idx,
+        columns=rr.Points3D.columns(
+            positions=fused.position, radii=[SMALL_MARKER] * k, colors=[rgb("fused")] * k
+        ),
+    )
+    for j, r in enumerate(radars):
+        strips = np.stack([np.broadcast_to(sites[j], fused.position.shape), fused.position], 1)
+        rec.send_columns(
+            f"{base}/lines_of_sight/{r.name}",
+            indexes=idx,
+            columns=rr.LineStrips3D.columns(
+                strips=list(strips), colors=[radar_rgb(j)] * k, radii=[THIN_LINE] * k
+            ),
+        )
+
+    # --- the velocity vector, m/s ---
+    base = f"{ROOT}/vector"
+    zeros = np.zeros((k, 3))
+    rec.send_columns(
+        f"{base}/truth",
+        indexes=idx,
+        columns=rr.Arrows3D.columns(
+            origins=zeros, vectors=first.true_velocity, colors=[rgb("truth")] * k, radii=[LINE] * k
+        ),
+    )
+    # A flagged scan gets a row with no instance, so the last good estimate is not shown in
+    # its place (views draw the latest value at the cursor).
+    ok = np.all(np.isfinite(vel), axis=-1)
+    rows = ok.astype(int).tolist()
+    k_ok = int(ok.sum())
+    tone = [rgb("band") if f else rgb("fused") for f in flagged[ok]]
+    if k_ok:
+        rec.send_columns(
+            f"{base}/fused",
+            indexes=idx,
+            columns=rr.Arrows3D.columns(
+                origins=zeros[ok],
+                vectors=vel[ok],
+                colors=tone,
+                radii=[LINE] * k_ok,
+            ).partition(rows),
+        )
+    speed = float(np.linalg.norm(first.true_velocity, axis=-1).max())
+    u = fused.position[:, None, :] - sites[None]  # (k, radars, 3)
+    u /= np.linalg.norm(u, axis=-1, keepdims=True)
+    for j, r in enumerate(radars):
+        radial = stack["radial_velocity"][:, j, None] * u[:, j]
+        rec.send_columns(
+            f"{base}/radial/{r.name}",
+            indexes=idx,
+            columns=rr.Arrows3D.columns(
+                origins=zeros, vectors=radial, colors=[radar_rgb(j)] * k, radii=[LINE] * k
+            ),
+        )
+        line = np.stack([-1.2 * speed * u[:, j], 1.2 * speed * u[:, j]], 1)
+        rec.send_columns(
+            f"{base}/line_of_sight/{r.name}",
+            indexes=idx,
+            columns=rr.LineStrips3D.columns(
+                strips=list(line), colors=[radar_rgb(j)] * k, radii=[THIN_LINE] * k
+            ),
+        )
+
+    # --- the error V̂ − V, m/s ---
+    err = vel - first.true_velocity
+    base = f"{ROOT}/error"
+    half_max = 1.0
+    if k_ok:
+        half, quat = ellipsoid_axes(cov[ok])
+        good = ~flagged[ok]
+        half_max = float(half[good].max()) if good.any() else float(half.max())
+        rec.send_columns(
+            f"{base}/estimate",
+            indexes=idx,
+            columns=rr.Points3D.columns(
+                positions=err[ok], radii=[MARKER] * k_ok, colors=tone
+            ).partition(rows),
+        )
+        rec.send_columns(
+            f"{base}/covariance",
+            indexes=idx,
+            columns=rr.Ellipsoids3D.columns(
+                centers=err[ok],
+                half_sizes=half,
+                quaternions=quat,
+                colors=tone,
+                line_radii=[THIN_LINE] * k_ok,
+            ).partition(rows),
+        )
+    error_half = 1.6 * half_max
+    _log_axes(rec, f"{base}/axes", error_half)
+    rec.log(
+        f"{base}/truth",
+        rr.Points3D([[0.0, 0.0, 0.0]], radii=[MARKER], colors=[rgb("truth")], labels=["V"]),
+        static=True,
+    )
+    _log_legend(rec, names)
+
+    # --- plots (flagged scans left out) ---
+    err[flagged] = np.nan
+    cov[flagged] = np.nan
+    for j, axis in enumerate(("vx", "vy", "vz")):
+        c = AXIS_COLOURS[axis]
+        log_series(
+            rec, f"plots/{ROOT}/error_mps/{axis}", n, t, err[:, j], c, f"V̂{axis[1]} − V{axis[1]}"
+        )
+        log_series(
+            rec, f"plots/{ROOT}/sigma_mps/{axis}", n, t, np.sqrt(cov[:, j, j]), c, f"σ {axis}"
+        )
+    log_series(rec, f"plots/{ROOT}/geometry_m/m", n, t, m, rgb("fused"), "geometry metric m")
+    log_series(
+        rec,
+        f"plots/{ROOT}/geometry_m/m_warn",
+        n,
+        t,
+        np.full(k, M_WARN),
+        rgb("band"),
+        "warning level",
+    )
+    log_text(rec, f"velocity fusion: {len(radars)} radars, {k} scans, seed {seed}")
+    pts = np.concatenate([sites, first.true_position]) * 1e-3
+    lo, hi = pts.min(0), pts.max(0)
+    return VelocityFrame(
+        tuple(float(v) for v in (lo + hi) / 2),
+        float((hi - lo).max()),
+        speed,
+        error_half,
+        names,
+    )
+
+
+def _log_axes(rec: rr.RecordingStream, entity: str, half: float) -> None:
+    """Three grey axes through the origin of the error view, labelled with their length."""
+    v = np.eye(3) * half
+    rec.log(
+        entity,
+        rr.Arrows3D(origins=-v, vectors=2 * v, colors=[rgb("band")], radii=[THIN_LINE]),
+        static=True,
+    )
+    rec.log(
+        f"{entity}/ticks",
+        rr.Points3D(
+            v,
+            radii=[SMALL_MARKER],
+            colors=[rgb("band")],
+            labels=[f"{a} +{half:.0f} m/s" for a in "xyz"],
+            show_labels=True,
+        ),
+        static=True,
+    )
+
+
+def _log_legend(rec: rr.RecordingStream, names: tuple[str, ...]) -> None:
+    entity = f"{ROOT}/legend"
+    labels = [*names, "fused V̂", "truth V", "x", "y", "z"]
+    colours = [radar_rgb(j) for j in range(len(names))] + [rgb("fused"), rgb("truth")]
+    colours += list(AXIS_COLOURS.values())
+    rec.log(entity, rr.Transform3D(mat3x3=np.diag([1.0, -1.0, 1.0])), static=True)
+    rec.log(
+        f"{entity}/swatches",
+        rr.Points2D(
+            [[i * 100.0, 0.0] for i in range(len(labels))],
+            radii=[MARKER],
+            colors=colours,
+            labels=labels,
+            show_labels=True,
+        ),
+        static=True,
+    )
+
+
+# --- views -----------------------------------------------------------------------------------
+
+
+def _eye(target: NDArray | tuple, distance: float, direction: tuple[float, float, float]):
+    d = np.asarray(direction, dtype=float)
+    d /= np.linalg.norm(d)
+    tgt = np.asarray(target, dtype=float)
+    return rrb.EyeControls3D(
+        position=tuple(tgt + distance * d), look_target=tuple(tgt), eye_up=(0.0, 0.0, 1.0)
+    )
+
+
+class VelocityViews(NamedTuple):
+    """The scene's views, and the tab that arranges them."""
+
+    vector: rrb.Spatial3DView
+    error: rrb.Spatial3DView
+    situation: rrb.Spatial3DView
+    tab: rrb.Container
+
+
+def legend_view(frame: VelocityFrame) -> rrb.Spatial2DView:
+    return rrb.Spatial2DView(
+        origin=ROOT,
+        contents=["$origin/legend/**"],
+        name="radars, estimate, truth, axes",
+        visual_bounds=rrb.VisualBounds2D(
+            x_range=[-40.0, 100.0 * (len(frame.radars) + 5)], y_range=[-10.0, 30.0]
+        ),
+    )
+
+
+def views(frame: VelocityFrame) -> VelocityViews:
+    """The velocity tab: the situation, the vector and its error, the plots."""
+    situation = rrb.Spatial3DView(
+        origin=ROOT,
+        contents=["$origin/map/**"],
+        name="situation, km: radars, lines of sight, fused position",
+        eye_controls=_eye(frame.map_centre_km, 1.6 * frame.map_size_km, (0.2, -0.9, 0.8)),
+    )
+    vector = rrb.Spatial3DView(
+        origin=ROOT,
+        contents=["$origin/vector/**"],
+        name="velocity V̂ and each radar's radial velocity, m/s",
+        eye_controls=_eye((0.0, 0.0, 0.0), 3.0 * frame.speed_mps, (0.5, -0.8, 0.6)),
+    )
+    error = rrb.Spatial3DView(
+        origin=ROOT,
+        contents=["$origin/error/**"],
+        name="error V̂ − V with its 1σ ellipsoid, m/s (grey: geometry flagged)",
+        eye_controls=_eye((0.0, 0.0, 0.0), 3.2 * frame.error_half_mps, (0.5, -0.8, 0.5)),
+    )
+    legend = legend_view(frame)
+    plots = [
+        rrb.TimeSeriesView(
+            origin=f"plots/{ROOT}/error_mps",
+            name="V̂ − V per axis (x, y, z as in the legend), m/s",
+            plot_legend=rrb.PlotLegend(visible=False),
+        ),
+        rrb.TimeSeriesView(
+            origin=f"plots/{ROOT}/sigma_mps",
+            name="first-order 1σ per axis, m/s",
+            plot_legend=rrb.PlotLegend(visible=False),
+        ),
+        rrb.TimeSeriesView(
+            origin=f"plots/{ROOT}/geometry_m",
+            name="geometry metric m (unitless), grey: warning level",
+            plot_legend=rrb.PlotLegend(visible=False),
+        ),
+    ]
+    tab = rrb.Horizontal(
+        rrb.Vertical(
+            legend,
+            rrb.Horizontal(vector, error),
+            situation,
+            row_shares=[1, 7, 6],
+        ),
+        rrb.Vertical(*plots),
+        column_shares=[3, 2],
+        name="Velocity: several radars' radial velocities",
+    )
+    return VelocityViews(vector, error, situation, tab)
