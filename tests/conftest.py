@@ -84,13 +84,12 @@ def chromium() -> tuple[str, list[str]]:
 
 
 def coloured_fraction(rgba: np.ndarray) -> float:
-    """Share of saturated pixels in the right 40% of the window below the top bar.
+    """Share of saturated pixels in the window below the top bar and above the time panel.
 
-    The Rerun viewer's chrome is grey; the data (series lines, tracks) are coloured, and every
-    blueprint here puts the time series in the right 40% of the window.
+    The Rerun viewer's chrome is grey; the data (series lines, tracks, ellipses) are coloured.
     """
-    h, w = rgba.shape[:2]
-    region = rgba[60 : h - 60, int(0.6 * w) :, :3]
+    h = rgba.shape[0]
+    region = rgba[60 : h - 60, :, :3]
     saturation = region.max(axis=-1) - region.min(axis=-1)
     return float((saturation > 0.3).mean())
 

@@ -9,10 +9,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from radarviz.core.experiments.prosov import ALL_METHODS, TrackingConfig, prosov_scene, run_tracking
+from radarviz.core.experiments.prosov import (
+    ALL_METHODS,
+    SHOWN_CONVERSIONS,
+    TrackingConfig,
+    prosov_scene,
+    run_tracking,
+)
 from radarviz.viz_app.cli.main import main
+from radarviz.viz_app.palette import rgb
+from radarviz.viz_app.rerun.prosov_scene import log_prosov
 from radarviz.viz_app.rerun.recording import ellipsoid_axes, recording_file
-from radarviz.viz_app.rerun.scenes import log_prosov
 
 
 @pytest.fixture(scope="module")
@@ -28,27 +35,29 @@ def test_documented_entity_paths_exist_with_one_row_per_scan(
 ) -> None:
     rows, _ = rrd_contents(prosov_rrd)
     scans = 60
-    per_scan = ["/world/truth/position", "/world/measurements/radar", "/world/converted/seed"]
-    for m in ("naive", "seed", "cmkf_d", "ucm", "ducm", "ekf", "ukf"):
-        per_scan += [f"/world/tracks/{m}/{part}" for part in ("position", "covariance", "velocity")]
+    per_scan = ["/prosov/map/truth/position", "/prosov/map/measurements"]
+    per_scan += [f"/prosov/bias/{c}/{part}" for c in SHOWN_CONVERSIONS for part in ("mean", "ci95")]
+    for m in ALL_METHODS:
+        per_scan.append(f"/prosov/map/tracks/{m}/position")
         per_scan += [
-            f"/plots/{metric}/{m}"
-            for metric in ("bias_range", "rmse_x", "sigma_x_filter", "nees_pos")
+            f"/prosov/target/{m}/{part}"
+            for part in ("covariance", "estimate", "measurement", "cloud", "cloud_mean")
         ]
-    per_scan += [
-        "/plots/delta_x/filter",
-        "/plots/delta_x/rmse",
-        "/plots/delta_x/std",
-        "/plots/nees_pos/band95_lo",
-    ]
+        per_scan += [
+            f"/plots/prosov/{name}/{m}" for name in ("bias_range_m", "rmse_x_m", "nees_pos")
+        ]
+    per_scan += [f"/plots/prosov/delta_x_percent/{r}" for r in ("filter", "rmse", "std")]
+    per_scan += ["/plots/prosov/nees_pos/band95_lo", "/plots/prosov/nees_pos/band95_hi"]
     for path in per_scan:
         assert rows.get(path) == scans, (path, rows.get(path))
     for static in (
-        "/world/radars/radar",
-        "/world/truth/path",
-        "/world/tracks/ducm/path",
-        "/world/monte_carlo/ucm/cloud",
-        "/world/monte_carlo/ucm/mean",
+        "/prosov/map",
+        "/prosov/map/radar",
+        "/prosov/map/truth/path",
+        "/prosov/map/tracks/ducm/path",
+        "/prosov/target",
+        "/prosov/target/naive/truth",
+        "/prosov/legend/swatches",
         "/log",
     ):
         assert static in rows, static
@@ -57,13 +66,43 @@ def test_documented_entity_paths_exist_with_one_row_per_scan(
 def test_logged_series_equal_core_outputs(prosov_rrd: Path, rrd_contents) -> None:
     _, cols = rrd_contents(prosov_rrd)
     res = run_tracking(TrackingConfig(sigma_beta_deg=2.0, runs=200, seed=3))
-    for m, metric in (("naive", "rmse_x"), ("ducm", "nees_pos"), ("ukf", "bias_range")):
-        got = cols[f"/plots/{metric}/{m}"]
+    for m, name, metric in (
+        ("naive", "rmse_x_m", "rmse_x"),
+        ("ducm", "nees_pos", "nees_pos"),
+        ("ukf", "bias_range_m", "bias_range"),
+    ):
+        got = cols[f"/plots/prosov/{name}/{m}"]
         assert got["scan"] == list(range(1, 61))
         np.testing.assert_array_equal(np.array(got["time"]) / 1e9, np.arange(60) * 10.0)
         np.testing.assert_array_equal(
             [v[0] for v in got["Scalars:scalars"]], getattr(res.metrics[m], metric)
         )
+
+
+def test_target_frame_is_the_estimate_seen_from_the_radar(prosov_rrd: Path, rrd_contents) -> None:
+    """The logged target-frame estimate is (cross-range, down-range) of x̂ − x, computed here
+    from the truth's azimuth β: (−sin β Δx + cos β Δy, cos β Δx + sin β Δy); every point of
+    the logged outline lies on the 1σ ellipse of the rotated position covariance."""
+    _, cols = rrd_contents(prosov_rrd)
+    scene = prosov_scene(TrackingConfig(sigma_beta_deg=2.0, runs=200, seed=3))
+    truth = scene.truth[:, [0, 2]]
+    beta = np.arctan2(truth[:, 1], truth[:, 0])
+    c, s = np.cos(beta), np.sin(beta)
+    for m in ("naive", "ukf"):
+        track = scene.tracks[m]
+        d = track.x[:, [0, 2]] - truth
+        expected = np.stack([-s * d[:, 0] + c * d[:, 1], c * d[:, 0] + s * d[:, 1]], -1)
+        got = np.array([p[0] for p in cols[f"/prosov/target/{m}/estimate"]["Points2D:positions"]])
+        np.testing.assert_allclose(got, expected, rtol=1e-5, atol=1e-2)
+        rot = np.stack([np.stack([-s, c], -1), np.stack([c, s], -1)], -2)
+        pos = track.P[:, [0, 2]][:, :, [0, 2]]
+        cov = rot @ pos @ rot.transpose(0, 2, 1)
+        strips = cols[f"/prosov/target/{m}/covariance"]["LineStrips2D:strips"]
+        for n in (0, 30, 59):
+            pts = np.array(strips[n][0]) - expected[n]
+            q = np.einsum("si,ij,sj->s", pts, np.linalg.inv(cov[n]), pts)
+            np.testing.assert_allclose(q, 1.0, rtol=1e-3)
+        assert not np.allclose(got, 0.0)  # the comparison above can fail
 
 
 def test_rrd_verify_passes(prosov_rrd: Path) -> None:
@@ -102,43 +141,37 @@ def test_record_refuses_to_overwrite_and_leaves_no_temporary(
     assert out.read_bytes() == b"keep me"
     assert main(["record", "--preset", "gorshkov", "--out", str(out), "--overwrite"]) == 0
     rows, _ = rrd_contents(out)
-    assert rows["/plots/finite_memory/gain_r/RLS6"] == 20
+    assert rows["/plots/gorshkov/gain_r_percent/RLS6"] == 20
     assert sorted(p.name for p in tmp_path.iterdir()) == ["g.rrd"]
 
 
 def test_demo_writes_a_recording_headless(tmp_path: Path, capsys, rrd_contents) -> None:
-    """The demo holds the three presets' documented entities, one row per scan, and its
-    Prosov part is core's scene (σβ = 2°, 500 runs, seed 1): the statistics and the displayed
-    run's tracks."""
+    """The demo holds the three scenes' documented entities, and its Prosov part is core's
+    scene (σβ = 2°, 500 runs, seed 1): the statistics and the displayed run's tracks."""
     out = tmp_path / "sub" / "demo.rrd"
     assert main(["demo", "--out", str(out)]) == 0
     printed = capsys.readouterr().out
     assert f"wrote {out}" in printed and "radarviz view" in printed
-    assert out.stat().st_size < 20e6
+    assert out.stat().st_size < 40e6
     rows, cols = rrd_contents(out)
-    per_scan = ["/world/truth/position", "/world/measurements/radar", "/plots/nees_pos/band95_hi"]
-    per_scan += [
-        f"/world/tracks/{m}/{part}" for m in ALL_METHODS for part in ("position", "velocity")
-    ]
-    per_scan += [f"/plots/rmse_x/{m}" for m in ALL_METHODS]
-    per_scan += [
-        "/world/fusion/position",
-        "/world/fusion/truth/position",
-        "/plots/fused_velocity/m",
-    ]
-    for path in per_scan:
-        assert rows.get(path) == 60, (path, rows.get(path))
-    assert rows.get("/plots/finite_memory/gain_r/RLS6") == 20  # k = 1 … 20 scans in the window
+    per_scan = {"/prosov/map/truth/position": 60, "/plots/prosov/nees_pos/band95_hi": 60}
+    per_scan |= {f"/prosov/target/{m}/covariance": 60 for m in ALL_METHODS}
+    per_scan |= {"/velocity/map/fused/position": 50, "/velocity/error/covariance": 50}
+    per_scan |= {"/plots/doppler_start/rmse_vr_mps/range_doppler": 58}
+    for path, n in per_scan.items():
+        assert rows.get(path) == n, (path, rows.get(path))
+    # Gorshkov's curves are functions of the window length: timeline window_k, k = 1 … 20.
+    gain = cols["/plots/gorshkov/gain_r_percent/RLS6"]
+    assert gain["window_k"] == list(range(1, 21)) and "scan" not in gain
     scene = prosov_scene(TrackingConfig(sigma_beta_deg=2.0, runs=500, seed=1))
     np.testing.assert_array_equal(
-        [v[0] for v in cols["/plots/rmse_x/naive"]["Scalars:scalars"]],
+        [v[0] for v in cols["/plots/prosov/rmse_x_m/naive"]["Scalars:scalars"]],
         scene.result.metrics["naive"].rmse_x,
     )
     for m in ("seed", "ukf"):
-        logged = np.array([p[0] for p in cols[f"/world/tracks/{m}/position"]["Points3D:positions"]])
-        np.testing.assert_array_equal(
-            logged[:, :2], scene.tracks[m].x[:, [0, 2]].astype(np.float32)
-        )
+        pts = cols[f"/prosov/map/tracks/{m}/position"]["Points2D:positions"]
+        logged = np.array([p[0] for p in pts])
+        np.testing.assert_array_equal(logged, scene.tracks[m].x[:, [0, 2]].astype(np.float32))
 
 
 def test_velocity_preset_logs_the_fused_velocity_and_flags_bad_geometry(
@@ -150,26 +183,37 @@ def test_velocity_preset_logs_the_fused_velocity_and_flags_bad_geometry(
     out = tmp_path / "v.rrd"
     assert main(["record", "--preset", "velocity", "--out", str(out), "--seed", "2"]) == 0
     rows, cols = rrd_contents(out)
+    scans = 50
     for r in ("R1", "R2", "R3"):
-        assert f"/world/radars/{r}" in rows and rows[f"/world/fusion/measurements/{r}"] == 60
-    assert rows["/world/fusion/position"] == 60 and rows["/world/fusion/truth/position"] == 60
-    m = np.array([v[0] for v in cols["/plots/fused_velocity/m"]["Scalars:scalars"]])
-    shown = set(cols["/world/fused_velocity/vector"]["scan"])
-    flagged = {
-        n for n, mv in zip(cols["/plots/fused_velocity/m"]["scan"], m, strict=True) if mv > M_WARN
-    }
-    # Every scan gets either an arrow with its ellipsoid or a warning, never both.
-    assert shown.isdisjoint(flagged) and len(shown) + len(flagged) == 60
-    assert rows["/world/fused_velocity/covariance"] == len(shown)
+        assert f"/velocity/map/radars/{r}" in rows
+        assert rows[f"/velocity/map/lines_of_sight/{r}"] == scans
+        assert rows[f"/velocity/vector/radial/{r}"] == scans
+    assert rows["/velocity/map/fused/position"] == scans
+    m_col = cols["/plots/velocity/geometry_m/m"]
+    m = np.array([v[0] for v in m_col["Scalars:scalars"]])
+    flagged = {n for n, mv in zip(m_col["scan"], m, strict=True) if mv > M_WARN}
     warnings = [t[0] for t in cols["/log"]["TextLog:text"] if "velocity at scan" in t[0]]
     assert len(warnings) == len(flagged) > 0
-    # The logged error series is the estimate minus the truth of the same scenario.
-    truth = generate_measurements(fusion_scenario(), 590.0, seed=None)["R1"].true_velocity
-    err_vz = cols["/plots/fused_velocity/error_vz"]
-    arrows = cols["/world/fused_velocity/vector"]
-    assert err_vz["scan"] == arrows["scan"]
-    vz = np.array([v[0][2] for v in arrows["Arrows3D:vectors"]]) / 10.0  # one period of motion
-    expected = vz - truth[np.array(arrows["scan"]) - 1, 2]
+    # Flagged scans are drawn grey and left out of the error plot.
+    arrows = cols["/velocity/vector/fused"]
+    grey = {
+        n
+        for n, c in zip(arrows["scan"], arrows["Arrows3D:colors"], strict=True)
+        if c[0] == rgb_int("band")
+    }
+    assert grey == flagged
+    err_vz = cols["/plots/velocity/error_mps/vz"]
+    assert set(err_vz["scan"]) == set(arrows["scan"]) - flagged
+    # The logged error is the estimate minus the truth of the same scenario.
+    truth = generate_measurements(fusion_scenario(), 490.0, seed=None)["R1"].true_velocity
+    vz = {n: v[0][2] for n, v in zip(arrows["scan"], arrows["Arrows3D:vectors"], strict=True)}
+    expected = [vz[n] - truth[n - 1, 2] for n in err_vz["scan"]]
     np.testing.assert_allclose(
-        [v[0] for v in err_vz["Scalars:scalars"]], expected, rtol=1e-5, atol=1e-4
+        [v[0] for v in err_vz["Scalars:scalars"]], expected, rtol=1e-5, atol=1e-3
     )
+
+
+def rgb_int(name: str) -> int:
+    """A palette colour as Rerun stores it: 0xRRGGBBAA."""
+    r, g, b = rgb(name)
+    return (r << 24) | (g << 16) | (b << 8) | 0xFF

@@ -98,17 +98,20 @@ def test_tune_shows_the_run_record_shows(tmp_path: Path, rrd_contents) -> None:
     release_streams()
     _, rec_cols = rrd_contents(recorded)
     _, tune_cols = rrd_contents(tuned)
-    entities = ["/world/truth/position", "/world/measurements/radar"]
-    entities += [f"/world/tracks/{m}/position" for m in ALL_METHODS]
-    entities += ["/world/tracks/ukf/covariance", "/plots/nees_pos/ducm", "/plots/rmse_x/naive"]
+    entities = ["/prosov/map/truth/position", "/prosov/map/measurements"]
+    entities += [f"/prosov/map/tracks/{m}/position" for m in ALL_METHODS]
+    entities += ["/prosov/target/ukf/covariance", "/plots/prosov/nees_pos/ducm"]
+    entities += ["/plots/prosov/rmse_x_m/naive"]
     for entity in entities:
         for column in rec_cols[entity]:
             if column != "rerun.controls.RowId":
                 assert tune_cols[entity][column] == rec_cols[entity][column], (entity, column)
-    assert len(rec_cols["/world/tracks/ukf/position"]["Points3D:positions"]) == 60
+    assert len(rec_cols["/prosov/map/tracks/ukf/position"]["Points2D:positions"]) == 60
     # A different seed is a different run: the comparison above can fail.
     other = simulate(TuneParams(sigma_beta_deg=2.0, seed=4, runs=20)).scene.tracks["ukf"].x
-    first = np.array([p[0] for p in rec_cols["/world/tracks/ukf/position"]["Points3D:positions"]])
+    first = np.array(
+        [p[0] for p in rec_cols["/prosov/map/tracks/ukf/position"]["Points2D:positions"]]
+    )
     assert not np.allclose(first[:, :2], other[:, [0, 2]].astype(np.float32))
 
 

@@ -170,19 +170,32 @@ def _scan_axes(scene: ProsovScene) -> tuple[NDArray[np.int64], NDArray[np.float6
     return np.arange(1, len(scene.times_s) + 1), scene.times_s
 
 
-def log_map(rec: rr.RecordingStream, scene: ProsovScene, label: str) -> None:
+def log_map(rec: rr.RecordingStream, scene: ProsovScene, frame: TargetFrame, label: str) -> None:
     """The situation in km: radar, true path, the displayed run's plots and tracks."""
     scans, times = _scan_axes(scene)
     idx = indexes(scans, times)
     n = len(scans)
     base = f"{ROOT}/map"
-    rec.log(base, flip_y(1e-3), static=True)
+    span = frame.map_extent_m[1]
+    rec.log(base, flip_y(1.0 / span), static=True)
     rec.log(
         f"{base}/radar",
         rr.Points2D([[0.0, 0.0]], radii=[MARKER], colors=[rgb("truth")], labels=[label]),
         static=True,
     )
     truth = scene.truth[:, [0, 2]]
+    end = truth[-1]
+    rec.log(
+        f"{base}/scale",
+        rr.Points2D(
+            [end],
+            radii=[SMALL_MARKER],
+            colors=[rgb("truth")],
+            labels=[f"{np.hypot(*end) / 1e3:.0f} km from the radar"],
+            show_labels=True,
+        ),
+        static=True,
+    )
     rec.log(
         f"{base}/truth/path",
         rr.LineStrips2D([truth], colors=[rgb("truth")], radii=[THIN_LINE]),
@@ -228,10 +241,22 @@ def log_target_frame(
     n = len(scans)
     rec.log(
         ROOT + "/target",
-        flip_y(1.0) if frame.exaggeration == 1 else _exaggerate(frame),
+        rr.Transform3D(
+            mat3x3=np.diag(
+                [1.0 / frame.cross_half_m, -frame.exaggeration / frame.cross_half_m, 1.0]
+            )
+        ),
         static=True,
     )
     shown = CLOUD_SHOWN
+    k = frame.exaggeration
+    stretch = f", down-range ×{k}" if k != 1 else ""
+    scale_label = rr.Points2D(
+        [[-0.6 * frame.cross_half_m, 0.36 * frame.cross_half_m / k]],
+        radii=[0.0],
+        labels=[f"view ±{frame.cross_half_m / 1e3:g} km across{stretch}"],
+        show_labels=True,
+    )
     measured = {c: _to_frame(scene, scene.converted_xy_m[c]) for c in SHOWN_CONVERSIONS}
     clouds = {c: _to_frame(scene, cloud.points[c][:, :shown]) for c in SHOWN_CONVERSIONS}
     means = cloud.offset_mean_m
@@ -246,6 +271,7 @@ def log_target_frame(
             rr.Points2D([[0.0, 0.0]], radii=[MARKER], colors=[rgb("truth")]),
             static=True,
         )
+        rec.log(f"{base}/scale", scale_label, static=True)
         est = _to_frame(scene, track.x[:, [0, 2]])
         cov = _frame_cov(scene, track.P)
         rec.send_columns(
@@ -299,10 +325,6 @@ def _crosses(centre: NDArray[np.float64], frame: TargetFrame) -> NDArray[np.floa
     return centre[:, None, None, :] + np.stack([d1, d2])[None]
 
 
-def _exaggerate(frame: TargetFrame) -> rr.Transform3D:
-    return rr.Transform3D(mat3x3=np.diag([1.0, -float(frame.exaggeration), 1.0]))
-
-
 def _log_bias(
     rec: rr.RecordingStream,
     cloud: ConversionCloud,
@@ -312,7 +334,18 @@ def _log_bias(
     """A forest plot per scan: each conversion's mean down-range offset from the truth (m)
     with its 95% confidence interval, one row per conversion, the truth at 0 (true scale)."""
     base = f"{ROOT}/bias"
-    rec.log(base, flip_y(1.0), static=True)
+    rec.log(base, flip_y(1.0 / frame.bias_half_m), static=True)
+    rec.log(
+        f"{base}/scale",
+        rr.Points2D(
+            [[0.0, 0.5 * frame.bias_row_m]],
+            radii=[SMALL_MARKER],
+            colors=[rgb("truth")],
+            labels=[f"truth; view ±{frame.bias_half_m:g} m"],
+            show_labels=True,
+        ),
+        static=True,
+    )
     rows = len(SHOWN_CONVERSIONS)
     row = frame.bias_row_m
     top, bottom = row * 0.6, -(rows - 0.4) * row
@@ -445,7 +478,7 @@ def log_scene(rec: rr.RecordingStream, scene: ProsovScene, cloud_points: int) ->
     """Everything of one Prosov scene: the map, the target frame, the legend, the plots."""
     cloud = conversion_cloud(scene.config, cloud_points)
     frame = target_frame(scene, cloud)
-    log_map(rec, scene, radar_label(scene.config))
+    log_map(rec, scene, frame, radar_label(scene.config))
     log_target_frame(rec, scene, frame, cloud)
     log_legend(rec, list(scene.tracks), f"{ROOT}/legend")
     log_statistics(rec, scene)
@@ -461,24 +494,20 @@ def _space(name: str, contents: str, bounds: rrb.VisualBounds2D, **kw) -> rrb.Sp
     )
 
 
-def method_view(method: str, frame: TargetFrame) -> rrb.Spatial2DView:
-    """One method in the target frame at the current scan."""
-    k = frame.exaggeration
-    bounds = rrb.VisualBounds2D(
-        x_range=[-frame.cross_half_m, frame.cross_half_m],
-        y_range=[-frame.range_half_m * k, frame.range_half_m * k],
-    )
-    scale = f", down-range ×{k}" if k != 1 else ""
-    return _space(f"{method}: target frame, 1σ ellipse, m{scale}", f"target/{method}", bounds)
+def method_view(method: str) -> rrb.Spatial2DView:
+    """One method in the target frame at the current scan. The scene's transform scales the
+    frame to ±1 across (``TargetFrame``), so one blueprint frames every configuration; the
+    scale is written in the view."""
+    bounds = rrb.VisualBounds2D(x_range=[-1.0, 1.0], y_range=[-1.0 / 2.3, 1.0 / 2.3])
+    return _space(f"{method}: target frame at the scan, 1σ ellipse", f"target/{method}", bounds)
 
 
-def map_view(scene_extent_m: tuple[float, float, float, float]) -> rrb.Spatial2DView:
-    """The situation in km, every scan up to the cursor."""
-    x0, x1, y0, y1 = (v * 1e-3 for v in scene_extent_m)
+def map_view() -> rrb.Spatial2DView:
+    """The situation (north up), every scan up to the cursor; distances in its labels."""
     return _space(
-        "situation, km (north up)",
+        "situation: radar, truth, plots and tracks (north up)",
         "map",
-        rrb.VisualBounds2D(x_range=[x0, x1], y_range=[-y1, -y0]),
+        rrb.VisualBounds2D(x_range=[-0.25, 1.02], y_range=[-0.3, 0.3]),
         time_ranges=rrb.VisibleTimeRange(
             "scan",
             start=rrb.TimeRangeBoundary.infinite(),
@@ -487,16 +516,14 @@ def map_view(scene_extent_m: tuple[float, float, float, float]) -> rrb.Spatial2D
     )
 
 
-def bias_view(frame: TargetFrame) -> rrb.Spatial2DView:
-    """The forest plot, framed on ±``frame.bias_half_m``."""
+def bias_view() -> rrb.Spatial2DView:
+    """The forest plot (scaled to ±1 by its transform)."""
     rows = len(SHOWN_CONVERSIONS)
-    row = frame.bias_row_m
+    row = 2.0 / 2.3 / (rows + 1)
     return _space(
-        "conversion bias along range at the scan: MC mean ± 95% CI, m",
+        "conversion bias along range at the scan: MC mean ± 95% CI",
         "bias",
-        rrb.VisualBounds2D(
-            x_range=[-frame.bias_half_m, frame.bias_half_m], y_range=[-row, rows * row]
-        ),
+        rrb.VisualBounds2D(x_range=[-1.0, 1.0], y_range=[-row, rows * row]),
     )
 
 
@@ -525,13 +552,13 @@ def series_views() -> list[rrb.TimeSeriesView]:
     return views
 
 
-def views(frame: TargetFrame, methods: Sequence[str]) -> rrb.Container:
+def views(methods: Sequence[str]) -> rrb.Container:
     """The Prosov tab: one target-frame view per method, the bias forest plot, the situation
     map, the legend and the per-scan statistics."""
-    cells = [method_view(m, frame) for m in methods] + [bias_view(frame)]
+    cells = [method_view(m) for m in methods] + [bias_view()]
     return rrb.Horizontal(
         rrb.Vertical(legend_view(), rrb.Grid(*cells, grid_columns=2), row_shares=[1, 12]),
-        rrb.Vertical(map_view(frame.map_extent_m), *series_views(), row_shares=[2, 2, 2, 2, 2]),
+        rrb.Vertical(map_view(), *series_views(), row_shares=[2, 2, 2, 2, 2]),
         column_shares=[3, 2],
         name="Prosov: converted measurements",
     )

@@ -46,9 +46,7 @@ def blueprint(*tabs: rrb.Container, timeline: str = "scan") -> rrb.Blueprint:
     )
 
 
-def overview(
-    frame: prosov_scene.TargetFrame, vframe: velocity_scene.VelocityFrame
-) -> rrb.Container:
+def overview(vframe: velocity_scene.VelocityFrame) -> rrb.Container:
     """The demo's first tab: what each paper is about, at a glance."""
     v = velocity_scene.views(vframe)
     vector, error, situation = v.vector, v.error, v.situation
@@ -56,10 +54,10 @@ def overview(
         rrb.Vertical(
             prosov_scene.legend_view(),
             rrb.Horizontal(
-                prosov_scene.method_view("naive", frame),
-                prosov_scene.method_view(OVERVIEW_DEBIASED, frame),
+                prosov_scene.method_view("naive"),
+                prosov_scene.method_view(OVERVIEW_DEBIASED),
             ),
-            prosov_scene.map_view(frame.map_extent_m),
+            prosov_scene.map_view(),
             rrb.TimeSeriesView(
                 origin="plots/doppler_start/rmse_vr_mps",
                 name="Gorshkov: radial-velocity RMSE of a Doppler-aided track start, m/s",
@@ -83,8 +81,8 @@ def record_preset(rec: rr.RecordingStream, preset: str, seed: int = 1) -> None:
     tabs: list[rrb.Container] = []
     timeline = "scan"
     if preset in ("demo", "prosov"):
-        frame = prosov_scene.log_prosov(rec, seed=seed)
-        tabs.append(prosov_scene.views(frame, prosov_scene.METHODS_SHOWN))
+        prosov_scene.log_prosov(rec, seed=seed)
+        tabs.append(prosov_scene.views(prosov_scene.METHODS_SHOWN))
     if preset in ("demo", "velocity"):
         vframe = velocity_scene.log_velocity_scene(rec, seed=seed)
         tabs.append(velocity_scene.views(vframe).tab)
@@ -97,6 +95,6 @@ def record_preset(rec: rr.RecordingStream, preset: str, seed: int = 1) -> None:
         else:  # the demo's timeline is ``scan``: the k curves open when window_k is chosen
             tabs += [start_tab, k_tab]
     if preset == "demo":
-        tabs.insert(0, overview(frame, vframe))
+        tabs.insert(0, overview(vframe))
     tabs.append(rrb.Vertical(text_log_view(), name="log"))
     rec.send_blueprint(blueprint(*tabs, timeline=timeline))

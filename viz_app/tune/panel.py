@@ -60,7 +60,7 @@ from radarviz.core.params import (
 )
 from radarviz.core.scenarios.planar import prosov_target
 from radarviz.viz_app.rerun import prosov_scene as prosov_views
-from radarviz.viz_app.rerun.prosov_scene import METHODS_SHOWN, TargetFrame
+from radarviz.viz_app.rerun.prosov_scene import METHODS_SHOWN
 from radarviz.viz_app.rerun.recording import (
     APPLICATION_ID,
     colour,
@@ -185,33 +185,31 @@ def simulate(params: TuneParams) -> TuneResult:
     return TuneResult(params, prosov_scene(params.config()))
 
 
-_BLUEPRINTS: dict[TargetFrame, Any] = {}
+_BLUEPRINT: list[Any] = []
 _BLUEPRINT_LOCK = threading.Lock()
 #: Converted points per scan behind each cloud mean the panel draws.
 TUNE_CLOUD_POINTS = 1000
 
 
-def send_blueprint(rec: rr.RecordingStream, frame: TargetFrame) -> None:
-    """Send the tuning blueprint (the Prosov tab framed by ``frame``); each frame's blueprint
-    is built once (``prosov_views.target_frame`` rounds its bounds to a few steps).
+def send_blueprint(rec: rr.RecordingStream) -> None:
+    """Send the tuning blueprint (the Prosov tab), built once.
 
-    ``rec.send_blueprint`` builds a new in-memory blueprint stream on every call, and
-    rerun-sdk 0.41 never frees it (two native threads each); reusing the built storage keeps
-    the thread count flat over any number of runs.
+    The Prosov views' bounds do not depend on the parameters (the scene's transforms carry
+    the scale), so one blueprint serves every run. ``rec.send_blueprint`` builds a new
+    in-memory blueprint stream on every call, and rerun-sdk 0.41 never frees it (two native
+    threads each); reusing the built storage keeps the thread count flat over any number of
+    runs.
     """
     from rerun.blueprint.api import create_in_memory_blueprint
 
     with _BLUEPRINT_LOCK:
-        storage = _BLUEPRINTS.get(frame)
-        if storage is None:
+        if not _BLUEPRINT:
             bp = blueprint(
-                prosov_views.views(frame, METHODS_SHOWN),
-                rrb.Vertical(text_log_view(), name="log"),
+                prosov_views.views(METHODS_SHOWN), rrb.Vertical(text_log_view(), name="log")
             )
-            storage = create_in_memory_blueprint(
-                application_id=APPLICATION_ID, blueprint=bp
-            ).storage
-            _BLUEPRINTS[frame] = storage
+            storage = create_in_memory_blueprint(application_id=APPLICATION_ID, blueprint=bp)
+            _BLUEPRINT.append(storage.storage)
+        storage = _BLUEPRINT[0]
     rr.bindings.send_blueprint(storage, True, True, recording=rec.to_native())
 
 
@@ -224,8 +222,8 @@ def log_tuning_scene(rec: rr.RecordingStream, params: TuneParams) -> TuneResult:
     """
     result = simulate(params)
     p = params
-    frame = prosov_views.log_scene(rec, result.scene, TUNE_CLOUD_POINTS)
-    send_blueprint(rec, frame)
+    prosov_views.log_scene(rec, result.scene, TUNE_CLOUD_POINTS)
+    send_blueprint(rec)
     log_text(
         rec,
         f"tune: {p.runs} Monte Carlo runs × {p.steps} scans, σr = {p.sigma_r_m:g} m, "
