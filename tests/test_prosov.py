@@ -250,3 +250,25 @@ def test_delta_x_band_is_nan_without_group_sums() -> None:
     lo, hi = res.delta_x_ci95()["rmse"]
     assert np.isnan(lo).all() and np.isnan(hi).all()
     assert np.isnan(res.band95("seed", "rmse_x")[0]).all()
+
+
+def test_figure_draws_every_band_and_names_its_runs() -> None:
+    """Each Δx reading, each method's range bias and NEES carries a shaded band, and the
+    legends say how many runs the bands come from."""
+    from matplotlib.collections import PolyCollection
+
+    from radarviz.viz_app.figures.prosov import _build_figure
+    from radarviz.viz_app.reports.prosov import prosov_document
+
+    configs = prosov_configs([1.0], runs=300, steps=20, methods=("naive", "seed", "ucm"))
+    doc = prosov_document([run_tracking(c) for c in configs])
+    fig = _build_figure(doc, doc["cases"], 20)
+    (delta_ax,) = fig.subfigs[0].axes
+    bias_ax, nees_ax = fig.subfigs[1].axes
+
+    def bands(ax) -> int:
+        return sum(isinstance(c, PolyCollection) for c in ax.collections)
+
+    assert (bands(delta_ax), bands(bias_ax), bands(nees_ax)) == (3, 3, 3)
+    labels = [t.get_text() for sub in fig.subfigs for leg in sub.legends for t in leg.get_texts()]
+    assert labels.count("95% band from 300 runs") == 2
