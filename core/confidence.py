@@ -80,21 +80,29 @@ def group_counts(offset: int, runs: int, groups: int = BAND_GROUPS) -> NDArray[n
 
 
 def group_sums(
-    terms: NDArray[np.float64], offset: int, groups: int = BAND_GROUPS
+    terms: NDArray[np.float64], offset: int, groups: int = BAND_GROUPS, *, square: bool = False
 ) -> NDArray[np.float64]:
-    """Per-group sums of per-run ``terms`` (..., m): (groups, ...); run i is run offset + i.
+    """Per-group sums of per-run ``terms`` (..., m) (of their squares with ``square``):
+    (groups, ...); run i is run offset + i.
 
     Run offset + i goes to group (offset + i) mod G, so a long experiment fed block by block
-    deals its runs exactly as one block of all of them would.
+    deals its runs exactly as one block of all of them would. The sums over each group's
+    runs are one matrix product (ones · terms) or one ``einsum`` of the squares, a fraction of
+    the cost of a strided reduction.
     """
     m = terms.shape[-1]
     q = m // groups
     out = np.zeros((groups, *terms.shape[:-1]))
     if q:
-        full = terms[..., : q * groups].reshape(*terms.shape[:-1], q, groups).sum(axis=-2)
-        out += np.moveaxis(full, -1, 0)  # row r: runs with local index ≡ r (mod G)
+        full = terms[..., : q * groups].reshape(*terms.shape[:-1], q, groups)
+        if square:
+            part = np.einsum("...qg,...qg->...g", full, full)
+        else:
+            part = np.matmul(np.ones(q), full)
+        out += np.moveaxis(part, -1, 0)  # row r: runs with local index ≡ r (mod G)
     for i in range(q * groups, m):  # the last m mod G runs, one each
-        out[i - q * groups] += terms[..., i]
+        t = terms[..., i]
+        out[i - q * groups] += t * t if square else t
     # Local residue r belongs to group (offset + r) mod G.
     return np.roll(out, offset % groups, axis=0)
 

@@ -241,6 +241,24 @@ def test_reproduce_gorshkov_json_document(capsys) -> None:
     assert tr["radar"] == "RLS3" and tr["runs"] == 50 and tr["start_scans"] == 3
     assert set(tr["variants"]) == {"range_only", "range_doppler"}
     assert tr["variants"]["range_doppler"]["rmse_vr"][:2] == [None, None]
+    # Every Monte Carlo series has its band, null exactly where the series is null, and the
+    # band brackets the value.
+    assert doc["band"]["level"] == 0.95 and doc["band"]["groups"] == 32
+    pairs = [
+        (rls1["sigma"][v][c], rls1["sigma_ci95"][v][c])
+        for v in ("range_only", "range_doppler")
+        for c in ("r", "vr", "a")
+    ]
+    pairs += [(rls1["gain_percent"][c], rls1["gain_percent_ci95"][c]) for c in ("vr", "a")]
+    for name in ("range_only", "range_doppler"):
+        entry = tr["variants"][name]
+        pairs += [(entry[k], entry["ci95"][k]) for k in ("rmse_vr", "rmse_x", "nees_pos")]
+    for values, band in pairs:
+        for x, lo, hi in zip(values, band["lo"], band["hi"], strict=True):
+            assert (x is None) == (lo is None) == (hi is None)
+            assert x is None or lo < x < hi
+    peak = rls1["range_gain_peak"]
+    assert peak["k"] in peak["k_within_band"] and peak["ci95"][0] < peak["percent"]
 
 
 @pytest.mark.parametrize(
