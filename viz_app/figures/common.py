@@ -62,9 +62,9 @@ def finite_points(
 BAND_ALPHA = 0.2
 
 
-def band_label(runs: Any) -> str:
-    """The legend entry of every Monte Carlo band: "95% band from N runs"."""
-    return f"95% band from {runs} runs"
+def band_label(runs: Any, unit: str = "runs") -> str:
+    """The legend entry of every Monte Carlo band: "95% band from N runs" (or trials)."""
+    return f"95% band from {runs} {unit}"
 
 
 def fill_band(

@@ -433,7 +433,7 @@ def _build_figure(
         Patch(
             color="0.3",
             alpha=BAND_ALPHA,
-            label=band_label(doc.get("trials", "?")).replace("runs", "trials"),
+            label=band_label(doc.get("trials", "?"), "trials"),
         ),
     ]
     fig.legend(
