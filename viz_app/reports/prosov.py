@@ -175,7 +175,8 @@ def format_claim(claim: dict[str, Any], runs: int) -> str:
     elif lo is None or hi is None:
         at = f"Δx({claim['peak_scan']}) = {peak:.2f}%, no band"
     else:
-        at = f"Δx({claim['peak_scan']}) = {peak:.2f}% ± {(hi - lo) / 2:.2f}%, [{lo:.2f}, {hi:.2f}]"
+        half = (hi - lo) / 2
+        at = f"Δx({claim['peak_scan']}) = {peak:.2f}% ± {half:.2g}%, [{lo:.2f}, {hi:.2f}]"
     return (
         f"{claim['reading']} reading, |Δx| ≤ {claim['bound_percent']:g}% over scans "
         f"1–{claim['scans']}: {verdict} ({at})"
