@@ -100,9 +100,9 @@ def group_sums(
         else:
             part = np.matmul(np.ones(q), full)
         out += np.moveaxis(part, -1, 0)  # row r: runs with local index ≡ r (mod G)
-    for i in range(q * groups, m):  # the last m mod G runs, one each
-        t = terms[..., i]
-        out[i - q * groups] += t * t if square else t
+    if m > q * groups:  # the last m mod G runs, one to each of the first groups
+        rest = np.moveaxis(terms[..., q * groups :], -1, 0)
+        out[: m - q * groups] += rest * rest if square else rest
     # Local residue r belongs to group (offset + r) mod G.
     return np.roll(out, offset % groups, axis=0)
 

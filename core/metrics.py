@@ -205,8 +205,13 @@ class MetricsAccumulator:
     def _add_group_sums(
         self, scans: list[int], offsets: list[int], terms: NDArray[np.float64]
     ) -> None:
-        for i, (n, offset) in enumerate(zip(scans, offsets, strict=True)):
-            self._group_sums[:, :, n] += np.moveaxis(group_sums(terms[:, i], offset), 0, 1)
+        # One ``group_sums`` per distinct offset mod G (one in all, for a single block).
+        residues = np.asarray(offsets) % BAND_GROUPS
+        where = np.asarray(scans)
+        for r in np.unique(residues):
+            idx = np.flatnonzero(residues == r)
+            part = group_sums(terms[:, idx], int(r))  # (G, len(SUM_NAMES), len(idx))
+            np.add.at(self._group_sums, (slice(None), slice(None), where[idx]), part.swapaxes(0, 1))
 
     def to_arrays(self) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
         """The state as plain arrays: runs (N,) and sums (len(SUM_NAMES), N), copies.
