@@ -17,7 +17,14 @@ Definitions, with e = x̂ − x the estimation error of run m at scan n and M ru
     nees_state  = mean eᵀ P⁻¹ e                 (4 dof)
 
 For a consistent filter M · nees ~ χ²(M·dof), which gives the two-sided 95% band
-``nees_band(dof, M)``.
+``nees_band(dof, M)``: where the run average of a consistent filter falls.
+
+The Monte Carlo error of every statistic (how far it is from its M → ∞ value) is a different
+band: the accumulator also keeps the sums per group of runs (run j of a scan in group
+j mod G, ``core.confidence.BAND_GROUPS``), and ``band95`` / ``leave_one_out`` give the
+delete-a-group jackknife band of any field (``core.confidence``). Ratios of two methods' fields
+(Prosov's Δx) take their leave-outs from both methods' ``leave_one_out``: the runs are dealt to
+the groups in the same order for every method, so group g holds the same runs everywhere.
 """
 
 from __future__ import annotations
@@ -27,6 +34,7 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
+from radarviz.core.confidence import BAND_GROUPS, group_counts, group_sums, jackknife_band
 from radarviz.core.filters.state import CVBatch, quad_form_inv
 from radarviz.core.geometry import polar_coordinates
 
@@ -71,7 +79,17 @@ STAGE_ROWS = 4096
 def scan_sums(
     x: NDArray[np.float64], P: NDArray[np.float64], truth: NDArray[np.float64]
 ) -> NDArray[np.float64]:
-    """The running-sum terms of K scans of m runs each: (len(SUM_NAMES), K).
+    """The running sums of K scans of m runs each: (len(SUM_NAMES), K).
+
+    ``scan_terms`` summed over the runs of each scan (one pairwise sum).
+    """
+    return scan_terms(x, P, truth).sum(axis=-1)
+
+
+def scan_terms(
+    x: NDArray[np.float64], P: NDArray[np.float64], truth: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """The per-run terms of the running sums of K scans of m runs: (len(SUM_NAMES), K, m).
 
     Args:
         x: (K, m, 4) filtered states (x, ẋ, y, ẏ); P: (K, m, 4, 4) their covariances.
@@ -105,7 +123,7 @@ def scan_sums(
     )
     e = x - t
     nees_state[...] = quad_form_inv(P.reshape(k * m, 4, 4), e.reshape(k * m, 4)).reshape(k, m)
-    return terms.sum(axis=-1)
+    return terms
 
 
 class MetricsAccumulator:
@@ -130,15 +148,24 @@ class MetricsAccumulator:
             np.empty((0, 4)),
         )
         self._staged: list[int] = []  # scan index of each staged slot, in arrival order
+        self._offsets: list[int] = []  # runs already at that scan before the slot's block
+        # Per-group runs (G, N) and sums (len(SUM_NAMES), G, N) for the jackknife bands
+        # (``core.confidence``): run j of a scan, in arrival order, is in group j mod G.
+        self.group_runs = np.zeros((BAND_GROUPS, steps), dtype=np.int64)
+        self._group_sums = np.zeros((len(SUM_NAMES), BAND_GROUPS, steps))
 
     def add(self, n: int, state: CVBatch, truth: NDArray[np.float64]) -> None:
         """Add one block of runs at scan index n (0-based); ``truth`` is the (4,) true state."""
         x, P = state.x, state.P
         m = x.shape[0]
+        offset = int(self.runs[n])
         self.runs[n] += m
+        self.group_runs[:, n] += group_counts(offset, m)
         if m >= STAGE_ROWS:  # big enough to be one efficient pass on its own
             self._flush()
-            self._add_sums([n], scan_sums(x[None], P[None], np.asarray(truth)[None]))
+            terms = scan_terms(x[None], P[None], np.asarray(truth)[None])
+            self._add_sums([n], terms.sum(axis=-1))
+            self._add_group_sums([n], [offset], terms)
             return
         staged = self._staged
         xs, ps, ts = self._stage
@@ -156,6 +183,7 @@ class MetricsAccumulator:
         ps[k] = P
         ts[k] = truth
         staged.append(n)
+        self._offsets.append(offset)
         if k + 1 == len(ts):
             self._flush()
 
@@ -164,12 +192,26 @@ class MetricsAccumulator:
         k = len(self._staged)
         if k:
             xs, ps, ts = self._stage
-            self._add_sums(self._staged, scan_sums(xs[:k], ps[:k], ts[:k]))
+            terms = scan_terms(xs[:k], ps[:k], ts[:k])
+            self._add_sums(self._staged, terms.sum(axis=-1))
+            self._add_group_sums(self._staged, self._offsets, terms)
             self._staged = []
+            self._offsets = []
 
     def _add_sums(self, scans: list[int], sums: NDArray[np.float64]) -> None:
         for i, n in enumerate(scans):  # one scan at a time: the order of the additions is kept
             self._sums[:, n] += sums[:, i]
+
+    def _add_group_sums(
+        self, scans: list[int], offsets: list[int], terms: NDArray[np.float64]
+    ) -> None:
+        # One ``group_sums`` per distinct offset mod G (one in all, for a single block).
+        residues = np.asarray(offsets) % BAND_GROUPS
+        where = np.asarray(scans)
+        for r in np.unique(residues):
+            idx = np.flatnonzero(residues == r)
+            part = group_sums(terms[:, idx], int(r))  # (G, len(SUM_NAMES), len(idx))
+            np.add.at(self._group_sums, (slice(None), slice(None), where[idx]), part.swapaxes(0, 1))
 
     def to_arrays(self) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
         """The state as plain arrays: runs (N,) and sums (len(SUM_NAMES), N), copies.
@@ -194,7 +236,14 @@ class MetricsAccumulator:
         acc = cls(steps)
         acc.runs[:] = runs
         acc._sums[:] = sums
+        acc.group_runs[:] = 0  # the group sums are not shipped: no bands (``has_groups``)
         return acc
+
+    @property
+    def has_groups(self) -> bool:
+        """Whether every run is in the group sums (false after ``from_arrays``), so that
+        ``leave_one_out`` is defined."""
+        return bool(np.array_equal(self.group_runs.sum(axis=0), self.runs))
 
     def merge(self, other: MetricsAccumulator) -> None:
         """Add another accumulator's sums (same N) into this one."""
@@ -202,17 +251,40 @@ class MetricsAccumulator:
         other._flush()
         self._sums += other._sums
         self.runs += other.runs
+        self.group_runs += other.group_runs
+        self._group_sums += other._group_sums
 
     def result(self) -> TrackMetrics:
         """The per-scan statistics; NaN at scans no run reached (e.g. before a track start)."""
         self._flush()
-        with np.errstate(invalid="ignore", divide="ignore"):
-            return self._result()
+        return metrics_from_sums(self.runs, self._sums)
 
-    def _result(self) -> TrackMetrics:
-        m = self.runs.astype(np.float64)
-        m[m == 0] = np.nan
-        s = dict(zip(SUM_NAMES, self._sums, strict=True))
+    def leave_one_out(self) -> TrackMetrics:
+        """The statistics with each group left out in turn: every field (G, N), NaN where the
+        group holds no run (or the sums hold no groups, see ``has_groups``). With ``result()``
+        this is what ``core.confidence.jackknife_band`` needs."""
+        self._flush()
+        runs = self.runs[None, :] - self.group_runs
+        if not self.has_groups:
+            runs = np.zeros_like(runs)
+        loo = metrics_from_sums(runs, self._sums[:, None, :] - self._group_sums)
+        empty = self.group_runs == 0
+        return TrackMetrics(*(np.where(empty, np.nan, f) for f in loo))
+
+    def band95(self, name: str) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """The 95% Monte Carlo band (lo, hi) per scan of the ``TrackMetrics`` field ``name``
+        (e.g. ``"rmse_x"``, ``"bias_range"``, ``"nees_pos"``): the delete-a-group jackknife
+        (``core.confidence``). NaN where it is undefined."""
+        return jackknife_band(getattr(self.result(), name), getattr(self.leave_one_out(), name))
+
+
+def metrics_from_sums(runs: NDArray[np.int64], sums: NDArray[np.float64]) -> TrackMetrics:
+    """``TrackMetrics`` from run counts (..., N) and running sums (len(SUM_NAMES), ..., N)
+    (module docstring); NaN where no run counted."""
+    m = runs.astype(np.float64)
+    m[m == 0] = np.nan
+    s = dict(zip(SUM_NAMES, sums, strict=True))
+    with np.errstate(invalid="ignore", divide="ignore"):
         bias_x = s["ex"] / m
         # Sample variance from the sums; clip tiny negative values left by rounding.
         var_x = np.maximum(s["ex2"] - s["ex"] * bias_x, 0.0) / (m - 1.0)

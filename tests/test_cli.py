@@ -48,14 +48,23 @@ def test_reproduce_prosov_json_document(capsys: pytest.CaptureFixture[str]) -> N
     doc = json.loads(out)
     assert doc["experiment"] == "prosov" and doc["runs"] == 50 and doc["seed"] == 4
     assert doc["period_s"] == 10.0
+    assert doc["band"] == {"level": 0.95, "method": "delete-a-group jackknife", "groups": 32}
     assert [c["sigma_beta_deg"] for c in doc["cases"]] == [1.0, 2.0]
     for case in doc["cases"]:
         assert case["sigma_r_m"] == 250.0 and case["n"] == [1, 2, 3, 4, 5]
         assert set(case["methods"]) == {"naive", "seed", "cmkf_d", "ucm", "ducm", "ekf", "ukf"}
         for m in case["methods"].values():
-            assert set(m) == METHOD_KEYS
-            assert all(len(v) == 5 and all(math.isfinite(x) for x in v) for v in m.values())
+            assert set(m) == METHOD_KEYS | {"ci95"}
+            series = {k: v for k, v in m.items() if k != "ci95"}
+            assert all(len(v) == 5 and all(math.isfinite(x) for x in v) for v in series.values())
+            assert set(m["ci95"]) == METHOD_KEYS
+            for key, band in m["ci95"].items():
+                assert all(
+                    lo <= x <= hi for lo, x, hi in zip(band["lo"], m[key], band["hi"], strict=True)
+                )
         assert set(case["delta_x_percent"]) == {"filter", "rmse", "std"}
+        assert set(case["delta_x_ci95"]) == {"filter", "rmse", "std"}
+        assert case["claims"] == []  # the paper's claims are over 20 scans; this run has 5
         lo, hi = case["nees_pos_band95"]
         assert 0 < lo < 2 < hi
 
@@ -232,6 +241,24 @@ def test_reproduce_gorshkov_json_document(capsys) -> None:
     assert tr["radar"] == "RLS3" and tr["runs"] == 50 and tr["start_scans"] == 3
     assert set(tr["variants"]) == {"range_only", "range_doppler"}
     assert tr["variants"]["range_doppler"]["rmse_vr"][:2] == [None, None]
+    # Every Monte Carlo series has its band, null exactly where the series is null, and the
+    # band brackets the value.
+    assert doc["band"]["level"] == 0.95 and doc["band"]["groups"] == 32
+    pairs = [
+        (rls1["sigma"][v][c], rls1["sigma_ci95"][v][c])
+        for v in ("range_only", "range_doppler")
+        for c in ("r", "vr", "a")
+    ]
+    pairs += [(rls1["gain_percent"][c], rls1["gain_percent_ci95"][c]) for c in ("vr", "a")]
+    for name in ("range_only", "range_doppler"):
+        entry = tr["variants"][name]
+        pairs += [(entry[k], entry["ci95"][k]) for k in ("rmse_vr", "rmse_x", "nees_pos")]
+    for values, band in pairs:
+        for x, lo, hi in zip(values, band["lo"], band["hi"], strict=True):
+            assert (x is None) == (lo is None) == (hi is None)
+            assert x is None or lo < x < hi
+    peak = rls1["range_gain_peak"]
+    assert peak["k"] in peak["k_within_band"] and peak["ci95"][0] < peak["percent"]
 
 
 @pytest.mark.parametrize(

@@ -589,3 +589,28 @@ def test_bad_preset_and_experiment_input() -> None:
                 3, sigma_r_m=1.0, sigma_vr_mps=None, period_s=1.0, with_doppler=False
             ),
         )
+
+
+def test_monte_carlo_bands_cover_the_analytic_values_at_95_percent() -> None:
+    """The σ (χ²) and gain (jackknife) bands of ``run_gorshkov`` against their exact values
+    sqrt(R_ii) and the analytic gain, over R independent seeds: each cell's coverage count is
+    binomial(R, 0.95) if the bands are right, so it must be within 3.5 of its standard
+    deviations √(0.95 · 0.05 / R) of 0.95: a false alarm rate of 5e-4 per cell, under 1% for
+    the ≤ 17 cells; a band of half or twice the width (68% or ~100%) fails."""
+    replicates = 150
+    covered_sigma, covered_gain = [], []
+    for seed in range(replicates):
+        res = run_gorshkov(["RLS3"], trials=640, seed=seed, ks=(2, 4, 8), n_points=8)
+        rad = res.radars[0]
+        st = rad.range_doppler
+        covered_sigma.append(
+            (st.sigma_mc_ci95_lo <= st.sigma_analytic) & (st.sigma_analytic <= st.sigma_mc_ci95_hi)
+        )
+        g = rad.gain_analytic
+        covered_gain.append((rad.gain_mc_ci95_lo <= g) & (g <= rad.gain_mc_ci95_hi))
+    tol = 3.5 * np.sqrt(0.95 * 0.05 / replicates)
+    sigma_cov = np.mean(covered_sigma, axis=0)
+    gain_cov = np.mean(covered_gain, axis=0)
+    fitted = np.isfinite(rad.gain_analytic) & (rad.gain_analytic > 0)
+    assert np.all(np.abs(sigma_cov[np.isfinite(st.sigma_analytic)] - 0.95) <= tol), sigma_cov
+    assert np.all(np.abs(gain_cov[fitted] - 0.95) <= tol), gain_cov

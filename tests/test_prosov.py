@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from radarviz.core.confidence import claim_verdict
 from radarviz.core.experiments.prosov import (
     ALL_METHODS,
     BLOCK_RUNS,
@@ -13,6 +14,7 @@ from radarviz.core.experiments.prosov import (
     displayed_measurements,
     prosov_configs,
     prosov_scene,
+    run_block,
     run_tracking,
     track_history,
 )
@@ -202,3 +204,78 @@ def test_conversion_cloud_is_centred_where_each_conversion_puts_it() -> None:
         np.testing.assert_allclose(cloud.offset_half_width95_m[method][0, 1], 1.959964 * se)
     steps = cfg.target.truth().shape[0]
     assert conversion_cloud(cfg, 10).points["ucm"].shape == (steps, 10, 2)
+
+
+def test_bands_and_claim_verdicts_in_the_document() -> None:
+    """The report's bands bracket its series, and its verdicts follow from the bands: the
+    P-based reading is many band widths outside both bounds (does not hold), the std reading
+    many inside (holds); the RMSE reading's true Δx(20) sits near the bounds, so its verdict
+    at 600 runs is whatever its bands over scans 1–20 give."""
+    from radarviz.viz_app.reports.prosov import format_prosov_table, prosov_document
+
+    configs = prosov_configs([1.0, 2.0], runs=600, steps=20, methods=("naive", "seed", "ucm"))
+    doc = prosov_document([run_tracking(c) for c in configs])
+    assert doc["band"]["groups"] >= 2 and doc["band"]["level"] == 0.95
+    for case in doc["cases"]:
+        for reading, band in case["delta_x_ci95"].items():
+            lo, value, hi = (np.array(band["lo"]), case["delta_x_percent"][reading], band["hi"])
+            assert np.all((lo < value) & (value < np.array(hi)))
+        ci = case["methods"]["ucm"]["ci95"]
+        for key in ("rmse_x", "bias_range", "nees_pos"):
+            value = np.array(case["methods"]["ucm"][key])
+            assert np.all((np.array(ci[key]["lo"]) < value) & (value < np.array(ci[key]["hi"])))
+        verdicts = {c["reading"]: c["verdict"] for c in case["claims"]}
+        assert verdicts["filter"] == "does not hold" and verdicts["std"] == "holds"
+        bound = {1.0: 2.1, 2.0: 18.0}[case["sigma_beta_deg"]]
+        band = case["delta_x_ci95"]["rmse"]
+        assert verdicts["rmse"] == claim_verdict(band["lo"][:20], band["hi"][:20], bound)
+        for c in case["claims"]:
+            lo, hi = c["peak_ci95"]
+            assert c["scans"] == 20 and lo < c["peak_percent"] < hi
+    table = format_prosov_table(doc)
+    assert "std reading, |Δx| ≤ 2.1% over scans 1–20: holds" in table
+    assert "filter reading, |Δx| ≤ 18% over scans 1–20: does not hold" in table
+    rmse_2deg = doc["cases"][1]["claims"][1]
+    assert rmse_2deg["reading"] == "rmse"
+    verdict = rmse_2deg["verdict"].replace("not resolved", "not resolved at 600 runs")
+    assert f"rmse reading, |Δx| ≤ 18% over scans 1–20: {verdict} (" in table
+    assert "holds for the RMSE" not in table
+
+
+def test_delta_x_band_is_nan_without_group_sums() -> None:
+    """A result built from sums without groups (a sweep's stored chunks) has no band, and
+    says so with NaN rather than a band of width zero."""
+    from radarviz.core.experiments.prosov import tracking_result
+    from radarviz.core.metrics import MetricsAccumulator
+
+    (cfg,) = prosov_configs([1.0], runs=64, steps=5, methods=("naive", "seed"))
+    acc = {
+        m: MetricsAccumulator.from_arrays(*a.to_arrays()) for m, a in run_block(cfg, 0, 64).items()
+    }
+    res = tracking_result(cfg, acc)
+    assert res.leave_one_out == {}
+    lo, hi = res.delta_x_ci95()["rmse"]
+    assert np.isnan(lo).all() and np.isnan(hi).all()
+    assert np.isnan(res.band95("seed", "rmse_x")[0]).all()
+
+
+def test_figure_draws_every_band_and_names_its_runs() -> None:
+    """Each Δx reading, each method's range bias and NEES carries a shaded band, and the
+    legends say how many runs the bands come from."""
+    from matplotlib.collections import PolyCollection
+
+    from radarviz.viz_app.figures.prosov import _build_figure
+    from radarviz.viz_app.reports.prosov import prosov_document
+
+    configs = prosov_configs([1.0], runs=300, steps=20, methods=("naive", "seed", "ucm"))
+    doc = prosov_document([run_tracking(c) for c in configs])
+    fig = _build_figure(doc, doc["cases"], 20)
+    (delta_ax,) = fig.subfigs[0].axes
+    bias_ax, nees_ax = fig.subfigs[1].axes
+
+    def bands(ax) -> int:
+        return sum(isinstance(c, PolyCollection) for c in ax.collections)
+
+    assert (bands(delta_ax), bands(bias_ax), bands(nees_ax)) == (3, 3, 3)
+    labels = [t.get_text() for sub in fig.subfigs for leg in sub.legends for t in leg.get_texts()]
+    assert labels.count("95% band from 300 runs") == 2

@@ -355,10 +355,20 @@ def test_cli_reproduce_velocity_json(capsys: pytest.CaptureFixture[str]) -> None
     for key in ("corr_first_order", "corr_mc"):
         assert np.shape(b[key]) == (3, 3)
     assert b["condition_number"] > 1 and 0 < b["m"] < M_WARN
+    lo, hi = np.array(b["sigma_mc_ci95"]["lo"]), np.array(b["sigma_mc_ci95"]["hi"])
+    assert np.all((lo < b["sigma_mc"]) & (np.array(b["sigma_mc"]) < hi))
+    corr_lo, corr_hi = np.array(b["corr_mc_ci95"]["lo"]), np.array(b["corr_mc_ci95"]["hi"])
+    assert corr_lo.shape == (3, 3) and np.all(corr_lo <= np.array(b["corr_mc"]) + 1e-12)
+    assert np.all(np.array(b["corr_mc"]) <= corr_hi + 1e-12)
+    assert doc["band"]["level"] == 0.95
     assert doc["sweep"]
     for p in doc["sweep"]:
         assert {"distance_km", "altitude_km", "m", "ratio_mc_to_linear"} <= set(p)
         assert len(p["ratio_mc_to_linear"]) == 3
+        for key in ("ratio_mc_to_linear", "ratio_robust_to_linear"):
+            band = p[key + "_ci95"]
+            for x, lo_i, hi_i in zip(p[key], band["lo"], band["hi"], strict=True):
+                assert lo_i <= x <= hi_i
     again = main(["reproduce", "velocity", "--trials", "3000", "--seed", "2", "--json"])
     assert again == 0 and json.loads(capsys.readouterr().out) == doc
 
@@ -389,3 +399,24 @@ def test_cli_reproduce_velocity_bad_input(args, needle, capsys) -> None:
     err = capsys.readouterr().err
     assert code == 2
     assert needle in err and err.count("\n") == 1 and "Traceback" not in err
+
+
+def test_monte_carlo_bands_cover_at_95_percent() -> None:
+    """``summarize_errors``' bands (jackknife σ and correlation, batch-means robust σ) over R
+    replicates of Gaussian errors with a known covariance: each coverage count is
+    binomial(R, 0.95) if the bands are right, so it is within 3.5 of its standard deviations
+    (5e-4 false alarms per quantity, 7 quantities); half or twice the width fails."""
+    rng = np.random.default_rng(11)
+    cov = np.array([[4.0, -1.2, 0.6], [-1.2, 9.0, -3.0], [0.6, -3.0, 25.0]])
+    sigma = np.sqrt(np.diag(cov))
+    corr = cov / np.outer(sigma, sigma)
+    chol = np.linalg.cholesky(cov)
+    replicates, n = 400, 640
+    hits = np.zeros(7)
+    for _ in range(replicates):
+        mc = summarize_errors(rng.standard_normal((n, 3)) @ chol.T)
+        hits[:3] += (mc.sigma_ci95_lo <= sigma) & (sigma <= mc.sigma_ci95_hi)
+        hits[3:6] += (mc.sigma_robust_ci95_lo <= sigma) & (sigma <= mc.sigma_robust_ci95_hi)
+        hits[6] += mc.correlation_ci95_lo[1, 2] <= corr[1, 2] <= mc.correlation_ci95_hi[1, 2]
+    tol = 3.5 * np.sqrt(0.95 * 0.05 / replicates)
+    assert np.all(np.abs(hits / replicates - 0.95) <= tol), hits / replicates

@@ -24,6 +24,7 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
+from radarviz.core.confidence import BAND_GROUPS, group_counts, group_sums, jackknife_band
 from radarviz.core.filters.doppler import doppler_update
 from radarviz.core.filters.polar_ekf import ekf_update
 from radarviz.core.filters.run import run_scans
@@ -117,7 +118,12 @@ class DopplerTrackingResult(NamedTuple):
         rmse_vr / sigma_vr_filter: variant → (N,) RMSE of the track's radial velocity and the
             filter's σ of it (√(g P gᵀ), g = ∂Vr/∂state).
         start_fits: variant → the finite-memory fit used for the start.
-        nees_pos_band95: the 95% χ² band of the run-averaged position NEES.
+        nees_pos_band95: the 95% χ² band of the run-averaged position NEES of a consistent
+            filter.
+        leave_one_out: variant → the metrics with each group of runs left out, (G, N) fields
+            (``MetricsAccumulator.leave_one_out``), for ``band95``.
+        rmse_vr_ci95: variant → the 95% Monte Carlo band (lo, hi) of ``rmse_vr``, (N,) each:
+            the delete-a-group jackknife (``core.confidence``) of √(Σ (V̂r − Vr)² / M).
     """
 
     config: DopplerTrackingConfig
@@ -127,10 +133,22 @@ class DopplerTrackingResult(NamedTuple):
     sigma_vr_filter: dict[str, NDArray[np.float64]]
     start_fits: dict[str, FiniteMemoryFit]
     nees_pos_band95: tuple[float, float]
+    leave_one_out: dict[str, TrackMetrics]
+    rmse_vr_ci95: dict[str, tuple[NDArray[np.float64], NDArray[np.float64]]]
+
+    def band95(self, variant: str, name: str) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """The 95% Monte Carlo band (lo, hi) per scan of one variant's ``TrackMetrics`` field
+        (``"rmse_x"``, ``"nees_pos"``, …): the delete-a-group jackknife; NaN before the start."""
+        return jackknife_band(
+            getattr(self.metrics[variant], name), getattr(self.leave_one_out[variant], name)
+        )
 
 
-def _vr_stats(state: CVBatch, truth_n: NDArray[np.float64]) -> tuple[float, float]:
-    """(Σ (V̂r − Vr)², Σ g P gᵀ) over the runs of one scan."""
+def _vr_stats(
+    state: CVBatch, truth_n: NDArray[np.float64]
+) -> tuple[float, float, NDArray[np.float64]]:
+    """(Σ (V̂r − Vr)², Σ g P gᵀ) over the runs of one scan, and the (V̂r − Vr)² per group
+    of runs (``core.confidence.group_sums``)."""
     x, P = state.x, state.P
     px, vx, py, vy = x[:, 0], x[:, 1], x[:, 2], x[:, 3]
     rp = polar_coordinates([px, py])[0]
@@ -138,7 +156,7 @@ def _vr_stats(state: CVBatch, truth_n: NDArray[np.float64]) -> tuple[float, floa
     g = np.stack([(vx - vrp * px / rp) / rp, px / rp, (vy - vrp * py / rp) / rp, py / rp], -1)
     var = np.einsum("mi,mij,mj->m", g, P, g)
     err = vrp - radial_velocity(truth_n[0::2], truth_n[1::2])
-    return float((err * err).sum()), float(var.sum())
+    return float((err * err).sum()), float(var.sum()), group_sums(err, 0, square=True)
 
 
 def run_doppler_tracking(config: DopplerTrackingConfig) -> DopplerTrackingResult:
@@ -154,6 +172,7 @@ def run_doppler_tracking(config: DopplerTrackingConfig) -> DopplerTrackingResult
         truth, sigma_r_m=sr, sigma_azimuth_rad=sb, sigma_vr_mps=svr, runs=config.runs, rng=rng
     )
     metrics, rmse_vr, sig_vr, fits = {}, {}, {}, {}
+    loo_metrics, rmse_vr_band = {}, {}
     for variant in VARIANTS:
         doppler = variant == "range_doppler"
         fit = finite_memory_fit(k, sigma_r_m=sr, sigma_vr_mps=svr, period_s=T, with_doppler=doppler)
@@ -168,6 +187,7 @@ def run_doppler_tracking(config: DopplerTrackingConfig) -> DopplerTrackingResult
         )
         acc = MetricsAccumulator(steps)
         sq, var = np.full(steps, np.nan), np.full(steps, np.nan)
+        sq_groups = np.full((BAND_GROUPS, steps), np.nan)
 
         def update(n: int, pred: CVBatch, out: CVBatch, doppler: bool = doppler) -> CVBatch:
             post = ekf_update(
@@ -185,9 +205,10 @@ def run_doppler_tracking(config: DopplerTrackingConfig) -> DopplerTrackingResult
             acc: MetricsAccumulator = acc,
             sq: NDArray[np.float64] = sq,
             var: NDArray[np.float64] = var,
+            sq_groups: NDArray[np.float64] = sq_groups,
         ) -> None:
             acc.add(n, state, truth[n])
-            sq[n], var[n] = _vr_stats(state, truth[n])
+            sq[n], var[n], sq_groups[:, n] = _vr_stats(state, truth[n])
 
         run_scans(
             state,
@@ -199,8 +220,14 @@ def run_doppler_tracking(config: DopplerTrackingConfig) -> DopplerTrackingResult
             on_scan=on_scan,
         )
         metrics[variant] = acc.result()
+        loo_metrics[variant] = acc.leave_one_out()
         rmse_vr[variant] = np.sqrt(sq / config.runs)
         sig_vr[variant] = np.sqrt(var / config.runs)
+        counts = group_counts(0, config.runs)[:, None]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            loo = np.sqrt((sq - sq_groups) / (config.runs - counts))
+        loo[counts[:, 0] == 0] = np.nan
+        rmse_vr_band[variant] = jackknife_band(rmse_vr[variant], loo)
     return DopplerTrackingResult(
         config=config,
         n=np.arange(1, steps + 1),
@@ -209,4 +236,6 @@ def run_doppler_tracking(config: DopplerTrackingConfig) -> DopplerTrackingResult
         sigma_vr_filter=sig_vr,
         start_fits=fits,
         nees_pos_band95=nees_band(2, config.runs),
+        leave_one_out=loo_metrics,
+        rmse_vr_ci95=rmse_vr_band,
     )

@@ -23,6 +23,7 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
+from radarviz.core.confidence import Verdict, claim_verdict, jackknife_band
 from radarviz.core.conversion.planar import convert_parts
 from radarviz.core.filters.methods import (
     ALL_METHODS,
@@ -117,7 +118,11 @@ class TrackingResult:
         config: what was run.
         n: (N,) scan numbers 1 … N.
         metrics: method name → per-scan statistics.
-        nees_pos_band95 / nees_state_band95: 95% χ² band of the run-averaged NEES.
+        nees_pos_band95 / nees_state_band95: 95% χ² band of the run-averaged NEES of a
+            consistent filter (where its average falls; not the Monte Carlo error).
+        leave_one_out: method → the statistics with each of the ``BAND_GROUPS`` groups of runs
+            left out, every field (G, N) (``MetricsAccumulator.leave_one_out``); empty when
+            the sums came without groups (a sweep's stored chunks), and then every band is NaN.
     """
 
     config: TrackingConfig
@@ -125,15 +130,120 @@ class TrackingResult:
     metrics: dict[str, TrackMetrics]
     nees_pos_band95: tuple[float, float]
     nees_state_band95: tuple[float, float]
+    leave_one_out: dict[str, TrackMetrics] = field(default_factory=dict)
 
     def delta_x_percent(self) -> dict[str, NDArray[np.float64]]:
         """Prosov's Δx(n) of ``seed`` against ``naive`` under the three readings of σ̂x."""
-        a, b = self.metrics["seed"], self.metrics["naive"]
-        return {
-            "filter": delta_percent(a.sigma_x_filter, b.sigma_x_filter),
-            "rmse": delta_percent(a.rmse_x, b.rmse_x),
-            "std": delta_percent(a.std_x, b.std_x),
-        }
+        return _delta_x(self.metrics["seed"], self.metrics["naive"])
+
+    def delta_x_ci95(self) -> dict[str, tuple[NDArray[np.float64], NDArray[np.float64]]]:
+        """The 95% Monte Carlo band of ``delta_x_percent``: reading → (lo, hi) per scan, %.
+
+        Δx is a ratio of two methods' statistics over the *same* runs, so its band is the
+        delete-a-group jackknife (``core.confidence``) with both methods' leave-outs taken
+        over the same group of runs: the common random numbers that make seed − naive far
+        more precise than either are kept. (A Student-t band over each group's own Δx would
+        carry the O(G/M) bias of a ratio of small-sample estimates; the jackknife's
+        leave-outs hold (G − 1)/G of the runs each.)
+        """
+        full = self.delta_x_percent()
+        if "seed" not in self.leave_one_out or "naive" not in self.leave_one_out:
+            return {k: _nan_band(v) for k, v in full.items()}
+        loo = _delta_x(self.leave_one_out["seed"], self.leave_one_out["naive"])
+        return {k: jackknife_band(full[k], loo[k]) for k in full}
+
+    def band95(self, method: str, name: str) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """The 95% Monte Carlo band (lo, hi) per scan of one method's ``TrackMetrics`` field
+        ``name``: ``band95("ucm", "rmse_x")``, ``band95("seed", "bias_range")``,
+        ``band95("ducm", "nees_pos")``; the delete-a-group jackknife (``core.confidence``),
+        NaN where undefined."""
+        value = getattr(self.metrics[method], name)
+        if method not in self.leave_one_out:
+            return _nan_band(value)
+        return jackknife_band(value, getattr(self.leave_one_out[method], name))
+
+
+def _delta_x(a: TrackMetrics, b: TrackMetrics) -> dict[str, NDArray[np.float64]]:
+    """Δx of ``a`` against ``b`` under the three readings (any common shape)."""
+    return {
+        "filter": delta_percent(a.sigma_x_filter, b.sigma_x_filter),
+        "rmse": delta_percent(a.rmse_x, b.rmse_x),
+        "std": delta_percent(a.std_x, b.std_x),
+    }
+
+
+def _nan_band(value: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    nan = np.full(np.shape(value), np.nan)
+    return nan, nan.copy()
+
+
+class DeltaXClaim(NamedTuple):
+    """A claim of the paper on Δx: |Δx(n)| ≤ ``bound_percent`` for scans n = 1 … ``scans``."""
+
+    sigma_beta_deg: float
+    bound_percent: float
+    scans: int
+
+
+#: The paper's claims (``docs/conversion.md``, finding 4): |Δx| within 2.1% at σβ = 1° and
+#: "up to 18%" at 2°, over the scans its figures show (the first 20).
+PROSOV_CLAIMS: tuple[DeltaXClaim, ...] = (DeltaXClaim(1.0, 2.1, 20), DeltaXClaim(2.0, 18.0, 20))
+
+
+class ClaimCheck(NamedTuple):
+    """A claim checked against one reading of Δx and its 95% band.
+
+    Attributes:
+        claim: what is checked.  reading: "filter", "rmse" or "std".
+        verdict: ``core.confidence.claim_verdict`` over scans 1 … claim.scans.
+        peak_scan: the scan of the window where |Δx| is largest; peak_percent its Δx and
+            peak_lo / peak_hi its 95% band, %.
+        runs: the Monte Carlo runs the band comes from.
+    """
+
+    claim: DeltaXClaim
+    reading: str
+    verdict: Verdict
+    peak_scan: int
+    peak_percent: float
+    peak_lo: float
+    peak_hi: float
+    runs: int
+
+
+def check_delta_x_claims(
+    result: TrackingResult, claims: Sequence[DeltaXClaim] = PROSOV_CLAIMS
+) -> list[ClaimCheck]:
+    """Every claim made for ``result``'s σβ (none if the paper made none), for each reading.
+
+    The verdict is from the 95% band of each scan of the window (``claim_verdict``): a claim
+    is only said to hold, or not, when the Monte Carlo error of the curve cannot change it.
+    """
+    sb = result.config.sigma_beta_deg
+    if "seed" not in result.metrics or "naive" not in result.metrics:
+        return []
+    values, bands = result.delta_x_percent(), result.delta_x_ci95()
+    out = []
+    for claim in claims:
+        if not np.isclose(claim.sigma_beta_deg, sb) or claim.scans > len(result.n):
+            continue
+        w = slice(0, claim.scans)
+        for reading, v in values.items():
+            lo, hi = bands[reading][0][w], bands[reading][1][w]
+            i = int(np.nanargmax(np.abs(v[w])))
+            out.append(
+                ClaimCheck(
+                    claim=claim,
+                    reading=reading,
+                    verdict=claim_verdict(lo, hi, claim.bound_percent),
+                    peak_scan=int(result.n[i]),
+                    peak_percent=float(v[i]),
+                    peak_lo=float(lo[i]),
+                    peak_hi=float(hi[i]),
+                    runs=result.config.runs,
+                )
+            )
+    return out
 
 
 def block_sizes(runs: int, block: int = BLOCK_RUNS) -> list[int]:
@@ -307,6 +417,9 @@ def tracking_result(
         metrics={m: accumulators[m].result() for m in config.methods},
         nees_pos_band95=nees_band(2, config.runs),
         nees_state_band95=nees_band(4, config.runs),
+        leave_one_out={
+            m: accumulators[m].leave_one_out() for m in config.methods if accumulators[m].has_groups
+        },
     )
 
 

@@ -46,6 +46,13 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from radarviz.core.confidence import (
+    BAND_GROUPS,
+    group_counts,
+    group_sums,
+    jackknife_band,
+    sigma_band,
+)
 from radarviz.core.params import (
     ParameterError,
     check,
@@ -627,6 +634,9 @@ class FilterStats(NamedTuple):
         order: (K,) number of parameters fitted.
         sigma_mc: (K, 3) Monte Carlo σ of the error (sample std about its mean, ddof = 1).
         bias_mc: (K, 3) Monte Carlo mean error.
+        sigma_mc_ci95_lo / sigma_mc_ci95_hi: (K, 3) the 95% χ² band of ``sigma_mc``
+            (``core.confidence.sigma_band``): the estimates are linear in Gaussian noise, so
+            (trials − 1) s²/σ² is exactly χ²(trials − 1).
         sigma_analytic: (K, 3) sqrt(R_ii).
         bias_analytic: (K, 3) W z_true − θ_true: 0 (to rounding) for the full order, the model
             bias of a reduced fit otherwise (e.g. −a T/2 for the two-point range-only velocity).
@@ -637,6 +647,8 @@ class FilterStats(NamedTuple):
     bias_mc: NDArray[np.float64]
     sigma_analytic: NDArray[np.float64]
     bias_analytic: NDArray[np.float64]
+    sigma_mc_ci95_lo: NDArray[np.float64]
+    sigma_mc_ci95_hi: NDArray[np.float64]
 
 
 class GorshkovRadar(NamedTuple):
@@ -649,6 +661,11 @@ class GorshkovRadar(NamedTuple):
         gain_mc: (K, 3) K(k) = (σ_range-only − σ_range+Vr)/σ_range-only · 100 % from the Monte
             Carlo σ, for r, Vr, a (NaN where either side is undefined).
         gain_analytic: (K, 3) the same from sqrt(R_ii).
+        gain_mc_ci95_lo / gain_mc_ci95_hi: (K, 3) the 95% band of ``gain_mc``: both variants
+            filter the same range noise, so their σ are correlated and the band is the
+            delete-a-group jackknife over ``BAND_GROUPS`` groups of trials
+            (``core.confidence``), which keeps that pairing (two independent χ² bands would
+            be several times too wide where Doppler adds little).
     """
 
     preset: RadarPreset
@@ -656,6 +673,8 @@ class GorshkovRadar(NamedTuple):
     range_doppler: FilterStats
     gain_mc: NDArray[np.float64]
     gain_analytic: NDArray[np.float64]
+    gain_mc_ci95_lo: NDArray[np.float64]
+    gain_mc_ci95_hi: NDArray[np.float64]
 
 
 class GorshkovResult(NamedTuple):
@@ -719,6 +738,34 @@ class _Moments:
 
     def std(self) -> NDArray[np.float64]:
         return np.sqrt(self.m2 / (self.n - 1))
+
+
+class _GroupMoments:
+    """Per-group Σe and Σe² of each row (trial t in group t mod G, ``core.confidence``), for
+    the leave-one-group-out σ of the jackknife."""
+
+    def __init__(self, rows: int) -> None:
+        self.n = np.zeros(BAND_GROUPS, dtype=np.int64)
+        self.s1 = np.zeros((BAND_GROUPS, rows))
+        self.s2 = np.zeros((BAND_GROUPS, rows))
+
+    def add(self, e: NDArray[np.float64]) -> None:
+        """Add a block ``e`` of shape (rows, trials), the trials after those already added."""
+        offset = int(self.n.sum())
+        self.n += group_counts(offset, e.shape[1])
+        self.s1 += group_sums(e, offset)
+        self.s2 += group_sums(e, offset, square=True)
+
+    def leave_one_out_std(self) -> NDArray[np.float64]:
+        """(G, rows) the sample std (ddof = 1) of all trials but group g's; NaN for an empty
+        group."""
+        n = (self.n.sum() - self.n)[:, None].astype(np.float64)
+        s1 = self.s1.sum(axis=0) - self.s1
+        s2 = self.s2.sum(axis=0) - self.s2
+        with np.errstate(invalid="ignore", divide="ignore"):
+            out = np.sqrt(np.maximum(s2 - s1 * s1 / n, 0.0) / (n - 1.0))
+        out[self.n == 0] = np.nan
+        return out
 
 
 def _stacked_weights(fits: Sequence[FiniteMemoryFit], n_points: int) -> NDArray[np.float64]:
@@ -813,6 +860,7 @@ def run_gorshkov(
         # True state at scan k of every window, aligned with the rows of ``weights``.
         target = np.concatenate([truth[k - 1] for k in ks_list])[:, None]
         moments = {dop: _Moments(3 * len(ks_list)) for dop in (False, True)}
+        groups = {dop: _GroupMoments(3 * len(ks_list)) for dop in (False, True)}
         clean = np.concatenate([truth[:, 0], truth[:, 1]])[:, None]
         scale = np.repeat([rad.sigma_r_m, rad.sigma_vr_mps], n_points)[:, None]
         rng = np.random.default_rng(child)
@@ -824,8 +872,10 @@ def run_gorshkov(
             for dop in (False, True):
                 err = weights[dop] @ z
                 err -= target
+                groups[dop].add(err)
                 moments[dop].add(err)
         stats = {}
+        loo_sigma = {}  # (G, K, 3) leave-one-group-out σ, NaN where not fitted
         for dop in (False, True):
             nk = len(ks_list)
             sig_mc = np.full((nk, 3), np.nan)
@@ -841,14 +891,22 @@ def run_gorshkov(
                 sig_an[idx] = fit.sigma
                 est_true = finite_memory_estimate(truth[:k, 0], truth[:k, 1] if dop else None, fit)
                 bias_an[idx] = est_true - truth[k - 1]
-            stats[dop] = FilterStats(order, sig_mc, bias_mc, sig_an, bias_an)
+            fitted = np.isfinite(sig_mc)
+            loo = groups[dop].leave_one_out_std().reshape(BAND_GROUPS, nk, 3)
+            loo_sigma[dop] = np.where(fitted, loo, np.nan)
+            lo, hi = sigma_band(sig_mc, trials)
+            stats[dop] = FilterStats(order, sig_mc, bias_mc, sig_an, bias_an, lo, hi)
+        gain = gain_percent(stats[False].sigma_mc, stats[True].sigma_mc)
+        gain_lo, gain_hi = jackknife_band(gain, gain_percent(loo_sigma[False], loo_sigma[True]))
         out.append(
             GorshkovRadar(
                 preset=rad,
                 range_only=stats[False],
                 range_doppler=stats[True],
-                gain_mc=gain_percent(stats[False].sigma_mc, stats[True].sigma_mc),
+                gain_mc=gain,
                 gain_analytic=gain_percent(stats[False].sigma_analytic, stats[True].sigma_analytic),
+                gain_mc_ci95_lo=gain_lo,
+                gain_mc_ci95_hi=gain_hi,
             )
         )
     return GorshkovResult(

@@ -69,6 +69,7 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from radarviz.core.confidence import BAND_GROUPS, jackknife_band, student_t_quantile
 from radarviz.core.conversion.spatial import convert_ucm_3d, ucm_cov_3d
 from radarviz.core.geometry import (
     LineOfSight,
@@ -492,6 +493,15 @@ class VelocityMC(NamedTuple):
         mean: (3,) bias; mean_se: (3,) its standard error.
         covariance: (3, 3) sample covariance; sigma: (3,); correlation: (3, 3).
         sigma_robust: (3,) interquartile range / 1.349 (a σ that ignores the heavy tails).
+        sigma_ci95_lo / sigma_ci95_hi (3,), correlation_ci95_lo / correlation_ci95_hi (3, 3):
+            95% Monte Carlo bands, the delete-a-group jackknife over ``BAND_GROUPS`` groups
+            of trials (trial t in group t mod G) of these smooth functions of the first and
+            second moments (``core.confidence``). Not the χ² band: the errors are not
+            Gaussian (Ĉ⁻¹ is nonlinear in the angle errors), and where they have no finite
+            variance (m beyond ~0.75) no band of σ means anything; read the robust σ there.
+        sigma_robust_ci95_lo / sigma_robust_ci95_hi: (3,) the 95% band of ``sigma_robust`` by
+            batch means: the robust σ of each group, and the full estimate ± t_{G−1} · their
+            standard deviation / √G (a quantile is not smooth enough for the jackknife).
     """
 
     trials: int
@@ -501,6 +511,12 @@ class VelocityMC(NamedTuple):
     sigma: NDArray[np.float64]
     correlation: NDArray[np.float64]
     sigma_robust: NDArray[np.float64]
+    sigma_ci95_lo: NDArray[np.float64]
+    sigma_ci95_hi: NDArray[np.float64]
+    correlation_ci95_lo: NDArray[np.float64]
+    correlation_ci95_hi: NDArray[np.float64]
+    sigma_robust_ci95_lo: NDArray[np.float64]
+    sigma_robust_ci95_hi: NDArray[np.float64]
 
 
 def velocity_errors(
@@ -526,22 +542,61 @@ def velocity_errors(
     return out
 
 
+#: The interquartile range of a normal distribution in units of its σ (2 · Φ⁻¹(0.75)).
+IQR_PER_SIGMA = 1.3489795003921634
+
+
 def summarize_errors(errors: ArrayLike) -> VelocityMC:
-    """Mean, covariance, σ, correlation and robust σ of (trials, 3) errors."""
+    """Mean, covariance, σ, correlation and robust σ of (trials, 3) errors, with their 95%
+    Monte Carlo bands (``VelocityMC``)."""
     e = _f(errors)
     n = e.shape[0]
     mean = e.mean(axis=0)
     cov = np.cov(e, rowvar=False)
     sigma = np.sqrt(np.diag(cov))
     q1, q3 = np.percentile(e, [25.0, 75.0], axis=0)
+    corr = cov / np.outer(sigma, sigma)
+    robust = (q3 - q1) / IQR_PER_SIGMA
+    # Leave-one-group-out covariances from per-group Σe and Σe eᵀ; group k is trials k::G.
+    groups = [e[k::BAND_GROUPS] for k in range(BAND_GROUPS)]
+    counts = np.array([len(x) for x in groups])
+    s1 = np.stack([x.sum(axis=0) for x in groups])
+    s2 = np.stack([x.T @ x for x in groups])
+    n_out = (n - counts).astype(np.float64)[:, None, None]
+    t1 = s1.sum(axis=0) - s1
+    with np.errstate(invalid="ignore", divide="ignore"):
+        cov_out = (s2.sum(axis=0) - s2 - t1[:, :, None] * t1[:, None, :] / n_out) / (n_out - 1.0)
+        sig_out = np.sqrt(np.maximum(np.diagonal(cov_out, axis1=1, axis2=2), 0.0))
+        corr_out = cov_out / (sig_out[:, :, None] * sig_out[:, None, :])
+    empty = counts == 0
+    sig_out[empty], corr_out[empty] = np.nan, np.nan
+    sig_lo, sig_hi = jackknife_band(sigma, sig_out)
+    sig_lo = np.maximum(sig_lo, 0.0)  # a σ is not negative, whatever its band says
+    corr_lo, corr_hi = jackknife_band(corr, corr_out)
+    # Batch means for the robust σ: each group's own IQR σ (groups of at least 2 trials).
+    per_group = [
+        np.subtract(*np.percentile(x, [75.0, 25.0], axis=0)) / IQR_PER_SIGMA
+        for x in groups
+        if len(x) >= 2
+    ]
+    half = np.full(3, np.nan)
+    if len(per_group) >= 2:
+        spread = np.std(per_group, axis=0, ddof=1) / np.sqrt(len(per_group))
+        half = student_t_quantile(len(per_group) - 1) * spread
     return VelocityMC(
         n,
         mean,
         sigma / np.sqrt(n),
         cov,
         sigma,
-        cov / np.outer(sigma, sigma),
-        (q3 - q1) / 1.3489795003921634,
+        corr,
+        robust,
+        sig_lo,
+        sig_hi,
+        corr_lo,
+        corr_hi,
+        robust - half,
+        robust + half,
     )
 
 

@@ -56,3 +56,37 @@ def finite_points(
         px.append(fx)
         py.append(fy)
     return px, py
+
+
+#: Opacity of a Monte Carlo band drawn in its series' colour (``fill_band``).
+BAND_ALPHA = 0.2
+
+
+def band_label(runs: Any, unit: str = "runs") -> str:
+    """The legend entry of every Monte Carlo band: "95% band from N runs" (or trials)."""
+    return f"95% band from {runs} {unit}"
+
+
+def fill_band(
+    ax: Any,
+    xs: Sequence[Any],
+    band: Any,
+    colour: str,
+    *,
+    positive: bool = False,
+    zorder: float = 2,
+) -> bool:
+    """Shade a document's {"lo": [...], "hi": [...]} band over ``xs`` in ``colour`` (light);
+    points where x, lo or hi is missing or non-finite (or lo ≤ 0 with ``positive``) are left
+    out. Returns whether anything was drawn."""
+    if not isinstance(band, dict):
+        return False
+    x_lo, lo = finite_points(xs, band.get("lo"), positive=positive)
+    x_hi, hi = finite_points(xs, band.get("hi"), positive=positive)
+    his = dict(zip(x_hi, hi, strict=True))
+    pts = [(x, y, his[x]) for x, y in zip(x_lo, lo, strict=True) if x in his]
+    if not pts:
+        return False
+    px, plo, phi = zip(*pts, strict=True)
+    ax.fill_between(px, plo, phi, color=colour, alpha=BAND_ALPHA, lw=0, zorder=zorder)
+    return True

@@ -10,6 +10,10 @@ velocity Vr, radial acceleration a), two columns:
 * right: the gain K(k) = (σ_range-only − σ_range+Vr) / σ_range-only · 100 % per radar; in the
   range row each radar's peak is marked and listed beside the paper's claims.
 
+The Monte Carlo σ and gains carry their 95% bands (the document's ``sigma_ci95`` and
+``gain_percent_ci95``), shaded lightly in the radar's colour; the styles legend says how many
+trials they come from.
+
 Radars whose analytic curves coincide exactly (range-only σr depends on σr alone, range-only σVr
 and σa on σr and T) are drawn in interleaved dashes, so every colour stays visible.
 
@@ -29,9 +33,17 @@ from matplotlib.axes import Axes
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
+from matplotlib.patches import Patch
 from matplotlib.ticker import LogFormatter, MaxNLocator
 
-from radarviz.viz_app.figures.common import PALETTE, finite_points, write_figure_atomically
+from radarviz.viz_app.figures.common import (
+    BAND_ALPHA,
+    PALETTE,
+    band_label,
+    fill_band,
+    finite_points,
+    write_figure_atomically,
+)
 
 #: Radar presets in display order; each keeps its colour in every panel (and in any subset).
 RADAR_ORDER: tuple[str, ...] = ("RLS1", "RLS2", "RLS3", "RLS4", "RLS5", "RLS6")
@@ -240,6 +252,13 @@ def _plot_sigma(
             )
             if not x:
                 continue
+            fill_band(
+                ax,
+                rad.get("k") or [],
+                _get(rad, "sigma_ci95", variant, key),
+                colours[name],
+                positive=True,
+            )
             ax.plot(
                 x,
                 y,
@@ -286,6 +305,7 @@ def _plot_gain(
         x, y = _broken(rad.get("k") or [], _get(rad, "gain_percent", key))
         if not any(not math.isnan(v) for v in y):
             continue
+        fill_band(ax, rad.get("k") or [], _get(rad, "gain_percent_ci95", key), colours[name])
         ax.plot(x, y, color=colours[name], lw=LINE_WIDTH, zorder=3)
         peak = _peak(x, y)
         if mark_peaks and peak is not None:
@@ -410,6 +430,11 @@ def _build_figure(
     style_handles += [
         Line2D([], [], color="0.2", lw=LINE_WIDTH, label="line: analytic √R_ii"),
         Line2D([], [], color="0.2", ls="none", marker="o", ms=ms, label="marker: Monte Carlo σ"),
+        Patch(
+            color="0.3",
+            alpha=BAND_ALPHA,
+            label=band_label(doc.get("trials", "?"), "trials"),
+        ),
     ]
     fig.legend(
         handles=radar_handles,

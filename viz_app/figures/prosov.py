@@ -4,9 +4,14 @@ One column per σβ case of the JSON document (see :mod:`viz_app.reports.prosov`
 
 1. the paper's Figs. 1–2: Δx(n) = (σ̂x_seed − σ̂x_naive) / σ̂x_naive in percent under the three
    readings of σ̂x (filter-reported, empirical RMSE, empirical std), with the paper's window
-   n ≤ ``paper_scans`` shaded and its stated bound (2.1% at 1°, 18% at 2°) marked;
+   n ≤ ``paper_scans`` shaded, its stated bound (2.1% at 1°, 18% at 2°) marked and the
+   verdict of the report (``core.experiments.prosov.check_delta_x_claims``) written in;
 2. range bias of every method against n (cross-range bias summarised in a note);
-3. position NEES (2 dof) of every method against n on a log axis, with its 95% band.
+3. position NEES (2 dof) of every method against n on a log axis, with the χ² range of a
+   consistent filter's run average.
+
+Every Monte Carlo curve carries its 95% band (the document's ``ci95`` / ``delta_x_ci95``,
+shaded lightly in the curve's colour; the legends say "95% band from N runs").
 
 The figure is built on :class:`matplotlib.figure.Figure` directly, so importing or calling this
 module never touches pyplot or the global backend, and it is written atomically.
@@ -27,7 +32,15 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 from matplotlib.ticker import LogFormatter
 
-from radarviz.viz_app.figures.common import PALETTE, finite_points, write_figure_atomically
+from radarviz.core.experiments.prosov import PROSOV_CLAIMS
+from radarviz.viz_app.figures.common import (
+    BAND_ALPHA,
+    PALETTE,
+    band_label,
+    fill_band,
+    finite_points,
+    write_figure_atomically,
+)
 from radarviz.viz_app.palette import OKABE_ITO, hex_colour, rgb
 
 #: Methods in display order; each keeps its colour in every panel.
@@ -39,7 +52,7 @@ _READINGS: tuple[tuple[str, str, str], ...] = (
     ("std", "std", hex_colour(OKABE_ITO["bluish_green"])),
 )
 #: The paper's stated bound on |Δx| over its window, by σβ in degrees.
-PAPER_BOUND_PERCENT: dict[float, float] = {1.0: 2.1, 2.0: 18.0}
+PAPER_BOUND_PERCENT: dict[float, float] = {c.sigma_beta_deg: c.bound_percent for c in PROSOV_CLAIMS}
 NOMINAL_NEES_POS = 2.0
 #: Bias panels: the first max(TRANSIENT_MIN_SCANS, TRANSIENT_FRACTION · scans) scans are the
 #: initial transient; the y-axis leaves them off-scale if they would stretch it this many times.
@@ -100,7 +113,7 @@ def _paper_bound(case: Mapping[str, Any]) -> float | None:
     return None
 
 
-def _plot_delta(ax: Axes, case: Mapping[str, Any], paper_scans: int) -> None:
+def _plot_delta(ax: Axes, case: Mapping[str, Any], paper_scans: int, doc_runs: Any) -> None:
     """Row 1: Δx(n) in percent, three readings, the paper's window and bound."""
     ns = case.get("n") or []
     ax.set_title(f"Δx(n), seed vs naive — {_sigma_label(case)}")
@@ -132,17 +145,24 @@ def _plot_delta(ax: Axes, case: Mapping[str, Any], paper_scans: int) -> None:
             color="0.3",
         )
     ax.axhline(0.0, color="black", lw=0.6, zorder=1)
+    bands = case.get("delta_x_ci95") or {}
     for key, label, colour in _READINGS:
         x, y = readings[key]
         if x:
+            fill_band(ax, ns, bands.get(key), colour)
             ax.plot(x, y, color=colour, lw=1.6, label=label, zorder=3)
-    x, y = readings["rmse"]
-    in_window = [abs(v) for xv, v in zip(x, y, strict=True) if xv <= paper_scans]
-    if in_window:
+    verdicts = {c.get("reading"): c.get("verdict") for c in case.get("claims") or []}
+    if verdicts and bound is not None:
+        text = f"|Δx| ≤ {bound:g}% over n ≤ {paper_scans}, from the 95% bands:\n" + "\n".join(
+            f"{label}: {verdicts[key]}"
+            + (f" at {doc_runs} runs" if verdicts[key] == "not resolved" else "")
+            for key, label, _ in _READINGS
+            if key in verdicts
+        )
         ax.text(
             0.02,
             0.03,
-            f"max |Δx| (RMSE) over n ≤ {paper_scans}: {max(in_window):.1f}%",
+            text,
             transform=ax.transAxes,
             ha="left",
             va="bottom",
@@ -208,6 +228,7 @@ def _plot_bias(ax: Axes, case: Mapping[str, Any], colours: Mapping[str, str]) ->
     ax.axhline(0.0, color="black", lw=0.6, zorder=1)
     for name, (x, y) in ranges.items():
         if x:
+            fill_band(ax, ns, (methods[name].get("ci95") or {}).get("bias_range"), colours[name])
             ax.plot(x, y, color=colours[name], lw=1.6, ls=_style(name), zorder=3)
     notes: list[str] = []
     if cross_by_n:
@@ -274,7 +295,7 @@ def _plot_nees(ax: Axes, case: Mapping[str, Any], colours: Mapping[str, str]) ->
                     color="0.75",
                     alpha=0.6,
                     zorder=0,
-                    label=f"95% band [{lo:.3g}, {hi:.3g}]",
+                    label=f"consistent filter's 95% range [{lo:.3g}, {hi:.3g}]",
                 )
             )
     handles.append(
@@ -289,6 +310,8 @@ def _plot_nees(ax: Axes, case: Mapping[str, Any], colours: Mapping[str, str]) ->
     )
     for name, (x, y) in nees.items():
         if x:
+            band = (methods[name].get("ci95") or {}).get("nees_pos")
+            fill_band(ax, ns, band, colours[name], positive=True)
             ax.plot(x, y, color=colours[name], lw=1.6, ls=_style(name), zorder=3)
     ax.set_yscale("log")
     # Plain numbers ("3", "20") rather than 3×10⁰; minor labels only on short ranges.
@@ -310,7 +333,7 @@ def _build_figure(
     track_axes = sub_tracks.subplots(2, ncases, squeeze=False, sharex="col")
     colours = _method_colours(cases)
     for j, case in enumerate(cases):
-        _plot_delta(delta_axes[j], case, paper_scans)
+        _plot_delta(delta_axes[j], case, paper_scans, doc.get("runs", "?"))
         _plot_bias(track_axes[0, j], case, colours)
         _plot_nees(track_axes[1, j], case, colours)
         for ax in (delta_axes[j], *track_axes[:, j]):
@@ -323,6 +346,8 @@ def _build_figure(
             top.append(Patch(color=_WINDOW_COLOUR, label=f"paper's window n ≤ {paper_scans}"))
         if any(_paper_bound(c) is not None for c in cases):
             top.append(Line2D([], [], color="0.45", ls="--", lw=0.9, label="paper's bound on |Δx|"))
+        if any(c.get("delta_x_ci95") for c in cases):
+            top.append(Patch(color="0.3", alpha=BAND_ALPHA, label=band_label(doc.get("runs", "?"))))
         sub_delta.legend(
             handles=top,
             loc="outside upper center",
@@ -336,6 +361,7 @@ def _build_figure(
         handles = [
             Line2D([], [], color=c, lw=1.6, ls=_style(m), label=m) for m, c in colours.items()
         ]
+        handles.append(Patch(color="0.3", alpha=BAND_ALPHA, label=band_label(doc.get("runs", "?"))))
         sub_tracks.legend(
             handles=handles,
             loc="outside lower center",

@@ -2,6 +2,9 @@
 
 JSON keys are an interface (``radarviz reproduce gorshkov --json``); lists are per window
 length k, with null where a value is undefined (e.g. range-only acceleration at k < 3).
+Every Monte Carlo series has its 95% band beside it: ``sigma_ci95`` (χ², exact for these
+Gaussian estimates), ``gain_percent_ci95`` (delete-a-group jackknife over the paired trials),
+and in the tracking part ``ci95`` per variant; ``band`` says which method made which.
 """
 
 from __future__ import annotations
@@ -10,9 +13,10 @@ from typing import Any
 
 import numpy as np
 
+from radarviz.core.confidence import BAND_GROUPS, BAND_LEVEL
 from radarviz.core.experiments.doppler_start import DopplerTrackingResult
-from radarviz.core.finite_memory.fit import FilterStats, GorshkovResult
-from radarviz.viz_app.reports.prosov import METRIC_KEYS, json_series
+from radarviz.core.finite_memory.fit import FilterStats, GorshkovRadar, GorshkovResult
+from radarviz.viz_app.reports.prosov import METRIC_KEYS, band_document, json_series
 
 _STATE_KEYS = ("r", "vr", "a")
 
@@ -26,14 +30,44 @@ def _variants(get: str, ro: FilterStats, rd: FilterStats) -> dict[str, Any]:
     return {"range_only": _by_state(getattr(ro, get)), "range_doppler": _by_state(getattr(rd, get))}
 
 
+def _band_by_state(lo: np.ndarray, hi: np.ndarray) -> dict[str, dict[str, list[float | None]]]:
+    """(K, 3) lo and hi → {"r": {"lo": [...], "hi": [...]}, "vr": …, "a": …}."""
+    return {key: band_document((lo[:, i], hi[:, i])) for i, key in enumerate(_STATE_KEYS)}
+
+
+def _sigma_bands(ro: FilterStats, rd: FilterStats) -> dict[str, Any]:
+    return {
+        name: _band_by_state(st.sigma_mc_ci95_lo, st.sigma_mc_ci95_hi)
+        for name, st in (("range_only", ro), ("range_doppler", rd))
+    }
+
+
+def range_gain_peak(rad: GorshkovRadar, ks: np.ndarray) -> dict[str, Any] | None:
+    """The peak of the Monte Carlo range gain with its 95% band, and every k whose band
+    reaches the peak's band (the window lengths the Monte Carlo cannot tell from the peak)."""
+    gain, lo, hi = rad.gain_mc[:, 0], rad.gain_mc_ci95_lo[:, 0], rad.gain_mc_ci95_hi[:, 0]
+    if not np.isfinite(gain).any():
+        return None
+    i = int(np.nanargmax(gain))
+    tied = [int(k) for k, h in zip(ks, hi, strict=True) if np.isfinite(h) and h >= lo[i]]
+    return {
+        "k": int(ks[i]),
+        "percent": float(gain[i]),
+        "ci95": json_series(np.array([lo[i], hi[i]])),
+        "k_within_band": tied,
+    }
+
+
 def tracking_document(result: DopplerTrackingResult) -> dict[str, Any]:
     """The Doppler-aided tracking part: the ``core.metrics`` statistics per variant, per scan."""
     cfg = result.config
     variants = {}
     for name, m in result.metrics.items():
-        entry = {k: json_series(getattr(m, k)) for k in METRIC_KEYS}
+        entry: dict[str, Any] = {k: json_series(getattr(m, k)) for k in METRIC_KEYS}
         entry["rmse_vr"] = json_series(result.rmse_vr[name])
         entry["sigma_vr_filter"] = json_series(result.sigma_vr_filter[name])
+        entry["ci95"] = {k: band_document(result.band95(name, k)) for k in METRIC_KEYS}
+        entry["ci95"]["rmse_vr"] = band_document(result.rmse_vr_ci95[name])
         variants[name] = entry
     return {
         "radar": cfg.radar,
@@ -63,13 +97,23 @@ def gorshkov_document(
                 "k": [int(k) for k in result.ks],
                 "sigma": _variants("sigma_mc", rad.range_only, rad.range_doppler),
                 "sigma_analytic": _variants("sigma_analytic", rad.range_only, rad.range_doppler),
+                "sigma_ci95": _sigma_bands(rad.range_only, rad.range_doppler),
                 "gain_percent": _by_state(rad.gain_mc),
+                "gain_percent_ci95": _band_by_state(rad.gain_mc_ci95_lo, rad.gain_mc_ci95_hi),
+                "range_gain_peak": range_gain_peak(rad, result.ks),
             }
         )
     doc: dict[str, Any] = {
         "experiment": "gorshkov",
         "trials": result.trials,
         "seed": result.seed,
+        "band": {
+            "level": BAND_LEVEL,
+            "sigma": "chi-squared",
+            "gain_percent": "delete-a-group jackknife",
+            "tracking": "delete-a-group jackknife",
+            "groups": BAND_GROUPS,
+        },
         "radars": radars,
     }
     if tracking is not None:
@@ -102,12 +146,32 @@ def format_gorshkov_table(doc: dict[str, Any]) -> str:
             vals = rad["sigma"][var][key]
             spec = "8.3f" if key == "a" else "8.1f"
             lines.append(f"  {label:<16}" + "".join(f(v, spec) for v in vals))
+        sig = rad["sigma"]["range_doppler"]["r"]
+        band = rad["sigma_ci95"]["range_doppler"]["r"]
+        rel = [
+            (h - lo) / 2 / v * 100
+            for v, lo, h in zip(sig, band["lo"], band["hi"], strict=True)
+            if None not in (v, lo, h) and v > 0
+        ]
+        if rel:
+            lines.append(f"  σ: 95% χ² band ± {max(rel):.2f}% of each value")
         for key, label in (("r", "gain r, %"), ("vr", "gain Vr, %"), ("a", "gain a, %")):
             lines.append(f"  {label:<16}" + "".join(f(v, "8.1f") for v in rad["gain_percent"][key]))
-        gains = [(v, k) for v, k in zip(rad["gain_percent"]["r"], ks, strict=True) if v is not None]
-        if gains:
-            peak, kp = max(gains)
-            lines.append(f"  range gain peaks at {peak:.1f}% for k = {kp}")
+            half = _half(rad["gain_percent_ci95"][key])
+            lines.append(f"  {'  ± (95%)':<16}" + "".join(f(v, "8.2f") for v in half))
+        peak = rad.get("range_gain_peak")
+        if peak:
+            lo, hi = peak["ci95"]
+            width = "" if lo is None or hi is None else f" ± {(hi - lo) / 2:.2f}%"
+            within = peak["k_within_band"]
+            tied = (
+                ""
+                if within == [peak["k"]]
+                else f" (k = {', '.join(map(str, within))} within its band)"
+            )
+            lines.append(
+                f"  range gain peaks at {peak['percent']:.1f}%{width} for k = {peak['k']}{tied}"
+            )
         lines.append("")
     tr = doc.get("tracking")
     if tr:
@@ -128,4 +192,15 @@ def format_gorshkov_table(doc: dict[str, Any]) -> str:
             ):
                 row = "".join(f(e[key][i], "9.2f") for i in cols)
                 lines.append(f"  {var + ' ' + label:<34}{row}")
+                if key in e["ci95"]:
+                    half = _half(e["ci95"][key])
+                    lines.append(f"  {'  ± (95%)':<34}" + "".join(f(half[i], "9.2f") for i in cols))
     return "\n".join(lines)
+
+
+def _half(band: dict[str, list[float | None]]) -> list[float | None]:
+    """Half the width of a band, None where it is undefined."""
+    return [
+        None if lo is None or hi is None else (hi - lo) / 2.0
+        for lo, hi in zip(band["lo"], band["hi"], strict=True)
+    ]

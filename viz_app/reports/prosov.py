@@ -11,7 +11,8 @@ from typing import Any
 
 import numpy as np
 
-from radarviz.core.experiments.prosov import TrackingResult
+from radarviz.core.confidence import BAND_GROUPS, BAND_LEVEL
+from radarviz.core.experiments.prosov import TrackingResult, check_delta_x_claims
 
 #: Per-method series in the document, in this order.
 METRIC_KEYS: tuple[str, ...] = (
@@ -30,20 +31,49 @@ def json_series(values: np.ndarray) -> list[float | None]:
     return [float(v) if math.isfinite(v) else None for v in np.asarray(values, dtype=float)]
 
 
+def band_document(band: tuple[np.ndarray, np.ndarray]) -> dict[str, list[float | None]]:
+    """A (lo, hi) band as {"lo": [...], "hi": [...]}, null where undefined."""
+    return {"lo": json_series(band[0]), "hi": json_series(band[1])}
+
+
+def _finite(v: float) -> float | None:
+    return float(v) if math.isfinite(v) else None
+
+
 def case_document(result: TrackingResult) -> dict[str, Any]:
-    """One σβ case of the document."""
+    """One σβ case of the document.
+
+    Besides the series: ``methods[name]["ci95"][key]`` the 95% Monte Carlo band of each
+    series (``TrackingResult.band95``), ``delta_x_ci95[reading]`` that of Δx, and ``claims``
+    the paper's claims checked against each reading (``check_delta_x_claims``).
+    """
     cfg = result.config
+    methods = {}
+    for name, m in result.metrics.items():
+        entry: dict[str, Any] = {k: json_series(getattr(m, k)) for k in METRIC_KEYS}
+        entry["ci95"] = {k: band_document(result.band95(name, k)) for k in METRIC_KEYS}
+        methods[name] = entry
     case: dict[str, Any] = {
         "sigma_beta_deg": cfg.sigma_beta_deg,
         "sigma_r_m": cfg.sigma_r_m,
         "n": [int(v) for v in result.n],
-        "methods": {
-            name: {k: json_series(getattr(m, k)) for k in METRIC_KEYS}
-            for name, m in result.metrics.items()
-        },
+        "methods": methods,
     }
     if "seed" in result.metrics and "naive" in result.metrics:
         case["delta_x_percent"] = {k: json_series(v) for k, v in result.delta_x_percent().items()}
+        case["delta_x_ci95"] = {k: band_document(v) for k, v in result.delta_x_ci95().items()}
+        case["claims"] = [
+            {
+                "reading": c.reading,
+                "bound_percent": c.claim.bound_percent,
+                "scans": c.claim.scans,
+                "verdict": c.verdict,
+                "peak_scan": c.peak_scan,
+                "peak_percent": _finite(c.peak_percent),
+                "peak_ci95": [_finite(c.peak_lo), _finite(c.peak_hi)],
+            }
+            for c in check_delta_x_claims(result)
+        ]
     case["nees_pos_band95"] = list(result.nees_pos_band95)
     return case
 
@@ -56,6 +86,7 @@ def prosov_document(results: Sequence[TrackingResult]) -> dict[str, Any]:
         "runs": first.runs,
         "seed": first.seed,
         "period_s": first.target.period_s,
+        "band": {"level": BAND_LEVEL, "method": "delete-a-group jackknife", "groups": BAND_GROUPS},
         "cases": [case_document(r) for r in results],
     }
 
@@ -95,6 +126,9 @@ def format_prosov_table(doc: dict[str, Any]) -> str:
                 vals = case["delta_x_percent"][reading]
                 row = "".join(f"{fmt(vals[i], '9.2f')}" for i in cols)
                 lines.append(f"    {reading + ' reading':<26}{row}")
+                half = _half_widths(case["delta_x_ci95"][reading])
+                row = "".join(f"{fmt(half[i], '9.2f')}" for i in cols)
+                lines.append(f"    {'  ± (95%)':<26}{row}")
         for label, key, spec in (
             ("range bias, m", "bias_range", "9.1f"),
             ("RMSE x, m", "rmse_x", "9.1f"),
@@ -102,16 +136,48 @@ def format_prosov_table(doc: dict[str, Any]) -> str:
             ("NEES position (2 dof)", "nees_pos", "9.2f"),
             ("NEES state (4 dof)", "nees_state", "9.2f"),
         ):
-            lines.append(f"  {label:<28}{head}")
+            lines.append(f"  {label + ' (± 95%)':<28}{head}")
             for name, m in case["methods"].items():
                 row = "".join(f"{fmt(m[key][i], spec)}" for i in cols)
                 lines.append(f"    {name:<26}{row}")
+                half = _half_widths(m["ci95"][key])
+                row = "".join(f"{fmt(half[i], spec)}" for i in cols)
+                lines.append(f"    {'  ±':<26}{row}")
+        if case.get("claims"):
+            lines.append(f"  The paper's claims, from the 95% bands of {doc['runs']} runs:")
+            for c in case["claims"]:
+                lines.append("    " + format_claim(c, doc["runs"]))
         lines.append("")
     lines.append(
-        "Reading guide: the paper's claim (|Δx| ≤ 2.1% at 1°, up to 18% at 2°) holds for the RMSE"
+        "Expected range biases (docs/conversion.md): naive about +r·s/2, seed about 0, cmkf_d and"
     )
-    lines.append(
-        "reading over its first 20 scans; naive is biased by about +r·s/2, seed by about 0,"
-    )
-    lines.append("cmkf_d and ucm by about +r·s, and ducm (decorrelated) stays small.")
+    lines.append("ucm about +r·s, ducm small (s = σβ² in rad²); compare the rows with their bands.")
     return "\n".join(lines)
+
+
+def _half_widths(band: dict[str, list[float | None]]) -> list[float | None]:
+    """Half the width of a band per scan, None where it is undefined."""
+    return [
+        None if lo is None or hi is None else (hi - lo) / 2.0
+        for lo, hi in zip(band["lo"], band["hi"], strict=True)
+    ]
+
+
+def format_claim(claim: dict[str, Any], runs: int) -> str:
+    """One claim of a case's ``claims`` as a sentence:
+    "rmse reading, |Δx| ≤ 2.1% over scans 1–20: not resolved at 1000 runs (Δx(20) = …)"."""
+    verdict = claim["verdict"]
+    if verdict == "not resolved":
+        verdict = f"not resolved at {runs} runs"
+    peak, (lo, hi) = claim["peak_percent"], claim["peak_ci95"]
+    if peak is None:
+        at = "no value"
+    elif lo is None or hi is None:
+        at = f"Δx({claim['peak_scan']}) = {peak:.2f}%, no band"
+    else:
+        half = (hi - lo) / 2
+        at = f"Δx({claim['peak_scan']}) = {peak:.2f}% ± {half:.2g}%, [{lo:.2f}, {hi:.2f}]"
+    return (
+        f"{claim['reading']} reading, |Δx| ≤ {claim['bound_percent']:g}% over scans "
+        f"1–{claim['scans']}: {verdict} ({at})"
+    )

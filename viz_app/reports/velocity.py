@@ -14,6 +14,11 @@ The JSON keys are an interface (``radarviz reproduce velocity --json``)::
 Vectors are (Vx, Vy, Vz) in m/s. ``ratio_mc_to_linear`` is the sample σ over the first-order σ;
 ``ratio_robust_to_linear`` uses the interquartile σ instead (insensitive to the heavy tails that
 near-singular draws of Ĉ produce at large m). Non-finite numbers become null.
+
+Every Monte Carlo value has its 95% band beside it as {"lo": …, "hi": …}: ``sigma_mc_ci95``
+and ``corr_mc_ci95`` (delete-a-group jackknife) in the baseline, ``ratio_mc_to_linear_ci95``
+(the σ band over the first-order σ, a constant) and ``ratio_robust_to_linear_ci95`` (batch
+means) in the sweep (``core.velocity.estimate.VelocityMC``); ``band`` names the methods.
 """
 
 from __future__ import annotations
@@ -23,6 +28,7 @@ from typing import Any
 
 import numpy as np
 
+from radarviz.core.confidence import BAND_GROUPS, BAND_LEVEL
 from radarviz.core.velocity.estimate import (
     AXES,
     BASELINE_SIGMA_AZ_DEG,
@@ -50,6 +56,12 @@ def _mat(a: np.ndarray) -> list[list[float | None]]:
     return [_vec(row) for row in np.asarray(a, dtype=float)]
 
 
+def _band(lo: np.ndarray, hi: np.ndarray) -> dict[str, Any]:
+    if np.ndim(lo) == 2:
+        return {"lo": _mat(lo), "hi": _mat(hi)}
+    return {"lo": _vec(lo), "hi": _vec(hi)}
+
+
 def velocity_document(result: VelocityExperiment) -> dict[str, Any]:
     """The whole experiment as a JSON-ready dict (module docstring)."""
     st, mc = result.baseline, result.baseline_mc
@@ -62,12 +74,14 @@ def velocity_document(result: VelocityExperiment) -> dict[str, Any]:
         "sigma_az_deg": list(BASELINE_SIGMA_AZ_DEG),
         "sigma_first_order": _vec(st.sigma),
         "sigma_mc": _vec(mc.sigma),
+        "sigma_mc_ci95": _band(mc.sigma_ci95_lo, mc.sigma_ci95_hi),
         "bias_mc": _vec(mc.mean),
         "bias_mc_se": _vec(mc.mean_se),
         "bias_second_order": _vec(st.bias_second_order),
         "bias_paper_term": _vec(st.bias_curvature),
         "corr_first_order": _mat(st.correlation),
         "corr_mc": _mat(mc.correlation),
+        "corr_mc_ci95": _band(mc.correlation_ci95_lo, mc.correlation_ci95_hi),
         "condition_number": _num(st.geometry.condition_number),
         "m": _num(st.geometry.m),
         "warning": st.geometry.warning,
@@ -82,7 +96,13 @@ def velocity_document(result: VelocityExperiment) -> dict[str, Any]:
                 "m": _num(s.geometry.m),
                 "condition_number": _num(s.geometry.condition_number),
                 "ratio_mc_to_linear": _vec(p.mc.sigma / s.sigma),
+                "ratio_mc_to_linear_ci95": _band(
+                    p.mc.sigma_ci95_lo / s.sigma, p.mc.sigma_ci95_hi / s.sigma
+                ),
                 "ratio_robust_to_linear": _vec(p.mc.sigma_robust / s.sigma),
+                "ratio_robust_to_linear_ci95": _band(
+                    p.mc.sigma_robust_ci95_lo / s.sigma, p.mc.sigma_robust_ci95_hi / s.sigma
+                ),
                 "sigma_first_order": _vec(s.sigma),
                 "warning": s.geometry.warning,
             }
@@ -93,6 +113,13 @@ def velocity_document(result: VelocityExperiment) -> dict[str, Any]:
         "seed": result.seed,
         "sweep_trials": result.sweep_trials,
         "m_warn": M_WARN,
+        "band": {
+            "level": BAND_LEVEL,
+            "sigma": "delete-a-group jackknife",
+            "correlation": "delete-a-group jackknife",
+            "sigma_robust": "batch means",
+            "groups": BAND_GROUPS,
+        },
         "sweep_direction": list(SWEEP_DIRECTION),
         "baseline": baseline,
         "sweep": sweep,
@@ -116,6 +143,8 @@ def format_velocity_table(doc: dict[str, Any]) -> str:
         f"  {'':<28}" + "".join(f"{k:>10}" for k in AXES),
         row("σ first order, m/s", b["sigma_first_order"]),
         row("σ Monte Carlo, m/s", b["sigma_mc"]),
+        row("  95% band from", b["sigma_mc_ci95"]["lo"]),
+        row("  to", b["sigma_mc_ci95"]["hi"]),
         row("bias Monte Carlo, m/s", b["bias_mc"]),
         row("  ± standard error", b["bias_mc_se"]),
         row("bias 2nd order, m/s", b["bias_second_order"]),
@@ -132,14 +161,21 @@ def format_velocity_table(doc: dict[str, Any]) -> str:
         lines.append(f"  warning: {b['warning']}")
     lines += [
         "",
-        f"Sweep ({doc['sweep_trials']} trials per point): MC σ / first-order σ "
+        f"Sweep ({doc['sweep_trials']} trials per point): MC σ / first-order σ ± its 95% band "
         "(robust σ in brackets)",
-        f"  {'h km':>5} {'D km':>6} {'m':>8}  {'Vx':>14} {'Vy':>14} {'Vz':>14}",
+        f"  {'h km':>5} {'D km':>6} {'m':>8}  {'Vx':>21} {'Vy':>21} {'Vz':>21}",
     ]
     for p in doc["sweep"]:
+        band = p["ratio_mc_to_linear_ci95"]
+        halves = [
+            None if lo is None or hi is None else (hi - lo) / 2
+            for lo, hi in zip(band["lo"], band["hi"], strict=True)
+        ]
         cells = "".join(
-            f" {f(r, '6.3g')} ({f(q, '5.3f')})"
-            for r, q in zip(p["ratio_mc_to_linear"], p["ratio_robust_to_linear"], strict=True)
+            f" {f(r, '6.3g')}±{f(h, '<6.2g')} ({f(q, '5.3f')})"
+            for r, h, q in zip(
+                p["ratio_mc_to_linear"], halves, p["ratio_robust_to_linear"], strict=True
+            )
         )
         flag = "  !" if p.get("warning") else ""
         lines.append(
