@@ -65,6 +65,7 @@ class VelocityFrame:
         speed_mps: the largest true speed (the vector view's scale).
         error_half_mps: the error view's half-size: 1.6 × the largest 1σ axis of unflagged scans.
         radars: the radar names, in colour order.
+        error_lim_mps: the error plot's y range ±error_lim_mps.
     """
 
     map_centre_km: tuple[float, float, float]
@@ -72,6 +73,7 @@ class VelocityFrame:
     speed_mps: float
     error_half_mps: float
     radars: tuple[str, ...]
+    error_lim_mps: float
 
 
 def log_velocity_scene(rec: rr.RecordingStream, seed: int = 1, scans: int = 50) -> VelocityFrame:
@@ -280,6 +282,7 @@ def log_velocity_scene(rec: rr.RecordingStream, seed: int = 1, scans: int = 50) 
         speed,
         error_half,
         names,
+        float(1.1 * np.nanmax(np.abs(err))) if np.isfinite(err).any() else 1.0,
     )
 
 
@@ -381,6 +384,7 @@ def views(frame: VelocityFrame) -> VelocityViews:
             origin=f"plots/{ROOT}/error_mps",
             name="V̂ − V per axis (x, y, z as in the legend), m/s",
             plot_legend=rrb.PlotLegend(visible=False),
+            axis_y=rrb.ScalarAxis(range=(-frame.error_lim_mps, frame.error_lim_mps)),
         ),
         rrb.TimeSeriesView(
             origin=f"plots/{ROOT}/sigma_mps",
