@@ -174,8 +174,11 @@ def test_bench_figures_are_consistent(capsys) -> None:
     assert len(kf) == len(kf_only) == len(doc["speedup_vs_filterpy"]) == 2
     for name in ("kf_ns_per_step", "kf_filter_only_ns_per_step", "speedup_vs_filterpy"):
         assert all(math.isfinite(v) and v > 0 for v in doc[name]), (name, doc[name])
-    for name in ("filterpy_ns_per_step", "gorshkov_s", "tune_median_ms"):
+    for name in ("filterpy_ns_per_step", "gorshkov_s"):
         assert math.isfinite(doc[name]) and doc[name] > 0, (name, doc[name])
+    assert set(doc["tune_median_ms"]) == {"prosov", "gorshkov", "velocity"}
+    for scene, ms in doc["tune_median_ms"].items():
+        assert math.isfinite(ms) and ms > 0, (scene, ms)
     # JSON keeps full precision: the ratio is exact to rounding.
     for ours, ratio in zip(kf, doc["speedup_vs_filterpy"], strict=True):
         assert ratio == pytest.approx(fp / ours, rel=1e-12)

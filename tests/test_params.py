@@ -15,7 +15,8 @@ from radarviz.core.experiments.prosov import TrackingConfig
 from radarviz.core.params import PARAMETERS, ParameterError, check
 from radarviz.core.scenarios.planar import prosov_target
 from radarviz.viz_app.cli.main import main
-from radarviz.viz_app.tune.panel import TuneParams, control_spec
+from radarviz.viz_app.tune.panel import control_spec
+from radarviz.viz_app.tune.params import TuneParams
 
 HEAVY = ("scipy.stats", "scipy.linalg", "matplotlib", "rerun", "viser", "dask", "pyarrow")
 

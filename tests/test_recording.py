@@ -39,10 +39,12 @@ def test_documented_entity_paths_exist_with_one_row_per_scan(
     per_scan += [f"/prosov/bias/{c}/{part}" for c in SHOWN_CONVERSIONS for part in ("mean", "ci95")]
     for m in ALL_METHODS:
         per_scan.append(f"/prosov/map/tracks/{m}/position")
+        per_scan += [f"/prosov/target/{m}/{part}" for part in ("covariance", "estimate")]
+    for c in (*SHOWN_CONVERSIONS, "polar"):
         per_scan += [
-            f"/prosov/target/{m}/{part}"
-            for part in ("covariance", "estimate", "measurement", "cloud", "cloud_mean")
+            f"/prosov/target/{c}/{part}" for part in ("measurement", "cloud", "cloud_mean")
         ]
+    for m in ALL_METHODS:
         per_scan += [
             f"/plots/prosov/{name}/{m}" for name in ("bias_range_m", "rmse_x_m", "nees_pos")
         ]

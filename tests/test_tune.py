@@ -24,15 +24,10 @@ from radarviz.core.params import ParameterError
 from radarviz.viz_app.cli.main import main
 from radarviz.viz_app.rerun.recording import recording_file
 from radarviz.viz_app.rerun.viewer import free_port
-from radarviz.viz_app.tune.panel import (
-    Coalescer,
-    TuneParams,
-    TuneSession,
-    log_tuning_scene,
-    preset_values,
-    release_streams,
-    simulate,
-)
+from radarviz.viz_app.tune.params import TuneParams, preset_values
+from radarviz.viz_app.tune.scenes import simulate
+from radarviz.viz_app.tune.session import TuneSession, log_tuning_scene, release_streams
+from radarviz.viz_app.tune.worker import Coalescer
 
 ROOT = Path(__file__).resolve().parents[1]
 ARTIFACTS = ROOT / "test-artifacts"
@@ -324,3 +319,60 @@ def test_tune_panel_slider_makes_new_recording(
         time.sleep(0.2)
     assert not _group_alive(proc.pid)
     assert not any(_pid_alive(pid) for pid in rerun_pids), "rerun outlived radarviz tune"
+
+
+# --- the three scenes -------------------------------------------------------------------------
+
+
+def test_c0_moves_the_finite_memory_curves_and_the_doppler_start() -> None:
+    """A larger C0 (better Doppler relative to range) gives a larger peak range gain, a
+    smaller σVr, and a smaller radial-velocity RMSE of the Doppler-started track; range-only
+    does not depend on C0 at all."""
+    small = simulate(TuneParams(scene="gorshkov", c0=0.5, runs=100))
+    large = simulate(TuneParams(scene="gorshkov", c0=20.0, runs=100))
+    fs, fl = small.figures, large.figures
+    assert fl["peak_range_gain_percent"] > fs["peak_range_gain_percent"] + 5.0
+    assert fl["sigma_vr_mps"] < fs["sigma_vr_mps"]
+    assert fl["range_doppler.rmse_vr_mps"] < fs["range_doppler.rmse_vr_mps"]
+    ro_small = small.gorshkov.radars[0].range_only.sigma_analytic
+    ro_large = large.gorshkov.radars[0].range_only.sigma_analytic
+    np.testing.assert_array_equal(ro_small, ro_large)
+    # The Monte Carlo check agrees with the analytic peak within its band (or nearly: the band
+    # is 95%, so allow the width of one band beyond it).
+    lo, hi = fl["peak_range_gain_mc_lo"], fl["peak_range_gain_mc_hi"]
+    assert lo - (hi - lo) <= fl["peak_range_gain_percent"] <= hi + (hi - lo)
+
+
+def test_velocity_scene_uses_the_panel_radars() -> None:
+    """σVr from C0 and σβ reach the velocity radars: a larger σβ gives a larger geometry
+    metric m and more flagged scans; a smaller σVr (larger C0) a smaller σ of Vx."""
+    base = TuneParams(scene="velocity", sigma_beta_deg=0.2, c0=1.0)
+    fine = simulate(base).figures
+    coarse = simulate(replace(base, sigma_beta_deg=2.0)).figures
+    assert coarse["m"] > 3 * fine["m"] and coarse["flagged_scans"] > fine["flagged_scans"]
+    sharper = simulate(replace(base, c0=100.0)).figures
+    assert sharper["sigma_vx_mps"] < fine["sigma_vx_mps"]
+
+
+def test_status_flags_a_nees_far_outside_its_band() -> None:
+    """The naive filter's NEES at σβ = 5° is far above its band: the status line says so."""
+    res = simulate(TuneParams(sigma_beta_deg=5.0, runs=100))
+    assert any(a.startswith("naive:") for a in res.alerts), res.alerts
+    s = TuneSession(None)
+    s.done(None, s.run(TuneParams(sigma_beta_deg=5.0, runs=100)), 1.0)
+    assert "⚠ naive: NEES" in s.status_markdown()
+
+
+def test_sigma_vr_is_never_shown_for_an_invalid_sigma_r() -> None:
+    from radarviz.viz_app.tune.panel import TunePanel
+
+    text = TunePanel._sigma_vr_text(-5.0, 10.0, 1.0)
+    assert "sigma_r_m" in text and "m/s**" not in text
+    assert "**25 m/s**" in TunePanel._sigma_vr_text(250.0, 10.0, 1.0)
+
+
+def test_switching_scene_keeps_the_shared_values() -> None:
+    s = TuneSession(None)
+    for scene in ("prosov", "gorshkov", "velocity"):
+        rep = s.run({**TuneParams(sigma_r_m=120.0, runs=50).__dict__, "scene": scene})
+        assert rep.params.scene == scene and rep.params.sigma_r_m == 120.0

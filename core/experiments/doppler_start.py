@@ -29,7 +29,12 @@ from radarviz.core.filters.doppler import doppler_update
 from radarviz.core.filters.polar_ekf import ekf_update
 from radarviz.core.filters.run import run_scans
 from radarviz.core.filters.state import CVBatch
-from radarviz.core.finite_memory.fit import FiniteMemoryFit, finite_memory_fit, preset
+from radarviz.core.finite_memory.fit import (
+    FiniteMemoryFit,
+    RadarPreset,
+    finite_memory_fit,
+    preset,
+)
 from radarviz.core.finite_memory.start import finite_memory_start
 from radarviz.core.geometry import polar_coordinates, radial_velocity
 from radarviz.core.metrics import MetricsAccumulator, TrackMetrics, nees_band
@@ -49,7 +54,8 @@ class DopplerTrackingConfig:
     """Monte Carlo of the finite-memory start plus EKF, range only beside range + Doppler.
 
     Attributes:
-        radar: preset name (RLS1 … RLS6) giving σr, σVr and T.
+        radar: the radar giving σr, σVr and T: a preset name (RLS1 … RLS6) or a
+            ``RadarPreset`` of its own (e.g. the tuning panel's σr, T and C0).
         sigma_beta_deg: azimuth noise σβ, degrees.
         runs: Monte Carlo runs.  seed: root of ``SeedSequence``.
         steps: scans per run.  start_scans: k of the finite-memory start.
@@ -57,7 +63,7 @@ class DopplerTrackingConfig:
         sigma_a_mps2: process noise of the EKF (discrete white-noise acceleration).
     """
 
-    radar: str = "RLS3"
+    radar: str | RadarPreset = "RLS3"
     sigma_beta_deg: float = default("sigma_beta_deg")
     runs: int = default("runs")
     seed: int = default("seed")
@@ -70,7 +76,7 @@ class DopplerTrackingConfig:
     def __post_init__(self) -> None:
         """Every field but ``radar``, ``start_scans`` and ``target`` is checked against
         ``core.params.PARAMETERS``; ``start_scans`` must fit in the run."""
-        preset(self.radar)
+        self.radar_preset()
         for name in ("sigma_beta_deg", "runs", "seed", "steps", "sigma_v0_mps", "sigma_a_mps2"):
             check(name, getattr(self, name))
         check_int("start_scans", self.start_scans, low=2, high=self.steps)
@@ -78,7 +84,17 @@ class DopplerTrackingConfig:
     def scenario(self) -> ConstantVelocityTarget2D:
         if self.target is not None:
             return self.target
-        return doppler_target(preset(self.radar).period_s, self.steps)
+        return doppler_target(self.radar_preset().period_s, self.steps)
+
+    def radar_preset(self) -> RadarPreset:
+        """The radar: the preset named ``radar``, or ``radar`` itself (its values checked)."""
+        if isinstance(self.radar, RadarPreset):
+            r = self.radar
+            check("sigma_r_m", r.sigma_r_m)
+            check("sigma_vr_mps", r.sigma_vr_mps)
+            check("period_s", r.period_s)
+            return r
+        return preset(self.radar)
 
 
 class PolarDopplerMeasurements(NamedTuple):
@@ -161,7 +177,7 @@ def _vr_stats(
 
 def run_doppler_tracking(config: DopplerTrackingConfig) -> DopplerTrackingResult:
     """Monte Carlo of both variants on the same measurements (common random numbers)."""
-    radar = preset(config.radar)
+    radar = config.radar_preset()
     sr, svr, T = radar.sigma_r_m, radar.sigma_vr_mps, radar.period_s
     sb = float(np.deg2rad(config.sigma_beta_deg))
     target = config.scenario()

@@ -224,22 +224,41 @@ def generate_measurements(
     return out
 
 
-def fusion_scenario(period_s: float = 10.0) -> Scenario3D:
+def fusion_scenario(
+    period_s: float = 10.0,
+    *,
+    sigma_r_m: float | None = None,
+    sigma_angle_rad: float | None = None,
+    sigma_vr_mps: float | None = None,
+) -> Scenario3D:
     """The velocity paper's baseline radars and target; the target turns for 100 s mid-way.
 
     Three radars at the baseline sites (``core.velocity.estimate.BASELINE_SITES_M``) with
     σr = 50, 100, 150 m and the baseline angle and radial-velocity accuracies, all scanning at
     ``period_s``; the target flies the baseline track for 200 s, turns at 0.02 rad/s for 100 s,
-    then flies straight on.
+    then flies straight on. ``sigma_r_m``, ``sigma_angle_rad`` (azimuth and elevation) and
+    ``sigma_vr_mps``, when given, replace the baseline accuracies of every radar (the tuning
+    panel's values); each is checked against ``core.params``.
     """
+    if sigma_r_m is not None:
+        check("sigma_r_m", sigma_r_m)
+    if sigma_vr_mps is not None:
+        check("sigma_vr_mps", sigma_vr_mps)
+    if sigma_angle_rad is not None:
+        check("sigma_beta_deg", float(np.rad2deg(sigma_angle_rad)))
+    check("period_s", period_s)
     radars = tuple(
         RadarSite(
             f"R{k + 1}",
             tuple(site),
-            sigma_r_m=50.0 * (k + 1),
-            sigma_azimuth_rad=float(np.deg2rad(BASELINE_SIGMA_AZ_DEG[k])),
-            sigma_elevation_rad=float(np.deg2rad(BASELINE_SIGMA_EL_DEG[k])),
-            sigma_vr_mps=BASELINE_SIGMA_VR_MPS[k],
+            sigma_r_m=sigma_r_m if sigma_r_m is not None else 50.0 * (k + 1),
+            sigma_azimuth_rad=sigma_angle_rad
+            if sigma_angle_rad is not None
+            else float(np.deg2rad(BASELINE_SIGMA_AZ_DEG[k])),
+            sigma_elevation_rad=sigma_angle_rad
+            if sigma_angle_rad is not None
+            else float(np.deg2rad(BASELINE_SIGMA_EL_DEG[k])),
+            sigma_vr_mps=sigma_vr_mps if sigma_vr_mps is not None else BASELINE_SIGMA_VR_MPS[k],
             period_s=period_s,
         )
         for k, site in enumerate(BASELINE_SITES_M)

@@ -32,7 +32,8 @@ from radarviz.core.filters.run import run_scans
 from radarviz.core.filters.state import cv_init
 from radarviz.core.scenarios.planar import polar_measurements, prosov_target
 from radarviz.viz_app.runtime import peak_rss_mb
-from radarviz.viz_app.tune.panel import measure_tune_latency
+from radarviz.viz_app.tune.params import SCENES
+from radarviz.viz_app.tune.serve import measure_tune_latency
 
 _H2 = np.array([[1.0, 0.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]])
 
@@ -144,7 +145,7 @@ def run_bench(runs: Sequence[int] = (10_000, 100_000), filterpy_runs: int = 200)
         "speedup_vs_filterpy": [fp / v for v in kf],
         "gorshkov_trials": 100_000,
         "gorshkov_s": gorshkov_s,
-        "tune_median_ms": measure_tune_latency(),
+        "tune_median_ms": {scene: measure_tune_latency(scene) for scene in SCENES},
         "peak_rss_mb": peak_rss_mb(),
     }
 
@@ -170,6 +171,7 @@ def format_bench(doc: dict[str, Any]) -> str:
         f"Gorshkov experiment (6 radars × {doc['gorshkov_trials']} trials, both variants): "
         f"{doc['gorshkov_s']:.2f} s"
     )
-    lines.append(f"tune: change → recording flushed, median {doc['tune_median_ms']:.0f} ms")
+    per_scene = ", ".join(f"{k} {v:.0f} ms" for k, v in doc["tune_median_ms"].items())
+    lines.append(f"tune: change → recording flushed, median per scene: {per_scene}")
     lines.append(f"peak RSS: {doc['peak_rss_mb']:.0f} MiB")
     return "\n".join(lines)

@@ -307,7 +307,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.command == "bench":
             return _cmd_bench(args)
         if args.command == "tune":
-            from radarviz.viz_app.tune.panel import cmd_tune
+            from radarviz.viz_app.tune.serve import cmd_tune
 
             return cmd_tune(args.host, args.port, args.viewer_port, args.no_browser)
         for module in (recording, track, sweep):

@@ -70,7 +70,7 @@ def tracking_document(result: DopplerTrackingResult) -> dict[str, Any]:
         entry["ci95"]["rmse_vr"] = band_document(result.rmse_vr_ci95[name])
         variants[name] = entry
     return {
-        "radar": cfg.radar,
+        "radar": cfg.radar_preset().name,
         "sigma_beta_deg": cfg.sigma_beta_deg,
         "runs": cfg.runs,
         "start_scans": cfg.start_scans,

@@ -23,11 +23,15 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
-from radarviz.core.experiments.doppler_start import DopplerTrackingConfig, run_doppler_tracking
-from radarviz.core.finite_memory.fit import run_gorshkov
+from radarviz.core.experiments.doppler_start import (
+    DopplerTrackingConfig,
+    DopplerTrackingResult,
+    run_doppler_tracking,
+)
+from radarviz.core.finite_memory.fit import GorshkovResult, run_gorshkov
 from radarviz.viz_app.palette import radar_rgb, rgb
 from radarviz.viz_app.rerun.recording import log_series, log_text
-from radarviz.viz_app.rerun.shapes import MARKER, flip_y
+from radarviz.viz_app.rerun.shapes import MARKER, flip_y, pale
 
 ROOT = "gorshkov"
 #: The timeline of the window length.
@@ -64,37 +68,62 @@ def _window_series(
 def log_gorshkov(
     rec: rr.RecordingStream, trials: int = 20_000, seed: int = 1, tracking_runs: int = 300
 ) -> tuple[str, ...]:
-    """Finite-memory σ and gains against k per radar and variant, and the Doppler-aided track
-    start's radial-velocity errors per scan. Returns the radar names in colour order."""
+    """The paper's six radars: finite-memory σ and gains against k, and the Doppler-aided
+    track start of RLS3. Returns the radar names in colour order."""
     result = run_gorshkov(None, trials=trials, seed=seed)
+    tracking = run_doppler_tracking(DopplerTrackingConfig(runs=tracking_runs, seed=seed))
+    log_gorshkov_results(rec, result, tracking)
+    log_text(rec, f"Gorshkov: {trials} trials per radar; Doppler start: {tracking_runs} runs")
+    return tuple(rad.preset.name for rad in result.radars)
+
+
+def log_gorshkov_results(
+    rec: rr.RecordingStream,
+    result: GorshkovResult,
+    tracking: DopplerTrackingResult,
+    analytic: bool = False,
+) -> None:
+    """Finite-memory σ and gains against k per radar and variant (Monte Carlo; with
+    ``analytic`` also √R_ii and the analytic gain, pale, at ``…/{p}_analytic``), and the
+    Doppler-aided track start's radial-velocity errors per scan."""
     ks = result.ks
     names = tuple(rad.preset.name for rad in result.radars)
     for j, rad in enumerate(result.radars):
         name, colour = rad.preset.name, radar_rgb(j)
-        for var in VARIANTS:
-            stats = getattr(rad, var)
-            for i, (_, entity, _) in enumerate(COMPONENTS):
+        curves = [("", colour, "Monte Carlo")]
+        if analytic:
+            curves.append(("_analytic", pale(colour, 0.5), "analytic"))
+        for suffix, tone, what in curves:
+            for var in VARIANTS:
+                stats = getattr(rad, var)
+                sigma = stats.sigma_analytic if suffix else stats.sigma_mc
+                for i, (_, entity, _) in enumerate(COMPONENTS):
+                    _window_series(
+                        rec,
+                        f"plots/{ROOT}/{entity}_{var}/{name}{suffix}",
+                        ks,
+                        sigma[:, i],
+                        tone,
+                        f"{name} {what}",
+                    )
+            gain = rad.gain_analytic if suffix else rad.gain_mc
+            for i, (comp, _, _) in enumerate(COMPONENTS):
                 _window_series(
                     rec,
-                    f"plots/{ROOT}/{entity}_{var}/{name}",
+                    f"plots/{ROOT}/gain_{comp}_percent/{name}{suffix}",
                     ks,
-                    stats.sigma_mc[:, i],
-                    colour,
-                    name,
+                    gain[:, i],
+                    tone,
+                    f"{name} {what}",
                 )
-        for i, (comp, _, _) in enumerate(COMPONENTS):
-            _window_series(
-                rec, f"plots/{ROOT}/gain_{comp}_percent/{name}", ks, rad.gain_mc[:, i], colour, name
-            )
     _log_legend(rec, names)
-    tr = run_doppler_tracking(DopplerTrackingConfig(runs=tracking_runs, seed=seed))
-    n = tr.n
-    times = (n - 1) * tr.config.scenario().period_s
-    for var in tr.rmse_vr:
+    n = tracking.n
+    times = (n - 1) * tracking.config.scenario().period_s
+    for var in tracking.rmse_vr:
         label = VARIANTS.get(var, var)
         for entity, values, what in (
-            ("rmse_vr_mps", tr.rmse_vr[var], "RMSE"),
-            ("sigma_vr_filter_mps", tr.sigma_vr_filter[var], "filter σ"),
+            ("rmse_vr_mps", tracking.rmse_vr[var], "RMSE"),
+            ("sigma_vr_filter_mps", tracking.sigma_vr_filter[var], "filter σ"),
         ):
             log_series(
                 rec,
@@ -105,8 +134,6 @@ def log_gorshkov(
                 rgb(var),
                 f"{label}: {what}",
             )
-    log_text(rec, f"Gorshkov: {trials} trials per radar; Doppler start: {tracking_runs} runs")
-    return names
 
 
 def _log_legend(rec: rr.RecordingStream, names: Sequence[str]) -> None:

@@ -14,10 +14,12 @@ Entity paths (``{m}`` a method: naive, seed, cmkf_d, ucm, ducm, ekf, ukf)::
     prosov/target/{m}/truth            the true target: the frame's origin (static)
     prosov/target/{m}/covariance       the method's 1σ position ellipse per scan
     prosov/target/{m}/estimate         the method's estimate per scan
-    prosov/target/{m}/measurement      the scan's converted measurement (the method's own
-                                       conversion; the naive point for filters fed polar plots)
-    prosov/target/{m}/cloud            Monte Carlo cloud of those converted points per scan
-    prosov/target/{m}/cloud_mean       the cloud's mean per scan
+    prosov/target/{c}/measurement      the scan's converted point of conversion c (naive,
+                                       seed, cmkf_d, ucm)
+    prosov/target/{c}/cloud            Monte Carlo cloud of c's converted points per scan
+    prosov/target/{c}/cloud_mean       the cloud's mean per scan
+    prosov/target/polar/…              the same for the naive points in grey, shown in the
+                                       views of the filters fed polar plots (ducm, ekf, ukf)
     prosov/bias/{c}                    conversion c's mean down-range offset ± 95% CI per scan
     prosov/legend                      one labelled swatch per method (static)
     plots/prosov/{metric}/{m}          per-scan Monte Carlo statistics (names carry units)
@@ -58,9 +60,11 @@ from radarviz.viz_app.rerun.shapes import (
     MARKER,
     SMALL_MARKER,
     THIN_LINE,
+    colours,
     ellipse_outline,
     flip_y,
     pale,
+    radii,
 )
 
 ROOT = "prosov"
@@ -158,7 +162,8 @@ def _to_frame(scene: ProsovScene, xy: NDArray[np.float64]) -> NDArray[np.float64
     """Points (N, ..., 2) → offsets from the truth in the target frame, (N, ..., 2) m."""
     b = _basis(scene)
     d = xy - scene.truth[:, None, [0, 2]] if xy.ndim == 3 else xy - scene.truth[:, [0, 2]]
-    return np.einsum("nij,n...j->n...i", b, d)
+    bt = np.swapaxes(b, -1, -2)
+    return d @ bt if d.ndim == 3 else (d[:, None, :] @ bt)[:, 0]
 
 
 def _frame_cov(scene: ProsovScene, P: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -205,15 +210,17 @@ def log_map(rec: rr.RecordingStream, scene: ProsovScene, frame: TargetFrame, lab
     rec.send_columns(
         f"{base}/truth/position",
         indexes=idx,
-        columns=rr.Points2D.columns(positions=truth, radii=[MARKER] * n, colors=[rgb("truth")] * n),
+        columns=rr.Points2D.columns(
+            positions=truth, radii=radii(MARKER, n), colors=colours(rgb("truth"), n)
+        ),
     )
     rec.send_columns(
         f"{base}/measurements",
         indexes=idx,
         columns=rr.Points2D.columns(
             positions=scene.converted_xy_m["naive"],
-            radii=[SMALL_MARKER] * n,
-            colors=[rgb("measurement")] * n,
+            radii=radii(SMALL_MARKER, n),
+            colors=colours(rgb("measurement"), n),
         ),
     )
     for m, track in scene.tracks.items():
@@ -227,13 +234,17 @@ def log_map(rec: rr.RecordingStream, scene: ProsovScene, frame: TargetFrame, lab
             f"{base}/tracks/{m}/position",
             indexes=idx,
             columns=rr.Points2D.columns(
-                positions=xy, radii=[SMALL_MARKER] * n, colors=[rgb(m)] * n
+                positions=xy, radii=radii(SMALL_MARKER, n), colors=colours(rgb(m), n)
             ),
         )
 
 
 def log_target_frame(
-    rec: rr.RecordingStream, scene: ProsovScene, frame: TargetFrame, cloud: ConversionCloud
+    rec: rr.RecordingStream,
+    scene: ProsovScene,
+    frame: TargetFrame,
+    cloud: ConversionCloud,
+    shown: int = CLOUD_SHOWN,
 ) -> None:
     """Each method in the target frame: its 1σ ellipse, estimate, the scan's converted
     measurement, and the Monte Carlo cloud of converted points with its mean."""
@@ -249,7 +260,6 @@ def log_target_frame(
         ),
         static=True,
     )
-    shown = CLOUD_SHOWN
     k = frame.exaggeration
     stretch = f", down-range ×{k}" if k != 1 else ""
     scale_label = rr.Points2D(
@@ -265,8 +275,6 @@ def log_target_frame(
         base = f"{ROOT}/target/{m}"
         colour = rgb(m)
         own = m in SHOWN_CONVERSIONS
-        source = m if own else "naive"  # filters fed polar plots: show them naively, in grey
-        tone = colour if own else rgb("measurement")
         rec.log(
             f"{base}/truth",
             rr.Points2D([[0.0, 0.0]], radii=[MARKER], colors=[rgb("truth")]),
@@ -279,41 +287,65 @@ def log_target_frame(
             f"{base}/covariance",
             indexes=idx,
             columns=rr.LineStrips2D.columns(
-                strips=list(ellipse_outline(est, cov)), colors=[colour] * n, radii=[LINE] * n
+                strips=ellipse_outline(est, cov), colors=colours(colour, n), radii=radii(LINE, n)
             ),
         )
         rec.send_columns(
             f"{base}/estimate",
             indexes=idx,
-            columns=rr.Points2D.columns(positions=est, radii=[MARKER] * n, colors=[colour] * n),
-        )
-        rec.send_columns(
-            f"{base}/measurement",
-            indexes=idx,
             columns=rr.Points2D.columns(
-                positions=measured[source], radii=[SMALL_MARKER] * n, colors=[tone] * n
+                positions=est, radii=radii(MARKER, n), colors=colours(colour, n)
             ),
         )
-        pts = clouds[source]
-        rec.send_columns(
-            f"{base}/cloud",
-            indexes=idx,
-            columns=rr.Points2D.columns(
-                positions=pts.reshape(-1, 2),
-                radii=[CLOUD_MARKER] * pts.shape[0] * pts.shape[1],
-                colors=[pale(tone, 0.55)] * pts.shape[0] * pts.shape[1],
-            ).partition([pts.shape[1]] * n),
-        )
-        rec.send_columns(
-            f"{base}/cloud_mean",
-            indexes=idx,
-            columns=rr.LineStrips2D.columns(
-                strips=list(_crosses(means[source], frame).reshape(-1, 2, 2)),
-                colors=[rgb("truth")] * (2 * n),
-                radii=[LINE] * (2 * n),
-            ).partition([2] * n),
-        )
+        if own:
+            _log_measured(rec, base, idx, measured[m], clouds[m], means[m], colour, frame)
+    # Filters fed polar plots (ducm, ekf, ukf) share one grey copy of the naive points.
+    if any(m not in SHOWN_CONVERSIONS for m in scene.tracks):
+        grey = rgb("measurement")
+        polar = f"{ROOT}/target/polar"
+        naive = (measured["naive"], clouds["naive"], means["naive"])
+        _log_measured(rec, polar, idx, *naive, grey, frame)
     _log_bias(rec, cloud, frame, idx)
+
+
+def _log_measured(
+    rec: rr.RecordingStream,
+    base: str,
+    idx: list[rr.TimeColumn],
+    measured: NDArray[np.float64],
+    pts: NDArray[np.float64],
+    means: NDArray[np.float64],
+    tone: tuple[int, int, int],
+    frame: TargetFrame,
+) -> None:
+    """The scan's converted measurement, the Monte Carlo cloud (pale) and its mean (×) at
+    ``base``/measurement, /cloud, /cloud_mean."""
+    n = len(measured)
+    rec.send_columns(
+        f"{base}/measurement",
+        indexes=idx,
+        columns=rr.Points2D.columns(
+            positions=measured, radii=radii(SMALL_MARKER, n), colors=colours(tone, n)
+        ),
+    )
+    rec.send_columns(
+        f"{base}/cloud",
+        indexes=idx,
+        columns=rr.Points2D.columns(
+            positions=pts.reshape(-1, 2),
+            radii=radii(CLOUD_MARKER, pts.shape[0] * pts.shape[1]),
+            colors=colours(pale(tone, 0.55), pts.shape[0] * pts.shape[1]),
+        ).partition([pts.shape[1]] * n),
+    )
+    rec.send_columns(
+        f"{base}/cloud_mean",
+        indexes=idx,
+        columns=rr.LineStrips2D.columns(
+            strips=_crosses(means, frame).reshape(-1, 2, 2),
+            colors=colours(rgb("truth"), 2 * n),
+            radii=radii(LINE, 2 * n),
+        ).partition([2] * n),
+    )
 
 
 def _crosses(centre: NDArray[np.float64], frame: TargetFrame) -> NDArray[np.float64]:
@@ -365,8 +397,8 @@ def _log_bias(
             indexes=idx,
             columns=rr.Points2D.columns(
                 positions=np.stack([down, y], -1),
-                radii=[MARKER] * n,
-                colors=[rgb(c)] * n,
+                radii=radii(MARKER, n),
+                colors=colours(rgb(c), n),
                 labels=[c] * n,
             ),
         )
@@ -375,7 +407,7 @@ def _log_bias(
             f"{base}/{c}/ci95",
             indexes=idx,
             columns=rr.LineStrips2D.columns(
-                strips=list(ends), colors=[rgb(c)] * n, radii=[LINE] * n
+                strips=ends, colors=colours(rgb(c), n), radii=radii(LINE, n)
             ),
         )
 
@@ -486,12 +518,14 @@ def log_prosov(
     return frame
 
 
-def log_scene(rec: rr.RecordingStream, scene: ProsovScene, cloud_points: int) -> TargetFrame:
+def log_scene(
+    rec: rr.RecordingStream, scene: ProsovScene, cloud_points: int, cloud_shown: int = CLOUD_SHOWN
+) -> TargetFrame:
     """Everything of one Prosov scene: the map, the target frame, the legend, the plots."""
     cloud = conversion_cloud(scene.config, cloud_points)
     frame = target_frame(scene, cloud)
     log_map(rec, scene, frame, radar_label(scene.config))
-    log_target_frame(rec, scene, frame, cloud)
+    log_target_frame(rec, scene, frame, cloud, min(cloud_shown, cloud_points))
     log_legend(rec, list(scene.tracks), f"{ROOT}/legend")
     log_statistics(rec, scene)
     return frame
@@ -511,7 +545,15 @@ def method_view(method: str) -> rrb.Spatial2DView:
     frame to ±1 across (``TargetFrame``), so one blueprint frames every configuration; the
     scale is written in the view."""
     bounds = rrb.VisualBounds2D(x_range=[-1.0, 1.0], y_range=[-1.0 / 2.3, 1.0 / 2.3])
-    return _space(f"{method}: target frame at the scan, 1σ ellipse", f"target/{method}", bounds)
+    contents = [f"$origin/target/{method}/**"]
+    if method not in SHOWN_CONVERSIONS:
+        contents.append("$origin/target/polar/**")
+    return rrb.Spatial2DView(
+        origin=ROOT,
+        contents=contents,
+        name=f"{method}: target frame at the scan, 1σ ellipse",
+        visual_bounds=bounds,
+    )
 
 
 def map_view() -> rrb.Spatial2DView:

@@ -36,13 +36,9 @@ import rerun as rr
 import rerun.blueprint as rrb
 from numpy.typing import NDArray
 
-from radarviz.core.scenarios.multi_radar import SIGMA_FIELDS, fusion_scenario, generate_measurements
-from radarviz.core.velocity.estimate import (
-    M_WARN,
-    GeometryError,
-    estimate_velocity,
-    fuse_positions,
-)
+from radarviz.core.scenarios.multi_radar import Scenario3D, fusion_scenario
+from radarviz.core.velocity.estimate import M_WARN
+from radarviz.core.velocity.scans import VelocityScans, estimate_scans
 from radarviz.viz_app.palette import OKABE_ITO, radar_rgb, rgb
 from radarviz.viz_app.rerun.recording import ellipsoid_axes, indexes, log_series, log_text
 from radarviz.viz_app.rerun.shapes import LINE, MARKER, SMALL_MARKER, THIN_LINE
@@ -62,75 +58,37 @@ class VelocityFrame:
 
     Attributes:
         map_centre_km, map_size_km: centre and largest extent of sites and path.
-        speed_mps: the largest true speed (the vector view's scale).
-        error_half_mps: the error view's half-size: 1.6 × the largest 1σ axis of unflagged scans.
         radars: the radar names, in colour order.
-        error_lim_mps: the error plot's y range ±error_lim_mps.
+        error_lim_mps: the error plot's y range ±error_lim_mps (None: the plot's own).
     """
 
     map_centre_km: tuple[float, float, float]
     map_size_km: float
-    speed_mps: float
-    error_half_mps: float
     radars: tuple[str, ...]
-    error_lim_mps: float
+    error_lim_mps: float | None
 
 
-def log_velocity_scene(rec: rr.RecordingStream, seed: int = 1, scans: int = 50) -> VelocityFrame:
-    """Several radars, one target: fused position and the full velocity vector per scan.
+def log_velocity_scene(
+    rec: rr.RecordingStream, seed: int = 1, scans: int = 50, scenario: Scenario3D | None = None
+) -> VelocityFrame:
+    """Several radars, one target (``fusion_scenario`` unless given): the fused position and
+    the full velocity vector per scan (``core.velocity.scans.estimate_scans``)."""
+    return log_velocity_run(rec, estimate_scans(scenario or fusion_scenario(), scans, seed))
 
-    Each scan the radars' (r, β, ε) are fused into one position and their radial velocities
-    give the velocity vector (``core.velocity.estimate``); its 1σ ellipsoid is drawn unless the
-    geometry metric m says the linear statistics do not hold, which goes to the text log.
-    """
-    scenario = fusion_scenario()
-    period = scenario.radars[0].period_s
-    meas = generate_measurements(scenario, (scans - 1) * period, seed=seed)
-    radars = scenario.radars
+
+def log_velocity_run(rec: rr.RecordingStream, run: VelocityScans) -> VelocityFrame:
+    """Log one ``VelocityScans``: flagged scans grey and in the text log."""
+    radars = run.scenario.radars
     names = tuple(r.name for r in radars)
-    sites = np.array([r.position for r in radars])
-    first = meas[radars[0].name]
-    n = np.arange(1, len(first.t) + 1)
-    t = first.t
+    sites = run.sites
+    n, t = run.n, run.t
     idx = indexes(n, t)
     k = len(n)
-    stack = {
-        f: np.stack([meas[r.name].__dict__[f] for r in radars], axis=-1)
-        for f in ("range", "azimuth", "elevation", "radial_velocity")
-    }
-    sig = {f: np.array([getattr(r, f) for r in radars]) for f in SIGMA_FIELDS}
-    angle_sigmas = {f: sig[f] for f in ("sigma_azimuth_rad", "sigma_elevation_rad")}
-    fused = fuse_positions(
-        sites,
-        stack["range"],
-        stack["azimuth"],
-        stack["elevation"],
-        sigma_r_m=sig["sigma_r_m"],
-        **angle_sigmas,
-    )
-    vel = np.full((k, 3), np.nan)
-    cov = np.full((k, 3, 3), np.nan)
-    m = np.full(k, np.nan)
-    flagged = np.zeros(k, dtype=bool)  # drawn grey: the linear statistics may not hold
-    for i in range(k):
-        try:
-            est = estimate_velocity(
-                sites,
-                stack["radial_velocity"][i],
-                stack["azimuth"][i],
-                stack["elevation"][i],
-                sigma_vr_mps=sig["sigma_vr_mps"],
-                **angle_sigmas,
-            )
-        except GeometryError as exc:
-            log_text(rec, f"velocity at scan {n[i]}: {exc}", level="WARN", scan=int(n[i]))
-            continue
-        m[i] = est.m
-        vel[i], cov[i] = est.velocity, est.covariance
-        if est.warning:
-            flagged[i] = True
-            log_text(rec, f"velocity at scan {n[i]}: {est.warning}", level="WARN", scan=int(n[i]))
-
+    radial_mps = run.stacked("radial_velocity")
+    fused = run.fused
+    vel, cov, m, flagged = run.velocity, run.covariance.copy(), run.m, run.flagged
+    for scan, text in run.messages:
+        log_text(rec, text, level="WARN", scan=scan)
     # --- the situation, km ---
     base = f"{ROOT}/map"
     rec.log(base, rr.Transform3D(scale=1e-3), static=True)
@@ -142,14 +100,14 @@ def log_velocity_scene(rec: rr.RecordingStream, seed: int = 1, scans: int = 50) 
         )
     rec.log(
         f"{base}/truth/path",
-        rr.LineStrips3D([first.true_position], colors=[rgb("truth")], radii=[THIN_LINE]),
+        rr.LineStrips3D([run.true_position], colors=[rgb("truth")], radii=[THIN_LINE]),
         static=True,
     )
     rec.send_columns(
         f"{base}/truth/position",
         indexes=idx,
         columns=rr.Points3D.columns(
-            positions=first.true_position, radii=[MARKER] * k, colors=[rgb("truth")] * k
+            positions=run.true_position, radii=[MARKER] * k, colors=[rgb("truth")] * k
         ),
     )
     rec.send_columns(
@@ -176,7 +134,7 @@ def log_velocity_scene(rec: rr.RecordingStream, seed: int = 1, scans: int = 50) 
         f"{base}/truth",
         indexes=idx,
         columns=rr.Arrows3D.columns(
-            origins=zeros, vectors=first.true_velocity, colors=[rgb("truth")] * k, radii=[LINE] * k
+            origins=zeros, vectors=run.true_velocity, colors=[rgb("truth")] * k, radii=[LINE] * k
         ),
     )
     # A flagged scan gets a row with no instance, so the last good estimate is not shown in
@@ -196,11 +154,11 @@ def log_velocity_scene(rec: rr.RecordingStream, seed: int = 1, scans: int = 50) 
                 radii=[LINE] * k_ok,
             ).partition(rows),
         )
-    speed = float(np.linalg.norm(first.true_velocity, axis=-1).max())
+    speed = float(np.linalg.norm(run.true_velocity, axis=-1).max())
     u = fused.position[:, None, :] - sites[None]  # (k, radars, 3)
     u /= np.linalg.norm(u, axis=-1, keepdims=True)
     for j, r in enumerate(radars):
-        radial = stack["radial_velocity"][:, j, None] * u[:, j]
+        radial = radial_mps[:, j, None] * u[:, j]
         rec.send_columns(
             f"{base}/radial/{r.name}",
             indexes=idx,
@@ -218,7 +176,7 @@ def log_velocity_scene(rec: rr.RecordingStream, seed: int = 1, scans: int = 50) 
         )
 
     # --- the error V̂ − V, m/s ---
-    err = vel - first.true_velocity
+    err = vel - run.true_velocity
     base = f"{ROOT}/error"
     half_max = 1.0
     if k_ok:
@@ -244,6 +202,10 @@ def log_velocity_scene(rec: rr.RecordingStream, seed: int = 1, scans: int = 50) 
             ).partition(rows),
         )
     error_half = 1.6 * half_max
+    # The views are framed in units of these scales (one blueprint for any accuracy): the
+    # error view's ±1 is ±error_half m/s, the vector view's 1 is the largest true speed.
+    rec.log(base, rr.Transform3D(scale=1.0 / error_half), static=True)
+    rec.log(f"{ROOT}/vector", rr.Transform3D(scale=1.0 / speed), static=True)
     _log_axes(rec, f"{base}/axes", error_half)
     rec.log(
         f"{base}/truth",
@@ -273,17 +235,29 @@ def log_velocity_scene(rec: rr.RecordingStream, seed: int = 1, scans: int = 50) 
         rgb("band"),
         "warning level",
     )
-    log_text(rec, f"velocity fusion: {len(radars)} radars, {k} scans, seed {seed}")
-    pts = np.concatenate([sites, first.true_position]) * 1e-3
+    log_text(rec, f"velocity fusion: {len(radars)} radars, {k} scans")
+    return geometry_frame(
+        run, float(1.1 * np.nanmax(np.abs(err))) if np.isfinite(err).any() else None
+    )
+
+
+def geometry_frame(run: VelocityScans, error_lim_mps: float | None = None) -> VelocityFrame:
+    """The views' framing: the map from the sites and the true path; the vector and error
+    views are in units their transforms set (``log_velocity_run``)."""
+    pts = np.concatenate([run.sites, run.true_position]) * 1e-3
     lo, hi = pts.min(0), pts.max(0)
     return VelocityFrame(
         tuple(float(v) for v in (lo + hi) / 2),
         float((hi - lo).max()),
-        speed,
-        error_half,
-        names,
-        float(1.1 * np.nanmax(np.abs(err))) if np.isfinite(err).any() else 1.0,
+        tuple(r.name for r in run.scenario.radars),
+        error_lim_mps,
     )
+
+
+def panel_frame() -> VelocityFrame:
+    """The framing of the baseline geometry (60 scans of 10 s), for a blueprint that serves
+    every accuracy the tuning panel sets."""
+    return geometry_frame(estimate_scans(fusion_scenario(), 60, None))
 
 
 def _log_axes(rec: rr.RecordingStream, entity: str, half: float) -> None:
@@ -370,13 +344,13 @@ def views(frame: VelocityFrame) -> VelocityViews:
         origin=ROOT,
         contents=["$origin/vector/**"],
         name="velocity V̂ and each radar's radial velocity, m/s",
-        eye_controls=_eye((0.0, 0.0, 0.0), 3.0 * frame.speed_mps, (0.5, -0.8, 0.6)),
+        eye_controls=_eye((0.0, 0.0, 0.0), 3.0, (0.5, -0.8, 0.6)),
     )
     error = rrb.Spatial3DView(
         origin=ROOT,
         contents=["$origin/error/**"],
         name="error V̂ − V with its 1σ ellipsoid, m/s (grey: geometry flagged)",
-        eye_controls=_eye((0.0, 0.0, 0.0), 3.2 * frame.error_half_mps, (0.5, -0.8, 0.5)),
+        eye_controls=_eye((0.0, 0.0, 0.0), 3.2, (0.5, -0.8, 0.5)),
     )
     legend = legend_view(frame)
     plots = [
@@ -384,7 +358,9 @@ def views(frame: VelocityFrame) -> VelocityViews:
             origin=f"plots/{ROOT}/error_mps",
             name="V̂ − V per axis (x, y, z as in the legend), m/s",
             plot_legend=rrb.PlotLegend(visible=False),
-            axis_y=rrb.ScalarAxis(range=(-frame.error_lim_mps, frame.error_lim_mps)),
+            axis_y=None
+            if frame.error_lim_mps is None
+            else rrb.ScalarAxis(range=(-frame.error_lim_mps, frame.error_lim_mps)),
         ),
         rrb.TimeSeriesView(
             origin=f"plots/{ROOT}/sigma_mps",

@@ -1,0 +1,173 @@
+"""``radarviz tune``'s servers: the Viser panel, a ``rerun --serve-web`` child, the worker.
+
+All three bind to 127.0.0.1 unless ``--host`` says otherwise. Every change of a control only
+records the newest parameters (``worker.Coalescer``); the worker runs the newest, logs it as a
+new recording to the gRPC server (``session.TuneSession``), and the panel shows the result.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import signal
+import socket
+import statistics
+import subprocess
+import sys
+import time
+from dataclasses import replace
+
+from radarviz.core.params import check_int
+from radarviz.viz_app.rerun.viewer import free_port, rerun_executable, viewer_url
+from radarviz.viz_app.tune.panel import TunePanel
+from radarviz.viz_app.tune.params import TuneParams
+from radarviz.viz_app.tune.session import TuneSession
+from radarviz.viz_app.tune.worker import Coalescer
+
+LOOPBACK = "127.0.0.1"
+
+
+def grpc_uri(host: str, port: int) -> str:
+    connect = LOOPBACK if host in ("0.0.0.0", "::", "") else host
+    return f"rerun+http://{connect}:{port}/proxy"
+
+
+def wait_port(host: str, port: int, timeout: float = 30.0) -> None:
+    connect = LOOPBACK if host in ("0.0.0.0", "::", "") else host
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        with contextlib.suppress(OSError), socket.create_connection((connect, port), timeout=1):
+            return
+        time.sleep(0.05)
+    raise TimeoutError(f"nothing listens on {connect}:{port} after {timeout:g} s")
+
+
+def start_rerun(host: str, grpc_port: int, web_port: int | None) -> subprocess.Popen:
+    """``rerun --serve-web`` (or ``--serve-grpc`` when ``web_port`` is None) in its own
+    process group, bound to ``host``."""
+    cmd = [rerun_executable()]
+    cmd += (
+        ["--serve-grpc"]
+        if web_port is None
+        else ["--serve-web", "--web-viewer-port", str(web_port)]
+    )
+    cmd += ["--bind", host, "--port", str(grpc_port), "--server-memory-limit", "512MiB"]
+    env = {**os.environ, "RERUN_ANALYTICS": "0"}
+    return subprocess.Popen(
+        cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True, env=env
+    )
+
+
+def stop_process_group(proc: subprocess.Popen | None) -> None:
+    if proc is None or proc.poll() is not None:
+        return
+    with contextlib.suppress(ProcessLookupError):
+        os.killpg(proc.pid, signal.SIGTERM)
+    try:
+        proc.wait(timeout=5)
+    except subprocess.TimeoutExpired:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait(timeout=5)
+
+
+def measure_tune_latency(
+    scene: str = "prosov", changes: int = 10, runs: int = 200, steps: int = 60
+) -> float:
+    """Median ms from a parameter change to the recording flushed to a local gRPC server.
+
+    Starts ``rerun --serve-grpc`` on 127.0.0.1, then submits ``changes`` changes of the
+    scene's own parameter (σβ for Prosov and velocity, C0 for Gorshkov) one after another
+    through the same worker path as the panel (one warm-up run first).
+    """
+    port = free_port(LOOPBACK)
+    proc = start_rerun(LOOPBACK, port, None)
+    times: list[float] = []
+    worker = None
+    try:
+        wait_port(LOOPBACK, port)
+        session = TuneSession(grpc_uri(LOOPBACK, port))
+        worker = Coalescer(
+            session.run,
+            lambda raw, rep, ms: times.append(ms),
+            lambda raw, exc: times.append(float("nan")),
+        )
+        base = TuneParams(scene=scene, runs=runs, steps=steps)
+        worker.submit(base)
+        worker.wait_idle(120)
+        times.clear()
+        for i in range(changes):
+            if scene == "gorshkov":
+                changed = replace(base, c0=0.5 + 0.5 * (i % 10))
+            else:
+                changed = replace(base, sigma_beta_deg=1.0 + 0.1 * (i % 10))
+            worker.submit(changed)
+            worker.wait_idle(120)
+    finally:
+        if worker is not None:
+            worker.stop()
+        stop_process_group(proc)
+    return float(statistics.median(times)) if times else float("nan")
+
+
+def cmd_tune(
+    host: str = LOOPBACK, port: int = 0, viewer_port: int = 0, no_browser: bool = False
+) -> int:
+    """Run the panel, the gRPC server and the web viewer until SIGTERM / Ctrl-C."""
+    import viser
+
+    from radarviz.viz_app.runtime import tune_allocator
+
+    check_int("--port", port, low=0, high=65535)
+    check_int("--viewer-port", viewer_port, low=0, high=65535)
+    if host != LOOPBACK:
+        print(
+            f"radarviz: warning: binding {host}: the tuning panel and viewer are reachable "
+            "from other machines",
+            file=sys.stderr,
+            flush=True,
+        )
+    tune_allocator()
+
+    def _stop(signum: int, frame: object) -> None:
+        raise SystemExit(0)  # unwinds into the finally below
+
+    signal.signal(signal.SIGTERM, _stop)
+    bind_probe = LOOPBACK if host in ("0.0.0.0", "::", "") else host
+    grpc_port = free_port(bind_probe)
+    web_port = viewer_port or free_port(bind_probe)
+    proc = None
+    server = None
+    worker = None
+    try:
+        proc = start_rerun(host, grpc_port, web_port)
+        server = viser.ViserServer(host=host, port=port, verbose=False)
+        session = TuneSession(grpc_uri(host, grpc_port), echo=True)
+        worker = Coalescer(session.run, session.done, session.error)
+        panel = TunePanel(server, session, worker)
+        wait_port(host, grpc_port)
+        panel_url = f"http://{bind_probe}:{server.get_port()}/"
+        view_url = viewer_url(bind_probe, web_port, grpc_port)
+        print(f"panel {panel_url}", flush=True)
+        print(f"viewer {view_url}", flush=True)
+        print("stop with Ctrl-C", flush=True)
+        worker.submit(panel.raw())
+        if not no_browser:
+            import webbrowser
+
+            webbrowser.open(panel_url)
+            webbrowser.open(view_url)
+        while True:
+            time.sleep(0.5)
+            if proc.poll() is not None:
+                print("radarviz: error: the rerun viewer stopped", file=sys.stderr, flush=True)
+                return 1
+    except (KeyboardInterrupt, SystemExit):
+        return 0
+    finally:
+        if worker is not None:
+            worker.stop()
+        if server is not None:
+            with contextlib.suppress(Exception):
+                server.stop()
+        stop_process_group(proc)
