@@ -269,7 +269,7 @@ def test_tune_panel_slider_makes_new_recording(
     try:
         panel = _expect(lines, r"^panel (\S+)", 60, log).group(1)
         viewer = _expect(lines, r"^viewer (\S+)", 10, log).group(1)
-        first = _expect(lines, r"^run (\S+) sigma_beta_deg=2 ms=(\d+)", 60, log)
+        first = _expect(lines, r"^run (\S+) scene=prosov sigma_beta_deg=2 c0=1 ms=(\d+)", 60, log)
         rerun_pids = [
             int(p)
             for p in subprocess.run(
@@ -287,7 +287,8 @@ def test_tune_panel_slider_makes_new_recording(
             slider = page.get_by_role("slider").first
             slider.focus()
             slider.press("ArrowRight")
-            second = _expect(lines, r"^run (\S+) sigma_beta_deg=2.1 ms=(\d+)", 60, log)
+            pattern = r"^run (\S+) scene=prosov sigma_beta_deg=2.1 c0=1 ms=(\d+)"
+            second = _expect(lines, pattern, 60, log)
             assert second.group(1) != first.group(1)
             # The status line in the panel (React DOM) names the new recording.
             page.get_by_text(second.group(1)).first.wait_for(timeout=30_000)
@@ -376,3 +377,88 @@ def test_switching_scene_keeps_the_shared_values() -> None:
     for scene in ("prosov", "gorshkov", "velocity"):
         rep = s.run({**TuneParams(sigma_r_m=120.0, runs=50).__dict__, "scene": scene})
         assert rep.params.scene == scene and rep.params.sigma_r_m == 120.0
+
+
+def _figure(line: str, name: str) -> float:
+    """A headline figure from a panel run line (``… name=value …``)."""
+    m = re.search(rf"\b{re.escape(name)}=(\S+)", line)
+    assert m, (name, line)
+    return float(m.group(1))
+
+
+def test_tune_panel_drives_each_scene_from_two_tabs(
+    chromium: tuple[str, list[str]], viewer_shows_data
+) -> None:
+    """Two browser tabs on one panel: in the first, the scene selector switches to Gorshkov and
+    a typed C0 of 20 (from 1) raises the peak range gain; the second tab shows the same state;
+    with the first closed, the second switches to the velocity scene and a σβ key press raises
+    σ of Vx. The viewer shows the newest run."""
+    from playwright.sync_api import sync_playwright
+
+    exe = Path(sys.executable).with_name("radarviz")
+    panel_port, viewer_port = free_port(), free_port()
+    command = [str(exe), "tune", "--no-browser", "--port", str(panel_port)]
+    proc = subprocess.Popen(
+        [*command, "--viewer-port", str(viewer_port)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+        cwd=ROOT,
+        env={**os.environ, "PYTHONUNBUFFERED": "1"},
+    )
+    lines: queue.Queue = queue.Queue()
+    threading.Thread(target=_reader, args=(proc, lines), daemon=True).start()
+    log: list[str] = []
+    try:
+        panel = _expect(lines, r"^panel (\S+)", 60, log).group(1)
+        viewer = _expect(lines, r"^viewer (\S+)", 10, log).group(1)
+        _expect(lines, r"^run \S+ scene=prosov", 60, log)
+        with sync_playwright() as p:
+            executable, args = chromium
+            browser = p.chromium.launch(executable_path=executable, args=args)
+            first = browser.new_page(viewport={"width": 1400, "height": 900})
+            second = browser.new_page(viewport={"width": 1400, "height": 900})
+            for page in (first, second):
+                page.goto(panel)
+                page.get_by_label("scene").first.wait_for(timeout=60_000)
+            first.get_by_label("scene").first.click()
+            first.get_by_role("option", name="gorshkov").click()
+            g1 = _expect(lines, r"^run (\S+) scene=gorshkov \S+ c0=1 .*", 60, log)
+            c0 = first.get_by_label("C0").first
+            c0.click()
+            c0.press("Control+a")
+            c0.type("20")
+            c0.press("Tab")
+            g2 = _expect(lines, r"^run (\S+) scene=gorshkov \S+ c0=20 .*", 60, log)
+            gain1 = _figure(g1.group(0), "peak_range_gain_percent")
+            gain2 = _figure(g2.group(0), "peak_range_gain_percent")
+            assert gain2 > gain1 + 5.0, (gain1, gain2)
+            # The other tab shows the same run.
+            second.get_by_text(g2.group(1)).first.wait_for(timeout=30_000)
+            first.close()
+            second.get_by_label("scene").first.click()
+            second.get_by_role("option", name="velocity").click()
+            v1 = _expect(lines, r"^run (\S+) scene=velocity sigma_beta_deg=2 .*", 60, log)
+            slider = second.get_by_role("slider").first
+            slider.focus()
+            slider.press("ArrowRight")
+            v2 = _expect(lines, r"^run (\S+) scene=velocity sigma_beta_deg=2.1 .*", 60, log)
+            s1, s2 = (_figure(v.group(0), "sigma_vx_mps") for v in (v1, v2))
+            assert s2 > s1, (s1, s2)
+            second.get_by_text(v2.group(1)).first.wait_for(timeout=30_000)
+            second.screenshot(path=str(ARTIFACTS / "tune_panel_velocity.png"))
+            view = browser.new_page(viewport={"width": 1600, "height": 1000})
+            view.goto(viewer)
+            view.wait_for_selector("canvas", timeout=60_000)
+            viewer_shows_data(view, ARTIFACTS / "tune_viewer_velocity.png")
+            browser.close()
+    finally:
+        if _group_alive(proc.pid):
+            os.killpg(proc.pid, signal.SIGTERM)
+        try:
+            proc.wait(timeout=15)
+        except subprocess.TimeoutExpired:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait(timeout=5)
+            raise

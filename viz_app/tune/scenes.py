@@ -197,10 +197,11 @@ def _velocity_summary(run: VelocityScans) -> tuple[dict[str, float], tuple[str, 
 
 
 def status_lines(result: TuneResult) -> list[str]:
-    """The scene's headline figures as markdown lines (alerts first, in bold)."""
+    """The scene's headline figures as markdown blocks (alerts first, a bold list), each
+    element a paragraph, a list item or a table row."""
     f = result.figures
     p = result.params
-    lines = [f"**⚠ {a}**" for a in result.alerts]
+    lines = [f"- **⚠ {a}**" for a in result.alerts]
     if lines:
         lines.append("")
     if result.prosov is not None:

@@ -152,9 +152,11 @@ class TuneSession:
             self.last_error = None
             self.runs_done += 1
         if self.echo:
+            p = report.params
+            headline = " ".join(f"{k}={v:.6g}" for k, v in sorted(report.figures.items()))
             print(
-                f"run {report.recording_id} sigma_beta_deg={report.params.sigma_beta_deg:g} "
-                f"ms={ms:.0f}",
+                f"run {report.recording_id} scene={p.scene} sigma_beta_deg={p.sigma_beta_deg:g} "
+                f"c0={p.c0:g} ms={ms:.0f} {headline}",
                 flush=True,
             )
         self._notify()
@@ -182,14 +184,20 @@ class TuneSession:
         if good is None:
             return "**status:** waiting for the first run …"
         p = good.params
-        lines = [
+        head = [
             f"**{SCENES[p.scene]}** · run {good.recording_id} · {good.ms:.0f} ms change→flush",
             f"σr {p.sigma_r_m:g} m · σβ {p.sigma_beta_deg:g}° · T {p.period_s:g} s · "
             f"C0 {p.c0:.4g} · {p.runs} runs · seed {p.seed}",
-            "",
-            *status_lines(good.result),
         ]
-        return "\n".join(lines)
+        # Markdown: table rows and list items stay on consecutive lines, prose lines are
+        # paragraphs of their own.
+        out: list[str] = []
+        for line in [*head, "", *status_lines(good.result)]:
+            block = line.startswith(("|", "- "))
+            if out and not block and out[-1] != "":
+                out.append("")
+            out.append(line)
+        return "\n".join(out)
 
     def save(self, directory: Path = RECORDINGS_DIR) -> Path:
         """Write the last good parameters' scene to ``directory`` atomically."""
