@@ -217,42 +217,96 @@ def _int(
 
 #: Upper limit of an angle σ accepted anywhere: beyond it a Cartesian Gaussian is meaningless.
 MAX_SIGMA_ANGLE_DEG = 20.0
+#: Lower limit of an angle σ (3.6 milli-arcseconds, far finer than any radar): below it r σ²
+#: underflows against r and the conversions' second-order terms lose every digit (negative
+#: NEES, NaN).
+MIN_SIGMA_ANGLE_DEG = 1e-6
 
 #: The parameter table. Defaults are the Prosov experiment (one radar at the origin, target at
 #: 150 km moving radially outward at 200 m/s, σr = 250 m, σβ = 1°, T = 10 s, 60 scans, Q = 0).
 PARAMETERS: dict[str, Parameter] = {
     p.name: p
     for p in (
-        _real("sigma_r_m", "σr", "range noise std", "m", 0.0, 1e6, 250.0),
-        _real("sigma_beta_deg", "σβ", "azimuth noise std", "deg", 0.0, MAX_SIGMA_ANGLE_DEG, 1.0),
+        _real("sigma_r_m", "σr", "range noise std", "m", 1e-3, 1e5, 250.0, low_open=False),
+        _real(
+            "sigma_beta_deg",
+            "σβ",
+            "azimuth noise std",
+            "deg",
+            MIN_SIGMA_ANGLE_DEG,
+            MAX_SIGMA_ANGLE_DEG,
+            1.0,
+            low_open=False,
+        ),
         _real(
             "sigma_elevation_deg",
             "σε",
             "elevation noise std",
             "deg",
-            0.0,
+            MIN_SIGMA_ANGLE_DEG,
             MAX_SIGMA_ANGLE_DEG,
             None,
+            low_open=False,
         ),
-        _real("sigma_vr_mps", "σVr", "radial-velocity noise std", "m/s", 0.0, 1e6, None),
-        _real("period_s", "T", "scan period", "s", 0.0, 3600.0, 10.0),
+        _real(
+            "sigma_vr_mps",
+            "σVr",
+            "radial-velocity noise std",
+            "m/s",
+            1e-4,
+            1e4,
+            None,
+            low_open=False,
+        ),
+        _real("period_s", "T", "scan period", "s", 1e-3, 3600.0, 10.0, low_open=False),
         _int("steps", "N", "scans per run", 2, 100_000, 60),
         _int("runs", "M", "Monte Carlo runs", 2, None, 1000),
         _int("trials", "M", "Monte Carlo trials", 2, 100_000_000, 100_000),
         _int("seed", "seed", "root of numpy.random.SeedSequence", 0, None, 1),
-        _real("c0", "C0", "σr² / (T² σVr²), range vs Doppler accuracy", "", 0.0, 1e8, 1.0),
+        _real(
+            "c0",
+            "C0",
+            "σr² / (T² σVr²), range vs Doppler accuracy",
+            "",
+            1e-8,
+            1e8,
+            1.0,
+            low_open=False,
+        ),
         _real(
             "sigma_a_mps2",
             "σa",
             "process-noise acceleration std",
             "m/s²",
             0.0,
-            None,
+            1e3,
             0.0,
             low_open=False,
         ),
-        _real("sigma_v0_mps", "σv0", "initial velocity std of a track", "m/s", 0.0, None, 1000.0),
+        _real(
+            "sigma_v0_mps",
+            "σv0",
+            "initial velocity std of a track",
+            "m/s",
+            1e-3,
+            1e5,
+            1000.0,
+            low_open=False,
+        ),
         _real("target_range_m", "r0", "initial target range", "m", 0.0, 1e8, 150e3),
+        _real("site_m", "x", "radar site coordinate", "m", -1e8, 1e8, None, low_open=False),
+        _real("range_m", "r", "measured range", "m", 0.0, 1e8, None),
+        _real(
+            "radial_velocity_mps",
+            "Vr",
+            "measured radial velocity",
+            "m/s",
+            -1e5,
+            1e5,
+            None,
+            low_open=False,
+        ),
+        _real("time_s", "t", "plot time", "s", -1e10, 1e10, None, low_open=False),
         _real(
             "target_speed_mps",
             "v",

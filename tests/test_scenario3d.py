@@ -95,7 +95,9 @@ def test_measurements_are_seeded_and_noisy() -> None:
 
 
 def test_bad_scenarios_raise_one_line() -> None:
-    with pytest.raises(ParameterError, match=r"period_s must be a finite number in \(0, 3600\]"):
+    with pytest.raises(
+        ParameterError, match=r"period_s must be a finite number in \[0.001, 3600\]"
+    ):
         RadarSite("X", (0.0, 0.0, 0.0), **_sigmas(1.0, 0.5, 0.5, 1.0), period_s=0.0)
     with pytest.raises(TypeError):  # the accuracies are keyword-only: no silent swap
         RadarSite("X", (0.0, 0.0, 0.0), 1.0, 0.01, 0.01, 1.0, 10.0)  # type: ignore[misc]

@@ -168,7 +168,7 @@ BAD_CASES = {
     "non-numeric": (
         HEADER + GOOD_ROWS[0] + "10,a,abc,1\n",
         GOOD_RADARS,
-        "m.csv line 3, column range_m: must be a finite number > 0 (got 'abc')",
+        "m.csv line 3, column range_m: must be a finite number in (0, 1e+08] (got 'abc')",
     ),
     "nan": (
         HEADER + GOOD_ROWS[0] + "10,a,150000,nan\n",
@@ -198,7 +198,7 @@ BAD_CASES = {
     "negative sigma": (
         HEADER + GOOD_ROWS[0],
         GOOD_RADARS.replace("100.0", "-1.0"),
-        "r.toml, radar 'b', key sigma_range_m: must be a finite number > 0",
+        "r.toml, radar 'b', key sigma_range_m: must be a finite number in [0.001, 100000]",
     ),
     "missing radar key": (
         HEADER + GOOD_ROWS[0],
@@ -605,12 +605,13 @@ NEW_BAD_CASES = {
     "bad doppler": (
         "time_s,radar,range_m,azimuth_deg,radial_velocity_mps\n0,a,150000,0.5,fast\n",
         MIXED_RADARS,
-        "m.csv line 2, column radial_velocity_mps: must be a finite number or empty",
+        "m.csv line 2, column radial_velocity_mps: must be a finite number in "
+        "[−100000, 100000] or empty",
     ),
     "elevation sigma range": (
         HEADER + GOOD_ROWS[0],
         GOOD_RADARS.replace("[radars.b]", "sigma_elevation_deg = 45.0\n\n[radars.b]"),
-        "r.toml, radar 'a', key sigma_elevation_deg: must be a finite number in (0, 20]",
+        "r.toml, radar 'a', key sigma_elevation_deg: must be a finite number in [1e-06, 20]",
     ),
 }
 

@@ -52,7 +52,7 @@ from radarviz.core.filters.predict import cv_predict
 from radarviz.core.filters.state import CVBatch
 from radarviz.core.finite_memory.fit import finite_memory_fit
 from radarviz.core.finite_memory.start import finite_memory_start
-from radarviz.core.params import ParameterError, check_choice, check_int, check_real
+from radarviz.core.params import ParameterError, check, check_choice, check_int
 
 INIT_MODES: tuple[str, ...] = ("first-plot", "finite-memory")
 
@@ -130,8 +130,8 @@ class TrackGroup:
         self.group = MethodGroup(methods)
         self.methods = tuple(methods)
         self.dims = dims
-        self.sigma_a = check_real("sigma_a_mps2", sigma_a_mps2, low=0.0, low_open=False)
-        self.sigma_v0 = check_real("sigma_v0_mps", sigma_v0_mps, low=0.0)
+        self.sigma_a = float(check("sigma_a_mps2", sigma_a_mps2))
+        self.sigma_v0 = float(check("sigma_v0_mps", sigma_v0_mps))
         self.state: CVBatch | None = None
         self.time_s: float | None = None
 
@@ -210,8 +210,8 @@ class StreamOptions:
     init_k: int = 3
 
     def __post_init__(self) -> None:
-        check_real("sigma_a_mps2", self.sigma_a_mps2, low=0.0, low_open=False)
-        check_real("sigma_v0_mps", self.sigma_v0_mps, low=0.0)
+        check("sigma_a_mps2", self.sigma_a_mps2)
+        check("sigma_v0_mps", self.sigma_v0_mps)
         check_choice("init", self.init, INIT_MODES)
         check_int("init_k", self.init_k, low=2, high=1000)
 

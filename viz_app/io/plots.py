@@ -92,6 +92,11 @@ SIM_PRESETS = ("prosov", "fusion")
 DOPPLER_MODES = ("use", "ignore")
 #: Most scans per radar ``simulate`` writes (files stream; the Monte Carlo limit does not apply).
 MAX_SIMULATE_STEPS = 10_000_000
+#: Physically meaningful ends of a plot's values (``core.params``: range_m, radial_velocity_mps,
+#: time_s): beyond them squares overflow and the filters return NaN without a word.
+MAX_RANGE_M = float(PARAMETERS["range_m"].high)
+MAX_RADIAL_VELOCITY_MPS = float(PARAMETERS["radial_velocity_mps"].high)
+MAX_TIME_S = float(PARAMETERS["time_s"].high)
 #: Plots read before they are tracked as one block (the bounded buffer: conversions are
 #: vectorised over a block).
 READ_BLOCK = 1024
@@ -142,7 +147,13 @@ def _bad(where: str, column: str, what: str, got: object) -> ParameterError:
     return ParameterError(f"{where}, column {column}: {what} (got {got!r})")
 
 
-_ANGLE_SIGMAS = ("sigma_azimuth_deg", "sigma_elevation_deg")
+#: The ``core.params`` entry bounding each radars-file key (site coordinates: ``site_m``).
+RADAR_KEY_PARAMETERS: dict[str, str] = {
+    "sigma_range_m": "sigma_r_m",
+    "sigma_azimuth_deg": "sigma_beta_deg",
+    "sigma_elevation_deg": "sigma_elevation_deg",
+    "sigma_radial_velocity_mps": "sigma_vr_mps",
+}
 
 
 def parse_radars(text: str, source: str) -> dict[str, Radar]:
@@ -177,12 +188,11 @@ def parse_radars(text: str, source: str) -> dict[str, Radar]:
                     raise ParameterError(f"{where}, key {key}: missing")
                 continue
             v = table[key]
-            if key.startswith("sigma_"):
-                high = PARAMETERS["sigma_beta_deg"].high if key in _ANGLE_SIGMAS else None
-                rng = f"in (0, {high:g}]" if high else "> 0"
-                ok = _is_real(v) and math.isfinite(v) and 0 < v and (high is None or v <= high)
-            else:
-                rng, ok = "", _is_real(v) and math.isfinite(v)
+            # Each key's physically meaningful range is its parameter's (``core.params``).
+            entry = PARAMETERS[RADAR_KEY_PARAMETERS.get(key, "site_m")]
+            low, high = entry.low, entry.high
+            rng = f"in [{low:g}, {high:g}]"
+            ok = _is_real(v) and math.isfinite(v) and low <= v <= high
             if not ok:
                 raise ParameterError(
                     f"{where}, key {key}: must be a finite number {rng}".rstrip() + f" (got {v!r})"
@@ -264,8 +274,13 @@ class PlotReader:
             if len(row) != width:
                 raise ParameterError(f"{where}: expected {width} fields, got {len(row)}")
             t = _number(row[i_t])
-            if t is None:
-                raise _bad(where, "time_s", "must be a finite number", row[i_t])
+            if t is None or abs(t) > MAX_TIME_S:
+                raise _bad(
+                    where,
+                    "time_s",
+                    f"must be a finite number in [−{MAX_TIME_S:g}, {MAX_TIME_S:g}]",
+                    row[i_t],
+                )
             if t < last_t:
                 raise _bad(
                     where, "time_s", f"must not be before the previous time {last_t!r}", row[i_t]
@@ -275,8 +290,10 @@ class PlotReader:
             if radar is None:
                 raise _bad(where, "radar", f"unknown radar (known: {', '.join(radars)})", name)
             r = _number(row[i_r])
-            if r is None or r <= 0:
-                raise _bad(where, "range_m", "must be a finite number > 0", row[i_r])
+            if r is None or not 0 < r <= MAX_RANGE_M:
+                raise _bad(
+                    where, "range_m", f"must be a finite number in (0, {MAX_RANGE_M:g}]", row[i_r]
+                )
             az = _number(row[i_az])
             if az is None or abs(az) > 360:
                 raise _bad(
@@ -300,9 +317,13 @@ class PlotReader:
             vr = sigma_vr = None
             if i_vr is not None and row[i_vr].strip():  # an empty cell: no Doppler here
                 vr = _number(row[i_vr])
-                if vr is None:
+                if vr is None or abs(vr) > MAX_RADIAL_VELOCITY_MPS:
                     raise _bad(
-                        where, "radial_velocity_mps", "must be a finite number or empty", row[i_vr]
+                        where,
+                        "radial_velocity_mps",
+                        f"must be a finite number in [−{MAX_RADIAL_VELOCITY_MPS:g}, "
+                        f"{MAX_RADIAL_VELOCITY_MPS:g}] or empty",
+                        row[i_vr],
                     )
                 sigma_vr = radar.sigma_radial_velocity_mps
                 if sigma_vr is None:
