@@ -317,6 +317,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         return _fail(cli_message(args, exc))
     except OSError as exc:
         return _fail(f"{exc.strerror or exc}: {exc.filename}" if exc.filename else str(exc))
+    except KeyboardInterrupt:
+        # Ctrl-C: every writer has removed its temporary file on the way out (the outputs are
+        # atomic), so the targets are as before; 130 is the shell's status for SIGINT.
+        print(f"radarviz: interrupted: {args.command} stopped, no output written", file=sys.stderr)
+        return 130
     return _fail(f"unknown command {args.command!r}")
 
 
