@@ -184,8 +184,26 @@ def test_worker_killed_mid_sweep_gives_the_identical_result(
 
 
 def test_cli_on_a_tcp_scheduler_writes_table_figures_and_recording(
-    client, serial_results, tmp_path: Path, capsys
+    serial_results, tmp_path: Path, capsys
 ) -> None:
+    """``--scheduler tcp://…``: the user's own plain-TCP scheduler (the sweep's local cluster
+    speaks TLS, so it cannot stand in for one)."""
+    from distributed import LocalCluster
+
+    with LocalCluster(
+        n_workers=1,
+        threads_per_worker=1,
+        processes=True,
+        host="127.0.0.1",
+        protocol="tcp",
+        dashboard_address=None,
+        scheduler_kwargs={"dashboard": False, "dashboard_address": "127.0.0.1:0"},
+    ) as cluster:
+        assert cluster.scheduler_address.startswith("tcp://")
+        _sweep_cli_on(cluster.scheduler_address, serial_results, tmp_path, capsys)
+
+
+def _sweep_cli_on(scheduler: str, serial_results, tmp_path: Path, capsys) -> None:
     out = tmp_path / "s.parquet"
     rrd = tmp_path / "s.rrd"
     code = main(
@@ -205,7 +223,7 @@ def test_cli_on_a_tcp_scheduler_writes_table_figures_and_recording(
             "--methods",
             *METHODS,
             "--scheduler",
-            client.scheduler_info()["address"],
+            scheduler,
             "--out",
             str(out),
             "--plot",
@@ -217,7 +235,7 @@ def test_cli_on_a_tcp_scheduler_writes_table_figures_and_recording(
     )
     assert code == 0
     doc = json.loads(capsys.readouterr().out)
-    assert doc["computed"] == 12 and doc["workers"] == 2
+    assert doc["computed"] == 12 and doc["workers"] == 1
     table = pq.read_table(out)
     expected = sweep_table(_spec(), serial_results)
     for col in COLUMNS:

@@ -13,10 +13,16 @@ from pathlib import Path
 from radarviz.core.params import ParameterError, check_choice, check_int
 from radarviz.viz_app.rerun.viewer import (
     LOOPBACK,
+    ServiceError,
+    bind_address,
+    check_port_free,
+    connect_address,
     free_port,
+    is_loopback,
     rerun_executable,
     serve_recording,
     viewer_url,
+    wait_viewer,
 )
 
 PRESETS = ("demo", "prosov", "gorshkov", "velocity")
@@ -101,35 +107,50 @@ def cmd_view(args: argparse.Namespace) -> int:
                 "drop --native to serve the web viewer"
             )
         return subprocess.call([rerun_executable(), args.path])
-    if args.host != LOOPBACK:
+    if not is_loopback(args.host):
         print(
             f"radarviz: warning: binding {args.host}: the viewer is reachable from other machines",
             file=sys.stderr,
         )
     for name, port in (("--port", args.port), ("--web-port", args.web_port)):
         check_int(name, port, low=0, high=65535)
-    grpc_port = args.port or free_port(args.host)
-    web_port = args.web_port or free_port(args.host)
-    proc = serve_recording(args.path, args.host, grpc_port, web_port)
+    host = bind_address("--host", args.host)
+    proc = None
+    try:
+        # A port taken by another program must not be printed as the viewer's address.
+        check_port_free("--port", host, args.port)
+        check_port_free("--web-port", host, args.web_port)
+        grpc_port = args.port or free_port(host)
+        web_port = args.web_port or free_port(host)
+        proc = serve_recording(args.path, host, grpc_port, web_port)
+        wait_viewer(proc, "--web-port", host, web_port)
+    except ServiceError as exc:
+        print(f"radarviz: error: {exc}", file=sys.stderr)
+        _stop_viewer(proc)
+        return 1
 
     def _stop(signum: int, frame: object) -> None:
         raise SystemExit(0)  # unwinds into the finally below, which stops the viewer
 
     signal.signal(signal.SIGTERM, _stop)
     print(f"serving {args.path}")
-    print(f"open {viewer_url(args.host, web_port, grpc_port)}", flush=True)
+    print(f"open {viewer_url(connect_address(host), web_port, grpc_port)}", flush=True)
     print("stop with Ctrl-C", flush=True)
     try:
         return proc.wait()
     except (KeyboardInterrupt, SystemExit):
         return 0
     finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGTERM)
-            try:
-                proc.wait(timeout=5)
-            except subprocess.TimeoutExpired:
-                os.killpg(proc.pid, signal.SIGKILL)
+        _stop_viewer(proc)
+
+
+def _stop_viewer(proc: subprocess.Popen | None) -> None:
+    if proc is not None and proc.poll() is None:
+        os.killpg(proc.pid, signal.SIGTERM)
+        try:
+            proc.wait(timeout=5)
+        except subprocess.TimeoutExpired:
+            os.killpg(proc.pid, signal.SIGKILL)
 
 
 COMMANDS = {"demo": cmd_demo, "record": cmd_record, "view": cmd_view}

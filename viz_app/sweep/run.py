@@ -242,6 +242,16 @@ class SweepAbortedError(RuntimeError):
     """The cluster gave up on a chunk (its workers kept dying); one line for the user."""
 
 
+def local_security() -> Any:
+    """Dask TLS for one local cluster: a certificate made now, known only to this process.
+
+    Needs the ``cryptography`` package (a dependency of radarviz).
+    """
+    from distributed.security import Security
+
+    return Security.temporary()
+
+
 @contextlib.contextmanager
 def dask_client(scheduler: str, workers: int) -> Iterator[Any]:
     """A ``distributed.Client``: on a new LocalCluster (``local``) or at an address.
@@ -249,23 +259,34 @@ def dask_client(scheduler: str, workers: int) -> Iterator[Any]:
     The local cluster has ``workers`` single-threaded worker processes (the filters hold the
     GIL between many small numpy calls, so threads would not scale), listens on 127.0.0.1
     only (free ports) and has no dashboard.
+
+    A Dask scheduler runs whatever a connected client submits, and 127.0.0.1 admits every
+    program of every user on the machine. So the local cluster speaks TLS with certificates
+    made for this run only (``Security.temporary()``: a throw-away CA, key and certificate
+    held in memory and handed to the workers through the nanny, ``require_encryption``): a
+    client must present that certificate, and a plain ``tcp://`` client, or a ``tls://`` one
+    without it, is refused before it can submit anything. ``tcp://HOST:PORT`` is the user's
+    own scheduler, with the security they gave it.
     """
     from distributed import Client, LocalCluster
 
     if scheduler == "local":
+        security = local_security()
         with (
             LocalCluster(
                 n_workers=workers,
                 threads_per_worker=1,
                 processes=True,
                 host="127.0.0.1",
+                protocol="tls",
+                security=security,
                 dashboard_address=None,
                 # No dashboard; the scheduler's small HTTP server (health, metrics) still
                 # starts, so give it a free loopback port instead of the shared default 8787.
                 scheduler_kwargs={"dashboard": False, "dashboard_address": "127.0.0.1:0"},
                 silence_logs=logging.ERROR,
             ) as cluster,
-            Client(cluster) as client,
+            Client(cluster, security=security) as client,
         ):
             yield client
     else:

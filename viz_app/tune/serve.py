@@ -1,6 +1,9 @@
 """``radarviz tune``'s servers: the Viser panel, a ``rerun --serve-web`` child, the worker.
 
-All three bind to 127.0.0.1 unless ``--host`` says otherwise. Every change of a control only
+All three bind to 127.0.0.1 unless ``--host`` says otherwise. The panel answers only the
+address it prints, with its secret token, and only to its own Host names and Origin
+(``tune.guard``). Ports asked for are checked free before anything starts, so a taken one
+is one line naming it, not an address served by some other program. Every change of a control only
 records the newest parameters (``worker.Coalescer``); the worker runs the newest, logs it as a
 new recording to the gRPC server (``session.TuneSession``), and the panel shows the result.
 """
@@ -18,7 +21,18 @@ import time
 from dataclasses import replace
 
 from radarviz.core.params import check_int
-from radarviz.viz_app.rerun.viewer import free_port, rerun_executable, viewer_url
+from radarviz.viz_app.rerun.viewer import (
+    ServiceError,
+    bind_address,
+    check_port_free,
+    connect_address,
+    free_port,
+    is_loopback,
+    rerun_executable,
+    viewer_url,
+    wait_viewer,
+)
+from radarviz.viz_app.tune.guard import PanelGuard, guarded_viser_server
 from radarviz.viz_app.tune.panel import TunePanel
 from radarviz.viz_app.tune.params import TuneParams
 from radarviz.viz_app.tune.session import TuneSession
@@ -32,10 +46,18 @@ def grpc_uri(host: str, port: int) -> str:
     return f"rerun+http://{connect}:{port}/proxy"
 
 
-def wait_port(host: str, port: int, timeout: float = 30.0) -> None:
-    connect = LOOPBACK if host in ("0.0.0.0", "::", "") else host
+def wait_port(
+    host: str, port: int, timeout: float = 30.0, proc: subprocess.Popen | None = None
+) -> None:
+    """Wait until ``port`` accepts connections; stop waiting at once if ``proc`` exits."""
+    connect = connect_address(host)
     end = time.monotonic() + timeout
     while time.monotonic() < end:
+        if proc is not None and proc.poll() is not None:
+            raise ServiceError(
+                f"the rerun server exited (code {proc.returncode}) before listening on "
+                f"{connect}:{port}"
+            )
         with contextlib.suppress(OSError), socket.create_connection((connect, port), timeout=1):
             return
         time.sleep(0.05)
@@ -114,40 +136,45 @@ def cmd_tune(
     host: str = LOOPBACK, port: int = 0, viewer_port: int = 0, no_browser: bool = False
 ) -> int:
     """Run the panel, the gRPC server and the web viewer until SIGTERM / Ctrl-C."""
-    import viser
-
     from radarviz.viz_app.runtime import tune_allocator
 
     check_int("--port", port, low=0, high=65535)
     check_int("--viewer-port", viewer_port, low=0, high=65535)
-    if host != LOOPBACK:
+    if not is_loopback(host):
         print(
             f"radarviz: warning: binding {host}: the tuning panel and viewer are reachable "
-            "from other machines",
+            "from other machines (the panel still needs its printed address and token)",
             file=sys.stderr,
             flush=True,
         )
+    bind = bind_address("--host", host)
     tune_allocator()
 
     def _stop(signum: int, frame: object) -> None:
         raise SystemExit(0)  # unwinds into the finally below
 
     signal.signal(signal.SIGTERM, _stop)
-    bind_probe = LOOPBACK if host in ("0.0.0.0", "::", "") else host
-    grpc_port = free_port(bind_probe)
-    web_port = viewer_port or free_port(bind_probe)
+    connect = connect_address(bind)
     proc = None
     server = None
     worker = None
     try:
-        proc = start_rerun(host, grpc_port, web_port)
-        server = viser.ViserServer(host=host, port=port, verbose=False)
-        session = TuneSession(grpc_uri(host, grpc_port), echo=True)
+        # Viser moves to the next port when its own is taken, and rerun exits: neither must
+        # end with an address served by another program, so a port asked for is checked here.
+        check_port_free("--port", bind, port)
+        check_port_free("--viewer-port", bind, viewer_port)
+        grpc_port = free_port(connect)
+        web_port = viewer_port or free_port(connect)
+        proc = start_rerun(bind, grpc_port, web_port)
+        guard = PanelGuard(host=host, bind=bind)
+        server = guarded_viser_server(guard, port, verbose=False)
+        session = TuneSession(grpc_uri(bind, grpc_port), echo=True)
         worker = Coalescer(session.run, session.done, session.error)
         panel = TunePanel(server, session, worker)
-        wait_port(host, grpc_port)
-        panel_url = f"http://{bind_probe}:{server.get_port()}/"
-        view_url = viewer_url(bind_probe, web_port, grpc_port)
+        wait_port(bind, grpc_port, proc=proc)
+        wait_viewer(proc, "--viewer-port", bind, web_port)
+        panel_url = guard.url(connect, server.get_port())
+        view_url = viewer_url(connect, web_port, grpc_port)
         print(f"panel {panel_url}", flush=True)
         print(f"viewer {view_url}", flush=True)
         print("stop with Ctrl-C", flush=True)
@@ -162,6 +189,9 @@ def cmd_tune(
             if proc.poll() is not None:
                 print("radarviz: error: the rerun viewer stopped", file=sys.stderr, flush=True)
                 return 1
+    except ServiceError as exc:
+        print(f"radarviz: error: {exc}", file=sys.stderr, flush=True)
+        return 1
     except (KeyboardInterrupt, SystemExit):
         return 0
     finally:
