@@ -219,3 +219,19 @@ def rgb_int(name: str) -> int:
     """A palette colour as Rerun stores it: 0xRRGGBBAA."""
     r, g, b = rgb(name)
     return (r << 24) | (g << 16) | (b << 8) | 0xFF
+
+
+def test_view_refuses_a_truncated_or_foreign_file(tmp_path: Path, capsys) -> None:
+    """``view`` reads the whole file first: a truncated recording or a file that is not one is a
+    one-line error (exit 2) naming it, and no viewer starts."""
+    good = tmp_path / "v.rrd"
+    assert main(["record", "--preset", "velocity", "--out", str(good)]) == 0
+    truncated = tmp_path / "t.rrd"
+    truncated.write_bytes(good.read_bytes()[: good.stat().st_size // 2])
+    foreign = tmp_path / "notes.rrd"
+    foreign.write_text("not a recording\n")
+    capsys.readouterr()
+    for path in (truncated, foreign):
+        assert main(["view", str(path)]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and f"{path} is not a" in err, err

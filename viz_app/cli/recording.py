@@ -97,9 +97,29 @@ def cmd_record(args: argparse.Namespace) -> int:
     return 0
 
 
+def check_recording(path: str) -> None:
+    """Read every chunk of ``path`` (``rerun.chunk.RrdReader``): a truncated file or one that is
+    not a recording is a ParameterError naming it, before any viewer is started (the viewer
+    itself would say "serving" and show an empty page)."""
+    import warnings
+
+    from rerun.chunk import RrdReader
+
+    try:
+        with warnings.catch_warnings():  # a file without its footer warns, then fails below
+            warnings.simplefilter("ignore")
+            chunks = sum(1 for _ in RrdReader(path).stream())
+    except Exception as exc:  # the reader raises plain exceptions for bad bytes
+        reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise ParameterError(f"{path} is not a readable Rerun recording: {reason}") from None
+    if chunks == 0:
+        raise ParameterError(f"{path} is not a Rerun recording: it holds no data")
+
+
 def cmd_view(args: argparse.Namespace) -> int:
     if not Path(args.path).is_file():
         raise ParameterError(f"path must be an existing .rrd file (got {args.path!r})")
+    check_recording(args.path)
     if args.native:
         if not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"):
             raise ParameterError(
