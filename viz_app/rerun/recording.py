@@ -54,8 +54,12 @@ def recording_file(
     it meanwhile). The encoded recording is held in memory until it is written.
     """
     stage = Stage(path, overwrite=overwrite)  # the target is checked before any work
-    rec = new_recording()
-    stream = rec.binary_stream()
+    try:
+        rec = new_recording()
+        stream = rec.binary_stream()
+    except BaseException:
+        stage.abort()
+        raise
     try:
         yield rec
         rec.flush()
