@@ -4,7 +4,9 @@ Bad input gets one line on standard error naming the flag and its allowed range,
 status 2; no traceback. The flags of table parameters (σr, σβ, T, scans, runs, seed, …) are
 built from ``core.params.PARAMETERS`` (``viz_app.cli.params.add_parameter``) and checked once,
 by the core config that receives them; the ``ParameterError`` it raises names the parameter,
-which is printed as the flag of this command.
+which is printed as the flag of this command. Outputs are checked before any work
+(``viz_app.io.atomic.check_outputs``: not an input, not each other, not a special file); an
+output that cannot be written is one line naming it, exit status 1, its previous file intact.
 
 Only numpy-level modules are imported to build the parser: matplotlib, Rerun, Viser, Dask and
 scipy.stats load when a command needs them (``tests/test_cli.py`` checks this).
@@ -23,8 +25,11 @@ from radarviz.core.params import ParameterError, check, check_int, check_real
 from radarviz.viz_app.cli import recording, sweep, track
 from radarviz.viz_app.cli.args import integer, number, print_report
 from radarviz.viz_app.cli.params import add_parameter, cli_message
+from radarviz.viz_app.io.atomic import WriteError, check_outputs
 
 EXIT_USAGE = 2
+#: Exit status when an output could not be written (``viz_app.io.atomic.WriteError``).
+EXIT_WRITE = 1
 #: Runs × cases above which a progress bar is drawn on standard error.
 PROGRESS_MIN_RUNS = 20_000
 
@@ -185,8 +190,7 @@ def _cmd_reproduce_prosov(args: argparse.Namespace) -> int:
     for m in args.methods:
         if m not in ALL_METHODS:
             raise ParameterError(f"--methods must be among {', '.join(ALL_METHODS)} (got {m!r})")
-    if args.plot is not None and not args.plot.strip():
-        raise ParameterError("--plot must name a file (got an empty string)")
+    check_outputs([("--plot", args.plot)])
     configs = prosov_configs(
         sigma_beta_deg=args.sigma_beta_deg,
         runs=args.runs,
@@ -238,8 +242,7 @@ def _cmd_reproduce_gorshkov(args: argparse.Namespace) -> int:
     check_int("--tracking-runs", args.tracking_runs, low=0)
     if args.tracking_runs == 1:
         raise ParameterError("--tracking-runs must be 0 (skip) or an integer >= 2 (got 1)")
-    if args.plot is not None and not args.plot.strip():
-        raise ParameterError("--plot must name a file (got an empty string)")
+    check_outputs([("--plot", args.plot)])
     # The tracking comparison's config is built (and so checked) before the long Monte Carlo;
     # with --tracking-runs 0 σβ is still checked, so a bad value is an error either way.
     tracking_config = None
@@ -269,8 +272,7 @@ def _cmd_reproduce_gorshkov(args: argparse.Namespace) -> int:
 def _cmd_reproduce_velocity(args: argparse.Namespace) -> int:
     from radarviz.core.velocity.estimate import run_velocity_experiment
 
-    if args.plot is not None and not args.plot.strip():
-        raise ParameterError("--plot must name a file (got an empty string)")
+    check_outputs([("--plot", args.plot)])
     from radarviz.viz_app.reports.velocity import format_velocity_table, velocity_document
     from radarviz.viz_app.runtime import tune_allocator
 
@@ -315,6 +317,9 @@ def main(argv: Sequence[str] | None = None) -> int:
                 return module.COMMANDS[args.command](args)
     except ParameterError as exc:
         return _fail(cli_message(args, exc))
+    except WriteError as exc:  # an output could not be written; the previous file is intact
+        print(f"radarviz: error: {exc}", file=sys.stderr)
+        return EXIT_WRITE
     except OSError as exc:
         return _fail(f"{exc.strerror or exc}: {exc.filename}" if exc.filename else str(exc))
     except KeyboardInterrupt:

@@ -11,6 +11,7 @@ import time
 from pathlib import Path
 
 from radarviz.core.params import ParameterError, check_choice, check_int
+from radarviz.viz_app.io.atomic import check_outputs
 from radarviz.viz_app.rerun.viewer import (
     LOOPBACK,
     ServiceError,
@@ -36,6 +37,11 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
         "--out",
         default=DEFAULT_DEMO_PATH,
         help=f"where to write the recording (default {DEFAULT_DEMO_PATH})",
+    )
+    demo.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace an existing file that is not a recording (one is always replaced)",
     )
     demo.add_argument("--seed", type=int, default=1, help="random seed (default 1)")
 
@@ -79,8 +85,17 @@ def _write(preset: str, out: str, overwrite: bool, seed: int) -> float:
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
+    from radarviz.viz_app.rerun.recording import is_recording
+
     check_int("--seed", args.seed, low=0)
-    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    if args.out.strip():
+        Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    check_outputs([("--out", args.out)])
+    if Path(args.out).exists() and not args.overwrite and not is_recording(args.out):
+        raise ParameterError(
+            f"--out {args.out} exists and is not a recording: refusing to replace it "
+            "(pass --overwrite)"
+        )
     seconds = _write("demo", args.out, overwrite=True, seed=args.seed)
     size = os.path.getsize(args.out) / 1e6
     print(f"wrote {args.out} ({size:.1f} MB) in {seconds:.2f} s")
@@ -92,6 +107,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
 def cmd_record(args: argparse.Namespace) -> int:
     check_choice("--preset", args.preset, PRESETS)
     check_int("--seed", args.seed, low=0)
+    check_outputs([("--out", args.out)], overwrite=args.overwrite)
     seconds = _write(args.preset, args.out, overwrite=args.overwrite, seed=args.seed)
     print(f"wrote {args.out} ({os.path.getsize(args.out) / 1e6:.1f} MB) in {seconds:.2f} s")
     return 0

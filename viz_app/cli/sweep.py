@@ -24,6 +24,7 @@ from radarviz.core.params import ParameterError, check_choice, check_int
 from radarviz.viz_app.bench.sweep import DEFAULT_GRID, DEFAULT_RUNS, format_bench, run_bench
 from radarviz.viz_app.cli.args import integer, number, print_report
 from radarviz.viz_app.cli.params import add_parameter, map_flag, parameter_flags
+from radarviz.viz_app.io.atomic import check_outputs, same_file
 from radarviz.viz_app.runtime import tune_allocator
 from radarviz.viz_app.sweep.run import (
     SCHEDULER_HELP,
@@ -196,25 +197,22 @@ def _spec_from_args(args: argparse.Namespace) -> SweepSpec:
 
 
 def _check_output_paths(args: argparse.Namespace) -> tuple[Path, Path | None, Path | None]:
-    """Fail before any work if an output cannot be written where asked."""
+    """Fail before any work if an output cannot be written where asked, or would replace
+    another output (``viz_app.io.atomic.check_outputs``)."""
+    check_outputs([("--out", args.out), ("--rrd", args.rrd)])
     out = Path(args.out)
-    if not args.out.strip() or out.is_dir():
-        raise ParameterError(f"--out must name a file (got {args.out!r})")
-    if not out.parent.is_dir():
-        raise FileNotFoundError(2, "no such directory", str(out.parent))
-    plot = rrd = None
+    rrd = None if args.rrd is None else Path(args.rrd)
+    plot = None
     if args.plot is not None:
         if not args.plot.strip():
             raise ParameterError("--plot must name a directory (got an empty string)")
         plot = Path(args.plot)
         if plot.exists() and not plot.is_dir():
             raise ParameterError(f"--plot must name a directory (got the file {args.plot!r})")
-    if args.rrd is not None:
-        if not args.rrd.strip() or Path(args.rrd).is_dir():
-            raise ParameterError(f"--rrd must name a file (got {args.rrd!r})")
-        rrd = Path(args.rrd)
-        if not rrd.parent.is_dir():
-            raise FileNotFoundError(2, "no such directory", str(rrd.parent))
+        for flag, path in (("--out", out), ("--rrd", rrd)):  # figures are sweep_*.png
+            if path is not None and path.name.startswith("sweep_") and path.suffix == ".png":
+                if same_file(path.parent, plot):
+                    raise ParameterError(f"{flag} may be replaced by a figure of --plot ({path})")
     return out, plot, rrd
 
 

@@ -17,6 +17,7 @@ from radarviz.core.params import check_choice
 from radarviz.core.tracking.stream import INIT_MODES, METHODS_3D, StreamOptions
 from radarviz.viz_app.cli.args import integer
 from radarviz.viz_app.cli.params import add_parameter, map_flag
+from radarviz.viz_app.io.atomic import check_outputs
 from radarviz.viz_app.io.plots import (
     DEFAULT_TRACKS,
     DOPPLER_MODES,
@@ -108,6 +109,10 @@ def _recorder(path: str) -> ObserverFactory:
 
 
 def cmd_track(args: argparse.Namespace) -> int:
+    check_outputs(
+        [("--out", args.out), ("--rrd", args.rrd)],
+        [("--input", args.input), ("--radars", args.radars)],
+    )
     options = StreamOptions(
         sigma_a_mps2=args.sigma_a_mps2,
         sigma_v0_mps=args.sigma_v0_mps,
@@ -130,6 +135,7 @@ def cmd_track(args: argparse.Namespace) -> int:
 
 def cmd_simulate(args: argparse.Namespace) -> int:
     check_choice("--preset", args.preset, SIM_PRESETS)
+    check_outputs([("--out", args.out), ("--radars-out", args.radars_out)])
     plots, radars = simulated_plots(args.preset, args.seed, args.sigma_beta_deg, args.steps)
     n = write_measurements(args.out, args.radars_out, plots, radars)
     print(f"wrote {n} plots to {args.out} and {len(radars)} radar(s) to {args.radars_out}")

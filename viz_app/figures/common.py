@@ -21,7 +21,8 @@ PALETTE: tuple[str, ...] = tuple(hex_colour(c) for c in RADAR_SEQUENCE)
 
 
 def write_figure_atomically(fig: Figure, path: Path, dpi: int = DPI) -> None:
-    """Render into a temporary file beside ``path``, then rename it onto ``path``.
+    """Render into a staged file beside ``path`` (``viz_app.io.atomic``), then rename it onto
+    ``path`` once fsynced and checked.
 
     Raises ValueError (one line) if matplotlib cannot write the suffix's format; on any error
     the temporary file is removed and ``path`` is untouched.
@@ -33,7 +34,7 @@ def write_figure_atomically(fig: Figure, path: Path, dpi: int = DPI) -> None:
             f"cannot write a figure as .{fmt} ({path}); use one of "
             + ", ".join("." + k for k in sorted(supported))
         )
-    with atomic_write(path, fsync=True) as fh:
+    with atomic_write(path) as fh:
         fig.savefig(fh, format=fmt, dpi=dpi)
 
 

@@ -14,15 +14,15 @@ from __future__ import annotations
 
 import contextlib
 import os
-import tempfile
 import uuid
+import warnings
 from collections.abc import Iterator
-from pathlib import Path
 
 import numpy as np
 import rerun as rr
 from numpy.typing import NDArray
 
+from radarviz.viz_app.io.atomic import Stage
 from radarviz.viz_app.palette import rgb
 
 APPLICATION_ID = "radarviz"
@@ -42,36 +42,76 @@ def new_recording(recording_id: str | None = None) -> rr.RecordingStream:
 def recording_file(
     path: str | os.PathLike, overwrite: bool = False
 ) -> Iterator[rr.RecordingStream]:
-    """Log into a new recording saved at ``path``, atomically.
+    """Log into a new recording saved at ``path``: written, verified, then renamed onto it.
 
-    The stream writes to a temporary file beside ``path``; on success it is flushed,
-    disconnected (which writes the footer) and renamed onto ``path``. On any error the
-    temporary file is removed and ``path`` is untouched. Refuses to replace an existing file
-    unless ``overwrite``.
+    The stream logs into memory (``binary_stream``; the SDK's own file writer can stall and
+    hang the process on a full disk, and logs our temporary name). When the block ends the
+    stream is flushed and disconnected (which ends it with the footer) and its bytes go
+    through ``viz_app.io.atomic``: a staged temporary file beside ``path``, fsynced, read back
+    whole (:func:`verify_recording`), renamed. On any error — a full disk included — the
+    temporary file is removed, ``path`` is untouched and a ``WriteError`` names ``path``.
+    Refuses to replace an existing file unless ``overwrite`` (also when another run creates
+    it meanwhile). The encoded recording is held in memory until it is written.
     """
-    target = Path(path)
-    if target.exists() and not overwrite:
-        raise FileExistsError(17, "refusing to overwrite (pass --overwrite)", str(target))
-    if not target.parent.is_dir():
-        raise FileNotFoundError(2, "no such directory", str(target.parent))
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".part", dir=target.parent)
-    os.close(fd)
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(tmp, 0o666 & ~umask)  # mkstemp creates 0600; a shared recording wants the default
-    rec = new_recording()
+    stage = Stage(path, overwrite=overwrite)  # the target is checked before any work
     try:
-        rec.save(tmp)
+        rec = new_recording()
+        stream = rec.binary_stream()
+    except BaseException:
+        stage.abort()
+        raise
+    try:
         yield rec
         rec.flush()
         rec.disconnect()
-        os.replace(tmp, target)
-    except BaseException:
+        data = stream.read(flush=False) or b""
+    except BaseException as exc:
         with contextlib.suppress(Exception):
             rec.disconnect()
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(tmp)
-        raise
+            stream.read(flush=False)  # drained: the SDK warns about unread data otherwise
+        failure = stage.failed(exc)
+        if failure is exc:
+            raise
+        raise failure from None
+    with stage.open("wb") as fh:
+        fh.write(data)
+    del data
+    stage.commit(verify=verify_recording)
+
+
+#: The first bytes of every Rerun recording file.
+RRD_MAGIC = b"RRF2"
+
+
+def is_recording(path: str | os.PathLike) -> bool:
+    """Whether ``path`` starts like a Rerun recording (whole or not: replacing one loses no
+    other kind of data)."""
+    try:
+        with open(path, "rb") as fh:
+            return fh.read(len(RRD_MAGIC)) == RRD_MAGIC
+    except OSError:
+        return False
+
+
+def verify_recording(path: str | os.PathLike) -> None:
+    """Raise unless ``path`` is a whole recording: the equivalent of ``rerun rrd verify``.
+
+    Every store (recordings and blueprints) is listed, every chunk of each decodes, and each
+    store opens from the footer's manifest, which only a cleanly ended stream has (a file cut
+    short anywhere, even by one byte, fails one of these).
+    """
+    from rerun.chunk import RrdReader
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # "no footer/manifest" is a warning of the reader
+        reader = RrdReader(path)
+        stores = [*reader.recordings(), *reader.blueprints()]
+        if not stores:
+            raise ValueError("no stores in the file")
+        for store in stores:
+            for _chunk in reader.stream(store=store):
+                pass
+            reader.store(store=store)
 
 
 def indexes(scans: NDArray, times: NDArray) -> list[rr.TimeColumn]:
