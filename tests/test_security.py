@@ -155,7 +155,11 @@ def _taken_port() -> socket.socket:
 
 def test_view_on_a_taken_web_port_is_one_line(tmp_path: Path) -> None:
     rrd = tmp_path / "x.rrd"
-    rrd.write_bytes(b"")
+    # A real recording: view reads the file whole before it touches a port.
+    made = subprocess.run(
+        [str(EXE), "record", "--preset", "velocity", "--out", str(rrd)], capture_output=True
+    )
+    assert made.returncode == 0, made.stderr
     with _taken_port() as other:
         port = other.getsockname()[1]
         done = subprocess.run(
