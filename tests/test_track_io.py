@@ -712,3 +712,22 @@ def test_finite_memory_start_skips_other_radars_until_it_starts(tmp_path: Path) 
         x[[0, 2]], 154000.0 * np.array([math.cos(b), math.sin(b)]), rtol=1e-12
     )
     np.testing.assert_allclose(x[[1, 3]], 200.0 * np.array([math.cos(b), math.sin(b)]), rtol=1e-9)
+
+
+def test_a_finite_memory_start_longer_than_the_file_is_an_error(tmp_path: Path, capsys) -> None:
+    """``--init-k`` larger than the plots: one line naming the flag, exit 2, no tracks file
+    (it used to write an empty one and exit 0)."""
+    radars = tmp_path / "r.toml"
+    radars.write_text(GOOD_RADARS)
+    meas = tmp_path / "m.csv"
+    lines = ["time_s,radar,range_m,azimuth_deg"]
+    lines += [f"{10 * k},a,{100000.0 + 200 * k},10" for k in range(12)]
+    meas.write_text("\n".join(lines) + "\n")
+    out = tmp_path / "t.csv"
+    argv = ["track", "--input", str(meas), "--radars", str(radars), "--out", str(out)]
+    assert main([*argv, "--init", "finite-memory", "--init-k", "20"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--init-k" in err and "12 plot(s)" in err, err
+    assert not out.exists()
+    assert main([*argv, "--init", "finite-memory", "--init-k", "5"]) == 0
+    assert out.exists()

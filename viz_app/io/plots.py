@@ -484,6 +484,14 @@ def run_track(
                 logger.add(plot, rows)
 
         plots, three_d, used = track_lines(src, input_path, radars, methods, options, on_rows)
+        if plots and not written:
+            # Raised inside the block: the output is abandoned, not written empty.
+            raise ParameterError(
+                f"init_k must leave plots to track: the finite-memory start needs "
+                f"{options.init_k} plots of one radar and {input_path} has {plots} plot(s) "
+                "in all, so no track started (lower --init-k or use --init first-plot)",
+                "init_k",
+            )
     return TrackSummary(plots, written, three_d, tuple(used), time.perf_counter() - start)
 
 
