@@ -731,3 +731,40 @@ def test_a_finite_memory_start_longer_than_the_file_is_an_error(tmp_path: Path, 
     assert not out.exists()
     assert main([*argv, "--init", "finite-memory", "--init-k", "5"]) == 0
     assert out.exists()
+
+
+def test_the_reader_bounds_lines_names_bad_bytes_and_waits_for_a_fifo(
+    tmp_path: Path, capsys, monkeypatch
+) -> None:
+    """A line longer than ``MAX_LINE_BYTES`` is refused as it is read (memory stays bounded);
+    bytes that are not UTF-8 are reported at their own line; a FIFO with no writer gives up
+    after ``FIFO_WAIT_S`` with one line. Each exits 2 and writes nothing."""
+    import os
+
+    from radarviz.viz_app.io import plots
+
+    radars = tmp_path / "r.toml"
+    radars.write_text(GOOD_RADARS)
+    out = tmp_path / "t.csv"
+    good = ["time_s,radar,range_m,azimuth_deg"] + [f"{10 * k},a,1e5,10" for k in range(6)]
+    cases = {
+        "long.csv": (
+            "\n".join(good[:3]) + "\n" + "9" * (plots.MAX_LINE_BYTES + 10) + "\n"
+        ).encode(),
+        "latin.csv": ("\n".join(good[:4]) + "\n").encode() + b"40,a,1e5,1\xe9\n",
+    }
+    expected = {"long.csv": "line 4: longer than", "latin.csv": "line 5: not UTF-8 text"}
+    for name, data in cases.items():
+        path = tmp_path / name
+        path.write_bytes(data)
+        argv = ["track", "--input", str(path), "--radars", str(radars), "--out", str(out)]
+        assert main(argv) == 2, name
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and expected[name] in err, err
+        assert not out.exists()
+    fifo = tmp_path / "plots.fifo"
+    os.mkfifo(fifo)
+    monkeypatch.setattr(plots, "FIFO_WAIT_S", 0.3)
+    assert main(["track", "--input", str(fifo), "--radars", str(radars), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "a FIFO with no writer after 0.3 s" in err and not out.exists(), err

@@ -57,8 +57,7 @@ import tomllib
 from collections.abc import Callable, Iterable, Iterator
 from contextlib import AbstractContextManager, ExitStack
 from dataclasses import dataclass, replace
-from pathlib import Path
-from typing import IO, Protocol
+from typing import IO, Any, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -380,12 +379,71 @@ def atomic_text(path: str | os.PathLike) -> AbstractContextManager[IO[str]]:
     return atomic_write(path, "w", newline="", encoding="utf-8")
 
 
+#: Longest line a measurement file may have (a plot's line is under 200 bytes): longer lines
+#: are refused as they are read, so a file without newlines never fills the memory.
+MAX_LINE_BYTES = 65_536
+#: Largest radars file read (a radar is ~200 bytes).
+MAX_RADARS_BYTES = 1_000_000
+#: How long an input FIFO may stay without a writer before the command gives up, s.
+FIFO_WAIT_S = 10.0
+
+
 def load_radars(path: str) -> dict[str, Radar]:
+    with open(path, "rb") as fh:
+        raw = fh.read(MAX_RADARS_BYTES + 1)
+    if len(raw) > MAX_RADARS_BYTES:
+        raise ParameterError(f"{path}: larger than {MAX_RADARS_BYTES} bytes: not a radars file")
     try:
-        text = Path(path).read_bytes().decode("utf-8")
-    except UnicodeDecodeError:
-        raise ParameterError(f"{path}: not UTF-8 text") from None
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = raw[: exc.start].count(b"\n") + 1
+        raise ParameterError(f"{path} line {line}: not UTF-8 text") from None
     return parse_radars(text, path)
+
+
+def _open_input(path: str) -> Any:
+    """``path`` opened for binary reading; a FIFO waits at most ``FIFO_WAIT_S`` for a writer
+    (a plain open would block forever)."""
+    import select
+    import stat
+
+    if not stat.S_ISFIFO(os.stat(path).st_mode):
+        return open(path, "rb")
+    fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)
+    try:
+        ready, _, _ = select.select([fd], [], [], FIFO_WAIT_S)
+        if not ready:
+            raise ParameterError(f"{path}: a FIFO with no writer after {FIFO_WAIT_S:g} s")
+        os.set_blocking(fd, True)
+        return os.fdopen(fd, "rb")
+    except BaseException:
+        os.close(fd)
+        raise
+
+
+def bounded_lines(fh: Any, source: str) -> Iterator[str]:
+    """The lines of a binary file, decoded as UTF-8 (a leading BOM dropped), each at most
+    ``MAX_LINE_BYTES``: a longer line or bytes that are not UTF-8 are a ParameterError naming
+    the line."""
+    number = 0
+    while True:
+        raw = fh.readline(MAX_LINE_BYTES + 1)
+        if not raw:
+            return
+        number += 1
+        if len(raw) > MAX_LINE_BYTES:
+            raise ParameterError(
+                f"{source} line {number}: longer than {MAX_LINE_BYTES} bytes (not a plots file?)"
+            )
+        if number == 1 and raw.startswith(b"\xef\xbb\xbf"):
+            raw = raw[3:]
+        try:
+            yield raw.decode("utf-8")
+        except UnicodeDecodeError as exc:
+            raise ParameterError(
+                f"{source} line {number}: not UTF-8 text (byte {raw[exc.start]:#04x} at "
+                f"column {exc.start + 1})"
+            ) from None
 
 
 @dataclass(frozen=True)
@@ -469,7 +527,7 @@ def run_track(
     radars = load_radars(radars_path)
     start = time.perf_counter()
     with ExitStack() as stack:
-        src = stack.enter_context(open(input_path, newline="", encoding="utf-8-sig"))
+        src = bounded_lines(stack.enter_context(_open_input(input_path)), input_path)
         out = stack.enter_context(atomic_text(out_path))
         w = csv.writer(out)
         w.writerow(TRACK_COLUMNS)
