@@ -135,17 +135,8 @@ def test_web_viewer_renders_a_recording(
     rrd = tmp_path / "prosov.rrd"
     with recording_file(rrd) as rec:
         record_preset(rec, "prosov")
-    grpc, web = free_port(), free_port()
-    exe = Path(sys.executable).with_name("radarviz")
-    proc = subprocess.Popen(
-        [str(exe), "view", str(rrd), "--port", str(grpc), "--web-port", str(web)],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-        start_new_session=True,
-    )
+    proc, grpc, web = _serve(rrd)
     try:
-        _wait_http(f"http://127.0.0.1:{web}/")
         executable, args = chromium
         with sync_playwright() as p:
             # launch() gives every browser a fresh temporary profile (user data dir).

@@ -240,23 +240,14 @@ def _group_alive(pgid: int) -> bool:
     return True
 
 
-def test_tune_panel_slider_makes_new_recording(
-    chromium: tuple[str, list[str]], viewer_shows_data
-) -> None:
-    from playwright.sync_api import sync_playwright
-
+def _start_tune() -> tuple[subprocess.Popen, int, queue.Queue]:
+    """``radarviz tune --no-browser`` on free ports: the process, its viewer port and a queue
+    of its output lines (read by a thread)."""
     exe = Path(sys.executable).with_name("radarviz")
     panel_port, viewer_port = free_port(), free_port()
+    command = [str(exe), "tune", "--no-browser", "--port", str(panel_port)]
     proc = subprocess.Popen(
-        [
-            str(exe),
-            "tune",
-            "--no-browser",
-            "--port",
-            str(panel_port),
-            "--viewer-port",
-            str(viewer_port),
-        ],
+        [*command, "--viewer-port", str(viewer_port)],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
@@ -266,6 +257,15 @@ def test_tune_panel_slider_makes_new_recording(
     )
     lines: queue.Queue = queue.Queue()
     threading.Thread(target=_reader, args=(proc, lines), daemon=True).start()
+    return proc, viewer_port, lines
+
+
+def test_tune_panel_slider_makes_new_recording(
+    chromium: tuple[str, list[str]], viewer_shows_data
+) -> None:
+    from playwright.sync_api import sync_playwright
+
+    proc, viewer_port, lines = _start_tune()
     log: list[str] = []
     rerun_pids: list[int] = []
     try:
@@ -397,20 +397,7 @@ def test_tune_panel_drives_each_scene_from_two_tabs(
     σ of Vx. The viewer shows the newest run."""
     from playwright.sync_api import sync_playwright
 
-    exe = Path(sys.executable).with_name("radarviz")
-    panel_port, viewer_port = free_port(), free_port()
-    command = [str(exe), "tune", "--no-browser", "--port", str(panel_port)]
-    proc = subprocess.Popen(
-        [*command, "--viewer-port", str(viewer_port)],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-        start_new_session=True,
-        cwd=ROOT,
-        env={**os.environ, "PYTHONUNBUFFERED": "1"},
-    )
-    lines: queue.Queue = queue.Queue()
-    threading.Thread(target=_reader, args=(proc, lines), daemon=True).start()
+    proc, _, lines = _start_tune()
     log: list[str] = []
     try:
         panel = _expect(lines, r"^panel (\S+)", 60, log).group(1)

@@ -62,6 +62,15 @@ class WriteError(OSError):
         return f"cannot write {self.filename}: {self.strerror}"
 
 
+def _created_meanwhile(target: Path) -> WriteError:
+    """Another run created ``target`` between the start and the end of this write."""
+    return WriteError(
+        errno.EEXIST,
+        "it was created meanwhile by another run (pass --overwrite to replace it)",
+        str(target),
+    )
+
+
 def _reason(exc: BaseException) -> str:
     """A one-line reason for ``exc`` that names no file (a temporary name must not leak)."""
     if isinstance(exc, OSError) and exc.strerror:
@@ -355,11 +364,7 @@ class Stage:
         try:
             os.link(self.path, target)  # fails if the target exists: no race
         except FileExistsError:
-            raise WriteError(
-                errno.EEXIST,
-                "it was created meanwhile by another run (pass --overwrite to replace it)",
-                str(target),
-            ) from None
+            raise _created_meanwhile(target) from None
         except OSError as exc:
             if exc.errno not in (errno.EPERM, errno.ENOTSUP, errno.EOPNOTSUPP, errno.EMLINK):
                 raise
@@ -367,11 +372,7 @@ class Stage:
             try:
                 os.close(os.open(target, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600))
             except FileExistsError:
-                raise WriteError(
-                    errno.EEXIST,
-                    "it was created meanwhile by another run (pass --overwrite to replace it)",
-                    str(target),
-                ) from None
+                raise _created_meanwhile(target) from None
             os.replace(self.path, target)
             return
         os.unlink(self.path)

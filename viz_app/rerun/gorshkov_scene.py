@@ -19,7 +19,6 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
@@ -31,7 +30,7 @@ from radarviz.core.experiments.doppler_start import (
 from radarviz.core.finite_memory.fit import GorshkovResult, run_gorshkov
 from radarviz.viz_app.palette import radar_rgb, rgb
 from radarviz.viz_app.rerun.recording import log_series, log_text
-from radarviz.viz_app.rerun.shapes import MARKER, flip_y, pale
+from radarviz.viz_app.rerun.shapes import legend_view, log_legend, pale
 
 ROOT = "gorshkov"
 #: The timeline of the window length.
@@ -43,26 +42,6 @@ COMPONENTS: tuple[tuple[str, str, str], ...] = (
     ("a", "sigma_a_mps2", "σ radial acceleration, m/s²"),
 )
 VARIANTS: dict[str, str] = {"range_only": "range only", "range_doppler": "range + Doppler"}
-
-
-def _window_series(
-    rec: rr.RecordingStream,
-    entity: str,
-    ks: np.ndarray,
-    values: np.ndarray,
-    colour: tuple[int, int, int],
-    name: str,
-) -> None:
-    v = np.asarray(values, dtype=np.float64)
-    ok = np.isfinite(v)
-    if not ok.any():
-        return
-    rec.log(entity, rr.SeriesLines(colors=[colour], names=[name]), static=True)
-    rec.send_columns(
-        entity,
-        indexes=[rr.TimeColumn(WINDOW_TIMELINE, sequence=np.asarray(ks)[ok])],
-        columns=rr.Scalars.columns(scalars=v[ok]),
-    )
 
 
 def log_gorshkov(
@@ -98,25 +77,29 @@ def log_gorshkov_results(
                 stats = getattr(rad, var)
                 sigma = stats.sigma_analytic if suffix else stats.sigma_mc
                 for i, (_, entity, _) in enumerate(COMPONENTS):
-                    _window_series(
+                    log_series(
                         rec,
                         f"plots/{ROOT}/{entity}_{var}/{name}{suffix}",
                         ks,
+                        None,
                         sigma[:, i],
                         tone,
                         f"{name} {what}",
+                        WINDOW_TIMELINE,
                     )
             gain = rad.gain_analytic if suffix else rad.gain_mc
             for i, (comp, _, _) in enumerate(COMPONENTS):
-                _window_series(
+                log_series(
                     rec,
                     f"plots/{ROOT}/gain_{comp}_percent/{name}{suffix}",
                     ks,
+                    None,
                     gain[:, i],
                     tone,
                     f"{name} {what}",
+                    WINDOW_TIMELINE,
                 )
-    _log_legend(rec, names)
+    log_legend(rec, f"{ROOT}/legend", list(names), [radar_rgb(j) for j in range(len(names))])
     n = tracking.n
     times = (n - 1) * tracking.config.scenario().period_s
     for var in tracking.rmse_vr:
@@ -134,22 +117,6 @@ def log_gorshkov_results(
                 rgb(var),
                 f"{label}: {what}",
             )
-
-
-def _log_legend(rec: rr.RecordingStream, names: Sequence[str]) -> None:
-    entity = f"{ROOT}/legend"
-    rec.log(entity, flip_y(1.0), static=True)
-    rec.log(
-        f"{entity}/swatches",
-        rr.Points2D(
-            [[i * 100.0, 0.0] for i in range(len(names))],
-            radii=[MARKER],
-            colors=[radar_rgb(j) for j in range(len(names))],
-            labels=list(names),
-            show_labels=True,
-        ),
-        static=True,
-    )
 
 
 # --- views -----------------------------------------------------------------------------------
@@ -171,13 +138,8 @@ def views(radars: Sequence[str]) -> rrb.Container:
         _plot(f"plots/{ROOT}/gain_{comp}_percent", f"Doppler gain K for {comp}, %, against k")
         for comp, _, _ in COMPONENTS
     ]
-    legend = rrb.Spatial2DView(
-        origin=ROOT,
-        contents=["$origin/legend/**"],
-        name="radars (timeline window_k: k scans in the window)",
-        visual_bounds=rrb.VisualBounds2D(
-            x_range=[-40.0, 100.0 * len(radars) + 40.0], y_range=[-10.0, 30.0]
-        ),
+    legend = legend_view(
+        ROOT, "legend", len(radars), "radars (timeline window_k: k scans in the window)"
     )
     return rrb.Vertical(
         legend,

@@ -63,6 +63,8 @@ from radarviz.viz_app.rerun.shapes import (
     colours,
     ellipse_outline,
     flip_y,
+    legend_view,
+    log_legend,
     pale,
     radii,
 )
@@ -412,23 +414,6 @@ def _log_bias(
         )
 
 
-def log_legend(rec: rr.RecordingStream, names: Sequence[str], entity: str) -> None:
-    """A legend as a view of its own: one labelled swatch per name, in a row, never over
-    data."""
-    rec.log(entity, flip_y(1.0), static=True)
-    rec.log(
-        f"{entity}/swatches",
-        rr.Points2D(
-            [[i * 100.0, 0.0] for i in range(len(names))],
-            radii=[MARKER],
-            colors=[rgb(m) for m in names],
-            labels=list(names),
-            show_labels=True,
-        ),
-        static=True,
-    )
-
-
 def log_statistics(rec: rr.RecordingStream, scene: ProsovScene) -> None:
     """Each method's per-scan Monte Carlo statistics, the NEES band and Prosov's Δx(n)."""
     scans, times = _scan_axes(scene)
@@ -526,7 +511,7 @@ def log_scene(
     frame = target_frame(scene, cloud)
     log_map(rec, scene, frame, radar_label(scene.config))
     log_target_frame(rec, scene, frame, cloud, min(cloud_shown, cloud_points))
-    log_legend(rec, list(scene.tracks), f"{ROOT}/legend")
+    log_legend(rec, f"{ROOT}/legend", list(scene.tracks), [rgb(m) for m in scene.tracks])
     log_statistics(rec, scene)
     return frame
 
@@ -581,12 +566,8 @@ def bias_view() -> rrb.Spatial2DView:
     )
 
 
-def legend_view() -> rrb.Spatial2DView:
-    return _space(
-        "methods",
-        "legend",
-        rrb.VisualBounds2D(x_range=[-40.0, 660.0], y_range=[-10.0, 30.0]),
-    )
+def method_legend_view() -> rrb.Spatial2DView:
+    return legend_view(ROOT, "legend", len(METHODS_SHOWN), "methods")
 
 
 def series_views() -> list[rrb.TimeSeriesView]:
@@ -611,7 +592,7 @@ def views(methods: Sequence[str]) -> rrb.Container:
     map, the legend and the per-scan statistics."""
     cells = [method_view(m) for m in methods] + [bias_view()]
     return rrb.Horizontal(
-        rrb.Vertical(legend_view(), rrb.Grid(*cells, grid_columns=2), row_shares=[1, 12]),
+        rrb.Vertical(method_legend_view(), rrb.Grid(*cells, grid_columns=2), row_shares=[1, 12]),
         rrb.Vertical(map_view(), *series_views(), row_shares=[2, 2, 2, 2, 2]),
         column_shares=[3, 2],
         name="Prosov: converted measurements",

@@ -121,14 +121,6 @@ def indexes(scans: NDArray, times: NDArray) -> list[rr.TimeColumn]:
     ]
 
 
-def _xyz(points: NDArray) -> NDArray[np.float64]:
-    """(N, 2) or (N, 3) → (N, 3), z = 0 for planar results."""
-    p = np.asarray(points, dtype=np.float64)
-    if p.shape[-1] == 3:
-        return p
-    return np.concatenate([p, np.zeros((*p.shape[:-1], 1))], axis=-1)
-
-
 def ellipsoid_axes(cov: NDArray[np.float64]) -> tuple[NDArray, NDArray]:
     """Half sizes (..., 3) (1σ) and rotation quaternions (..., 4) xyzw of covariances (..., 3, 3).
 
@@ -146,25 +138,18 @@ def ellipsoid_axes(cov: NDArray[np.float64]) -> tuple[NDArray, NDArray]:
     return half, quat.reshape(*v.shape[:-2], 4)
 
 
-def position_cov_3d(P: NDArray[np.float64]) -> NDArray[np.float64]:
-    """The (N, 3, 3) position covariance of CV states (x, ẋ, y, ẏ[, z, ż]); planar → σz = 0."""
-    if P.shape[-1] == 6:
-        return P[..., [0, 2, 4], :][..., :, [0, 2, 4]]
-    out = np.zeros((*P.shape[:-2], 3, 3))
-    out[..., :2, :2] = P[..., [0, 2], :][..., :, [0, 2]]
-    return out
-
-
 def log_series(
     rec: rr.RecordingStream,
     entity: str,
     scans: NDArray,
-    times: NDArray,
+    times: NDArray | None,
     values: NDArray,
     rgb: tuple[int, int, int] | None = None,
     name: str | None = None,
+    timeline: str = "scan",
 ):
-    """A scalar time series; non-finite values (undefined scans) are left out."""
+    """A scalar series over ``scans`` on the sequence ``timeline`` (and over ``times`` on the
+    ``time`` timeline unless None); non-finite values (undefined scans) are left out."""
     v = np.asarray(values, dtype=np.float64)
     ok = np.isfinite(v)
     if not ok.any():
@@ -175,11 +160,10 @@ def log_series(
             rr.SeriesLines(colors=[rgb] if rgb else None, names=[name] if name else None),
             static=True,
         )
-    rec.send_columns(
-        entity,
-        indexes=indexes(np.asarray(scans)[ok], np.asarray(times)[ok]),
-        columns=rr.Scalars.columns(scalars=v[ok]),
-    )
+    at = [rr.TimeColumn(timeline, sequence=np.asarray(scans, dtype=np.int64)[ok])]
+    if times is not None:
+        at.append(rr.TimeColumn("time", duration=np.asarray(times, dtype=np.float64)[ok]))
+    rec.send_columns(entity, indexes=at, columns=rr.Scalars.columns(scalars=v[ok]))
 
 
 def log_text(

@@ -16,21 +16,11 @@ from __future__ import annotations
 import rerun as rr
 import rerun.blueprint as rrb
 
-from radarviz.core.experiments.prosov import ProsovScene
 from radarviz.viz_app.rerun import gorshkov_scene, prosov_scene, velocity_scene
 
 PRESETS: tuple[str, ...] = ("demo", "prosov", "gorshkov", "velocity")
 #: The debiased method set beside ``naive`` in the overview.
 OVERVIEW_DEBIASED = "ucm"
-
-
-def scene_figures(scene: ProsovScene) -> dict[str, float]:
-    """Key figures for status lines: bias in range (m) and position NEES at the last scan."""
-    metrics = scene.result.metrics
-    return {
-        **{f"{n}.bias_range_m": float(m.bias_range[-1]) for n, m in metrics.items()},
-        **{f"{n}.nees_pos": float(m.nees_pos[-1]) for n, m in metrics.items()},
-    }
 
 
 def text_log_view() -> rrb.TextLogView:
@@ -52,7 +42,7 @@ def overview(vframe: velocity_scene.VelocityFrame) -> rrb.Container:
     vector, error, situation = v.vector, v.error, v.situation
     return rrb.Horizontal(
         rrb.Vertical(
-            prosov_scene.legend_view(),
+            prosov_scene.method_legend_view(),
             rrb.Horizontal(
                 prosov_scene.method_view("naive"),
                 prosov_scene.method_view(OVERVIEW_DEBIASED),
@@ -66,7 +56,7 @@ def overview(vframe: velocity_scene.VelocityFrame) -> rrb.Container:
             row_shares=[1, 6, 4, 4],
         ),
         rrb.Vertical(
-            velocity_scene.legend_view(vframe),
+            velocity_scene.radar_legend_view(vframe),
             rrb.Horizontal(vector, error),
             situation,
             row_shares=[1, 7, 7],

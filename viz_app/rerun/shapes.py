@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 import rerun as rr
+import rerun.blueprint as rrb
 from numpy.typing import NDArray
 
 #: Marker radii in screen points: they stay visible at any zoom.
@@ -60,3 +61,41 @@ def colours(rgb: tuple[int, int, int], n: int) -> NDArray[np.uint8]:
 def radii(radius: float, n: int) -> NDArray[np.float32]:
     """``n`` copies of one radius (screen units stay negative, as ``rr.Radius`` encodes them)."""
     return np.full(n, float(radius), dtype=np.float32)
+
+
+#: Spacing of legend swatches (drawn units) and the legend views' margin.
+LEGEND_STEP = 100.0
+
+
+def log_legend(
+    rec: rr.RecordingStream,
+    entity: str,
+    labels: list[str],
+    colours_: list[tuple[int, int, int]],
+) -> None:
+    """A legend as entities of its own: one labelled swatch per label, in a row, so a view of
+    it (``legend_view``) names the colours without covering any data."""
+    rec.log(entity, flip_y(1.0), static=True)
+    rec.log(
+        f"{entity}/swatches",
+        rr.Points2D(
+            [[i * LEGEND_STEP, 0.0] for i in range(len(labels))],
+            radii=[MARKER],
+            colors=colours_,
+            labels=labels,
+            show_labels=True,
+        ),
+        static=True,
+    )
+
+
+def legend_view(origin: str, entity: str, count: int, name: str) -> rrb.Spatial2DView:
+    """The view of a ``log_legend`` row of ``count`` swatches at ``origin``/``entity``."""
+    return rrb.Spatial2DView(
+        origin=origin,
+        contents=[f"$origin/{entity}/**"],
+        name=name,
+        visual_bounds=rrb.VisualBounds2D(
+            x_range=[-0.4 * LEGEND_STEP, LEGEND_STEP * (count - 0.6)], y_range=[-10.0, 30.0]
+        ),
+    )

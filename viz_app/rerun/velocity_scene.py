@@ -41,7 +41,14 @@ from radarviz.core.velocity.estimate import M_WARN
 from radarviz.core.velocity.scans import VelocityScans, estimate_scans
 from radarviz.viz_app.palette import OKABE_ITO, radar_rgb, rgb
 from radarviz.viz_app.rerun.recording import ellipsoid_axes, indexes, log_series, log_text
-from radarviz.viz_app.rerun.shapes import LINE, MARKER, SMALL_MARKER, THIN_LINE
+from radarviz.viz_app.rerun.shapes import (
+    LINE,
+    MARKER,
+    SMALL_MARKER,
+    THIN_LINE,
+    legend_view,
+    log_legend,
+)
 
 ROOT = "velocity"
 #: Colours of the velocity components (none is a radar's).
@@ -286,18 +293,7 @@ def _log_legend(rec: rr.RecordingStream, names: tuple[str, ...]) -> None:
     labels = [*names, "fused V̂", "truth V", "x", "y", "z"]
     colours = [radar_rgb(j) for j in range(len(names))] + [rgb("fused"), rgb("truth")]
     colours += list(AXIS_COLOURS.values())
-    rec.log(entity, rr.Transform3D(mat3x3=np.diag([1.0, -1.0, 1.0])), static=True)
-    rec.log(
-        f"{entity}/swatches",
-        rr.Points2D(
-            [[i * 100.0, 0.0] for i in range(len(labels))],
-            radii=[MARKER],
-            colors=colours,
-            labels=labels,
-            show_labels=True,
-        ),
-        static=True,
-    )
+    log_legend(rec, entity, labels, colours)
 
 
 # --- views -----------------------------------------------------------------------------------
@@ -321,15 +317,9 @@ class VelocityViews(NamedTuple):
     tab: rrb.Container
 
 
-def legend_view(frame: VelocityFrame) -> rrb.Spatial2DView:
-    return rrb.Spatial2DView(
-        origin=ROOT,
-        contents=["$origin/legend/**"],
-        name="radars, estimate, truth, axes",
-        visual_bounds=rrb.VisualBounds2D(
-            x_range=[-40.0, 100.0 * (len(frame.radars) + 5)], y_range=[-10.0, 30.0]
-        ),
-    )
+def radar_legend_view(frame: VelocityFrame) -> rrb.Spatial2DView:
+    # The radars, then the five of ``_log_legend``: V̂, V and the three axes.
+    return legend_view(ROOT, "legend", len(frame.radars) + 5, "radars, estimate, truth, axes")
 
 
 def views(frame: VelocityFrame) -> VelocityViews:
@@ -352,7 +342,7 @@ def views(frame: VelocityFrame) -> VelocityViews:
         name="error V̂ − V with its 1σ ellipsoid, m/s (grey: geometry flagged)",
         eye_controls=_eye((0.0, 0.0, 0.0), 3.2, (0.5, -0.8, 0.5)),
     )
-    legend = legend_view(frame)
+    legend = radar_legend_view(frame)
     plots = [
         rrb.TimeSeriesView(
             origin=f"plots/{ROOT}/error_mps",
