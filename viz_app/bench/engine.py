@@ -10,6 +10,10 @@ Figures (ns per track-step = wall time / (runs × scans), one core):
   runs, with the converted points and covariances computed beforehand and not timed (so the
   ratio is, if anything, unfair to the batched filter).
 * ``speedup_vs_filterpy`` = filterpy_ns_per_step / kf_ns_per_step.
+* ``engine_runs`` / ``numpy_ns_per_step`` / ``compiled_ns_per_step``: per method, the
+  Monte Carlo filter (start, then predict + update every scan, states handed on) by the
+  numpy engine (``filter_block``) and by the compiled kernel (``core.filters.compiled``),
+  on the same measurements, best of three; ``compiled_speedup`` their ratio.
 * ``gorshkov_s``: wall time of the whole Gorshkov experiment (six radars, 10⁵ trials each,
   range only and range + Doppler, k = 1 … 20), best of ``repeats``.
 * ``peak_rss_mb``: peak resident memory of the process.
@@ -112,6 +116,45 @@ def bench_filterpy(runs: int, config: TrackingConfig) -> float:
     return elapsed / (runs * (steps - 1)) * 1e9
 
 
+def bench_engines(runs: int, config: TrackingConfig, repeats: int = 3) -> dict[str, Any]:
+    """ns per track-step of every method by the numpy engine and by the compiled kernel."""
+    from radarviz.core.filters.compiled import FilterSettings, filter_scans
+    from radarviz.core.filters.methods import ALL_METHODS
+    from radarviz.core.metrics import STAGE_ROWS
+
+    steps = config.target.steps
+    r_hat, b_hat = _measurements(runs, steps, config, seed=7)
+    settings = FilterSettings(
+        config.sigma_r_m,
+        config.sigma_beta_rad,
+        config.target.period_s,
+        config.sigma_a_mps2,
+        config.sigma_v0_mps,
+    )
+    chunk = max(1, STAGE_ROWS // runs)
+    for _ in filter_scans("naive", r_hat[:2], b_hat[:2], settings, chunk):
+        pass  # compile or load the kernel before timing
+    numpy_ns, compiled_ns = {}, {}
+    for method in ALL_METHODS:
+        best_np = best_c = float("inf")
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            filter_block(method, r_hat, b_hat, config, lambda n, st: None)
+            t1 = time.perf_counter()
+            for _ in filter_scans(method, r_hat, b_hat, settings, chunk):
+                pass
+            t2 = time.perf_counter()
+            best_np, best_c = min(best_np, t1 - t0), min(best_c, t2 - t1)
+        numpy_ns[method] = best_np / (runs * steps) * 1e9
+        compiled_ns[method] = best_c / (runs * steps) * 1e9
+    return {
+        "engine_runs": runs,
+        "numpy_ns_per_step": numpy_ns,
+        "compiled_ns_per_step": compiled_ns,
+        "compiled_speedup": {m: numpy_ns[m] / compiled_ns[m] for m in numpy_ns},
+    }
+
+
 def bench_gorshkov(trials: int = 100_000, repeats: int = 2) -> float:
     """Seconds for the whole Gorshkov Monte Carlo (all six presets), best of ``repeats``."""
     from radarviz.core.finite_memory.fit import run_gorshkov
@@ -134,7 +177,9 @@ def run_bench(runs: Sequence[int] = (10_000, 100_000), filterpy_runs: int = 200)
         e2e, only = bench_batched(m, config)
         kf.append(e2e)
         kf_only.append(only)
+    engines = bench_engines(10_000, config)
     return {
+        **engines,
         "runs": list(runs),
         "scans": config.target.steps,
         "block_runs": BLOCK_RUNS,
@@ -167,6 +212,13 @@ def format_bench(doc: dict[str, Any]) -> str:
             f"batched ucm filter, {m:>7} runs: {e2e:6.1f} ns per track-step "
             f"(filter only {only:6.1f})   speedup vs filterpy {sp:6.0f}×"
         )
+    lines.append(
+        f"Monte Carlo filter per method, {doc['engine_runs']} runs × {doc['scans']} scans, "
+        "ns per track-step: numpy engine → compiled kernel (speed-up)"
+    )
+    for method, v in doc["numpy_ns_per_step"].items():
+        c, ratio = doc["compiled_ns_per_step"][method], doc["compiled_speedup"][method]
+        lines.append(f"  {method:>7}: {v:6.1f} → {c:6.1f}  ({ratio:.1f}×)")
     lines.append(
         f"Gorshkov experiment (6 radars × {doc['gorshkov_trials']} trials, both variants): "
         f"{doc['gorshkov_s']:.2f} s"
