@@ -221,8 +221,13 @@ class MetricsAccumulator:
         The sums are those of K ``add`` calls, bit for bit (``scan_terms`` does not depend
         on how many scans are formed together), for one pass instead of K.
         """
+        self.add_terms(first, scan_terms(x, P, np.asarray(truth), los))
+
+    def add_terms(self, first: int, terms: NDArray[np.float64]) -> None:
+        """``add_scans`` given the per-run terms (len(SUM_NAMES), K, m) of ``scan_terms`` (or
+        of its compiled mirror, ``core.filters.compiled.metric_terms``)."""
         self._flush()
-        k, m = x.shape[:2]
+        k, m = terms.shape[1:]
         scans = list(range(first, first + k))
         offsets = [int(self.runs[n]) for n in scans]
         counts: dict[int, NDArray[np.int64]] = {}  # usually one offset for all the scans
@@ -231,7 +236,6 @@ class MetricsAccumulator:
                 counts[offset] = group_counts(offset, m)
             self.group_runs[:, n] += counts[offset]
         self.runs[first : first + k] += m
-        terms = scan_terms(x, P, np.asarray(truth), los)
         self._add_sums(scans, terms.sum(axis=-1))
         self._add_group_sums(scans, offsets, terms)
 

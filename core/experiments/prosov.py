@@ -16,7 +16,9 @@ filtered states.
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
@@ -25,7 +27,7 @@ from numpy.typing import NDArray
 
 from radarviz.core.confidence import Verdict, claim_verdict, jackknife_band
 from radarviz.core.conversion.planar import convert_parts
-from radarviz.core.filters.compiled import ENGINES, FilterSettings, filter_scans
+from radarviz.core.filters.compiled import ENGINES, FilterSettings, filter_scans, metric_terms
 from radarviz.core.filters.methods import (
     ALL_METHODS,
     MethodGroup,
@@ -394,7 +396,8 @@ def _run_block(
             for c in filter_scans(method, r_hat, beta_hat, settings, chunk):
                 span = slice(c.first, c.first + c.x.shape[0])
                 los = (cos_los[span], sin_los[span])
-                out[method].add_scans(c.first, c.x[:, :size], c.P[:, :size], truth[span], los)
+                terms = metric_terms(c.x[:, :size], c.P[:, :size], truth[span], los)
+                out[method].add_terms(c.first, terms)
                 if shown is not None:
                     tracks[method].x[span] = c.x[:, size]
                     tracks[method].P[span] = c.P[:, size]
@@ -457,28 +460,55 @@ def tracking_result(
     )
 
 
+def available_cores() -> int:
+    """The cores this process may run on (its CPU affinity where the system has one)."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        return os.cpu_count() or 1
+
+
 def _monte_carlo(
     config: TrackingConfig,
     truth: NDArray[np.float64],
     progress: ProgressFn | None,
     block: int,
     shown: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None,
+    workers: int | None = None,
 ) -> tuple[TrackingResult, dict[str, DisplayedTrack]]:
-    """Blocks 0, 1, … added into zero accumulators in that order; ``shown`` rides in block 0."""
+    """Blocks 0, 1, … added into zero accumulators in that order; ``shown`` rides in block 0.
+
+    With the compiled engine the blocks are filtered by ``workers`` threads (default: every
+    available core; its kernels release the GIL). Each block's sums depend on its own runs
+    only and are merged in block order as they come back, so the result is the one-thread
+    result bit for bit (``tests/test_compiled.py``). The numpy engine's small vector
+    operations hold the GIL, so it stays on one thread.
+    """
     steps = truth.shape[0]
+    sizes = block_sizes(config.runs, block)
+    check_int("workers", workers if workers is not None else 1, low=1)
+    n_workers = min(len(sizes), workers or available_cores())
     acc = {m: MetricsAccumulator(steps) for m in config.methods}
     tracks: dict[str, DisplayedTrack] = {}
-    done = 0
-    for index, size in enumerate(block_sizes(config.runs, block)):
-        block_acc, block_tracks = _run_block(
-            config, index, size, truth, shown if index == 0 else None
-        )
-        tracks.update(block_tracks)
-        for method, a in block_acc.items():
-            acc[method].merge(a)
-        done += size
-        if progress is not None:
-            progress(done, config.runs)
+
+    def one(index: int) -> tuple[dict[str, MetricsAccumulator], dict[str, DisplayedTrack]]:
+        return _run_block(config, index, sizes[index], truth, shown if index == 0 else None)
+
+    pool = ThreadPoolExecutor(n_workers) if n_workers > 1 and config.engine == "compiled" else None
+    try:
+        # ``map`` yields in submission order: block b is merged after blocks 0 … b − 1.
+        blocks = pool.map(one, range(len(sizes))) if pool else map(one, range(len(sizes)))
+        done = 0
+        for size, (block_acc, block_tracks) in zip(sizes, blocks, strict=True):
+            tracks.update(block_tracks)
+            for method, a in block_acc.items():
+                acc[method].merge(a)
+            done += size
+            if progress is not None:
+                progress(done, config.runs)
+    finally:
+        if pool is not None:
+            pool.shutdown(cancel_futures=True)
     return tracking_result(config, acc), tracks
 
 
@@ -486,6 +516,7 @@ def run_tracking(
     config: TrackingConfig,
     progress: ProgressFn | None = None,
     block: int = BLOCK_RUNS,
+    workers: int | None = None,
 ) -> TrackingResult:
     """Monte Carlo of every configured method; statistics accumulated block by block.
 
@@ -495,8 +526,10 @@ def run_tracking(
 
     Args:
         progress: called as ``progress(runs_done, runs_total)`` after each block.
+        workers: threads filtering blocks (default: every available core); the result does
+            not depend on it.
     """
-    return _monte_carlo(config, config.target.truth(), progress, block)[0]
+    return _monte_carlo(config, config.target.truth(), progress, block, workers=workers)[0]
 
 
 def displayed_measurements(

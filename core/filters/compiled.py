@@ -193,6 +193,25 @@ def filter_history(
     return chunk.x, chunk.P
 
 
+def metric_terms(
+    x: NDArray[np.float64],
+    P: NDArray[np.float64],
+    truth: NDArray[np.float64],
+    los: tuple[NDArray[np.float64], NDArray[np.float64]],
+) -> NDArray[np.float64]:
+    """``core.metrics.scan_terms`` by the compiled kernel: (len(SUM_NAMES), K, m) terms of
+    x (K, m, 4), P (K, m, 4, 4) against truth (K, 4), ``los`` = ``truth_line_of_sight``.
+
+    Equal to the numpy function to rounding (``tests/test_compiled.py``); one pass over the
+    states instead of a few dozen vector operations and their temporaries.
+    """
+    from radarviz.core.filters.kernels_2d import metric_terms_2d
+
+    out = np.empty((10, *x.shape[:2]))
+    metric_terms_2d(x, P, np.ascontiguousarray(truth), los[0], los[1], out)
+    return out
+
+
 @functools.cache
 def _kernel() -> Callable[..., None]:
     """The compiled kernel, compiled (or loaded from numba's cache) on first use."""

@@ -15,7 +15,8 @@ import numpy as np
 
 # error_model="numpy": a division by zero or a negative pivot gives inf / NaN for that track,
 # as the numpy engine does, instead of raising. cache=True: compiled once per machine.
-_jit = numba.njit(cache=True, error_model="numpy")
+# nogil=True: blocks of runs filter in parallel threads (``core.experiments.prosov``).
+_jit = numba.njit(cache=True, error_model="numpy", nogil=True)
 
 
 _TWO_PI = 2.0 * math.pi
@@ -318,3 +319,45 @@ def filter_scans_2d(
                 x_state[m, a] = xs[i, m, a] = x[a]
                 for b_ in range(4):
                     P_state[m, a, b_] = Ps[i, m, a, b_] = P[a, b_]
+
+
+@_jit
+def metric_terms_2d(x, P, truth, cos_los, sin_los, out):
+    """``core.metrics.scan_terms`` compiled: the per-run terms of the running sums, out
+    (len(SUM_NAMES), K, m), of x (K, m, 4), P (K, m, 4, 4) against truth (K, 4), with the true
+    line of sight cos_los, sin_los (K, 1). NEES by the Cholesky factor of P, as
+    ``core.filters.state.quad_form_inv`` (NaN where P is not positive definite)."""
+    L = np.empty((4, 4))
+    y = np.empty(4)
+    e = np.empty(4)
+    for k in range(x.shape[0]):
+        c, s = cos_los[k, 0], sin_los[k, 0]
+        for m in range(x.shape[1]):
+            ex, ey = x[k, m, 0] - truth[k, 0], x[k, m, 2] - truth[k, 2]
+            pxx, pyy, pxy = P[k, m, 0, 0], P[k, m, 2, 2], P[k, m, 0, 2]
+            out[0, k, m], out[1, k, m] = ex, ex * ex
+            out[2, k, m], out[3, k, m] = ey, ey * ey
+            out[4, k, m], out[5, k, m] = c * ex + s * ey, c * ey - s * ex
+            out[6, k, m], out[7, k, m] = pxx, pyy
+            out[8, k, m] = (pyy * ex * ex - 2.0 * pxy * ex * ey + pxx * ey * ey) / (
+                pxx * pyy - pxy * pxy
+            )
+            for i in range(4):
+                e[i] = x[k, m, i] - truth[k, i]
+            total = 0.0
+            for i in range(4):
+                for j in range(i + 1):
+                    acc = P[k, m, i, j]
+                    for q in range(j):
+                        acc -= L[i, q] * L[j, q]
+                    if i == j:
+                        L[i, i] = sqrt(acc) if acc >= 0.0 else np.nan
+                    else:
+                        L[i, j] = acc / L[j, j]
+                yi = e[i]
+                for q in range(i):
+                    yi -= L[i, q] * y[q]
+                yi /= L[i, i]
+                y[i] = yi
+                total += yi * yi
+            out[9, k, m] = total
