@@ -194,3 +194,19 @@ def test_threads_over_blocks_give_the_one_thread_result_bit_for_bit() -> None:
             np.testing.assert_array_equal(v, getattr(many.metrics[method], name), err_msg=name)
         for name, v in one.leave_one_out[method]._asdict().items():
             np.testing.assert_array_equal(v, getattr(many.leave_one_out[method], name))
+
+
+def test_a_method_without_a_kernel_runs_on_the_numpy_engine(monkeypatch) -> None:
+    """A registered method the kernel lacks is filtered by the numpy engine inside a compiled
+    run (bit for bit its numpy-engine statistics), the others by the kernel."""
+    import radarviz.core.experiments.prosov as prosov
+
+    monkeypatch.setattr(prosov, "COMPILED_METHODS", ("naive",))
+    cfg = TrackingConfig(runs=100, methods=("naive", "ukf"), seed=2)
+    mixed = run_tracking(cfg)
+    reference = run_tracking(replace(cfg, engine="numpy"))
+    np.testing.assert_array_equal(mixed.metrics["ukf"].rmse_x, reference.metrics["ukf"].rmse_x)
+    assert not np.array_equal(mixed.metrics["naive"].rmse_x, reference.metrics["naive"].rmse_x)
+    np.testing.assert_allclose(
+        mixed.metrics["naive"].rmse_x, reference.metrics["naive"].rmse_x, rtol=TOL
+    )

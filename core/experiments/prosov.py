@@ -27,7 +27,13 @@ from numpy.typing import NDArray
 
 from radarviz.core.confidence import Verdict, claim_verdict, jackknife_band
 from radarviz.core.conversion.planar import convert_parts
-from radarviz.core.filters.compiled import ENGINES, FilterSettings, filter_scans, metric_terms
+from radarviz.core.filters.compiled import (
+    COMPILED_METHODS,
+    ENGINES,
+    FilterSettings,
+    filter_scans,
+    metric_terms,
+)
 from radarviz.core.filters.methods import (
     ALL_METHODS,
     MethodGroup,
@@ -381,7 +387,8 @@ def _run_block(
         tracks = {
             m: DisplayedTrack(np.empty((steps, 4)), np.empty((steps, 4, 4))) for m in config.methods
         }
-    if config.engine == "compiled":
+    compiled = [m for m in config.methods if config.engine == "compiled" and m in COMPILED_METHODS]
+    if compiled:
         settings = FilterSettings(
             config.sigma_r_m,
             config.sigma_beta_rad,
@@ -392,7 +399,7 @@ def _run_block(
         # As many scans per pass as the accumulator stages (its summing pass stays in cache).
         chunk = max(1, STAGE_ROWS // r_hat.shape[0])
         cos_los, sin_los = truth_line_of_sight(truth)
-        for method in config.methods:
+        for method in compiled:
             for c in filter_scans(method, r_hat, beta_hat, settings, chunk):
                 span = slice(c.first, c.first + c.x.shape[0])
                 los = (cos_los[span], sin_los[span])
@@ -401,10 +408,11 @@ def _run_block(
                 if shown is not None:
                     tracks[method].x[span] = c.x[:, size]
                     tracks[method].P[span] = c.P[:, size]
-        return out, tracks
-    # Methods share a batch while it stays within a block's size (cache-sized, see BLOCK_RUNS).
+    # The rest on the numpy engine (all of them with engine="numpy"; a method the kernel does
+    # not have otherwise). Methods share a batch while it stays within a block's size.
+    rest = [m for m in config.methods if m not in compiled]
     n_rows = r_hat.shape[0]
-    for names in method_groups(config.methods, max_group=max(1, BLOCK_RUNS // n_rows)):
+    for names in method_groups(rest, max_group=max(1, BLOCK_RUNS // n_rows)) if rest else []:
         group = MethodGroup(names)
 
         def on_scan(n: int, st: CVBatch, group: MethodGroup = group) -> None:
