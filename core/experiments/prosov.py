@@ -31,8 +31,8 @@ from radarviz.core.filters.compiled import (
     COMPILED_METHODS,
     ENGINES,
     FilterSettings,
+    TermsRequest,
     filter_scans,
-    metric_terms,
 )
 from radarviz.core.filters.methods import (
     ALL_METHODS,
@@ -45,7 +45,6 @@ from radarviz.core.filters.run import run_scans
 from radarviz.core.filters.state import CVBatch
 from radarviz.core.geometry import range_cross_basis
 from radarviz.core.metrics import (
-    STAGE_ROWS,
     MetricsAccumulator,
     TrackMetrics,
     delta_percent,
@@ -66,6 +65,8 @@ from radarviz.core.scenarios.planar import (
     prosov_target,
 )
 
+#: Run-scans of metric terms per pass of the compiled engine (80 B each: 5 MB).
+TERMS_ROWS = 1 << 16
 #: Runs per block: large enough that vector operations dominate Python overhead, small enough
 #: that a block's working set stays in cache.
 BLOCK_RUNS = 16384
@@ -396,18 +397,17 @@ def _run_block(
             config.sigma_a_mps2,
             config.sigma_v0_mps,
         )
-        # As many scans per pass as the accumulator stages (its summing pass stays in cache).
-        chunk = max(1, STAGE_ROWS // r_hat.shape[0])
-        cos_los, sin_los = truth_line_of_sight(truth)
+        # The kernel forms every run's metric terms as it goes (only the shown run's states
+        # leave it); a chunk's terms stay within a few MB.
+        chunk = max(1, TERMS_ROWS // r_hat.shape[0])
+        want = TermsRequest(size, truth, truth_line_of_sight(truth))
         for method in compiled:
-            for c in filter_scans(method, r_hat, beta_hat, settings, chunk):
-                span = slice(c.first, c.first + c.x.shape[0])
-                los = (cos_los[span], sin_los[span])
-                terms = metric_terms(c.x[:, :size], c.P[:, :size], truth[span], los)
-                out[method].add_terms(c.first, terms)
+            for c in filter_scans(method, r_hat, beta_hat, settings, chunk, terms=want):
+                out[method].add_terms(c.first, c.terms)
                 if shown is not None:
-                    tracks[method].x[span] = c.x[:, size]
-                    tracks[method].P[span] = c.P[:, size]
+                    span = slice(c.first, c.first + c.x.shape[0])
+                    tracks[method].x[span] = c.x[:, 0]
+                    tracks[method].P[span] = c.P[:, 0]
     # The rest on the numpy engine (all of them with engine="numpy"; a method the kernel does
     # not have otherwise). Methods share a batch while it stays within a block's size.
     rest = [m for m in config.methods if m not in compiled]

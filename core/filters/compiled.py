@@ -90,13 +90,31 @@ class FilterSettings(NamedTuple):
 
 
 class ScanChunk(NamedTuple):
-    """Filtered states of scans ``first … first + K − 1``: x (K, m, 4), P (K, m, 4, 4).
+    """Scans ``first … first + K − 1``: the states x (K, m', 4), P (K, m', 4, 4) of the runs
+    that give states, and the metric terms (len(SUM_NAMES), K, m − m') of the first runs when
+    ``filter_scans`` was asked for them (else None).
 
     The arrays are reused for the next chunk: copy what must be kept."""
 
     first: int
     x: NDArray[np.float64]
     P: NDArray[np.float64]
+    terms: NDArray[np.float64] | None = None
+
+
+class TermsRequest(NamedTuple):
+    """Ask ``filter_scans`` for the metric terms (``core.metrics.scan_terms``) of the first
+    ``runs`` runs instead of their states: computed in the kernel as each state is formed, so
+    the states of a Monte Carlo never go through memory.
+
+    Attributes:
+        runs: how many of the first runs give terms.
+        truth: (N, 4) true states; los: ``core.metrics.truth_line_of_sight(truth)``.
+    """
+
+    runs: int
+    truth: NDArray[np.float64]
+    los: tuple[NDArray[np.float64], NDArray[np.float64]]
 
 
 def filter_scans(
@@ -108,6 +126,7 @@ def filter_scans(
     *,
     radial_velocity_mps: NDArray[np.float64] | None = None,
     start: tuple[int, CVBatch] | None = None,
+    terms: TermsRequest | None = None,
 ) -> Iterator[ScanChunk]:
     """Filter every run's scans, ``chunk_scans`` at a time.
 
@@ -124,6 +143,7 @@ def filter_scans(
         radial_velocity_mps: (m, N) measured V̂r: after each plot's update, the Doppler update
             along the measured line of sight (``core.filters.doppler``) with σVr
             ``settings.sigma_vr_mps``.
+        terms: the metric terms of the first runs instead of their states.
 
     Yields:
         ``ScanChunk`` s covering the filtered scans in order (a start at scan 0 included).
@@ -145,8 +165,15 @@ def filter_scans(
         begin = start[0] + 1
         x[...], P[...] = start[1].x, start[1].P
     k = max(1, min(int(chunk_scans), steps - begin))
-    xs = np.empty((k, runs, 4))
-    Ps = np.empty((k, runs, 4, 4))
+    n_terms = 0 if terms is None else int(terms.runs)
+    xs = np.empty((k, runs - n_terms, 4))
+    Ps = np.empty((k, runs - n_terms, 4, 4))
+    out_terms = np.empty((10, k, n_terms))  # len(core.metrics.SUM_NAMES) rows
+    if terms is None:
+        truth, cos_los, sin_los = np.zeros((1, 4)), np.zeros((1, 1)), np.zeros((1, 1))
+    else:
+        truth = np.ascontiguousarray(terms.truth, dtype=np.float64)
+        cos_los, sin_los = terms.los
     s = settings
     c, wm0, wc0, w = s.ukf.weights(4)
     for first in range(begin, steps, k):
@@ -176,8 +203,14 @@ def filter_scans(
             P,
             xs,
             Ps,
+            n_terms,
+            truth,
+            cos_los,
+            sin_los,
+            out_terms,
         )
-        yield ScanChunk(first, xs[: last - first], Ps[: last - first])
+        n = last - first
+        yield ScanChunk(first, xs[:n], Ps[:n], out_terms[:, :n] if terms is not None else None)
 
 
 def filter_history(

@@ -264,10 +264,15 @@ def doppler_update(x, P, vr_hat: float, b: float, var_vr: float, vb: float, K):
 @_jit
 def filter_scans_2d(
     code, start_code, r_scans, b_scans, vr_scans, doppler, first, last, sr, sb, svr, T, sa,
-    v0, sx, sy, c, wm0, wc0, w, x_state, P_state, xs, Ps,
+    v0, sx, sy, c, wm0, wc0, w, x_state, P_state, xs, Ps, n_terms, truth, cos_los, sin_los,
+    terms,
 ):  # fmt: skip
     """Scans ``first … last − 1`` of every run; scan 0 starts a track from its plot (code
-    ``start_code``), later scans continue from ``x_state``/``P_state`` (updated in place)."""
+    ``start_code``), later scans continue from ``x_state``/``P_state`` (updated in place).
+
+    Runs m < ``n_terms`` give their metric terms (``track_terms``) at each scan into
+    terms[:, n − first, m] (truth, cos_los, sin_los indexed by scan); the others their states
+    into xs[n − first, m − n_terms], Ps[…]."""
     sr2, s, vr, vb, q = sr * sr, sb * sb, sr * sr, sb * sb, sa * sa
     prm = np.array([c, wm0, wc0, w])
     co, co_start = coefficients(code, s, sr2), coefficients(start_code, s, sr2)
@@ -275,6 +280,7 @@ def filter_scans_2d(
     L = np.empty((4, 4))
     Z = np.empty((9, 2))
     x, P = np.empty(4), np.empty((4, 4))  # one track's state, in and out of the batch arrays
+    y, e = np.empty(4), np.empty(4)
     runs = r_scans.shape[1]
     # Scan-major: at each scan the runs' states, measurements and outputs are walked in
     # memory order (run-major walks stride through every scan's rows: 3× slower).
@@ -314,11 +320,51 @@ def filter_scans_2d(
                     position_update(x, P, zx + sx - x[0], zy + sy - x[2], r00, r01, r11, K, L)
                 if doppler:
                     doppler_update(x, P, vr_scans[n, m], b, svr * svr, vb, K)
-            i = n - first
             for a in range(4):
-                x_state[m, a] = xs[i, m, a] = x[a]
+                x_state[m, a] = x[a]
                 for b_ in range(4):
-                    P_state[m, a, b_] = Ps[i, m, a, b_] = P[a, b_]
+                    P_state[m, a, b_] = P[a, b_]
+            i = n - first
+            if m < n_terms:
+                track_terms(x, P, truth[n], cos_los[n, 0], sin_los[n, 0], terms, i, m, L, y, e)
+            else:
+                j = m - n_terms
+                for a in range(4):
+                    xs[i, j, a] = x[a]
+                    for b_ in range(4):
+                        Ps[i, j, a, b_] = P[a, b_]
+
+
+@_jit
+def track_terms(x, P, t, c, s, out, k, m, L, y, e):
+    """The terms of one track at one scan into out[:, k, m] (``metric_terms_2d``): x (4,),
+    P (4, 4), t the (4,) truth, (c, s) the true line of sight."""
+    ex, ey = x[0] - t[0], x[2] - t[2]
+    pxx, pyy, pxy = P[0, 0], P[2, 2], P[0, 2]
+    out[0, k, m], out[1, k, m] = ex, ex * ex
+    out[2, k, m], out[3, k, m] = ey, ey * ey
+    out[4, k, m], out[5, k, m] = c * ex + s * ey, c * ey - s * ex
+    out[6, k, m], out[7, k, m] = pxx, pyy
+    out[8, k, m] = (pyy * ex * ex - 2.0 * pxy * ex * ey + pxx * ey * ey) / (pxx * pyy - pxy * pxy)
+    for i in range(4):
+        e[i] = x[i] - t[i]
+    total = 0.0
+    for i in range(4):  # eᵀ P⁻¹ e by the Cholesky factor (core.filters.state.quad_form_inv)
+        for j in range(i + 1):
+            acc = P[i, j]
+            for q in range(j):
+                acc -= L[i, q] * L[j, q]
+            if i == j:
+                L[i, i] = sqrt(acc) if acc >= 0.0 else np.nan
+            else:
+                L[i, j] = acc / L[j, j]
+        yi = e[i]
+        for q in range(i):
+            yi -= L[i, q] * y[q]
+        yi /= L[i, i]
+        y[i] = yi
+        total += yi * yi
+    out[9, k, m] = total
 
 
 @_jit
@@ -331,33 +377,7 @@ def metric_terms_2d(x, P, truth, cos_los, sin_los, out):
     y = np.empty(4)
     e = np.empty(4)
     for k in range(x.shape[0]):
-        c, s = cos_los[k, 0], sin_los[k, 0]
         for m in range(x.shape[1]):
-            ex, ey = x[k, m, 0] - truth[k, 0], x[k, m, 2] - truth[k, 2]
-            pxx, pyy, pxy = P[k, m, 0, 0], P[k, m, 2, 2], P[k, m, 0, 2]
-            out[0, k, m], out[1, k, m] = ex, ex * ex
-            out[2, k, m], out[3, k, m] = ey, ey * ey
-            out[4, k, m], out[5, k, m] = c * ex + s * ey, c * ey - s * ex
-            out[6, k, m], out[7, k, m] = pxx, pyy
-            out[8, k, m] = (pyy * ex * ex - 2.0 * pxy * ex * ey + pxx * ey * ey) / (
-                pxx * pyy - pxy * pxy
+            track_terms(
+                x[k, m], P[k, m], truth[k], cos_los[k, 0], sin_los[k, 0], out, k, m, L, y, e
             )
-            for i in range(4):
-                e[i] = x[k, m, i] - truth[k, i]
-            total = 0.0
-            for i in range(4):
-                for j in range(i + 1):
-                    acc = P[k, m, i, j]
-                    for q in range(j):
-                        acc -= L[i, q] * L[j, q]
-                    if i == j:
-                        L[i, i] = sqrt(acc) if acc >= 0.0 else np.nan
-                    else:
-                        L[i, j] = acc / L[j, j]
-                yi = e[i]
-                for q in range(i):
-                    yi -= L[i, q] * y[q]
-                yi /= L[i, i]
-                y[i] = yi
-                total += yi * yi
-            out[9, k, m] = total
