@@ -93,18 +93,26 @@ def test_kernel_matches_numpy_engine_off_the_origin(method: str) -> None:
     assert_close(x, P, *numpy_history(method, r_hat, beta_hat, s, site=site))
 
 
-def test_ukf_kernel_gives_nan_not_an_exception_without_a_definite_covariance() -> None:
-    """As the numpy engine's component-wise path: a predicted covariance that is only
-    semi-definite (σv0 = 0 and Q = 0 leave the velocity variance exactly 0) gives NaN states
-    at the same places, and no exception."""
+def test_ukf_kernel_takes_a_null_direction_and_refuses_an_indefinite_covariance() -> None:
+    """As the numpy engine (``polar_ukf.semidefinite_cholesky``): σv0 = 0 with Q = 0 leaves the
+    velocity variance exactly 0, a null direction the sigma points do not move along (finite
+    states, equal to numpy's); a start covariance indefinite beyond rounding makes that track
+    NaN and leaves the others alone."""
     cfg = TrackingConfig(sigma_beta_deg=1.0)
-    # 20 tracks: the numpy engine's component-wise path (small batches take a dense path).
     r_hat, beta_hat = block_measurements(cfg, 0, 20, cfg.target.truth())
     s = FilterSettings(cfg.sigma_r_m, cfg.sigma_beta_rad, 10.0, 0.0, 0.0)
-    x, _ = filter_history("ukf", r_hat[:, :3], beta_hat[:, :3], s)
-    x_ref, _ = numpy_history("ukf", r_hat[:, :3], beta_hat[:, :3], s)
-    np.testing.assert_array_equal(np.isnan(x), np.isnan(x_ref))
-    assert not np.isnan(x[0]).any() and np.isnan(x[1:]).all()
+    x, P = filter_history("ukf", r_hat[:, :4], beta_hat[:, :4], s)
+    x_ref, P_ref = numpy_history("ukf", r_hat[:, :4], beta_hat[:, :4], s)
+    assert np.all(np.isfinite(x)) and np.all(np.isfinite(x_ref))
+    np.testing.assert_allclose(x, x_ref, rtol=0, atol=TOL * cfg.sigma_r_m)
+    np.testing.assert_allclose(P, P_ref, rtol=0, atol=TOL * np.abs(P_ref).max())
+    # An indefinite start (a negative velocity variance) for track 3 only.
+    start = as_batch(np.broadcast_to(x[1, :, :], (20, 4)), P[1].copy())
+    start.P[3, 1, 1] = -1e6  # far below what one scan of process noise adds back
+    s2 = FilterSettings(cfg.sigma_r_m, cfg.sigma_beta_rad, 10.0, 0.5, 100.0)
+    xk, _ = filter_history("ukf", r_hat, beta_hat, s2, start=(1, start))
+    assert np.isnan(xk[:, 3]).all()
+    assert np.isfinite(np.delete(xk, 3, axis=1)).all()
 
 
 def test_experiment_engines_agree_on_every_statistic() -> None:

@@ -25,6 +25,7 @@ import math
 from typing import Any
 
 from radarviz.core.filters.compiled import METHOD_CODES, START_CODES, FilterSettings
+from radarviz.core.filters.polar_ukf import SEMIDEFINITE_RTOL
 
 Array = Any  # an array of the caller's namespace
 _TWO_PI = 2.0 * math.pi
@@ -163,16 +164,19 @@ def _ukf(xp, x, P, r, b, vr, vb, sx, sy, prm):
     """``core.filters.polar_ukf.ukf_update`` on components."""
     c, wm0, wc0, w = prm
     L = {}
-    for j in range(4):
+    for j in range(4):  # semi-definite Cholesky of c·P (polar_ukf.semidefinite_cholesky)
         d = c * P[j, j]
         for k in range(j):
             d = d - L[j, k] * L[j, k]
+        tol = SEMIDEFINITE_RTOL * c * P[j, j]
+        null = xp.abs(d) <= tol
+        d = xp.where(null, 0.0, xp.where(d < -tol, xp.nan, d))
         L[j, j] = xp.sqrt(d)
         for i in range(j + 1, 4):
             e = c * _sym(P, i, j)
             for k in range(j):
                 e = e - L[i, k] * L[j, k]
-            L[i, j] = e / L[j, j]
+            L[i, j] = xp.where(null, 0.0, e / xp.where(null, 1.0, L[j, j]))
     px, py = x[0] - sx, x[2] - sy
     r0, b0 = xp.hypot(px, py), xp.atan2(py, px)
     pts = []  # (range, bearing) of +column k, −column k; columns touching x or y only
@@ -210,13 +214,23 @@ def _ukf(xp, x, P, r, b, vr, vb, sx, sy, prm):
         K.append((a0 * i00 + a1 * i01, a0 * i01 + a1 * i11))
     nr, nb = r - zr, _wrap(xp, b - zb)
     x_new = [x[i] + K[i][0] * nr + K[i][1] * nb for i in range(4)]
-    P_new = {}
-    for i in range(4):
-        for j in range(i, 4):
-            ksk = K[i][0] * (S[0, 0] * K[j][0] + S[0, 1] * K[j][1]) + K[i][1] * (
-                S[0, 1] * K[j][0] + S[1, 1] * K[j][1]
-            )
-            P_new[i, j] = P[i, j] - ksk
+    # P⁺ in Joseph form: Σ_p Wc_p e_p e_pᵀ + K R Kᵀ, e_p = (χ_p − x⁻) − K d_p.
+    e0 = [K[i][0] * d0[0] + K[i][1] * d0[1] for i in range(4)]
+    P_new = {
+        (i, j): wc0 * e0[i] * e0[j] + vr * K[i][0] * K[j][0] + vb * K[i][1] * K[j][1]
+        for i in range(4)
+        for j in range(i, 4)
+    }
+    for k in range(4):
+        for sgn, f in ((0, 1.0), (1, -1.0)):
+            dd = ds[2 * k + sgn]
+            e = [
+                (f * L[i, k] if i >= k else 0.0) - (K[i][0] * dd[0] + K[i][1] * dd[1])
+                for i in range(4)
+            ]
+            for i in range(4):
+                for j in range(i, 4):
+                    P_new[i, j] = P_new[i, j] + w * e[i] * e[j]
     return x_new, P_new
 
 

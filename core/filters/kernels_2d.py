@@ -13,6 +13,10 @@ from math import atan2, ceil, cos, cosh, exp, expm1, hypot, sin, sinh, sqrt
 import numba
 import numpy as np
 
+# A Cholesky pivot within this fraction of its diagonal is a direction of zero variance (a
+# zero column); below it the track is NaN (numba reads it as a compile-time constant).
+from radarviz.core.filters.polar_ukf import SEMIDEFINITE_RTOL
+
 # error_model="numpy": a division by zero or a negative pivot gives inf / NaN for that track,
 # as the numpy engine does, instead of raising. cache=True: compiled once per machine.
 # nogil=True: blocks of runs filter in parallel threads (``core.experiments.prosov``).
@@ -168,21 +172,28 @@ def position_update(x, P, nx: float, ny: float, r00: float, r01: float, r11: flo
 
 
 @_jit
-def ukf_update(x, P, r: float, b: float, vr: float, vb: float, sx: float, sy: float, prm, L, Z, K):
-    # core.filters.polar_ukf: sigma points of (x⁻, P⁻), through the polar map, unscented
-    # S and Pxz, K = Pxz S⁻¹, x⁺ = x + K ν, P⁺ = P − K S Kᵀ (symmetrised).
+def ukf_update(x, P, r, b, vr, vb, sx, sy, prm, L, Z, K, E):
+    # core.filters.polar_ukf: sigma points of (x⁻, P⁻) through the polar map, unscented S and
+    # Pxz, K = Pxz S⁻¹, x⁺ = x + K ν, and P⁺ in Joseph form, Σ_p Wc_p e_p e_pᵀ + K R Kᵀ with
+    # e_p = (χ_p − x⁻) − K d_p (a sum of semi-definite terms: it cannot turn indefinite).
     c, wm0, wc0, w = prm[0], prm[1], prm[2], prm[3]
-    for j in range(4):  # lower Cholesky factor of c·P, column by column
+    for j in range(4):  # lower Cholesky factor of c·P, semi-definite (semidefinite_cholesky)
         d = c * P[j, j]
         for k in range(j):
             d -= L[j, k] * L[j, k]
-        d = sqrt(d) if d >= 0.0 else math.nan
+        tol = SEMIDEFINITE_RTOL * c * P[j, j]
+        null = abs(d) <= tol
+        if null:
+            d = 0.0
+        elif d < -tol:
+            d = math.nan  # indefinite beyond rounding: this track becomes NaN
+        d = sqrt(d)
         L[j, j] = d
         for i in range(j + 1, 4):
             e = c * P[i, j]
             for k in range(j):
                 e -= L[i, k] * L[j, k]
-            L[i, j] = e / d
+            L[i, j] = 0.0 if null else e / d
         for i in range(j):
             L[i, j] = 0.0
     px, py = x[0] - sx, x[2] - sy
@@ -212,7 +223,6 @@ def ukf_update(x, P, r: float, b: float, vr: float, vb: float, sx: float, sy: fl
     det = s00 * s11 - s01 * s01
     i00, i01, i11 = s11 / det, -s01 / det, s00 / det
     nr, nb = r - zr, wrap(b - zb)
-    K = np.empty((4, 2))
     for i in range(4):  # Pxz = W Σ_k L[:, k] (d_k+ − d_k−)ᵀ, then K = Pxz S⁻¹
         a0, a1 = 0.0, 0.0
         for k in range(4):
@@ -224,14 +234,22 @@ def ukf_update(x, P, r: float, b: float, vr: float, vb: float, sx: float, sy: fl
         K[i, 1] = a0 * i01 + a1 * i11
     for i in range(4):
         x[i] += K[i, 0] * nr + K[i, 1] * nb
+    for i in range(4):  # the central point (e = −K d₀) and K R Kᵀ
+        E[i] = K[i, 0] * Z[0, 0] + K[i, 1] * Z[0, 1]
     for i in range(4):
         for j in range(i, 4):
-            ksk = K[i, 0] * (s00 * K[j, 0] + s01 * K[j, 1]) + K[i, 1] * (
-                s01 * K[j, 0] + s11 * K[j, 1]
-            )
-            P[i, j] -= ksk
-            if i != j:
-                P[j, i] = P[i, j]
+            P[i, j] = wc0 * E[i] * E[j] + vr * K[i, 0] * K[j, 0] + vb * K[i, 1] * K[j, 1]
+    for k in range(4):  # the points ± column k: e = ±L[:, k] − K d
+        for sgn in range(2):
+            p, f = 1 + 2 * k + sgn, 1.0 if sgn == 0 else -1.0
+            for i in range(4):
+                E[i] = f * L[i, k] - (K[i, 0] * Z[p, 0] + K[i, 1] * Z[p, 1])
+            for i in range(4):
+                for j in range(i, 4):
+                    P[i, j] += w * E[i] * E[j]
+    for i in range(4):
+        for j in range(i):
+            P[i, j] = P[j, i]
 
 
 @_jit
@@ -280,7 +298,7 @@ def filter_scans_2d(
     L = np.empty((4, 4))
     Z = np.empty((9, 2))
     x, P = np.empty(4), np.empty((4, 4))  # one track's state, in and out of the batch arrays
-    y, e = np.empty(4), np.empty(4)
+    y, e, E = np.empty(4), np.empty(4), np.empty(4)
     runs = r_scans.shape[1]
     # Scan-major: at each scan the runs' states, measurements and outputs are walked in
     # memory order (run-major walks stride through every scan's rows: 3× slower).
@@ -313,7 +331,7 @@ def filter_scans_2d(
                         L,
                     )
                 elif code == 6:
-                    ukf_update(x, P, r, b, vr, vb, sx, sy, prm, L, Z, K)
+                    ukf_update(x, P, r, b, vr, vb, sx, sy, prm, L, Z, K, E)
                 else:
                     px, py = x[0] - sx, x[2] - sy
                     zx, zy, r00, r01, r11 = convert(code, r, b, sr2, s, px, py, co)
