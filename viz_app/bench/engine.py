@@ -178,11 +178,12 @@ def bench_engines(runs: int, config: TrackingConfig, repeats: int = 3) -> dict[s
     }
 
 
-def bench_parallel(runs: int = 4 * BLOCK_RUNS, repeats: int = 2) -> dict[str, Any]:
-    """The Prosov Monte Carlo (all methods, ``runs`` runs) on one thread and on every core:
-    seconds, speed-up and parallel efficiency (speed-up / cores); the two results are
-    checked equal bit for bit."""
+def bench_parallel(runs: int, repeats: int = 2) -> dict[str, Any]:
+    """The Prosov Monte Carlo (all methods, ``runs`` runs in four blocks per core or more) on
+    one thread and on every core: seconds, speed-up and parallel efficiency (speed-up /
+    cores); the two results are checked equal bit for bit."""
     cores = available_cores()
+    block = max(256, min(BLOCK_RUNS, runs // (4 * cores)))
     config = TrackingConfig(runs=runs)
     best = {}
     results = {}
@@ -190,17 +191,18 @@ def bench_parallel(runs: int = 4 * BLOCK_RUNS, repeats: int = 2) -> dict[str, An
         t = float("inf")
         for _ in range(repeats):
             t0 = time.perf_counter()
-            results[workers] = run_tracking(config, workers=workers)
+            results[workers] = run_tracking(config, block=block, workers=workers)
             t = min(t, time.perf_counter() - t0)
         best[workers] = t
     same = all(
-        np.array_equal(results[1].metrics[m].rmse_x, results[cores].metrics[m].rmse_x)
-        and np.array_equal(results[1].metrics[m].nees_pos, results[cores].metrics[m].nees_pos)
+        np.array_equal(a, getattr(results[cores].metrics[m], name), equal_nan=True)
         for m in config.methods
+        for name, a in results[1].metrics[m]._asdict().items()
     )
     speedup = best[1] / best[cores]
     return {
         "parallel_runs": runs,
+        "parallel_block": block,
         "cores": cores,
         "one_thread_s": best[1],
         "all_cores_s": best[cores],
@@ -232,8 +234,8 @@ def run_bench(runs: Sequence[int] = (10_000, 100_000), filterpy_runs: int = 200)
         e2e, only = bench_batched(m, config)
         kf.append(e2e)
         kf_only.append(only)
-    engines = bench_engines(10_000, config)
-    parallel = bench_parallel()
+    engines = bench_engines(min(runs), config)
+    parallel = bench_parallel(max(runs))
     return {
         **engines,
         **parallel,
@@ -281,8 +283,9 @@ def format_bench(doc: dict[str, Any]) -> str:
             f"(measurements, filter, statistics) {e:6.1f} = {over:.2f}× the filter"
         )
     lines.append(
-        f"Prosov Monte Carlo, {doc['parallel_runs']} runs, all methods: "
-        f"{doc['one_thread_s']:.2f} s on one thread, {doc['all_cores_s']:.2f} s on "
+        f"Prosov Monte Carlo, {doc['parallel_runs']} runs, all methods (blocks of "
+        f"{doc['parallel_block']}): {doc['one_thread_s']:.2f} s on one thread, "
+        f"{doc['all_cores_s']:.2f} s on "
         f"{doc['cores']} cores: {doc['parallel_speedup']:.2f}× (efficiency "
         f"{doc['parallel_efficiency']:.0%}; "
         f"{'bit-identical' if doc['parallel_bit_identical'] else 'RESULTS DIFFER'})"
