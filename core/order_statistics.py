@@ -6,15 +6,16 @@ So:
 
 1. **count**: the first pass histograms every column of every set of values (the whole
    sample, and each group of trials of the jackknife) into fine bins (edges from the first
-   block's spread, with an under- and an overflow bin);
+   block's central spread, with an under- and an overflow bin);
 2. **select**: the ranks a quantile needs (numpy's default "linear" method: the order
    statistics ⌊h⌋ and ⌊h⌋ + 1 of h = (n − 1) p) are located in their bins; the second pass
    keeps only the values of those bins, a few per ten thousand;
 3. **result**: the kept values sorted give the order statistics exactly, interpolated as
    ``numpy.quantile`` does — the same number, bit for bit, without holding the sample.
 
-Memory is the histograms (sets × columns × bins counts) plus the kept values, whatever the
-number of trials.
+Memory is the histograms (sets × columns × bins counts) plus the kept values: the few bins
+around each quantile, about 0.1% of the values (0.05 B per trial for three columns, against 24
+B for keeping them all).
 """
 
 from __future__ import annotations
@@ -63,7 +64,10 @@ class TwoPassQuantiles:
         v = np.asarray(values, dtype=np.float64)
         s = np.asarray(set_index, dtype=np.int64)
         if self.edges is None:
-            lo, hi = np.nanmin(v, axis=0), np.nanmax(v, axis=0)
+            # The first block's central 98%, widened by its width on each side: a far outlier
+            # of a heavy tail must not stretch the bins (the quantile bins would then hold a
+            # fixed fraction of every block); what falls outside is under- or overflow.
+            lo, hi = np.nanquantile(v, [0.01, 0.99], axis=0)
             span = np.maximum(hi - lo, np.finfo(np.float64).tiny)
             self.edges = np.linspace(lo - span, hi + span, self.bins + 1, axis=-1)
         nb = self.bins + 2
