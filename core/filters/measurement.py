@@ -80,13 +80,15 @@ class PlotMeasurement:
     parts: Parts | None = None
 
     def _for(self, state: CVBatch, models: bool) -> tuple[PolarPlot, PolarNoise, Parts | None]:
+        if not models:  # the arrays were made for this batch
+            return self.plot, self.noise, self.parts
         shape = state.batch_shape
         plot = PolarPlot(*(_expand(v, models) for v in self.plot))
         if not self.group.converted:  # the polar updates take arrays of the batch's shape
             plot = PolarPlot(*(None if v is None else np.broadcast_to(v, shape) for v in plot))
         noise = PolarNoise(*(_expand(v, models) for v in self.noise))
         parts = self.parts
-        if parts is not None and models:
+        if parts is not None:
             z, R = parts
             parts = (
                 [np.broadcast_to(np.asarray(v)[..., None], shape) for v in z],

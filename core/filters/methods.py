@@ -346,9 +346,21 @@ class MethodGroup:
                     if kind.about_prediction:  # ducm: its covariance at this row's prediction
                         zi, Ri = kind.convert(plot, noise, self._predicted(pred, i, site))
                         for a in range(len(z)):
-                            z[a][i] = np.reshape(zi[a], z[a][i].shape)
+                            z[a][i] = _fitted(zi[a], z[a][i])
                         for key, v in Ri.items():
-                            R[key][i] = np.reshape(v, R[key][i].shape)
+                            R[key][i] = _fitted(v, R[key][i])
         zs = _shifted(z, site)
         pos = position_index(pred.dims)
         return [zs[a] - pred.x[..., p] for a, p in enumerate(pos)], R
+
+
+def _fitted(value: ArrayLike, target: ArrayLike) -> ArrayLike:
+    """``value`` shaped to go into ``target``'s place: reshaped when the sizes agree (a (1,)
+    conversion into one row), else broadcast (a plot's (M, 1) point over (M, r) models)."""
+    shape = np.shape(target)
+    v = np.asarray(value)
+    if v.size == np.prod(shape, dtype=int):
+        return np.reshape(v, shape)
+    while v.ndim > len(shape) and v.shape[0] == 1:  # a single track's leading axis of 1
+        v = v[0]
+    return np.broadcast_to(v, shape)
