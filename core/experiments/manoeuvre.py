@@ -1,0 +1,326 @@
+"""``reproduce manoeuvre``: tracking manoeuvring aircraft with each method and motion model.
+
+Monte Carlo over the flights of ``core.scenarios.manoeuvre`` (F flights × M noise runs, one
+batch of B = F·M tracks): every method of ``METHODS_3D`` tracks every run with each motion
+model, through the streaming tracker's own step (``core.tracking.stream.TrackGroup``), so the
+figures are those of ``radarviz track`` on such files. Per method and model:
+
+* position RMSE over every plot after ``burn_in_plots`` and every run, against the RMSE of
+  the raw converted measurements (``ucm``'s point of each plot) over the same plots;
+* mean position NEES over the same plots (3 degrees of freedom; consistent: 3) and, per
+  plot, whether the run-averaged NEES lies in its χ² band (``core.metrics.nees_band``);
+* the consistency monitor's figure (``core.tracking.consistency``): the fraction of NIS
+  windows outside their band, and the fraction of runs it flags (out more than
+  ``INCONSISTENT_FRACTION`` of the time).
+
+Every figure carries a 95% delete-a-group jackknife band over the runs (``core.confidence``).
+
+The straight-line check runs Prosov's target (one radar, 150 km, 200 m/s radially outward,
+σr = 250 m, σβ = 1°, T = 10 s, 60 scans, 2D) with the matched filter (CV, Q = 0) and the
+default IMM, and reports the IMM's RMSE over scans 31–60 relative to the matched filter's.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import NamedTuple
+
+import numpy as np
+from numpy.typing import NDArray
+
+from radarviz.core.confidence import BAND_GROUPS, group_sums, jackknife_band
+from radarviz.core.filters.measurement import DopplerMeasurement
+from radarviz.core.filters.methods import (
+    ALL_METHODS,
+    METHODS_3D,
+    PolarNoise,
+    PolarPlot,
+    method_groups,
+    method_named,
+)
+from radarviz.core.filters.models import DEFAULT_IMM, CVModel, IMMModel
+from radarviz.core.metrics import nees_band
+from radarviz.core.params import ParameterError, check, check_int
+from radarviz.core.scenarios.manoeuvre import FLIGHTS, ManoeuvrePlots, manoeuvre_plots
+from radarviz.core.scenarios.planar import polar_measurements, prosov_target
+from radarviz.core.tracking.consistency import (
+    INCONSISTENT_FRACTION,
+    NIS_BAND_LEVEL,
+    out_of_band,
+    windowed_nis,
+)
+from radarviz.core.tracking.stream import TrackGroup
+
+#: The motion models compared: the papers' Q = 0, the CV filter the user tried (σa = 1),
+#: and the default IMM of ``radarviz track``.
+DEFAULT_MODELS: dict[str, CVModel | IMMModel] = {
+    "cv-q0": CVModel(0.0),
+    "cv-sa1": CVModel(1.0),
+    "imm": DEFAULT_IMM,
+}
+
+
+@dataclass(frozen=True)
+class ManoeuvreConfig:
+    """The experiment's settings.
+
+    Attributes:
+        runs: noise runs per flight (M).  seed: root of the noise.
+        methods: from ``METHODS_3D``.  models: name → motion model.
+        burn_in_plots: plots left out of RMSE and NEES at the start (the track's transient
+            from a one-plot start with σv0).
+        nis_window: w of the consistency monitor.  sigma_v0_mps: the start's velocity std.
+        straight_runs: runs of the straight-line check (0: skip it).
+    """
+
+    runs: int = 8
+    seed: int = 1
+    methods: tuple[str, ...] = METHODS_3D
+    models: dict[str, CVModel | IMMModel] = field(default_factory=lambda: dict(DEFAULT_MODELS))
+    burn_in_plots: int = 30
+    nis_window: int = 10
+    sigma_v0_mps: float = 1000.0
+    straight_runs: int = 256
+
+    def __post_init__(self) -> None:
+        check_int("runs", self.runs, low=2, high=10_000)
+        check("seed", self.seed)
+        for m in self.methods:
+            if m not in METHODS_3D:
+                raise ParameterError(
+                    f"methods must be among {', '.join(METHODS_3D)} (got {m!r})", "methods"
+                )
+        check_int("burn_in_plots", self.burn_in_plots, low=0, high=500)
+        check("nis_window", self.nis_window)
+        check("sigma_v0_mps", self.sigma_v0_mps)
+        if self.straight_runs:
+            check_int("straight_runs", self.straight_runs, low=2, high=100_000)
+
+
+class Figure(NamedTuple):
+    """A Monte Carlo figure and its 95% jackknife band."""
+
+    value: float
+    lo: float
+    hi: float
+
+
+class ModelResult(NamedTuple):
+    """One method with one motion model on the manoeuvring flights."""
+
+    rmse_m: Figure
+    rmse_ratio: Figure  # RMSE / raw converted measurement RMSE
+    nees: Figure  # mean position NEES (dof 3)
+    nees_plots_in_band: float  # fraction of plots whose run-averaged NEES is in its band
+    nis_out_fraction: Figure
+    flagged_runs: float  # fraction of runs the monitor flags
+
+
+class StraightLineResult(NamedTuple):
+    """The IMM against the matched CV filter on Prosov's straight-line target (2D)."""
+
+    runs: int
+    rmse_cv_m: dict[str, float]
+    rmse_imm_m: dict[str, float]
+    ratio: dict[str, Figure]  # IMM / CV RMSE over scans 31–60
+
+
+class ManoeuvreResult(NamedTuple):
+    config: ManoeuvreConfig
+    flights: tuple[str, ...]
+    plots_per_flight: int
+    raw_rmse_m: Figure
+    results: dict[str, dict[str, ModelResult]]  # model → method → result
+    nees_band_per_plot: tuple[float, float]
+    straight: StraightLineResult | None
+
+
+def _groups_of(values: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Per-group sums (G, ...) of per-run values (..., B) (run b in group b mod G)."""
+    return group_sums(values, 0, BAND_GROUPS)
+
+
+def _ratio_figure(num: NDArray[np.float64], den: NDArray[np.float64], sqrt: bool) -> Figure:
+    """(Σ num / Σ den)[^½] over runs (B,) with its jackknife band."""
+    gn, gd = _groups_of(num), _groups_of(den)
+    f = (lambda v: np.sqrt(v)) if sqrt else (lambda v: v)
+    est = f(num.sum() / den.sum())
+    loo = f((num.sum() - gn) / (den.sum() - gd))
+    lo, hi = jackknife_band(est, loo)
+    return Figure(float(est), float(lo), float(hi))
+
+
+def _ratio_of_rmse(
+    e2: NDArray[np.float64], raw2: NDArray[np.float64], count: NDArray[np.float64]
+) -> Figure:
+    """√(Σ e² / Σ raw²) (same plots, same runs) with its jackknife band."""
+    ge, gr = _groups_of(e2), _groups_of(raw2)
+    est = np.sqrt(e2.sum() / raw2.sum())
+    loo = np.sqrt((e2.sum() - ge) / (raw2.sum() - gr))
+    lo, hi = jackknife_band(est, loo)
+    return Figure(float(est), float(lo), float(hi))
+
+
+def _track_batch(
+    mp: ManoeuvrePlots,
+    methods: tuple[str, ...],
+    motion: CVModel | IMMModel,
+    sigma_v0_mps: float,
+) -> tuple[dict[str, NDArray], dict[str, NDArray], dict[str, NDArray], NDArray[np.int64]]:
+    """Track every run: per method, position errors (N, B, 3), NEES (N, B), NIS (N − 1, B)
+    and the NIS dof (N − 1,) of each update."""
+    n_plots, f, m = mp.range_m.shape
+    b = f * m
+    sched = mp.schedule
+    truth = np.repeat(mp.true_position_m, m, axis=1)  # (N, B, 3)
+    errs, nees, nis = {}, {}, {}
+    dof = np.zeros(n_plots - 1, dtype=np.int64)
+    for names in method_groups(methods):
+        group = TrackGroup(names, 3, motion, sigma_v0_mps)
+        e = np.empty((len(names), n_plots, b, 3))
+        q = np.empty((len(names), n_plots, b))
+        s = np.empty((len(names), n_plots - 1, b))
+        for n in range(n_plots):
+            radar = sched.radars[int(sched.radar[n])]
+            plot = PolarPlot(
+                *(v[n].reshape(b) for v in (mp.range_m, mp.azimuth_rad, mp.elevation_rad))
+            )
+            noise = PolarNoise(radar.sigma_r_m, radar.sigma_azimuth_rad, radar.sigma_elevation_rad)
+            pre = group.group.start_parts(plot, noise) if group.group.converted else None
+            doppler = None
+            if mp.doppler[n]:
+                doppler = DopplerMeasurement(
+                    mp.radial_velocity_mps[n].reshape(b),
+                    plot.azimuth_rad,
+                    plot.elevation_rad,
+                    radar.sigma_vr_mps,
+                    radar.sigma_azimuth_rad,
+                    radar.sigma_elevation_rad,
+                )
+            site = np.asarray(radar.position, dtype=np.float64)
+            state, stats = group.add_arrays(float(sched.time_s[n]), plot, noise, site, pre, doppler)
+            x = state.x.reshape(len(names), b, 6)
+            P = state.P.reshape(len(names), b, 6, 6)
+            err = x[..., 0::2] - truth[n]
+            e[:, n] = err
+            Ppos = P[..., 0::2, 0::2]
+            q[:, n] = np.einsum(
+                "...i,...i->...", err, np.linalg.solve(Ppos, err[..., None])[..., 0]
+            )
+            if stats is not None:
+                s[:, n - 1] = stats.nis.reshape(len(names), b)
+                dof[n - 1] = stats.dof
+        for i, name in enumerate(names):
+            errs[name], nees[name], nis[name] = e[i], q[i], s[i]
+    return errs, nees, nis, dof
+
+
+def raw_converted_errors(mp: ManoeuvrePlots) -> NDArray[np.float64]:
+    """Errors (N, B, 3) of every plot's ``ucm`` converted point (site + conversion) against
+    the truth: the accuracy of the measurements themselves."""
+    n_plots, f, m = mp.range_m.shape
+    b = f * m
+    ucm = method_named("ucm")
+    truth = np.repeat(mp.true_position_m, m, axis=1)
+    out = np.empty((n_plots, b, 3))
+    for n in range(n_plots):
+        radar = mp.schedule.radars[int(mp.schedule.radar[n])]
+        plot = PolarPlot(*(v[n].reshape(b) for v in (mp.range_m, mp.azimuth_rad, mp.elevation_rad)))
+        noise = PolarNoise(radar.sigma_r_m, radar.sigma_azimuth_rad, radar.sigma_elevation_rad)
+        z, _ = ucm.convert(plot, noise)
+        for a in range(3):
+            out[n, :, a] = z[a] + radar.position[a] - truth[n, :, a]
+    return out
+
+
+def _model_result(
+    e: NDArray, nees: NDArray, nis: NDArray, dof: NDArray, raw2: NDArray, cfg: ManoeuvreConfig
+) -> ModelResult:
+    burn = cfg.burn_in_plots
+    e2 = (e[burn:] ** 2).sum(-1).sum(0)  # per run (B,)
+    count = np.full(e2.shape, float(e.shape[0] - burn))
+    rmse = _ratio_figure(e2, count, sqrt=True)
+    ratio = _ratio_of_rmse(e2, raw2, count)
+    nees_fig = _ratio_figure(nees[burn:].sum(0), count, sqrt=False)
+    lo, hi = nees_band(3, nees.shape[1])
+    per_plot = nees[burn:].mean(axis=1)
+    in_band = float(np.mean((per_plot >= lo) & (per_plot <= hi)))
+    q, D = windowed_nis(nis, dof, cfg.nis_window)
+    below, above = out_of_band(q, D, NIS_BAND_LEVEL)
+    out = (below | above).astype(np.float64)  # (W, B)
+    out_per_run = out.sum(0)
+    nis_fig = _ratio_figure(out_per_run, np.full(out_per_run.shape, float(out.shape[0])), False)
+    flagged = float(np.mean(out.mean(0) > INCONSISTENT_FRACTION))
+    return ModelResult(rmse, ratio, nees_fig, in_band, nis_fig, flagged)
+
+
+def straight_line_check(
+    runs: int, seed: int, models: tuple[CVModel, IMMModel], sigma_v0_mps: float
+) -> StraightLineResult:
+    """The matched CV filter (Q = 0) and the IMM on Prosov's straight-line target (2D, every
+    2D method), same runs; RMSE over scans 31–60 and the IMM/CV ratio with its band."""
+    target = prosov_target()
+    truth = target.truth()  # (N, 4)
+    rng = np.random.default_rng(np.random.SeedSequence(seed).spawn(1)[0])
+    sigma_r, sigma_b = 250.0, np.radians(1.0)
+    r_hat, b_hat = polar_measurements(
+        truth, sigma_r_m=sigma_r, sigma_azimuth_rad=sigma_b, runs=runs, rng=rng
+    )
+    e2: dict[str, dict[str, NDArray]] = {}
+    for label, motion in zip(("cv", "imm"), models, strict=True):
+        e2[label] = {}
+        for names in method_groups(ALL_METHODS):
+            group = TrackGroup(names, 2, motion, sigma_v0_mps)
+            acc = np.zeros((len(names), runs))
+            for n in range(target.steps):
+                plot = PolarPlot(r_hat[:, n], b_hat[:, n])
+                noise = PolarNoise(sigma_r, sigma_b)
+                pre = group.group.start_parts(plot, noise) if group.group.converted else None
+                st, _ = group.add_arrays(
+                    n * target.period_s, plot, noise, np.zeros(2), pre, None, with_stats=False
+                )
+                if n >= 30:
+                    x = st.x.reshape(len(names), runs, 4)
+                    acc += (x[..., 0] - truth[n, 0]) ** 2 + (x[..., 2] - truth[n, 2]) ** 2
+            for i, name in enumerate(names):
+                e2[label][name] = acc[i]
+    ratio = {
+        name: _ratio_of_rmse(e2["imm"][name], e2["cv"][name], np.ones(runs)) for name in ALL_METHODS
+    }
+    rmse = {
+        label: {name: float(np.sqrt(v.mean() / 30.0)) for name, v in e2[label].items()}
+        for label in e2
+    }
+    return StraightLineResult(runs, rmse["cv"], rmse["imm"], ratio)
+
+
+def run_manoeuvre(cfg: ManoeuvreConfig, flights: Sequence = FLIGHTS) -> ManoeuvreResult:
+    """The whole experiment (module docstring)."""
+    mp = manoeuvre_plots(cfg.runs, cfg.seed, tuple(flights))
+    raw = raw_converted_errors(mp)
+    burn = cfg.burn_in_plots
+    raw2 = (raw[burn:] ** 2).sum(-1).sum(0)
+    count = np.full(raw2.shape, float(raw.shape[0] - burn))
+    results: dict[str, dict[str, ModelResult]] = {}
+    for label, motion in cfg.models.items():
+        errs, nees, nis, dof = _track_batch(mp, cfg.methods, motion, cfg.sigma_v0_mps)
+        results[label] = {
+            m: _model_result(errs[m], nees[m], nis[m], dof, raw2, cfg) for m in cfg.methods
+        }
+    straight = None
+    if cfg.straight_runs:
+        imm = next((v for v in cfg.models.values() if isinstance(v, IMMModel)), DEFAULT_IMM)
+        straight = straight_line_check(
+            cfg.straight_runs, cfg.seed, (CVModel(0.0), imm), cfg.sigma_v0_mps
+        )
+    b = mp.range_m.shape[1] * mp.range_m.shape[2]
+    return ManoeuvreResult(
+        cfg,
+        tuple(f.name for f in flights),
+        mp.range_m.shape[0],
+        _ratio_figure(raw2, count, sqrt=True),
+        results,
+        nees_band(3, b),
+        straight,
+    )
