@@ -330,3 +330,49 @@ def test_reproduce_manoeuvre_meets_its_targets(capsys) -> None:
         assert r["rmse_over_raw"]["value"] > 5.0
     for v in doc["straight_line"]["imm_over_cv"].values():
         assert 1.0 < v["value"] < 1.5
+
+
+# --------------------------------------------------------------------------------------------
+# Recordings
+# --------------------------------------------------------------------------------------------
+
+
+def test_manoeuvre_scene_logs_core_values_and_the_monitor_events(
+    tmp_path: Path, rrd_contents
+) -> None:
+    from radarviz.core.experiments.manoeuvre import track_flight
+    from radarviz.viz_app.rerun.manoeuvre_scene import FLIGHT, log_manoeuvre
+    from radarviz.viz_app.rerun.recording import recording_file
+
+    path = tmp_path / "m.rrd"
+    with recording_file(path) as rec:
+        logged = log_manoeuvre(rec, seed=2)
+    rows, cols = rrd_contents(path)
+    ft = track_flight(FLIGHT, 2)
+    n = ft.time_s.size
+    for entity in ("manoeuvre/map/truth/position", "manoeuvre/map/plots"):
+        assert rows[f"/{entity}"] == n
+    for label in ("cv-q0", "imm"):
+        got = [v[0] for v in cols[f"/plots/manoeuvre/error_m/{label}"]["Scalars:scalars"]]
+        np.testing.assert_array_equal(got, ft.errors_m[label])
+        nis = [v[0] for v in cols[f"/plots/manoeuvre/nis/{label}"]["Scalars:scalars"]]
+        np.testing.assert_array_equal(nis, ft.windows[label][:, 1])
+        assert rows[f"/manoeuvre/map/tracks/{label}/position"] == n
+    # Q = 0 leaves its band and the log says so; the IMM stays (on this flight and seed).
+    assert logged.events["cv-q0"] and logged.events["cv-q0"][0].kind == "leaves"
+    assert not [e for e in logged.events["imm"] if e.kind == "leaves"]
+    texts = [t[0] for t in cols["/log"]["TextLog:text"]]
+    assert any(t.startswith("cv-q0: track ucm has left its NIS band") for t in texts)
+
+
+def test_track_recording_logs_the_band_exits(manoeuvre_files, tmp_path: Path, rrd_contents):
+    meas, radars = manoeuvre_files
+    rrd = tmp_path / "t.rrd"
+    argv = ["track", "--input", str(meas), "--radars", str(radars), "--model", "cv"]
+    assert main([*argv, "--out", str(tmp_path / "t.csv"), "--rrd", str(rrd)]) == 0
+    _, cols = rrd_contents(rrd)
+    texts = [t[0] for t in cols["/log"]["TextLog:text"]]
+    levels = [lv[0] for lv in cols["/log"]["TextLog:level"]]
+    exits = [(t, lv) for t, lv in zip(texts, levels, strict=True) if "has left its NIS band" in t]
+    assert {t.split()[1] for t, _ in exits} == set(METHODS_3D)
+    assert all(lv == "WARN" for _, lv in exits)

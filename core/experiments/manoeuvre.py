@@ -22,6 +22,7 @@ default IMM, and reports the IMM's RMSE over scans 31–60 relative to the match
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import NamedTuple
@@ -47,10 +48,12 @@ from radarviz.core.scenarios.planar import polar_measurements, prosov_target
 from radarviz.core.tracking.consistency import (
     INCONSISTENT_FRACTION,
     NIS_BAND_LEVEL,
+    ConsistencyEvent,
+    ConsistencyMonitor,
     out_of_band,
     windowed_nis,
 )
-from radarviz.core.tracking.stream import TrackGroup
+from radarviz.core.tracking.stream import Plot, StreamOptions, StreamTracker, TrackGroup
 
 #: The motion models compared: the papers' Q = 0, the CV filter the user tried (σa = 1),
 #: and the default IMM of ``radarviz track``.
@@ -124,6 +127,111 @@ class StraightLineResult(NamedTuple):
     rmse_cv_m: dict[str, float]
     rmse_imm_m: dict[str, float]
     ratio: dict[str, Figure]  # IMM / CV RMSE over scans 31–60
+
+
+class FlightTracks(NamedTuple):
+    """One flight tracked by one method with several motion models (the demo's scene).
+
+    Attributes:
+        time_s: (N,) plot times.  radar: (N,) radar index.  truth_m: (N, 3) true position.
+        measured_m: (N, 3) each plot's naive converted point (site + r̂ u(β̂, ε̂)).
+        estimates: model → (N, 3) track positions.  errors_m: model → (N,) |x̂ − x|.
+        windows: model → (W, 4) the monitor's (time, q, lo, hi) per window.
+        events: model → the monitor's events.
+    """
+
+    time_s: NDArray[np.float64]
+    radar: NDArray[np.int64]
+    truth_m: NDArray[np.float64]
+    measured_m: NDArray[np.float64]
+    estimates: dict[str, NDArray[np.float64]]
+    errors_m: dict[str, NDArray[np.float64]]
+    windows: dict[str, NDArray[np.float64]]
+    events: dict[str, list[ConsistencyEvent]]
+
+
+def track_flight(
+    flight: int = 4,
+    seed: int = 1,
+    method: str = "ucm",
+    models: dict[str, CVModel | IMMModel] | None = None,
+    nis_window: int = 10,
+) -> FlightTracks:
+    """Flight ``flight`` of ``FLIGHTS`` (noise run 0 of ``seed``) tracked plot by plot by
+    ``StreamTracker`` with each model (default: Q = 0 and the IMM), the monitor watching."""
+    models = models or {"cv-q0": CVModel(0.0), "imm": DEFAULT_IMM}
+    plots, mp = flight_plots(flight, seed)
+    sched = mp.schedule
+    measured = np.array(
+        [
+            np.asarray(p.site)
+            + p.range_m
+            * np.array(
+                [
+                    np.cos(p.elevation_rad) * np.cos(p.azimuth_rad),
+                    np.cos(p.elevation_rad) * np.sin(p.azimuth_rad),
+                    np.sin(p.elevation_rad),
+                ]
+            )
+            for p in plots
+        ]
+    )
+    truth = mp.true_position_m[:, 0]
+    est, err, win, ev = {}, {}, {}, {}
+    for label, motion in models.items():
+        mon = ConsistencyMonitor(nis_window, keep_history=True)
+        opts = _stream_options(motion, mon)
+        rows = StreamTracker((method,), True, opts).add_block(plots)
+        x = np.array([r[0][1][0::2] for r in rows])
+        est[label], err[label] = x, np.linalg.norm(x - truth, axis=-1)
+        win[label], ev[label] = mon.history(method), list(mon.events)
+    return FlightTracks(sched.time_s, sched.radar, truth, measured, est, err, win, ev)
+
+
+def flight_plots(
+    flight: int, seed: int, steps: int | None = None, through_degrees: bool = False
+) -> tuple[list[Plot], ManoeuvrePlots]:
+    """Flight ``flight`` of ``FLIGHTS``, noise run 0 of ``seed``, as the tracker's plots (and
+    the arrays they came from). ``through_degrees``: angles and their σ rounded through
+    degrees, as a measurement file gives them (so tracking the file equals tracking these)."""
+    mp = manoeuvre_plots(1, seed, (FLIGHTS[flight],), steps=steps)
+    sched = mp.schedule
+
+    def angle(v: float) -> float:
+        return math.radians(math.degrees(v)) if through_degrees else v
+
+    plots = []
+    for n, t in enumerate(sched.time_s):
+        r = sched.radars[int(sched.radar[n])]
+        vr = float(mp.radial_velocity_mps[n, 0, 0])
+        doppler = bool(mp.doppler[n])
+        plots.append(
+            Plot(
+                float(t),
+                float(mp.range_m[n, 0, 0]),
+                angle(float(mp.azimuth_rad[n, 0, 0])),
+                r.sigma_r_m,
+                angle(r.sigma_azimuth_rad),
+                tuple(map(float, r.position)),
+                r.name,
+                angle(float(mp.elevation_rad[n, 0, 0])),
+                angle(r.sigma_elevation_rad),
+                vr if doppler else None,
+                r.sigma_vr_mps if doppler else 0.0,
+            )
+        )
+    return plots, mp
+
+
+def _stream_options(motion: CVModel | IMMModel, monitor: ConsistencyMonitor) -> StreamOptions:
+    if isinstance(motion, IMMModel):
+        return StreamOptions(
+            model="imm",
+            imm_sigma_a_mps2=motion.sigma_a_mps2,
+            transition_prob=motion.transition,
+            monitor=monitor,
+        )
+    return StreamOptions(model="cv", sigma_a_mps2=motion.sigma_a_mps2, monitor=monitor)
 
 
 class ManoeuvreResult(NamedTuple):

@@ -8,7 +8,7 @@ aircraft reaches at ``VERTICAL_ACCEL_MPS2`` (so climbs and descents start and en
 The flight plans (:data:`FLIGHTS`) are what an approach or en-route sector sees: standard-rate
 turns (3°/s, ``STANDARD_RATE_RADPS``) and half-rate turns (1.5°/s, an airliner at 25° bank),
 climbs and descents at 5–15 m/s, accelerations and decelerations of 0.5–1 m/s² between
-140 and 250 m/s, at 3–11 km altitude. The plans are written for this project (no recorded
+140 and 280 m/s, at 1.4–11 km altitude. The plans are written for this project (no recorded
 trajectories are shipped).
 
 The truth is integrated on a grid of ``STEP_S`` = 0.1 s: over one step the heading turns by
@@ -16,7 +16,8 @@ The truth is integrated on a grid of ``STEP_S`` = 0.1 s: over one step the headi
 (second order in dt: the error against the exact arc is below 1 mm per step at 250 m/s and
 3°/s). Every radar's scan phase is a multiple of the step, so plot times fall on the grid.
 
-Radars (:data:`MANOEUVRE_RADARS`): three 3D sites 40–70 km apart, σr = 60 m, σβ = 0.15°,
+Radars (:data:`MANOEUVRE_RADARS`): three 3D sites 63–142 km apart, none within 20 km
+horizontally of any flight (the cone above a radar is blind), σr = 60 m, σβ = 0.15°,
 σε = 0.3°, T = 5 s, scans staggered by 1.7 s; the third also measures radial velocity
 (σVr = 1 m/s). Plot j of radar k is (r, β, ε[, Vr]) of the truth at t0_k + j T plus Gaussian
 noise; the noise of run i comes from child i of ``SeedSequence(seed)`` (runs are

@@ -114,6 +114,7 @@ class _Track:
     run_out: int = 0
     left: bool = False
     first_exit_s: float | None = None
+    history: list = field(default_factory=list)
 
 
 class ConsistencyMonitor:
@@ -124,6 +125,7 @@ class ConsistencyMonitor:
         level: the band's two-sided probability.
         on_event: called with each event as it happens (e.g. a warning printer).
         sustain: successive out-of-band windows that make an exit (default 2w).
+        keep_history: keep every window's (time, q, lo, hi) (``history``; for recordings).
     """
 
     def __init__(
@@ -132,11 +134,13 @@ class ConsistencyMonitor:
         level: float = NIS_BAND_LEVEL,
         on_event: Callable[[ConsistencyEvent], None] | None = None,
         sustain: int | None = None,
+        keep_history: bool = False,
     ) -> None:
         self.window = int(check("nis_window", window))
         self.sustain = 2 * self.window if sustain is None else int(check("nis_window", sustain))
         self.level = check_real("level", level, low=0.0, high=1.0, high_open=True)
         self.on_event = on_event
+        self.keep_history = keep_history
         self.events: list[ConsistencyEvent] = []
         self._tracks: dict[str, _Track] = {}
 
@@ -166,6 +170,8 @@ class ConsistencyMonitor:
         q = tr.nis_sum / tr.dof_sum
         lo, hi = nis_band(tr.dof_sum, self.level)
         tr.windows += 1
+        if self.keep_history:
+            tr.history.append((time_s, q, lo, hi))
         out = not lo <= q <= hi
         tr.above += q > hi
         tr.below += q < lo
@@ -194,6 +200,11 @@ class ConsistencyMonitor:
             tr.first_exit_s,
             bool(tr.windows) and frac > INCONSISTENT_FRACTION,
         )
+
+    def history(self, track: str) -> NDArray[np.float64]:
+        """(W, 4) rows (time, q, lo, hi) of every window of ``track`` (``keep_history``)."""
+        rows = self._tracks[track].history if track in self._tracks else []
+        return np.array(rows, dtype=np.float64).reshape(-1, 4)
 
     def results(self) -> dict[str, TrackConsistency]:
         return {name: self.result(name) for name in self._tracks}

@@ -27,6 +27,19 @@ with the same engine as the Monte Carlo (``core.filters``): a track is a batch o
   method starts at the k-th of them (``core.finite_memory.start``). No track exists before:
   the plots up to the start (other radars' included, which are not used) give no rows.
 
+* **Motion model** (``StreamOptions.model``): ``"cv"``, the constant-velocity filter with
+  white-noise acceleration σa (σa = 0: the papers' Q = 0), or ``"imm"``, the IMM of
+  constant-velocity models (``core.filters.imm``): each group's batch then has a trailing
+  model axis and its rows are the combined estimates. Either way a plot is the same stages
+  (``core.filters.measurement``: the method's update, then Doppler), applied by
+  ``core.filters.step.cv_step`` or ``core.filters.imm.imm_step``.
+* **Consistency**: with ``StreamOptions.monitor`` every update's NIS (of the combined
+  prediction for the IMM) goes to a ``core.tracking.consistency.ConsistencyMonitor``, track
+  name = method.
+* **Finite-memory track** (``StreamOptions.finite_memory_k`` = k > 0): beside the recursive
+  tracks, at each plot of the first radar seen, the finite-memory fit over its last k equally
+  spaced plots (the start's fit, slid along), as an extra row named ``FINITE_MEMORY_TRACK``.
+
 State rows are always in the 3D layout (x, ẋ, y, ẏ, z, ż), z = ż = 0 for 2D tracks.
 """
 

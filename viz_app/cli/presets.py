@@ -8,15 +8,9 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
-
+from radarviz.core.experiments.manoeuvre import flight_plots
 from radarviz.core.params import check_choice
-from radarviz.core.scenarios.manoeuvre import (
-    DOPPLER_RADARS,
-    FLIGHTS,
-    MANOEUVRE_RADARS,
-    manoeuvre_plots,
-)
+from radarviz.core.scenarios.manoeuvre import DOPPLER_RADARS, FLIGHTS, MANOEUVRE_RADARS
 from radarviz.core.tracking.stream import Plot
 from radarviz.viz_app.io.plots import SIM_PRESETS, Radar
 
@@ -47,27 +41,5 @@ def manoeuvre_file_plots(
     """Flight ``flight``'s plots (noise run 0 of ``seed``), angles rounded through degrees as
     the file gives them; ``steps``: scans per radar (default the whole flight)."""
     check_choice("flight", flight, FLIGHT_NAMES)
-    index = FLIGHT_NAMES.index(flight)
-    m = manoeuvre_plots(runs=1, seed=seed, flights=(FLIGHTS[index],), steps=steps)
-    radars = manoeuvre_radars()
-    sched = m.schedule
-    plots = []
-    for n in range(sched.time_s.size):
-        r = radars[int(sched.radar[n])]
-        vr = float(m.radial_velocity_mps[n, 0, 0])
-        plots.append(
-            Plot(
-                float(sched.time_s[n]),
-                float(m.range_m[n, 0, 0]),
-                math.radians(math.degrees(float(m.azimuth_rad[n, 0, 0]))),
-                r.sigma_range_m,
-                math.radians(r.sigma_azimuth_deg),
-                (r.x_m, r.y_m, r.z_m),
-                r.name,
-                math.radians(math.degrees(float(m.elevation_rad[n, 0, 0]))),
-                math.radians(float(r.sigma_elevation_deg or 0.0)),
-                None if np.isnan(vr) else vr,
-                r.sigma_radial_velocity_mps or 0.0,
-            )
-        )
-    return plots, radars
+    plots, _ = flight_plots(FLIGHT_NAMES.index(flight), seed, steps, through_degrees=True)
+    return plots, manoeuvre_radars()
