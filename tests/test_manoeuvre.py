@@ -330,6 +330,14 @@ def test_reproduce_manoeuvre_meets_its_targets(capsys) -> None:
         assert r["rmse_over_raw"]["value"] > 5.0
     for v in doc["straight_line"]["imm_over_cv"].values():
         assert 1.0 < v["value"] < 1.5
+    # The finite-memory tracks (k = 5): consistent, and no better than their radar's plots
+    # across the line of sight (docs/manoeuvre.md, section 3).
+    fm = {f["radar"]: f for f in doc["finite_memory"]}
+    assert fm["north"]["with_doppler"] is False and fm["east"]["with_doppler"] is True
+    for f in fm.values():
+        lo, hi = f["nees_pos"]["ci95"]
+        assert 2.1 <= lo and hi <= 4.5
+        assert 0.95 < f["rmse_over_raw"]["value"] < 1.05
 
 
 # --------------------------------------------------------------------------------------------

@@ -41,6 +41,8 @@ from radarviz.core.filters.methods import (
     method_named,
 )
 from radarviz.core.filters.models import DEFAULT_IMM, CVModel, IMMModel
+from radarviz.core.finite_memory.fit import finite_memory_fit
+from radarviz.core.finite_memory.start import finite_memory_start
 from radarviz.core.metrics import nees_band
 from radarviz.core.params import ParameterError, check, check_int
 from radarviz.core.scenarios.manoeuvre import FLIGHTS, ManoeuvrePlots, manoeuvre_plots
@@ -85,6 +87,7 @@ class ManoeuvreConfig:
     nis_window: int = 10
     sigma_v0_mps: float = 1000.0
     straight_runs: int = 256
+    finite_memory_k: int = 5
 
     def __post_init__(self) -> None:
         check_int("runs", self.runs, low=2, high=10_000)
@@ -99,6 +102,8 @@ class ManoeuvreConfig:
         check("sigma_v0_mps", self.sigma_v0_mps)
         if self.straight_runs:
             check_int("straight_runs", self.straight_runs, low=2, high=100_000)
+        if self.finite_memory_k:
+            check_int("finite_memory_k", self.finite_memory_k, low=3, high=100)
 
 
 class Figure(NamedTuple):
@@ -234,6 +239,18 @@ def _stream_options(motion: CVModel | IMMModel, monitor: ConsistencyMonitor) -> 
     return StreamOptions(model="cv", sigma_a_mps2=motion.sigma_a_mps2, monitor=monitor)
 
 
+class FiniteMemoryResult(NamedTuple):
+    """The sliding-window finite-memory track of one radar (``track --finite-memory K``)."""
+
+    radar: str
+    k: int
+    with_doppler: bool
+    rmse_m: Figure
+    raw_rmse_m: Figure  # that radar's own converted plots, same plots
+    rmse_ratio: Figure
+    nees: Figure
+
+
 class ManoeuvreResult(NamedTuple):
     config: ManoeuvreConfig
     flights: tuple[str, ...]
@@ -242,6 +259,7 @@ class ManoeuvreResult(NamedTuple):
     results: dict[str, dict[str, ModelResult]]  # model → method → result
     nees_band_per_plot: tuple[float, float]
     straight: StraightLineResult | None
+    finite_memory: tuple[FiniteMemoryResult, ...] = ()
 
 
 def _groups_of(values: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -403,6 +421,62 @@ def straight_line_check(
     return StraightLineResult(runs, rmse["cv"], rmse["imm"], ratio)
 
 
+def finite_memory_tracks(
+    mp: ManoeuvrePlots, raw: NDArray[np.float64], radar: int, k: int, sigma_v0_mps: float
+) -> FiniteMemoryResult:
+    """Radar ``radar``'s sliding-window track over every run: at each of its plots from the
+    k-th on, the finite-memory fit of its last k ranges (and radial velocities, if it has
+    Doppler) placed on the plot's line of sight (``core.finite_memory``, the fit and start
+    ``StreamTracker`` uses), against the truth and against that radar's own raw plots."""
+    sched = mp.schedule
+    site = sched.radars[radar]
+    idx = np.flatnonzero(sched.radar == radar)
+    _, f, m = mp.range_m.shape
+    b = f * m
+    doppler = bool(mp.doppler[idx[0]])
+    fit = finite_memory_fit(
+        k,
+        sigma_r_m=site.sigma_r_m,
+        sigma_vr_mps=site.sigma_vr_mps if doppler else None,
+        period_s=site.period_s,
+        with_doppler=doppler,
+    )
+    truth = np.repeat(mp.true_position_m, m, axis=1)
+    ranges = mp.range_m[idx].reshape(idx.size, b)
+    vrs = mp.radial_velocity_mps[idx].reshape(idx.size, b)
+    e2 = np.zeros(b)
+    raw2 = np.zeros(b)
+    nees = np.zeros(b)
+    for i in range(k - 1, idx.size):
+        n = idx[i]
+        st = finite_memory_start(
+            fit,
+            ranges[i - k + 1 : i + 1].T,
+            vrs[i - k + 1 : i + 1].T if doppler else None,
+            mp.azimuth_rad[n].reshape(b),
+            mp.elevation_rad[n].reshape(b),
+            sigma_azimuth_rad=site.sigma_azimuth_rad,
+            sigma_elevation_rad=site.sigma_elevation_rad,
+            sigma_v0_mps=sigma_v0_mps,
+            site=np.asarray(site.position, dtype=np.float64),
+        )
+        err = st.x[..., 0::2] - truth[n]
+        e2 += (err**2).sum(-1)
+        raw2 += (raw[n] ** 2).sum(-1)
+        Ppos = st.P[..., 0::2, 0::2]
+        nees += np.einsum("bi,bi->b", err, np.linalg.solve(Ppos, err[..., None])[..., 0])
+    count = np.full(b, float(idx.size - k + 1))
+    return FiniteMemoryResult(
+        site.name,
+        k,
+        doppler,
+        _ratio_figure(e2, count, sqrt=True),
+        _ratio_figure(raw2, count, sqrt=True),
+        _ratio_of_rmse(e2, raw2, count),
+        _ratio_figure(nees, count, sqrt=False),
+    )
+
+
 def run_manoeuvre(cfg: ManoeuvreConfig, flights: Sequence = FLIGHTS) -> ManoeuvreResult:
     """The whole experiment (module docstring)."""
     mp = manoeuvre_plots(cfg.runs, cfg.seed, tuple(flights))
@@ -422,6 +496,19 @@ def run_manoeuvre(cfg: ManoeuvreConfig, flights: Sequence = FLIGHTS) -> Manoeuvr
         straight = straight_line_check(
             cfg.straight_runs, cfg.seed, (CVModel(0.0), imm), cfg.sigma_v0_mps
         )
+    fm: tuple[FiniteMemoryResult, ...] = ()
+    if cfg.finite_memory_k:
+        # The first radar (what ``track --finite-memory`` uses) and the first with Doppler.
+        with_doppler = [
+            j
+            for j in range(len(mp.schedule.radars))
+            if mp.doppler[np.flatnonzero(mp.schedule.radar == j)[0]]
+        ]
+        radars = [0, *with_doppler[:1]]
+        fm = tuple(
+            finite_memory_tracks(mp, raw, j, cfg.finite_memory_k, cfg.sigma_v0_mps)
+            for j in dict.fromkeys(radars)
+        )
     b = mp.range_m.shape[1] * mp.range_m.shape[2]
     return ManoeuvreResult(
         cfg,
@@ -431,4 +518,5 @@ def run_manoeuvre(cfg: ManoeuvreConfig, flights: Sequence = FLIGHTS) -> Manoeuvr
         results,
         nees_band(3, b),
         straight,
+        fm,
     )

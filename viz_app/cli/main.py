@@ -147,6 +147,13 @@ def build_parser() -> argparse.ArgumentParser:
         "default 256)",
     )
     man.add_argument(
+        "--finite-memory",
+        type=integer,
+        default=5,
+        metavar="K",
+        help="window of the finite-memory tracks (0: skip them; default 5)",
+    )
+    man.add_argument(
         "--json", action="store_true", help="print only the JSON document on standard output"
     )
 
@@ -306,7 +313,14 @@ def _cmd_reproduce_manoeuvre(args: argparse.Namespace) -> int:
     check_int("--runs", args.runs, low=2, high=10_000)
     if args.straight_runs != 0:
         check_int("--straight-runs", args.straight_runs, low=2, high=100_000)
-    cfg = ManoeuvreConfig(runs=args.runs, seed=args.seed, straight_runs=args.straight_runs)
+    if args.finite_memory != 0:
+        check_int("--finite-memory", args.finite_memory, low=3, high=100)
+    cfg = ManoeuvreConfig(
+        runs=args.runs,
+        seed=args.seed,
+        straight_runs=args.straight_runs,
+        finite_memory_k=args.finite_memory,
+    )
     from radarviz.viz_app.reports.manoeuvre import format_manoeuvre_table, manoeuvre_document
 
     doc = manoeuvre_document(run_manoeuvre(cfg))

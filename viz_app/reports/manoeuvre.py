@@ -91,6 +91,19 @@ def manoeuvre_document(res: ManoeuvreResult) -> dict[str, Any]:
         "targets": targets,
         "flags_q0": bool(q0) and all(r.flagged_runs == 1.0 for r in q0.values()),
     }
+    if res.finite_memory:
+        doc["finite_memory"] = [
+            {
+                "radar": f.radar,
+                "k": f.k,
+                "with_doppler": f.with_doppler,
+                "rmse_m": figure_document(f.rmse_m),
+                "raw_rmse_m": figure_document(f.raw_rmse_m),
+                "rmse_over_raw": figure_document(f.rmse_ratio),
+                "nees_pos": figure_document(f.nees),
+            }
+            for f in res.finite_memory
+        ]
     if res.straight is not None:
         s = res.straight
         doc["straight_line"] = {
@@ -138,6 +151,14 @@ def format_manoeuvre_table(doc: dict[str, Any]) -> str:
         + ", ".join(f"{k} {'met' if v else 'NOT met'}" for k, v in t["imm_meets"].items())
     )
     lines.append(f"monitor flags cv-q0 on every run: {'yes' if doc['flags_q0'] else 'no'}")
+    for f in doc.get("finite_memory", []):
+        lines.append(
+            f"finite-memory track, radar {f['radar']}, k = {f['k']} "
+            f"({'range + Doppler' if f['with_doppler'] else 'range only'}): RMSE "
+            f"{_fig(f['rmse_m'], '.4g')} m against its radar's raw plots "
+            f"{_fig(f['raw_rmse_m'], '.4g')} m (ratio {_fig(f['rmse_over_raw'])}), "
+            f"NEES {_fig(f['nees_pos'])}"
+        )
     s = doc.get("straight_line")
     if s:
         lines.append("")
