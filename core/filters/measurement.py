@@ -83,17 +83,31 @@ class PlotMeasurement:
         if not models:  # the arrays were made for this batch
             return self.plot, self.noise, self.parts
         shape = state.batch_shape
-        plot = PolarPlot(*(_expand(v, models) for v in self.plot))
+        # An IMM step asks twice per stage (likelihoods, update): expand the arrays once.
+        cache = self.__dict__.setdefault("_expansions", {})
+        if shape not in cache:
+            cache[shape] = self._expanded(shape)
+        return cache[shape]
+
+    def _expanded(self, shape: tuple[int, ...]) -> tuple[PolarPlot, PolarNoise, Parts | None]:
+        plot = PolarPlot(*(_expand(v, True) for v in self.plot))
         if not self.group.converted:  # the polar updates take arrays of the batch's shape
             plot = PolarPlot(*(None if v is None else np.broadcast_to(v, shape) for v in plot))
-        noise = PolarNoise(*(_expand(v, models) for v in self.noise))
+        noise = PolarNoise(*(_expand(v, True) for v in self.noise))
         parts = self.parts
         if parts is not None:
             z, R = parts
-            parts = (
-                [np.broadcast_to(np.asarray(v)[..., None], shape) for v in z],
-                {k: np.broadcast_to(np.asarray(v)[..., None], shape) for k, v in R.items()},
-            )
+            if any(k.about_prediction for k in self.group.kinds):
+                # ``ducm`` rewrites its row per model: the parts need the batch's full shape.
+                parts = (
+                    [np.broadcast_to(np.asarray(v)[..., None], shape) for v in z],
+                    {k: np.broadcast_to(np.asarray(v)[..., None], shape) for k, v in R.items()},
+                )
+            else:
+                parts = (
+                    [np.asarray(v)[..., None] for v in z],
+                    {k: np.asarray(v)[..., None] for k, v in R.items()},
+                )
         return plot, noise, parts
 
     def innovation(self, state: CVBatch, models: bool = False) -> InnovationStats:

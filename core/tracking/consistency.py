@@ -71,9 +71,10 @@ class ConsistencyEvent(NamedTuple):
     def message(self) -> str:
         side = "above" if self.q > self.hi else "below"
         if self.kind == "leaves":
+            value = f"{self.q:.3g}" if math.isfinite(self.q) else "not finite (a broken track)"
             return (
                 f"track {self.track} has left its NIS band at t = {self.time_s:g} s: windowed "
-                f"NIS/dof {self.q:.3g} {side} [{self.lo:.3g}, {self.hi:.3g}]"
+                f"NIS/dof {value} {side} [{self.lo:.3g}, {self.hi:.3g}]"
             )
         return f"track {self.track} is back in its NIS band at t = {self.time_s:g} s"
 
