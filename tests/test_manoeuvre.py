@@ -299,6 +299,8 @@ def test_track_defaults_to_a_consistent_imm_and_writes_its_summary(
         (["--model", "ct"], "--model must be one of cv, imm (got 'ct')"),
         (["--nis-window", "0"], "--nis-window must be an integer in [1, 10000] (got 0)"),
         (["--finite-memory", "1"], "--finite-memory must be an integer in [2, 1000] (got 1)"),
+        (["--model", "imm", "--sigma-a", "1"], "--sigma-a is the cv model's"),
+        (["--sigma-a", "1", "--imm-sigma-a", "1", "5"], "--imm-sigma-a is the imm model's"),
     ],
 )
 def test_bad_model_parameters_are_one_line_exit_2_nothing_written(
@@ -384,3 +386,18 @@ def test_track_recording_logs_the_band_exits(manoeuvre_files, tmp_path: Path, rr
     exits = [(t, lv) for t, lv in zip(texts, levels, strict=True) if "has left its NIS band" in t]
     assert {t.split()[1] for t, _ in exits} == set(METHODS_3D)
     assert all(lv == "WARN" for _, lv in exits)
+
+
+@pytest.mark.parametrize(
+    ("args", "needle"),
+    [
+        (["--flight", "loop"], "--flight must be one of approach, departure"),
+        (["--scans", "1"], "--scans must be an integer in [2, 10000000] (got 1)"),
+    ],
+)
+def test_bad_manoeuvre_preset_input_writes_nothing(tmp_path: Path, capsys, args, needle) -> None:
+    argv = ["simulate", "--preset", "manoeuvre", "--out", str(tmp_path / "m.csv")]
+    assert main([*argv, "--radars-out", str(tmp_path / "r.toml"), *args]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and needle in err, err
+    assert list(tmp_path.iterdir()) == []

@@ -302,7 +302,7 @@ def manoeuvre_plots(
     seed = int(check("seed", seed))
     duration = min(f.duration_s for f in flights)
     if steps is not None:
-        steps = int(check("steps", steps))
+        steps = check_int("steps", steps, low=2)  # beyond the flight it changes nothing
         duration = min(duration, (steps - 1) * min(r.period_s for r in radars))
     sched = plot_schedule(duration, radars)
     truths = [fly(f) for f in flights]

@@ -199,6 +199,16 @@ def _motion_options(args: argparse.Namespace) -> dict:
     model = args.model
     if model is None:
         model = "cv" if args.sigma_a_mps2 is not None else "imm"
+    # A flag of the other model would be ignored without a word: refuse it instead.
+    if model == "imm" and args.sigma_a_mps2 is not None:
+        raise ParameterError("--sigma-a is the cv model's; with --model imm use --imm-sigma-a")
+    if model == "cv":
+        for flag, value in (
+            ("--imm-sigma-a", args.imm_sigma_a_mps2),
+            ("--imm-transition", args.imm_transition),
+        ):
+            if value is not None:
+                raise ParameterError(f"{flag} is the imm model's; it needs --model imm")
     sigmas = tuple(
         DEFAULT_IMM.sigma_a_mps2 if args.imm_sigma_a_mps2 is None else args.imm_sigma_a_mps2
     )
@@ -276,6 +286,8 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     if args.preset == "manoeuvre":
         check("sigma_beta_deg", args.sigma_beta_deg)
         check_choice("flight", args.flight, FLIGHT_NAMES)
+        if args.steps is not None:
+            check("steps", args.steps, high=MAX_SIMULATE_STEPS)
         plots, radars = manoeuvre_file_plots(args.flight, args.seed, args.steps)
     else:
         steps = default("steps") if args.steps is None else args.steps
