@@ -268,22 +268,12 @@ def _groups_of(values: NDArray[np.float64]) -> NDArray[np.float64]:
 
 
 def _ratio_figure(num: NDArray[np.float64], den: NDArray[np.float64], sqrt: bool) -> Figure:
-    """(Σ num / Σ den)[^½] over runs (B,) with its jackknife band."""
+    """(Σ num / Σ den)[^½] over runs (B,) with its jackknife band: an RMSE (num = Σ e², den =
+    count), a mean (sqrt False), or a ratio of two RMSEs over the same plots and runs."""
     gn, gd = _groups_of(num), _groups_of(den)
     f = (lambda v: np.sqrt(v)) if sqrt else (lambda v: v)
     est = f(num.sum() / den.sum())
     loo = f((num.sum() - gn) / (den.sum() - gd))
-    lo, hi = jackknife_band(est, loo)
-    return Figure(float(est), float(lo), float(hi))
-
-
-def _ratio_of_rmse(
-    e2: NDArray[np.float64], raw2: NDArray[np.float64], count: NDArray[np.float64]
-) -> Figure:
-    """√(Σ e² / Σ raw²) (same plots, same runs) with its jackknife band."""
-    ge, gr = _groups_of(e2), _groups_of(raw2)
-    est = np.sqrt(e2.sum() / raw2.sum())
-    loo = np.sqrt((e2.sum() - ge) / (raw2.sum() - gr))
     lo, hi = jackknife_band(est, loo)
     return Figure(float(est), float(lo), float(hi))
 
@@ -367,7 +357,7 @@ def _model_result(
     e2 = (e[burn:] ** 2).sum(-1).sum(0)  # per run (B,)
     count = np.full(e2.shape, float(e.shape[0] - burn))
     rmse = _ratio_figure(e2, count, sqrt=True)
-    ratio = _ratio_of_rmse(e2, raw2, count)
+    ratio = _ratio_figure(e2, raw2, sqrt=True)  # same plots, same runs
     nees_fig = _ratio_figure(nees[burn:].sum(0), count, sqrt=False)
     lo, hi = nees_band(3, nees.shape[1])
     per_plot = nees[burn:].mean(axis=1)
@@ -412,7 +402,7 @@ def straight_line_check(
             for i, name in enumerate(names):
                 e2[label][name] = acc[i]
     ratio = {
-        name: _ratio_of_rmse(e2["imm"][name], e2["cv"][name], np.ones(runs)) for name in ALL_METHODS
+        name: _ratio_figure(e2["imm"][name], e2["cv"][name], sqrt=True) for name in ALL_METHODS
     }
     rmse = {
         label: {name: float(np.sqrt(v.mean() / 30.0)) for name, v in e2[label].items()}
@@ -472,7 +462,7 @@ def finite_memory_tracks(
         doppler,
         _ratio_figure(e2, count, sqrt=True),
         _ratio_figure(raw2, count, sqrt=True),
-        _ratio_of_rmse(e2, raw2, count),
+        _ratio_figure(e2, raw2, sqrt=True),
         _ratio_figure(nees, count, sqrt=False),
     )
 
