@@ -91,7 +91,7 @@ def check_probabilities(name: str, row: tuple[float, ...], r: int) -> None:
     if len(row) != r:
         raise ParameterError(f"{name} must have {r} entries (got {len(row)})", name)
     for p in row:
-        check_real(name, p, low=0.0, high=1.0, high_open=True, parameter=name)
+        check_real(name, p, low=0.0, high=1.0, high_open=True)
     total = math.fsum(row)
     if abs(total - 1.0) > ROW_SUM_TOLERANCE:
         raise ParameterError(
@@ -112,7 +112,7 @@ def check_transition(transition: tuple[tuple[float, ...], ...], r: int) -> None:
         if len(row) != r:
             raise ParameterError(f"{name} row {i + 1} must have {r} entries (got {len(row)})", name)
         for p in row:
-            check_real(name, p, low=0.0, high=1.0, high_open=True)
+            check(name, p)  # the table's (0, 1)
         total = math.fsum(row)
         if abs(total - 1.0) > ROW_SUM_TOLERANCE:
             raise ParameterError(
