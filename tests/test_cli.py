@@ -193,6 +193,13 @@ def test_bench_figures_are_consistent(capsys) -> None:
     assert set(doc["tune_median_ms"]) == {"prosov", "gorshkov", "velocity"}
     for scene, ms in doc["tune_median_ms"].items():
         assert math.isfinite(ms) and ms > 0, (scene, ms)
+    imm = doc["imm"]
+    assert imm["runs"] == 500 and imm["filterpy_runs"] == 3
+    for label in ("batch", "single"):
+        v = imm[label]
+        assert all(math.isfinite(v[k]) and v[k] > 0 for k in v), (label, v)
+        assert v["imm_over_cv"] == pytest.approx(v["imm_ns_per_step"] / v["cv_ns_per_step"])
+    assert math.isfinite(imm["filterpy_imm_ns_per_step"]) and imm["filterpy_imm_ns_per_step"] > 0
     # JSON keeps full precision: the ratio is exact to rounding.
     for ours, ratio in zip(kf, doc["speedup_vs_filterpy"], strict=True):
         assert ratio == pytest.approx(fp / ours, rel=1e-12)

@@ -122,7 +122,9 @@ def test_simulate_then_track_equals_in_memory(tmp_path: Path, sigma_beta_deg: fl
         )
         == 0
     )
-    assert main(["track", "--input", str(meas), "--radars", str(radars), "--out", str(out)]) == 0
+    # The reproduction's Q = 0 filter (track's own default on a user's file is the IMM).
+    track = ["track", "--input", str(meas), "--radars", str(radars), "--out", str(out)]
+    assert main([*track, "--model", "cv"]) == 0
     rows = read_tracks(out)
     cfg = TrackingConfig(sigma_beta_deg=sigma_beta_deg, seed=3)
     r_hat, b_hat = displayed_measurements(cfg)

@@ -56,6 +56,9 @@ OTHER_COLOURS: dict[str, tuple[int, int, int]] = {
     "range_only": OKABE_ITO["vermillion"],
     "range_doppler": OKABE_ITO["blue"],
     "fused": OKABE_ITO["reddish_purple"],
+    # Motion models (the manoeuvre scene).
+    "cv-q0": OKABE_ITO["vermillion"],
+    "imm": OKABE_ITO["blue"],
 }
 
 FALLBACK: tuple[int, int, int] = (100, 100, 100)

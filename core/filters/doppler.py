@@ -56,17 +56,9 @@ def doppler_update(
     x, P = state.x, state.P
     dims, n = state.dims, x.shape[-1]
     vel = velocity_index(dims)
-    az = np.asarray(azimuth_rad, dtype=np.float64)
-    el = np.asarray(elevation_rad, dtype=np.float64)
-    ca, sa, ce, se = np.cos(az), np.sin(az), np.cos(el), np.sin(el)
-    # u = (cos ε cos β, cos ε sin β, sin ε), ∂u/∂β = cos ε (−sin β, cos β, 0),
-    # ∂u/∂ε = (−sin ε cos β, −sin ε sin β, cos ε)  (``core.geometry``), first ``dims`` axes.
-    u = (ce * ca, ce * sa, se)[:dims]
-    g_b = (-ce * sa, ce * ca)
-    g_e = (-se * ca, -se * sa, ce)
-    var_vr = np.asarray(sigma_vr_mps, dtype=np.float64) ** 2
-    var_b = np.asarray(sigma_azimuth_rad, dtype=np.float64) ** 2
-    var_e = np.asarray(sigma_elevation_rad, dtype=np.float64) ** 2
+    u, g_b, g_e, var_vr, var_b, var_e = _geometry(
+        dims, azimuth_rad, elevation_rad, sigma_vr_mps, sigma_azimuth_rad, sigma_elevation_rad
+    )
     if use_dense(state):  # the same update as matrix products (small batches)
         return _dense(state, radial_velocity_mps, u, g_b, g_e, var_vr, var_b, var_e, out)
     v = [x[..., i] for i in vel]
@@ -133,6 +125,63 @@ def _dense(
     out: CVBatch | None,
 ) -> CVBatch:
     """``doppler_update`` for small batches: the variance and the update as matrix products."""
+    return dense_joseph_update(
+        state, *_dense_terms(state, radial_velocity_mps, u, g_b, g_e, var_vr, var_b, var_e), out
+    )
+
+
+def doppler_terms(
+    state: CVBatch,
+    radial_velocity_mps: ArrayLike,
+    azimuth_rad: ArrayLike,
+    elevation_rad: ArrayLike = 0.0,
+    *,
+    sigma_vr_mps: ArrayLike,
+    sigma_azimuth_rad: ArrayLike,
+    sigma_elevation_rad: ArrayLike = 0.0,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """The Doppler measurement as a linear one: ν (..., 1), H (..., 1, n) and var e (..., 1, 1)
+    (module docstring), for the innovation statistics (``core.filters.innovation``)."""
+    geometry = _geometry(
+        state.dims, azimuth_rad, elevation_rad, sigma_vr_mps, sigma_azimuth_rad, sigma_elevation_rad
+    )
+    return _dense_terms(state, radial_velocity_mps, *geometry)
+
+
+def _geometry(
+    dims: int,
+    azimuth_rad: ArrayLike,
+    elevation_rad: ArrayLike,
+    sigma_vr_mps: ArrayLike,
+    sigma_azimuth_rad: ArrayLike,
+    sigma_elevation_rad: ArrayLike,
+) -> tuple:
+    """u, ∂u/∂β, ∂u/∂ε (first ``dims`` axes) and the variances σVr², σβ², σε²."""
+    az = np.asarray(azimuth_rad, dtype=np.float64)
+    el = np.asarray(elevation_rad, dtype=np.float64)
+    ca, sa, ce, se = np.cos(az), np.sin(az), np.cos(el), np.sin(el)
+    # u = (cos ε cos β, cos ε sin β, sin ε), ∂u/∂β = cos ε (−sin β, cos β, 0),
+    # ∂u/∂ε = (−sin ε cos β, −sin ε sin β, cos ε)  (``core.geometry``), first ``dims`` axes.
+    u = (ce * ca, ce * sa, se)[:dims]
+    g_b = (-ce * sa, ce * ca)
+    g_e = (-se * ca, -se * sa, ce)
+    var_vr = np.asarray(sigma_vr_mps, dtype=np.float64) ** 2
+    var_b = np.asarray(sigma_azimuth_rad, dtype=np.float64) ** 2
+    var_e = np.asarray(sigma_elevation_rad, dtype=np.float64) ** 2
+    return u, g_b, g_e, var_vr, var_b, var_e
+
+
+def _dense_terms(
+    state: CVBatch,
+    radial_velocity_mps: ArrayLike,
+    u: tuple,
+    g_b: tuple,
+    g_e: tuple,
+    var_vr: NDArray[np.float64],
+    var_b: NDArray[np.float64],
+    var_e: NDArray[np.float64],
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """ν (..., 1), H (..., 1, n), var e (..., 1, 1) as arrays (the dense path's terms)."""
     dims, n = state.dims, state.x.shape[-1]
     shape = state.batch_shape
     vel = list(velocity_index(dims))
@@ -163,4 +212,4 @@ def _dense(
     nu[..., 0] = radial_velocity_mps - (u_v[..., None, :] @ v[..., :, None])[..., 0, 0]
     R = np.empty((*shape, 1, 1))
     R[..., 0, 0] = r_e
-    return dense_joseph_update(state, nu, H, R, out)
+    return nu, H, R

@@ -38,10 +38,10 @@ from numpy.typing import ArrayLike
 
 from radarviz.core.conversion.planar import convert_parts
 from radarviz.core.conversion.spatial import convert_naive_3d, convert_ucm_3d
-from radarviz.core.filters.polar_ekf import ekf_update, site_offsets
+from radarviz.core.filters.polar_ekf import ekf_pseudo_measurement, ekf_update, site_offsets
 from radarviz.core.filters.polar_ukf import ukf_update
-from radarviz.core.filters.position import cv_update_parts, upper_entries
-from radarviz.core.filters.state import CVBatch, Vec, cv_init
+from radarviz.core.filters.position import cv_update_parts, innovation_update, upper_entries
+from radarviz.core.filters.state import CVBatch, Vec, cv_init, position_index
 
 Parts = tuple[list[Vec], dict[tuple[int, int], Vec]]
 
@@ -305,6 +305,30 @@ class MethodGroup:
         """
         if not self.converted:
             return self.kinds[0].update(pred, plot, noise, site=site, out=out)
+        nu, R = self.measurement(pred, plot, noise, site=site, parts=parts)
+        return innovation_update(pred, nu, R, out)
+
+    def measurement(
+        self,
+        pred: CVBatch,
+        plot: PolarPlot,
+        noise: PolarNoise,
+        *,
+        site: ArrayLike | None = None,
+        parts: Parts | None = None,
+    ) -> tuple[Sequence[Vec], dict[tuple[int, int], Vec]]:
+        """This scan's measurement as a position measurement of the predicted batch: the
+        innovation ν (d components, m) and its noise R (upper entries, m²), each (...).
+
+        Converted methods: ν = z + site − H x⁻ with the conversion's R (what their update
+        uses). ``ekf``: its ν' = J ν and R' = J R Jᵀ at the prediction (the EKF update is the
+        position update of these, ``core.filters.polar_ekf``). ``ukf``: the same linearised
+        measurement; its own update uses sigma points, so for the UKF these are the EKF's
+        statistics of the same plot (``core.filters.innovation`` uses them for the NIS and
+        the IMM likelihood).
+        """
+        if not self.converted:
+            return ekf_pseudo_measurement(pred, plot.vectors(), site=site, **noise._asdict())
         if parts is None:
             z, R = stack_parts(
                 [
@@ -322,7 +346,21 @@ class MethodGroup:
                     if kind.about_prediction:  # ducm: its covariance at this row's prediction
                         zi, Ri = kind.convert(plot, noise, self._predicted(pred, i, site))
                         for a in range(len(z)):
-                            z[a][i] = np.reshape(zi[a], z[a][i].shape)
+                            z[a][i] = _fitted(zi[a], z[a][i])
                         for key, v in Ri.items():
-                            R[key][i] = np.reshape(v, R[key][i].shape)
-        return cv_update_parts(pred, _shifted(z, site), R, out)
+                            R[key][i] = _fitted(v, R[key][i])
+        zs = _shifted(z, site)
+        pos = position_index(pred.dims)
+        return [zs[a] - pred.x[..., p] for a, p in enumerate(pos)], R
+
+
+def _fitted(value: ArrayLike, target: ArrayLike) -> ArrayLike:
+    """``value`` shaped to go into ``target``'s place: reshaped when the sizes agree (a (1,)
+    conversion into one row), else broadcast (a plot's (M, 1) point over (M, r) models)."""
+    shape = np.shape(target)
+    v = np.asarray(value)
+    if v.size == np.prod(shape, dtype=int):
+        return np.reshape(v, shape)
+    while v.ndim > len(shape) and v.shape[0] == 1:  # a single track's leading axis of 1
+        v = v[0]
+    return np.broadcast_to(v, shape)

@@ -92,6 +92,30 @@ def ekf_update(
     Returns:
         The posterior batch (``out`` if given, else a new one).
     """
+    nu, Rp = ekf_pseudo_measurement(
+        state,
+        measurement,
+        sigma_r_m=sigma_r_m,
+        sigma_azimuth_rad=sigma_azimuth_rad,
+        sigma_elevation_rad=sigma_elevation_rad,
+        site=site,
+    )
+    # S' = H_pos P⁻ H_posᵀ + R', K' = P⁻ H_posᵀ S'⁻¹, Joseph: the position update.
+    return innovation_update(state, nu, Rp, out)
+
+
+def ekf_pseudo_measurement(
+    state: CVBatch,
+    measurement: Sequence[ArrayLike],
+    *,
+    sigma_r_m: ArrayLike,
+    sigma_azimuth_rad: ArrayLike,
+    sigma_elevation_rad: ArrayLike = 0.0,
+    site: ArrayLike | None = None,
+) -> tuple[tuple[Vec, ...], dict[tuple[int, int], Vec]]:
+    """The EKF's measurement in metres: ν' = J ν (d components) and R' = J R Jᵀ (upper
+    entries), J at the prediction (module docstring). The polar NIS νᵀ S⁻¹ ν equals
+    ν'ᵀ S'⁻¹ ν' with S' = H_pos P⁻ H_posᵀ + R' (S = G S' Gᵀ, ν = G ν')."""
     meas = polar_measurement_vectors(state, measurement)
     var_r = np.asarray(sigma_r_m, dtype=np.float64) ** 2
     var_b = np.asarray(sigma_azimuth_rad, dtype=np.float64) ** 2
@@ -129,5 +153,4 @@ def ekf_update(
             for i in range(3)
             for j in range(i, 3)
         }
-    # S' = H_pos P⁻ H_posᵀ + R', K' = P⁻ H_posᵀ S'⁻¹, Joseph: the position update.
-    return innovation_update(state, nu, Rp, out)
+    return nu, Rp

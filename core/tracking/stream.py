@@ -27,18 +27,33 @@ with the same engine as the Monte Carlo (``core.filters``): a track is a batch o
   method starts at the k-th of them (``core.finite_memory.start``). No track exists before:
   the plots up to the start (other radars' included, which are not used) give no rows.
 
+* **Motion model** (``StreamOptions.model``): ``"cv"``, the constant-velocity filter with
+  white-noise acceleration σa (σa = 0: the papers' Q = 0), or ``"imm"``, the IMM of
+  constant-velocity models (``core.filters.imm``): each group's batch then has a trailing
+  model axis and its rows are the combined estimates. Either way a plot is the same stages
+  (``core.filters.measurement``: the method's update, then Doppler), applied by
+  ``core.filters.step.cv_step`` or ``core.filters.imm.imm_step``.
+* **Consistency**: with ``StreamOptions.monitor`` every update's NIS (of the combined
+  prediction for the IMM) goes to a ``core.tracking.consistency.ConsistencyMonitor``, track
+  name = method.
+* **Finite-memory track** (``StreamOptions.finite_memory_k`` = k > 0): beside the recursive
+  tracks, at each plot of the first radar seen, the finite-memory fit over its last k equally
+  spaced plots (the start's fit, slid along), as an extra row named ``FINITE_MEMORY_TRACK``.
+
 State rows are always in the 3D layout (x, ẋ, y, ẏ, z, ż), z = ż = 0 for 2D tracks.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
 
-from radarviz.core.filters.doppler import doppler_update
+from radarviz.core.filters.imm import IMMState, imm_start, imm_step
+from radarviz.core.filters.innovation import InnovationStats
+from radarviz.core.filters.measurement import DopplerMeasurement, PlotMeasurement
 from radarviz.core.filters.methods import (
     ALL_METHODS,
     METHODS_3D,
@@ -48,13 +63,17 @@ from radarviz.core.filters.methods import (
     PolarPlot,
     method_groups,
 )
-from radarviz.core.filters.predict import cv_predict
+from radarviz.core.filters.models import DEFAULT_IMM, MOTION_MODELS, CVModel, IMMModel
 from radarviz.core.filters.state import CVBatch
+from radarviz.core.filters.step import Stage, cv_step
 from radarviz.core.finite_memory.fit import finite_memory_fit
 from radarviz.core.finite_memory.start import finite_memory_start
 from radarviz.core.params import ParameterError, check, check_choice, check_int
+from radarviz.core.tracking.consistency import ConsistencyMonitor
 
 INIT_MODES: tuple[str, ...] = ("first-plot", "finite-memory")
+#: The method name of the sliding-window finite-memory track in the rows.
+FINITE_MEMORY_TRACK = "finite-memory"
 
 StateRow = tuple[str, NDArray[np.float64], NDArray[np.float64]]
 
@@ -115,14 +134,15 @@ class TrackGroup:
 
     ``methods`` is either one polar method (``ekf``, ``ukf``) or any number of converted-
     measurement methods (``core.filters.methods.MethodGroup``); ``dims`` is 2 or 3. The
-    batch has one row per method.
+    batch has one row per method; with an IMM ``motion`` each row carries its r models on a
+    trailing axis (``core.filters.imm``) and ``state`` is the combined estimate.
     """
 
     def __init__(
         self,
         methods: tuple[str, ...],
         dims: int,
-        sigma_a_mps2: float = 0.0,
+        motion: CVModel | IMMModel | None = None,
         sigma_v0_mps: float = 1000.0,
     ):
         for m in methods:
@@ -130,9 +150,10 @@ class TrackGroup:
         self.group = MethodGroup(methods)
         self.methods = tuple(methods)
         self.dims = dims
-        self.sigma_a = float(check("sigma_a_mps2", sigma_a_mps2))
+        self.motion = CVModel() if motion is None else motion
         self.sigma_v0 = float(check("sigma_v0_mps", sigma_v0_mps))
         self.state: CVBatch | None = None
+        self.imm: IMMState | None = None
         self.time_s: float | None = None
 
     def precompute(self, plots: list[Plot]) -> Parts | None:
@@ -151,8 +172,12 @@ class TrackGroup:
     def start_from(self, x: NDArray[np.float64], P: NDArray[np.float64], time_s: float) -> None:
         """Start every method of the group at x (n,), P (n, n) (absolute frame)."""
         m = len(self.methods)
-        self.state = CVBatch(np.tile(x, (m, 1)), np.tile(P, (m, 1, 1)))
-        self.time_s = time_s
+        self._started(CVBatch(np.tile(x, (m, 1)), np.tile(P, (m, 1, 1))), time_s)
+
+    def _started(self, state: CVBatch, time_s: float) -> None:
+        self.state, self.time_s = state, time_s
+        if isinstance(self.motion, IMMModel):
+            self.imm = imm_start(state, self.motion)
 
     def add(
         self,
@@ -160,34 +185,63 @@ class TrackGroup:
         pre: Parts | None,
         use_doppler: bool = True,
         polar: tuple[PolarPlot, PolarNoise] | None = None,
-    ) -> CVBatch:
+        with_stats: bool = True,
+    ) -> tuple[CVBatch, InnovationStats | None]:
         """Filter one plot; ``pre`` this plot's slice of ``precompute`` (z (M,), R (M,));
-        ``polar``: the plot as (1,) arrays if the caller has them (every group shares them)."""
-        m = len(self.methods)
+        ``polar``: the plot as (1,) arrays if the caller has them (every group shares them).
+
+        Returns the posterior (one row per method) and, with ``with_stats``, the plot's
+        innovation statistics (None at the start, which has no prediction).
+        """
         site = np.asarray(p.site[: self.dims], dtype=np.float64)
         plot, noise = polar if polar is not None else polar_arrays([p], self.dims)
-        if self.state is None:
-            state = self.group.start(plot, noise, sigma_v0_mps=self.sigma_v0, site=site, parts=pre)
-        else:
-            assert self.time_s is not None
-            dt = p.time_s - self.time_s
-            if dt < 0:
-                raise ValueError(f"times must not decrease (got {p.time_s} after {self.time_s})")
-            pred = cv_predict(self.state, dt, self.sigma_a) if dt > 0 else self.state
-            state = self.group.update(pred, plot, noise, site=site, parts=pre)
+        doppler = None
         if use_doppler and p.radial_velocity_mps is not None:
             # Linear in the velocity: the position frame does not matter.
-            state = doppler_update(
-                state,
-                np.full(m, p.radial_velocity_mps),
+            doppler = DopplerMeasurement(
+                p.radial_velocity_mps,
                 p.azimuth_rad,
                 0.0 if p.elevation_rad is None else p.elevation_rad,
-                sigma_vr_mps=p.sigma_radial_velocity_mps,
-                sigma_azimuth_rad=p.sigma_azimuth_rad,
-                sigma_elevation_rad=p.sigma_elevation_rad,
+                p.sigma_radial_velocity_mps,
+                p.sigma_azimuth_rad,
+                p.sigma_elevation_rad,
             )
-        self.state, self.time_s = state, p.time_s
-        return state
+        return self.add_arrays(p.time_s, plot, noise, site, pre, doppler, with_stats)
+
+    def add_arrays(
+        self,
+        time_s: float,
+        plot: PolarPlot,
+        noise: PolarNoise,
+        site: NDArray[np.float64],
+        pre: Parts | None,
+        doppler: DopplerMeasurement | None,
+        with_stats: bool = True,
+    ) -> tuple[CVBatch, InnovationStats | None]:
+        """``add`` for one plot time given as arrays: the plot's values broadcast against the
+        batch after its method axis, so a batch of runs (k, M) takes (M,) arrays (the Monte
+        Carlo of ``core.experiments.manoeuvre``) and a single track (k,) takes (1,) ones."""
+        stages: list[Stage] = [PlotMeasurement(self.group, plot, noise, site, pre)]
+        if doppler is not None:
+            stages.append(doppler)
+        if self.state is None:
+            state = self.group.start(plot, noise, sigma_v0_mps=self.sigma_v0, site=site, parts=pre)
+            for stage in stages[1:]:  # the start is the position stage; Doppler follows it
+                state = stage.update(state)
+            self._started(state, time_s)
+            return state, None
+        assert self.time_s is not None
+        dt = time_s - self.time_s
+        if dt < 0:
+            raise ValueError(f"times must not decrease (got {time_s} after {self.time_s})")
+        if self.imm is not None:
+            assert isinstance(self.motion, IMMModel)
+            self.imm, state, stats = imm_step(self.imm, dt, self.motion, stages, with_stats)
+        else:
+            assert isinstance(self.motion, CVModel)
+            state, stats = cv_step(self.state, dt, self.motion.sigma_a_mps2, stages, with_stats)
+        self.state, self.time_s = state, time_s
+        return state, stats
 
 
 @dataclass(frozen=True)
@@ -195,12 +249,20 @@ class StreamOptions:
     """How ``StreamTracker`` filters.
 
     Attributes:
-        sigma_a_mps2: process-noise acceleration std (0: constant velocity exactly).
+        sigma_a_mps2: process-noise acceleration std of the ``cv`` model (0: constant
+            velocity exactly, the papers' Q = 0).
         sigma_v0_mps: velocity std of the start (the papers' 1000 m/s).
         use_doppler: use the plots' radial velocities (when they have them).
         init: ``"first-plot"`` (the papers' start) or ``"finite-memory"`` (Gorshkov and
             Zavizhenets' window fit, ``docs/finite_memory.md``).
         init_k: plots in the finite-memory window (≥ 2 with Doppler, ≥ 3 without).
+        model: ``"cv"`` or ``"imm"`` (``core.filters.models``).
+        imm_sigma_a_mps2, transition_prob: the IMM's σa per model and its transition matrix
+            (rows), used with ``model="imm"`` and checked always.
+        finite_memory_k: 0, or the window k of a sliding-window finite-memory track kept
+            beside the recursive ones (rows named ``FINITE_MEMORY_TRACK``).
+        monitor: a consistency monitor fed every update's NIS, track name = method
+            (``core.tracking.consistency``), or None.
     """
 
     sigma_a_mps2: float = 0.0
@@ -208,12 +270,29 @@ class StreamOptions:
     use_doppler: bool = True
     init: str = "first-plot"
     init_k: int = 3
+    model: str = "cv"
+    imm_sigma_a_mps2: tuple[float, ...] = DEFAULT_IMM.sigma_a_mps2
+    transition_prob: tuple[tuple[float, ...], ...] = DEFAULT_IMM.transition
+    finite_memory_k: int = 0
+    monitor: ConsistencyMonitor | None = field(default=None, compare=False)
 
     def __post_init__(self) -> None:
         check("sigma_a_mps2", self.sigma_a_mps2)
         check("sigma_v0_mps", self.sigma_v0_mps)
         check_choice("init", self.init, INIT_MODES)
         check_int("init_k", self.init_k, low=2, high=1000)
+        check_choice("model", self.model, MOTION_MODELS)
+        self.motion()
+        if self.finite_memory_k:
+            check_int("finite_memory_k", self.finite_memory_k, low=2, high=1000)
+
+    def motion(self) -> CVModel | IMMModel:
+        """The motion model these options ask for."""
+        if self.model == "imm":
+            return IMMModel(tuple(self.imm_sigma_a_mps2), tuple(map(tuple, self.transition_prob)))
+        # The IMM's parameters are checked even for a cv run: a bad value is an error either way.
+        IMMModel(tuple(self.imm_sigma_a_mps2), tuple(map(tuple, self.transition_prob)))
+        return CVModel(self.sigma_a_mps2)
 
 
 class StreamTracker:
@@ -242,13 +321,15 @@ class StreamTracker:
         o = options
         dims = 3 if three_d else 2
         self._groups = [
-            TrackGroup(g, dims, o.sigma_a_mps2, o.sigma_v0_mps) for g in method_groups(self.methods)
+            TrackGroup(g, dims, o.motion(), o.sigma_v0_mps) for g in method_groups(self.methods)
         ]
         self._where = {
             m: (k, i) for k, tr in enumerate(self._groups) for i, m in enumerate(tr.methods)
         }
         self._window: list[Plot] | None = [] if o.init == "finite-memory" else None
         self._started = False
+        self._fm_window: list[Plot] = []
+        self._fm_radar: str | None = None
 
     def add(self, p: Plot) -> list[StateRow]:
         """Filter one plot; returns (method, x (6,), P (6, 6)) per method in ``methods`` order,
@@ -278,13 +359,26 @@ class StreamTracker:
                 out.append(self._rows() if self._started else [])
                 continue
             polar = polar_arrays([p], 3 if self.three_d else 2)  # shared by all groups
+            monitor = self.options.monitor
             for g, parts in zip(self._groups, pre, strict=True):
                 row = None
                 if parts is not None:
                     row = ([z[:, i] for z in parts[0]], {k: v[:, i] for k, v in parts[1].items()})
-                g.add(p, row, use_doppler, polar)
+                _, stats = g.add(p, row, use_doppler, polar, monitor is not None)
+                if monitor is not None and stats is not None:
+                    for j, m in enumerate(g.methods):
+                        monitor.add(m, p.time_s, float(stats.nis[j]), stats.dof)
             self._started = True
-            out.append(self._rows())
+            rows = self._rows()
+            if self.options.finite_memory_k:
+                try:
+                    fm = self._finite_memory_row(p)
+                except PlotError as exc:
+                    exc.index = i
+                    raise
+                if fm is not None:
+                    rows.append(fm)
+            out.append(rows)
         return out
 
     def _rows(self) -> list[StateRow]:
@@ -293,12 +387,7 @@ class StreamTracker:
             k, i = self._where[m]
             st = self._groups[k].state
             assert st is not None
-            n = st.x.shape[-1]
-            x6 = np.zeros(6)
-            P6 = np.zeros((6, 6))
-            x6[:n] = st.x[i]
-            P6[:n, :n] = st.P[i]
-            rows.append((m, x6, P6))
+            rows.append((m, *_rows_6(st, i)))
         return rows
 
     def _fill_window(self, p: Plot) -> None:
@@ -324,6 +413,17 @@ class StreamTracker:
         win.append(p)
         if len(win) < k:
             return
+        start = self._window_fit(win, "the finite-memory start", "init_k")
+        for g in self._groups:
+            g.start_from(start.x.copy(), start.P.copy(), p.time_s)
+        self._started = True
+        self._window = None
+
+    def _window_fit(self, win: list[Plot], what: str, flag: str) -> CVBatch:
+        """The CV state at the newest of ``win`` (k equally spaced plots of one radar) from
+        the finite-memory least-squares fit of their ranges (and radial velocities when every
+        plot has one): ``core.finite_memory.fit`` and ``core.finite_memory.start``."""
+        p, k = win[-1], len(win)
         doppler = self.options.use_doppler and all(q.radial_velocity_mps is not None for q in win)
         period = win[1].time_s - win[0].time_s
         try:
@@ -335,17 +435,17 @@ class StreamTracker:
                 with_doppler=doppler,
             )
         except ParameterError as exc:
-            raise PlotError("time_s", f"finite-memory start: {exc}") from None
+            raise PlotError("time_s", f"{what}: {exc}") from None
         if fit.order < 2:
             raise PlotError(
                 "range_m",
-                f"the finite-memory start over k = {k} range-only plots fits only "
-                f"{fit.order} parameter; init_k must be 3 or more",
+                f"{what} over k = {k} range-only plots fits only "
+                f"{fit.order} parameter; {flag} must be 3 or more",
             )
         ranges = np.array([q.range_m for q in win])
         vrs = np.array([q.radial_velocity_mps for q in win], dtype=float) if doppler else None
         dims = 3 if self.three_d else 2
-        start = finite_memory_start(
+        return finite_memory_start(
             fit,
             ranges,
             vrs,
@@ -356,7 +456,39 @@ class StreamTracker:
             sigma_v0_mps=self.options.sigma_v0_mps,
             site=np.asarray(p.site[:dims], dtype=np.float64),
         )
-        for g in self._groups:
-            g.start_from(start.x.copy(), start.P.copy(), p.time_s)
-        self._started = True
-        self._window = None
+
+    def _finite_memory_row(self, p: Plot) -> StateRow | None:
+        """The sliding-window track's row at plot ``p``, or None (another radar's plot, or
+        fewer than k equally spaced plots since the window last restarted).
+
+        The window is the plots of the first radar seen; a step other than its period (a
+        missed scan) restarts it, because the fit assumes equal spacing."""
+        k = self.options.finite_memory_k
+        win = self._fm_window
+        if self._fm_radar is None:
+            self._fm_radar = p.radar
+        if p.radar != self._fm_radar:
+            return None
+        if len(win) >= 2:
+            period = win[1].time_s - win[0].time_s
+            if not math.isclose(p.time_s - win[-1].time_s, period, rel_tol=1e-6, abs_tol=1e-9):
+                win.clear()
+        elif win and p.time_s <= win[-1].time_s:
+            win.clear()
+        win.append(p)
+        if len(win) > k:
+            win.pop(0)
+        if len(win) < k:
+            return None
+        st = self._window_fit(win, "the finite-memory track", "finite_memory_k")
+        return FINITE_MEMORY_TRACK, *_rows_6(st, 0)
+
+
+def _rows_6(st: CVBatch, i: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Row ``i`` of a batch as x (6,), P (6, 6) in the 3D layout (z = ż = 0 for 2D)."""
+    n = st.x.shape[-1]
+    x6 = np.zeros(6)
+    P6 = np.zeros((6, 6))
+    x6[:n] = st.x.reshape(-1, n)[i]
+    P6[:n, :n] = st.P.reshape(-1, n, n)[i]
+    return x6, P6

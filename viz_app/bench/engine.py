@@ -21,6 +21,12 @@ Figures (ns per track-step = wall time / (runs × scans), one core):
   speed-up / cores; ``parallel_bit_identical`` checks the two results equal.
 * ``gorshkov_s``: wall time of the whole Gorshkov experiment (six radars, 10⁵ trials each,
   range only and range + Doppler, k = 1 … 20), best of ``repeats``.
+* ``imm``: the tracker's step (``core.tracking.stream.TrackGroup``: predict and the ``ucm``
+  position update, innovation statistics included) on the Prosov plots, ns per track-step,
+  for the default IMM and for the CV filter in the same run, on a batch of ``runs[0]`` tracks
+  (the Monte Carlo path) and on one track (the streaming path); ``imm_over_cv`` their ratios;
+  ``filterpy_imm_ns_per_step``: filterpy's ``IMMEstimator`` (two ``KalmanFilter`` models,
+  the converted points given) on a subsample of runs.
 * ``peak_rss_mb``: peak resident memory of the process.
 """
 
@@ -224,6 +230,66 @@ def bench_gorshkov(trials: int = 100_000, repeats: int = 2) -> float:
     return best
 
 
+def _track_group_ns(
+    motion: Any, r_hat: np.ndarray, b_hat: np.ndarray, config: TrackingConfig
+) -> float:
+    """ns per track-step of ``TrackGroup.add_arrays`` (ucm, 2D) over a batch of runs."""
+    from radarviz.core.filters.methods import PolarNoise, PolarPlot
+    from radarviz.core.tracking.stream import TrackGroup
+
+    runs, steps = r_hat.shape
+    noise = PolarNoise(config.sigma_r_m, config.sigma_beta_rad)
+    g = TrackGroup(("ucm",), 2, motion)
+    site = np.zeros(2)
+    T = config.target.period_s
+    t0 = time.perf_counter()
+    for n in range(steps):
+        plot = PolarPlot(r_hat[:, n], b_hat[:, n])
+        g.add_arrays(n * T, plot, noise, site, g.group.start_parts(plot, noise), None)
+    return (time.perf_counter() - t0) / (runs * steps) * 1e9
+
+
+def bench_imm(runs: int, filterpy_runs: int, config: TrackingConfig) -> dict[str, Any]:
+    """The ``imm`` figures (module docstring)."""
+    from filterpy.kalman import IMMEstimator
+
+    from radarviz.core.filters.models import DEFAULT_IMM, CVModel
+    from radarviz.core.filters.predict import process_noise
+
+    steps = config.target.steps
+    out: dict[str, Any] = {"runs": runs}
+    for label, m in (("batch", runs), ("single", 1)):
+        r_hat, b_hat = _measurements(m, steps, config, seed=7)
+        cv = _track_group_ns(CVModel(1.0), r_hat, b_hat, config)
+        imm = _track_group_ns(DEFAULT_IMM, r_hat, b_hat, config)
+        out[label] = {"cv_ns_per_step": cv, "imm_ns_per_step": imm, "imm_over_cv": imm / cv}
+    sr, sb, T = config.sigma_r_m, config.sigma_beta_rad, config.target.period_s
+    r_hat, b_hat = _measurements(filterpy_runs, steps, config, seed=12345)
+    c = convert("ucm", r_hat, b_hat, sigma_r_m=sr, sigma_azimuth_rad=sb)
+    elapsed = 0.0
+    for m in range(filterpy_runs):
+        init = cv_init(c.z[m, :1], c.R[m, :1])
+        filters = []
+        for sigma_a in DEFAULT_IMM.sigma_a_mps2:
+            kf = KalmanFilter(dim_x=4, dim_z=2)
+            kf.F, kf.H, kf.Q = transition_matrix(T), _H2, process_noise(T, sigma_a)
+            kf.x, kf.P = init.x[0].copy(), init.P[0].copy()
+            filters.append(kf)
+        bank = IMMEstimator(
+            filters, DEFAULT_IMM.initial_probabilities(), DEFAULT_IMM.transition_matrix()
+        )
+        t0 = time.perf_counter()
+        for n in range(1, steps):
+            bank.predict()
+            for f in bank.filters:
+                f.R = c.R[m, n]
+            bank.update(c.z[m, n])
+        elapsed += time.perf_counter() - t0
+    out["filterpy_runs"] = filterpy_runs
+    out["filterpy_imm_ns_per_step"] = elapsed / (filterpy_runs * (steps - 1)) * 1e9
+    return out
+
+
 def run_bench(runs: Sequence[int] = (10_000, 100_000), filterpy_runs: int = 200) -> dict[str, Any]:
     """All figures of ``radarviz bench`` as a JSON-ready dict."""
     config = TrackingConfig(runs=2, target=prosov_target())
@@ -250,6 +316,7 @@ def run_bench(runs: Sequence[int] = (10_000, 100_000), filterpy_runs: int = 200)
         "gorshkov_trials": 100_000,
         "gorshkov_s": gorshkov_s,
         "tune_median_ms": {scene: measure_tune_latency(scene) for scene in SCENES},
+        "imm": bench_imm(runs[0], filterpy_runs, config),
         "peak_rss_mb": peak_rss_mb(),
     }
 
@@ -296,5 +363,16 @@ def format_bench(doc: dict[str, Any]) -> str:
     )
     per_scene = ", ".join(f"{k} {v:.0f} ms" for k, v in doc["tune_median_ms"].items())
     lines.append(f"tune: change → recording flushed, median per scene: {per_scene}")
+    imm = doc["imm"]
+    for label, what in (("batch", f"{imm['runs']} runs"), ("single", "one track")):
+        v = imm[label]
+        lines.append(
+            f"tracker step, ucm, {what}: IMM {v['imm_ns_per_step']:.0f} ns, CV "
+            f"{v['cv_ns_per_step']:.0f} ns per track-step (IMM/CV {v['imm_over_cv']:.2f}×)"
+        )
+    lines.append(
+        f"filterpy IMMEstimator (2 models): {imm['filterpy_imm_ns_per_step']:.0f} ns per step "
+        f"({imm['filterpy_runs']} runs)"
+    )
     lines.append(f"peak RSS: {doc['peak_rss_mb']:.0f} MiB")
     return "\n".join(lines)

@@ -133,6 +133,30 @@ def build_parser() -> argparse.ArgumentParser:
         "--plot", metavar="FILE.png", help="write the figure (baseline σ and correlations, sweep)"
     )
 
+    man = rep_sub.add_parser(
+        "manoeuvre",
+        help="manoeuvring aircraft: methods × motion models (Q = 0, σa = 1, IMM), Monte Carlo",
+    )
+    add_parameter(man, "runs", default=8, note="noise runs per flight, 6 flights")
+    add_parameter(man, "seed")
+    man.add_argument(
+        "--straight-runs",
+        type=integer,
+        default=256,
+        help="runs of the straight-line check, IMM against the matched filter (0: skip; "
+        "default 256)",
+    )
+    man.add_argument(
+        "--finite-memory",
+        type=integer,
+        default=5,
+        metavar="K",
+        help="window of the finite-memory tracks (0: skip them; default 5)",
+    )
+    man.add_argument(
+        "--json", action="store_true", help="print only the JSON document on standard output"
+    )
+
     for module in (recording, track, sweep):
         module.add_commands(sub)
 
@@ -289,6 +313,27 @@ def _cmd_reproduce_velocity(args: argparse.Namespace) -> int:
     )
 
 
+def _cmd_reproduce_manoeuvre(args: argparse.Namespace) -> int:
+    from radarviz.core.experiments.manoeuvre import ManoeuvreConfig, run_manoeuvre
+
+    check_int("--runs", args.runs, low=2, high=10_000)
+    if args.straight_runs != 0:
+        check_int("--straight-runs", args.straight_runs, low=2, high=100_000)
+    if args.finite_memory != 0:
+        check_int("--finite-memory", args.finite_memory, low=3, high=100)
+    cfg = ManoeuvreConfig(
+        runs=args.runs,
+        seed=args.seed,
+        straight_runs=args.straight_runs,
+        finite_memory_k=args.finite_memory,
+    )
+    from radarviz.viz_app.reports.manoeuvre import format_manoeuvre_table, manoeuvre_document
+
+    doc = manoeuvre_document(run_manoeuvre(cfg))
+    print_report(doc, args.json, format_manoeuvre_table, allow_nan=False)
+    return 0
+
+
 def _cmd_bench(args: argparse.Namespace) -> int:
     for m in args.runs:
         check_int("--runs", m, low=100, high=10_000_000)
@@ -322,6 +367,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _cmd_reproduce_gorshkov(args)
         if args.command == "reproduce" and args.experiment == "velocity":
             return _cmd_reproduce_velocity(args)
+        if args.command == "reproduce" and args.experiment == "manoeuvre":
+            return _cmd_reproduce_manoeuvre(args)
         if args.command == "bench":
             return _cmd_bench(args)
         if args.command == "tune":

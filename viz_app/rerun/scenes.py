@@ -6,7 +6,9 @@ One scene per paper, each in its own tab, never two scenes of different scale in
     gorshkov   Gorshkov: finite memory against k, on the ``window_k`` timeline, and the
                Doppler-aided track start on ``scan`` (``gorshkov_scene``)
     velocity   Velocity: several radars' radial velocities (``velocity_scene``)
-    demo       all three, opening on an overview tab: the naive and a debiased method side by
+    manoeuvre  a manoeuvring flight, Q = 0 against the IMM, the NIS monitor
+               (``manoeuvre_scene``)
+    demo       all four, opening on an overview tab: the naive and a debiased method side by
                side in the target frame, the velocity vector and its error ellipsoid, the
                situations and the Doppler start's error
 """
@@ -16,9 +18,9 @@ from __future__ import annotations
 import rerun as rr
 import rerun.blueprint as rrb
 
-from radarviz.viz_app.rerun import gorshkov_scene, prosov_scene, velocity_scene
+from radarviz.viz_app.rerun import gorshkov_scene, manoeuvre_scene, prosov_scene, velocity_scene
 
-PRESETS: tuple[str, ...] = ("demo", "prosov", "gorshkov", "velocity")
+PRESETS: tuple[str, ...] = ("demo", "prosov", "gorshkov", "velocity", "manoeuvre")
 #: The debiased method set beside ``naive`` in the overview.
 OVERVIEW_DEBIASED = "ucm"
 
@@ -84,6 +86,9 @@ def record_preset(rec: rr.RecordingStream, preset: str, seed: int = 1) -> None:
             timeline = gorshkov_scene.WINDOW_TIMELINE
         else:  # the demo's timeline is ``scan``: the k curves open when window_k is chosen
             tabs += [start_tab, k_tab]
+    if preset in ("demo", "manoeuvre"):
+        manoeuvre_scene.log_manoeuvre(rec, seed=seed)
+        tabs.append(manoeuvre_scene.views())
     if preset == "demo":
         tabs.insert(0, overview(vframe))
     tabs.append(rrb.Vertical(text_log_view(), name="log"))

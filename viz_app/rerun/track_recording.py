@@ -30,6 +30,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from radarviz.core.filters.state import position_index, velocity_index
+from radarviz.core.tracking.consistency import ConsistencyMonitor
 from radarviz.core.tracking.stream import Plot, StateRow
 from radarviz.viz_app.io.plots import Radar
 from radarviz.viz_app.palette import radar_rgb
@@ -59,8 +60,15 @@ def measured_point(p: Plot) -> tuple[float, float, float]:
 class TrackRecorder:
     """Buffers plots and track states and sends them to a recording in chunks."""
 
-    def __init__(self, rec: rr.RecordingStream, radars: Iterable[Radar]):
+    def __init__(
+        self,
+        rec: rr.RecordingStream,
+        radars: Iterable[Radar],
+        monitor: ConsistencyMonitor | None = None,
+    ):
         self.rec = rec
+        self.monitor = monitor
+        self._events_logged = 0
         self.count = 0
         self.chunk = 0
         radars = list(radars)
@@ -150,15 +158,32 @@ class TrackRecorder:
 
     @classmethod
     @contextlib.contextmanager
-    def to_file(cls, path: str | os.PathLike, radars: Iterable[Radar]) -> Iterator[TrackRecorder]:
-        """A recorder writing ``path`` atomically (replaced if it exists)."""
+    def to_file(
+        cls,
+        path: str | os.PathLike,
+        radars: Iterable[Radar],
+        monitor: ConsistencyMonitor | None = None,
+    ) -> Iterator[TrackRecorder]:
+        """A recorder writing ``path`` atomically (replaced if it exists); ``monitor``: its
+        NIS band exits and returns are written to the log as they happen."""
         with recording_file(path, overwrite=True) as rec:
-            recorder = cls(rec, radars)
+            recorder = cls(rec, radars, monitor)
             yield recorder
             recorder.close()
 
     def add(self, plot: Plot, rows: list[StateRow]) -> None:
         self.count += 1
+        if self.monitor is not None:
+            # The tracker runs ahead by a block of plots: log the events up to this plot's time.
+            events = self.monitor.events
+            while (
+                self._events_logged < len(events)
+                and events[self._events_logged].time_s <= plot.time_s
+            ):
+                event = events[self._events_logged]
+                level = "WARN" if event.kind == "leaves" else "INFO"
+                log_text(self.rec, event.message(), level, scan=self.count, timeline="plot")
+                self._events_logged += 1
         self._meas[plot.radar].append((self.count, plot.time_s, measured_point(plot)))
         for method, x, P in rows:
             self._tracks[method].append((self.count, plot.time_s, x, P))

@@ -1,0 +1,122 @@
+"""The interacting multiple model (IMM) filter over a batch of constant-velocity tracks.
+
+Blom and Bar-Shalom's IMM (Bar-Shalom, Li and Kirubarajan 2001, sec. 11.6.6), for r models
+that share the state (x, ẋ, y, ẏ[, z, ż]) and differ in their prediction (``core.filters.
+models.IMMModel``: σa per model). The r model-conditioned estimates of every track are one
+batch with a *trailing model axis*: x (..., r, n), P (..., r, n, n), so a batch of k methods ×
+M runs × r models is one ``CVBatch`` of shape (k, M, r) and every model-conditioned update is
+the engine's own (``core.filters.measurement``: the plot's arrays broadcast over the models).
+Per plot, with model probabilities μᵢ and the transition matrix Π::
+
+    mixing        c̄ⱼ = Σᵢ πᵢⱼ μᵢ,   μᵢ|ⱼ = πᵢⱼ μᵢ / c̄ⱼ
+                  x⁰ⱼ = Σᵢ μᵢ|ⱼ xᵢ,   P⁰ⱼ = Σᵢ μᵢ|ⱼ (Pᵢ + (xᵢ − x⁰ⱼ)(xᵢ − x⁰ⱼ)ᵀ)
+    prediction    x⁻ⱼ, P⁻ⱼ = model j's prediction of (x⁰ⱼ, P⁰ⱼ)       (``cv_predict`` with σa,j)
+    update        each stage: Λⱼ = N(νⱼ; 0, Sⱼ),  μⱼ ∝ Λⱼ c̄ⱼ,  then the stage's update
+    combination   x = Σⱼ μⱼ xⱼ,   P = Σⱼ μⱼ (Pⱼ + (xⱼ − x)(xⱼ − x)ᵀ)
+
+filterpy's ``IMMEstimator`` runs the same recursion (its ``update`` ends with the mixing that
+its next ``predict`` uses); ``tests/test_imm.py`` checks the two against each other.
+
+The innovation statistics the consistency monitor sees (``imm_step``) are those of the
+combined prediction x̄⁻ = Σⱼ c̄ⱼ x⁻ⱼ, P̄⁻ (moment matched): for a position measurement with one
+R this is exactly the mixture's innovation mean and covariance.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import NamedTuple
+
+import numpy as np
+from numpy.typing import NDArray
+
+from radarviz.core.filters.innovation import InnovationStats
+from radarviz.core.filters.models import IMMModel
+from radarviz.core.filters.predict import cv_predict
+from radarviz.core.filters.state import CVBatch
+from radarviz.core.filters.step import Stage
+
+
+class IMMState(NamedTuple):
+    """The IMM estimate of a batch of tracks.
+
+    Attributes:
+        models: model-conditioned estimates, batch (..., r): x (..., r, n), P (..., r, n, n).
+        probabilities: μ (..., r), summing to 1 over the last axis.
+    """
+
+    models: CVBatch
+    probabilities: NDArray[np.float64]
+
+
+def imm_start(state: CVBatch, model: IMMModel) -> IMMState:
+    """Every model starts at the track's start (..., n); μ = the model's initial one."""
+    r = model.models
+    x = np.repeat(state.x[..., None, :], r, axis=-2)
+    P = np.repeat(state.P[..., None, :, :], r, axis=-3)
+    mu = np.broadcast_to(model.initial_probabilities(), (*state.batch_shape, r)).copy()
+    return IMMState(CVBatch(x, P), mu)
+
+
+def imm_combine(models: CVBatch, mu: NDArray[np.float64]) -> CVBatch:
+    """The moment-matched estimate Σⱼ μⱼ N(xⱼ, Pⱼ): x (..., n), P (..., n, n)."""
+    x = np.einsum("...j,...jn->...n", mu, models.x)
+    dx = models.x - x[..., None, :]
+    P = np.einsum("...j,...jmn->...mn", mu, models.P + dx[..., :, None] * dx[..., None, :])
+    return CVBatch(x, 0.5 * (P + P.mT))
+
+
+def imm_mix(imm: IMMState, transition: NDArray[np.float64]) -> tuple[CVBatch, NDArray[np.float64]]:
+    """The mixed initial conditions (x⁰ⱼ, P⁰ⱼ), batch (..., r), and c̄ (..., r)."""
+    mu = imm.probabilities
+    c = mu @ transition  # c̄ⱼ = Σᵢ μᵢ πᵢⱼ
+    w = transition * mu[..., :, None] / c[..., None, :]  # μᵢ|ⱼ, (..., i, j)
+    x, P = imm.models.x, imm.models.P
+    x0 = np.einsum("...ij,...in->...jn", w, x)
+    dx = x[..., :, None, :] - x0[..., None, :, :]  # xᵢ − x⁰ⱼ, (..., i, j, n)
+    P0 = np.einsum("...ij,...imn->...jmn", w, P) + np.einsum(
+        "...ij,...ijm,...ijn->...jmn", w, dx, dx
+    )
+    return CVBatch(x0, 0.5 * (P0 + P0.mT)), c
+
+
+def imm_predict(mixed: CVBatch, dt_s: float, model: IMMModel) -> CVBatch:
+    """Model j's constant-velocity prediction (σa,j) of its mixed estimate, every j."""
+    xs, Ps = [], []
+    for j, sigma_a in enumerate(model.sigma_a_mps2):
+        pred = cv_predict(CVBatch(mixed.x[..., j, :], mixed.P[..., j, :, :]), dt_s, sigma_a)
+        xs.append(pred.x)
+        Ps.append(pred.P)
+    return CVBatch(np.stack(xs, axis=-2), np.stack(Ps, axis=-3))
+
+
+def mode_probabilities(
+    prior: NDArray[np.float64], log_likelihood: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """μⱼ ∝ Λⱼ c̄ⱼ, normalised over the last axis (log-likelihoods shifted by their maximum so
+    that a far-off plot does not underflow every model to 0)."""
+    a = log_likelihood - log_likelihood.max(axis=-1, keepdims=True)
+    w = prior * np.exp(a)
+    return w / w.sum(axis=-1, keepdims=True)
+
+
+def imm_step(
+    imm: IMMState,
+    dt_s: float,
+    model: IMMModel,
+    stages: Sequence[Stage],
+    with_stats: bool = True,
+) -> tuple[IMMState, CVBatch, InnovationStats | None]:
+    """One plot: mix, predict over ``dt_s`` (0: no prediction), then each stage (module
+    docstring). Returns the new IMM state, its combined estimate (...) and, with
+    ``with_stats``, the innovation statistics of the combined prediction."""
+    mixed, mu = imm_mix(imm, model.transition_matrix())
+    pred = imm_predict(mixed, dt_s, model) if dt_s > 0 else mixed
+    total: InnovationStats | None = None
+    for stage in stages:
+        if with_stats:
+            s = stage.innovation(imm_combine(pred, mu))
+            total = s if total is None else total + s
+        mu = mode_probabilities(mu, stage.innovation(pred, models=True).log_likelihood())
+        pred = stage.update(pred, models=True)
+    return IMMState(pred, mu), imm_combine(pred, mu), total

@@ -1,0 +1,152 @@
+"""One plot's measurement stages as objects a scan step can apply to any batch.
+
+A plot updates a track in stages: its position (a method's converted point, or the polar
+measurement for ``ekf``/``ukf``), then, when it has one, its Doppler radial velocity. Each
+stage here knows its plot and offers two things on a predicted batch:
+
+* ``innovation(state)``: the innovation statistics (``core.filters.innovation``), for the
+  consistency monitor and the IMM likelihoods;
+* ``update(state)``: the posterior, by the engine's own update functions
+  (``MethodGroup.update``, ``doppler_update``); nothing is re-implemented here.
+
+``models=True`` says the batch has one more, trailing axis than the plot's arrays were made
+for (the IMM's model axis, ``core.filters.imm``): every array of the plot gets a trailing
+axis of 1 and broadcasts over the models. The same stage so serves the IMM's model-
+conditioned updates (batch (..., r)) and its combined estimate (batch (...)).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from radarviz.core.filters.doppler import doppler_terms, doppler_update
+from radarviz.core.filters.innovation import (
+    InnovationStats,
+    linear_innovation,
+    position_innovation,
+)
+from radarviz.core.filters.methods import MethodGroup, Parts, PolarNoise, PolarPlot
+from radarviz.core.filters.position import innovation_update
+from radarviz.core.filters.state import CVBatch, Vec, position_index
+
+
+def _expand(value: ArrayLike | None, models: bool) -> ArrayLike | None:
+    """``value`` with a trailing axis of 1 when the batch has a model axis."""
+    if value is None or not models:
+        return value
+    return np.asarray(value, dtype=np.float64)[..., None]
+
+
+@dataclass(frozen=True)
+class PositionMeasurement:
+    """A Cartesian position measurement z (d components, m) with noise R (upper entries, m²),
+    each broadcasting against the batch: the linear measurement of ``core.filters.position``."""
+
+    z: tuple[Vec, ...]
+    R: dict[tuple[int, int], Vec]
+
+    def _innovation(self, state: CVBatch, models: bool) -> tuple[list[Vec], dict]:
+        pos = position_index(state.dims)
+        nu = [_expand(self.z[a], models) - state.x[..., p] for a, p in enumerate(pos)]
+        return nu, {k: _expand(v, models) for k, v in self.R.items()}
+
+    def innovation(self, state: CVBatch, models: bool = False) -> InnovationStats:
+        return position_innovation(state, *self._innovation(state, models))
+
+    def update(self, state: CVBatch, models: bool = False) -> CVBatch:
+        return innovation_update(state, *self._innovation(state, models))
+
+
+@dataclass(frozen=True)
+class PlotMeasurement:
+    """The position stage of one scan for a method group (``MethodGroup``).
+
+    Attributes:
+        group: the methods of the batch (its leading axis for a converted group).
+        plot, noise: the plot's polar values and noise std, arrays broadcasting against the
+            batch shape (without the model axis).
+        site: the radar's position (d,).
+        parts: the converted methods' precomputed conversions (``MethodGroup.start_parts``),
+            or None.
+    """
+
+    group: MethodGroup
+    plot: PolarPlot
+    noise: PolarNoise
+    site: ArrayLike | None = None
+    parts: Parts | None = None
+
+    def _for(self, state: CVBatch, models: bool) -> tuple[PolarPlot, PolarNoise, Parts | None]:
+        if not models:  # the arrays were made for this batch
+            return self.plot, self.noise, self.parts
+        shape = state.batch_shape
+        # An IMM step asks twice per stage (likelihoods, update): expand the arrays once.
+        cache = self.__dict__.setdefault("_expansions", {})
+        if shape not in cache:
+            cache[shape] = self._expanded(shape)
+        return cache[shape]
+
+    def _expanded(self, shape: tuple[int, ...]) -> tuple[PolarPlot, PolarNoise, Parts | None]:
+        plot = PolarPlot(*(_expand(v, True) for v in self.plot))
+        if not self.group.converted:  # the polar updates take arrays of the batch's shape
+            plot = PolarPlot(*(None if v is None else np.broadcast_to(v, shape) for v in plot))
+        noise = PolarNoise(*(_expand(v, True) for v in self.noise))
+        parts = self.parts
+        if parts is not None:
+            z, R = parts
+            if any(k.about_prediction for k in self.group.kinds):
+                # ``ducm`` rewrites its row per model: the parts need the batch's full shape.
+                parts = (
+                    [np.broadcast_to(np.asarray(v)[..., None], shape) for v in z],
+                    {k: np.broadcast_to(np.asarray(v)[..., None], shape) for k, v in R.items()},
+                )
+            else:
+                parts = (
+                    [np.asarray(v)[..., None] for v in z],
+                    {k: np.asarray(v)[..., None] for k, v in R.items()},
+                )
+        return plot, noise, parts
+
+    def innovation(self, state: CVBatch, models: bool = False) -> InnovationStats:
+        plot, noise, parts = self._for(state, models)
+        nu, R = self.group.measurement(state, plot, noise, site=self.site, parts=parts)
+        return position_innovation(state, nu, R)
+
+    def update(self, state: CVBatch, models: bool = False) -> CVBatch:
+        plot, noise, parts = self._for(state, models)
+        return self.group.update(state, plot, noise, site=self.site, parts=parts)
+
+
+@dataclass(frozen=True)
+class DopplerMeasurement:
+    """The Doppler stage of one plot: V̂r along the measured line of sight
+    (``core.filters.doppler``); arrays broadcast against the batch (scalars for one plot)."""
+
+    radial_velocity_mps: ArrayLike
+    azimuth_rad: ArrayLike
+    elevation_rad: ArrayLike
+    sigma_vr_mps: ArrayLike
+    sigma_azimuth_rad: ArrayLike
+    sigma_elevation_rad: ArrayLike
+
+    def _args(self, models: bool) -> tuple[list, dict]:
+        vals = [_expand(v, models) for v in (self.radial_velocity_mps, self.azimuth_rad)]
+        vals.append(_expand(self.elevation_rad, models))
+        kw = {
+            "sigma_vr_mps": _expand(self.sigma_vr_mps, models),
+            "sigma_azimuth_rad": _expand(self.sigma_azimuth_rad, models),
+            "sigma_elevation_rad": _expand(self.sigma_elevation_rad, models),
+        }
+        return vals, kw
+
+    def innovation(self, state: CVBatch, models: bool = False) -> InnovationStats:
+        vals, kw = self._args(models)
+        nu, H, R = doppler_terms(state, *vals, **kw)
+        return linear_innovation(state, nu, H, R)
+
+    def update(self, state: CVBatch, models: bool = False) -> CVBatch:
+        vals, kw = self._args(models)
+        return doppler_update(state, *vals, **kw)
