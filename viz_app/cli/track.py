@@ -12,7 +12,6 @@ import math
 from collections.abc import Callable, Iterable
 from contextlib import AbstractContextManager
 
-from radarviz.core.experiments.prosov import ALL_METHODS
 from radarviz.core.params import check_choice
 from radarviz.core.tracking.stream import INIT_MODES, METHODS_3D, StreamOptions
 from radarviz.viz_app.cli.args import integer
@@ -43,7 +42,7 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
         nargs="+",
         default=None,
         metavar="METHOD",
-        help=f"methods (default all: {' '.join(ALL_METHODS)} in 2D, {' '.join(METHODS_3D)} in 3D)",
+        help=f"methods, 2D or 3D plots alike (default all: {' '.join(METHODS_3D)})",
     )
     tr.add_argument(
         "--out",
