@@ -129,16 +129,19 @@ def spherical_hessians(theta: ArrayLike) -> Arr:
     """
     t = _f(theta)
     r, az, el = t[..., 0], t[..., 1], t[..., 2]
-    u = direction_cosines(az, el)
-    d_b, d_e = unit_vector_partials(az, el)
     ca, sa, ce, se = np.cos(az), np.sin(az), np.cos(el), np.sin(el)
-    zero = np.zeros_like(r * ca)
-    h_bb = (-r * ce)[..., None] * np.stack(np.broadcast_arrays(ca, sa, zero), axis=-1)
-    h_ee = -r[..., None] * u
-    h_be = (r * se)[..., None] * np.stack(np.broadcast_arrays(sa, -ca, zero), axis=-1)
-    h_rr = np.zeros_like(u)
-    rows = [[h_rr, d_b, d_e], [d_b, h_bb, h_be], [d_e, h_be, h_ee]]  # [j][k] → (..., 3) over i
-    H = np.stack([np.stack(row, axis=-1) for row in rows], axis=-2)  # (..., 3 i, 3 j, 3 k)
+    H = np.zeros((*t.shape[:-1], 3, 3, 3))  # [..., i, j, k]; ∂²/∂r² = 0 and z's ∂/∂β = 0
+    # ∂u/∂β = cos ε (−sin β, cos β, 0) and ∂u/∂ε = (−sin ε cos β, −sin ε sin β, cos ε)
+    # (``core.geometry.unit_vector_partials``), in the (r, β) and (r, ε) places.
+    for j, k in ((0, 1), (1, 0)):
+        H[..., 0, j, k], H[..., 1, j, k] = -ce * sa, ce * ca
+    for j, k in ((0, 2), (2, 0)):
+        H[..., 0, j, k], H[..., 1, j, k], H[..., 2, j, k] = -se * ca, -se * sa, ce
+    rce, rse = r * ce, r * se
+    H[..., 0, 1, 1], H[..., 1, 1, 1] = -rce * ca, -rce * sa  # −r cos ε (cos β, sin β, 0)
+    H[..., 0, 2, 2], H[..., 1, 2, 2], H[..., 2, 2, 2] = -rce * ca, -rce * sa, -rse  # −r u
+    for j, k in ((1, 2), (2, 1)):
+        H[..., 0, j, k], H[..., 1, j, k] = rse * sa, -rse * ca  # r sin ε (sin β, −cos β, 0)
     return H
 
 
