@@ -157,7 +157,7 @@ def convert(method: str, r, az, el, sr, sa, se, predicted=None):
     return cv3.convert_3d(method, r, az, el, **sig, predicted_xyz=predicted)
 
 
-CONVERSIONS_3D = (*cv3.METHODS_3D, "mucm")
+EVERY_CONVERSION_3D = (*cv3.CONVERSIONS_3D, "mucm")
 
 # r, azimuth, elevation, σr, σβ, σε: the fusion geometry, then large angle errors, where the
 # O(s²) terms are many standard errors large, so the checks have power.
@@ -433,7 +433,7 @@ def test_mucm_2d_is_duan_han_li() -> None:
 # ---------------------------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("method", CONVERSIONS_3D)
+@pytest.mark.parametrize("method", EVERY_CONVERSION_3D)
 def test_3d_reduces_to_2d_at_zero_elevation(method: str) -> None:
     """ε̂ = 0 and σε = 0: the x–y part equals the 2D conversion to 1e-12, z and its rows are 0
     (a batch of five, including r/σr = 1e8, where only cancellation-free formulas pass)."""
@@ -457,7 +457,7 @@ def test_3d_conversions_broadcast_over_a_batch() -> None:
     r = 50e3 + 100 * rng.standard_normal((2, 3))
     az, el = 0.4 + 0.01 * rng.standard_normal((2, 3)), 0.2 + 0.01 * rng.standard_normal((2, 3))
     pred = point_3d(r + 50, az, el)
-    for method in CONVERSIONS_3D:
+    for method in EVERY_CONVERSION_3D:
         grid = convert(method, r, az, el, 80.0, 0.01, 0.02, predicted=pred)
         for idx in np.ndindex(2, 3):
             one = convert(method, r[idx], az[idx], el[idx], 80.0, 0.01, 0.02, predicted=pred[idx])

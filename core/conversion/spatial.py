@@ -40,7 +40,7 @@ from radarviz.core.conversion.second_order import second_order_correction, spher
 from radarviz.core.geometry import direction_cosines, polar_coordinates, unit_vector_partials
 
 #: The 3D conversions, with the names of their 2D forms.
-METHODS_3D: tuple[str, ...] = ("naive", "seed", "cmkf_d", "ucm", "ducm")
+CONVERSIONS_3D: tuple[str, ...] = ("naive", "seed", "cmkf_d", "ucm", "ducm")
 
 
 def _point_3d(r: NDArray, az: NDArray, el: NDArray) -> NDArray[np.float64]:
@@ -364,7 +364,7 @@ def convert_3d(
     sigma_elevation_rad: ArrayLike,
     predicted_xyz: ArrayLike | None = None,
 ) -> Converted:
-    """Any of ``METHODS_3D``; ``ducm`` needs ``predicted_xyz`` (..., 3), radar-centred.
+    """Any of ``CONVERSIONS_3D``; ``ducm`` needs ``predicted_xyz`` (..., 3), radar-centred.
 
     Args:
         r, azimuth, elevation: (...) measured range (m) and angles (rad).
@@ -375,8 +375,8 @@ def convert_3d(
         "sigma_azimuth_rad": sigma_azimuth_rad,
         "sigma_elevation_rad": sigma_elevation_rad,
     }
-    if method not in METHODS_3D:
-        raise ValueError(f"method must be one of {', '.join(METHODS_3D)} (got {method!r})")
+    if method not in CONVERSIONS_3D:
+        raise ValueError(f"method must be one of {', '.join(CONVERSIONS_3D)} (got {method!r})")
     if method == "ducm":
         if predicted_xyz is None:
             raise ValueError("method ducm needs predicted_xyz (the filter's predicted position)")
