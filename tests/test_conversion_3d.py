@@ -16,6 +16,7 @@ method on 3D plots (the math: docs/conversion.md, sections 2, 4 and 6).
   posterior mean-square error of ucm's point (ucm's own R is rejected), and the ``seed`` point
   is the posterior mean to second order.
 * **Zero elevation**, σε = 0: each 3D form is its 2D form with z = 0 (1e-12).
+* **Registry**: each method starts and updates a (2, 3) batch of 3D plots as a flat batch.
 * **Tracks**: ``radarviz simulate --preset fusion`` on its straight-line leg, then ``radarviz
   track`` with every method: finite tracks whose position RMSE is below the raw converted
   measurements' over independent files, by more than Z standard errors of the mean ratio.
@@ -40,7 +41,8 @@ from radarviz.core.conversion import modified as mu
 from radarviz.core.conversion import planar as cv
 from radarviz.core.conversion import second_order as so
 from radarviz.core.conversion import spatial as cv3
-from radarviz.core.filters.methods import ALL_METHODS, METHODS, METHODS_3D
+from radarviz.core.filters.methods import ALL_METHODS, METHODS, METHODS_3D, PolarNoise, PolarPlot
+from radarviz.core.filters.predict import cv_predict
 from radarviz.core.velocity.estimate import BASELINE_TARGET_M, BASELINE_VELOCITY_MPS
 from radarviz.viz_app.cli.main import main
 
@@ -476,6 +478,29 @@ def test_3d_conversions_broadcast_over_a_batch() -> None:
 
 def test_every_method_exists_in_3d() -> None:
     assert METHODS_3D == ALL_METHODS and all(3 in m.dims for m in METHODS.values())
+
+
+@pytest.mark.parametrize("name", ALL_METHODS)
+def test_every_method_starts_and_updates_a_3d_batch_of_any_shape(name: str) -> None:
+    """Each method on a (2, 3) batch of 3D plots, one radar away from the origin, gives its six
+    tracks of a flat batch bit for bit (``ducm`` converts about each row's own prediction)."""
+    rng = np.random.default_rng(23)
+    r = 80e3 + rng.normal(0, 100.0, (2, 3))
+    b, e = 0.4 + rng.normal(0, 0.01, (2, 3)), 0.1 + rng.normal(0, 0.01, (2, 3))
+    noise, site = PolarNoise(100.0, 0.01, 0.02), np.array([1e3, -2e3, 50.0])
+    kind = METHODS[name]
+    grid = kind.start(PolarPlot(r, b, e), noise, sigma_v0_mps=300.0, site=site)
+    flat = kind.start(
+        PolarPlot(r.ravel(), b.ravel(), e.ravel()), noise, sigma_v0_mps=300.0, site=site
+    )
+    nxt = (r + 900.0, b + 0.001, e)
+    grid = kind.update(cv_predict(grid, 5.0), PolarPlot(*nxt), noise, site=site)
+    flat = kind.update(
+        cv_predict(flat, 5.0), PolarPlot(*(v.ravel() for v in nxt)), noise, site=site
+    )
+    assert grid.x.shape == (2, 3, 6) and np.all(np.isfinite(grid.P))
+    np.testing.assert_array_equal(grid.x.reshape(6, 6), flat.x)
+    np.testing.assert_array_equal(grid.P.reshape(6, 6, 6), flat.P)
 
 
 #: Independent simulated files; 20 scans per radar (T = 10 s) keep the target on its straight
