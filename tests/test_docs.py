@@ -37,6 +37,7 @@ WORKS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("Lerro and Bar-Shalom 1993", ("Lerro", "Bar-Shalom", "1993", "29(3)", "1015–1022")),
     ("Mo et al. 1998", ("Mo", "Song", "Zhou", "Sun", "Bar-Shalom", "1998", "34(3)", "1023–1027")),
     ("Bordonaro et al. 2014", ("Bordonaro", "Willett", "Bar-Shalom", "2014", "50(2)", "1431–1444")),
+    ("Duan, Han and Li 2004", ("Duan", "Han", "Li", "2004", "40(4)", "1374–1377")),
     ("FilterPy (Labbe)", ("Labbe", "FilterPy")),
     ("Van der Merwe 2004", ("van der Merwe", "2004")),
 )

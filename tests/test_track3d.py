@@ -651,15 +651,17 @@ def expect_error(
 HEADER3 = "time_s,radar,range_m,azimuth_deg,elevation_deg,radial_velocity_mps\n"
 
 
-def test_2d_method_on_3d_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_unknown_method_on_3d_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Every method exists in 3D (tests/test_conversion_3d.py runs each); a name that is none
+    of them is one line listing them all."""
     text = HEADER3 + "0,a,100000,10,3,-100\n10,b,90000,20,4,-90\n"
     expect_error(
         tmp_path,
         capsys,
         text,
         radars_toml(),
-        ["--method", "ekf", "seed"],
-        ["seed", "naive, ucm, ekf, ukf"],
+        ["--method", "ekf", "magic"],
+        ["magic", "naive, seed, cmkf_d, ucm, ducm, ekf, ukf"],
     )
 
 

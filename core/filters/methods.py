@@ -7,20 +7,21 @@ filter (``core.filters.state``, ``core.filters.predict``):
 name       kind       dims  what it does
 =========  =========  ====  ===========================================================
 naive      converted  2, 3  r̂ u(β̂, ε̂), first-order covariance (Prosov eqs. 8–9)
-seed       converted  2     × (1 − s/2), covariance eq. 11 (Prosov eqs. 10–11 as printed)
-cmkf_d     converted  2     × (1 − e^(−s) + e^(−s/2)), eq. 11 (Lerro & Bar-Shalom 1993)
+seed       converted  2, 3  × (1 − s/2), covariance eq. 11 (Prosov eqs. 10–11 as printed)
+cmkf_d     converted  2, 3  × (1 − e^(−s) + e^(−s/2)), eq. 11 (Lerro & Bar-Shalom 1993)
 ucm        converted  2, 3  × e^(s/2), exact covariance at the measurement (Mo et al. 1998)
-ducm       converted  2     ucm's point, covariance at the prediction (Bordonaro et al. 2014)
+ducm       converted  2, 3  ucm's point, covariance at the prediction (Bordonaro et al. 2014)
 ekf        ekf        2, 3  polar measurement filtered directly, linearised at the prediction
 ukf        ukf        2, 3  polar measurement filtered directly, scaled sigma points
 =========  =========  ====  ===========================================================
 
-(s = σβ², rad².) Every method starts a track from its first plot the same way: the method's
-converted point and covariance (``ducm``, having no prediction yet, starts like ``ucm``;
-``ekf`` and ``ukf`` from the naive point), velocity 0 with std σv0. Converted methods then
-update with the position update (``core.filters.position``), the polar ones with
-``core.filters.polar_ekf`` / ``core.filters.polar_ukf``. Doppler, when a plot has it, is a
-second update of the same kind for every method (``core.filters.doppler``).
+(s = σβ², rad²; in 3D the same forms per axis, ``core.conversion.spatial``.) Every method
+starts a track from its first plot the same way: the method's converted point and covariance
+(``ducm``, having no prediction yet, starts like ``ucm``; ``ekf`` and ``ukf`` from the naive
+point), velocity 0 with std σv0. Converted methods then update with the position update
+(``core.filters.position``), the polar ones with ``core.filters.polar_ekf`` /
+``core.filters.polar_ukf``. Doppler, when a plot has it, is a second update of the same kind
+for every method (``core.filters.doppler``).
 
 Every function works on a batch of any leading shape and takes the radar's ``site``, so a
 Monte Carlo of 10⁵ runs, the streaming tracker's single track (a batch of one) and the panel
@@ -29,7 +30,7 @@ all run the same code.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -37,7 +38,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from radarviz.core.conversion.planar import convert_parts
-from radarviz.core.conversion.spatial import convert_naive_3d, convert_ucm_3d
+from radarviz.core.conversion.spatial import convert_3d
 from radarviz.core.filters.polar_ekf import ekf_pseudo_measurement, ekf_update, site_offsets
 from radarviz.core.filters.polar_ukf import ukf_update
 from radarviz.core.filters.position import cv_update_parts, innovation_update, upper_entries
@@ -82,15 +83,16 @@ def _parts_2d(name: str, plot: PolarPlot, noise: PolarNoise, predicted: list[Vec
     return [c.x, c.y], {(0, 0): c.r00, (0, 1): c.r01, (1, 1): c.r11}
 
 
-def _parts_3d(convert3: Callable) -> Callable:
-    def parts(name: str, plot: PolarPlot, noise: PolarNoise, predicted: list[Vec] | None) -> Parts:
-        c = convert3(plot.range_m, plot.azimuth_rad, plot.elevation_rad, **noise._asdict())
-        return [c.z[..., i] for i in range(3)], upper_entries(c.R)
-
-    return parts
-
-
-_CONVERT_3D = {"naive": _parts_3d(convert_naive_3d), "ucm": _parts_3d(convert_ucm_3d)}
+def _parts_3d(name: str, plot: PolarPlot, noise: PolarNoise, predicted: list[Vec] | None) -> Parts:
+    c = convert_3d(
+        name,
+        plot.range_m,
+        plot.azimuth_rad,
+        plot.elevation_rad,
+        **noise._asdict(),
+        predicted_xyz=None if predicted is None else np.stack(np.broadcast_arrays(*predicted), -1),
+    )
+    return [c.z[..., i] for i in range(3)], upper_entries(c.R)
 
 
 @dataclass(frozen=True)
@@ -128,7 +130,7 @@ class Method:
         name = conversion or self.name
         if plot.dims == 2:
             return _parts_2d(name, plot, noise, predicted)
-        return _CONVERT_3D[name](name, plot, noise, predicted)
+        return _parts_3d(name, plot, noise, predicted)
 
     def start(
         self,
@@ -187,10 +189,10 @@ METHODS: dict[str, Method] = {
     m.name: m
     for m in (
         Method("naive", "converted", (2, 3), "naive", False, "converted point, linearised cov."),
-        Method("seed", "converted", (2,), "seed", False, "Prosov's eq. 10 correction, eq. 11"),
-        Method("cmkf_d", "converted", (2,), "cmkf_d", False, "Lerro & Bar-Shalom debiased"),
+        Method("seed", "converted", (2, 3), "seed", False, "Prosov's eq. 10 correction, eq. 11"),
+        Method("cmkf_d", "converted", (2, 3), "cmkf_d", False, "Lerro & Bar-Shalom debiased"),
         Method("ucm", "converted", (2, 3), "ucm", False, "Mo et al. unbiased conversion"),
-        Method("ducm", "converted", (2,), "ucm", True, "Bordonaro et al. decorrelated ucm"),
+        Method("ducm", "converted", (2, 3), "ucm", True, "Bordonaro et al. decorrelated ucm"),
         Method("ekf", "ekf", (2, 3), "naive", False, "polar EKF"),
         Method("ukf", "ukf", (2, 3), "naive", False, "polar UKF"),
     )

@@ -10,9 +10,8 @@ with the same engine as the Monte Carlo (``core.filters``): a track is a batch o
   prediction and the position update are one set of vector operations for all of them, only
   the conversion is per method. ``ekf`` and ``ukf`` are a batch of one each. Rows do not
   interact: each row's result is that of a batch of one, to rounding.
-* **2D** (no elevation): all methods of ``core.filters.methods``; **3D** (elevation on every
-  plot): the methods that exist in 3D (``METHODS_3D``). Asking for a 2D-only method with
-  elevations is an error.
+* **2D** (no elevation) and **3D** (elevation on every plot): all methods of
+  ``core.filters.methods`` (every one exists in both, ``METHODS_3D``).
 * **First plot**: the method's start (``Method.start``), shifted by the radar site. Later plots:
   predict with dt = t − t_previous (dt = 0, equal times, skips the prediction), then update
   with the plot's radar as ``site`` (the polar updates and ``ducm`` linearise about the
@@ -309,11 +308,6 @@ class StreamTracker:
         if not methods:
             raise ParameterError(f"method must name at least one of {', '.join(allowed)}")
         for m in methods:
-            if three_d and m in ALL_METHODS and m not in METHODS_3D:
-                raise ParameterError(
-                    f"method {m} is a 2D conversion and the plots have elevations "
-                    f"(3D methods: {', '.join(METHODS_3D)})"
-                )
             check_choice("method", m, allowed)
         self.methods = tuple(methods)
         self.three_d = three_d

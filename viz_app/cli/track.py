@@ -14,7 +14,6 @@ import sys
 from collections.abc import Callable, Iterable
 from contextlib import AbstractContextManager
 
-from radarviz.core.experiments.prosov import ALL_METHODS
 from radarviz.core.filters.models import DEFAULT_IMM
 from radarviz.core.params import ParameterError, check, check_choice, default
 from radarviz.core.tracking.consistency import ConsistencyMonitor
@@ -52,7 +51,7 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
         nargs="+",
         default=None,
         metavar="METHOD",
-        help=f"methods (default all: {' '.join(ALL_METHODS)} in 2D, {' '.join(METHODS_3D)} in 3D)",
+        help=f"methods, 2D or 3D plots alike (default all: {' '.join(METHODS_3D)})",
     )
     tr.add_argument(
         "--out",
