@@ -70,7 +70,7 @@ def wait_port(
 #: already, and switches to each new run as it arrives). Its resident memory is several
 #: times the limit (the limit counts the buffered messages, not the server's own copies and
 #: indexes): with 512 MiB it grew by ≈ 1.1 MB per Prosov run (≈ one run's recording, 1.0 MB
-#: at 60 scans) to 373 MB after 300 runs and past 1 GB in a long session; with 4 MiB, which
+#: at 60 scans) to 373 MB after 300 runs (128 MiB: 404 MB after 600); with 4 MiB, which
 #: still holds the newest three Prosov runs, it stayed near 90 MB (94 MB after 600 runs).
 SERVER_MEMORY_LIMIT = "4MiB"
 
