@@ -9,6 +9,7 @@ work, exit status 1 naming the target for a write that failed.
 from __future__ import annotations
 
 import errno
+import math
 import os
 import shutil
 import signal
@@ -18,8 +19,10 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
+from radarviz.core.finite import ResultError, check_finite_document, check_finite_result
 from radarviz.viz_app.cli.main import main
 from radarviz.viz_app.io.atomic import (
     Stage,
@@ -503,3 +506,258 @@ def test_an_error_inside_the_unit_commits_nothing(tmp_path: Path) -> None:
             fh.write("new b")
     assert (a.read_text(), b.read_text()) == ("new a", "new b")
     assert temporaries(tmp_path) == []
+
+
+# --------------------------------------------------------------------------------------------
+# Results that are not finite (``core.finite``): one line, exit 1, nothing printed or written
+# --------------------------------------------------------------------------------------------
+
+
+def test_check_finite_result_names_the_value_and_spares_undefined_ones() -> None:
+    n = np.arange(1, 6)
+    values = np.array([np.nan, np.nan, 1.0, 2.0, 3.0])
+    check_finite_result("w", "x", values, defined=n >= 3, index=n)  # undefined before scan 3
+    with pytest.raises(ResultError, match=r"^w: x at scan 2 is NaN \(not a finite result\)$"):
+        check_finite_result("w", "x", values, defined=n >= 2, index=n)
+    with pytest.raises(ResultError, match=r"^w: nees at scan 4 is -0\.5 \(a negative value"):
+        check_finite_result("w", "nees", [1.0, 2.0, 3.0, -0.5], nonnegative=True)
+    check_finite_result("w", "bias", [1.0, -2.0])  # a bias may be negative
+    with pytest.raises(ResultError, match=r"at k 7\[2\] is \+inf"):
+        check_finite_result(
+            "w", "g", np.array([[0.0, 0.0, 0.0], [0.0, 0.0, np.inf]]), index_name="k", index=[3, 7]
+        )
+    with pytest.raises(ResultError, match=r"^w: baseline\.sigma_mc\[1\] is NaN"):
+        check_finite_document("w", {"baseline": {"sigma_mc": [1.0, math.nan], "warning": None}})
+
+
+def _spoil(result, method: str, key: str, scan: int, value: float):
+    """Put ``value`` into ``result.metrics[method].key`` at ``scan`` (1-based), in place."""
+    getattr(result.metrics[method], key)[scan - 1] = value
+    return result
+
+
+@pytest.mark.parametrize(
+    "value, expected",
+    [
+        (math.nan, "reproduce prosov: nees_pos of ukf at scan 12 is NaN (not a finite result)"),
+        (-0.5, "reproduce prosov: nees_pos of ukf at scan 12 is -0.5 (a negative value"),
+    ],
+)
+@pytest.mark.parametrize("as_json", [False, True])
+def test_reproduce_prosov_refuses_a_nan_or_negative_nees(
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+    value: float,
+    expected: str,
+    as_json: bool,
+) -> None:
+    import radarviz.viz_app.cli.main as cli
+
+    real = cli.run_tracking
+    monkeypatch.setattr(
+        cli,
+        "run_tracking",
+        lambda cfg, progress=None: _spoil(real(cfg), "ukf", "nees_pos", 12, value),
+    )
+    png = tmp_path / "f.png"
+    argv = ["reproduce", "prosov", "--runs", "20", "--steps", "20", "--methods", "naive", "ukf"]
+    argv += ["--sigma-beta-deg", "1", "--plot", str(png)] + (["--json"] if as_json else [])
+    assert main(argv) == 1
+    out, err = capsys.readouterr()
+    assert out == ""
+    one_error_line(err, expected)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_reproduce_gorshkov_undefined_is_null_and_a_nan_is_an_error(
+    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Range-only acceleration at k < 3 and the track start's scans before its k are null by
+    construction; a NaN where a value must exist (k = 5, scan 10) is an error."""
+    import json
+
+    import radarviz.core.experiments.doppler_start as ds
+    import radarviz.core.finite_memory.fit as fit
+
+    argv = ["reproduce", "gorshkov", "--trials", "200", "--radars", "RLS1", "--k-max", "6"]
+    argv += ["--tracking-runs", "20", "--json"]
+    assert main(argv) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["radars"][0]["sigma"]["range_only"]["a"][:2] == [None, None]
+    assert all(v is not None for v in doc["radars"][0]["sigma"]["range_only"]["a"][2:])
+    start = doc["tracking"]["start_scans"]
+    rmse = doc["tracking"]["variants"]["range_doppler"]["rmse_x"]
+    assert rmse[: start - 1] == [None] * (start - 1) and None not in rmse[start - 1 :]
+
+    real_fit = fit.run_gorshkov
+
+    def spoiled_fit(*args, **kwargs):
+        result = real_fit(*args, **kwargs)
+        result.radars[0].range_only.sigma_mc[4, 0] = math.nan
+        return result
+
+    monkeypatch.setattr(fit, "run_gorshkov", spoiled_fit)
+    assert main(argv) == 1
+    out, err = capsys.readouterr()
+    assert out == ""
+    one_error_line(err, "reproduce gorshkov: sigma_mc of range_only (RLS1) at k 5[0] is NaN")
+
+    monkeypatch.setattr(fit, "run_gorshkov", real_fit)
+    real_track = ds.run_doppler_tracking
+    monkeypatch.setattr(
+        ds,
+        "run_doppler_tracking",
+        lambda cfg: _spoil(real_track(cfg), "range_only", "rmse_x", 10, math.nan),
+    )
+    assert main(argv) == 1
+    one_error_line(capsys.readouterr().err, "rmse_x of range_only at scan 10 is NaN")
+
+
+def test_reproduce_velocity_refuses_a_nan(
+    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import radarviz.core.velocity.estimate as est
+
+    real = est.run_velocity_experiment
+
+    def spoiled(*args, **kwargs):
+        result = real(*args, **kwargs)
+        result.baseline_mc.sigma[1] = math.nan
+        return result
+
+    monkeypatch.setattr(est, "run_velocity_experiment", spoiled)
+    assert main(["reproduce", "velocity", "--trials", "2000"]) == 1
+    out, err = capsys.readouterr()
+    assert out == ""
+    one_error_line(err, "reproduce velocity: baseline.sigma_mc[1] is NaN (not a finite result)")
+
+
+@pytest.mark.parametrize("entry, value", [((2, 2), math.nan), ((0, 0), -1.0)])
+def test_track_refuses_a_nan_or_negative_variance_and_writes_nothing(
+    tmp_path: Path,
+    inputs: tuple[Path, Path],
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+    entry: tuple[int, int],
+    value: float,
+) -> None:
+    from radarviz.core.tracking import stream
+
+    real = stream.StreamTracker.add_block
+    seen = {"plots": 0}
+
+    def spoiled(self, plots):
+        rows = real(self, plots)
+        for plot_rows in rows:
+            seen["plots"] += 1
+            if seen["plots"] == 7:
+                method, x, P = plot_rows[0]
+                P = P.copy()
+                P[entry] = value
+                plot_rows[0] = (method, x, P)
+        return rows
+
+    monkeypatch.setattr(stream.StreamTracker, "add_block", spoiled)
+    meas, radars = inputs
+    out, rrd = tmp_path / "t.csv", tmp_path / "t.rrd"
+    argv = track(meas, radars, "--out", str(out), "--rrd", str(rrd), "--method", "naive")
+    assert main(argv) == 1
+    column = "p_yy" if entry == (2, 2) else "p_xx"
+    what = "is NaN (not a finite result)" if math.isnan(value) else "is -1 (a negative value"
+    line = one_error_line(capsys.readouterr().err, f"{column} of naive", what)
+    assert line.startswith(f"radarviz: error: track: {meas} at time 60.0 s:")
+    assert not out.exists() and not rrd.exists()
+    assert temporaries(tmp_path) == []
+
+
+def test_simulate_refuses_a_nan_plot_and_writes_nothing(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import dataclasses
+
+    import radarviz.viz_app.cli.track as cli_track
+
+    real = cli_track.simulated_plots
+
+    def spoiled(*args, **kwargs):
+        plots, radars = real(*args, **kwargs)
+        plots[3] = dataclasses.replace(plots[3], range_m=math.nan)
+        return plots, radars
+
+    monkeypatch.setattr(cli_track, "simulated_plots", spoiled)
+    meas, radars = tmp_path / "m.csv", tmp_path / "r.toml"
+    argv = ["simulate", "--preset", "prosov", "--out", str(meas), "--radars-out", str(radars)]
+    assert main(argv) == 1
+    one_error_line(capsys.readouterr().err, "simulate: range_m at plot 4 is NaN")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_sweep_refuses_a_nan_and_writes_no_table(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import radarviz.viz_app.cli.sweep as cli_sweep
+
+    real = cli_sweep.run_sweep
+
+    def spoiled(spec, *args, **kwargs):
+        run = real(spec, *args, **kwargs)
+        _spoil(run.results[0], "naive", "rmse_x", 3, math.nan)
+        return run
+
+    monkeypatch.setattr(cli_sweep, "run_sweep", spoiled)
+    out = tmp_path / "s.parquet"
+    args = ["sweep", "--grid", "sigma_beta_deg=1", "--runs", "10", "--scheduler", "serial"]
+    assert main([*args, "--json", "--methods", "naive", "--out", str(out)]) == 1
+    stdout, err = capsys.readouterr()
+    assert stdout == ""
+    one_error_line(err, "sweep: point 0: rmse_x of naive at scan 3 is NaN")
+    assert not out.exists()
+
+
+def test_bench_refuses_a_nan_figure(
+    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import radarviz.viz_app.bench.engine as engine
+
+    monkeypatch.setattr(
+        engine, "run_bench", lambda runs, filterpy_runs: {"runs": list(runs), "kf_ns": [math.nan]}
+    )
+    assert main(["bench", "--json", "--runs", "100"]) == 1
+    out, err = capsys.readouterr()
+    assert out == ""
+    one_error_line(err, "bench: kf_ns[0] is NaN (not a finite result)")
+
+
+def test_tune_panel_shows_a_nan_as_its_error_and_keeps_the_last_good_run(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    import radarviz.viz_app.tune.scenes as scenes
+    from radarviz.viz_app.tune.params import TuneParams
+    from radarviz.viz_app.tune.session import TuneSession
+    from radarviz.viz_app.tune.worker import Coalescer
+
+    small = TuneParams(runs=20, steps=10)
+    session = TuneSession(None)
+    worker = Coalescer(session.run, session.done, session.error)
+    real = scenes.prosov_scene
+    try:
+        worker.submit(small)
+        assert worker.wait_idle(60)
+        good = session.last_good
+        assert good is not None and session.last_error is None
+
+        def spoiled(cfg):
+            scene = real(cfg)
+            _spoil(scene.result, "ukf", "nees_pos", 4, math.nan)
+            return scene
+
+        monkeypatch.setattr(scenes, "prosov_scene", spoiled)
+        worker.submit(TuneParams(runs=20, steps=10, sigma_beta_deg=1.5))
+        assert worker.wait_idle(60)
+    finally:
+        worker.stop()
+    assert session.last_good is good  # still on screen
+    assert session.last_error == (
+        "tune prosov: nees_pos of ukf at scan 4 is NaN (not a finite result)"
+    )

@@ -451,3 +451,61 @@ def test_tune_panel_drives_each_scene_from_two_tabs(
             os.killpg(proc.pid, signal.SIGKILL)
             proc.wait(timeout=5)
             raise
+
+
+def _group_rss_mb(pgid: int) -> float:
+    """Resident memory (MB) of every process in group ``pgid``: ``rerun`` is a launcher whose
+    child is the server."""
+    total_kb = 0
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+            if int(fields[2]) != pgid:  # fields after the name: state, ppid, pgrp, …
+                continue
+            status = (stat.parent / "status").read_text()
+        except (OSError, IndexError, ValueError):
+            continue  # gone meanwhile
+        for line in status.splitlines():
+            if line.startswith("VmRSS:"):
+                total_kb += int(line.split()[1])
+    return total_kb / 1024
+
+
+def test_rerun_server_memory_stays_bounded_over_many_runs(tmp_path: Path) -> None:
+    """The panel's gRPC server (``serve.start_rerun``, its ``SERVER_MEMORY_LIMIT``) must not
+    keep every run. Over runs 50 → 100 of the Prosov scene (the largest recording) its
+    resident memory may grow by less than half of what one run sends (that run's recording,
+    measured here): with the earlier 512 MiB limit it grew by about one whole recording per
+    run (1.1 MB per run against 1.0 MB sent), with 4 MiB by ≈ 0.1 MB."""
+    from radarviz.viz_app.tune.serve import (
+        LOOPBACK,
+        grpc_uri,
+        start_rerun,
+        stop_process_group,
+        wait_port,
+    )
+
+    params = TuneParams(scene="prosov", runs=20)
+    path = tmp_path / "one.rrd"
+    with recording_file(path) as rec:
+        log_tuning_scene(rec, params)
+    del rec
+    release_streams()
+    run_mb = path.stat().st_size / 1e6
+    port = free_port(LOOPBACK)
+    proc = start_rerun(LOOPBACK, port, None)
+    try:
+        wait_port(LOOPBACK, port, proc=proc)
+        session = TuneSession(grpc_uri(LOOPBACK, port))
+        rss = {}
+        for i in range(1, 101):
+            session.run(replace(params, sigma_beta_deg=1.0 + 0.01 * i))
+            if i in (50, 100):
+                time.sleep(0.5)  # the server has taken the last messages in
+                rss[i] = _group_rss_mb(proc.pid)
+        assert proc.poll() is None
+    finally:
+        stop_process_group(proc)
+    assert rss[50] > 20, rss  # the server itself was measured, not only its launcher
+    per_run = (rss[100] - rss[50]) / 50
+    assert per_run < 0.5 * run_mb, (rss, run_mb)

@@ -7,6 +7,8 @@ by the core config that receives them; the ``ParameterError`` it raises names th
 which is printed as the flag of this command. Outputs are checked before any work
 (``viz_app.io.atomic.check_outputs``: not an input, not each other, not a special file); an
 output that cannot be written is one line naming it, exit status 1, its previous file intact.
+A result that is not finite (a NaN figure, a negative NEES or variance; ``core.finite``) is one
+line naming where it appeared, exit status 1, and nothing is printed or written.
 
 Only numpy-level modules are imported to build the parser: matplotlib, Rerun, Viser, Dask and
 scipy.stats load when a command needs them (``tests/test_cli.py`` checks this).
@@ -21,6 +23,7 @@ from collections.abc import Callable, Sequence
 from typing import Any, NoReturn
 
 from radarviz.core.experiments.prosov import ALL_METHODS, prosov_configs, run_tracking
+from radarviz.core.finite import ResultError, check_finite_document
 from radarviz.core.params import ParameterError, check, check_int, check_real
 from radarviz.viz_app.cli import recording, sweep, track
 from radarviz.viz_app.cli.args import integer, number, print_report
@@ -30,6 +33,8 @@ from radarviz.viz_app.io.atomic import WriteError, check_outputs
 EXIT_USAGE = 2
 #: Exit status when an output could not be written (``viz_app.io.atomic.WriteError``).
 EXIT_WRITE = 1
+#: Exit status when a computed result is not finite (``core.finite.ResultError``).
+EXIT_RESULT = 1
 #: Runs × cases above which a progress bar is drawn on standard error.
 PROGRESS_MIN_RUNS = 20_000
 
@@ -353,6 +358,7 @@ def _cmd_bench(args: argparse.Namespace) -> int:
 
     tune_allocator()
     doc = run_bench(runs=args.runs, filterpy_runs=args.filterpy_runs)
+    check_finite_document("bench", doc, nonnegative=True)  # times, rates and ratios
     print_report(doc, args.json, format_bench)
     return 0
 
@@ -383,6 +389,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except WriteError as exc:  # an output could not be written; the previous file is intact
         print(f"radarviz: error: {exc}", file=sys.stderr)
         return EXIT_WRITE
+    except ResultError as exc:  # a NaN or a negative NEES: nothing printed, nothing written
+        print(f"radarviz: error: {exc}", file=sys.stderr)
+        return EXIT_RESULT
     except OSError as exc:
         return _fail(f"{exc.strerror or exc}: {exc.filename}" if exc.filename else str(exc))
     except KeyboardInterrupt:

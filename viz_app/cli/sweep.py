@@ -20,6 +20,7 @@ import numpy as np
 
 from radarviz.core.experiments.prosov import ALL_METHODS, BLOCK_RUNS
 from radarviz.core.experiments.sweep import GRID_AXES, SWEEP_PRESETS, SweepBase, SweepSpec
+from radarviz.core.finite import check_finite_document
 from radarviz.core.params import ParameterError, check_choice, check_int
 from radarviz.viz_app.bench.sweep import DEFAULT_GRID, DEFAULT_RUNS, format_bench, run_bench
 from radarviz.viz_app.cli.args import integer, number, print_report
@@ -224,6 +225,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     else:
         workers = check_int("--workers", args.workers, low=1, high=1024)
     out, plot_dir, rrd = _check_output_paths(args)
+    from radarviz.viz_app.reports.prosov import check_tracking_result
     from radarviz.viz_app.sweep.output import plot_sweep, record_sweep, sweep_table, write_parquet
 
     tune_allocator()
@@ -239,6 +241,8 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     except SweepAbortedError as exc:
         print(f"radarviz: error: {exc}", file=sys.stderr)
         return 1
+    for i, result in enumerate(run.results):  # before any output: all good or none written
+        check_tracking_result(f"sweep: point {i}", result)
     figures: list[str] = []
     with commit_together():  # the table, the figures and the recording: all or none
         write_parquet(sweep_table(spec, run.results), out)
@@ -266,6 +270,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         "figures": figures,
         "rrd": str(rrd) if rrd is not None else None,
     }
+    check_finite_document("sweep", doc, nonnegative=True)  # counts and times
     if args.json:
         json.dump(doc, sys.stdout)
         sys.stdout.write("\n")
@@ -307,6 +312,7 @@ def cmd_bench_sweep(args: argparse.Namespace) -> int:
     spec.configs()
     tune_allocator()
     doc = run_bench(spec, list(args.workers))
+    check_finite_document("bench-sweep", doc, nonnegative=True)
     print_report(doc, args.json, format_bench)
     return 0
 

@@ -63,6 +63,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from radarviz.core.experiments.prosov import ALL_METHODS, TrackingConfig, displayed_measurements
+from radarviz.core.finite import check_finite_result
 from radarviz.core.params import PARAMETERS, ParameterError, check, check_choice, default
 from radarviz.core.scenarios.multi_radar import (
     Scenario3D,
@@ -359,6 +360,23 @@ def track_row(time_s: float, method: str, x: NDArray[np.float64], P: NDArray[np.
     return [time_s, method, *x[_STATE_INDEX].tolist(), *P[_COV_ROWS, _COV_COLS].tolist()]
 
 
+#: The variances among the track columns: they must not be negative.
+VARIANCE_COLUMNS = frozenset({"p_xx", "p_yy", "p_zz", "p_vxvx", "p_vyvy", "p_vzvz"})
+_ROW_NONNEGATIVE = np.array([c in VARIANCE_COLUMNS for c in TRACK_COLUMNS[2:]])
+
+
+def check_track_rows(where: str, rows: list[StateRow]) -> None:
+    """The finite-result check (``core.finite``) of one plot's track rows before they are
+    written: every state and covariance entry finite, every variance not negative. Nothing
+    in a track is undefined (before its start a method has no row at all)."""
+    for method, x, P in rows:
+        values = np.concatenate([x[_STATE_INDEX], P[_COV_ROWS, _COV_COLS]])
+        if np.isfinite(values).all() and (values[_ROW_NONNEGATIVE] >= 0).all():
+            continue  # the usual case, without building names
+        for column, v, positive in zip(TRACK_COLUMNS[2:], values, _ROW_NONNEGATIVE, strict=True):
+            check_finite_result(where, f"{column} of {method}", v, nonnegative=bool(positive))
+
+
 def state_from_row(values: dict[str, str]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """The state x (6,) and P (6, 6) of one track-file row (the inverse of ``track_row``)."""
     x = np.zeros(6)
@@ -537,6 +555,7 @@ def run_track(
 
         def on_rows(plot: Plot, rows: list[StateRow]) -> None:
             nonlocal written
+            check_track_rows(f"track: {input_path} at time {plot.time_s!r} s", rows)
             w.writerows([track_row(plot.time_s, m, x, P) for m, x, P in rows])
             written += len(rows)
             if logger is not None:
@@ -652,7 +671,20 @@ def write_measurements(
     meas_path: str, radars_path: str, plots: list[Plot], radars: list[Radar]
 ) -> int:
     """Plots as a measurement CSV and their radars as TOML, committed together; returns
-    plots."""
+    plots. Every plot's values pass the finite-result check first (a range or an angle that
+    came out NaN is an error, not a row; ranges must be > 0 to be read back)."""
+    for column, values, positive in (
+        ("time_s", [p.time_s for p in plots], False),
+        ("range_m", [p.range_m for p in plots], True),
+        ("azimuth_rad", [p.azimuth_rad for p in plots], False),
+        ("elevation_rad", [p.elevation_rad for p in plots if p.elevation_rad is not None], False),
+        (
+            "radial_velocity_mps",
+            [p.radial_velocity_mps for p in plots if p.radial_velocity_mps is not None],
+            False,
+        ),
+    ):
+        check_finite_result("simulate", column, values, nonnegative=positive, index_name="plot")
     three_d = plots[0].elevation_rad is not None
     doppler = any(p.radial_velocity_mps is not None for p in plots)
     header = (

@@ -15,8 +15,14 @@ import numpy as np
 
 from radarviz.core.confidence import BAND_GROUPS, BAND_LEVEL
 from radarviz.core.experiments.doppler_start import DopplerTrackingResult
+from radarviz.core.finite import check_finite_result
 from radarviz.core.finite_memory.fit import FilterStats, GorshkovRadar, GorshkovResult
-from radarviz.viz_app.reports.prosov import METRIC_KEYS, band_document, json_series
+from radarviz.viz_app.reports.prosov import (
+    METRIC_KEYS,
+    band_document,
+    check_metrics,
+    json_series,
+)
 
 _STATE_KEYS = ("r", "vr", "a")
 
@@ -80,10 +86,76 @@ def tracking_document(result: DopplerTrackingResult) -> dict[str, Any]:
     }
 
 
+def fitted(stats: FilterStats) -> np.ndarray:
+    """(K, 3) True where a window of k scans estimates r, Vr, a (``order``, from
+    ``core.finite_memory.fit.max_order``: min(k·m, 3) parameters); elsewhere undefined."""
+    return np.arange(3)[None, :] < np.asarray(stats.order)[:, None]
+
+
+def check_gorshkov_result(
+    where: str, result: GorshkovResult, tracking: DopplerTrackingResult | None = None
+) -> None:
+    """The finite-result check (``core.finite``) of everything the document reports: each
+    variant's σ (Monte Carlo, analytic, χ² band; not negative) where its fit estimates the
+    parameter, the gains and their band where the range-only fit does (the gain needs both),
+    and the tracking part from its start scan on."""
+    ks = result.ks
+    for rad in result.radars:
+        radar = rad.preset.name
+        for variant, st in (("range_only", rad.range_only), ("range_doppler", rad.range_doppler)):
+            mask = fitted(st)
+            for key in ("sigma_mc", "sigma_analytic", "sigma_mc_ci95_lo", "sigma_mc_ci95_hi"):
+                check_finite_result(
+                    where,
+                    f"{key} of {variant} ({radar})",
+                    getattr(st, key),
+                    defined=mask,
+                    nonnegative=True,
+                    index_name="k",
+                    index=ks,
+                )
+        both = fitted(rad.range_only)
+        for key in ("gain_mc", "gain_analytic", "gain_mc_ci95_lo", "gain_mc_ci95_hi"):
+            check_finite_result(
+                where, f"{key} ({radar})", getattr(rad, key), defined=both, index_name="k", index=ks
+            )
+    if tracking is None:
+        return
+    first = tracking.config.start_scans
+    bands = {v: {k: tracking.band95(v, k) for k in METRIC_KEYS} for v in tracking.metrics}
+    check_metrics(where, tracking.metrics, tracking.n, bands, first_scan=first)
+    defined = np.asarray(tracking.n) >= first
+    for variant in tracking.metrics:
+        for key, values in (
+            ("rmse_vr", tracking.rmse_vr[variant]),
+            ("sigma_vr_filter", tracking.sigma_vr_filter[variant]),
+        ):
+            check_finite_result(
+                where,
+                f"{key} of {variant}",
+                values,
+                defined=defined,
+                nonnegative=True,
+                index=tracking.n,
+            )
+        for side, band in zip(("lo", "hi"), tracking.rmse_vr_ci95[variant], strict=True):
+            check_finite_result(
+                where,
+                f"rmse_vr 95% band {side} of {variant}",
+                band,
+                defined=defined,
+                index=tracking.n,
+            )
+
+
 def gorshkov_document(
-    result: GorshkovResult, tracking: DopplerTrackingResult | None = None
+    result: GorshkovResult,
+    tracking: DopplerTrackingResult | None = None,
+    where: str = "reproduce gorshkov",
 ) -> dict[str, Any]:
-    """The whole experiment, one entry per radar (and the tracking part if given)."""
+    """The whole experiment, one entry per radar (and the tracking part if given); its
+    numbers pass ``check_gorshkov_result`` first (undefined ones become null)."""
+    check_gorshkov_result(where, result, tracking)
     radars = []
     for rad in result.radars:
         p = rad.preset

@@ -13,6 +13,8 @@ import numpy as np
 
 from radarviz.core.confidence import BAND_GROUPS, BAND_LEVEL
 from radarviz.core.experiments.prosov import TrackingResult, check_delta_x_claims
+from radarviz.core.finite import check_finite_result
+from radarviz.core.metrics import TrackMetrics
 
 #: Per-method series in the document, in this order.
 METRIC_KEYS: tuple[str, ...] = (
@@ -24,6 +26,72 @@ METRIC_KEYS: tuple[str, ...] = (
     "nees_pos",
     "nees_state",
 )
+#: Series that are a σ, an RMSE or a NEES: negative is a failure, not a value.
+NONNEGATIVE_KEYS: frozenset[str] = frozenset(
+    {"sigma_x_filter", "rmse_x", "std_x", "nees_pos", "nees_state"}
+)
+
+
+def check_metrics(
+    where: str,
+    metrics: dict[str, TrackMetrics],
+    n: np.ndarray,
+    bands: dict[str, Any],
+    first_scan: int = 1,
+) -> None:
+    """Every ``METRIC_KEYS`` series of every method (``core.finite.check_finite_result``):
+    finite from ``first_scan`` on (a track started from k scans has none before scan k),
+    σ / RMSE / NEES not negative; ``bands[name][key]`` (lo, hi) finite wherever the series is,
+    for the methods that have groups of runs (without them every band is undefined)."""
+    defined = np.asarray(n) >= first_scan
+    for name, m in metrics.items():
+        for key in METRIC_KEYS:
+            check_finite_result(
+                where,
+                f"{key} of {name}",
+                getattr(m, key),
+                defined=defined,
+                nonnegative=key in NONNEGATIVE_KEYS,
+                index=n,
+            )
+            if name in bands:
+                for side, band in zip(("lo", "hi"), bands[name][key], strict=True):
+                    check_finite_result(
+                        where, f"{key} 95% band {side} of {name}", band, defined=defined, index=n
+                    )
+
+
+def check_tracking_result(where: str, result: TrackingResult) -> None:
+    """The finite-result check of one Prosov case before it is printed, written or shown:
+    the metrics and their bands (``check_metrics``), Δx and its band, the NEES χ² bands."""
+    bands = {
+        name: {key: result.band95(name, key) for key in METRIC_KEYS}
+        for name in result.metrics
+        if name in result.leave_one_out
+    }
+    check_metrics(where, result.metrics, result.n, bands)
+    if "seed" in result.metrics and "naive" in result.metrics:
+        grouped = "seed" in result.leave_one_out and "naive" in result.leave_one_out
+        ci = result.delta_x_ci95()
+        for reading, values in result.delta_x_percent().items():
+            check_finite_result(where, f"delta_x_percent ({reading})", values, index=result.n)
+            for side, band in zip(("lo", "hi"), ci[reading], strict=True):
+                check_finite_result(
+                    where,
+                    f"delta_x_percent ({reading}) 95% band {side}",
+                    band,
+                    defined=grouped,
+                    index=result.n,
+                )
+    for label, band in (("pos", result.nees_pos_band95), ("state", result.nees_state_band95)):
+        check_finite_result(
+            where,
+            f"nees_{label}_band95",
+            band,
+            nonnegative=True,
+            index_name="the",
+            index=("low end", "high end"),
+        )
 
 
 def json_series(values: np.ndarray) -> list[float | None]:
@@ -78,8 +146,15 @@ def case_document(result: TrackingResult) -> dict[str, Any]:
     return case
 
 
-def prosov_document(results: Sequence[TrackingResult]) -> dict[str, Any]:
-    """The whole experiment: one case per σβ, all with the same runs, seed and period."""
+def prosov_document(
+    results: Sequence[TrackingResult], where: str = "reproduce prosov"
+) -> dict[str, Any]:
+    """The whole experiment: one case per σβ, all with the same runs, seed and period.
+
+    Every case passes ``check_tracking_result`` first: a NaN or a negative NEES is a
+    ``ResultError`` naming ``where``, never a null in the document."""
+    for r in results:
+        check_tracking_result(where, r)
     first = results[0].config
     return {
         "experiment": "prosov",

@@ -13,7 +13,9 @@ The JSON keys are an interface (``radarviz reproduce velocity --json``)::
 
 Vectors are (Vx, Vy, Vz) in m/s. ``ratio_mc_to_linear`` is the sample σ over the first-order σ;
 ``ratio_robust_to_linear`` uses the interquartile σ instead (insensitive to the heavy tails that
-near-singular draws of Ĉ produce at large m). Non-finite numbers become null.
+near-singular draws of Ĉ produce at large m). Nothing is undefined: every number passes
+``core.finite.check_finite_document`` (a NaN, or a negative σ, ratio, m or condition number, is
+a ``ResultError`` naming its path, never a null).
 
 Every Monte Carlo value has its 95% band beside it as {"lo": …, "hi": …}: ``sigma_mc_ci95``
 and ``corr_mc_ci95`` (delete-a-group jackknife) in the baseline, ``ratio_mc_to_linear_ci95``
@@ -23,12 +25,12 @@ means) in the sweep (``core.velocity.estimate.VelocityMC``); ``band`` names the 
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 import numpy as np
 
 from radarviz.core.confidence import BAND_GROUPS, BAND_LEVEL
+from radarviz.core.finite import check_finite_document
 from radarviz.core.velocity.estimate import (
     AXES,
     BASELINE_SIGMA_AZ_DEG,
@@ -42,17 +44,27 @@ from radarviz.core.velocity.estimate import (
     VelocityExperiment,
 )
 
+#: Keys of the document whose numbers are a σ, a ratio of σ, m or a condition number.
+NONNEGATIVE_KEYS = (
+    "sigma_first_order",
+    "sigma_mc",
+    "bias_mc_se",
+    "condition_number",
+    "m",
+    "ratio_mc_to_linear",
+    "ratio_robust_to_linear",
+)
 
-def _num(v: float) -> float | None:
-    v = float(v)
-    return v if math.isfinite(v) else None
+
+def _num(v: float) -> float:
+    return float(v)
 
 
-def _vec(a: np.ndarray) -> list[float | None]:
+def _vec(a: np.ndarray) -> list[float]:
     return [_num(v) for v in np.asarray(a, dtype=float).ravel()]
 
 
-def _mat(a: np.ndarray) -> list[list[float | None]]:
+def _mat(a: np.ndarray) -> list[list[float]]:
     return [_vec(row) for row in np.asarray(a, dtype=float)]
 
 
@@ -62,8 +74,11 @@ def _band(lo: np.ndarray, hi: np.ndarray) -> dict[str, Any]:
     return {"lo": _vec(lo), "hi": _vec(hi)}
 
 
-def velocity_document(result: VelocityExperiment) -> dict[str, Any]:
-    """The whole experiment as a JSON-ready dict (module docstring)."""
+def velocity_document(
+    result: VelocityExperiment, where: str = "reproduce velocity"
+) -> dict[str, Any]:
+    """The whole experiment as a JSON-ready dict (module docstring), every number checked
+    (``check_finite_document``: a failure is a ``ResultError`` naming ``where``)."""
     st, mc = result.baseline, result.baseline_mc
     baseline = {
         "sites_m": [list(s) for s in BASELINE_SITES_M],
@@ -107,7 +122,7 @@ def velocity_document(result: VelocityExperiment) -> dict[str, Any]:
                 "warning": s.geometry.warning,
             }
         )
-    return {
+    doc = {
         "experiment": "velocity",
         "trials": result.trials,
         "seed": result.seed,
@@ -124,6 +139,8 @@ def velocity_document(result: VelocityExperiment) -> dict[str, Any]:
         "baseline": baseline,
         "sweep": sweep,
     }
+    check_finite_document(where, doc, NONNEGATIVE_KEYS)
+    return doc
 
 
 def format_velocity_table(doc: dict[str, Any]) -> str:

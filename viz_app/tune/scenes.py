@@ -9,8 +9,13 @@ Each scene is the viewer's own scene module fed with the panel's values:
 * ``velocity``: the three baseline sites, every radar with σr, σβ (azimuth and elevation),
   σVr and T, over ``steps`` scans.
 
-``figures`` are the headline numbers of the status line (all finite or left out);
-``alerts`` the figures far outside their consistency band or flagged by the estimator.
+``figures`` are the headline numbers of the status line; ``alerts`` the figures far outside
+their consistency band or flagged by the estimator. Before anything is logged or shown, a run
+passes the same finite-result check as the command line (``core.finite``; the Prosov and
+Gorshkov results with the reports' own checks): a NaN, or a negative NEES or σ, raises
+``ResultError``, which the panel shows as its one error line while the last good run stays on
+screen. A figure is left out only where it is undefined by construction (no scan of the
+velocity scene has an estimate yet; no k where the range-only σVr falls below σVr).
 """
 
 from __future__ import annotations
@@ -26,11 +31,14 @@ from radarviz.core.experiments.doppler_start import (
     run_doppler_tracking,
 )
 from radarviz.core.experiments.prosov import ProsovScene, TrackingConfig, prosov_scene
+from radarviz.core.finite import check_finite_figures
 from radarviz.core.finite_memory.fit import GorshkovResult, RadarPreset, run_gorshkov
 from radarviz.core.scenarios.multi_radar import fusion_scenario
 from radarviz.core.scenarios.planar import prosov_target
 from radarviz.core.velocity.estimate import M_WARN
 from radarviz.core.velocity.scans import VelocityScans, estimate_scans
+from radarviz.viz_app.reports.gorshkov import check_gorshkov_result
+from radarviz.viz_app.reports.prosov import check_tracking_result
 from radarviz.viz_app.rerun import gorshkov_scene, velocity_scene
 from radarviz.viz_app.rerun import prosov_scene as prosov_views
 from radarviz.viz_app.tune.params import TuneParams
@@ -82,6 +90,7 @@ def simulate(p: TuneParams) -> TuneResult:
             methods=p.methods,
         )
         scene = prosov_scene(cfg)
+        check_tracking_result("tune prosov", scene.result)
         figures, alerts = _prosov_summary(scene)
         return TuneResult(p, prosov=scene, figures=figures, alerts=alerts)
     if p.scene == "gorshkov":
@@ -96,6 +105,7 @@ def simulate(p: TuneParams) -> TuneResult:
                 steps=max(p.steps, 4),
             )
         )
+        check_gorshkov_result("tune gorshkov", result, tracking)
         figures, alerts = _gorshkov_summary(p, result, tracking)
         return TuneResult(p, gorshkov=result, tracking=tracking, figures=figures, alerts=alerts)
     scenario = fusion_scenario(
@@ -122,8 +132,31 @@ def log_result(rec: rr.RecordingStream, result: TuneResult) -> None:
 # --- headline figures ------------------------------------------------------------------------
 
 
-def _finite(d: dict[str, float]) -> dict[str, float]:
-    return {k: float(v) for k, v in d.items() if np.isfinite(v)}
+#: Figures that are a NEES, a σ, an RMSE, a window length, m or a count: never negative
+#: (".name": that figure of every method or variant). Biases and gains may be negative.
+NONNEGATIVE_FIGURES = (
+    ".nees_pos",
+    "nees_band95_lo",
+    "nees_band95_hi",
+    "sigma_vr_mps",
+    "peak_range_gain_k",
+    "peak_range_gain_mc_k",
+    "k_range_only_beats_doppler",
+    ".rmse_vr_mps",
+    "flagged_scans",
+    "sigma_vx_mps",
+    "sigma_vy_mps",
+    "sigma_vz_mps",
+    "m",
+    "scan",
+)
+
+
+def _finite(scene: str, d: dict[str, float]) -> dict[str, float]:
+    """The figures as floats, each a finite number (``core.finite.check_finite_figures``)."""
+    figures = {k: float(v) for k, v in d.items()}
+    check_finite_figures(f"tune {scene}", figures, NONNEGATIVE_FIGURES)
+    return figures
 
 
 def _prosov_summary(scene: ProsovScene) -> tuple[dict[str, float], tuple[str, ...]]:
@@ -141,7 +174,7 @@ def _prosov_summary(scene: ProsovScene) -> tuple[dict[str, float], tuple[str, ..
                 f"{name}: NEES {nees:.3g} is far outside its 95% band [{lo:.2f}, {hi:.2f}]: "
                 "its covariance is not credible"
             )
-    return _finite(figures), tuple(alerts)
+    return _finite("prosov", figures), tuple(alerts)
 
 
 def _gorshkov_summary(
@@ -171,7 +204,7 @@ def _gorshkov_summary(
         figures["k_range_only_beats_doppler"] = float(ks[below[0]])
     for var, rmse in tracking.rmse_vr.items():
         figures[f"{var}.rmse_vr_mps"] = float(rmse[-1])
-    return _finite(figures), ()
+    return _finite("gorshkov", figures), ()
 
 
 def _velocity_summary(run: VelocityScans) -> tuple[dict[str, float], tuple[str, ...]]:
@@ -193,7 +226,7 @@ def _velocity_summary(run: VelocityScans) -> tuple[dict[str, float], tuple[str, 
             )
     if run.flagged.any():
         alerts.append(f"{int(run.flagged.sum())} of {len(run.n)} scans flagged (m > {M_WARN:g})")
-    return _finite(figures), tuple(alerts)
+    return _finite("velocity", figures), tuple(alerts)
 
 
 def status_lines(result: TuneResult) -> list[str]:

@@ -64,6 +64,17 @@ def wait_port(
     raise TimeoutError(f"nothing listens on {connect}:{port} after {timeout:g} s")
 
 
+#: The gRPC server's buffer (``--server-memory-limit``). The server keeps what it relays for
+#: viewers that connect later and drops the oldest messages, hence the oldest runs, beyond
+#: this; a run that is dropped is only gone for such late viewers (a connected viewer has it
+#: already, and switches to each new run as it arrives). Its resident memory is several
+#: times the limit (the limit counts the buffered messages, not the server's own copies and
+#: indexes): with 512 MiB it grew by ≈ 1.1 MB per Prosov run (≈ one run's recording, 1.0 MB
+#: at 60 scans) to 373 MB after 300 runs (128 MiB: 404 MB after 600); with 4 MiB, which
+#: still holds the newest three Prosov runs, it stayed near 90 MB (94 MB after 600 runs).
+SERVER_MEMORY_LIMIT = "4MiB"
+
+
 def start_rerun(host: str, grpc_port: int, web_port: int | None) -> subprocess.Popen:
     """``rerun --serve-web`` (or ``--serve-grpc`` when ``web_port`` is None) in its own
     process group, bound to ``host``."""
@@ -73,7 +84,8 @@ def start_rerun(host: str, grpc_port: int, web_port: int | None) -> subprocess.P
         if web_port is None
         else ["--serve-web", "--web-viewer-port", str(web_port)]
     )
-    cmd += ["--bind", host, "--port", str(grpc_port), "--server-memory-limit", "512MiB"]
+    cmd += ["--bind", host, "--port", str(grpc_port)]
+    cmd += ["--server-memory-limit", SERVER_MEMORY_LIMIT]
     env = {**os.environ, "RERUN_ANALYTICS": "0"}
     return subprocess.Popen(
         cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True, env=env

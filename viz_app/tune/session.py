@@ -2,8 +2,9 @@
 
 Each run is logged as a NEW recording id (application id ``radarviz``) so the web viewer
 switches to it; the last good run and the last error are kept, and listeners (the panel) are
-told after every run. Bad values (``ParameterError``) become the error line; the last good run
-stays on screen.
+told after every run. Bad values (``ParameterError``) and results that are not finite
+(``ResultError``: a NaN, a negative NEES) become the error line; the last good run stays on
+screen.
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ from typing import Any
 import rerun as rr
 import rerun.blueprint as rrb
 
+from radarviz.core.finite import ResultError
 from radarviz.core.params import ParameterError
 from radarviz.viz_app.rerun import gorshkov_scene, prosov_scene, velocity_scene
 from radarviz.viz_app.rerun.recording import APPLICATION_ID, log_text, recording_file
@@ -163,7 +165,7 @@ class TuneSession:
 
     def error(self, raw: Any, exc: BaseException) -> None:
         msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        if not isinstance(exc, ParameterError):
+        if not isinstance(exc, ParameterError | ResultError):  # those are one line already
             msg = f"{type(exc).__name__}: {msg}"
         with self._lock:
             self.last_error = msg
