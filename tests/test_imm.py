@@ -112,3 +112,25 @@ def test_bad_imm_models_are_one_line_naming_the_parameter(sigma_a, transition, n
 def test_initial_probabilities_are_stationary() -> None:
     mu = MODEL.initial_probabilities()
     np.testing.assert_allclose(mu @ MODEL.transition_matrix(), mu, rtol=1e-12)
+
+
+def test_a_model_without_a_finite_likelihood_gets_no_weight() -> None:
+    from radarviz.core.filters.imm import mode_probabilities
+
+    prior = np.array([[0.7, 0.3], [0.7, 0.3], [0.7, 0.3]])
+    ll = np.array([[-5.0, np.nan], [np.nan, np.nan], [-1000.0, -1001.0]])
+    mu = mode_probabilities(prior, ll)
+    np.testing.assert_allclose(mu[0], [1.0, 0.0])
+    np.testing.assert_allclose(mu[1], prior[1])  # nothing to weigh: the prior stays
+    w = 0.7 * np.exp(1.0) / (0.7 * np.exp(1.0) + 0.3)  # no underflow at −1000
+    np.testing.assert_allclose(mu[2], [w, 1.0 - w], rtol=1e-12)
+
+
+def test_innovation_of_a_broken_track_is_nan_not_an_exception() -> None:
+    from radarviz.core.filters.innovation import gaussian_stats
+
+    S = np.array([[[4.0, 0.0], [0.0, 9.0]], [[1.0, 2.0], [2.0, 1.0]]])  # second: indefinite
+    nu = np.array([[2.0, 3.0], [1.0, 1.0]])
+    st = gaussian_stats(nu, S)
+    assert st.nis[0] == pytest.approx(2.0) and st.log_det_s[0] == pytest.approx(np.log(36.0))
+    assert np.isnan(st.nis[1]) and np.isnan(st.log_det_s[1])

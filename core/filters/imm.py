@@ -94,9 +94,13 @@ def mode_probabilities(
     prior: NDArray[np.float64], log_likelihood: NDArray[np.float64]
 ) -> NDArray[np.float64]:
     """μⱼ ∝ Λⱼ c̄ⱼ, normalised over the last axis (log-likelihoods shifted by their maximum so
-    that a far-off plot does not underflow every model to 0)."""
-    a = log_likelihood - log_likelihood.max(axis=-1, keepdims=True)
-    w = prior * np.exp(a)
+    that a far-off plot does not underflow every model to 0). A model whose likelihood is not
+    finite (its S not positive definite) gets no weight; a track with no finite likelihood
+    keeps its prior c̄."""
+    ll = np.where(np.isfinite(log_likelihood), log_likelihood, -np.inf)
+    top = ll.max(axis=-1, keepdims=True)
+    ok = np.isfinite(top)
+    w = prior * np.exp(np.where(ok, ll - np.where(ok, top, 0.0), 0.0))
     return w / w.sum(axis=-1, keepdims=True)
 
 

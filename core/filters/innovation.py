@@ -21,7 +21,13 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
-from radarviz.core.filters.state import CVBatch, Vec, cov_components, position_index
+from radarviz.core.filters.state import (
+    CVBatch,
+    Vec,
+    cov_components,
+    position_index,
+    quad_form_inv,
+)
 
 _LOG_2PI = math.log(2.0 * math.pi)
 
@@ -53,11 +59,15 @@ class InnovationStats(NamedTuple):
 
 
 def gaussian_stats(nu: NDArray[np.float64], S: NDArray[np.float64]) -> InnovationStats:
-    """NIS and log det S for ν (..., m) and S (..., m, m) symmetric positive definite."""
-    L = np.linalg.cholesky(S)
-    y = np.linalg.solve(L, nu[..., None])[..., 0]  # L y = ν: νᵀ S⁻¹ ν = |y|²
-    log_det = 2.0 * np.log(np.diagonal(L, axis1=-2, axis2=-1)).sum(-1)
-    return InnovationStats(np.einsum("...i,...i->...", y, y), log_det, nu.shape[-1])
+    """NIS and log det S for ν (..., m) and S (..., m, m) symmetric positive definite.
+
+    A track whose S is not positive definite (a broken track) gets NaN for both and leaves
+    the others alone: the monitor counts it out of band, the IMM gives that model no weight.
+    """
+    with np.errstate(invalid="ignore", divide="ignore"):
+        nis = quad_form_inv(S, nu)  # written-out Cholesky: NaN, not an exception
+        sign, log_det = np.linalg.slogdet(S)
+    return InnovationStats(nis, np.where(sign > 0, log_det, np.nan), nu.shape[-1])
 
 
 def position_innovation(
