@@ -54,6 +54,7 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
         metavar="METHOD",
         help=f"methods (default all: {' '.join(ALL_METHODS)} in 2D, {' '.join(METHODS_3D)} in 3D)",
     )
+    map_flag(tr, "method", "--method")
     tr.add_argument(
         "--out",
         default=DEFAULT_TRACKS,
@@ -256,6 +257,7 @@ def cmd_track(args: argparse.Namespace) -> int:
         rows=s.rows,
         three_d=s.three_d,
         methods=s.methods,
+        targets=s.targets,
     )
     if args.summary:
         with atomic_write(args.summary, "w", encoding="utf-8") as fh:
@@ -271,8 +273,9 @@ def cmd_track(args: argparse.Namespace) -> int:
     extra = f" and {args.rrd}" if args.rrd else ""
     extra += f" and {args.summary}" if args.summary else ""
     bad = doc["inconsistent_tracks"]
+    of = f" of {len(s.targets)} targets" if s.targets else ""
     print(
-        f"tracked {s.plots} plots ({'3D' if s.three_d else '2D'}) with {len(s.methods)} "
+        f"tracked {s.plots} plots{of} ({'3D' if s.three_d else '2D'}) with {len(s.methods)} "
         f"method(s), model {options.model}, into {args.out}{extra}: {s.rows} rows, "
         f"{s.seconds:.2f} s, {rate:.0f} plots/s, peak RSS {peak_rss_mb():.0f} MB; "
         + (f"inconsistent: {', '.join(bad)}" if bad else "every track within its NIS band")

@@ -18,6 +18,7 @@ from radarviz.core.tracking.consistency import (
     ConsistencyMonitor,
 )
 from radarviz.core.tracking.stream import StreamOptions
+from radarviz.core.tracking.targets import track_name
 
 #: Band exits reported on standard error per track; later ones only count in the summary.
 MAX_EXIT_WARNINGS = 3
@@ -47,10 +48,13 @@ def track_summary_document(
     rows: int,
     three_d: bool,
     methods: tuple[str, ...],
+    targets: tuple[str, ...] = (),
 ) -> dict[str, Any]:
-    """The summary of one ``track`` run."""
+    """The summary of one ``track`` run; ``targets``: a file of many targets' labels (its
+    tracks are named ``core.tracking.targets.track_name(target, method)``)."""
     tracks = {}
-    for name in methods:
+    names = [track_name(t, m) for t in targets for m in methods] if targets else methods
+    for name in names:
         if name not in monitor.tracks:
             continue  # a track with no update after its start has nothing to test
         r = monitor.result(name)
@@ -72,6 +76,7 @@ def track_summary_document(
         "rows": rows,
         "dims": 3 if three_d else 2,
         "methods": list(methods),
+        "targets": len(targets) or None,
         "model": motion_document(options),
         "finite_memory_k": options.finite_memory_k or None,
         "nis_window": monitor.window,
