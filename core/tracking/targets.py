@@ -259,7 +259,7 @@ class TargetTracker:
         updating, all with or all without a Doppler stage."""
         sub = [plots[i] for i in which]
         plot, noise = polar_arrays(sub, self.dims)
-        site = np.array([p.site[: self.dims] for p in sub], dtype=np.float64)
+        site = np.array([p.site for p in sub], dtype=np.float64)[:, : self.dims]
         doppler = None
         if with_doppler:
             doppler = DopplerMeasurement(
@@ -285,9 +285,9 @@ class TargetTracker:
             nis = None
             if stats is not None and monitor is not None:
                 nis = stats.nis[row] if converted else stats.nis
-            for j, i in enumerate(which):
-                out[i].append((m, xs[j], Ps[j]))
-                if nis is not None:
-                    assert monitor is not None and stats is not None
-                    p = plots[i]
-                    monitor.add(track_name(p.target, m), p.time_s, float(nis[j]), stats.dof)
+            for i, x, P in zip(which, xs, Ps, strict=True):
+                out[i].append((m, x, P))
+            if nis is not None:
+                assert monitor is not None and stats is not None
+                for p, v in zip(sub, nis.tolist(), strict=True):
+                    monitor.add(track_name(p.target, m), p.time_s, v, stats.dof)

@@ -187,6 +187,12 @@ def build_parser() -> argparse.ArgumentParser:
         default=200,
         help="runs of the filterpy subsample (default 200)",
     )
+    bench.add_argument(
+        "--targets",
+        type=integer,
+        default=1000,
+        help="targets of the many-target tracker figure (default 1000)",
+    )
     return parser
 
 
@@ -332,11 +338,12 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     for m in args.runs:
         check_int("--runs", m, low=100, high=10_000_000)
     check_int("--filterpy-runs", args.filterpy_runs, low=1, high=100_000)
+    check_int("--targets", args.targets, low=1, high=100_000)
     from radarviz.viz_app.bench.engine import format_bench, run_bench
     from radarviz.viz_app.runtime import tune_allocator
 
     tune_allocator()
-    doc = run_bench(runs=args.runs, filterpy_runs=args.filterpy_runs)
+    doc = run_bench(runs=args.runs, filterpy_runs=args.filterpy_runs, targets=args.targets)
     print_report(doc, args.json, format_bench)
     return 0
 

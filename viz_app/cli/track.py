@@ -278,9 +278,19 @@ def cmd_track(args: argparse.Namespace) -> int:
         f"tracked {s.plots} plots{of} ({'3D' if s.three_d else '2D'}) with {len(s.methods)} "
         f"method(s), model {options.model}, into {args.out}{extra}: {s.rows} rows, "
         f"{s.seconds:.2f} s, {rate:.0f} plots/s, peak RSS {peak_rss_mb():.0f} MB; "
-        + (f"inconsistent: {', '.join(bad)}" if bad else "every track within its NIS band")
+        + (_inconsistent(bad, len(doc["tracks"])) if bad else "every track within its NIS band")
     )
     return 0
+
+
+#: Inconsistent tracks named in the summary line; more are counted (the summary names all).
+MAX_NAMED_TRACKS = 10
+
+
+def _inconsistent(bad: list[str], tracks: int) -> str:
+    if len(bad) <= MAX_NAMED_TRACKS:
+        return f"inconsistent: {', '.join(bad)}"
+    return f"inconsistent: {len(bad)} of {tracks} tracks (each named in --summary)"
 
 
 def cmd_simulate(args: argparse.Namespace) -> int:

@@ -9,6 +9,7 @@ interface; a value that is not finite (a track whose innovation blew up) is null
 from __future__ import annotations
 
 import math
+from collections import Counter
 from collections.abc import Callable
 from typing import Any
 
@@ -54,8 +55,10 @@ def track_summary_document(
     tracks are named ``core.tracking.targets.track_name(target, method)``)."""
     tracks = {}
     names = [track_name(t, m) for t in targets for m in methods] if targets else methods
+    known = set(monitor.tracks)
+    exits = Counter(e.track for e in monitor.events if e.kind == "leaves")
     for name in names:
-        if name not in monitor.tracks:
+        if name not in known:
             continue  # a track with no update after its start has nothing to test
         r = monitor.result(name)
         w = r.windows
@@ -67,7 +70,7 @@ def track_summary_document(
             "fraction_below": _num(r.below / w) if w else None,
             "mean_nis_per_dof": _num(r.mean_nis_per_dof),
             "first_exit_s": _num(r.first_exit_s),
-            "band_exits": sum(1 for e in monitor.events if e.track == name and e.kind == "leaves"),
+            "band_exits": exits[name],
             "inconsistent": r.inconsistent,
         }
     return {
