@@ -255,4 +255,4 @@ def test_good_target_file_out_of_order_across_targets(tmp_path: Path) -> None:
     assert _track(tmp_path / "m.csv", tmp_path / "r.toml", tmp_path / "t.csv") == 0
     rows = _read(tmp_path / "t.csv")
     assert [r["target"] for r in rows[:: len(ALL_METHODS)]] == ["A", "B", "A", "B"]
-    assert [r["time_s"] for r in rows[:: len(ALL_METHODS)]] == ["0.0", "5.0", "10.0", "8.0"]
+    assert [float(r["time_s"]) for r in rows[:: len(ALL_METHODS)]] == [0.0, 5.0, 10.0, 8.0]

@@ -40,8 +40,8 @@ plot); a file of many targets has the plot's ``target`` after ``time_s``::
     p_xvx, p_xvy, p_xvz, p_yvx, p_yvy, p_yvz, p_zvx, p_zvy, p_zvz   position–velocity block
 
 (m, m/s, m², m²/s, m²/s²; p_xvy is cov(x, vy)). In 2D, z, vz and every covariance entry
-involving them are 0. Floats are written with Python's shortest round-trip repr, so nothing is
-lost.
+involving them are 0. Floats are written in their shortest round-trip form (pyarrow's CSV
+writer, a block of rows at a time; text cells quoted), so nothing is lost.
 
 ``--out`` defaults to ``tracks.csv`` in the current directory and an existing file is replaced;
 ``--rrd OUT.rrd`` also writes a Rerun recording (``viz_app.rerun.track_recording``, handed in by
@@ -384,21 +384,83 @@ def track_columns(targets: bool) -> tuple[str, ...]:
     return (TRACK_COLUMNS[0], "target", *TRACK_COLUMNS[1:]) if targets else TRACK_COLUMNS
 
 
-def track_row(
-    time_s: float,
-    method: str,
-    x: NDArray[np.float64],
-    P: NDArray[np.float64],
-    target: str | None = None,
-) -> list:
-    """One output row from a state x (6,) = (x, ẋ, y, ẏ, z, ż) and its P (6, 6); ``target``
-    (a file of many targets) goes after the time."""
-    lead: list = [time_s, method] if target is None else [time_s, target, method]
-    return [*lead, *x[_STATE_INDEX].tolist(), *P[_COV_ROWS, _COV_COLS].tolist()]
+#: Track rows written to the track file at a time (one pyarrow table).
+WRITE_BLOCK = 8192
+
+
+class TrackWriter:
+    """The track file written a block of rows at a time with pyarrow's CSV writer.
+
+    A row is (time_s, [target,] method, the six state components, the 21 covariance
+    entries); a block's states x (N, 6) and P (N, 6, 6) become the columns through the index
+    tables that ``state_from_row`` reads them back with, and pyarrow formats the floats (shortest
+    round trip, like Python's repr, but ``0`` for 0.0) and quotes the text columns. Memory
+    holds at most ``WRITE_BLOCK`` rows.
+
+    Args:
+        fh: the binary file to write (``atomic_write``'s).
+        targets: the file has a ``target`` column (``track_columns``).
+    """
+
+    def __init__(self, fh: IO[bytes], targets: bool):
+        self.fh = fh
+        self.targets = targets
+        self.columns = track_columns(targets)
+        self.rows = 0
+        self._writer: Any = None
+        self._times: list[float] = []
+        self._labels: list[str] = []
+        self._methods: list[str] = []
+        self._x: list[NDArray[np.float64]] = []
+        self._P: list[NDArray[np.float64]] = []
+
+    def add(self, plot: Plot, rows: list[StateRow]) -> None:
+        """One plot's rows (method, x (6,), P (6, 6))."""
+        for m, x, P in rows:
+            self._times.append(plot.time_s)
+            self._methods.append(m)
+            self._x.append(x)
+            self._P.append(P)
+        if self.targets:
+            self._labels.extend([plot.target] * len(rows))
+        self.rows += len(rows)
+        if len(self._times) >= WRITE_BLOCK:
+            self.flush()
+
+    def flush(self) -> None:
+        """Write the buffered rows (the header with the first block)."""
+        import pyarrow as pa
+        import pyarrow.csv as pcsv
+
+        if not self._times:
+            return
+        x = np.stack(self._x)[:, _STATE_INDEX]
+        P = np.stack(self._P)[:, _COV_ROWS, _COV_COLS]
+        text = [pa.array(self._labels, pa.string())] if self.targets else []
+        columns = [
+            pa.array(self._times, pa.float64()),
+            *text,
+            pa.array(self._methods, pa.string()),
+            *(pa.array(x[:, k]) for k in range(x.shape[1])),
+            *(pa.array(P[:, k]) for k in range(P.shape[1])),
+        ]
+        table = pa.Table.from_arrays(columns, names=list(self.columns))
+        if self._writer is None:
+            options = pcsv.WriteOptions(quoting_style="needed")
+            self._writer = pcsv.CSVWriter(self.fh, table.schema, write_options=options)
+        self._writer.write_table(table)
+        for buf in (self._times, self._labels, self._methods, self._x, self._P):
+            buf.clear()
+
+    def close(self) -> None:
+        """Write what is buffered and finish the file."""
+        self.flush()
+        if self._writer is not None:
+            self._writer.close()
 
 
 def state_from_row(values: dict[str, str]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """The state x (6,) and P (6, 6) of one track-file row (the inverse of ``track_row``)."""
+    """The state x (6,) and P (6, 6) of one track-file row (the inverse of ``TrackWriter``)."""
     x = np.zeros(6)
     x[_STATE_INDEX] = [float(values[c]) for c in TRACK_COLUMNS[2:8]]
     P = np.zeros((6, 6))
@@ -581,28 +643,26 @@ def run_track(
     start = time.perf_counter()
     with ExitStack() as stack:
         src = bounded_lines(stack.enter_context(_open_input(input_path)), input_path)
-        out = stack.enter_context(atomic_text(out_path))
-        w = csv.writer(out)
+        out = stack.enter_context(atomic_write(out_path, "wb"))
         logger = None if observer is None else stack.enter_context(observer(radars.values()))
-        written = 0
-        labelled = False
+        writer: TrackWriter | None = None
 
         def on_start(targets: bool) -> None:
-            nonlocal labelled
-            labelled = targets
-            w.writerow(track_columns(targets))
+            nonlocal writer
+            writer = TrackWriter(out, targets)
 
         def on_rows(plot: Plot, rows: list[StateRow]) -> None:
-            nonlocal written
-            target = plot.target if labelled else None
-            w.writerows([track_row(plot.time_s, m, x, P, target) for m, x, P in rows])
-            written += len(rows)
+            assert writer is not None
+            writer.add(plot, rows)
             if logger is not None:
                 logger.add(plot, rows)
 
         plots, three_d, used, targets = track_lines(
             src, input_path, radars, methods, options, on_rows, on_start
         )
+        assert writer is not None
+        writer.close()
+        written = writer.rows
         if plots and not written:
             # Raised inside the block: the output is abandoned, not written empty.
             raise ParameterError(
