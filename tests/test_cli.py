@@ -159,7 +159,9 @@ def test_bench_figures_are_consistent(capsys) -> None:
     from radarviz.viz_app.bench.engine import format_bench
 
     rss_before = _high_water_rss_mib()
-    code = main(["bench", "--json", "--runs", "500", "1000", "--filterpy-runs", "3"])
+    code = main(
+        ["bench", "--json", "--runs", "500", "1000", "--filterpy-runs", "3", "--targets", "30"]
+    )
     assert code == 0
     ru_after = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
     doc = json.loads(capsys.readouterr().out)
@@ -200,6 +202,14 @@ def test_bench_figures_are_consistent(capsys) -> None:
         assert all(math.isfinite(v[k]) and v[k] > 0 for k in v), (label, v)
         assert v["imm_over_cv"] == pytest.approx(v["imm_ns_per_step"] / v["cv_ns_per_step"])
     assert math.isfinite(imm["filterpy_imm_ns_per_step"]) and imm["filterpy_imm_ns_per_step"] > 0
+    tg = doc["targets"]
+    assert tg["targets"] == 30 and tg["loop_targets"] == 20 and tg["methods"] == 7
+    assert tg["scans"] == prosov_target().steps
+    for k in ("batched_plots_per_s", "loop_plots_per_s"):
+        assert math.isfinite(tg[k]) and tg[k] > 0, (k, tg)
+    assert tg["batched_over_loop"] == pytest.approx(
+        tg["batched_plots_per_s"] / tg["loop_plots_per_s"], rel=1e-12
+    )
     # JSON keeps full precision: the ratio is exact to rounding.
     for ours, ratio in zip(kf, doc["speedup_vs_filterpy"], strict=True):
         assert ratio == pytest.approx(fp / ours, rel=1e-12)

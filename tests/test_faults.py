@@ -721,7 +721,9 @@ def test_bench_refuses_a_nan_figure(
     import radarviz.viz_app.bench.engine as engine
 
     monkeypatch.setattr(
-        engine, "run_bench", lambda runs, filterpy_runs: {"runs": list(runs), "kf_ns": [math.nan]}
+        engine,
+        "run_bench",
+        lambda runs, filterpy_runs, targets: {"runs": list(runs), "kf_ns": [math.nan]},
     )
     assert main(["bench", "--json", "--runs", "100"]) == 1
     out, err = capsys.readouterr()

@@ -473,10 +473,10 @@ def test_tracking_streams_with_a_bounded_buffer() -> None:
         written[0] += 1
 
     radars = parse_radars(GOOD_RADARS, "r.toml")
-    plots, three_d, methods = track_lines(
+    plots, three_d, methods, targets = track_lines(
         lines, "m.csv", radars, ("ucm",), StreamOptions(), on_rows
     )
-    assert (plots, three_d, methods) == (n, False, ("ucm",))
+    assert (plots, three_d, methods, targets) == (n, False, ("ucm",), ())
     assert written[0] == n
     assert READ_BLOCK - 1 <= lines.lag <= READ_BLOCK
 

@@ -34,7 +34,7 @@ from radarviz.core.filters.innovation import InnovationStats
 from radarviz.core.filters.models import IMMModel
 from radarviz.core.filters.predict import cv_predict
 from radarviz.core.filters.state import CVBatch
-from radarviz.core.filters.step import Stage
+from radarviz.core.filters.step import Stage, moves
 
 
 class IMMState(NamedTuple):
@@ -80,8 +80,9 @@ def imm_mix(imm: IMMState, transition: NDArray[np.float64]) -> tuple[CVBatch, ND
     return CVBatch(x0, 0.5 * (P0 + P0.mT)), c
 
 
-def imm_predict(mixed: CVBatch, dt_s: float, model: IMMModel) -> CVBatch:
-    """Model j's constant-velocity prediction (σa,j) of its mixed estimate, every j."""
+def imm_predict(mixed: CVBatch, dt_s: float | NDArray[np.float64], model: IMMModel) -> CVBatch:
+    """Model j's constant-velocity prediction (σa,j) of its mixed estimate, every j; ``dt_s``
+    one step or one per track (broadcasting against the batch without its model axis)."""
     xs, Ps = [], []
     for j, sigma_a in enumerate(model.sigma_a_mps2):
         pred = cv_predict(CVBatch(mixed.x[..., j, :], mixed.P[..., j, :, :]), dt_s, sigma_a)
@@ -106,7 +107,7 @@ def mode_probabilities(
 
 def imm_step(
     imm: IMMState,
-    dt_s: float,
+    dt_s: float | NDArray[np.float64],
     model: IMMModel,
     stages: Sequence[Stage],
     with_stats: bool = True,
@@ -115,7 +116,7 @@ def imm_step(
     docstring). Returns the new IMM state, its combined estimate (...) and, with
     ``with_stats``, the innovation statistics of the combined prediction."""
     mixed, mu = imm_mix(imm, model.transition_matrix())
-    pred = imm_predict(mixed, dt_s, model) if dt_s > 0 else mixed
+    pred = imm_predict(mixed, dt_s, model) if moves(dt_s) else mixed
     total: InnovationStats | None = None
     for stage in stages:
         if with_stats:

@@ -68,7 +68,8 @@ class PlotMeasurement:
         group: the methods of the batch (its leading axis for a converted group).
         plot, noise: the plot's polar values and noise std, arrays broadcasting against the
             batch shape (without the model axis).
-        site: the radar's position (d,).
+        site: the radar's position (d,), or one per track (..., d) (many targets, each seen
+            by its own radar).
         parts: the converted methods' precomputed conversions (``MethodGroup.start_parts``),
             or None.
     """
@@ -79,9 +80,11 @@ class PlotMeasurement:
     site: ArrayLike | None = None
     parts: Parts | None = None
 
-    def _for(self, state: CVBatch, models: bool) -> tuple[PolarPlot, PolarNoise, Parts | None]:
+    def _for(
+        self, state: CVBatch, models: bool
+    ) -> tuple[PolarPlot, PolarNoise, Parts | None, ArrayLike | None]:
         if not models:  # the arrays were made for this batch
-            return self.plot, self.noise, self.parts
+            return self.plot, self.noise, self.parts, self.site
         shape = state.batch_shape
         # An IMM step asks twice per stage (likelihoods, update): expand the arrays once.
         cache = self.__dict__.setdefault("_expansions", {})
@@ -89,7 +92,9 @@ class PlotMeasurement:
             cache[shape] = self._expanded(shape)
         return cache[shape]
 
-    def _expanded(self, shape: tuple[int, ...]) -> tuple[PolarPlot, PolarNoise, Parts | None]:
+    def _expanded(
+        self, shape: tuple[int, ...]
+    ) -> tuple[PolarPlot, PolarNoise, Parts | None, ArrayLike | None]:
         plot = PolarPlot(*(_expand(v, True) for v in self.plot))
         if not self.group.converted:  # the polar updates take arrays of the batch's shape
             plot = PolarPlot(*(None if v is None else np.broadcast_to(v, shape) for v in plot))
@@ -108,16 +113,19 @@ class PlotMeasurement:
                     [np.asarray(v)[..., None] for v in z],
                     {k: np.asarray(v)[..., None] for k, v in R.items()},
                 )
-        return plot, noise, parts
+        site = self.site
+        if site is not None and np.ndim(site) > 1:  # a site per track (..., d): over the models
+            site = np.asarray(site, dtype=np.float64)[..., None, :]
+        return plot, noise, parts, site
 
     def innovation(self, state: CVBatch, models: bool = False) -> InnovationStats:
-        plot, noise, parts = self._for(state, models)
-        nu, R = self.group.measurement(state, plot, noise, site=self.site, parts=parts)
+        plot, noise, parts, site = self._for(state, models)
+        nu, R = self.group.measurement(state, plot, noise, site=site, parts=parts)
         return position_innovation(state, nu, R)
 
     def update(self, state: CVBatch, models: bool = False) -> CVBatch:
-        plot, noise, parts = self._for(state, models)
-        return self.group.update(state, plot, noise, site=self.site, parts=parts)
+        plot, noise, parts, site = self._for(state, models)
+        return self.group.update(state, plot, noise, site=site, parts=parts)
 
 
 @dataclass(frozen=True)

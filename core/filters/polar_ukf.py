@@ -372,7 +372,8 @@ def _ukf_dense(
     chi = np.concatenate([x[..., None, :], x[..., None, :] + cols, x[..., None, :] - cols], -2)
     offsets = chi[..., pos]
     if site is not None:
-        offsets = offsets - np.asarray(site, dtype=np.float64)
+        # A site per track (..., d) lines up with the tracks, not with the sigma points.
+        offsets = offsets - np.asarray(site, dtype=np.float64)[..., None, :]
     zeta = np.stack(polar_coordinates([offsets[..., a] for a in range(m)]), -1)  # (..., 2n+1, m)
     wm = np.full(2 * n + 1, w)
     wm[0] = wm0

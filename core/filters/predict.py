@@ -55,19 +55,28 @@ def _dense_model(period_s: float, sigma_a_mps2: float, dims: int) -> tuple[NDArr
 
 
 def cv_predict(
-    state: CVBatch, period_s: float, sigma_a_mps2: float = 0.0, out: CVBatch | None = None
+    state: CVBatch,
+    period_s: float | NDArray[np.float64],
+    sigma_a_mps2: float = 0.0,
+    out: CVBatch | None = None,
 ) -> CVBatch:
     """x⁻ = F x, P⁻ = F P Fᵀ + Q for every track of the batch.  Returns ``out`` or a new batch.
+
+    ``period_s`` is one period T for the whole batch, or an array of periods, one per track,
+    broadcasting against the batch shape from its end (many targets, each with its own time
+    since its last plot: T (K,) for a batch (M, K) of M methods × K targets); T = 0 leaves a
+    track as it is.
 
     Written component by component with explicit output buffers: each line is one pass over
     the batch with no temporary to allocate (1.5× faster than the same formulas as plain
     expressions at 10⁴ tracks). Within an axis block (p, v) → (p + T v, v); between axes a and
     b the four entries follow from the same rule on both sides.
     """
-    T = float(period_s)
+    per_track = np.ndim(period_s) > 0
+    T = np.asarray(period_s, dtype=np.float64) if per_track else float(period_s)
     x, P = state.x, state.P
     out = target_batch(state, out)
-    if use_dense(state):
+    if use_dense(state) and not per_track:
         F, Q = _dense_model(T, float(sigma_a_mps2), state.dims)
         P_new = F @ P @ F.T + Q
         out.x[...] = x @ F.T

@@ -10,9 +10,17 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Protocol
 
+import numpy as np
+from numpy.typing import NDArray
+
 from radarviz.core.filters.innovation import InnovationStats
 from radarviz.core.filters.predict import cv_predict
 from radarviz.core.filters.state import CVBatch
+
+
+def moves(dt_s: float | NDArray[np.float64]) -> bool:
+    """Whether a step of ``dt_s`` (s; one, or one per track) predicts at all (some dt > 0)."""
+    return bool(np.any(np.asarray(dt_s) > 0))
 
 
 class Stage(Protocol):
@@ -25,17 +33,20 @@ class Stage(Protocol):
 
 def cv_step(
     state: CVBatch,
-    dt_s: float,
+    dt_s: float | NDArray[np.float64],
     sigma_a_mps2: float,
     stages: Sequence[Stage],
     with_stats: bool = True,
 ) -> tuple[CVBatch, InnovationStats | None]:
     """Predict over ``dt_s`` (0: no prediction, two plots at one time) and apply ``stages``.
 
+    ``dt_s`` may be one step per track (an array broadcasting against the batch shape, as
+    ``cv_predict`` takes it); a track whose step is 0 is then predicted over 0 s, unchanged.
+
     Returns the posterior and, with ``with_stats``, the plot's innovation statistics (the sum
     over its stages, each taken on the state the stage updates: ``core.filters.innovation``).
     """
-    pred = cv_predict(state, dt_s, sigma_a_mps2) if dt_s > 0 else state
+    pred = cv_predict(state, dt_s, sigma_a_mps2) if moves(dt_s) else state
     total: InnovationStats | None = None
     for stage in stages:
         if with_stats:

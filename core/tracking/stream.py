@@ -82,7 +82,8 @@ class Plot:
     """One measurement of the target and the accuracy of the radar that made it.
 
     Angles in rad, distances in m, speeds in m/s. ``elevation_rad`` is None for a 2D plot and
-    ``radial_velocity_mps`` None for a plot without Doppler.
+    ``radial_velocity_mps`` None for a plot without Doppler. ``target`` labels the target the
+    plot belongs to in a file of many targets (``core.tracking.targets``); "" in a file of one.
     """
 
     time_s: float
@@ -96,6 +97,7 @@ class Plot:
     sigma_elevation_rad: float = 0.0
     radial_velocity_mps: float | None = None
     sigma_radial_velocity_mps: float = 0.0
+    target: str = ""
 
 
 class PlotError(ParameterError):
@@ -294,6 +296,15 @@ class StreamOptions:
         return CVModel(self.sigma_a_mps2)
 
 
+def check_methods(methods: tuple[str, ...], three_d: bool) -> None:
+    """``methods`` must be at least one of the methods that exist in 2D or in 3D."""
+    allowed = METHODS_3D if three_d else ALL_METHODS
+    if not methods:
+        raise ParameterError(f"method must name at least one of {', '.join(allowed)}")
+    for m in methods:
+        check_choice("method", m, allowed)
+
+
 class StreamTracker:
     """Every requested method's track of one target, fed one ``Plot`` at a time.
 
@@ -304,11 +315,7 @@ class StreamTracker:
     """
 
     def __init__(self, methods: tuple[str, ...], three_d: bool, options: StreamOptions):
-        allowed = METHODS_3D if three_d else ALL_METHODS
-        if not methods:
-            raise ParameterError(f"method must name at least one of {', '.join(allowed)}")
-        for m in methods:
-            check_choice("method", m, allowed)
+        check_methods(methods, three_d)
         self.methods = tuple(methods)
         self.three_d = three_d
         self.options = options
@@ -478,11 +485,17 @@ class StreamTracker:
         return FINITE_MEMORY_TRACK, *_rows_6(st, 0)
 
 
+def as_6(st: CVBatch) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """A batch (...) as x (..., 6), P (..., 6, 6) in the 3D layout (z = ż = 0 for 2D)."""
+    n = st.x.shape[-1]
+    x6 = np.zeros((*st.batch_shape, 6))
+    P6 = np.zeros((*st.batch_shape, 6, 6))
+    x6[..., :n] = st.x
+    P6[..., :n, :n] = st.P
+    return x6, P6
+
+
 def _rows_6(st: CVBatch, i: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Row ``i`` of a batch as x (6,), P (6, 6) in the 3D layout (z = ż = 0 for 2D)."""
     n = st.x.shape[-1]
-    x6 = np.zeros(6)
-    P6 = np.zeros((6, 6))
-    x6[:n] = st.x.reshape(-1, n)[i]
-    P6[:n, :n] = st.P.reshape(-1, n, n)[i]
-    return x6, P6
+    return as_6(CVBatch(st.x.reshape(-1, n)[i], st.P.reshape(-1, n, n)[i]))

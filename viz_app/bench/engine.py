@@ -27,6 +27,12 @@ Figures (ns per track-step = wall time / (runs × scans), one core):
   (the Monte Carlo path) and on one track (the streaming path); ``imm_over_cv`` their ratios;
   ``filterpy_imm_ns_per_step``: filterpy's ``IMMEstimator`` (two ``KalmanFilter`` models,
   the converted points given) on a subsample of runs.
+* ``targets``: the tracker of many targets (``core.tracking.targets.TargetTracker``) on
+  ``targets`` Prosov runs as targets (one plot per target per scan, times offset by 1 ms per
+  target, all seven 2D methods, the cv model with σa = 1 m/s²), plots per second over the
+  whole file (the plots made beforehand, not timed), beside the same plots tracked one
+  target at a time (``StreamTracker``, on a subsample of ``loop_targets`` targets) in the
+  same run; ``batched_over_loop`` the ratio of their plots per second.
 * ``peak_rss_mb``: peak resident memory of the process.
 """
 
@@ -290,7 +296,50 @@ def bench_imm(runs: int, filterpy_runs: int, config: TrackingConfig) -> dict[str
     return out
 
 
-def run_bench(runs: Sequence[int] = (10_000, 100_000), filterpy_runs: int = 200) -> dict[str, Any]:
+def bench_targets(targets: int, config: TrackingConfig, loop_targets: int = 20) -> dict[str, Any]:
+    """The ``targets`` figures (module docstring)."""
+    import math
+
+    from radarviz.core.tracking.stream import ALL_METHODS, Plot, StreamOptions, StreamTracker
+    from radarviz.core.tracking.targets import TargetTracker
+
+    steps = config.target.steps
+    r_hat, b_hat = _measurements(targets, steps, config, seed=21)
+    T, sr, sb = config.target.period_s, config.sigma_r_m, config.sigma_beta_rad
+    by_target = [
+        [
+            Plot(n * T + 1e-3 * k, float(r_hat[k, n]), float(b_hat[k, n]), sr, sb, target=str(k))
+            for n in range(steps)
+        ]
+        for k in range(targets)
+    ]
+    plots = [by_target[k][n] for n in range(steps) for k in range(targets)]
+    options = StreamOptions(model="cv", sigma_a_mps2=1.0)
+    tracker = TargetTracker(ALL_METHODS, False, options)
+    t0 = time.perf_counter()
+    for i in range(0, len(plots), 8192):
+        tracker.add_block(plots[i : i + 8192])
+    batched = len(plots) / (time.perf_counter() - t0)
+    loop_targets = min(loop_targets, targets)
+    t0 = time.perf_counter()
+    for own in by_target[:loop_targets]:
+        StreamTracker(ALL_METHODS, False, options).add_block(own)
+    loop = loop_targets * steps / (time.perf_counter() - t0)
+    assert math.isfinite(batched) and math.isfinite(loop)
+    return {
+        "targets": targets,
+        "scans": steps,
+        "methods": len(ALL_METHODS),
+        "batched_plots_per_s": batched,
+        "loop_targets": loop_targets,
+        "loop_plots_per_s": loop,
+        "batched_over_loop": batched / loop,
+    }
+
+
+def run_bench(
+    runs: Sequence[int] = (10_000, 100_000), filterpy_runs: int = 200, targets: int = 1000
+) -> dict[str, Any]:
     """All figures of ``radarviz bench`` as a JSON-ready dict."""
     config = TrackingConfig(runs=2, target=prosov_target())
     gorshkov_s = bench_gorshkov()
@@ -317,6 +366,7 @@ def run_bench(runs: Sequence[int] = (10_000, 100_000), filterpy_runs: int = 200)
         "gorshkov_s": gorshkov_s,
         "tune_median_ms": {scene: measure_tune_latency(scene) for scene in SCENES},
         "imm": bench_imm(runs[0], filterpy_runs, config),
+        "targets": bench_targets(targets, config),
         "peak_rss_mb": peak_rss_mb(),
     }
 
@@ -373,6 +423,13 @@ def format_bench(doc: dict[str, Any]) -> str:
     lines.append(
         f"filterpy IMMEstimator (2 models): {imm['filterpy_imm_ns_per_step']:.0f} ns per step "
         f"({imm['filterpy_runs']} runs)"
+    )
+    tg = doc["targets"]
+    lines.append(
+        f"tracker of many targets, {tg['targets']} targets × {tg['scans']} scans, "
+        f"{tg['methods']} methods: {tg['batched_plots_per_s']:.0f} plots/s; one target at a "
+        f"time ({tg['loop_targets']} targets): {tg['loop_plots_per_s']:.0f} plots/s "
+        f"(batched/loop {tg['batched_over_loop']:.1f}×)"
     )
     lines.append(f"peak RSS: {doc['peak_rss_mb']:.0f} MiB")
     return "\n".join(lines)

@@ -198,6 +198,12 @@ def build_parser() -> argparse.ArgumentParser:
         default="cpu",
         help="cpu: the engines against filterpy (default); gpu: the array-API path on CuPy",
     )
+    bench.add_argument(
+        "--targets",
+        type=integer,
+        default=1000,
+        help="targets of the many-target tracker figure (default 1000)",
+    )
     return parser
 
 
@@ -343,6 +349,7 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     for m in args.runs:
         check_int("--runs", m, low=100, high=10_000_000)
     check_int("--filterpy-runs", args.filterpy_runs, low=1, high=100_000)
+    check_int("--targets", args.targets, low=1, high=100_000)
     if args.device == "gpu":
         from radarviz.viz_app.bench.device import NoGPUError, bench_gpu, format_gpu
 
@@ -357,7 +364,7 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     from radarviz.viz_app.runtime import tune_allocator
 
     tune_allocator()
-    doc = run_bench(runs=args.runs, filterpy_runs=args.filterpy_runs)
+    doc = run_bench(runs=args.runs, filterpy_runs=args.filterpy_runs, targets=args.targets)
     check_finite_document("bench", doc, nonnegative=True)  # times, rates and ratios
     print_report(doc, args.json, format_bench)
     return 0

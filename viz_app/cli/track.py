@@ -53,6 +53,7 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
         metavar="METHOD",
         help=f"methods, 2D or 3D plots alike (default all: {' '.join(METHODS_3D)})",
     )
+    map_flag(tr, "method", "--method")
     tr.add_argument(
         "--out",
         default=DEFAULT_TRACKS,
@@ -255,6 +256,7 @@ def cmd_track(args: argparse.Namespace) -> int:
         rows=s.rows,
         three_d=s.three_d,
         methods=s.methods,
+        targets=s.targets,
     )
     if args.summary:
         with atomic_write(args.summary, "w", encoding="utf-8") as fh:
@@ -270,13 +272,24 @@ def cmd_track(args: argparse.Namespace) -> int:
     extra = f" and {args.rrd}" if args.rrd else ""
     extra += f" and {args.summary}" if args.summary else ""
     bad = doc["inconsistent_tracks"]
+    of = f" of {len(s.targets)} targets" if s.targets else ""
     print(
-        f"tracked {s.plots} plots ({'3D' if s.three_d else '2D'}) with {len(s.methods)} "
+        f"tracked {s.plots} plots{of} ({'3D' if s.three_d else '2D'}) with {len(s.methods)} "
         f"method(s), model {options.model}, into {args.out}{extra}: {s.rows} rows, "
         f"{s.seconds:.2f} s, {rate:.0f} plots/s, peak RSS {peak_rss_mb():.0f} MB; "
-        + (f"inconsistent: {', '.join(bad)}" if bad else "every track within its NIS band")
+        + (_inconsistent(bad, len(doc["tracks"])) if bad else "every track within its NIS band")
     )
     return 0
+
+
+#: Inconsistent tracks named in the summary line; more are counted (the summary names all).
+MAX_NAMED_TRACKS = 10
+
+
+def _inconsistent(bad: list[str], tracks: int) -> str:
+    if len(bad) <= MAX_NAMED_TRACKS:
+        return f"inconsistent: {', '.join(bad)}"
+    return f"inconsistent: {len(bad)} of {tracks} tracks (each named in --summary)"
 
 
 def cmd_simulate(args: argparse.Namespace) -> int:

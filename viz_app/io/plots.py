@@ -1,9 +1,14 @@
 """``radarviz track`` and ``radarviz simulate``: measurement files in, track files out.
 
-Measurement file (CSV, header line first, one row per plot of one target, times
-non-decreasing)::
+Measurement file (CSV, header line first, one row per plot, times non-decreasing)::
 
-    time_s, radar, range_m, azimuth_deg [, elevation_deg] [, radial_velocity_mps]
+    time_s, radar, range_m, azimuth_deg [, elevation_deg] [, radial_velocity_mps] [, target]
+
+Without ``target`` every plot is of one target. With it (the radar's own track number, or any
+label; no cell may be empty) the file holds many targets, interleaved: each target gets its
+own tracks, all targets advancing as one batch (``core.tracking.targets``); times need only
+not decrease within a target, and a target may change radar from plot to plot. The
+finite-memory start and track are for files of one target.
 
 With ``elevation_deg`` the track is 3D (every row needs an elevation; methods ``naive``,
 ``ucm``, ``ekf``, ``ukf``), without it 2D in the x–y plane (all seven methods; the sites' z is
@@ -27,16 +32,16 @@ radar, one period), then predicted over each time step and updated, radar-centre
 
 Track file (CSV), one row per plot and method, in plot order then ``--method`` order; the first
 plot's rows are the starting states (with ``--init finite-memory`` rows begin at the k-th
-plot)::
+plot); a file of many targets has the plot's ``target`` after ``time_s``::
 
-    time_s, method, x_m, y_m, z_m, vx_mps, vy_mps, vz_mps,
+    time_s, [target,] method, x_m, y_m, z_m, vx_mps, vy_mps, vz_mps,
     p_xx, p_xy, p_xz, p_yy, p_yz, p_zz,                    position covariance (upper triangle)
     p_vxvx, p_vxvy, p_vxvz, p_vyvy, p_vyvz, p_vzvz,        velocity covariance (upper triangle)
     p_xvx, p_xvy, p_xvz, p_yvx, p_yvy, p_yvz, p_zvx, p_zvy, p_zvz   position–velocity block
 
 (m, m/s, m², m²/s, m²/s²; p_xvy is cov(x, vy)). In 2D, z, vz and every covariance entry
-involving them are 0. Floats are written with Python's shortest round-trip repr, so nothing is
-lost.
+involving them are 0. Floats are written in their shortest round-trip form (pyarrow's CSV
+writer, a block of rows at a time; text cells quoted), so nothing is lost.
 
 ``--out`` defaults to ``tracks.csv`` in the current directory and an existing file is replaced;
 ``--rrd OUT.rrd`` also writes a Rerun recording (``viz_app.rerun.track_recording``, handed in by
@@ -80,11 +85,12 @@ from radarviz.core.tracking.stream import (
     StreamOptions,
     StreamTracker,
 )
+from radarviz.core.tracking.targets import TargetTracker
 from radarviz.core.velocity.estimate import BASELINE_TARGET_M, BASELINE_VELOCITY_MPS
 from radarviz.viz_app.io.atomic import atomic_write, commit_together
 
 REQUIRED_COLUMNS = ("time_s", "radar", "range_m", "azimuth_deg")
-OPTIONAL_COLUMNS = ("elevation_deg", "radial_velocity_mps")
+OPTIONAL_COLUMNS = ("elevation_deg", "radial_velocity_mps", "target")
 RADAR_KEYS = ("x_m", "y_m", "z_m", "sigma_range_m", "sigma_azimuth_deg")
 OPTIONAL_RADAR_KEYS = ("sigma_elevation_deg", "sigma_radial_velocity_mps")
 DEFAULT_TRACKS = "tracks.csv"
@@ -246,6 +252,8 @@ class PlotReader:
         self.header = header
         self.three_d = "elevation_deg" in header
         self.doppler = "radial_velocity_mps" in header
+        #: The file labels its plots' targets (a ``target`` column): many targets.
+        self.targets = "target" in header
 
     def __iter__(self) -> Iterator[tuple[int, Plot]]:
         source, radars, reader, header = self.source, self.radars, self._reader, self.header
@@ -253,8 +261,12 @@ class PlotReader:
         i_t, i_radar, i_r, i_az = (idx[h] for h in REQUIRED_COLUMNS)
         i_el = idx.get("elevation_deg")
         i_vr = idx.get("radial_velocity_mps")
+        i_target = idx.get("target")
         width = len(header)
         last_t = -math.inf
+        # With a target column, times need only not decrease within each target.
+        last_of: dict[str, float] = {}
+        target = ""
         count = 0
         while True:
             try:
@@ -281,9 +293,18 @@ class PlotReader:
                     f"must be a finite number in [−{MAX_TIME_S:g}, {MAX_TIME_S:g}]",
                     row[i_t],
                 )
+            if i_target is not None:
+                target = row[i_target].strip()
+                if not target:
+                    raise _bad(where, "target", "must not be empty (a label per plot)", "")
+                last_t = last_of.get(target, -math.inf)
             if t < last_t:
+                of = f" of target {target!r}" if i_target is not None else ""
                 raise _bad(
-                    where, "time_s", f"must not be before the previous time {last_t!r}", row[i_t]
+                    where,
+                    "time_s",
+                    f"must not be before the previous time{of} {last_t!r}",
+                    row[i_t],
                 )
             name = row[i_radar].strip()
             radar = radars.get(name)
@@ -334,6 +355,8 @@ class PlotReader:
                         row[i_vr],
                     )
             last_t = t
+            if i_target is not None:
+                last_of[target] = t
             count += 1
             yield (
                 line,
@@ -349,15 +372,92 @@ class PlotReader:
                     0.0 if sigma_el is None else math.radians(sigma_el),
                     vr,
                     0.0 if sigma_vr is None else sigma_vr,
+                    target,
                 ),
             )
         if count == 0:
             raise ParameterError(f"{source}: no plots after the header")
 
 
-def track_row(time_s: float, method: str, x: NDArray[np.float64], P: NDArray[np.float64]) -> list:
-    """One output row from a state x (6,) = (x, ẋ, y, ẏ, z, ż) and its P (6, 6)."""
-    return [time_s, method, *x[_STATE_INDEX].tolist(), *P[_COV_ROWS, _COV_COLS].tolist()]
+def track_columns(targets: bool) -> tuple[str, ...]:
+    """The track file's header: ``TRACK_COLUMNS``, with ``target`` after ``time_s`` for a
+    measurement file of many targets."""
+    return (TRACK_COLUMNS[0], "target", *TRACK_COLUMNS[1:]) if targets else TRACK_COLUMNS
+
+
+#: Track rows written to the track file at a time (one pyarrow table).
+WRITE_BLOCK = 8192
+
+
+class TrackWriter:
+    """The track file written a block of rows at a time with pyarrow's CSV writer.
+
+    A row is (time_s, [target,] method, the six state components, the 21 covariance
+    entries); a block's states x (N, 6) and P (N, 6, 6) become the columns through the index
+    tables that ``state_from_row`` reads them back with, and pyarrow formats the floats (shortest
+    round trip, like Python's repr, but ``0`` for 0.0) and quotes the text columns. Memory
+    holds at most ``WRITE_BLOCK`` rows.
+
+    Args:
+        fh: the binary file to write (``atomic_write``'s).
+        targets: the file has a ``target`` column (``track_columns``).
+    """
+
+    def __init__(self, fh: IO[bytes], targets: bool):
+        self.fh = fh
+        self.targets = targets
+        self.columns = track_columns(targets)
+        self.rows = 0
+        self._writer: Any = None
+        self._times: list[float] = []
+        self._labels: list[str] = []
+        self._methods: list[str] = []
+        self._x: list[NDArray[np.float64]] = []
+        self._P: list[NDArray[np.float64]] = []
+
+    def add(self, plot: Plot, rows: list[StateRow]) -> None:
+        """One plot's rows (method, x (6,), P (6, 6))."""
+        for m, x, P in rows:
+            self._times.append(plot.time_s)
+            self._methods.append(m)
+            self._x.append(x)
+            self._P.append(P)
+        if self.targets:
+            self._labels.extend([plot.target] * len(rows))
+        self.rows += len(rows)
+        if len(self._times) >= WRITE_BLOCK:
+            self.flush()
+
+    def flush(self) -> None:
+        """Write the buffered rows (the header with the first block)."""
+        import pyarrow as pa
+        import pyarrow.csv as pcsv
+
+        if not self._times:
+            return
+        x = np.stack(self._x)[:, _STATE_INDEX]
+        P = np.stack(self._P)[:, _COV_ROWS, _COV_COLS]
+        text = [pa.array(self._labels, pa.string())] if self.targets else []
+        columns = [
+            pa.array(self._times, pa.float64()),
+            *text,
+            pa.array(self._methods, pa.string()),
+            *(pa.array(x[:, k]) for k in range(x.shape[1])),
+            *(pa.array(P[:, k]) for k in range(P.shape[1])),
+        ]
+        table = pa.Table.from_arrays(columns, names=list(self.columns))
+        if self._writer is None:
+            options = pcsv.WriteOptions(quoting_style="needed")
+            self._writer = pcsv.CSVWriter(self.fh, table.schema, write_options=options)
+        self._writer.write_table(table)
+        for buf in (self._times, self._labels, self._methods, self._x, self._P):
+            buf.clear()
+
+    def close(self) -> None:
+        """Write what is buffered and finish the file."""
+        self.flush()
+        if self._writer is not None:
+            self._writer.close()
 
 
 #: The variances among the track columns: they must not be negative.
@@ -378,7 +478,7 @@ def check_track_rows(where: str, rows: list[StateRow]) -> None:
 
 
 def state_from_row(values: dict[str, str]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """The state x (6,) and P (6, 6) of one track-file row (the inverse of ``track_row``)."""
+    """The state x (6,) and P (6, 6) of one track-file row (the inverse of ``TrackWriter``)."""
     x = np.zeros(6)
     x[_STATE_INDEX] = [float(values[c]) for c in TRACK_COLUMNS[2:8]]
     P = np.zeros((6, 6))
@@ -466,13 +566,15 @@ def bounded_lines(fh: Any, source: str) -> Iterator[str]:
 
 @dataclass(frozen=True)
 class TrackSummary:
-    """What ``run_track`` did: plots read, rows written, 2D/3D, methods, wall time (s)."""
+    """What ``run_track`` did: plots read, rows written, 2D/3D, methods, wall time (s), and
+    the targets in order of their first plot (() for a file without a target column)."""
 
     plots: int
     rows: int
     three_d: bool
     methods: tuple[str, ...]
     seconds: float
+    targets: tuple[str, ...] = ()
 
 
 def track_lines(
@@ -482,22 +584,34 @@ def track_lines(
     methods: tuple[str, ...] | None,
     options: StreamOptions,
     on_rows: Callable[[Plot, list[StateRow]], None],
-) -> tuple[int, bool, tuple[str, ...]]:
+    on_start: Callable[[bool], None] | None = None,
+) -> tuple[int, bool, tuple[str, ...], tuple[str, ...]]:
     """Track a measurement CSV given as lines; ``on_rows(plot, rows)`` after every plot.
 
-    Plots are read and tracked ``READ_BLOCK`` at a time, so at most that many are held.
+    Plots are read and tracked ``READ_BLOCK`` at a time, so at most that many are held. A file
+    with a ``target`` column is tracked by ``core.tracking.targets.TargetTracker`` (one track
+    per target and method, all targets in one batch), one without by ``StreamTracker``;
+    ``on_start(targets)`` is called once the header has told which.
 
     ``methods`` None: every method of the file's kind (``ALL_METHODS`` in 2D, ``METHODS_3D``
-    in 3D). Returns (plots, three_d, methods). Tracker errors come back as
+    in 3D). Returns (plots, three_d, methods, targets). Tracker errors come back as
     "SOURCE line L, column C: …".
     """
     reader = PlotReader(lines, source, radars)
     if methods is None:
         methods = METHODS_3D if reader.three_d else ALL_METHODS
+    tracker: StreamTracker | TargetTracker
     try:
-        tracker = StreamTracker(methods, reader.three_d, options)
-    except ParameterError as exc:  # its only errors are about the methods: name the flag
+        if reader.targets:
+            tracker = TargetTracker(methods, reader.three_d, options)
+        else:
+            tracker = StreamTracker(methods, reader.three_d, options)
+    except ParameterError as exc:  # errors about the options: the CLI names the flag
+        if exc.parameter:
+            raise
         raise ParameterError(f"--{exc}") from None
+    if on_start is not None:
+        on_start(reader.targets)
     plots = 0
     block: list[tuple[int, Plot]] = []
 
@@ -518,7 +632,8 @@ def track_lines(
             run_block()
     if block:
         run_block()
-    return plots, reader.three_d, methods
+    targets = tracker.targets if isinstance(tracker, TargetTracker) else ()
+    return plots, reader.three_d, methods, targets
 
 
 class RowObserver(Protocol):
@@ -547,21 +662,27 @@ def run_track(
     with ExitStack() as stack:
         stack.enter_context(commit_together())  # the tracks and the recording: both or neither
         src = bounded_lines(stack.enter_context(_open_input(input_path)), input_path)
-        out = stack.enter_context(atomic_text(out_path))
-        w = csv.writer(out)
-        w.writerow(TRACK_COLUMNS)
+        out = stack.enter_context(atomic_write(out_path, "wb"))
         logger = None if observer is None else stack.enter_context(observer(radars.values()))
-        written = 0
+        writer: TrackWriter | None = None
+
+        def on_start(targets: bool) -> None:
+            nonlocal writer
+            writer = TrackWriter(out, targets)
 
         def on_rows(plot: Plot, rows: list[StateRow]) -> None:
-            nonlocal written
+            assert writer is not None
             check_track_rows(f"track: {input_path} at time {plot.time_s!r} s", rows)
-            w.writerows([track_row(plot.time_s, m, x, P) for m, x, P in rows])
-            written += len(rows)
+            writer.add(plot, rows)
             if logger is not None:
                 logger.add(plot, rows)
 
-        plots, three_d, used = track_lines(src, input_path, radars, methods, options, on_rows)
+        plots, three_d, used, targets = track_lines(
+            src, input_path, radars, methods, options, on_rows, on_start
+        )
+        assert writer is not None
+        writer.close()
+        written = writer.rows
         if plots and not written:
             # Raised inside the block: the output is abandoned, not written empty.
             raise ParameterError(
@@ -570,7 +691,7 @@ def run_track(
                 "in all, so no track started (lower --init-k or use --init first-plot)",
                 "init_k",
             )
-    return TrackSummary(plots, written, three_d, tuple(used), time.perf_counter() - start)
+    return TrackSummary(plots, written, three_d, tuple(used), time.perf_counter() - start, targets)
 
 
 # --------------------------------------------------------------------------------------------
@@ -671,8 +792,9 @@ def write_measurements(
     meas_path: str, radars_path: str, plots: list[Plot], radars: list[Radar]
 ) -> int:
     """Plots as a measurement CSV and their radars as TOML, committed together; returns
-    plots. Every plot's values pass the finite-result check first (a range or an angle that
-    came out NaN is an error, not a row; ranges must be > 0 to be read back)."""
+    plots (with a ``target`` column when any plot has a target label). Every plot's values
+    pass the finite-result check first (a range or an angle that came out NaN is an error,
+    not a row; ranges must be > 0 to be read back)."""
     for column, values, positive in (
         ("time_s", [p.time_s for p in plots], False),
         ("range_m", [p.range_m for p in plots], True),
@@ -687,10 +809,12 @@ def write_measurements(
         check_finite_result("simulate", column, values, nonnegative=positive, index_name="plot")
     three_d = plots[0].elevation_rad is not None
     doppler = any(p.radial_velocity_mps is not None for p in plots)
+    labelled = any(p.target for p in plots)
     header = (
         list(REQUIRED_COLUMNS)
         + (["elevation_deg"] if three_d else [])
         + (["radial_velocity_mps"] if doppler else [])
+        + (["target"] if labelled else [])
     )
     # Both files change together or neither does (``commit_together``).
     with commit_together(), atomic_text(meas_path) as fh, atomic_text(radars_path) as rh:
@@ -703,6 +827,8 @@ def write_measurements(
                 row.append(math.degrees(p.elevation_rad))
             if doppler:
                 row.append("" if p.radial_velocity_mps is None else p.radial_velocity_mps)
+            if labelled:
+                row.append(p.target)
             w.writerow(row)
         rh.write(_radar_toml(radars))
     return len(plots)

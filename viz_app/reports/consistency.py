@@ -9,6 +9,7 @@ interface; a value that is not finite (a track whose innovation blew up) is null
 from __future__ import annotations
 
 import math
+from collections import Counter
 from collections.abc import Callable
 from typing import Any
 
@@ -18,6 +19,7 @@ from radarviz.core.tracking.consistency import (
     ConsistencyMonitor,
 )
 from radarviz.core.tracking.stream import StreamOptions
+from radarviz.core.tracking.targets import track_name
 
 #: Band exits reported on standard error per track; later ones only count in the summary.
 MAX_EXIT_WARNINGS = 3
@@ -47,11 +49,16 @@ def track_summary_document(
     rows: int,
     three_d: bool,
     methods: tuple[str, ...],
+    targets: tuple[str, ...] = (),
 ) -> dict[str, Any]:
-    """The summary of one ``track`` run."""
+    """The summary of one ``track`` run; ``targets``: a file of many targets' labels (its
+    tracks are named ``core.tracking.targets.track_name(target, method)``)."""
     tracks = {}
-    for name in methods:
-        if name not in monitor.tracks:
+    names = [track_name(t, m) for t in targets for m in methods] if targets else methods
+    known = set(monitor.tracks)
+    exits = Counter(e.track for e in monitor.events if e.kind == "leaves")
+    for name in names:
+        if name not in known:
             continue  # a track with no update after its start has nothing to test
         r = monitor.result(name)
         w = r.windows
@@ -63,7 +70,7 @@ def track_summary_document(
             "fraction_below": _num(r.below / w) if w else None,
             "mean_nis_per_dof": _num(r.mean_nis_per_dof),
             "first_exit_s": _num(r.first_exit_s),
-            "band_exits": sum(1 for e in monitor.events if e.track == name and e.kind == "leaves"),
+            "band_exits": exits[name],
             "inconsistent": r.inconsistent,
         }
     return {
@@ -72,6 +79,7 @@ def track_summary_document(
         "rows": rows,
         "dims": 3 if three_d else 2,
         "methods": list(methods),
+        "targets": len(targets) or None,
         "model": motion_document(options),
         "finite_memory_k": options.finite_memory_k or None,
         "nis_window": monitor.window,

@@ -12,6 +12,10 @@ method)::
     plots/sigma_pos_m/{m}            √trace of the position covariance, m
     plots/speed_mps/{m}              track speed, m/s
 
+In a file of many targets (a ``target`` column) every target and method is one entity:
+``{m}`` above becomes ``{t}/{m}`` (``core.tracking.targets.track_name``; a label's characters
+that an entity path reserves are escaped), coloured by method.
+
 Timelines: ``plot`` (sequence 1, 2, … over the file's plots) and ``time`` (the file's time_s,
 as a duration). Plots are buffered and sent column-wise (``send_columns``) every ``RRD_CHUNK``
 plots, so memory stays bounded however long the file is; a 2D track is drawn at z = 0.
@@ -32,6 +36,7 @@ import rerun.blueprint as rrb
 from radarviz.core.filters.state import position_index, velocity_index
 from radarviz.core.tracking.consistency import ConsistencyMonitor
 from radarviz.core.tracking.stream import Plot, StateRow
+from radarviz.core.tracking.targets import track_name
 from radarviz.viz_app.io.plots import Radar
 from radarviz.viz_app.palette import radar_rgb
 from radarviz.viz_app.rerun.recording import colour, ellipsoid_axes, log_text, recording_file
@@ -91,9 +96,13 @@ class TrackRecorder:
         self._meas: dict[str, list[tuple[int, float, tuple[float, float, float]]]] = defaultdict(
             list
         )
-        self._tracks: dict[str, list[tuple[int, float, np.ndarray, np.ndarray]]] = defaultdict(list)
-        # Each method's last drawn position: the next chunk's path strip starts there.
+        # Per (target, method): the buffered states ("" the target of a file of one).
+        self._tracks: dict[tuple[str, str], list[tuple[int, float, np.ndarray, np.ndarray]]] = (
+            defaultdict(list)
+        )
+        # Each track's last drawn position: the next chunk's path strip starts there.
         self._last: dict[str, np.ndarray] = {}
+        self._styled: set[str] = set()
 
     def _extend(self, pts: np.ndarray) -> None:
         ok = np.all(np.isfinite(pts), axis=1)
@@ -186,7 +195,7 @@ class TrackRecorder:
                 self._events_logged += 1
         self._meas[plot.radar].append((self.count, plot.time_s, measured_point(plot)))
         for method, x, P in rows:
-            self._tracks[method].append((self.count, plot.time_s, x, P))
+            self._tracks[(plot.target, method)].append((self.count, plot.time_s, x, P))
         if self.count % RRD_CHUNK == 0:
             self.flush()
 
@@ -213,9 +222,10 @@ class TrackRecorder:
                     colors=[colour("measurement")] * len(pts),
                 ),
             )
-        for method, items in self._tracks.items():
+        for (target, method), items in self._tracks.items():
             if not items:
                 continue
+            name = track_name(rr.escape_entity_path_part(target), method) if target else method
             n, t, xs, ps = zip(*items, strict=True)
             x, P = np.array(xs), np.array(ps)
             POS, VEL = list(position_index(3)), list(velocity_index(3))
@@ -224,7 +234,7 @@ class TrackRecorder:
             rgb = colour(method)
             k = len(pos)
             idx = self.indexes(list(n), list(t))
-            base = f"world/tracks/{method}"
+            base = f"world/tracks/{name}"
             rec.send_columns(
                 f"{base}/position",
                 indexes=idx,
@@ -248,27 +258,28 @@ class TrackRecorder:
                     origins=pos, vectors=vel * ARROW_SECONDS, colors=[rgb] * k
                 ),
             )
-            strip = pos if method not in self._last else np.vstack([self._last[method], pos])
-            self._last[method] = pos[-1]
+            strip = pos if name not in self._last else np.vstack([self._last[name], pos])
+            self._last[name] = pos[-1]
             rec.log(
                 f"{base}/path/{self.chunk:06d}",
                 rr.LineStrips3D([strip], colors=[rgb], radii=[THIN_LINE]),
                 static=True,
             )
-            if self.chunk == 0:
+            if name not in self._styled:  # a track's first chunk
+                self._styled.add(name)
                 for series in ("sigma_pos_m", "speed_mps"):
                     rec.log(
-                        f"plots/{series}/{method}",
-                        rr.SeriesLines(colors=[rgb], names=[method]),
+                        f"plots/{series}/{name}",
+                        rr.SeriesLines(colors=[rgb], names=[track_name(target, method)]),
                         static=True,
                     )
             rec.send_columns(
-                f"plots/sigma_pos_m/{method}",
+                f"plots/sigma_pos_m/{name}",
                 indexes=idx,
                 columns=rr.Scalars.columns(scalars=np.sqrt(np.trace(cov, axis1=1, axis2=2))),
             )
             rec.send_columns(
-                f"plots/speed_mps/{method}",
+                f"plots/speed_mps/{name}",
                 indexes=idx,
                 columns=rr.Scalars.columns(scalars=np.linalg.norm(vel, axis=1)),
             )

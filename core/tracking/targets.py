@@ -1,0 +1,293 @@
+"""Many targets at once: one track per target and method, every target on the batch axis.
+
+A measurement file with a ``target`` column (the radar's own track number, or any label)
+holds the plots of many targets, interleaved. ``TargetTracker`` keeps, for every method group
+(``core.filters.methods.method_groups``), one batch whose *target axis* holds every target
+seen so far: (M, K) for M converted methods × K targets, (K,) for ``ekf`` or ``ukf``; with the
+IMM each has its trailing model axis too (``core.filters.imm``).
+
+* **Waves.** A block of plots is cut into waves: wave w holds the w-th plot of every target
+  that has one in the block. A wave has at most one plot per target and the waves run in
+  order, so every target's plots are filtered in its own order, whatever the order across
+  targets.
+* **Sub-batches.** Within a wave, the plots that start a track and the plots that update one,
+  with and without a Doppler stage, are each one sub-batch: their targets' rows are gathered
+  from the target axis, advanced by the engine's own calls as for one target
+  (``core.filters.step.cv_step`` or ``core.filters.imm.imm_step``, with one time step per
+  target and the plot's radar as a site per target), and put back. A target may change radar
+  from one plot to the next.
+* **Per target, as alone.** Rows do not interact, so each target's tracks are those that
+  ``core.tracking.stream.StreamTracker`` gives for that target's plots alone, to rounding
+  (the batched arithmetic takes other, equivalent routes through the same formulas).
+* **Start**: the first-plot start only (the finite-memory start and track fit a window of one
+  radar's plots per target; they are ``StreamTracker``'s, for files of one target).
+
+Times must not decrease within a target (across targets they may). The consistency monitor
+names a track ``track_name(target, method)``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from radarviz.core.filters.imm import IMMState, imm_start, imm_step
+from radarviz.core.filters.innovation import InnovationStats
+from radarviz.core.filters.measurement import DopplerMeasurement, PlotMeasurement
+from radarviz.core.filters.methods import MethodGroup, PolarNoise, PolarPlot, method_groups
+from radarviz.core.filters.models import CVModel, IMMModel
+from radarviz.core.filters.state import CVBatch
+from radarviz.core.filters.step import Stage, cv_step
+from radarviz.core.params import ParameterError
+from radarviz.core.tracking.stream import (
+    Plot,
+    PlotError,
+    StateRow,
+    StreamOptions,
+    as_6,
+    check_methods,
+    polar_arrays,
+)
+
+
+def track_name(target: str, method: str) -> str:
+    """The name of ``target``'s track of ``method`` (consistency monitor, recording, summary):
+    ``method`` for a file of one target (target ""), ``target/method`` otherwise."""
+    return f"{target}/{method}" if target else method
+
+
+class _TargetBank:
+    """One method group's tracks of every target: arrays with a target axis (``axis``).
+
+    CV: x (*lead, K, n), P (*lead, K, n, n); IMM: the models' x (*lead, K, r, n), P and the
+    probabilities μ (*lead, K, r); ``lead`` is (M,) for M converted methods, () for a polar one.
+    """
+
+    def __init__(
+        self, methods: tuple[str, ...], dims: int, motion: CVModel | IMMModel, sigma_v0_mps: float
+    ):
+        self.group = MethodGroup(methods)
+        self.methods = methods
+        self.motion = motion
+        self.sigma_v0 = sigma_v0_mps
+        self.axis = 1 if self.group.converted else 0
+        lead = (len(methods),) if self.group.converted else ()
+        n = 2 * dims
+        self.imm = isinstance(motion, IMMModel)
+        tail: tuple[tuple[int, ...], ...]
+        if isinstance(motion, IMMModel):
+            r = motion.models
+            tail = ((r, n), (r, n, n), (r,))
+        else:
+            tail = ((n,), (n, n))
+        self.arrays = [np.zeros((*lead, 0, *t)) for t in tail]
+
+    def grow(self, capacity: int) -> None:
+        """Room for ``capacity`` targets on the target axis (new rows zero, never read)."""
+        grown = []
+        for a in self.arrays:
+            shape = list(a.shape)
+            shape[self.axis] = capacity - a.shape[self.axis]
+            grown.append(np.concatenate([a, np.zeros(shape)], axis=self.axis))
+        self.arrays = grown
+
+    def _take(self, ids: NDArray[np.intp]) -> list[NDArray[np.float64]]:
+        return [a[:, ids] if self.axis else a[ids] for a in self.arrays]
+
+    def _put(self, ids: NDArray[np.intp], values: list[NDArray[np.float64]]) -> None:
+        for a, v in zip(self.arrays, values, strict=True):
+            if self.axis:
+                a[:, ids] = v
+            else:
+                a[ids] = v
+
+    def step(
+        self,
+        ids: NDArray[np.intp],
+        new: bool,
+        plot: PolarPlot,
+        noise: PolarNoise,
+        site: NDArray[np.float64],
+        doppler: DopplerMeasurement | None,
+        dt_s: NDArray[np.float64],
+        with_stats: bool,
+    ) -> tuple[CVBatch, InnovationStats | None]:
+        """Start (``new``) or advance the tracks of targets ``ids`` (K,) with one plot each:
+        plot and noise arrays (K,), ``site`` (K, d), ``dt_s`` (K,). Returns the posterior,
+        (*lead, K), and with ``with_stats`` the innovation statistics (None at a start)."""
+        parts = self.group.start_parts(plot, noise) if self.group.converted else None
+        stages: list[Stage] = [PlotMeasurement(self.group, plot, noise, site, parts)]
+        if doppler is not None:
+            stages.append(doppler)
+        stats = None
+        if new:
+            state = self.group.start(
+                plot, noise, sigma_v0_mps=self.sigma_v0, site=site, parts=parts
+            )
+            for stage in stages[1:]:  # the start is the position stage; Doppler follows it
+                state = stage.update(state)
+            if isinstance(self.motion, IMMModel):
+                imm = imm_start(state, self.motion)
+                self._put(ids, [imm.models.x, imm.models.P, imm.probabilities])
+            else:
+                self._put(ids, [state.x, state.P])
+            return state, None
+        if isinstance(self.motion, IMMModel):
+            mx, mP, mu = self._take(ids)
+            imm, state, stats = imm_step(
+                IMMState(CVBatch(mx, mP), mu), dt_s, self.motion, stages, with_stats
+            )
+            self._put(ids, [imm.models.x, imm.models.P, imm.probabilities])
+        else:
+            x, P = self._take(ids)
+            state, stats = cv_step(
+                CVBatch(x, P), dt_s, self.motion.sigma_a_mps2, stages, with_stats
+            )
+            self._put(ids, [state.x, state.P])
+        return state, stats
+
+
+class TargetTracker:
+    """Every requested method's track of every target, fed blocks of labelled plots.
+
+    Args:
+        methods: from ``ALL_METHODS`` (2D) or ``METHODS_3D`` (3D).
+        three_d: plots carry elevations (every plot must then have one).
+        options: ``StreamOptions`` with the first-plot start and no finite-memory track.
+    """
+
+    def __init__(self, methods: tuple[str, ...], three_d: bool, options: StreamOptions):
+        check_methods(methods, three_d)
+        if options.init != "first-plot":
+            raise ParameterError(
+                "init must be first-plot for plots of many targets (the finite-memory start "
+                "fits one target's window; track each target's file alone for it)",
+                "init",
+            )
+        if options.finite_memory_k:
+            raise ParameterError(
+                "finite_memory_k must be 0 for plots of many targets (the finite-memory "
+                "track is one target's; track each target's file alone for it)",
+                "finite_memory_k",
+            )
+        self.methods = tuple(methods)
+        self.three_d = three_d
+        self.options = options
+        self.dims = 3 if three_d else 2
+        motion = options.motion()
+        self._banks = [
+            _TargetBank(g, self.dims, motion, options.sigma_v0_mps)
+            for g in method_groups(self.methods)
+        ]
+        self._where = {
+            m: (b, i) for b, bank in enumerate(self._banks) for i, m in enumerate(bank.methods)
+        }
+        self._slot: dict[str, int] = {}
+        self._time_s = np.zeros(0)
+
+    @property
+    def targets(self) -> tuple[str, ...]:
+        """The targets seen so far, in order of their first plot."""
+        return tuple(self._slot)
+
+    def add_block(self, plots: list[Plot]) -> list[list[StateRow]]:
+        """Filter a block of plots; returns, per plot, (method, x (6,), P (6, 6)) per method
+        in ``methods`` order (state rows in the 3D layout). A ``PlotError`` carries ``index``,
+        the position in the block of the plot it is about."""
+        waves: list[list[int]] = []
+        seen: dict[str, int] = {}
+        for i, p in enumerate(plots):
+            if self.three_d != (p.elevation_rad is not None):
+                raise PlotError(
+                    "elevation_deg", "every plot of a 3D track needs an elevation", index=i
+                )
+            w = seen.get(p.target, 0)
+            seen[p.target] = w + 1
+            if w == len(waves):
+                waves.append([])
+            waves[w].append(i)
+        out: list[list[StateRow]] = [[] for _ in plots]
+        for wave in waves:
+            self._wave(plots, wave, out)
+        return out
+
+    def _wave(self, plots: list[Plot], wave: list[int], out: list[list[StateRow]]) -> None:
+        """Filter plots ``wave`` of ``plots`` (at most one per target) into ``out``."""
+        new = np.zeros(len(wave), dtype=bool)
+        for j, i in enumerate(wave):
+            target = plots[i].target
+            if target not in self._slot:
+                self._slot[target] = len(self._slot)
+                new[j] = True
+        capacity = self._time_s.size
+        if len(self._slot) > capacity:
+            capacity = max(len(self._slot), 2 * capacity, 16)
+            for bank in self._banks:
+                bank.grow(capacity)
+            self._time_s = np.concatenate([self._time_s, np.zeros(capacity - self._time_s.size)])
+        ids = np.array([self._slot[plots[i].target] for i in wave], dtype=np.intp)
+        times = np.array([plots[i].time_s for i in wave])
+        dt = times - self._time_s[ids]
+        for j in np.flatnonzero(~new & (dt < 0)):
+            p = plots[wave[j]]
+            raise PlotError(
+                "time_s",
+                f"target {p.target!r}: times must not decrease within a target (got "
+                f"{p.time_s!r} after {float(self._time_s[ids[j]])!r})",
+                index=wave[j],
+            )
+        use_doppler = self.options.use_doppler
+        doppler = np.array([use_doppler and plots[i].radial_velocity_mps is not None for i in wave])
+        for start in (True, False):
+            for dop in (False, True):
+                sel = np.flatnonzero((new == start) & (doppler == dop))
+                if sel.size:
+                    self._run(plots, [wave[j] for j in sel], ids[sel], start, dop, dt[sel], out)
+        self._time_s[ids] = times
+
+    def _run(
+        self,
+        plots: list[Plot],
+        which: list[int],
+        ids: NDArray[np.intp],
+        start: bool,
+        with_doppler: bool,
+        dt_s: NDArray[np.float64],
+        out: list[list[StateRow]],
+    ) -> None:
+        """One sub-batch: plots ``which`` (one per target ``ids``), all starting or all
+        updating, all with or all without a Doppler stage."""
+        sub = [plots[i] for i in which]
+        plot, noise = polar_arrays(sub, self.dims)
+        site = np.array([p.site for p in sub], dtype=np.float64)[:, : self.dims]
+        doppler = None
+        if with_doppler:
+            doppler = DopplerMeasurement(
+                np.array([p.radial_velocity_mps for p in sub], dtype=np.float64),
+                plot.azimuth_rad,
+                np.zeros(len(sub)) if plot.elevation_rad is None else plot.elevation_rad,
+                np.array([p.sigma_radial_velocity_mps for p in sub], dtype=np.float64),
+                noise.sigma_azimuth_rad,
+                noise.sigma_elevation_rad,
+            )
+        monitor = self.options.monitor
+        results = []
+        for bank in self._banks:
+            state, stats = bank.step(
+                ids, start, plot, noise, site, doppler, dt_s, monitor is not None
+            )
+            results.append((as_6(state), stats))
+        for m in self.methods:
+            b, row = self._where[m]
+            (x6, P6), stats = results[b]
+            converted = self._banks[b].axis == 1
+            xs, Ps = (x6[row], P6[row]) if converted else (x6, P6)
+            nis = None
+            if stats is not None and monitor is not None:
+                nis = stats.nis[row] if converted else stats.nis
+            for i, x, P in zip(which, xs, Ps, strict=True):
+                out[i].append((m, x, P))
+            if nis is not None:
+                assert monitor is not None and stats is not None
+                for p, v in zip(sub, nis.tolist(), strict=True):
+                    monitor.add(track_name(p.target, m), p.time_s, v, stats.dof)
