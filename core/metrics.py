@@ -86,14 +86,35 @@ def scan_sums(
     return scan_terms(x, P, truth).sum(axis=-1)
 
 
+def truth_line_of_sight(
+    truth: NDArray[np.float64],
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """cos β and sin β (K, 1) of the true bearing at each of K scans, truth (K, 4).
+
+    From each scan's scalar truth exactly as a single scan would (a vectorised arctan2 may
+    round differently), so sums do not depend on how scans are grouped. Callers adding many
+    chunks of the same scans form it once and pass it to ``scan_terms`` as ``los``.
+    """
+    k = truth.shape[0]
+    c, s = np.empty((k, 1)), np.empty((k, 1))
+    for i in range(k):
+        bearing = polar_coordinates([truth[i, 0], truth[i, 2]])[1]
+        c[i], s[i] = np.cos(bearing), np.sin(bearing)
+    return c, s
+
+
 def scan_terms(
-    x: NDArray[np.float64], P: NDArray[np.float64], truth: NDArray[np.float64]
+    x: NDArray[np.float64],
+    P: NDArray[np.float64],
+    truth: NDArray[np.float64],
+    los: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None,
 ) -> NDArray[np.float64]:
     """The per-run terms of the running sums of K scans of m runs: (len(SUM_NAMES), K, m).
 
     Args:
         x: (K, m, 4) filtered states (x, ẋ, y, ẏ); P: (K, m, 4, 4) their covariances.
         truth: (K, 4) the true state at each of the K scans.
+        los: ``truth_line_of_sight(truth)`` if the caller has it.
 
     Every number is formed by the same operations in the same order whatever K and m are
     (element-wise IEEE arithmetic, then one pairwise sum over the m runs of each scan), so a
@@ -101,11 +122,7 @@ def scan_terms(
     a result by one bit.
     """
     k, m = x.shape[:2]
-    # The line of sight of each scan, from the scalar truth exactly as a single scan would.
-    c, s = np.empty((k, 1)), np.empty((k, 1))
-    for i in range(k):
-        bearing = polar_coordinates([truth[i, 0], truth[i, 2]])[1]
-        c[i], s[i] = np.cos(bearing), np.sin(bearing)
+    c, s = truth_line_of_sight(truth) if los is None else los
     t = truth[:, None, :]
     terms = np.empty((len(SUM_NAMES), k, m))
     ex, ex2, ey, ey2, er, ec, pxx, pyy, nees_pos, nees_state = terms
@@ -186,6 +203,41 @@ class MetricsAccumulator:
         self._offsets.append(offset)
         if k + 1 == len(ts):
             self._flush()
+
+    def add_scans(
+        self,
+        first: int,
+        x: NDArray[np.float64],
+        P: NDArray[np.float64],
+        truth: NDArray[np.float64],
+        los: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None,
+    ) -> None:
+        """Add one block of runs at K consecutive scans ``first … first + K − 1`` at once.
+
+        Args:
+            x: (K, m, 4) states; P: (K, m, 4, 4) covariances; truth: (K, 4) true states.
+            los: ``truth_line_of_sight(truth)``, if the caller has it.
+
+        The sums are those of K ``add`` calls, bit for bit (``scan_terms`` does not depend
+        on how many scans are formed together), for one pass instead of K.
+        """
+        self.add_terms(first, scan_terms(x, P, np.asarray(truth), los))
+
+    def add_terms(self, first: int, terms: NDArray[np.float64]) -> None:
+        """``add_scans`` given the per-run terms (len(SUM_NAMES), K, m) of ``scan_terms`` (or
+        of its compiled mirror, ``core.filters.compiled.metric_terms``)."""
+        self._flush()
+        k, m = terms.shape[1:]
+        scans = list(range(first, first + k))
+        offsets = [int(self.runs[n]) for n in scans]
+        counts: dict[int, NDArray[np.int64]] = {}  # usually one offset for all the scans
+        for n, offset in zip(scans, offsets, strict=True):
+            if offset not in counts:
+                counts[offset] = group_counts(offset, m)
+            self.group_runs[:, n] += counts[offset]
+        self.runs[first : first + k] += m
+        self._add_sums(scans, terms.sum(axis=-1))
+        self._add_group_sums(scans, offsets, terms)
 
     def _flush(self) -> None:
         """Turn the staged scans into sums."""

@@ -176,6 +176,20 @@ def test_bench_figures_are_consistent(capsys) -> None:
         assert all(math.isfinite(v) and v > 0 for v in doc[name]), (name, doc[name])
     for name in ("filterpy_ns_per_step", "gorshkov_s"):
         assert math.isfinite(doc[name]) and doc[name] > 0, (name, doc[name])
+    from radarviz.core.filters.methods import ALL_METHODS
+
+    for name in ("numpy_ns_per_step", "compiled_ns_per_step", "experiment_ns_per_step"):
+        assert set(doc[name]) == set(ALL_METHODS), name
+        assert all(math.isfinite(v) and v > 0 for v in doc[name].values()), (name, doc[name])
+    for m in ALL_METHODS:
+        assert doc["compiled_speedup"][m] == pytest.approx(
+            doc["numpy_ns_per_step"][m] / doc["compiled_ns_per_step"][m], rel=1e-12
+        )
+    assert doc["engine_runs"] == 500 and doc["parallel_runs"] == 1000
+    assert doc["parallel_bit_identical"] is True
+    assert doc["parallel_efficiency"] == pytest.approx(
+        doc["one_thread_s"] / doc["all_cores_s"] / doc["cores"], rel=1e-12
+    )
     assert set(doc["tune_median_ms"]) == {"prosov", "gorshkov", "velocity"}
     for scene, ms in doc["tune_median_ms"].items():
         assert math.isfinite(ms) and ms > 0, (scene, ms)

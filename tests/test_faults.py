@@ -26,6 +26,7 @@ from radarviz.viz_app.io.atomic import (
     WriteError,
     atomic_write,
     check_outputs,
+    commit_together,
     remove_stale_temps,
 )
 from radarviz.viz_app.rerun.recording import recording_file, verify_recording
@@ -388,3 +389,117 @@ def test_stale_temporaries_of_dead_runs_are_removed_and_live_ones_kept(tmp_path:
     removed = remove_stale_temps(out)
     assert sorted(removed) == sorted([dead, legacy])
     assert live.exists() and unrelated.exists()
+
+
+# --------------------------------------------------------------------------------------------
+# Several outputs commit as a unit (``commit_together``)
+# --------------------------------------------------------------------------------------------
+
+
+def fail_second_rename(monkeypatch: pytest.MonkeyPatch, targets: list[Path]) -> list[str]:
+    """Make the second ``os.replace`` onto one of ``targets`` fail with EIO (other renames,
+    e.g. the sweep's chunk store and the restoring of a backup, go through). Returns the
+    targets renamed onto, in order."""
+    real = os.replace
+    names = {os.path.realpath(t) for t in targets}
+    calls: list[str] = []
+
+    def replace(src, dst, *args, **kwargs):
+        if os.path.realpath(dst) in names and not os.path.basename(src).startswith(
+            "." + os.path.basename(dst) + "."
+        ):
+            return real(src, dst, *args, **kwargs)  # not a staged file: let it through
+        if os.path.realpath(dst) in names:
+            calls.append(str(dst))
+            if len(calls) == 2:
+                raise OSError(errno.EIO, os.strerror(errno.EIO))
+        return real(src, dst, *args, **kwargs)
+
+    monkeypatch.setattr(os, "replace", replace)
+    return calls
+
+
+def snapshot(*paths: Path) -> dict[Path, bytes | None]:
+    return {p: p.read_bytes() if p.exists() else None for p in paths}
+
+
+@pytest.mark.parametrize("existing", [True, False])
+def test_simulate_second_rename_failing_leaves_both_outputs(
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+    existing: bool,
+) -> None:
+    meas, radars = tmp_path / "m.csv", tmp_path / "r.toml"
+    if existing:
+        meas.write_text("old measurements\n")
+        radars.write_text("# old radars\n")
+    before = snapshot(meas, radars)
+    calls = fail_second_rename(monkeypatch, [meas, radars])
+    argv = ["simulate", "--preset", "prosov", "--out", str(meas), "--radars-out", str(radars)]
+    assert main(argv) == 1
+    assert len(calls) >= 2  # the first rename happened (then its backup went back)
+    line = one_error_line(capsys.readouterr().err, f"cannot write {calls[1]}")
+    assert os.strerror(errno.EIO) in line
+    assert f"{calls[0]} left as before" in line
+    assert snapshot(meas, radars) == before
+    assert temporaries(tmp_path) == []  # neither the staged files nor the backup remain
+
+
+def test_track_second_rename_failing_keeps_tracks_and_recording(
+    tmp_path: Path,
+    inputs: tuple[Path, Path],
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    meas, radars = inputs
+    out, rrd = tmp_path / "t.csv", tmp_path / "t.rrd"
+    assert main(track(meas, radars, "--out", str(out), "--rrd", str(rrd))) == 0
+    capsys.readouterr()
+    before = snapshot(out, rrd)
+    calls = fail_second_rename(monkeypatch, [out, rrd])
+    argv = track(meas, radars, "--out", str(out), "--rrd", str(rrd), "--method", "naive")
+    assert main(argv) == 1
+    assert len(calls) >= 2
+    one_error_line(capsys.readouterr().err, f"cannot write {calls[1]}", "left as before")
+    assert snapshot(out, rrd) == before
+    verify_recording(rrd)
+    assert temporaries(tmp_path) == []
+
+
+def test_sweep_second_rename_failing_keeps_table_and_recording(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    out, rrd = tmp_path / "s.parquet", tmp_path / "s.rrd"
+    out.write_bytes(b"an older table")
+    rrd.write_bytes(b"an older recording")
+    before = snapshot(out, rrd)
+    calls = fail_second_rename(monkeypatch, [out, rrd])
+    args = ["sweep", "--grid", "sigma_beta_deg=1", "--runs", "10", "--scheduler", "serial"]
+    assert main([*args, "--json", "--out", str(out), "--rrd", str(rrd)]) == 1
+    assert len(calls) >= 2
+    one_error_line(capsys.readouterr().err, f"cannot write {calls[1]}", "left as before")
+    assert snapshot(out, rrd) == before
+    assert temporaries(tmp_path) == []
+
+
+def test_an_error_inside_the_unit_commits_nothing(tmp_path: Path) -> None:
+    """A stage verified early in the block is not renamed when a later write fails."""
+    a, b = tmp_path / "a.txt", tmp_path / "b.txt"
+    a.write_text("old a")
+    with pytest.raises(RuntimeError, match="second output"), commit_together():
+        with atomic_write(a, "w") as fh:
+            fh.write("new a")
+        assert a.read_text() == "old a"  # verified, not yet renamed
+        with atomic_write(b, "w") as fh:
+            fh.write("partial b")
+            raise RuntimeError("second output failed")
+    assert a.read_text() == "old a" and not b.exists()
+    assert temporaries(tmp_path) == []
+    with commit_together():  # and a clean block renames both
+        with atomic_write(a, "w") as fh:
+            fh.write("new a")
+        with atomic_write(b, "w") as fh:
+            fh.write("new b")
+    assert (a.read_text(), b.read_text()) == ("new a", "new b")
+    assert temporaries(tmp_path) == []

@@ -28,7 +28,7 @@ import radarviz.core.filters.polar_ekf as ekf_module
 import radarviz.core.filters.polar_ukf as ukf_module
 from radarviz.core.conversion.planar import convert
 from radarviz.core.filters.methods import METHODS, PolarNoise, PolarPlot
-from radarviz.core.filters.polar_ukf import UKFParams
+from radarviz.core.filters.polar_ukf import UKFParams, dense_cholesky
 from radarviz.core.filters.predict import cv_predict, transition_matrix
 from radarviz.core.filters.state import CVBatch, cv_init, empty_batch, quad_form_inv
 from radarviz.core.geometry import wrap_angle
@@ -372,3 +372,24 @@ def test_working_memory_is_linear_and_small(update) -> None:
         tracemalloc.stop()
     assert peak < 48 * 8 * runs
     assert np.isfinite(out.P).all()
+
+
+def test_semidefinite_cholesky_accepts_a_null_direction() -> None:
+    """L Lᵀ = P for a batch of P (6, 6) of rank 4 (built as A Aᵀ, A 6 × 4: two exact null
+    directions, which LAPACK's Cholesky refuses), LAPACK's factor where P is positive definite,
+    and NaN for an indefinite P only (its neighbours untouched)."""
+    rng = np.random.default_rng(3)
+    A = rng.standard_normal((5, 6, 4)) * np.array([1e3, 1.0, 1e3, 1.0, 1e2, 1.0])[:, None]
+    P = A @ A.mT
+    with pytest.raises(np.linalg.LinAlgError):
+        np.linalg.cholesky(P)
+    L = dense_cholesky(P)
+    np.testing.assert_allclose(L @ L.mT, P, rtol=0, atol=1e-12 * np.abs(P).max())
+    assert np.all(np.triu(L, 1) == 0)
+    B = rng.standard_normal((5, 6, 6))
+    Q = B @ B.mT + np.eye(6)
+    np.testing.assert_allclose(dense_cholesky(Q), np.linalg.cholesky(Q), rtol=1e-12, atol=1e-12)
+    Q[2, 0, 0] = -1.0  # indefinite
+    L = dense_cholesky(Q)
+    assert np.isnan(L[2]).any()
+    np.testing.assert_allclose(np.delete(L, 2, 0), np.linalg.cholesky(np.delete(Q, 2, 0)))

@@ -36,7 +36,7 @@ from scipy.stats import chi2
 
 from radarviz.core.finite_memory.fit import finite_memory_fit
 from radarviz.core.finite_memory.start import finite_memory_start
-from radarviz.core.tracking.stream import StreamOptions, StreamTracker
+from radarviz.core.tracking.stream import METHODS_3D, Plot, StreamOptions, StreamTracker
 from radarviz.core.velocity.estimate import BASELINE_VELOCITY_MPS
 from radarviz.viz_app.cli.main import main
 from radarviz.viz_app.io.plots import TRACK_COLUMNS, fusion_plots, state_from_row
@@ -693,3 +693,71 @@ def test_elevation_without_sigma_elevation(
         [],
         ["m.csv line 3, column elevation_deg", "sigma_elevation_deg", "'b'"],
     )
+
+
+# --------------------------------------------------------------------------------------------
+# The target at the radar's pole or site (the UKF's square root of a semi-definite P)
+# --------------------------------------------------------------------------------------------
+
+
+def overhead_plots(
+    height_m: float, speed_mps: float = 10.0, period_s: float = 1.0, n: int = 20
+) -> list[Plot]:
+    """Noise-free plots (σr 1 m, σβ = σε = 1°) of a target that starts straight above
+    (height > 0) or below the radar, elevation exactly ±90°, and flies off along +x: the
+    first-plot start's position covariance is singular there (the azimuth column of the
+    conversion Jacobian, r cos ε ∂u/∂β, vanishes)."""
+    sigma = math.radians(1.0)
+    out = []
+    for k in range(n):
+        dx = speed_mps * k * period_s
+        el = math.atan2(height_m, dx)
+        r = math.hypot(dx, height_m)
+        out.append(Plot(k * period_s, r, 0.0, 1.0, sigma, (0.0, 0.0, 0.0), "a", el, sigma))
+    return out
+
+
+@pytest.mark.parametrize("height_m", [100.0, -100.0, 5.0, 3000.0])
+def test_ukf_starting_at_the_pole_stays_finite_and_semidefinite(height_m: float) -> None:
+    """Before the semi-definite square root and the Joseph-form P⁺ every one of these raised
+    LinAlgError ("not positive definite") at the second or third plot."""
+    plots = overhead_plots(height_m)
+    dense = StreamTracker(("ukf",), True, StreamOptions()).add_block(plots)
+    for rows in dense:
+        _, x, P = rows[0]
+        assert np.isfinite(x).all() and np.isfinite(P).all()
+        np.testing.assert_array_equal(P, P.T)
+        # Positive semi-definite to rounding: eigvalsh's own error is ~ eps · |P|.
+        assert np.linalg.eigvalsh(P).min() >= -1e-13 * np.abs(P).max()
+
+
+def test_ukf_at_the_pole_component_path_equals_dense_path(monkeypatch) -> None:
+    """The batched (component-wise) UKF takes the same square root and the same Joseph form
+    as the dense one: a track started at the pole agrees to rounding (the RTOL argument of
+    this module), where it used to be NaN."""
+    import radarviz.core.filters.state as state
+
+    plots = overhead_plots(100.0)
+    dense = StreamTracker(("ukf",), True, StreamOptions()).add_block(plots)
+    monkeypatch.setattr(state, "DENSE_MAX_RUNS", 0)
+    batched = StreamTracker(("ukf",), True, StreamOptions()).add_block(plots)
+    for a, b in zip(dense, batched, strict=True):
+        close(b[0][1], a[0][1])
+        close(b[0][2], a[0][2])
+
+
+def test_track_3d_file_starting_at_the_pole(tmp_path: Path) -> None:
+    """``radarviz track`` on a 3D file whose first plot is straight above the radar: every
+    3D method writes finite tracks (the UKF used to end in a LinAlgError traceback)."""
+    meas, radars = tmp_path / "m.csv", tmp_path / "r.toml"
+    lines = ["time_s,radar,range_m,azimuth_deg,elevation_deg"]
+    for p in overhead_plots(100.0):
+        assert p.elevation_rad is not None
+        lines.append(f"{p.time_s!r},a,{p.range_m!r},0.0,{math.degrees(p.elevation_rad)!r}")
+    meas.write_text("\n".join(lines) + "\n")
+    radars.write_text(radars_toml({"a": ((0.0, 0.0, 0.0), 1.0, 1.0, 1.0, 1.0)}))
+    rows = run_track(tmp_path, meas, radars)
+    assert {r["method"] for r in rows} == set(METHODS_3D)
+    assert len(rows) == 20 * len(METHODS_3D)
+    values = np.array([[float(r[c]) for c in TRACK_COLUMNS[2:]] for r in rows])
+    assert np.isfinite(values).all()

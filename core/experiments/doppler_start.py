@@ -18,6 +18,7 @@ Gaussian after the polar-to-Cartesian step, and the app says so rather than hidi
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
@@ -25,10 +26,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from radarviz.core.confidence import BAND_GROUPS, group_counts, group_sums, jackknife_band
+from radarviz.core.filters.compiled import ENGINES, FilterSettings, filter_scans
 from radarviz.core.filters.doppler import doppler_update
 from radarviz.core.filters.polar_ekf import ekf_update
-from radarviz.core.filters.run import run_scans
-from radarviz.core.filters.state import CVBatch
+from radarviz.core.filters.predict import cv_predict
+from radarviz.core.filters.state import CVBatch, empty_batch
 from radarviz.core.finite_memory.fit import (
     FiniteMemoryFit,
     RadarPreset,
@@ -37,8 +39,8 @@ from radarviz.core.finite_memory.fit import (
 )
 from radarviz.core.finite_memory.start import finite_memory_start
 from radarviz.core.geometry import polar_coordinates, radial_velocity
-from radarviz.core.metrics import MetricsAccumulator, TrackMetrics, nees_band
-from radarviz.core.params import check, check_int, default
+from radarviz.core.metrics import STAGE_ROWS, MetricsAccumulator, TrackMetrics, nees_band
+from radarviz.core.params import check, check_choice, check_int, default
 from radarviz.core.scenarios.planar import ConstantVelocityTarget2D
 
 VARIANTS: tuple[str, ...] = ("range_only", "range_doppler")
@@ -61,6 +63,8 @@ class DopplerTrackingConfig:
         steps: scans per run.  start_scans: k of the finite-memory start.
         sigma_v0_mps: std of the unobserved cross-range velocity at the start.
         sigma_a_mps2: process noise of the EKF (discrete white-noise acceleration).
+        engine: ``"compiled"`` (``core.filters.compiled``) or ``"numpy"`` (the reference),
+            as ``core.experiments.prosov.TrackingConfig.engine``.
     """
 
     radar: str | RadarPreset = "RLS3"
@@ -72,6 +76,7 @@ class DopplerTrackingConfig:
     sigma_v0_mps: float = default("sigma_v0_mps")
     sigma_a_mps2: float = default("sigma_a_mps2")
     target: ConstantVelocityTarget2D | None = field(default=None)
+    engine: str = "compiled"
 
     def __post_init__(self) -> None:
         """Every field but ``radar``, ``start_scans`` and ``target`` is checked against
@@ -80,6 +85,7 @@ class DopplerTrackingConfig:
         for name in ("sigma_beta_deg", "runs", "seed", "steps", "sigma_v0_mps", "sigma_a_mps2"):
             check(name, getattr(self, name))
         check_int("start_scans", self.start_scans, low=2, high=self.steps)
+        check_choice("engine", self.engine, ENGINES)
 
     def scenario(self) -> ConstantVelocityTarget2D:
         if self.target is not None:
@@ -161,18 +167,49 @@ class DopplerTrackingResult(NamedTuple):
 
 
 def _vr_stats(
-    state: CVBatch, truth_n: NDArray[np.float64]
-) -> tuple[float, float, NDArray[np.float64]]:
-    """(Σ (V̂r − Vr)², Σ g P gᵀ) over the runs of one scan, and the (V̂r − Vr)² per group
-    of runs (``core.confidence.group_sums``)."""
-    x, P = state.x, state.P
-    px, vx, py, vy = x[:, 0], x[:, 1], x[:, 2], x[:, 3]
+    x: NDArray[np.float64], P: NDArray[np.float64], truth: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """Per scan of K scans of m runs, x (K, m, 4), P (K, m, 4, 4), truth (K, 4): Σ (V̂r − Vr)²
+    and Σ g P gᵀ over the runs, (K,) each, and the (V̂r − Vr)² per group of runs (G, K)
+    (``core.confidence.group_sums``); g = ∂Vr/∂state at the estimate."""
+    px, vx, py, vy = x[..., 0], x[..., 1], x[..., 2], x[..., 3]
     rp = polar_coordinates([px, py])[0]
     vrp = (px * vx + py * vy) / rp
     g = np.stack([(vx - vrp * px / rp) / rp, px / rp, (vy - vrp * py / rp) / rp, py / rp], -1)
-    var = np.einsum("mi,mij,mj->m", g, P, g)
-    err = vrp - radial_velocity(truth_n[0::2], truth_n[1::2])
-    return float((err * err).sum()), float(var.sum()), group_sums(err, 0, square=True)
+    var = np.einsum("kmi,kmij,kmj->km", g, P, g)
+    err = vrp - radial_velocity(truth[:, None, 0::2], truth[:, None, 1::2])
+    return (err * err).sum(axis=-1), var.sum(axis=-1), group_sums(err, 0, square=True)
+
+
+class _VariantSums:
+    """One variant's running sums: the tracking metrics and the radial-velocity sums per scan
+    (NaN at scans before the start)."""
+
+    def __init__(self, steps: int) -> None:
+        self.acc = MetricsAccumulator(steps)
+        self.sq, self.var = np.full(steps, np.nan), np.full(steps, np.nan)
+        self.sq_groups = np.full((BAND_GROUPS, steps), np.nan)
+
+    def add(self, first: int, x: NDArray, P: NDArray, truth: NDArray) -> None:
+        """Scans first … first + K − 1: x (K, m, 4), P (K, m, 4, 4), truth (K, 4)."""
+        span = slice(first, first + x.shape[0])
+        self.acc.add_scans(first, x, P, truth)
+        self.sq[span], self.var[span], self.sq_groups[:, span] = _vr_stats(x, P, truth)
+
+    def result(self, runs: int) -> dict[str, object]:
+        """The variant's fields of ``DopplerTrackingResult``."""
+        rmse = np.sqrt(self.sq / runs)
+        counts = group_counts(0, runs)[:, None]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            loo = np.sqrt((self.sq - self.sq_groups) / (runs - counts))
+        loo[counts[:, 0] == 0] = np.nan
+        return {
+            "metrics": self.acc.result(),
+            "leave_one_out": self.acc.leave_one_out(),
+            "rmse_vr": rmse,
+            "sigma_vr_filter": np.sqrt(self.var / runs),
+            "rmse_vr_ci95": jackknife_band(rmse, loo),
+        }
 
 
 def run_doppler_tracking(config: DopplerTrackingConfig) -> DopplerTrackingResult:
@@ -180,20 +217,20 @@ def run_doppler_tracking(config: DopplerTrackingConfig) -> DopplerTrackingResult
     radar = config.radar_preset()
     sr, svr, T = radar.sigma_r_m, radar.sigma_vr_mps, radar.period_s
     sb = float(np.deg2rad(config.sigma_beta_deg))
-    target = config.scenario()
-    truth = target.truth()
+    truth = config.scenario().truth()
     steps, k = truth.shape[0], config.start_scans
     rng = np.random.default_rng(np.random.SeedSequence(config.seed))
     meas = polar_doppler_measurements(
         truth, sigma_r_m=sr, sigma_azimuth_rad=sb, sigma_vr_mps=svr, runs=config.runs, rng=rng
     )
-    metrics, rmse_vr, sig_vr, fits = {}, {}, {}, {}
-    loo_metrics, rmse_vr_band = {}, {}
+    settings = FilterSettings(sr, sb, T, config.sigma_a_mps2, config.sigma_v0_mps, sigma_vr_mps=svr)
+    fits: dict[str, FiniteMemoryFit] = {}
+    fields: dict[str, dict[str, object]] = {}
     for variant in VARIANTS:
         doppler = variant == "range_doppler"
         fit = finite_memory_fit(k, sigma_r_m=sr, sigma_vr_mps=svr, period_s=T, with_doppler=doppler)
         fits[variant] = fit
-        state = finite_memory_start(
+        start = finite_memory_start(
             fit,
             meas.r[:, :k],
             meas.vr[:, :k] if doppler else None,
@@ -201,57 +238,49 @@ def run_doppler_tracking(config: DopplerTrackingConfig) -> DopplerTrackingResult
             sigma_azimuth_rad=sb,
             sigma_v0_mps=config.sigma_v0_mps,
         )
-        acc = MetricsAccumulator(steps)
-        sq, var = np.full(steps, np.nan), np.full(steps, np.nan)
-        sq_groups = np.full((BAND_GROUPS, steps), np.nan)
-
-        def update(n: int, pred: CVBatch, out: CVBatch, doppler: bool = doppler) -> CVBatch:
-            post = ekf_update(
-                pred, (meas.r[:, n], meas.beta[:, n]), sigma_r_m=sr, sigma_azimuth_rad=sb, out=out
-            )
-            if not doppler:
-                return post
-            return doppler_update(
-                post, meas.vr[:, n], meas.beta[:, n], sigma_vr_mps=svr, sigma_azimuth_rad=sb
-            )
-
-        def on_scan(
-            n: int,
-            state: CVBatch,
-            acc: MetricsAccumulator = acc,
-            sq: NDArray[np.float64] = sq,
-            var: NDArray[np.float64] = var,
-            sq_groups: NDArray[np.float64] = sq_groups,
-        ) -> None:
-            acc.add(n, state, truth[n])
-            sq[n], var[n], sq_groups[:, n] = _vr_stats(state, truth[n])
-
-        run_scans(
-            state,
-            steps,
-            T,
-            update,
-            sigma_a_mps2=config.sigma_a_mps2,
-            first_scan=k - 1,
-            on_scan=on_scan,
-        )
-        metrics[variant] = acc.result()
-        loo_metrics[variant] = acc.leave_one_out()
-        rmse_vr[variant] = np.sqrt(sq / config.runs)
-        sig_vr[variant] = np.sqrt(var / config.runs)
-        counts = group_counts(0, config.runs)[:, None]
-        with np.errstate(invalid="ignore", divide="ignore"):
-            loo = np.sqrt((sq - sq_groups) / (config.runs - counts))
-        loo[counts[:, 0] == 0] = np.nan
-        rmse_vr_band[variant] = jackknife_band(rmse_vr[variant], loo)
+        sums = _VariantSums(steps)
+        sums.add(k - 1, start.x[None], start.P[None], truth[k - 1 : k])
+        vr = meas.vr if doppler else None
+        filter_ekf = _filter_compiled if config.engine == "compiled" else _filter_numpy
+        for first, x, P in filter_ekf(meas.r, meas.beta, vr, settings, (k - 1, start)):
+            sums.add(first, x, P, truth[first : first + x.shape[0]])
+        fields[variant] = sums.result(config.runs)
+    by_field = {name: {v: f[name] for v, f in fields.items()} for name in fields[VARIANTS[0]]}
     return DopplerTrackingResult(
         config=config,
         n=np.arange(1, steps + 1),
-        metrics=metrics,
-        rmse_vr=rmse_vr,
-        sigma_vr_filter=sig_vr,
         start_fits=fits,
         nees_pos_band95=nees_band(2, config.runs),
-        leave_one_out=loo_metrics,
-        rmse_vr_ci95=rmse_vr_band,
+        **by_field,
     )
+
+
+Chunks = Iterator[tuple[int, NDArray[np.float64], NDArray[np.float64]]]
+
+
+def _filter_compiled(r, beta, vr, settings: FilterSettings, start: tuple[int, CVBatch]) -> Chunks:
+    """The polar EKF (and the Doppler update where ``vr`` is given) after ``start`` =
+    (scan k, state), by the compiled kernel: (first scan, x (K, m, 4), P (K, m, 4, 4))."""
+    chunk = max(1, STAGE_ROWS // r.shape[0])
+    for c in filter_scans("ekf", r, beta, settings, chunk, radial_velocity_mps=vr, start=start):
+        yield c.first, c.x, c.P
+
+
+def _filter_numpy(r, beta, vr, settings: FilterSettings, start: tuple[int, CVBatch]) -> Chunks:
+    """``_filter_compiled`` by the numpy engine (the reference), one scan at a time."""
+    s = settings
+    noise = {"sigma_r_m": s.sigma_r_m, "sigma_azimuth_rad": s.sigma_azimuth_rad}
+    state = start[1]
+    buffers = (empty_batch(state.batch_shape), empty_batch(state.batch_shape))
+    for n in range(start[0] + 1, r.shape[1]):
+        pred = cv_predict(state, s.period_s, s.sigma_a_mps2, out=buffers[n % 2])
+        state = ekf_update(pred, (r[:, n], beta[:, n]), **noise)
+        if vr is not None:
+            state = doppler_update(
+                state,
+                vr[:, n],
+                beta[:, n],
+                sigma_vr_mps=s.sigma_vr_mps,
+                sigma_azimuth_rad=s.sigma_azimuth_rad,
+            )
+        yield n, state.x[None], state.P[None]

@@ -8,7 +8,13 @@ sigma points drawn from the predicted x⁻, P⁻), for a radar at ``site`` (``co
     ẑ = Σ Wm_i ζ_i                           bearings averaged relative to ζ₀'s bearing
     S = Σ Wc_i d_i d_iᵀ + R,   d_i = ζ_i ⊖ ẑ   (⊖ wraps the bearing difference)
     Pxz = Σ Wc_i (χ_i − x⁻) d_iᵀ             cross covariance
-    K = Pxz S⁻¹,   x⁺ = x⁻ + K (z ⊖ ẑ),   P⁺ = P⁻ − K S Kᵀ   (symmetrised)
+    K = Pxz S⁻¹,   x⁺ = x⁻ + K (z ⊖ ẑ),   P⁺ = P⁻ − K S Kᵀ
+
+P⁺ is evaluated in the Joseph form of the unscented update,
+P⁺ = Σ Wc_i e_i e_iᵀ + K R Kᵀ with e_i = (χ_i − x⁻) − K d_i, which equals P⁻ − K S Kᵀ for
+K = Pxz S⁻¹ (expand it: P⁻ − K Pzx − Pxz Kᵀ + K S Kᵀ) but is a sum of positive
+semi-definite terms (no weight is negative, ``UKFParams``): no cancellation can leave it
+indefinite, which the subtraction does when P⁺ is small against P⁻ in some direction.
 
 Bearing mean: ẑ_β = wrap(β₀ + Σ Wm_i wrap(β_i − β₀)), with β₀ the bearing of the central
 point; a plain weighted sum would put the mean of bearings straddling ±π near 0.
@@ -17,8 +23,16 @@ Batched without per-track matrices or a (..., 2n+1, n) sigma-point array: the Ch
 factor is written out over the batch as (...) vectors, and because it is lower triangular and
 only the position enters h, the two points along its last column (the last velocity
 component alone) map to ζ₀ and drop out of Pxz. So 2(n − 1) distinct polar evaluations per
-track, and the last factor column is never formed. A track whose P⁻ is not positive definite
-gets NaN and leaves the others alone (filterpy would raise).
+track, and the last factor column is never formed.
+
+P⁻ need only be positive semi-definite (:func:`semidefinite_cholesky`): a direction of zero
+variance to rounding is legitimate and does occur. A first-plot start at elevation ±90° (or
+at range 0) has a singular position covariance (the azimuth column r cos ε ∂u/∂β of the
+conversion Jacobian vanishes), that null direction survives the prediction up to the tiny
+process noise, and the subtraction P⁻ − K S Kᵀ then leaves a pivot of −10⁻¹⁶ of its diagonal:
+LAPACK's Cholesky (and filterpy) would raise. Such a pivot is taken as zero, so the sigma
+points do not move along a direction that has no variance. A track whose P⁻ is indefinite
+beyond rounding gets NaN and leaves the others alone.
 
 The sigma points, hence the UKF estimate, depend on the orientation of the frame (the
 Cholesky factor of a rotated P is not the rotated factor), unlike the EKF: with the Prosov
@@ -63,8 +77,9 @@ class UKFParams(NamedTuple):
     Defaults α = 1, β = 2, κ = 0 give λ = 0: the points sit at x ± √n·(Cholesky column of P),
     Wm₀ = 0, Wc₀ = β = 2 (the Gaussian kurtosis correction) and Wm_k = Wc_k = 1/(2n). No
     weight is negative, so the unscented S is a non-negative combination of outer products
-    plus R (positive definite), and P − K S Kᵀ is the Schur complement of a positive
-    semi-definite joint covariance: P⁺ stays positive definite. The popular small α (e.g.
+    plus R (positive definite), P − K S Kᵀ is the Schur complement of a positive
+    semi-definite joint covariance, and its Joseph form a sum of positive semi-definite
+    terms: P⁺ stays positive semi-definite to rounding. The popular small α (e.g.
     1e-3) makes Wm₀ ≈ −10⁶ and Wc₀ < 0; S can then lose definiteness, and the huge cancelling
     weights cost digits. Points at ±2σ are well inside the region where the polar map is
     smooth at radar ranges (2σ cross-range ≪ r).
@@ -90,31 +105,84 @@ class UKFParams(NamedTuple):
 _DEFAULT_UKF = UKFParams()
 
 
+#: A Cholesky pivot (the variance of a component given the earlier ones) at most this fraction
+#: of its diagonal entry is taken as zero: that direction is known to rounding. P⁺ = P⁻ − K S Kᵀ
+#: is a subtraction that loses log₁₀(P⁻ᵢᵢ / P⁺ᵢᵢ) of the 16 digits (a start with σv0 = 1000
+#: m/s and a scan later: 4 to 6 of them), so a null direction comes back as ± 10⁻¹⁶ to 10⁻¹¹
+#: of its diagonal; 10⁻⁹ (a conditional σ of 3·10⁻⁵ of the marginal σ) is above that.
+SEMIDEFINITE_RTOL = 1e-9
+
+
+def semidefinite_cholesky(
+    P: NDArray[np.float64], columns: int | None = None
+) -> dict[tuple[int, int], Vec]:
+    """Entries (i, k), i >= k, k < ``columns``, of the lower Cholesky factor L of every
+    positive semi-definite P (..., n, n), L Lᵀ = P, as (...) vectors.
+
+    The column-by-column (Cholesky–Banachiewicz) recursion::
+
+        d_j = P_jj − Σ_{k<j} L_jk²,   L_jj = √d_j,   L_ij = (P_ij − Σ_{k<j} L_ik L_jk) / L_jj
+
+    A pivot with |d_j| ≤ ``SEMIDEFINITE_RTOL`` · P_jj is a direction of zero variance (to
+    rounding): its column is zero, which is the exact factor of a semi-definite P (there the
+    P_ij − Σ L_ik L_jk vanish with d_j). A pivot below −``SEMIDEFINITE_RTOL`` · P_jj (P
+    indefinite beyond rounding) gives NaN for that track only. Where P is positive definite
+    this is the usual Cholesky factor, LAPACK's to rounding. ``columns`` None: all n.
+    """
+    n = P.shape[-1]
+    columns = n if columns is None else columns
+    Pc = cov_components(P)
+    L: dict[tuple[int, int], Vec] = {}
+    with np.errstate(invalid="ignore", divide="ignore"):
+        for j in range(columns):
+            d = Pc[j, j].copy()
+            for k in range(j):
+                d -= L[j, k] * L[j, k]
+            tol = SEMIDEFINITE_RTOL * Pc[j, j]
+            null = np.abs(d) <= tol
+            d[null] = 0.0
+            d[d < -tol] = np.nan  # indefinite beyond rounding: this track becomes NaN
+            np.sqrt(d, out=d)
+            L[j, j] = d
+            for i in range(j + 1, n):
+                e = Pc[i, j].copy()
+                for k in range(j):
+                    e -= L[i, k] * L[j, k]
+                e /= d
+                e[null] = 0.0
+                L[i, j] = e
+    return L
+
+
 def cholesky_columns(P: NDArray[np.float64], scale: float) -> dict[tuple[int, int], Vec]:
-    """All but the last column of ``scale ·`` the lower Cholesky factor of every P (..., n, n).
+    """All but the last column of ``scale ·`` the lower Cholesky factor of every P (..., n, n)
+    (:func:`semidefinite_cholesky`).
 
     Returns the entries (i, k), i >= k, k <= n − 2, as (...) vectors. The last column (only
     its (n−1, n−1) entry is nonzero) moves the sigma points along the last velocity component
-    alone, which h ignores, so the UKF never needs it. A negative pivot gives NaN for that
-    track (numpy warns "invalid value"); the last pivot is never formed, so it is not checked.
+    alone, which h ignores, so the UKF never needs it; the last pivot is never formed, so it
+    is not checked.
     """
-    n = P.shape[-1]
-    Pc = cov_components(P)
-    L: dict[tuple[int, int], Vec] = {}
-    for j in range(n - 1):
-        d = Pc[j, j].copy()
-        for k in range(j):
-            d -= L[j, k] * L[j, k]
-        np.sqrt(d, out=d)
-        L[j, j] = d
-        for i in range(j + 1, n):
-            e = Pc[i, j].copy()
-            for k in range(j):
-                e -= L[i, k] * L[j, k]
-            e /= d
-            L[i, j] = e
+    L = semidefinite_cholesky(P, P.shape[-1] - 1)
     for v in L.values():
         v *= scale
+    return L
+
+
+def dense_cholesky(P: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The lower Cholesky factor (..., n, n) of positive semi-definite P (..., n, n).
+
+    LAPACK's where every P of the batch is positive definite (filterpy's square root);
+    otherwise :func:`semidefinite_cholesky`, which accepts a null direction and gives NaN only
+    to a track whose P is indefinite beyond rounding.
+    """
+    try:
+        return np.linalg.cholesky(P)
+    except np.linalg.LinAlgError:
+        pass
+    L = np.zeros_like(P)
+    for (i, k), v in semidefinite_cholesky(P).items():
+        L[..., i, k] = v
     return L
 
 
@@ -192,9 +260,9 @@ def ukf_update(
 
     # Residuals d_i = ζ_i ⊖ ẑ, in place, and the unscented S = Σ Wc_i d_i d_iᵀ + R.
     d0 = [residual(comp, h0[comp]) for comp in range(m)]
+    del h0, p0
     wcc = wc0 + 2.0 * w
     S = {(a, b): (wcc * d0[a]) * d0[b] for a in range(m) for b in range(a, m)}
-    del d0
     for comp in range(m):
         for i in range(npts):
             Z[comp][i] = residual(comp, Z[comp][i])
@@ -206,10 +274,9 @@ def ukf_update(
             S[a, b] += w * acc + var[a] if a == b else w * acc
     # Cross covariance: χ_{k±} − x⁻ = ±column k, so Pxz = W Σ_k column_k (d_{k+} − d_{k−})ᵀ.
     D = [[Z[comp][2 * k] - Z[comp][2 * k + 1] for k in range(n - 1)] for comp in range(m)]
-    del Z
     inv = symmetric_inverse(S, m, scale=w)  # folds the weight W of Pxz into S⁻¹
+    del S
     inv = {(a, b): sym(inv, a, b) for a in range(m) for b in range(m)}
-    Sf = {(a, b): sym(S, a, b) for a in range(m) for b in range(m)}
     K: list[list[Vec]] = [[] for _ in range(m)]  # K[e][i]: gain row i, column e
     for i in range(n):
         a_row = []
@@ -223,8 +290,9 @@ def ukf_update(
             for comp in range(1, m):
                 g = g + a_row[comp] * inv[comp, e]
             K[e].append(g)
-    del D, col, inv
+    del D, inv
     nu = [residual(comp, meas[comp]) for comp in range(m)]
+    mean.clear()  # every residual is taken: free ẑ
     out = target_batch(state, out)
     xc, oxc = mean_components(x), mean_components(out.x)
     for i in range(n):
@@ -232,21 +300,48 @@ def ukf_update(
         for e in range(1, m):
             acc = acc + K[e][i] * nu[e]
         oxc[i] = acc
-    # P⁺ = P⁻ − K S Kᵀ with (K S Kᵀ)_ij = K_i · (S K_jᵀ), averaged with its transpose.
-    W = [[sum_terms([Sf[a, e] * K[e][j] for e in range(m)]) for j in range(n)] for a in range(m)]
+    del nu, acc
+    # P⁺ in Joseph form (module docstring): Σ_p Wc_p e_p e_pᵀ + K R Kᵀ, e_p = (χ_p − x⁻) − K d_p.
+    # χ₀ and the two points along the last column share d_p = d₀ (weight Wc₀ + 2W, e = −K d₀,
+    # their ± last-column parts cancelling in the cross terms); those two add 2W·(n+λ)·dₙ₋₁ =
+    # dₙ₋₁, the last Cholesky pivot of P⁻, at (n−1, n−1).
     Pc, oPc = cov_components(P), cov_components(out.P)
-    for i in range(n):
+    last = Pc[n - 1, n - 1] - sum_terms([col[n - 1, k] * col[n - 1, k] for k in range(n - 1)]) / c
+    tol = SEMIDEFINITE_RTOL * Pc[n - 1, n - 1]
+    last = np.where(np.abs(last) <= tol, 0.0, np.where(last < -tol, np.nan, last))
+    del tol
+    kd0 = [sum_terms([K[e][i] * d0[e] for e in range(m)]) for i in range(n)]
+    for i in range(n):  # the accumulators are out's own P (no temporaries per entry)
         for j in range(i, n):
-            if i == j:
-                ksk = sum_terms([K[a][i] * W[a][i] for a in range(m)])
-            else:
-                ksk = sum_terms(
-                    [K[a][i] * W[a][j] for a in range(m)] + [K[a][j] * W[a][i] for a in range(m)]
-                )
-                ksk *= 0.5
-            oPc[i, j] = Pc[i, j] - ksk
-            if i != j:
-                oPc[j, i] = oPc[i, j]
+            acc = oPc[i, j]
+            np.multiply(kd0[i], kd0[j], out=acc)
+            acc *= wcc
+            for e in range(m):
+                acc += (var[e] * K[e][i]) * K[e][j]
+    oPc[n - 1, n - 1] += last
+    del kd0, d0, last
+    for k in range(n - 1):
+        for p, sign in ((2 * k, 1.0), (2 * k + 1, -1.0)):
+            e_p = []  # −e_p (the sign drops out of the products)
+            for i in range(n):
+                v = sum_terms([K[e][i] * Z[e][p] for e in range(m)])
+                if i >= k:
+                    v -= sign * col[i, k]
+                e_p.append(v)
+            for i in range(n):
+                we = w * e_p[i]
+                for j in range(i, n):
+                    oPc[i, j] += we * e_p[j]
+                del we
+            del e_p
+            for e in range(m):
+                Z[e][p] = None  # type: ignore[call-overload]  # each point freed once used
+        for i in range(k, n):
+            del col[i, k]
+    del Z, col
+    for i in range(n):
+        for j in range(i + 1, n):
+            oPc[j, i] = oPc[i, j]
     return out
 
 
@@ -273,7 +368,7 @@ def _ukf_dense(
     n, m = x.shape[-1], state.dims
     pos = list(position_index(m))
     c, wm0, wc0, w = params.weights(n)
-    cols = np.linalg.cholesky(c * P).mT  # row k: column k of the factor
+    cols = dense_cholesky(c * P).mT  # row k: column k of the factor
     chi = np.concatenate([x[..., None, :], x[..., None, :] + cols, x[..., None, :] - cols], -2)
     offsets = chi[..., pos]
     if site is not None:
@@ -297,7 +392,10 @@ def _ukf_dense(
     K = np.linalg.solve(S, Pxz.mT).mT
     nu = np.stack(meas, -1) - z_mean
     nu[..., 1] = wrap_angle(nu[..., 1])
-    P_new = P - K @ S @ K.mT
+    # Joseph form: P⁺ = Σ Wc_i (dx_i − K dz_i)(dx_i − K dz_i)ᵀ + K R Kᵀ, equal to P − K S Kᵀ
+    # but a sum of positive semi-definite terms, so no cancellation can make it indefinite.
+    e = dx - dz @ K.mT
+    P_new = np.einsum("p,...pi,...pj->...ij", wc, e, e) + K @ R @ K.mT
     out = target_batch(state, out)
     out.x[...] = x + (K @ nu[..., None])[..., 0]
     out.P[...] = 0.5 * (P_new + P_new.mT)

@@ -64,6 +64,7 @@ Angles are radians; the frame is flat (no earth curvature).
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterator
 from typing import NamedTuple
 
 import numpy as np
@@ -77,6 +78,7 @@ from radarviz.core.geometry import (
     line_of_sight,
     unit_vector_partials,
 )
+from radarviz.core.order_statistics import TwoPassQuantiles
 from radarviz.core.params import ParameterError, check, check_int
 
 #: m above which the first-order statistics are flagged as unreliable. In the sweep of
@@ -519,16 +521,15 @@ class VelocityMC(NamedTuple):
     sigma_robust_ci95_hi: NDArray[np.float64]
 
 
-def velocity_errors(
+def velocity_error_blocks(
     problem: VelocityProblem, trials: int, rng: np.random.Generator
-) -> NDArray[np.float64]:
-    """(trials, 3) errors V̂ − V with Gaussian δVr, δε, δβ drawn per radar per trial.
-
-    The draws are, in order, δVr, δε, δβ as (trials, N) standard normals scaled by σ.
-    """
+) -> Iterator[NDArray[np.float64]]:
+    """Errors V̂ − V, block by block ((≤ BLOCK_TRIALS, 3) each), with Gaussian δVr, δε, δβ
+    drawn per radar per trial: per block, in order, δVr, δε, δβ as (b, N) standard normals
+    scaled by σ. The same ``rng`` state gives the same blocks (the two passes of
+    ``monte_carlo_velocity`` draw them twice)."""
     trials = check_int("trials", trials, low=1)
     n = problem.sites.shape[0]
-    out = np.empty((trials, 3))
     for start in range(0, trials, BLOCK_TRIALS):
         b = min(BLOCK_TRIALS, trials - start)
         z = rng.standard_normal((3, b, n))
@@ -538,34 +539,105 @@ def velocity_errors(
             d_elevation_rad=z[1] * problem.sigma_elevation_rad,
             d_azimuth_rad=z[2] * problem.sigma_azimuth_rad,
         )
-        out[start : start + b] = est - problem.velocity
-    return out
+        yield est - problem.velocity
 
 
+def velocity_errors(
+    problem: VelocityProblem, trials: int, rng: np.random.Generator
+) -> NDArray[np.float64]:
+    """All (trials, 3) errors of ``velocity_error_blocks`` in one array (small trial counts)."""
+    return np.concatenate(list(velocity_error_blocks(problem, trials, rng)))
+
+
+#: Trials whose errors the Monte Carlo keeps between its two passes (24 MB); beyond, the
+#: second pass draws them again (the same draws: the result does not depend on it).
+KEEP_TRIALS = 1 << 20
 #: The interquartile range of a normal distribution in units of its σ (2 · Φ⁻¹(0.75)).
 IQR_PER_SIGMA = 1.3489795003921634
 
 
+class ErrorSums:
+    """Streaming first and second moments of (trials, 3) errors per group of trials (trial t
+    in group t mod G), about a shift (the first block's mean) so the sums do not cancel."""
+
+    def __init__(self) -> None:
+        self.shift: NDArray[np.float64] | None = None
+        self.n = np.zeros(BAND_GROUPS, dtype=np.int64)
+        self.s1 = np.zeros((BAND_GROUPS, 3))
+        self.s2 = np.zeros((BAND_GROUPS, 3, 3))
+        self.trials = 0
+
+    def groups(self, b: int) -> NDArray[np.int64]:
+        """The groups of the next ``b`` trials."""
+        return (self.trials + np.arange(b)) % BAND_GROUPS
+
+    def add(self, e: NDArray[np.float64]) -> None:
+        if self.shift is None:
+            self.shift = e.mean(axis=0)
+        d = e - self.shift
+        g = self.groups(len(e))
+        self.n += np.bincount(g, minlength=BAND_GROUPS)
+        for k in range(3):
+            self.s1[:, k] += np.bincount(g, weights=d[:, k], minlength=BAND_GROUPS)
+            for j in range(k, 3):
+                w = np.bincount(g, weights=d[:, k] * d[:, j], minlength=BAND_GROUPS)
+                self.s2[:, k, j] += w
+                if j != k:
+                    self.s2[:, j, k] += w
+        self.trials += len(e)
+
+
+def monte_carlo_velocity(
+    problem: VelocityProblem, trials: int, seed: int | np.random.SeedSequence
+) -> VelocityMC:
+    """Seeded Monte Carlo of V̂ (bit-reproducible for the same seed), in memory flat in the
+    number of trials: moments are summed block by block and the quartiles of the robust σ
+    come exactly from two passes over the same draws (``core.order_statistics``)."""
+    ss = (
+        seed
+        if isinstance(seed, np.random.SeedSequence)
+        else np.random.SeedSequence(check_int("seed", seed, low=0))
+    )
+    return _summarize(lambda: velocity_error_blocks(problem, trials, np.random.default_rng(ss)))
+
+
 def summarize_errors(errors: ArrayLike) -> VelocityMC:
     """Mean, covariance, σ, correlation and robust σ of (trials, 3) errors, with their 95%
-    Monte Carlo bands (``VelocityMC``)."""
+    Monte Carlo bands (``VelocityMC``); the errors as one block of ``monte_carlo_velocity``."""
     e = _f(errors)
-    n = e.shape[0]
-    mean = e.mean(axis=0)
-    cov = np.cov(e, rowvar=False)
+    return _summarize(lambda: iter([e]))
+
+
+def _summarize(blocks: Callable[[], Iterator[NDArray[np.float64]]]) -> VelocityMC:
+    """``VelocityMC`` of the error blocks ``blocks()`` yields (called twice: the same blocks)."""
+    sums = ErrorSums()
+    quart = TwoPassQuantiles([0.25, 0.75], 1 + BAND_GROUPS, 3)
+    kept: list[NDArray[np.float64]] | None = []  # the first pass's blocks, while they fit
+    for e in blocks():
+        quart.count(e, 1 + sums.groups(len(e)))
+        sums.add(e)
+        if kept is not None:
+            kept.append(e)
+            if sums.trials > KEEP_TRIALS:
+                kept = None  # past the budget: the second pass draws the blocks again
+    seen = 0
+    for e in blocks() if kept is None else kept:
+        quart.select(e, 1 + (seen + np.arange(len(e))) % BAND_GROUPS)
+        seen += len(e)
+    q = quart.result()  # (1 + G, 2, 3): the whole sample, then each group
+    n = sums.trials
+    t1, t2 = sums.s1.sum(axis=0), sums.s2.sum(axis=0)
+    mean = sums.shift + t1 / n
+    cov = (t2 - np.outer(t1, t1) / n) / (n - 1)
     sigma = np.sqrt(np.diag(cov))
-    q1, q3 = np.percentile(e, [25.0, 75.0], axis=0)
     corr = cov / np.outer(sigma, sigma)
-    robust = (q3 - q1) / IQR_PER_SIGMA
-    # Leave-one-group-out covariances from per-group Σe and Σe eᵀ; group k is trials k::G.
-    groups = [e[k::BAND_GROUPS] for k in range(BAND_GROUPS)]
-    counts = np.array([len(x) for x in groups])
-    s1 = np.stack([x.sum(axis=0) for x in groups])
-    s2 = np.stack([x.T @ x for x in groups])
+    robust = (q[0, 1] - q[0, 0]) / IQR_PER_SIGMA
+    # Leave-one-group-out covariances from the per-group sums (shift-invariant).
+    counts = sums.n
     n_out = (n - counts).astype(np.float64)[:, None, None]
-    t1 = s1.sum(axis=0) - s1
+    r1 = t1 - sums.s1
     with np.errstate(invalid="ignore", divide="ignore"):
-        cov_out = (s2.sum(axis=0) - s2 - t1[:, :, None] * t1[:, None, :] / n_out) / (n_out - 1.0)
+        cov_out = (t2 - sums.s2 - r1[:, :, None] * r1[:, None, :] / n_out) / (n_out - 1.0)
         sig_out = np.sqrt(np.maximum(np.diagonal(cov_out, axis1=1, axis2=2), 0.0))
         corr_out = cov_out / (sig_out[:, :, None] * sig_out[:, None, :])
     empty = counts == 0
@@ -574,11 +646,8 @@ def summarize_errors(errors: ArrayLike) -> VelocityMC:
     sig_lo = np.maximum(sig_lo, 0.0)  # a σ is not negative, whatever its band says
     corr_lo, corr_hi = jackknife_band(corr, corr_out)
     # Batch means for the robust σ: each group's own IQR σ (groups of at least 2 trials).
-    per_group = [
-        np.subtract(*np.percentile(x, [75.0, 25.0], axis=0)) / IQR_PER_SIGMA
-        for x in groups
-        if len(x) >= 2
-    ]
+    per_group = [(q[1 + g, 1] - q[1 + g, 0]) / IQR_PER_SIGMA for g in range(BAND_GROUPS)]
+    per_group = [v for v, c in zip(per_group, counts, strict=True) if c >= 2]
     half = np.full(3, np.nan)
     if len(per_group) >= 2:
         spread = np.std(per_group, axis=0, ddof=1) / np.sqrt(len(per_group))
@@ -598,18 +667,6 @@ def summarize_errors(errors: ArrayLike) -> VelocityMC:
         robust - half,
         robust + half,
     )
-
-
-def monte_carlo_velocity(
-    problem: VelocityProblem, trials: int, seed: int | np.random.SeedSequence
-) -> VelocityMC:
-    """Seeded Monte Carlo of V̂ (bit-reproducible for the same seed)."""
-    ss = (
-        seed
-        if isinstance(seed, np.random.SeedSequence)
-        else np.random.SeedSequence(check_int("seed", seed, low=0))
-    )
-    return summarize_errors(velocity_errors(problem, trials, np.random.default_rng(ss)))
 
 
 # --------------------------------------------------------------------------------------------

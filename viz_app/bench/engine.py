@@ -10,6 +10,15 @@ Figures (ns per track-step = wall time / (runs × scans), one core):
   runs, with the converted points and covariances computed beforehand and not timed (so the
   ratio is, if anything, unfair to the batched filter).
 * ``speedup_vs_filterpy`` = filterpy_ns_per_step / kf_ns_per_step.
+* ``engine_runs`` / ``numpy_ns_per_step`` / ``compiled_ns_per_step``: per method, the
+  Monte Carlo filter (start, then predict + update every scan, states handed on) by the
+  numpy engine (``filter_block``) and by the compiled kernel (``core.filters.compiled``),
+  on the same measurements, best of three; ``compiled_speedup`` their ratio.
+* ``experiment_ns_per_step`` / ``experiment_over_filter``: the whole one-method Monte Carlo
+  (measurements, compiled filter, statistics) per track-step, and its ratio to the filter.
+* ``one_thread_s`` / ``all_cores_s`` / ``parallel_efficiency``: the all-method Monte Carlo
+  of ``parallel_runs`` runs on one thread and on every core (blocks over threads), with
+  speed-up / cores; ``parallel_bit_identical`` checks the two results equal.
 * ``gorshkov_s``: wall time of the whole Gorshkov experiment (six radars, 10⁵ trials each,
   range only and range + Doppler, k = 1 … 20), best of ``repeats``.
 * ``peak_rss_mb``: peak resident memory of the process.
@@ -19,13 +28,21 @@ from __future__ import annotations
 
 import time
 from collections.abc import Sequence
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
 from filterpy.kalman import KalmanFilter
 
 from radarviz.core.conversion.planar import convert
-from radarviz.core.experiments.prosov import BLOCK_RUNS, TrackingConfig, block_sizes, filter_block
+from radarviz.core.experiments.prosov import (
+    BLOCK_RUNS,
+    TrackingConfig,
+    available_cores,
+    block_sizes,
+    filter_block,
+    run_tracking,
+)
 from radarviz.core.filters.position import cv_update
 from radarviz.core.filters.predict import transition_matrix
 from radarviz.core.filters.run import run_scans
@@ -112,6 +129,89 @@ def bench_filterpy(runs: int, config: TrackingConfig) -> float:
     return elapsed / (runs * (steps - 1)) * 1e9
 
 
+def bench_engines(runs: int, config: TrackingConfig, repeats: int = 3) -> dict[str, Any]:
+    """ns per track-step of every method by the numpy engine and by the compiled kernel."""
+    from radarviz.core.filters.compiled import FilterSettings, filter_scans
+    from radarviz.core.filters.methods import ALL_METHODS
+    from radarviz.core.metrics import STAGE_ROWS
+
+    steps = config.target.steps
+    r_hat, b_hat = _measurements(runs, steps, config, seed=7)
+    settings = FilterSettings(
+        config.sigma_r_m,
+        config.sigma_beta_rad,
+        config.target.period_s,
+        config.sigma_a_mps2,
+        config.sigma_v0_mps,
+    )
+    chunk = max(1, STAGE_ROWS // runs)
+    for _ in filter_scans("naive", r_hat[:2], b_hat[:2], settings, chunk):
+        pass  # compile or load the kernel before timing
+    numpy_ns, compiled_ns, experiment_ns = {}, {}, {}
+    for method in ALL_METHODS:
+        one = replace(config, runs=runs, methods=(method,))
+        best_np = best_c = best_e = float("inf")
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            filter_block(method, r_hat, b_hat, config, lambda n, st: None)
+            t1 = time.perf_counter()
+            for _ in filter_scans(method, r_hat, b_hat, settings, chunk):
+                pass
+            t2 = time.perf_counter()
+            run_tracking(one, workers=1)
+            t3 = time.perf_counter()
+            best_np, best_c, best_e = (
+                min(best_np, t1 - t0),
+                min(best_c, t2 - t1),
+                min(best_e, t3 - t2),
+            )
+        numpy_ns[method] = best_np / (runs * steps) * 1e9
+        compiled_ns[method] = best_c / (runs * steps) * 1e9
+        experiment_ns[method] = best_e / (runs * steps) * 1e9
+    return {
+        "engine_runs": runs,
+        "numpy_ns_per_step": numpy_ns,
+        "compiled_ns_per_step": compiled_ns,
+        "compiled_speedup": {m: numpy_ns[m] / compiled_ns[m] for m in numpy_ns},
+        "experiment_ns_per_step": experiment_ns,
+        "experiment_over_filter": {m: experiment_ns[m] / compiled_ns[m] for m in numpy_ns},
+    }
+
+
+def bench_parallel(runs: int, repeats: int = 2) -> dict[str, Any]:
+    """The Prosov Monte Carlo (all methods, ``runs`` runs in four blocks per core or more) on
+    one thread and on every core: seconds, speed-up and parallel efficiency (speed-up /
+    cores); the two results are checked equal bit for bit."""
+    cores = available_cores()
+    block = max(256, min(BLOCK_RUNS, runs // (4 * cores)))
+    config = TrackingConfig(runs=runs)
+    best = {}
+    results = {}
+    for workers in (1, cores):
+        t = float("inf")
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            results[workers] = run_tracking(config, block=block, workers=workers)
+            t = min(t, time.perf_counter() - t0)
+        best[workers] = t
+    same = all(
+        np.array_equal(a, getattr(results[cores].metrics[m], name), equal_nan=True)
+        for m in config.methods
+        for name, a in results[1].metrics[m]._asdict().items()
+    )
+    speedup = best[1] / best[cores]
+    return {
+        "parallel_runs": runs,
+        "parallel_block": block,
+        "cores": cores,
+        "one_thread_s": best[1],
+        "all_cores_s": best[cores],
+        "parallel_speedup": speedup,
+        "parallel_efficiency": speedup / cores,
+        "parallel_bit_identical": same,
+    }
+
+
 def bench_gorshkov(trials: int = 100_000, repeats: int = 2) -> float:
     """Seconds for the whole Gorshkov Monte Carlo (all six presets), best of ``repeats``."""
     from radarviz.core.finite_memory.fit import run_gorshkov
@@ -134,7 +234,11 @@ def run_bench(runs: Sequence[int] = (10_000, 100_000), filterpy_runs: int = 200)
         e2e, only = bench_batched(m, config)
         kf.append(e2e)
         kf_only.append(only)
+    engines = bench_engines(min(runs), config)
+    parallel = bench_parallel(max(runs))
     return {
+        **engines,
+        **parallel,
         "runs": list(runs),
         "scans": config.target.steps,
         "block_runs": BLOCK_RUNS,
@@ -167,6 +271,25 @@ def format_bench(doc: dict[str, Any]) -> str:
             f"batched ucm filter, {m:>7} runs: {e2e:6.1f} ns per track-step "
             f"(filter only {only:6.1f})   speedup vs filterpy {sp:6.0f}×"
         )
+    lines.append(
+        f"Monte Carlo filter per method, {doc['engine_runs']} runs × {doc['scans']} scans, "
+        "ns per track-step: numpy engine → compiled kernel (speed-up)"
+    )
+    for method, v in doc["numpy_ns_per_step"].items():
+        c, ratio = doc["compiled_ns_per_step"][method], doc["compiled_speedup"][method]
+        e, over = doc["experiment_ns_per_step"][method], doc["experiment_over_filter"][method]
+        lines.append(
+            f"  {method:>7}: {v:6.1f} → {c:6.1f}  ({ratio:.1f}×);  whole Monte Carlo "
+            f"(measurements, filter, statistics) {e:6.1f} = {over:.2f}× the filter"
+        )
+    lines.append(
+        f"Prosov Monte Carlo, {doc['parallel_runs']} runs, all methods (blocks of "
+        f"{doc['parallel_block']}): {doc['one_thread_s']:.2f} s on one thread, "
+        f"{doc['all_cores_s']:.2f} s on "
+        f"{doc['cores']} cores: {doc['parallel_speedup']:.2f}× (efficiency "
+        f"{doc['parallel_efficiency']:.0%}; "
+        f"{'bit-identical' if doc['parallel_bit_identical'] else 'RESULTS DIFFER'})"
+    )
     lines.append(
         f"Gorshkov experiment (6 radars × {doc['gorshkov_trials']} trials, both variants): "
         f"{doc['gorshkov_s']:.2f} s"

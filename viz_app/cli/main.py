@@ -163,6 +163,12 @@ def build_parser() -> argparse.ArgumentParser:
         default=200,
         help="runs of the filterpy subsample (default 200)",
     )
+    bench.add_argument(
+        "--device",
+        choices=("cpu", "gpu"),
+        default="cpu",
+        help="cpu: the engines against filterpy (default); gpu: the array-API path on CuPy",
+    )
     return parser
 
 
@@ -287,6 +293,16 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     for m in args.runs:
         check_int("--runs", m, low=100, high=10_000_000)
     check_int("--filterpy-runs", args.filterpy_runs, low=1, high=100_000)
+    if args.device == "gpu":
+        from radarviz.viz_app.bench.device import NoGPUError, bench_gpu, format_gpu
+
+        try:
+            doc = bench_gpu(runs=args.runs[0])
+        except NoGPUError as exc:
+            print(f"radarviz: error: bench --device gpu: {exc}", file=sys.stderr)
+            return 1
+        print_report(doc, args.json, format_gpu)
+        return 0
     from radarviz.viz_app.bench.engine import format_bench, run_bench
     from radarviz.viz_app.runtime import tune_allocator
 

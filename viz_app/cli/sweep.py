@@ -24,7 +24,7 @@ from radarviz.core.params import ParameterError, check_choice, check_int
 from radarviz.viz_app.bench.sweep import DEFAULT_GRID, DEFAULT_RUNS, format_bench, run_bench
 from radarviz.viz_app.cli.args import integer, number, print_report
 from radarviz.viz_app.cli.params import add_parameter, map_flag, parameter_flags
-from radarviz.viz_app.io.atomic import check_outputs, same_file
+from radarviz.viz_app.io.atomic import check_outputs, commit_together, same_file
 from radarviz.viz_app.runtime import tune_allocator
 from radarviz.viz_app.sweep.run import (
     SCHEDULER_HELP,
@@ -239,13 +239,14 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     except SweepAbortedError as exc:
         print(f"radarviz: error: {exc}", file=sys.stderr)
         return 1
-    write_parquet(sweep_table(spec, run.results), out)
     figures: list[str] = []
-    if plot_dir is not None:
-        plot_dir.mkdir(parents=True, exist_ok=True)
-        figures = [str(p) for p in plot_sweep(spec, run.results, plot_dir)]
-    if rrd is not None:
-        record_sweep(spec, run.results, rrd)
+    with commit_together():  # the table, the figures and the recording: all or none
+        write_parquet(sweep_table(spec, run.results), out)
+        if plot_dir is not None:
+            plot_dir.mkdir(parents=True, exist_ok=True)
+            figures = [str(p) for p in plot_sweep(spec, run.results, plot_dir)]
+        if rrd is not None:
+            record_sweep(spec, run.results, rrd)
     wall = time.perf_counter() - wall0
     doc = {
         "points": len(run.results),

@@ -19,6 +19,15 @@ sweep chunks, figures, Rerun recordings) goes through :class:`Stage`:
 
 Any failure removes the temporary file, leaves the target as it was, and raises
 :class:`WriteError`, whose one-line message names the target (never the temporary name).
+
+A command with several outputs (``simulate``'s measurements and radars, ``track --out
+--rrd``, ``sweep``'s table, figures and recording) writes them inside :func:`commit_together`:
+every stage is written and verified first, and only then are they renamed one after the
+other, each replaced target's previous file kept as a hard link (a backup) until the last
+rename has succeeded. If a rename fails, the targets already renamed get their previous
+files back (``os.replace`` of the backup; a target that did not exist is removed), so the
+outputs change together or not at all, as far as POSIX allows: a crash between two renames
+can still leave the first replaced, and its backup is then a stale temporary file.
 The command line reports it with exit status 1. :func:`check_outputs` is the check before
 any work: outputs that equal an input or each other, or that are not regular files, are
 refused as bad input (a ``ParameterError`` naming the option, exit status 2).
@@ -27,11 +36,13 @@ refused as bad input (a ``ParameterError`` naming the option, exit status 2).
 from __future__ import annotations
 
 import contextlib
+import contextvars
 import errno
 import io
 import os
 import re
 import secrets
+import shutil
 import stat
 import time
 from collections.abc import Callable, Iterator, Sequence
@@ -53,6 +64,10 @@ _LEGACY_TOKEN = r"[a-z0-9_]{8}"
 #: When this process started: a temporary file last written before it belongs to another run.
 _RUN_START = time.time()
 _SWEPT: set[str] = set()
+#: The stages verified inside the innermost :func:`commit_together` block, renamed at its end.
+_UNIT: contextvars.ContextVar[list[Stage] | None] = contextvars.ContextVar(
+    "radarviz_commit_unit", default=None
+)
 
 
 class WriteError(OSError):
@@ -272,8 +287,7 @@ class Stage:
         self.written: int | None = None
         self.existing = self._check_target()
         remove_stale_temps(self.target)
-        name = self.target.name[:_NAME_IN_TEMP]
-        self.path = self.target.with_name(f".{name}.{os.getpid()}-{secrets.token_hex(4)}.tmp")
+        self.path = self.temp_name()
         flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_CLOEXEC", 0)
         try:
             self.fd: int | None = os.open(self.path, flags, 0o666)  # the umask applies
@@ -323,6 +337,10 @@ class Stage:
         """
         try:
             self._sync_and_verify(self.written if written is None else written, verify)
+            unit = _UNIT.get()
+            if unit is not None:  # renamed with the unit's other outputs (commit_together)
+                unit.append(self)
+                return
             self._rename()
         except BaseException as exc:
             self.abort()
@@ -376,6 +394,30 @@ class Stage:
             os.replace(self.path, target)
             return
         os.unlink(self.path)
+
+    def temp_name(self, kind: str = "tmp") -> Path:
+        """A fresh hidden name beside the target in this module's temporary pattern (so a
+        stale one is removed by :func:`remove_stale_temps`)."""
+        name = self.target.name[:_NAME_IN_TEMP]
+        return self.target.with_name(f".{name}.{os.getpid()}-{secrets.token_hex(4)}.{kind}")
+
+    def backup(self) -> Path | None:
+        """A hard link (a copy where links are not supported) of the target's current file,
+        None if there is none: what :func:`commit_together` restores if a later rename fails.
+        (Without overwrite the rename refuses an existing target, so there is nothing to keep.)
+        """
+        if not self.overwrite:
+            return None
+        path = self.temp_name()
+        try:
+            os.link(self.target, path)
+        except FileNotFoundError:
+            return None  # removed meanwhile: nothing to restore
+        except OSError as exc:
+            if exc.errno not in (errno.EPERM, errno.ENOTSUP, errno.EOPNOTSUPP, errno.EMLINK):
+                raise
+            shutil.copy2(self.target, path)
+        return path
 
     @contextlib.contextmanager
     def open(self, mode: str = "wb", **open_kwargs: Any) -> Iterator[IO[Any]]:
@@ -444,6 +486,81 @@ def _fsync_directory(directory: Path) -> None:
             os.fsync(fd)
         finally:
             os.close(fd)
+
+
+@contextlib.contextmanager
+def commit_together() -> Iterator[None]:
+    """Outputs that change together or not at all: every :class:`Stage` committed inside the
+    block is verified there, and all are renamed when the block ends (module docstring).
+
+    An error inside the block aborts every stage (no target changes). A rename that fails
+    restores the targets renamed before it from their backups (a new target is removed) and
+    raises one :class:`WriteError` naming the failing target and those left as they were.
+    A block inside another joins the outer one.
+    """
+    if _UNIT.get() is not None:
+        yield
+        return
+    staged: list[Stage] = []
+    token = _UNIT.set(staged)
+    try:
+        yield
+    except BaseException:
+        for stage in staged:
+            stage.abort()
+        raise
+    finally:
+        _UNIT.reset(token)
+    _rename_all(staged)
+
+
+def _rename_all(stages: Sequence[Stage]) -> None:
+    """Rename every verified stage onto its target, or restore those renamed (see above)."""
+    done: list[tuple[Stage, Path | None]] = []
+    for i, stage in enumerate(stages):
+        backup = None
+        try:
+            backup = stage.backup()
+            stage._rename()
+        except BaseException as exc:
+            if backup is not None:
+                with contextlib.suppress(OSError):
+                    os.unlink(backup)
+            for later in stages[i:]:
+                later.abort()
+            problems = _restore(done)
+            error = stage.error(exc) if isinstance(exc, Exception) else None
+            if error is None:  # Ctrl-C between two renames: restored, then interrupted
+                raise
+            kept = [str(s.target) for s, _ in done if str(s.target) not in problems]
+            reason = error.strerror or "rename failed"
+            if kept:
+                reason += f"; {', '.join(kept)} left as before"
+            for target, why in problems.items():
+                reason += f"; {target} could not be restored ({why})"
+            raise WriteError(error.errno or errno.EIO, reason, str(stage.target)) from None
+        done.append((stage, backup))
+    for _stage, backup in done:
+        if backup is not None:
+            with contextlib.suppress(OSError):
+                os.unlink(backup)
+    for directory in {os.path.realpath(s.target.parent) for s in stages}:
+        _fsync_directory(Path(directory))
+
+
+def _restore(done: Sequence[tuple[Stage, Path | None]]) -> dict[str, str]:
+    """Undo the renames of ``done`` (last first): a backup goes back onto its target, a target
+    that did not exist is removed. Returns {target: reason} for those that could not be."""
+    problems: dict[str, str] = {}
+    for stage, backup in reversed(done):
+        try:
+            if backup is not None:
+                os.replace(backup, stage.target)
+            else:
+                os.unlink(stage.target)
+        except OSError as exc:
+            problems[str(stage.target)] = exc.strerror or type(exc).__name__
+    return problems
 
 
 @contextlib.contextmanager

@@ -80,7 +80,7 @@ from radarviz.core.tracking.stream import (
     StreamTracker,
 )
 from radarviz.core.velocity.estimate import BASELINE_TARGET_M, BASELINE_VELOCITY_MPS
-from radarviz.viz_app.io.atomic import atomic_write
+from radarviz.viz_app.io.atomic import atomic_write, commit_together
 
 REQUIRED_COLUMNS = ("time_s", "radar", "range_m", "azimuth_deg")
 OPTIONAL_COLUMNS = ("elevation_deg", "radial_velocity_mps")
@@ -527,6 +527,7 @@ def run_track(
     radars = load_radars(radars_path)
     start = time.perf_counter()
     with ExitStack() as stack:
+        stack.enter_context(commit_together())  # the tracks and the recording: both or neither
         src = bounded_lines(stack.enter_context(_open_input(input_path)), input_path)
         out = stack.enter_context(atomic_text(out_path))
         w = csv.writer(out)
@@ -650,7 +651,8 @@ def fusion_plots(seed: int = 1, steps: int = 60) -> tuple[list[Plot], list[Radar
 def write_measurements(
     meas_path: str, radars_path: str, plots: list[Plot], radars: list[Radar]
 ) -> int:
-    """Plots as a measurement CSV and their radars as TOML, both atomic; returns plots."""
+    """Plots as a measurement CSV and their radars as TOML, committed together; returns
+    plots."""
     three_d = plots[0].elevation_rad is not None
     doppler = any(p.radial_velocity_mps is not None for p in plots)
     header = (
@@ -658,7 +660,8 @@ def write_measurements(
         + (["elevation_deg"] if three_d else [])
         + (["radial_velocity_mps"] if doppler else [])
     )
-    with atomic_text(meas_path) as fh, atomic_text(radars_path) as rh:
+    # Both files change together or neither does (``commit_together``).
+    with commit_together(), atomic_text(meas_path) as fh, atomic_text(radars_path) as rh:
         w = csv.writer(fh)
         w.writerow(header)
         for p in plots:

@@ -1,0 +1,253 @@
+"""The 2D Monte Carlo filters as compiled scalar loops (numba), one track at a time.
+
+The numpy engine (``core.filters.methods`` and the update modules) evaluates each scan as a
+few hundred vector operations over the whole batch. At the tuning panel's few hundred runs
+that is all call overhead (~1 ms per scan and method group); at 10⁴–10⁵ runs it streams
+every intermediate through memory. This module runs the *same equations* as one compiled
+loop over tracks and scans, with the 4 × 4 state in registers:
+
+=========  =======================================================================
+kind       the lines it mirrors
+=========  =======================================================================
+start      ``Method.start`` → ``start_from_parts`` → ``cv_init``
+predict    ``core.filters.predict.cv_predict`` (F P Fᵀ + Q, white-noise acceleration)
+converted  ``core.conversion.planar`` (the five conversions) →
+           ``core.filters.position.innovation_update`` (Joseph form multiplied out)
+ekf        ``core.filters.polar_ekf.ekf_update`` (ν' = J ν, R' = J R Jᵀ, then Joseph)
+ukf        ``core.filters.polar_ukf.ukf_update`` (Van der Merwe points, Cholesky of P⁻)
+doppler    ``core.filters.doppler.doppler_update`` (after any of them, when V̂r is given)
+=========  =======================================================================
+
+The numpy engine stays the reference: ``tests/test_compiled.py`` checks every method against
+it to 1e-9 relative, including a track whose covariance has lost definiteness (NaN there,
+as in numpy). The arithmetic is the same but not in the same order, so results agree to
+rounding, not bit for bit.
+
+numba is imported on first use, and the compiled kernel is cached on disk
+(``cache=True``), so commands that never filter a Monte Carlo pay nothing and later runs
+load the kernel instead of compiling it (the first ever call compiles for a few seconds).
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Callable, Iterator
+from typing import Any, NamedTuple
+
+import numpy as np
+from numpy.typing import NDArray
+
+from radarviz.core.filters.polar_ukf import UKFParams
+from radarviz.core.filters.state import CVBatch
+
+#: Kernel codes of the 2D methods (``core.filters.methods.METHODS`` names).
+METHOD_CODES: dict[str, int] = {
+    "naive": 0,
+    "seed": 1,
+    "cmkf_d": 2,
+    "ucm": 3,
+    "ducm": 4,
+    "ekf": 5,
+    "ukf": 6,
+}
+#: Each method's start conversion (``Method.start_conversion``): ducm starts like ucm, the
+#: polar filters from the naive point.
+START_CODES: dict[str, int] = {
+    "naive": 0,
+    "seed": 1,
+    "cmkf_d": 2,
+    "ucm": 3,
+    "ducm": 3,
+    "ekf": 0,
+    "ukf": 0,
+}
+COMPILED_METHODS: tuple[str, ...] = tuple(METHOD_CODES)
+#: The Monte Carlo engines an experiment can run on: this module, or the numpy engine (the
+#: reference the tests hold this one to).
+ENGINES: tuple[str, ...] = ("compiled", "numpy")
+
+
+class FilterSettings(NamedTuple):
+    """The scalars every track of a block shares.
+
+    Attributes:
+        sigma_r_m, sigma_azimuth_rad: measurement noise std σr (m), σβ (rad).
+        period_s: scan period T (s).  sigma_a_mps2: process-noise acceleration std σa.
+        sigma_v0_mps: initial velocity std of every track.
+        site_m: the radar's (x, y) position, m.
+        ukf: the UKF's sigma-point parameters.
+        sigma_vr_mps: Doppler noise std σVr (m/s), used with radial velocities.
+    """
+
+    sigma_r_m: float
+    sigma_azimuth_rad: float
+    period_s: float
+    sigma_a_mps2: float
+    sigma_v0_mps: float
+    site_m: tuple[float, float] = (0.0, 0.0)
+    ukf: UKFParams = UKFParams()
+    sigma_vr_mps: float = 1.0
+
+
+class ScanChunk(NamedTuple):
+    """Scans ``first … first + K − 1``: the states x (K, m', 4), P (K, m', 4, 4) of the runs
+    that give states, and the metric terms (len(SUM_NAMES), K, m − m') of the first runs when
+    ``filter_scans`` was asked for them (else None).
+
+    The arrays are reused for the next chunk: copy what must be kept."""
+
+    first: int
+    x: NDArray[np.float64]
+    P: NDArray[np.float64]
+    terms: NDArray[np.float64] | None = None
+
+
+class TermsRequest(NamedTuple):
+    """Ask ``filter_scans`` for the metric terms (``core.metrics.scan_terms``) of the first
+    ``runs`` runs instead of their states: computed in the kernel as each state is formed, so
+    the states of a Monte Carlo never go through memory.
+
+    Attributes:
+        runs: how many of the first runs give terms.
+        truth: (N, 4) true states; los: ``core.metrics.truth_line_of_sight(truth)``.
+    """
+
+    runs: int
+    truth: NDArray[np.float64]
+    los: tuple[NDArray[np.float64], NDArray[np.float64]]
+
+
+def filter_scans(
+    method: str,
+    r_hat: NDArray[np.float64],
+    beta_hat: NDArray[np.float64],
+    settings: FilterSettings,
+    chunk_scans: int,
+    *,
+    radial_velocity_mps: NDArray[np.float64] | None = None,
+    start: tuple[int, CVBatch] | None = None,
+    terms: TermsRequest | None = None,
+) -> Iterator[ScanChunk]:
+    """Filter every run's scans, ``chunk_scans`` at a time.
+
+    Without ``start``, every track starts at scan 0 from its plot (the method's start
+    conversion) and scans 1 … N − 1 follow; with ``start = (k, state)`` the (m,) batch
+    ``state`` is the estimate at scan k and scans k + 1 … N − 1 follow (the Doppler-aided
+    experiment's finite-memory start).
+
+    Args:
+        method: one of ``COMPILED_METHODS``.
+        r_hat, beta_hat: (m, N) measured ranges (m) and azimuths (rad) of m runs.
+        settings: the shared scalars.
+        chunk_scans: scans per yielded chunk (≥ 1): bounds the memory to chunk × m states.
+        radial_velocity_mps: (m, N) measured V̂r: after each plot's update, the Doppler update
+            along the measured line of sight (``core.filters.doppler``) with σVr
+            ``settings.sigma_vr_mps``.
+        terms: the metric terms of the first runs instead of their states.
+
+    Yields:
+        ``ScanChunk`` s covering the filtered scans in order (a start at scan 0 included).
+    """
+    kernel = _kernel()
+    r_scans = np.ascontiguousarray(np.asarray(r_hat, dtype=np.float64).T)
+    b_scans = np.ascontiguousarray(np.asarray(beta_hat, dtype=np.float64).T)
+    steps, runs = r_scans.shape
+    doppler = radial_velocity_mps is not None
+    vr_scans = (
+        np.ascontiguousarray(np.asarray(radial_velocity_mps, dtype=np.float64).T)
+        if doppler
+        else np.zeros((1, 1))
+    )
+    x = np.empty((runs, 4))
+    P = np.empty((runs, 4, 4))
+    begin = 0
+    if start is not None:
+        begin = start[0] + 1
+        x[...], P[...] = start[1].x, start[1].P
+    k = max(1, min(int(chunk_scans), steps - begin))
+    n_terms = 0 if terms is None else int(terms.runs)
+    xs = np.empty((k, runs - n_terms, 4))
+    Ps = np.empty((k, runs - n_terms, 4, 4))
+    out_terms = np.empty((10, k, n_terms))  # len(core.metrics.SUM_NAMES) rows
+    if terms is None:
+        truth, cos_los, sin_los = np.zeros((1, 4)), np.zeros((1, 1)), np.zeros((1, 1))
+    else:
+        truth = np.ascontiguousarray(terms.truth, dtype=np.float64)
+        cos_los, sin_los = terms.los
+    s = settings
+    c, wm0, wc0, w = s.ukf.weights(4)
+    for first in range(begin, steps, k):
+        last = min(first + k, steps)
+        kernel(
+            METHOD_CODES[method],
+            START_CODES[method],
+            r_scans,
+            b_scans,
+            vr_scans,
+            doppler,
+            first,
+            last,
+            float(s.sigma_r_m),
+            float(s.sigma_azimuth_rad),
+            float(s.sigma_vr_mps),
+            float(s.period_s),
+            float(s.sigma_a_mps2),
+            float(s.sigma_v0_mps),
+            float(s.site_m[0]),
+            float(s.site_m[1]),
+            float(c),
+            float(wm0),
+            float(wc0),
+            float(w),
+            x,
+            P,
+            xs,
+            Ps,
+            n_terms,
+            truth,
+            cos_los,
+            sin_los,
+            out_terms,
+        )
+        n = last - first
+        yield ScanChunk(first, xs[:n], Ps[:n], out_terms[:, :n] if terms is not None else None)
+
+
+def filter_history(
+    method: str,
+    r_hat: NDArray[np.float64],
+    beta_hat: NDArray[np.float64],
+    settings: FilterSettings,
+    **kw: Any,
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Every filtered scan's states at once: x (K, m, 4) and P (K, m, 4, 4) (``filter_scans``
+    in one chunk; for tests and small batches)."""
+    (chunk,) = list(filter_scans(method, r_hat, beta_hat, settings, np.shape(r_hat)[1], **kw))
+    return chunk.x, chunk.P
+
+
+def metric_terms(
+    x: NDArray[np.float64],
+    P: NDArray[np.float64],
+    truth: NDArray[np.float64],
+    los: tuple[NDArray[np.float64], NDArray[np.float64]],
+) -> NDArray[np.float64]:
+    """``core.metrics.scan_terms`` by the compiled kernel: (len(SUM_NAMES), K, m) terms of
+    x (K, m, 4), P (K, m, 4, 4) against truth (K, 4), ``los`` = ``truth_line_of_sight``.
+
+    Equal to the numpy function to rounding (``tests/test_compiled.py``); one pass over the
+    states instead of a few dozen vector operations and their temporaries.
+    """
+    from radarviz.core.filters.kernels_2d import metric_terms_2d
+
+    out = np.empty((10, *x.shape[:2]))
+    metric_terms_2d(x, P, np.ascontiguousarray(truth), los[0], los[1], out)
+    return out
+
+
+@functools.cache
+def _kernel() -> Callable[..., None]:
+    """The compiled kernel, compiled (or loaded from numba's cache) on first use."""
+    from radarviz.core.filters.kernels_2d import filter_scans_2d
+
+    return filter_scans_2d
