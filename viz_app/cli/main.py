@@ -65,6 +65,15 @@ def build_parser() -> argparse.ArgumentParser:
     add_parameter(pro, "period_s", "--period", "--period-s")
     add_parameter(pro, "steps")
     pro.add_argument(
+        "--dims",
+        type=int,
+        choices=(2, 3),
+        default=2,
+        help="2: the paper's plane; 3: the same target at an elevation, every method in 3D",
+    )
+    add_parameter(pro, "target_elevation_deg", "--elevation-deg", note="with --dims 3")
+    add_parameter(pro, "sigma_elevation_deg", default=1.0, shown_default=1.0, note="with --dims 3")
+    pro.add_argument(
         "--methods",
         nargs="+",
         default=list(ALL_METHODS),
@@ -205,6 +214,9 @@ def _cmd_reproduce_prosov(args: argparse.Namespace) -> int:
         steps=args.steps,
         sigma_r_m=args.sigma_r_m,
         methods=args.methods,
+        dims=args.dims,
+        elevation_deg=args.target_elevation_deg,
+        sigma_elevation_deg=args.sigma_elevation_deg if args.dims == 3 else None,
     )
     from radarviz.viz_app.reports.prosov import format_prosov_table, prosov_document
     from radarviz.viz_app.runtime import tune_allocator
@@ -217,7 +229,7 @@ def _cmd_reproduce_prosov(args: argparse.Namespace) -> int:
         if show_progress:
             from radarviz.viz_app.cli.progress import ProgressBar
 
-            bar = ProgressBar(f"prosov σβ={cfg.sigma_beta_deg:g}°")
+            bar = ProgressBar(f"prosov{' 3D' if cfg.dims == 3 else ''} σβ={cfg.sigma_beta_deg:g}°")
         results.append(run_tracking(cfg, progress=bar))
     return _emit(
         args,
