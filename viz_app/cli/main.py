@@ -85,6 +85,25 @@ def build_parser() -> argparse.ArgumentParser:
     )
     pro.add_argument("--plot", metavar="FILE.png", help="write the figure (Figs. 1-2, bias, NEES)")
 
+    dop = rep_sub.add_parser(
+        "doppler",
+        help="EKF + Doppler: line-of-sight against converted (r̂·V̂r) update, RLS1-RLS6",
+    )
+    dop.add_argument(
+        "--radars",
+        nargs="+",
+        default=None,
+        metavar="RLS",
+        help="radar presets (default all: RLS1 ... RLS6)",
+    )
+    add_parameter(dop, "sigma_beta_deg")
+    add_parameter(dop, "runs")
+    add_parameter(dop, "seed")
+    dop.add_argument(
+        "--json", action="store_true", help="print only the JSON document on standard output"
+    )
+    dop.add_argument("--plot", metavar="FILE.png", help="write the figure (NEES per radar)")
+
     gor = rep_sub.add_parser(
         "gorshkov", help="finite-memory range / radial-velocity filter (Gorshkov), Monte Carlo"
     )
@@ -287,6 +306,30 @@ def _cmd_reproduce_gorshkov(args: argparse.Namespace) -> int:
     )
 
 
+def _cmd_reproduce_doppler(args: argparse.Namespace) -> int:
+    from radarviz.core.experiments.doppler_start import compare_doppler_updates
+    from radarviz.core.finite_memory.fit import PRESETS
+
+    radars: list[str] = args.radars if args.radars is not None else list(PRESETS)
+    for name in radars:
+        if name not in PRESETS:
+            raise ParameterError(f"--radars must be among {', '.join(PRESETS)} (got {name!r})")
+    check_outputs([("--plot", args.plot)])
+    from radarviz.viz_app.reports.doppler import doppler_document, format_doppler_table
+    from radarviz.viz_app.runtime import tune_allocator
+
+    tune_allocator()
+    results = compare_doppler_updates(
+        tuple(radars), sigma_beta_deg=args.sigma_beta_deg, runs=args.runs, seed=args.seed
+    )
+    return _emit(
+        args,
+        doppler_document(results),
+        format_doppler_table,
+        "radarviz.viz_app.figures.doppler:plot_doppler",
+    )
+
+
 def _cmd_reproduce_velocity(args: argparse.Namespace) -> int:
     from radarviz.core.velocity.estimate import run_velocity_experiment
 
@@ -330,6 +373,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         if args.command == "reproduce" and args.experiment == "prosov":
             return _cmd_reproduce_prosov(args)
+        if args.command == "reproduce" and args.experiment == "doppler":
+            return _cmd_reproduce_doppler(args)
         if args.command == "reproduce" and args.experiment == "gorshkov":
             return _cmd_reproduce_gorshkov(args)
         if args.command == "reproduce" and args.experiment == "velocity":
