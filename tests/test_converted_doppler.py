@@ -120,3 +120,59 @@ def test_batched_rows_equal_single_rows() -> None:
     )
     np.testing.assert_allclose(full.x[2, 1], one.x[0], rtol=1e-12)
     np.testing.assert_allclose(full.P[2, 1], one.P[0], rtol=1e-12, atol=1e-9)
+
+
+def test_doppler_experiment_runs_the_converted_variant_from_the_same_start() -> None:
+    from radarviz.core.experiments.doppler_start import (
+        DopplerTrackingConfig,
+        compare_doppler_updates,
+        doppler_consistency,
+        run_doppler_tracking,
+    )
+    from radarviz.core.params import ParameterError
+
+    with pytest.raises(ParameterError, match="variant must be one of"):
+        DopplerTrackingConfig(variants=("range_only", "bogus"))
+    cfg = DopplerTrackingConfig(
+        radar="RLS2",
+        runs=60,
+        steps=12,
+        engine="numpy",
+        variants=("range_doppler", "range_converted_doppler"),
+    )
+    res = run_doppler_tracking(cfg)
+    a, b = (res.metrics[v] for v in cfg.variants)
+    k = cfg.start_scans - 1  # the start scan: the same finite-memory start for both
+    assert a.rmse_x[k] == b.rmse_x[k] and a.nees_pos[k] == b.nees_pos[k]
+    assert not np.array_equal(a.nees_pos[k + 1 :], b.nees_pos[k + 1 :])
+    (summary,) = [doppler_consistency(r) for r in compare_doppler_updates(("RLS2",), runs=60)]
+    assert [c.variant for c in summary] == ["range_doppler", "range_converted_doppler"]
+    for c in summary:
+        assert c.nees_last_ci95[0] <= c.nees_last <= c.nees_last_ci95[1]
+        assert c.verdict in ("consistent", "over-confident", "under-confident")
+
+
+def test_cli_reproduce_doppler_and_track_converted(tmp_path, capsys) -> None:
+    import json
+
+    from radarviz.viz_app.cli.main import main
+
+    assert main(["reproduce", "doppler", "--radars", "RLS1", "--runs", "20", "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["cases"][0]["radar"] == "RLS1"
+    assert {c["variant"] for c in doc["cases"][0]["consistency"]} == {
+        "range_doppler",
+        "range_converted_doppler",
+    }
+    assert main(["reproduce", "doppler", "--radars", "RLS9", "--runs", "20"]) == 2
+    assert "--radars must be among" in capsys.readouterr().err
+    meas, radars = tmp_path / "m.csv", tmp_path / "r.toml"
+    args = ["simulate", "--preset", "fusion", "--out", str(meas), "--radars-out", str(radars)]
+    assert main([*args, "--scans", "6"]) == 0
+    outs = {}
+    for mode in ("use", "converted"):
+        out = tmp_path / f"t_{mode}.csv"
+        track = ["track", "--input", str(meas), "--radars", str(radars), "--out", str(out)]
+        assert main([*track, "--doppler", mode, "--method", "ucm"]) == 0
+        outs[mode] = out.read_text()
+    assert outs["use"] != outs["converted"]

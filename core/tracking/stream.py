@@ -37,6 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from radarviz.core.filters.converted_doppler import converted_doppler_update
 from radarviz.core.filters.doppler import doppler_update
 from radarviz.core.filters.methods import (
     ALL_METHODS,
@@ -159,6 +160,7 @@ class TrackGroup:
         pre: Parts | None,
         use_doppler: bool = True,
         polar: tuple[PolarPlot, PolarNoise] | None = None,
+        doppler: str = "line_of_sight",
     ) -> CVBatch:
         """Filter one plot; ``pre`` this plot's slice of ``precompute`` (z (M,), R (M,));
         ``polar``: the plot as (1,) arrays if the caller has them (every group shares them)."""
@@ -174,7 +176,16 @@ class TrackGroup:
                 raise ValueError(f"times must not decrease (got {p.time_s} after {self.time_s})")
             pred = cv_predict(self.state, dt, self.sigma_a) if dt > 0 else self.state
             state = self.group.update(pred, plot, noise, site=site, parts=pre)
-        if use_doppler and p.radial_velocity_mps is not None:
+        if use_doppler and p.radial_velocity_mps is not None and doppler == "converted":
+            state = converted_doppler_update(
+                state,
+                np.full(m, p.range_m),
+                np.full(m, p.radial_velocity_mps),
+                sigma_r_m=p.sigma_r_m,
+                sigma_vr_mps=p.sigma_radial_velocity_mps,
+                site=site,
+            )
+        elif use_doppler and p.radial_velocity_mps is not None:
             # Linear in the velocity: the position frame does not matter.
             state = doppler_update(
                 state,
@@ -200,6 +211,8 @@ class StreamOptions:
         init: ``"first-plot"`` (the papers' start) or ``"finite-memory"`` (Gorshkov and
             Zavizhenets' window fit, ``docs/finite_memory.md``).
         init_k: plots in the finite-memory window (≥ 2 with Doppler, ≥ 3 without).
+        doppler_update: ``"line_of_sight"`` (``core.filters.doppler``) or ``"converted"``
+            (the r̂·V̂r pseudo-measurement, ``core.filters.converted_doppler``).
     """
 
     sigma_a_mps2: float = 0.0
@@ -207,12 +220,14 @@ class StreamOptions:
     use_doppler: bool = True
     init: str = "first-plot"
     init_k: int = 3
+    doppler_update: str = "line_of_sight"
 
     def __post_init__(self) -> None:
         check("sigma_a_mps2", self.sigma_a_mps2)
         check("sigma_v0_mps", self.sigma_v0_mps)
         check_choice("init", self.init, INIT_MODES)
         check_int("init_k", self.init_k, low=2, high=1000)
+        check_choice("doppler_update", self.doppler_update, ("line_of_sight", "converted"))
 
 
 class StreamTracker:
@@ -276,7 +291,7 @@ class StreamTracker:
                 row = None
                 if parts is not None:
                     row = ([z[:, i] for z in parts[0]], {k: v[:, i] for k, v in parts[1].items()})
-                g.add(p, row, use_doppler, polar)
+                g.add(p, row, use_doppler, polar, self.options.doppler_update)
             self._started = True
             out.append(self._rows())
         return out

@@ -73,7 +73,8 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
         "--doppler",
         default="use",
         metavar="MODE",
-        help="radial velocities: use or ignore (default use)",
+        help="radial velocities: use (line-of-sight update), converted (the r̂·V̂r"
+        " pseudo-measurement) or ignore (default use)",
     )
     add_parameter(tr, "sigma_a_mps2", "--sigma-a", "--sigma-a-mps2")
     add_parameter(tr, "sigma_v0_mps", "--sigma-v0", "--sigma-v0-mps")
@@ -115,7 +116,8 @@ def cmd_track(args: argparse.Namespace) -> int:
     options = StreamOptions(
         sigma_a_mps2=args.sigma_a_mps2,
         sigma_v0_mps=args.sigma_v0_mps,
-        use_doppler=check_choice("--doppler", args.doppler, DOPPLER_MODES) == "use",
+        use_doppler=check_choice("--doppler", args.doppler, DOPPLER_MODES) != "ignore",
+        doppler_update="converted" if args.doppler == "converted" else "line_of_sight",
         init=args.init,
         init_k=args.init_k,
     )

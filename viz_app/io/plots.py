@@ -88,7 +88,8 @@ RADAR_KEYS = ("x_m", "y_m", "z_m", "sigma_range_m", "sigma_azimuth_deg")
 OPTIONAL_RADAR_KEYS = ("sigma_elevation_deg", "sigma_radial_velocity_mps")
 DEFAULT_TRACKS = "tracks.csv"
 SIM_PRESETS = ("prosov", "fusion")
-DOPPLER_MODES = ("use", "ignore")
+#: ``track --doppler``: "use" the line-of-sight update, "converted" the r̂·V̂r one, or "ignore".
+DOPPLER_MODES = ("use", "converted", "ignore")
 #: Most scans per radar ``simulate`` writes (files stream; the Monte Carlo limit does not apply).
 MAX_SIMULATE_STEPS = 10_000_000
 #: Physically meaningful ends of a plot's values (``core.params``: range_m, radial_velocity_mps,
