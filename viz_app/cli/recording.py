@@ -26,7 +26,7 @@ from radarviz.viz_app.rerun.viewer import (
     wait_viewer,
 )
 
-PRESETS = ("demo", "prosov", "gorshkov", "velocity")
+PRESETS = ("demo", "prosov", "prosov3d", "gorshkov", "velocity")
 DEFAULT_DEMO_PATH = "recordings/demo.rrd"
 
 
