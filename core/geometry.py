@@ -119,3 +119,19 @@ def range_cross_basis(site: ArrayLike, target: ArrayLike) -> NDArray[np.float64]
     u = d / np.linalg.norm(d, axis=-1, keepdims=True)
     c = np.stack([-u[..., 1], u[..., 0]], axis=-1)
     return np.stack([c, u], axis=-2)
+
+
+def range_cross_up_basis(site: ArrayLike, target: ArrayLike) -> NDArray[np.float64]:
+    """Rows (down-range, cross-range, up) of the 3D frame of ``target`` seen from ``site``.
+
+    u = (target − site) / |target − site| (down-range); c = (−sin β, cos β, 0), the horizontal
+    direction of increasing azimuth (cross-range); w = u × c, perpendicular to both and
+    pointing up (the direction of increasing elevation). For an offset d from the target,
+    ``B @ d`` is (down-range, cross-range, up) in m; a covariance P becomes B P Bᵀ. Shapes:
+    site (3,) or (..., 3), target (..., 3); result (..., 3, 3). Not defined straight overhead.
+    """
+    d = _f(target) - _f(site)
+    u = d / np.linalg.norm(d, axis=-1, keepdims=True)
+    az = np.arctan2(d[..., 1], d[..., 0])
+    c = np.stack([-np.sin(az), np.cos(az), np.zeros_like(az)], axis=-1)
+    return np.stack([u, c, np.cross(u, c)], axis=-2)

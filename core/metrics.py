@@ -16,6 +16,11 @@ Definitions, with e = x̂ − x the estimation error of run m at scan n and M ru
     nees_pos    = mean e_posᵀ P_pos⁻¹ e_pos     (2 dof)
     nees_state  = mean eᵀ P⁻¹ e                 (4 dof)
 
+In 3D (states (x, ẋ, y, ẏ, z, ż)) the same sums mean: bias_range along the 3D line of sight
+u = (cos ε cos β, cos ε sin β, sin ε), bias_cross along the horizontal cross-range
+(−sin β, cos β, 0), nees_pos with 3 dof and nees_state with 6 (``nees_dof``); ex, ey, pxx,
+pyy are the x and y axes as in 2D. The 2D sums are formed by the 2D code, unchanged.
+
 For a consistent filter M · nees ~ χ²(M·dof), which gives the two-sided 95% band
 ``nees_band(dof, M)``: where the run average of a consistent filter falls.
 
@@ -122,6 +127,8 @@ def scan_terms(
     a result by one bit.
     """
     k, m = x.shape[:2]
+    if x.shape[-1] == 6:
+        return _scan_terms_3d(x, P, truth)
     c, s = truth_line_of_sight(truth) if los is None else los
     t = truth[:, None, :]
     terms = np.empty((len(SUM_NAMES), k, m))
@@ -141,6 +148,42 @@ def scan_terms(
     e = x - t
     nees_state[...] = quad_form_inv(P.reshape(k * m, 4, 4), e.reshape(k * m, 4)).reshape(k, m)
     return terms
+
+
+def _scan_terms_3d(
+    x: NDArray[np.float64], P: NDArray[np.float64], truth: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """``scan_terms`` of 3D states: x (K, m, 6), P (K, m, 6, 6), truth (K, 6) (module
+    docstring: bias along the 3D line of sight, NEES with 3 and 6 dof)."""
+    k, m = x.shape[:2]
+    u, c = np.empty((k, 1, 3)), np.empty((k, 1, 2))
+    for i in range(k):  # from each scan's scalar truth, as in 2D
+        _, az, el = polar_coordinates([truth[i, 0], truth[i, 2], truth[i, 4]])
+        u[i, 0] = np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)
+        c[i, 0] = -np.sin(az), np.cos(az)
+    e = x - truth[:, None, :]
+    terms = np.empty((len(SUM_NAMES), k, m))
+    ex, ex2, ey, ey2, er, ec, pxx, pyy, nees_pos, nees_state = terms
+    ex[...], ey[...] = e[..., 0], e[..., 2]
+    ez = e[..., 4]
+    np.multiply(ex, ex, out=ex2)
+    np.multiply(ey, ey, out=ey2)
+    er[...] = u[..., 0] * ex + u[..., 1] * ey + u[..., 2] * ez
+    ec[...] = c[..., 0] * ex + c[..., 1] * ey
+    pxx[...], pyy[...] = P[..., 0, 0], P[..., 2, 2]
+    pos = [0, 2, 4]
+    p_pos = P[..., pos, :][..., pos]
+    e_pos = e[..., pos].reshape(k * m, 3)
+    nees_pos[...] = quad_form_inv(p_pos.reshape(k * m, 3, 3), e_pos).reshape(k, m)
+    nees_state[...] = quad_form_inv(P.reshape(k * m, 6, 6), e.reshape(k * m, 6)).reshape(k, m)
+    return terms
+
+
+def nees_dof(dims: int) -> tuple[int, int]:
+    """Degrees of freedom of (position NEES, state NEES) of a ``dims``-D track: (2, 4), (3, 6)."""
+    if dims not in (2, 3):
+        raise ValueError(f"dims must be 2 or 3 (got {dims})")
+    return dims, 2 * dims
 
 
 class MetricsAccumulator:
@@ -172,7 +215,8 @@ class MetricsAccumulator:
         self._group_sums = np.zeros((len(SUM_NAMES), BAND_GROUPS, steps))
 
     def add(self, n: int, state: CVBatch, truth: NDArray[np.float64]) -> None:
-        """Add one block of runs at scan index n (0-based); ``truth`` is the (4,) true state."""
+        """Add one block of runs at scan index n (0-based); ``truth`` is the (4,) or (6,) true
+        state (2D or 3D, as the block's states)."""
         x, P = state.x, state.P
         m = x.shape[0]
         offset = int(self.runs[n])
@@ -186,13 +230,14 @@ class MetricsAccumulator:
             return
         staged = self._staged
         xs, ps, ts = self._stage
-        if xs.shape[1] != m or not len(ts):  # a new block size: sum the staged, stage anew
+        d = x.shape[-1]  # 4 (2D) or 6 (3D)
+        if xs.shape[1] != m or xs.shape[-1] != d or not len(ts):  # a new block size: stage anew
             self._flush()
             depth = max(1, STAGE_ROWS // max(m, 1))
             self._stage = xs, ps, ts = (
-                np.empty((depth, m, 4)),
-                np.empty((depth, m, 4, 4)),
-                np.empty((depth, 4)),
+                np.empty((depth, m, d)),
+                np.empty((depth, m, d, d)),
+                np.empty((depth, d)),
             )
             staged = self._staged
         k = len(staged)

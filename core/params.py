@@ -317,6 +317,16 @@ PARAMETERS: dict[str, Parameter] = {
             low_open=False,
         ),
         _real("target_range_m", "r0", "initial target range", "m", 0.0, 1e8, 150e3),
+        _real(
+            "target_elevation_deg",
+            "E",
+            "target elevation seen from the radar",
+            "deg",
+            -80.0,
+            80.0,
+            0.0,
+            low_open=False,
+        ),
         _real("site_m", "x", "radar site coordinate", "m", -1e8, 1e8, None, low_open=False),
         _real("range_m", "r", "measured range", "m", 0.0, 1e8, None),
         _real(

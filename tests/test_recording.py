@@ -235,3 +235,27 @@ def test_view_refuses_a_truncated_or_foreign_file(tmp_path: Path, capsys) -> Non
         assert main(["view", str(path)]) == 2
         err = capsys.readouterr().err
         assert err.count("\n") == 1 and f"{path} is not a" in err, err
+
+
+def test_prosov3d_scene_logs_every_method_in_the_3d_target_frame(tmp_path, rrd_contents) -> None:
+    """``record --preset prosov3d``: per scan every method's estimate and 1σ ellipsoid in the
+    (down-range, cross-range, up) frame and the statistics; the ellipsoids are the tracks'
+    covariances rotated into that frame (checked through the basis itself)."""
+    from radarviz.core.geometry import range_cross_up_basis
+    from radarviz.viz_app.rerun.prosov_scene import log_prosov3d
+
+    path = tmp_path / "p3d.rrd"
+    with recording_file(path) as rec:
+        axis = log_prosov3d(rec, runs=40, seed=2)
+    assert np.isfinite(axis) and axis > 0
+    rows, _ = rrd_contents(path)
+    for m in ALL_METHODS:
+        for part in ("estimate", "covariance"):
+            assert rows.get(f"/prosov3d/target/{m}/{part}") == 60, (m, part)
+        assert rows.get(f"/plots/prosov3d/nees_pos/{m}") == 60
+    # The frame: orthonormal, right-handed, down-range along the line of sight, up above it.
+    B = range_cross_up_basis(np.zeros(3), [[1e5, 2e4, 3e4]])[0]
+    np.testing.assert_allclose(B @ B.T, np.eye(3), atol=1e-12)
+    assert np.linalg.det(B) == pytest.approx(1.0)
+    np.testing.assert_allclose(B[0], np.array([1e5, 2e4, 3e4]) / np.linalg.norm([1e5, 2e4, 3e4]))
+    assert B[1, 2] == 0.0 and B[2, 2] > 0.0

@@ -10,6 +10,10 @@ Monte Carlo, range only beside range + Doppler on the same measurements:
 2. Continue with the polar EKF on (r̂, β̂) (``core.filters.polar_ekf``) and, for the Doppler
    variant, then a second, scalar update with V̂r along the measured line of sight
    (``core.filters.doppler``; its docstring says why not the textbook EKF row).
+   The optional variant ``range_converted_doppler`` (``DopplerTrackingConfig.variants``)
+   replaces that second update by the converted-Doppler one, the pseudo-measurement r̂ V̂r
+   (``core.filters.converted_doppler``), on the numpy engine; it starts like
+   ``range_doppler``, so the two differ only in the Doppler update.
 
 The line-of-sight update stays consistent for RLS1–RLS4; for RLS5–RLS6 at σβ = 1° its NEES
 still sits at 3–10 (the range-only EKF's at 2.5–4.4): the precise radars' errors are far from
@@ -27,6 +31,7 @@ from numpy.typing import NDArray
 
 from radarviz.core.confidence import BAND_GROUPS, group_counts, group_sums, jackknife_band
 from radarviz.core.filters.compiled import ENGINES, FilterSettings, filter_scans
+from radarviz.core.filters.converted_doppler import converted_doppler_update
 from radarviz.core.filters.doppler import doppler_update
 from radarviz.core.filters.polar_ekf import ekf_update
 from radarviz.core.filters.predict import cv_predict
@@ -40,10 +45,17 @@ from radarviz.core.finite_memory.fit import (
 from radarviz.core.finite_memory.start import finite_memory_start
 from radarviz.core.geometry import polar_coordinates, radial_velocity
 from radarviz.core.metrics import STAGE_ROWS, MetricsAccumulator, TrackMetrics, nees_band
-from radarviz.core.params import check, check_choice, check_int, default
+from radarviz.core.params import ParameterError, check, check_choice, check_int, default
 from radarviz.core.scenarios.planar import ConstantVelocityTarget2D
 
 VARIANTS: tuple[str, ...] = ("range_only", "range_doppler")
+#: Every variant a config may ask for: ``VARIANTS`` (the default) and the converted Doppler.
+ALL_VARIANTS: tuple[str, ...] = (*VARIANTS, "range_converted_doppler")
+#: The Doppler update of each variant that has one.
+DOPPLER_UPDATE: dict[str, str] = {
+    "range_doppler": "line_of_sight",
+    "range_converted_doppler": "converted",
+}
 
 
 def doppler_target(period_s: float = 10.0, steps: int = 60) -> ConstantVelocityTarget2D:
@@ -64,7 +76,9 @@ class DopplerTrackingConfig:
         sigma_v0_mps: std of the unobserved cross-range velocity at the start.
         sigma_a_mps2: process noise of the EKF (discrete white-noise acceleration).
         engine: ``"compiled"`` (``core.filters.compiled``) or ``"numpy"`` (the reference),
-            as ``core.experiments.prosov.TrackingConfig.engine``.
+            as ``core.experiments.prosov.TrackingConfig.engine``. The converted-Doppler
+            variant always runs on the numpy engine (the compiled kernel has no such update).
+        variants: which of ``ALL_VARIANTS`` to run (default ``VARIANTS``).
     """
 
     radar: str | RadarPreset = "RLS3"
@@ -77,6 +91,7 @@ class DopplerTrackingConfig:
     sigma_a_mps2: float = default("sigma_a_mps2")
     target: ConstantVelocityTarget2D | None = field(default=None)
     engine: str = "compiled"
+    variants: tuple[str, ...] = VARIANTS
 
     def __post_init__(self) -> None:
         """Every field but ``radar``, ``start_scans`` and ``target`` is checked against
@@ -86,6 +101,12 @@ class DopplerTrackingConfig:
             check(name, getattr(self, name))
         check_int("start_scans", self.start_scans, low=2, high=self.steps)
         check_choice("engine", self.engine, ENGINES)
+        if not self.variants:
+            raise ParameterError(
+                f"variants must name at least one of {', '.join(ALL_VARIANTS)}", "variants"
+            )
+        for v in self.variants:
+            check_choice("variant", v, ALL_VARIANTS)
 
     def scenario(self) -> ConstantVelocityTarget2D:
         if self.target is not None:
@@ -226,8 +247,9 @@ def run_doppler_tracking(config: DopplerTrackingConfig) -> DopplerTrackingResult
     settings = FilterSettings(sr, sb, T, config.sigma_a_mps2, config.sigma_v0_mps, sigma_vr_mps=svr)
     fits: dict[str, FiniteMemoryFit] = {}
     fields: dict[str, dict[str, object]] = {}
-    for variant in VARIANTS:
-        doppler = variant == "range_doppler"
+    for variant in config.variants:
+        update = DOPPLER_UPDATE.get(variant)
+        doppler = update is not None
         fit = finite_memory_fit(k, sigma_r_m=sr, sigma_vr_mps=svr, period_s=T, with_doppler=doppler)
         fits[variant] = fit
         start = finite_memory_start(
@@ -241,11 +263,18 @@ def run_doppler_tracking(config: DopplerTrackingConfig) -> DopplerTrackingResult
         sums = _VariantSums(steps)
         sums.add(k - 1, start.x[None], start.P[None], truth[k - 1 : k])
         vr = meas.vr if doppler else None
-        filter_ekf = _filter_compiled if config.engine == "compiled" else _filter_numpy
-        for first, x, P in filter_ekf(meas.r, meas.beta, vr, settings, (k - 1, start)):
+        if update == "converted":
+            chunks = _filter_numpy(meas.r, meas.beta, vr, settings, (k - 1, start), "converted")
+        elif config.engine == "compiled":
+            chunks = _filter_compiled(meas.r, meas.beta, vr, settings, (k - 1, start))
+        else:
+            chunks = _filter_numpy(meas.r, meas.beta, vr, settings, (k - 1, start))
+        for first, x, P in chunks:
             sums.add(first, x, P, truth[first : first + x.shape[0]])
         fields[variant] = sums.result(config.runs)
-    by_field = {name: {v: f[name] for v, f in fields.items()} for name in fields[VARIANTS[0]]}
+    by_field = {
+        name: {v: f[name] for v, f in fields.items()} for name in fields[config.variants[0]]
+    }
     return DopplerTrackingResult(
         config=config,
         n=np.arange(1, steps + 1),
@@ -266,8 +295,17 @@ def _filter_compiled(r, beta, vr, settings: FilterSettings, start: tuple[int, CV
         yield c.first, c.x, c.P
 
 
-def _filter_numpy(r, beta, vr, settings: FilterSettings, start: tuple[int, CVBatch]) -> Chunks:
-    """``_filter_compiled`` by the numpy engine (the reference), one scan at a time."""
+def _filter_numpy(
+    r,
+    beta,
+    vr,
+    settings: FilterSettings,
+    start: tuple[int, CVBatch],
+    doppler: str = "line_of_sight",
+) -> Chunks:
+    """``_filter_compiled`` by the numpy engine (the reference), one scan at a time;
+    ``doppler``: ``"line_of_sight"`` (``core.filters.doppler``) or ``"converted"``
+    (``core.filters.converted_doppler``), the update V̂r enters by."""
     s = settings
     noise = {"sigma_r_m": s.sigma_r_m, "sigma_azimuth_rad": s.sigma_azimuth_rad}
     state = start[1]
@@ -275,7 +313,15 @@ def _filter_numpy(r, beta, vr, settings: FilterSettings, start: tuple[int, CVBat
     for n in range(start[0] + 1, r.shape[1]):
         pred = cv_predict(state, s.period_s, s.sigma_a_mps2, out=buffers[n % 2])
         state = ekf_update(pred, (r[:, n], beta[:, n]), **noise)
-        if vr is not None:
+        if vr is not None and doppler == "converted":
+            state = converted_doppler_update(
+                state,
+                r[:, n],
+                vr[:, n],
+                sigma_r_m=s.sigma_r_m,
+                sigma_vr_mps=s.sigma_vr_mps,
+            )
+        elif vr is not None:
             state = doppler_update(
                 state,
                 vr[:, n],
@@ -284,3 +330,87 @@ def _filter_numpy(r, beta, vr, settings: FilterSettings, start: tuple[int, CVBat
                 sigma_azimuth_rad=s.sigma_azimuth_rad,
             )
         yield n, state.x[None], state.P[None]
+
+
+#: The two Doppler updates compared by ``compare_doppler_updates``.
+DOPPLER_VARIANTS: tuple[str, ...] = ("range_doppler", "range_converted_doppler")
+
+
+class DopplerConsistency(NamedTuple):
+    """How consistent one Doppler update is on one radar: its position NEES against χ².
+
+    Attributes:
+        radar: the preset (RLS1 … RLS6).  variant: ``range_doppler`` (line of sight) or
+            ``range_converted_doppler`` (r̂ V̂r).
+        nees_mean: the position NEES averaged over the runs and the scans after the start.
+        nees_mean_ci95: its 95% Monte Carlo band (delete-a-group jackknife over the runs).
+        nees_last / nees_last_ci95: the run-averaged NEES at the last scan and its band.
+        band95: where the run average of a consistent filter falls at one scan (χ², 2 dof).
+        verdict: ``"consistent"`` when the last scan's Monte Carlo band overlaps the χ² band,
+            ``"over-confident"`` when it lies above, ``"under-confident"`` below.
+    """
+
+    radar: str
+    variant: str
+    nees_mean: float
+    nees_mean_ci95: tuple[float, float]
+    nees_last: float
+    nees_last_ci95: tuple[float, float]
+    band95: tuple[float, float]
+    verdict: str
+
+
+def doppler_consistency(result: DopplerTrackingResult) -> list[DopplerConsistency]:
+    """``DopplerConsistency`` of each Doppler variant of ``result``."""
+    lo_b, hi_b = result.nees_pos_band95
+    after = slice(result.config.start_scans, None)
+    out = []
+    for variant in result.metrics:
+        if variant not in DOPPLER_UPDATE:
+            continue
+        full = result.metrics[variant].nees_pos
+        loo = result.leave_one_out[variant].nees_pos
+        mean_lo, mean_hi = jackknife_band(np.mean(full[after]), np.mean(loo[:, after], axis=-1))
+        last_lo, last_hi = result.band95(variant, "nees_pos")
+        lo, hi = float(last_lo[-1]), float(last_hi[-1])
+        verdict = (
+            "over-confident" if lo > hi_b else "under-confident" if hi < lo_b else "consistent"
+        )
+        out.append(
+            DopplerConsistency(
+                radar=result.config.radar_preset().name,
+                variant=variant,
+                nees_mean=float(np.mean(full[after])),
+                nees_mean_ci95=(float(mean_lo), float(mean_hi)),
+                nees_last=float(full[-1]),
+                nees_last_ci95=(lo, hi),
+                band95=(lo_b, hi_b),
+                verdict=verdict,
+            )
+        )
+    return out
+
+
+def compare_doppler_updates(
+    radars: tuple[str, ...] = ("RLS1", "RLS2", "RLS3", "RLS4", "RLS5", "RLS6"),
+    *,
+    sigma_beta_deg: float = default("sigma_beta_deg"),
+    runs: int = default("runs"),
+    seed: int = default("seed"),
+    engine: str = "compiled",
+) -> list[DopplerTrackingResult]:
+    """The Doppler-aided Monte Carlo of each radar with both Doppler updates on the same
+    measurements (``DOPPLER_VARIANTS``); ``doppler_consistency`` of each result says which is
+    consistent. The configs are all built (and so checked) before any is run."""
+    configs = [
+        DopplerTrackingConfig(
+            radar=name,
+            sigma_beta_deg=sigma_beta_deg,
+            runs=runs,
+            seed=seed,
+            engine=engine,
+            variants=DOPPLER_VARIANTS,
+        )
+        for name in radars
+    ]
+    return [run_doppler_tracking(c) for c in configs]

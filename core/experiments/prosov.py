@@ -27,6 +27,7 @@ from numpy.typing import NDArray
 
 from radarviz.core.confidence import Verdict, claim_verdict, jackknife_band
 from radarviz.core.conversion.planar import convert_parts
+from radarviz.core.conversion.spatial import convert_3d
 from radarviz.core.filters.compiled import (
     COMPILED_METHODS,
     ENGINES,
@@ -49,6 +50,7 @@ from radarviz.core.metrics import (
     TrackMetrics,
     delta_percent,
     nees_band,
+    nees_dof,
     truth_line_of_sight,
 )
 from radarviz.core.params import (
@@ -63,6 +65,11 @@ from radarviz.core.scenarios.planar import (
     ConstantVelocityTarget2D,
     polar_measurements,
     prosov_target,
+)
+from radarviz.core.scenarios.spatial import (
+    ConstantVelocityTarget3D,
+    prosov_target_3d,
+    spherical_measurements,
 )
 
 #: Run-scans of metric terms per pass of the compiled engine (80 B each: 5 MB).
@@ -87,7 +94,12 @@ ProgressFn = Callable[[int, int], None]
 
 @dataclass(frozen=True)
 class TrackingConfig:
-    """One Monte Carlo tracking experiment with a single 2D radar at the origin.
+    """One Monte Carlo tracking experiment with a single radar at the origin, 2D or 3D.
+
+    The target decides the dimension: a ``ConstantVelocityTarget3D``
+    (``core.scenarios.spatial.prosov_target_3d``) makes the radar measure elevation too, with
+    noise ``sigma_elevation_deg`` (required then), and every method runs in 3D on the numpy
+    engine (the compiled kernels are 2D: a 3D config must say ``engine="numpy"``).
 
     Every field is a ``core.params.PARAMETERS`` entry: its default comes from there and it is
     validated against it (once, here).
@@ -97,7 +109,7 @@ class TrackingConfig:
         sigma_beta_deg: azimuth noise σβ, degrees.
         runs: Monte Carlo runs M (>= 2).
         seed: root seed of ``numpy.random.SeedSequence``.
-        target: the true trajectory (period and number of scans live there).
+        target: the true trajectory (period and number of scans live there; 2D or 3D).
         sigma_a_mps2: process-noise acceleration std of the filters (0: the paper's Q = 0).
         sigma_v0_mps: initial velocity std of every track.
         methods: which filters to run, from ``ALL_METHODS``.
@@ -105,17 +117,21 @@ class TrackingConfig:
             scans, the fast path) or ``"numpy"`` (the vectorised reference engine the tests
             hold the compiled one to). Results agree to rounding (~1e-12 relative), far
             inside any Monte Carlo error, but not bit for bit.
+        sigma_elevation_deg: elevation noise σε, degrees (3D targets only).
     """
 
     sigma_r_m: float = default("sigma_r_m")
     sigma_beta_deg: float = default("sigma_beta_deg")
     runs: int = default("runs")
     seed: int = default("seed")
-    target: ConstantVelocityTarget2D = field(default_factory=prosov_target)
+    target: ConstantVelocityTarget2D | ConstantVelocityTarget3D = field(
+        default_factory=prosov_target
+    )
     sigma_a_mps2: float = default("sigma_a_mps2")
     sigma_v0_mps: float = default("sigma_v0_mps")
     methods: tuple[str, ...] = ALL_METHODS
     engine: str = "compiled"
+    sigma_elevation_deg: float | None = None
 
     def __post_init__(self) -> None:
         for name in ("sigma_r_m", "sigma_beta_deg", "runs", "seed", "sigma_a_mps2", "sigma_v0_mps"):
@@ -127,10 +143,34 @@ class TrackingConfig:
         for m in self.methods:
             check_choice("method", m, ALL_METHODS)
         check_choice("engine", self.engine, ENGINES)
+        if self.dims == 3:
+            if self.sigma_elevation_deg is None:
+                raise ParameterError(
+                    "sigma_elevation_deg must be given for a 3D target", "sigma_elevation_deg"
+                )
+            check("sigma_elevation_deg", self.sigma_elevation_deg)
+            if self.engine != "numpy":
+                raise ParameterError(
+                    "engine must be numpy for a 3D target (the compiled kernels are 2D)", "engine"
+                )
+        elif self.sigma_elevation_deg is not None:
+            raise ParameterError(
+                "sigma_elevation_deg must be left out for a 2D target", "sigma_elevation_deg"
+            )
+
+    @property
+    def dims(self) -> int:
+        """2 or 3: the dimension of the target, the radar's plots and every track."""
+        return 3 if isinstance(self.target, ConstantVelocityTarget3D) else 2
 
     @property
     def sigma_beta_rad(self) -> float:
         return float(np.deg2rad(self.sigma_beta_deg))
+
+    @property
+    def sigma_elevation_rad(self) -> float:
+        """σε in rad (0 for a 2D target)."""
+        return float(np.deg2rad(self.sigma_elevation_deg or 0.0))
 
 
 @dataclass(frozen=True)
@@ -281,11 +321,13 @@ def filter_block(
     beta_hat: NDArray[np.float64],
     config: TrackingConfig,
     on_scan: Callable[[int, CVBatch], None],
+    elevation_hat: NDArray[np.float64] | None = None,
 ) -> CVBatch:
     """Run one method over a block of runs; ``on_scan(n, state)`` sees every filtered state.
 
     Args:
         r_hat, beta_hat: (m, N) measured ranges (m) and azimuths (rad).
+        elevation_hat: (m, N) measured elevations (rad) of a 3D config.
     Returns:
         The state after the last scan.
 
@@ -299,7 +341,7 @@ def filter_block(
     def one(n: int, state: CVBatch) -> None:
         on_scan(n, CVBatch(state.x[0], state.P[0]) if squeeze else state)
 
-    state = filter_group(group, r_hat, beta_hat, config, one)
+    state = filter_group(group, r_hat, beta_hat, config, one, elevation_hat)
     return CVBatch(state.x[0], state.P[0]) if squeeze else state
 
 
@@ -309,21 +351,28 @@ def filter_group(
     beta_hat: NDArray[np.float64],
     config: TrackingConfig,
     on_scan: Callable[[int, CVBatch], None],
+    elevation_hat: NDArray[np.float64] | None = None,
 ) -> CVBatch:
     """``filter_block`` for a group of methods at once: the converted methods of ``group`` are
     one batch (k, m) (row i: method i), so their predictions and updates are one set of vector
-    operations; each row is what ``filter_block`` gives for its method alone."""
+    operations; each row is what ``filter_block`` gives for its method alone.
+
+    With ``elevation_hat`` (m, N) the plots are 3D (r̂, β̂, ε̂) and every track is 3D."""
     T, qa = config.target.period_s, config.sigma_a_mps2
     steps = r_hat.shape[1]
-    noise = PolarNoise(config.sigma_r_m, config.sigma_beta_rad)
-    state = group.start(
-        PolarPlot(r_hat[:, 0], beta_hat[:, 0]), noise, sigma_v0_mps=config.sigma_v0_mps
-    )
+    if (elevation_hat is None) != (config.dims == 2):
+        raise ValueError(f"a {config.dims}D config needs {config.dims} measured coordinates")
+    noise = PolarNoise(config.sigma_r_m, config.sigma_beta_rad, config.sigma_elevation_rad)
     # Scan-major copies, so each scan's measurements are contiguous vectors.
-    r_scans, b_scans = np.ascontiguousarray(r_hat.T), np.ascontiguousarray(beta_hat.T)
+    scans = [np.ascontiguousarray(a.T) for a in (r_hat, beta_hat, elevation_hat) if a is not None]
+
+    def plot(n: int) -> PolarPlot:
+        return PolarPlot(*(a[n] for a in scans))
+
+    state = group.start(plot(0), noise, sigma_v0_mps=config.sigma_v0_mps)
 
     def update(n: int, pred: CVBatch, out: CVBatch) -> CVBatch:
-        return group.update(pred, PolarPlot(r_scans[n], b_scans[n]), noise, out=out)
+        return group.update(pred, plot(n), noise, out=out)
 
     return run_scans(state, steps, T, update, sigma_a_mps2=qa, on_scan=on_scan)
 
@@ -340,21 +389,38 @@ def block_seed(seed: int, index: int) -> np.random.SeedSequence:
 
 def block_measurements(
     config: TrackingConfig, index: int, size: int, truth: NDArray[np.float64]
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Block ``index``'s measured ranges and azimuths, each (size, N), from ``block_seed``."""
+) -> tuple[NDArray[np.float64], ...]:
+    """Block ``index``'s measured ranges and azimuths (and elevations, 3D), each (size, N),
+    from ``block_seed``."""
     rng = np.random.default_rng(block_seed(config.seed, index))
+    return _measurements(config, truth, size, rng)
+
+
+def _measurements(
+    config: TrackingConfig, truth: NDArray[np.float64], runs: int, rng: np.random.Generator
+) -> tuple[NDArray[np.float64], ...]:
+    """(r̂, β̂) or, for a 3D config, (r̂, β̂, ε̂), each (runs, N), drawn from ``rng``."""
+    if config.dims == 3:
+        return spherical_measurements(
+            truth,
+            sigma_r_m=config.sigma_r_m,
+            sigma_azimuth_rad=config.sigma_beta_rad,
+            sigma_elevation_rad=config.sigma_elevation_rad,
+            runs=runs,
+            rng=rng,
+        )
     return polar_measurements(
         truth,
         sigma_r_m=config.sigma_r_m,
         sigma_azimuth_rad=config.sigma_beta_rad,
-        runs=size,
+        runs=runs,
         rng=rng,
     )
 
 
 class DisplayedTrack(NamedTuple):
     """One method's filtered states of the displayed run: x (N, 4) as (x, ẋ, y, ẏ) in m and
-    m/s, and P (N, 4, 4) their covariances."""
+    m/s (3D: (N, 6), (x, ẋ, y, ẏ, z, ż)), and P (N, 4, 4) (3D: (N, 6, 6)) their covariances."""
 
     x: NDArray[np.float64]
     P: NDArray[np.float64]
@@ -365,9 +431,9 @@ def _run_block(
     index: int,
     size: int,
     truth: NDArray[np.float64],
-    shown: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None,
+    shown: tuple[NDArray[np.float64], ...] | None = None,
 ) -> tuple[dict[str, MetricsAccumulator], dict[str, DisplayedTrack]]:
-    """``run_block``, and with ``shown = (r̂, β̂)`` (1, N) also the states of that run.
+    """``run_block``, and with ``shown = (r̂, β̂[, ε̂])`` (1, N) also the states of that run.
 
     The shown run is filtered as one more row of the block, after its ``size`` runs, by the
     same ``filter_block`` call: every row of a batch is filtered on its own (element-wise
@@ -379,14 +445,17 @@ def _run_block(
     check_int("index", index, low=0)
     check_int("size", size, low=1)
     steps = truth.shape[0]
-    r_hat, beta_hat = block_measurements(config, index, size, truth)
+    meas = block_measurements(config, index, size, truth)
     if shown is not None:
-        r_hat, beta_hat = np.concatenate([r_hat, shown[0]]), np.concatenate([beta_hat, shown[1]])
+        meas = tuple(np.concatenate([a, b]) for a, b in zip(meas, shown, strict=True))
+    r_hat, beta_hat = meas[:2]
+    elevation_hat = meas[2] if config.dims == 3 else None
     out = {method: MetricsAccumulator(steps) for method in config.methods}
     tracks: dict[str, DisplayedTrack] = {}
+    d = 2 * config.dims
     if shown is not None:
         tracks = {
-            m: DisplayedTrack(np.empty((steps, 4)), np.empty((steps, 4, 4))) for m in config.methods
+            m: DisplayedTrack(np.empty((steps, d)), np.empty((steps, d, d))) for m in config.methods
         }
     compiled = [m for m in config.methods if config.engine == "compiled" and m in COMPILED_METHODS]
     if compiled:
@@ -426,7 +495,7 @@ def _run_block(
                 if shown is not None:
                     tracks[method].x[n], tracks[method].P[n] = x[size], P[size]
 
-        filter_group(group, r_hat, beta_hat, config, on_scan)
+        filter_group(group, r_hat, beta_hat, config, on_scan, elevation_hat)
     return out, tracks
 
 
@@ -456,12 +525,13 @@ def tracking_result(
 ) -> TrackingResult:
     """The per-scan statistics of accumulators holding all ``config.runs`` runs."""
     steps = config.target.steps
+    dof_pos, dof_state = nees_dof(config.dims)
     return TrackingResult(
         config=config,
         n=np.arange(1, steps + 1),
         metrics={m: accumulators[m].result() for m in config.methods},
-        nees_pos_band95=nees_band(2, config.runs),
-        nees_state_band95=nees_band(4, config.runs),
+        nees_pos_band95=nees_band(dof_pos, config.runs),
+        nees_state_band95=nees_band(dof_state, config.runs),
         leave_one_out={
             m: accumulators[m].leave_one_out() for m in config.methods if accumulators[m].has_groups
         },
@@ -481,7 +551,7 @@ def _monte_carlo(
     truth: NDArray[np.float64],
     progress: ProgressFn | None,
     block: int,
-    shown: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None,
+    shown: tuple[NDArray[np.float64], ...] | None = None,
     workers: int | None = None,
 ) -> tuple[TrackingResult, dict[str, DisplayedTrack]]:
     """Blocks 0, 1, … added into zero accumulators in that order; ``shown`` rides in block 0.
@@ -542,17 +612,16 @@ def run_tracking(
 
 def displayed_measurements(
     config: TrackingConfig, truth: NDArray[np.float64] | None = None
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """The displayed run's measured r̂ and β̂, each (1, N) in m and rad (``DISPLAY_STREAM``).
+) -> tuple[NDArray[np.float64], ...]:
+    """The displayed run's measured r̂ and β̂ (3D: and ε̂), each (1, N) in m and rad
+    (``DISPLAY_STREAM``).
 
     ``radarviz simulate --preset prosov`` writes this run as a measurement file.
     """
     if truth is None:
         truth = config.target.truth()
     rng = np.random.default_rng(np.random.SeedSequence([config.seed, DISPLAY_STREAM]))
-    return polar_measurements(
-        truth, sigma_r_m=config.sigma_r_m, sigma_azimuth_rad=config.sigma_beta_rad, runs=1, rng=rng
-    )
+    return _measurements(config, truth, 1, rng)
 
 
 @dataclass(frozen=True)
@@ -561,12 +630,14 @@ class ProsovScene:
 
     Attributes:
         result: the Monte Carlo statistics, equal bit for bit to ``run_tracking(config)``.
-        truth: (N, 4) true states (x, ẋ, y, ẏ).
+        truth: (N, 4) true states (x, ẋ, y, ẏ); 3D: (N, 6) (x, ẋ, y, ẏ, z, ż).
         times_s: (N,) scan times 0, T, 2T, … in s.
         r_hat_m, beta_hat_rad: (N,) the displayed run's measured range (m) and azimuth (rad).
-        converted_xy_m: conversion method → (N, 2) its converted points of the displayed run,
-            for ``SHOWN_CONVERSIONS`` (``naive`` is the plain polar-to-Cartesian point).
+        converted_xy_m: conversion method → (N, 2) (3D: (N, 3)) its converted points of the
+            displayed run, for ``SHOWN_CONVERSIONS`` (``naive`` is the plain polar-to-Cartesian
+            point).
         tracks: method → the displayed run's filtered states, for every configured method.
+        elevation_hat_rad: (N,) the displayed run's measured elevation (rad); None in 2D.
     """
 
     result: TrackingResult
@@ -576,6 +647,7 @@ class ProsovScene:
     beta_hat_rad: NDArray[np.float64]
     converted_xy_m: dict[str, NDArray[np.float64]]
     tracks: dict[str, DisplayedTrack]
+    elevation_hat_rad: NDArray[np.float64] | None = None
 
     @property
     def config(self) -> TrackingConfig:
@@ -597,14 +669,28 @@ def prosov_scene(
         progress: called as ``progress(runs_done, runs_total)`` after each block.
     """
     truth = config.target.truth()
-    r_hat, beta_hat = displayed_measurements(config, truth)
-    result, tracks = _monte_carlo(config, truth, progress, block, (r_hat, beta_hat))
+    shown = displayed_measurements(config, truth)
+    r_hat, beta_hat = shown[:2]
+    result, tracks = _monte_carlo(config, truth, progress, block, shown)
     sr, sb = config.sigma_r_m, config.sigma_beta_rad
     converted = {}
     for method in SHOWN_CONVERSIONS:
+        if config.dims == 3:
+            c3 = convert_3d(
+                method,
+                r_hat[0],
+                beta_hat[0],
+                shown[2][0],
+                sigma_r_m=sr,
+                sigma_azimuth_rad=sb,
+                sigma_elevation_rad=config.sigma_elevation_rad,
+            )
+            converted[method] = c3.z
+            continue
         c = convert_parts(method, r_hat[0], beta_hat[0], sigma_r_m=sr, sigma_azimuth_rad=sb)
         converted[method] = np.stack([c.x, c.y], -1)
     return ProsovScene(
+        elevation_hat_rad=shown[2][0] if config.dims == 3 else None,
         result=result,
         truth=truth,
         times_s=np.arange(truth.shape[0]) * config.target.period_s,
@@ -671,11 +757,33 @@ def prosov_configs(
     *,
     sigma_r_m: float = default("sigma_r_m"),
     methods: Sequence[str] = ALL_METHODS,
+    dims: int = 2,
+    elevation_deg: float = default("target_elevation_deg"),
+    sigma_elevation_deg: float | None = None,
 ) -> list[TrackingConfig]:
     """The paper's experiment, one configuration per σβ (the paper: 1° and 2°).
 
-    Each value is validated once, by the target (period, scans) and the configs (the rest).
+    ``dims=3``: the 3D reproduction, the same range and radial motion at elevation
+    ``elevation_deg`` (``core.scenarios.spatial.prosov_target_3d``), elevation noise
+    ``sigma_elevation_deg``, on the numpy engine. Each value is validated once, by the target
+    (period, scans, elevation) and the configs (the rest).
     """
+    check_int("dims", dims, low=2, high=3)
+    if dims == 3:
+        target3 = prosov_target_3d(elevation_deg, period_s, steps)
+        return [
+            TrackingConfig(
+                sigma_r_m=sigma_r_m,
+                sigma_beta_deg=float(sb),
+                runs=runs,
+                seed=seed,
+                target=target3,
+                methods=tuple(methods),
+                engine="numpy",
+                sigma_elevation_deg=sigma_elevation_deg,
+            )
+            for sb in sigma_beta_deg
+        ]
     target = prosov_target(period_s, steps)
     return [
         TrackingConfig(
@@ -695,19 +803,22 @@ def track_history(
     r_hat: NDArray[np.float64],
     beta_hat: NDArray[np.float64],
     config: TrackingConfig,
+    elevation_hat: NDArray[np.float64] | None = None,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Every filtered state of a few runs, for display: x (m, N, 4) and P (m, N, 4, 4).
+    """Every filtered state of a few runs, for display: x (m, N, 4) and P (m, N, 4, 4)
+    (3D, with ``elevation_hat`` (m, N): (m, N, 6) and (m, N, 6, 6)).
 
     The Monte Carlo statistics never keep states; this is for the handful of runs a viewer
     draws (memory grows as m · N).
     """
     m, steps = r_hat.shape
-    xs = np.empty((m, steps, 4))
-    ps = np.empty((m, steps, 4, 4))
+    d = 2 * config.dims
+    xs = np.empty((m, steps, d))
+    ps = np.empty((m, steps, d, d))
 
     def keep(n: int, state: CVBatch) -> None:
         xs[:, n] = state.x
         ps[:, n] = state.P
 
-    filter_block(method, r_hat, beta_hat, config, keep)
+    filter_block(method, r_hat, beta_hat, config, keep, elevation_hat)
     return xs, ps

@@ -70,6 +70,15 @@ def build_parser() -> argparse.ArgumentParser:
     add_parameter(pro, "period_s", "--period", "--period-s")
     add_parameter(pro, "steps")
     pro.add_argument(
+        "--dims",
+        type=int,
+        choices=(2, 3),
+        default=2,
+        help="2: the paper's plane; 3: the same target at an elevation, every method in 3D",
+    )
+    add_parameter(pro, "target_elevation_deg", "--elevation-deg", note="with --dims 3")
+    add_parameter(pro, "sigma_elevation_deg", default=1.0, shown_default=1.0, note="with --dims 3")
+    pro.add_argument(
         "--methods",
         nargs="+",
         default=list(ALL_METHODS),
@@ -80,6 +89,25 @@ def build_parser() -> argparse.ArgumentParser:
         "--json", action="store_true", help="print only the JSON document on standard output"
     )
     pro.add_argument("--plot", metavar="FILE.png", help="write the figure (Figs. 1-2, bias, NEES)")
+
+    dop = rep_sub.add_parser(
+        "doppler",
+        help="EKF + Doppler: line-of-sight against converted (r̂·V̂r) update, RLS1-RLS6",
+    )
+    dop.add_argument(
+        "--radars",
+        nargs="+",
+        default=None,
+        metavar="RLS",
+        help="radar presets (default all: RLS1 ... RLS6)",
+    )
+    add_parameter(dop, "sigma_beta_deg")
+    add_parameter(dop, "runs")
+    add_parameter(dop, "seed")
+    dop.add_argument(
+        "--json", action="store_true", help="print only the JSON document on standard output"
+    )
+    dop.add_argument("--plot", metavar="FILE.png", help="write the figure (NEES per radar)")
 
     gor = rep_sub.add_parser(
         "gorshkov", help="finite-memory range / radial-velocity filter (Gorshkov), Monte Carlo"
@@ -240,6 +268,9 @@ def _cmd_reproduce_prosov(args: argparse.Namespace) -> int:
         steps=args.steps,
         sigma_r_m=args.sigma_r_m,
         methods=args.methods,
+        dims=args.dims,
+        elevation_deg=args.target_elevation_deg,
+        sigma_elevation_deg=args.sigma_elevation_deg if args.dims == 3 else None,
     )
     from radarviz.viz_app.reports.prosov import format_prosov_table, prosov_document
     from radarviz.viz_app.runtime import tune_allocator
@@ -252,7 +283,7 @@ def _cmd_reproduce_prosov(args: argparse.Namespace) -> int:
         if show_progress:
             from radarviz.viz_app.cli.progress import ProgressBar
 
-            bar = ProgressBar(f"prosov σβ={cfg.sigma_beta_deg:g}°")
+            bar = ProgressBar(f"prosov{' 3D' if cfg.dims == 3 else ''} σβ={cfg.sigma_beta_deg:g}°")
         results.append(run_tracking(cfg, progress=bar))
     return _emit(
         args,
@@ -307,6 +338,30 @@ def _cmd_reproduce_gorshkov(args: argparse.Namespace) -> int:
         gorshkov_document(result, tracking),
         format_gorshkov_table,
         "radarviz.viz_app.figures.gorshkov:plot_gorshkov",
+    )
+
+
+def _cmd_reproduce_doppler(args: argparse.Namespace) -> int:
+    from radarviz.core.experiments.doppler_start import compare_doppler_updates
+    from radarviz.core.finite_memory.fit import PRESETS
+
+    radars: list[str] = args.radars if args.radars is not None else list(PRESETS)
+    for name in radars:
+        if name not in PRESETS:
+            raise ParameterError(f"--radars must be among {', '.join(PRESETS)} (got {name!r})")
+    check_outputs([("--plot", args.plot)])
+    from radarviz.viz_app.reports.doppler import doppler_document, format_doppler_table
+    from radarviz.viz_app.runtime import tune_allocator
+
+    tune_allocator()
+    results = compare_doppler_updates(
+        tuple(radars), sigma_beta_deg=args.sigma_beta_deg, runs=args.runs, seed=args.seed
+    )
+    return _emit(
+        args,
+        doppler_document(results),
+        format_doppler_table,
+        "radarviz.viz_app.figures.doppler:plot_doppler",
     )
 
 
@@ -376,6 +431,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         if args.command == "reproduce" and args.experiment == "prosov":
             return _cmd_reproduce_prosov(args)
+        if args.command == "reproduce" and args.experiment == "doppler":
+            return _cmd_reproduce_doppler(args)
         if args.command == "reproduce" and args.experiment == "gorshkov":
             return _cmd_reproduce_gorshkov(args)
         if args.command == "reproduce" and args.experiment == "velocity":

@@ -26,7 +26,7 @@ from radarviz.viz_app.rerun.viewer import (
     wait_viewer,
 )
 
-PRESETS = ("demo", "prosov", "gorshkov", "velocity", "manoeuvre")
+PRESETS = ("demo", "prosov", "prosov3d", "gorshkov", "velocity", "manoeuvre")
 DEFAULT_DEMO_PATH = "recordings/demo.rrd"
 
 

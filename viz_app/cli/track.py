@@ -83,7 +83,8 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
         "--doppler",
         default="use",
         metavar="MODE",
-        help="radial velocities: use or ignore (default use)",
+        help="radial velocities: use (line-of-sight update), converted (the r̂·V̂r"
+        " pseudo-measurement) or ignore (default use)",
     )
     tr.add_argument(
         "--model",
@@ -238,7 +239,7 @@ def cmd_track(args: argparse.Namespace) -> int:
     monitor = ConsistencyMonitor(args.nis_window, on_event=exit_warner(_warn))
     options = StreamOptions(
         sigma_v0_mps=args.sigma_v0_mps,
-        use_doppler=check_choice("--doppler", args.doppler, DOPPLER_MODES) == "use",
+        use_doppler=check_choice("--doppler", args.doppler, DOPPLER_MODES) != "ignore",
         init=args.init,
         init_k=args.init_k,
         finite_memory_k=args.finite_memory,

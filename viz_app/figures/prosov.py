@@ -94,7 +94,10 @@ def _style(method: str) -> str | tuple[int, tuple[int, int]]:
 
 def _sigma_label(case: Mapping[str, Any]) -> str:
     sb = case.get("sigma_beta_deg")
-    return f"σβ = {float(sb):g}°" if sb is not None else "σβ = ?"
+    text = f"σβ = {float(sb):g}°" if sb is not None else "σβ = ?"
+    if case.get("dims") == 3:
+        text += f", E = {case['elevation_deg']:g}°, σε = {case['sigma_elevation_deg']:g}°"
+    return text
 
 
 def _note(ax: Axes, text: str) -> None:
@@ -264,7 +267,7 @@ def _plot_nees(ax: Axes, case: Mapping[str, Any], colours: Mapping[str, str]) ->
     """Row 3: position NEES per method on a log axis, with the 95% band and the nominal 2."""
     ns = case.get("n") or []
     methods = case.get("methods") or {}
-    ax.set_title(f"position NEES (2 dof) — {_sigma_label(case)}")
+    ax.set_title(f"position NEES ({int(case.get('dims', 2))} dof) — {_sigma_label(case)}")
     ax.set_ylabel("NEES")
     ax.set_xlabel("scan n")
     if not methods:
@@ -298,14 +301,15 @@ def _plot_nees(ax: Axes, case: Mapping[str, Any], colours: Mapping[str, str]) ->
                     label=f"consistent filter's 95% range [{lo:.3g}, {hi:.3g}]",
                 )
             )
+    nominal = float(case.get("dims", NOMINAL_NEES_POS))  # the position NEES's dof
     handles.append(
         ax.axhline(
-            NOMINAL_NEES_POS,
+            nominal,
             color="black",
             lw=0.8,
             ls=":",
             zorder=1,
-            label=f"nominal {NOMINAL_NEES_POS:g}",
+            label=f"nominal {nominal:g}",
         )
     )
     for name, (x, y) in nees.items():

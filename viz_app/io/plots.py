@@ -95,6 +95,7 @@ RADAR_KEYS = ("x_m", "y_m", "z_m", "sigma_range_m", "sigma_azimuth_deg")
 OPTIONAL_RADAR_KEYS = ("sigma_elevation_deg", "sigma_radial_velocity_mps")
 DEFAULT_TRACKS = "tracks.csv"
 SIM_PRESETS = ("prosov", "fusion")
+#: ``track --doppler``: "use" (the line-of-sight update) or "ignore".
 DOPPLER_MODES = ("use", "ignore")
 #: Most scans per radar ``simulate`` writes (files stream; the Monte Carlo limit does not apply).
 MAX_SIMULATE_STEPS = 10_000_000

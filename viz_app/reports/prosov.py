@@ -124,6 +124,7 @@ def case_document(result: TrackingResult) -> dict[str, Any]:
     case: dict[str, Any] = {
         "sigma_beta_deg": cfg.sigma_beta_deg,
         "sigma_r_m": cfg.sigma_r_m,
+        "dims": cfg.dims,
         "n": [int(v) for v in result.n],
         "methods": methods,
     }
@@ -142,7 +143,11 @@ def case_document(result: TrackingResult) -> dict[str, Any]:
             }
             for c in check_delta_x_claims(result)
         ]
+    if cfg.dims == 3:
+        case["elevation_deg"] = cfg.target.elevation_deg
+        case["sigma_elevation_deg"] = cfg.sigma_elevation_deg
     case["nees_pos_band95"] = list(result.nees_pos_band95)
+    case["nees_state_band95"] = list(result.nees_state_band95)
     return case
 
 
@@ -190,8 +195,14 @@ def format_prosov_table(doc: dict[str, Any]) -> str:
         n = case["n"]
         cols = _scan_columns(n)
         head = "".join(f"{'n=' + str(n[i]):>9}" for i in cols)
+        dims = int(case.get("dims", 2))
+        where = (
+            f", 3D: elevation {case['elevation_deg']:g}°, σε = {case['sigma_elevation_deg']:g}°"
+            if dims == 3
+            else ""
+        )
         lines.append(
-            f"σβ = {case['sigma_beta_deg']:g}°, σr = {case['sigma_r_m']:g} m"
+            f"σβ = {case['sigma_beta_deg']:g}°, σr = {case['sigma_r_m']:g} m{where}"
             f"   (NEES_pos 95% band for the run average: "
             f"[{case['nees_pos_band95'][0]:.3f}, {case['nees_pos_band95'][1]:.3f}])"
         )
@@ -208,8 +219,8 @@ def format_prosov_table(doc: dict[str, Any]) -> str:
             ("range bias, m", "bias_range", "9.1f"),
             ("RMSE x, m", "rmse_x", "9.1f"),
             ("filter σx, m", "sigma_x_filter", "9.1f"),
-            ("NEES position (2 dof)", "nees_pos", "9.2f"),
-            ("NEES state (4 dof)", "nees_state", "9.2f"),
+            (f"NEES position ({dims} dof)", "nees_pos", "9.2f"),
+            (f"NEES state ({2 * dims} dof)", "nees_state", "9.2f"),
         ):
             lines.append(f"  {label + ' (± 95%)':<28}{head}")
             for name, m in case["methods"].items():

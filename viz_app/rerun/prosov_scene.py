@@ -414,15 +414,16 @@ def _log_bias(
         )
 
 
-def log_statistics(rec: rr.RecordingStream, scene: ProsovScene) -> None:
-    """Each method's per-scan Monte Carlo statistics, the NEES band and Prosov's Δx(n)."""
+def log_statistics(rec: rr.RecordingStream, scene: ProsovScene, root: str = ROOT) -> None:
+    """Each method's per-scan Monte Carlo statistics, the NEES band and Prosov's Δx(n), under
+    ``plots/{root}``."""
     scans, times = _scan_axes(scene)
     result = scene.result
     for name, m in result.metrics.items():
         for entity, attr, _ in SERIES:
             log_series(
                 rec,
-                f"plots/{ROOT}/{entity}/{name}",
+                f"plots/{root}/{entity}/{name}",
                 scans,
                 times,
                 getattr(m, attr),
@@ -432,7 +433,7 @@ def log_statistics(rec: rr.RecordingStream, scene: ProsovScene) -> None:
     for tag, v in zip(("lo", "hi"), result.nees_pos_band95, strict=True):
         log_series(
             rec,
-            f"plots/{ROOT}/nees_pos/band95_{tag}",
+            f"plots/{root}/nees_pos/band95_{tag}",
             scans,
             times,
             np.full(len(scans), v),
@@ -444,7 +445,7 @@ def log_statistics(rec: rr.RecordingStream, scene: ProsovScene) -> None:
         for tag, band in zip(("lo", "hi"), result.delta_x_ci95()["rmse"], strict=True):
             log_series(
                 rec,
-                f"plots/{ROOT}/delta_x_percent/rmse_band95_{tag}",
+                f"plots/{root}/delta_x_percent/rmse_band95_{tag}",
                 scans,
                 times,
                 band,
@@ -454,7 +455,7 @@ def log_statistics(rec: rr.RecordingStream, scene: ProsovScene) -> None:
         for reading, values in result.delta_x_percent().items():
             log_series(
                 rec,
-                f"plots/{ROOT}/delta_x_percent/{reading}",
+                f"plots/{root}/delta_x_percent/{reading}",
                 scans,
                 times,
                 values,
@@ -570,16 +571,18 @@ def method_legend_view() -> rrb.Spatial2DView:
     return legend_view(ROOT, "legend", len(METHODS_SHOWN), "methods")
 
 
-def series_views() -> list[rrb.TimeSeriesView]:
+def series_views(root: str = ROOT, dims: int = 2) -> list[rrb.TimeSeriesView]:
     views = [
         rrb.TimeSeriesView(
-            origin=f"plots/{ROOT}/{entity}", name=title, plot_legend=rrb.PlotLegend(visible=False)
+            origin=f"plots/{root}/{entity}",
+            name=title.replace("(2 dof)", f"({dims} dof)"),
+            plot_legend=rrb.PlotLegend(visible=False),
         )
         for entity, _, title in SERIES
     ]
     views.append(
         rrb.TimeSeriesView(
-            origin=f"plots/{ROOT}/delta_x_percent",
+            origin=f"plots/{root}/delta_x_percent",
             name="Δx seed vs naive, %: filter (blue), rmse ± 95% (vermillion), std (green)",
             plot_legend=rrb.PlotLegend(visible=False),
         )
@@ -596,4 +599,123 @@ def views(methods: Sequence[str]) -> rrb.Container:
         rrb.Vertical(map_view(), *series_views(), row_shares=[2, 2, 2, 2, 2]),
         column_shares=[3, 2],
         name="Prosov: converted measurements",
+    )
+
+
+# --- the 3D reproduction (``record --preset prosov3d``) --------------------------------------
+
+#: Entity root of the 3D scene::
+#:
+#:     prosov3d/target/{m}/estimate     the method's estimate minus the truth, per scan, km
+#:     prosov3d/target/{m}/covariance   its 1σ position ellipsoid, per scan
+#:     prosov3d/target/truth, /axes     the truth at the origin; down-range, cross-range, up
+#:     plots/prosov3d/...               the statistics (as the 2D scene's, 3 dof)
+#:
+#: In the target frame (``core.geometry.range_cross_up_basis``): x down-range, y cross-range,
+#: z up, in km, so the flat ellipsoids (σr along range, r σβ across, r σε up) show at true scale.
+ROOT_3D = "prosov3d"
+
+
+def log_prosov3d(
+    rec: rr.RecordingStream,
+    sigma_beta_deg: float = 2.0,
+    sigma_elevation_deg: float = 1.0,
+    elevation_deg: float = 30.0,
+    runs: int = 300,
+    seed: int = 1,
+) -> float:
+    """The 3D Prosov scene (``prosov_scene`` of a 3D config): every method's estimate of the
+    displayed run and its 1σ ellipsoid in the target frame, and the Monte Carlo statistics.
+    Returns the half-size (km) of the frame's view."""
+    from radarviz.core.experiments.prosov import prosov_configs
+    from radarviz.core.geometry import range_cross_up_basis
+    from radarviz.viz_app.rerun.recording import ellipsoid_axes
+
+    (cfg,) = prosov_configs(
+        [sigma_beta_deg],
+        runs=runs,
+        seed=seed,
+        dims=3,
+        elevation_deg=elevation_deg,
+        sigma_elevation_deg=sigma_elevation_deg,
+    )
+    scene = prosov_scene(cfg)
+    scans, times = _scan_axes(scene)
+    idx = indexes(scans, times)
+    pos = [0, 2, 4]
+    B = range_cross_up_basis(np.zeros(3), scene.truth[:, pos])  # (N, 3, 3)
+    n = len(scans)
+    largest = 0.0
+    for name, track in scene.tracks.items():
+        err = np.einsum("nij,nj->ni", B, track.x[:, pos] - scene.truth[:, pos]) / 1e3
+        cov = B @ track.P[:, pos][:, :, pos] @ np.swapaxes(B, -1, -2) / 1e6
+        half, quat = ellipsoid_axes(cov)
+        largest = max(largest, float(half[n // 2 :].max()))
+        colour = rgb(name)
+        rec.send_columns(
+            f"{ROOT_3D}/target/{name}/estimate",
+            indexes=idx,
+            columns=rr.Points3D.columns(
+                positions=err, colors=[colour] * n, radii=[-4.0] * n
+            ).partition([1] * n),
+        )
+        rec.send_columns(
+            f"{ROOT_3D}/target/{name}/covariance",
+            indexes=idx,
+            columns=rr.Ellipsoids3D.columns(
+                centers=err,
+                half_sizes=half,
+                quaternions=quat,
+                colors=[colour] * n,
+                line_radii=[-1.5] * n,
+                fill_mode=[rr.components.FillMode.MajorWireframe] * n,
+            ).partition([1] * n),
+        )
+    axis = 1.2 * largest
+    rec.log(
+        f"{ROOT_3D}/target/truth",
+        rr.Points3D([[0.0, 0.0, 0.0]], radii=-6.0, colors=[rgb("truth")], labels=["truth"]),
+        static=True,
+    )
+    rec.log(
+        f"{ROOT_3D}/target/axes",
+        rr.Arrows3D(
+            vectors=[[axis, 0.0, 0.0], [0.0, axis, 0.0], [0.0, 0.0, axis]],
+            colors=[(120, 120, 120)] * 3,
+            labels=["down-range, km", "cross-range, km", "up, km"],
+            radii=-1.0,
+        ),
+        static=True,
+    )
+    log_legend(rec, f"{ROOT_3D}/legend", list(scene.tracks), [rgb(m) for m in scene.tracks])
+    log_statistics(rec, scene, ROOT_3D)
+    log_text(
+        rec,
+        f"Prosov 3D: {runs} Monte Carlo runs, σβ = {sigma_beta_deg:g}°, σε = "
+        f"{sigma_elevation_deg:g}°, target at elevation {elevation_deg:g}°, seed {seed}",
+    )
+    return axis
+
+
+def views_3d(axis_km: float) -> rrb.Container:
+    """The 3D tab: every method's estimate and 1σ ellipsoid in the target frame, the legend,
+    and the per-scan statistics."""
+    d = 2.2 * axis_km
+    frame = rrb.Spatial3DView(
+        origin=ROOT_3D,
+        contents=["$origin/target/**"],
+        name="3D target frame at the scan (down-range, cross-range, up; km): 1σ ellipsoids",
+        eye_controls=rrb.EyeControls3D(
+            position=(0.9 * d, -0.7 * d, 0.6 * d),
+            look_target=(0.0, 0.0, 0.0),
+            eye_up=(0.0, 0.0, 1.0),
+        ),
+    )
+    return rrb.Horizontal(
+        rrb.Vertical(
+            legend_view(ROOT_3D, "legend", len(METHODS_SHOWN), "methods"), frame, row_shares=[1, 12]
+        ),
+        rrb.Vertical(*series_views(ROOT_3D, 3)),
+        column_shares=[3, 2],
+        name="Prosov 3D: the target frame",
     )

@@ -3,6 +3,8 @@
 One scene per paper, each in its own tab, never two scenes of different scale in one view:
 
     prosov     Prosov: converted measurements (``prosov_scene``)
+    prosov3d   the same in 3D, the target frame down-range, cross-range, up with every
+               method's 1σ ellipsoid (``prosov_scene.log_prosov3d``)
     gorshkov   Gorshkov: finite memory against k, on the ``window_k`` timeline, and the
                Doppler-aided track start on ``scan`` (``gorshkov_scene``)
     velocity   Velocity: several radars' radial velocities (``velocity_scene``)
@@ -20,7 +22,7 @@ import rerun.blueprint as rrb
 
 from radarviz.viz_app.rerun import gorshkov_scene, manoeuvre_scene, prosov_scene, velocity_scene
 
-PRESETS: tuple[str, ...] = ("demo", "prosov", "gorshkov", "velocity", "manoeuvre")
+PRESETS: tuple[str, ...] = ("demo", "prosov", "prosov3d", "gorshkov", "velocity", "manoeuvre")
 #: The debiased method set beside ``naive`` in the overview.
 OVERVIEW_DEBIASED = "ucm"
 
@@ -75,6 +77,9 @@ def record_preset(rec: rr.RecordingStream, preset: str, seed: int = 1) -> None:
     if preset in ("demo", "prosov"):
         prosov_scene.log_prosov(rec, seed=seed)
         tabs.append(prosov_scene.views(prosov_scene.METHODS_SHOWN))
+    if preset == "prosov3d":
+        axis = prosov_scene.log_prosov3d(rec, seed=seed)
+        tabs.append(prosov_scene.views_3d(axis))
     if preset in ("demo", "velocity"):
         vframe = velocity_scene.log_velocity_scene(rec, seed=seed)
         tabs.append(velocity_scene.views(vframe).tab)
