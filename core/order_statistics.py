@@ -115,7 +115,11 @@ class TwoPassQuantiles:
                     keep = self._tables[st, c][rb]
                     if st:
                         keep &= rs == st
-                    self._kept[st, c].append(rv[keep])
+                    kept = self._kept[st, c]
+                    if keep.any():
+                        kept.append(rv[keep])
+                    if len(kept) > 32:  # one array, not one per block: flat in the blocks
+                        kept[:] = [np.concatenate(kept)]
 
     def result(self) -> NDArray[np.float64]:
         """(S, P, C) quantiles; NaN for an empty set."""
@@ -123,7 +127,7 @@ class TwoPassQuantiles:
         for (st, c), bins in self._wanted.items():
             n = int(self.counts[st, c].sum())
             h, ranks = self._ranks(n)
-            kept = np.sort(np.concatenate(self._kept[st, c]))
+            kept = np.sort(np.concatenate([np.empty(0), *self._kept[st, c]]))
             cum = np.cumsum(self.counts[st, c])
             below = {int(b): int(cum[b - 1]) if b else 0 for b in bins}
             for p in range(len(self.probs)):

@@ -3,7 +3,8 @@ memory that they allow."""
 
 from __future__ import annotations
 
-import tracemalloc
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -35,19 +36,29 @@ def test_two_pass_quantiles_equal_numpy_quantile_bit_for_bit(block: int) -> None
         np.testing.assert_array_equal(got[st], np.quantile(v[s == st], probs, axis=0))
 
 
-def test_velocity_monte_carlo_memory_does_not_grow_with_trials(monkeypatch) -> None:
+_PEAK = """
+import gc, sys, tracemalloc
+from radarviz.core.velocity import estimate
+estimate.BLOCK_TRIALS, estimate.KEEP_TRIALS = 2048, 4096
+problem = estimate.baseline_problem()
+estimate.monte_carlo_velocity(problem, 4 * 2048, 5)  # warm: imports and caches
+gc.collect()
+tracemalloc.start()
+estimate.monte_carlo_velocity(problem, int(sys.argv[1]), 5)
+print(tracemalloc.get_traced_memory()[1])
+"""
+
+
+def test_velocity_monte_carlo_memory_does_not_grow_with_trials() -> None:
     """With small blocks and a small keep budget, 16× the trials costs no more than a few
-    blocks of memory more (a stored (trials, 3) array would add 24 B per trial)."""
-    monkeypatch.setattr(estimate, "BLOCK_TRIALS", 2048)
-    monkeypatch.setattr(estimate, "KEEP_TRIALS", 4096)
-    problem = estimate.baseline_problem()
+    blocks of memory more (a stored (trials, 3) array would add 24 B per trial). Each peak is
+    taken in a fresh process, so no other test's threads or garbage count."""
 
     def peak(trials: int) -> int:
-        tracemalloc.start()
-        estimate.monte_carlo_velocity(problem, trials, 5)
-        _, top = tracemalloc.get_traced_memory()
-        tracemalloc.stop()
-        return top
+        out = subprocess.run(
+            [sys.executable, "-c", _PEAK, str(trials)], capture_output=True, text=True, check=True
+        )
+        return int(out.stdout.strip())
 
     small, large = peak(8 * 2048), peak(128 * 2048)
     assert large - small < 0.1 * 24 * (128 - 8) * 2048, (small, large)
