@@ -769,22 +769,14 @@ def prosov_configs(
     (period, scans, elevation) and the configs (the rest).
     """
     check_int("dims", dims, low=2, high=3)
-    if dims == 3:
-        target3 = prosov_target_3d(elevation_deg, period_s, steps)
-        return [
-            TrackingConfig(
-                sigma_r_m=sigma_r_m,
-                sigma_beta_deg=float(sb),
-                runs=runs,
-                seed=seed,
-                target=target3,
-                methods=tuple(methods),
-                engine="numpy",
-                sigma_elevation_deg=sigma_elevation_deg,
-            )
-            for sb in sigma_beta_deg
-        ]
-    target = prosov_target(period_s, steps)
+    three_d = dims == 3
+    target = (
+        prosov_target_3d(elevation_deg, period_s, steps)
+        if three_d
+        else prosov_target(period_s, steps)
+    )
+    # 3D runs on the numpy engine and needs σε; 2D takes the defaults.
+    extra = {"engine": "numpy", "sigma_elevation_deg": sigma_elevation_deg} if three_d else {}
     return [
         TrackingConfig(
             sigma_r_m=sigma_r_m,
@@ -793,6 +785,7 @@ def prosov_configs(
             seed=seed,
             target=target,
             methods=tuple(methods),
+            **extra,
         )
         for sb in sigma_beta_deg
     ]
