@@ -21,8 +21,8 @@ from radarviz.experiments import GorshkovRun
 from radarviz.tracking import Tracks
 
 Columns = dict[str, NDArray[Any]]
-#: The state components of a track row, in the order of the state vector.
-STATE_COLUMNS = ("x_m", "y_m", "z_m", "vx_mps", "vy_mps", "vz_mps")
+#: The state components of a track row, in the order of the state vector (x, vx, y, vy, z, vz).
+STATE_COLUMNS = ("x_m", "vx_mps", "y_m", "vy_mps", "z_m", "vz_mps")
 _GORSHKOV_STATES = ("r_m", "vr_mps", "a_mps2")
 
 

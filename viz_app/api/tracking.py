@@ -8,6 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from radarviz.core.filters.state import position_index
 from radarviz.core.params import ParameterError
 from radarviz.core.tracking.stream import Plot, PlotError, StateRow, StreamOptions
 from radarviz.viz_app.io.plots import Radar, _open_input, bounded_lines, load_radars, track_lines
@@ -21,7 +22,7 @@ class TrackStep:
         plot: index of the plot in ``Tracks.plots``.
         time_s: the plot's time, s.
         method: the filter.
-        x: state (x, y, z, vx, vy, vz), shape (6,), m and m/s.
+        x: state (x, vx, y, vy, z, vz), shape (6,), m and m/s (2D plots: z = vz = 0).
         P: its covariance, shape (6, 6), in m², m²/s, m²/s².
     """
 
@@ -52,7 +53,8 @@ class Tracks:
 
     def positions_m(self, method: str) -> NDArray[np.float64]:
         """The method's estimated positions, shape (K, 3), m (one row per tracked plot)."""
-        rows = [s.x[:3] for s in self.steps if s.method == method]
+        pos = list(position_index(3))
+        rows = [s.x[pos] for s in self.steps if s.method == method]
         return np.array(rows, dtype=float).reshape(-1, 3)
 
     def rows_by_plot(self) -> list[list[StateRow]]:
