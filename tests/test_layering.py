@@ -25,8 +25,17 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 
-# Source folder -> installed package name (pyproject.toml's [tool.setuptools] package-dir).
-SOURCE_ROOTS: dict[str, str] = {"core": "radarviz.core", "viz_app": "radarviz.viz_app"}
+# Source folder -> installed package name (pyproject.toml's [tool.setuptools] package-dir). The
+# public API, viz_app/api, is the top-level package radarviz; a file belongs to the longest
+# folder that holds it.
+SOURCE_ROOTS: dict[str, str] = {
+    "core": "radarviz.core",
+    "viz_app": "radarviz.viz_app",
+    "viz_app/api": "radarviz",
+}
+#: The API is the top of the stack: only the command line builds on it (and it on itself).
+API_FOLDER = "viz_app/api"
+API_USERS: tuple[str, ...] = ("viz_app/api/", "viz_app/cli/")
 
 # (files under this path, imports they must not make, why). A forbidden name matches itself and
 # everything below it: "rerun" forbids "rerun" and "rerun.blueprint", not "radarviz.viz_app.rerun".
@@ -119,10 +128,17 @@ class Import:
 Graph = dict[str, dict[str, Import]]
 
 
+def _root_of(rel: Path) -> str:
+    """The source folder of a file: the longest ``SOURCE_ROOTS`` folder that holds it."""
+    posix = rel.as_posix()
+    return max((f for f in SOURCE_ROOTS if posix.startswith(f + "/")), key=len)
+
+
 def _module_name(rel: Path) -> str:
-    """Installed dotted name of a source file: core/params.py -> radarviz.core.params."""
-    parts = list(rel.with_suffix("").parts)
-    parts[0] = SOURCE_ROOTS[parts[0]]
+    """Installed dotted name of a source file: core/params.py -> radarviz.core.params,
+    viz_app/api/tracking.py -> radarviz.tracking."""
+    root = _root_of(rel)
+    parts = [SOURCE_ROOTS[root], *rel.with_suffix("").parts[len(Path(root).parts) :]]
     if parts[-1] == "__init__":
         parts.pop()
     return ".".join(parts)
@@ -135,6 +151,8 @@ def _sources() -> dict[str, tuple[str, ast.Module]]:
     for folder in SOURCE_ROOTS:
         for path in sorted((ROOT / folder).rglob("*.py")):
             rel = path.relative_to(ROOT)
+            if rel.as_posix() in out:  # a nested root (viz_app/api) is walked twice
+                continue
             tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(rel))
             out[rel.as_posix()] = (_module_name(rel), tree)
     return out
@@ -247,8 +265,15 @@ def _is_file_io(qualified: str | None) -> bool:
 def test_sources_are_found() -> None:
     """The walk sees the tree it guards (a wrong ROOT would make every rule pass vacuously)."""
     modules = _project_modules()
-    for expected in ("radarviz.core.params", "radarviz.core.filters.state", "radarviz.viz_app.cli"):
+    for expected in (
+        "radarviz.core.params",
+        "radarviz.core.filters.state",
+        "radarviz.viz_app.cli",
+        "radarviz",
+        "radarviz.tracking",
+    ):
         assert expected in modules, f"{expected} not found under {ROOT}"
+    assert "radarviz.viz_app.api" not in modules, "viz_app/api must map to radarviz"
     assert any(imp.target == "rerun" for imp in _all_imports()), "no 'import rerun' seen"
 
 
@@ -260,6 +285,26 @@ def test_forbidden_imports() -> None:
         if imp.file.startswith(scope) and any(_within(imp.target, f) for f in forbidden)
     ]
     assert not breaches, "forbidden imports:\n" + "\n".join(breaches)
+
+
+def _api_modules() -> set[str]:
+    return {name for rel, (name, _) in _sources().items() if rel.startswith(API_FOLDER + "/")}
+
+
+def test_only_the_cli_builds_on_the_api() -> None:
+    """The API (viz_app/api, installed as radarviz) sits on top of core and viz_app: core and
+    the adapters never import it, so it can call them without a cycle; the CLI goes through
+    it."""
+    api = _api_modules()
+    assert "radarviz" in api and len(api) > 1, api
+    breaches = [
+        f"{imp.file}:{imp.line}: imports {imp.target} (the API; only {API_USERS} may)"
+        for imp in _all_imports()
+        if imp.target in api and not imp.file.startswith(API_USERS)
+    ]
+    assert not breaches, "imports of the API from below it:\n" + "\n".join(breaches)
+    cli = {imp.target for imp in _all_imports() if imp.file.startswith("viz_app/cli/")}
+    assert cli & api, "the command line does not use the API"
 
 
 def test_core_does_no_file_io() -> None:

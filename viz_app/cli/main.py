@@ -22,12 +22,12 @@ import sys
 from collections.abc import Callable, Sequence
 from typing import Any, NoReturn
 
-from radarviz.core.experiments.prosov import ALL_METHODS, prosov_configs, run_tracking
+from radarviz.core.experiments.prosov import ALL_METHODS
 from radarviz.core.finite import ResultError, check_finite_document
-from radarviz.core.params import ParameterError, check, check_int, check_real
+from radarviz.core.params import ParameterError, check_int, check_real
 from radarviz.viz_app.cli import recording, sweep, track
 from radarviz.viz_app.cli.args import integer, number, print_report
-from radarviz.viz_app.cli.params import add_parameter, cli_message
+from radarviz.viz_app.cli.params import add_parameter, cli_message, map_flag
 from radarviz.viz_app.io.atomic import WriteError, check_outputs
 
 EXIT_USAGE = 2
@@ -69,6 +69,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_parameter(pro, "seed")
     add_parameter(pro, "period_s", "--period", "--period-s")
     add_parameter(pro, "steps")
+    map_flag(pro, "methods", "--methods")
     pro.add_argument(
         "--dims",
         type=int,
@@ -121,6 +122,8 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="RLS",
         help="radar presets (default all: RLS1 … RLS6)",
     )
+    for name in ("radars", "k_max", "tracking_radar", "tracking_runs"):
+        map_flag(gor, name, "--" + name.replace("_", "-"))
     gor.add_argument(
         "--k-max",
         type=integer,
@@ -256,12 +259,22 @@ def _emit(
 
 
 def _cmd_reproduce_prosov(args: argparse.Namespace) -> int:
-    for m in args.methods:
-        if m not in ALL_METHODS:
-            raise ParameterError(f"--methods must be among {', '.join(ALL_METHODS)} (got {m!r})")
+    import radarviz
+
     check_outputs([("--plot", args.plot)])
-    configs = prosov_configs(
-        sigma_beta_deg=args.sigma_beta_deg,
+    from radarviz.viz_app.reports.prosov import format_prosov_table, prosov_document
+    from radarviz.viz_app.runtime import tune_allocator
+
+    tune_allocator()
+    progress = None
+    if args.runs * len(args.sigma_beta_deg) >= PROGRESS_MIN_RUNS:
+        from radarviz.viz_app.cli.progress import ProgressBar
+
+        def progress(sigma_beta_deg: float) -> ProgressBar:
+            return ProgressBar(f"prosov{' 3D' if args.dims == 3 else ''} σβ={sigma_beta_deg:g}°")
+
+    results = radarviz.run_prosov(
+        args.sigma_beta_deg,
         runs=args.runs,
         seed=args.seed,
         period_s=args.period_s,
@@ -271,20 +284,8 @@ def _cmd_reproduce_prosov(args: argparse.Namespace) -> int:
         dims=args.dims,
         elevation_deg=args.target_elevation_deg,
         sigma_elevation_deg=args.sigma_elevation_deg if args.dims == 3 else None,
+        progress=progress,
     )
-    from radarviz.viz_app.reports.prosov import format_prosov_table, prosov_document
-    from radarviz.viz_app.runtime import tune_allocator
-
-    tune_allocator()
-    results = []
-    show_progress = args.runs * len(configs) >= PROGRESS_MIN_RUNS
-    for cfg in configs:
-        bar = None
-        if show_progress:
-            from radarviz.viz_app.cli.progress import ProgressBar
-
-            bar = ProgressBar(f"prosov{' 3D' if cfg.dims == 3 else ''} σβ={cfg.sigma_beta_deg:g}°")
-        results.append(run_tracking(cfg, progress=bar))
     return _emit(
         args,
         prosov_document(results),
@@ -294,48 +295,32 @@ def _cmd_reproduce_prosov(args: argparse.Namespace) -> int:
 
 
 def _cmd_reproduce_gorshkov(args: argparse.Namespace) -> int:
-    from radarviz.core.experiments.doppler_start import DopplerTrackingConfig, run_doppler_tracking
-    from radarviz.core.finite_memory.fit import PRESETS, RadarPreset, run_gorshkov
+    import radarviz
+    from radarviz.core.finite_memory.fit import PRESETS, RadarPreset
 
-    k_max = check_int("--k-max", args.k_max, low=1, high=20)
     radars: list = args.radars if args.radars is not None else list(PRESETS)
-    for name in radars:
-        if name not in PRESETS:
-            raise ParameterError(f"--radars must be among {', '.join(PRESETS)} (got {name!r})")
     if args.custom is not None:
         sr = check_real("--custom SIGMA_R_M", args.custom[0], low=0.0, high=1e6)
         c0 = check_real("--custom C0", args.custom[1], low=0.0, high=1e8)
         T = check_real("--custom PERIOD_S", args.custom[2], low=0.0, high=3600.0)
         radars = [*radars, RadarPreset("custom", "-", sr, sr / (T * c0**0.5), T)]
-    if args.tracking_radar not in PRESETS:
-        raise ParameterError(
-            f"--tracking-radar must be one of {', '.join(PRESETS)} (got {args.tracking_radar!r})"
-        )
-    check_int("--tracking-runs", args.tracking_runs, low=0)
-    if args.tracking_runs == 1:
-        raise ParameterError("--tracking-runs must be 0 (skip) or an integer >= 2 (got 1)")
     check_outputs([("--plot", args.plot)])
-    # The tracking comparison's config is built (and so checked) before the long Monte Carlo;
-    # with --tracking-runs 0 σβ is still checked, so a bad value is an error either way.
-    tracking_config = None
-    if args.tracking_runs:
-        tracking_config = DopplerTrackingConfig(
-            radar=args.tracking_radar,
-            sigma_beta_deg=args.sigma_beta_deg,
-            runs=args.tracking_runs,
-            seed=args.seed,
-        )
-    else:
-        check("sigma_beta_deg", args.sigma_beta_deg)
     from radarviz.viz_app.reports.gorshkov import format_gorshkov_table, gorshkov_document
     from radarviz.viz_app.runtime import tune_allocator
 
     tune_allocator()
-    result = run_gorshkov(radars, trials=args.trials, seed=args.seed, ks=range(1, k_max + 1))
-    tracking = None if tracking_config is None else run_doppler_tracking(tracking_config)
+    run = radarviz.run_gorshkov(
+        radars,
+        trials=args.trials,
+        seed=args.seed,
+        k_max=args.k_max,
+        tracking_radar=args.tracking_radar,
+        tracking_runs=args.tracking_runs,
+        sigma_beta_deg=args.sigma_beta_deg,
+    )
     return _emit(
         args,
-        gorshkov_document(result, tracking),
+        gorshkov_document(run.fits, run.tracking),
         format_gorshkov_table,
         "radarviz.viz_app.figures.gorshkov:plot_gorshkov",
     )
@@ -366,14 +351,14 @@ def _cmd_reproduce_doppler(args: argparse.Namespace) -> int:
 
 
 def _cmd_reproduce_velocity(args: argparse.Namespace) -> int:
-    from radarviz.core.velocity.estimate import run_velocity_experiment
+    import radarviz
 
     check_outputs([("--plot", args.plot)])
     from radarviz.viz_app.reports.velocity import format_velocity_table, velocity_document
     from radarviz.viz_app.runtime import tune_allocator
 
     tune_allocator()
-    doc = velocity_document(run_velocity_experiment(args.trials, args.seed))
+    doc = velocity_document(radarviz.run_velocity(args.trials, args.seed))
     return _emit(
         args, doc, format_velocity_table, "radarviz.viz_app.figures.velocity:plot_velocity"
     )

@@ -11,6 +11,7 @@ import time
 from pathlib import Path
 
 from radarviz.core.params import ParameterError, check_choice, check_int
+from radarviz.viewer import PRESETS
 from radarviz.viz_app.io.atomic import check_outputs
 from radarviz.viz_app.rerun.viewer import (
     LOOPBACK,
@@ -26,7 +27,6 @@ from radarviz.viz_app.rerun.viewer import (
     wait_viewer,
 )
 
-PRESETS = ("demo", "prosov", "prosov3d", "gorshkov", "velocity", "manoeuvre")
 DEFAULT_DEMO_PATH = "recordings/demo.rrd"
 
 
@@ -73,14 +73,10 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
 
 
 def _write(preset: str, out: str, overwrite: bool, seed: int) -> float:
-    from radarviz.viz_app.rerun.recording import recording_file
-    from radarviz.viz_app.rerun.scenes import record_preset
-    from radarviz.viz_app.runtime import tune_allocator
+    import radarviz
 
-    tune_allocator()
     t0 = time.perf_counter()
-    with recording_file(out, overwrite=overwrite) as rec:
-        record_preset(rec, preset, seed=seed)
+    radarviz.record(preset, out, overwrite=overwrite, seed=seed)
     return time.perf_counter() - t0
 
 

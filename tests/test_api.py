@@ -1,0 +1,190 @@
+"""The public API (``import radarviz``): the functions give the engine's numbers, the tables
+hold them row for row, bad input is one line naming the parameter, and the command line is
+the same computation."""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import radarviz
+from radarviz.core.conversion.planar import convert as core_convert
+from radarviz.core.experiments.prosov import (
+    ALL_METHODS,
+    TrackingConfig,
+    prosov_target,
+    run_tracking,
+)
+from radarviz.core.finite_memory.fit import finite_memory_fit, preset
+from radarviz.core.params import ParameterError
+from radarviz.viz_app.cli.main import main
+from radarviz.viz_app.io.plots import run_track, simulated_plots, state_from_row, write_measurements
+
+
+def test_all_names_resolve_and_core_and_viz_app_still_import() -> None:
+    import radarviz.core
+    import radarviz.viz_app
+
+    for name in radarviz.__all__:
+        assert getattr(radarviz, name) is not None, name
+    assert sorted(radarviz.__all__) == sorted(set(radarviz.__all__))
+
+
+def test_run_prosov_is_the_engine_bit_for_bit() -> None:
+    [res] = radarviz.run_prosov(2.0, runs=64, seed=3, steps=12, methods=("naive", "seed"))
+    ref = run_tracking(
+        TrackingConfig(
+            sigma_beta_deg=2.0,
+            runs=64,
+            seed=3,
+            target=prosov_target(10.0, 12),
+            methods=("naive", "seed"),
+        )
+    )
+    for m in ("naive", "seed"):
+        for field in ("bias_range", "rmse_x", "nees_pos"):
+            np.testing.assert_array_equal(
+                getattr(res.metrics[m], field), getattr(ref.metrics[m], field)
+            )
+    table = radarviz.to_table([res])
+    assert len(table) == 2 * 12
+    rows = table[table.method == "seed"].sort_values("scan")
+    np.testing.assert_array_equal(rows.bias_range.to_numpy(), ref.metrics["seed"].bias_range)
+    assert radarviz.to_arrow(res).num_rows == 24
+
+
+def test_convert_and_finite_memory_are_the_core_functions() -> None:
+    r = np.array([150e3, 90e3])
+    b = np.array([0.1, -0.3])
+    for method in ("naive", "seed", "cmkf_d", "ucm"):
+        a = radarviz.convert(method, r, b, sigma_r_m=250.0, sigma_azimuth_rad=0.03)
+        c = core_convert(method, r, b, sigma_r_m=250.0, sigma_azimuth_rad=0.03)
+        np.testing.assert_array_equal(a.z, c.z)
+        np.testing.assert_array_equal(a.R, c.R)
+    p = preset("RLS3")
+    fit = radarviz.finite_memory(
+        5, sigma_r_m=p.sigma_r_m, sigma_vr_mps=p.sigma_vr_mps, period_s=10.0
+    )
+    ref = finite_memory_fit(5, sigma_r_m=p.sigma_r_m, sigma_vr_mps=p.sigma_vr_mps, period_s=10.0)
+    np.testing.assert_array_equal(fit.R, ref.R)
+    assert fit.sigma.shape == (3,)
+
+
+def test_estimate_velocity_recovers_the_true_velocity_without_noise() -> None:
+    from radarviz.core.geometry import direction_cosines
+
+    sites = np.array([(0.0, 0.0, 0.0), (80e3, 0.0, 0.0), (40e3, 70e3, 0.0)])
+    target, v = np.array([40e3, 30e3, 10e3]), np.array([216.5, 125.0, 0.0])
+    d = target - sites
+    az, el = np.arctan2(d[:, 1], d[:, 0]), np.arctan2(d[:, 2], np.hypot(d[:, 0], d[:, 1]))
+    est = radarviz.estimate_velocity(
+        sites,
+        direction_cosines(az, el) @ v,
+        az,
+        el,
+        sigma_vr_mps=[1.0, 3.0, 5.0],
+        sigma_azimuth_rad=np.deg2rad([0.1, 0.3, 0.5]),
+        sigma_elevation_rad=np.deg2rad([0.2, 0.5, 1.0]),
+    )
+    np.testing.assert_allclose(est.velocity, v, atol=1e-9)
+    # The README's first-order σ of the baseline: 2.157, 3.385, 10.665 m/s.
+    np.testing.assert_allclose(np.sqrt(np.diag(est.covariance)), [2.157, 3.385, 10.665], atol=5e-4)
+    table = radarviz.to_table(est)
+    assert table.shape[0] == 1 and table.geometry_m.iloc[0] == pytest.approx(0.053, abs=5e-4)
+
+
+@pytest.mark.parametrize(
+    ("call", "start"),
+    [
+        (lambda: radarviz.run_prosov(1.0, runs=1), "runs must be"),
+        (lambda: radarviz.run_prosov(1.0, methods=("nope",)), "methods must be among"),
+        (lambda: radarviz.run_prosov(-1.0), "sigma_beta_deg must be"),
+        (lambda: radarviz.run_gorshkov(k_max=0), "k_max must be an integer in [1, 20]"),
+        (lambda: radarviz.run_gorshkov(["RLS9"]), "radars must be among"),
+        (lambda: radarviz.run_gorshkov(tracking_runs=1), "tracking_runs must be 0"),
+        (lambda: radarviz.finite_memory(0, sigma_r_m=1, sigma_vr_mps=1, period_s=1), "k must"),
+        (lambda: radarviz.track([], init="later"), "init must be one of"),
+        (lambda: radarviz.to_table(42), "result must be"),
+        (lambda: radarviz.record("nope", "x.rrd"), "preset must be one of"),
+    ],
+)
+def test_bad_input_is_one_line_naming_the_parameter(call, start: str) -> None:
+    with pytest.raises(ParameterError) as exc:
+        call()
+    assert str(exc.value).startswith(start), str(exc.value)
+    assert "\n" not in str(exc.value)
+
+
+def test_track_equals_the_file_tracker(tmp_path: Path) -> None:
+    plots, radars = simulated_plots("fusion", 2, 1.0, 20)
+    meas, sites = tmp_path / "m.csv", tmp_path / "r.toml"
+    write_measurements(str(meas), str(sites), plots, radars)
+    out = tmp_path / "tracks.csv"
+    run_track(str(meas), str(sites), str(out))
+    with out.open() as fh:
+        cli_rows = list(csv.DictReader(fh))
+    from_file = radarviz.track_file(str(meas), str(sites))
+    from_plots = radarviz.track(plots, radars=radars)
+    assert len(from_file.steps) == len(from_plots.steps) == len(cli_rows) > 0
+    for a, b, row in zip(from_file.steps, from_plots.steps, cli_rows, strict=True):
+        x, P = state_from_row(row)
+        assert a.method == b.method == row["method"]
+        np.testing.assert_allclose(a.x, b.x, rtol=1e-12, atol=1e-9)
+        np.testing.assert_allclose(a.x, x, rtol=1e-12, atol=1e-9)
+        np.testing.assert_allclose(a.P, P, rtol=1e-12, atol=1e-9)
+    table = radarviz.to_table(from_file)
+    assert len(table) == len(cli_rows)
+    first = from_file.steps[0]
+    np.testing.assert_array_equal(table[["x_m", "y_m", "z_m"]].iloc[0], first.x[[0, 2, 4]])
+    np.testing.assert_array_equal(table.sigma_vy_mps.iloc[0], np.sqrt(first.P[3, 3]))
+    assert set(table.method) == set(from_file.methods)
+    pos = from_file.positions_m("ekf")
+    assert pos.shape == (len(plots), 3)
+
+
+def test_record_tracks_and_refuse_to_overwrite(tmp_path: Path) -> None:
+    from radarviz.viz_app.rerun.recording import verify_recording
+
+    plots, radars = simulated_plots("prosov", 1, 1.0, 60)
+    tracks = radarviz.track(plots, ("naive", "ekf"), radars=radars)
+    path = radarviz.record(tracks, tmp_path / "t.rrd")
+    verify_recording(path)
+    before = path.read_bytes()
+    with pytest.raises(ParameterError, match="exists"):
+        radarviz.record(tracks, path)
+    assert path.read_bytes() == before
+    with pytest.raises(ParameterError, match="radars"):
+        radarviz.record(radarviz.track(plots, ("naive",)), tmp_path / "u.rrd")
+    assert not (tmp_path / "u.rrd").exists()
+
+
+def test_cli_reproduce_is_the_api(capsys: pytest.CaptureFixture[str]) -> None:
+    assert (
+        main(
+            [
+                "reproduce",
+                "prosov",
+                "--runs",
+                "40",
+                "--steps",
+                "8",
+                "--sigma-beta-deg",
+                "2",
+                "--json",
+            ]
+        )
+        == 0
+    )
+    doc = json.loads(capsys.readouterr().out)
+    [res] = radarviz.run_prosov(2.0, runs=40, steps=8)
+    case = doc["cases"][0]
+    for m in ALL_METHODS:
+        np.testing.assert_allclose(
+            case["methods"][m]["bias_range"], res.metrics[m].bias_range, rtol=1e-15
+        )
+    assert main(["reproduce", "gorshkov", "--k-max", "0"]) == 2
+    assert "--k-max must be an integer in [1, 20]" in capsys.readouterr().err

@@ -1,0 +1,174 @@
+"""Tracking plots: a thin layer over the streaming tracker (``radarviz.core.tracking.stream``)."""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from radarviz.core.filters.state import position_index
+from radarviz.core.params import ParameterError
+from radarviz.core.tracking.stream import Plot, PlotError, StateRow, StreamOptions
+from radarviz.viz_app.io.plots import Radar, _open_input, bounded_lines, load_radars, track_lines
+
+
+@dataclass(frozen=True)
+class TrackStep:
+    """One method's state after one plot.
+
+    Attributes:
+        plot: index of the plot in ``Tracks.plots``.
+        time_s: the plot's time, s.
+        method: the filter.
+        x: state (x, vx, y, vy, z, vz), shape (6,), m and m/s (2D plots: z = vz = 0).
+        P: its covariance, shape (6, 6), in m², m²/s, m²/s².
+    """
+
+    plot: int
+    time_s: float
+    method: str
+    x: NDArray[np.float64]
+    P: NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class Tracks:
+    """What ``track`` returns: the plots it was given and every method's states.
+
+    Attributes:
+        plots: the plots in the order they were tracked.
+        steps: one ``TrackStep`` per (plot, method) once the track has started.
+        methods: the filters run.
+        three_d: the plots carry elevations.
+        radars: the radar sites (for a recording), empty when plots came without them.
+    """
+
+    plots: tuple[Plot, ...]
+    steps: tuple[TrackStep, ...]
+    methods: tuple[str, ...]
+    three_d: bool
+    radars: tuple[Radar, ...] = ()
+
+    def positions_m(self, method: str) -> NDArray[np.float64]:
+        """The method's estimated positions, shape (K, 3), m (one row per tracked plot)."""
+        pos = list(position_index(3))
+        rows = [s.x[pos] for s in self.steps if s.method == method]
+        return np.array(rows, dtype=float).reshape(-1, 3)
+
+    def rows_by_plot(self) -> list[list[StateRow]]:
+        """For each plot, its (method, x (6,), P (6, 6)) rows: what the tracker returned."""
+        out: list[list[StateRow]] = [[] for _ in self.plots]
+        for s in self.steps:
+            out[s.plot].append((s.method, s.x, s.P))
+        return out
+
+
+def _options(**kwargs: object) -> StreamOptions:
+    return StreamOptions(**kwargs)  # type: ignore[arg-type]  # each field is checked there
+
+
+def track(
+    plots: Iterable[Plot],
+    methods: Sequence[str] | None = None,
+    *,
+    sigma_a_mps2: float = 0.0,
+    sigma_v0_mps: float = 1000.0,
+    use_doppler: bool = True,
+    init: str = "first-plot",
+    init_k: int = 3,
+    radars: Iterable[Radar] = (),
+) -> Tracks:
+    """Track one target's plots with every requested filter.
+
+    The plots go to ``StreamTracker`` (the same tracker as ``radarviz track``) in blocks.
+
+    Args:
+        plots: ``Plot`` records in time order (2D, or all with elevations for 3D).
+        methods: filters (default every one of the plots' kind).
+        sigma_a_mps2: process-noise acceleration std, m/s² (0: constant velocity exactly).
+        sigma_v0_mps: velocity std of the start, m/s.
+        use_doppler: use the plots' radial velocities where they have them.
+        init: ``first-plot`` or ``finite-memory`` (Gorshkov and Zavizhenets' window fit).
+        init_k: plots in the finite-memory start window.
+        radars: the sites, kept for ``record`` and ``show``.
+
+    Returns:
+        ``Tracks`` (``to_table`` gives one row per plot and method).
+    """
+    from radarviz.core.experiments.prosov import ALL_METHODS
+    from radarviz.core.tracking.stream import METHODS_3D, StreamTracker
+
+    options = _options(
+        sigma_a_mps2=sigma_a_mps2,
+        sigma_v0_mps=sigma_v0_mps,
+        use_doppler=use_doppler,
+        init=init,
+        init_k=init_k,
+    )
+    plots = tuple(plots)
+    three_d = bool(plots) and plots[0].elevation_rad is not None
+    used = tuple(methods) if methods is not None else (METHODS_3D if three_d else ALL_METHODS)
+    tracker = StreamTracker(used, three_d, options)
+    steps: list[TrackStep] = []
+    block = 1000
+    for i in range(0, len(plots), block):
+        chunk = list(plots[i : i + block])
+        try:
+            rows_of = tracker.add_block(chunk)
+        except PlotError as exc:
+            raise ParameterError(f"plots[{i + exc.index}].{exc.column}: {exc}", "plots") from None
+        for j, (p, rows) in enumerate(zip(chunk, rows_of, strict=True)):
+            steps += [TrackStep(i + j, p.time_s, m, x.copy(), P.copy()) for m, x, P in rows]
+    return Tracks(plots, tuple(steps), used, three_d, tuple(radars))
+
+
+def track_file(
+    measurements: str,
+    radars: str,
+    methods: Sequence[str] | None = None,
+    *,
+    sigma_a_mps2: float = 0.0,
+    sigma_v0_mps: float = 1000.0,
+    use_doppler: bool = True,
+    init: str = "first-plot",
+    init_k: int = 3,
+) -> Tracks:
+    """Track a measurement CSV file with its radars TOML file (the formats of ``radarviz
+    track``, described in the README); nothing is written.
+
+    Args:
+        measurements: path of the measurement CSV.
+        radars: path of the radars TOML file (sites in m, accuracies).
+        methods: see ``track``.
+        sigma_a_mps2: see ``track``.
+        sigma_v0_mps: see ``track``.
+        use_doppler: see ``track``.
+        init: see ``track``.
+        init_k: see ``track``.
+
+    Returns:
+        ``Tracks``, with the file's radars.
+    """
+    options = _options(
+        sigma_a_mps2=sigma_a_mps2,
+        sigma_v0_mps=sigma_v0_mps,
+        use_doppler=use_doppler,
+        init=init,
+        init_k=init_k,
+    )
+    sites = load_radars(radars)
+    plots: list[Plot] = []
+    steps: list[TrackStep] = []
+
+    def on_rows(plot: Plot, rows: list[StateRow]) -> None:
+        steps.extend(TrackStep(len(plots), plot.time_s, m, x.copy(), P.copy()) for m, x, P in rows)
+        plots.append(plot)
+
+    with _open_input(measurements) as fh:
+        src = bounded_lines(fh, measurements)
+        _, three_d, used = track_lines(
+            src, measurements, sites, None if methods is None else tuple(methods), options, on_rows
+        )
+    return Tracks(tuple(plots), tuple(steps), tuple(used), three_d, tuple(sites.values()))

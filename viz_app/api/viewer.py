@@ -1,0 +1,126 @@
+"""Rerun recordings of presets and tracks: written to a file, or shown in a notebook.
+
+The embedded viewer is ``rerun-notebook``'s widget. Its JavaScript and WebAssembly ship in
+that package; by default the widget fetches them from the Rerun website, which fails without
+internet. Unless ``RERUN_NOTEBOOK_ASSET`` is already set, ``show`` sets it to ``serve-local``
+before the widget is first imported: the kernel then serves the package's own files on
+localhost and the viewer works offline.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from radarviz.core.params import ParameterError, check_choice, check_int
+from radarviz.tracking import Tracks
+
+if TYPE_CHECKING:
+    import rerun as rr
+
+#: What ``record`` and ``show`` accept as a name: the scenes of ``radarviz record --preset``.
+PRESETS = ("demo", "prosov", "prosov3d", "gorshkov", "velocity", "manoeuvre")
+#: ``RERUN_NOTEBOOK_ASSET`` value that serves the widget's files from the installed package.
+OFFLINE_ASSETS = "serve-local"
+
+Recordable = str | Tracks
+
+
+def _log(rec: rr.RecordingStream, what: Recordable, seed: int) -> None:
+    """Fill ``rec`` with a preset's scenes or a ``Tracks`` result, and send its blueprint."""
+    if isinstance(what, Tracks):
+        from radarviz.viz_app.rerun.track_recording import TrackRecorder
+
+        if not what.radars:
+            raise ParameterError(
+                "tracks must carry their radars to be recorded (pass radars= to track, or use "
+                "track_file)",
+                "tracks",
+            )
+        recorder = TrackRecorder(rec, what.radars)
+        for plot, rows in zip(what.plots, what.rows_by_plot(), strict=True):
+            recorder.add(plot, rows)
+        recorder.close()
+        return
+    if not isinstance(what, str):
+        raise ParameterError(
+            f"what must be a preset name ({', '.join(PRESETS)}) or Tracks "
+            f"(got {type(what).__name__})",
+            "what",
+        )
+    from radarviz.viz_app.rerun.scenes import record_preset
+    from radarviz.viz_app.runtime import tune_allocator
+
+    check_choice("preset", what, PRESETS)
+    tune_allocator()
+    record_preset(rec, what, seed=seed)
+
+
+def record(
+    what: Recordable, path: str | os.PathLike, *, overwrite: bool = False, seed: int = 1
+) -> Path:
+    """Write a Rerun recording (``.rrd``) of a preset or of ``track`` results.
+
+    The file is written whole or not at all (``radarviz.viz_app.io.atomic``); open it with
+    ``radarviz view PATH`` or ``show``.
+
+    Args:
+        what: a preset name (``demo``, ``prosov``, ``prosov3d``, ``gorshkov``, ``velocity``,
+            ``manoeuvre``: the scenes of ``radarviz record``) or a ``Tracks`` result with its
+            radars.
+        path: the ``.rrd`` file to write.
+        overwrite: replace an existing file.
+        seed: root seed of a preset's Monte Carlo.
+
+    Returns:
+        The path written.
+    """
+    from radarviz.viz_app.io.atomic import check_outputs
+    from radarviz.viz_app.rerun.recording import recording_file
+
+    check_int("seed", seed, low=0)
+    check_outputs([("path", str(path))], overwrite=overwrite)
+    if isinstance(what, str):
+        check_choice("preset", what, PRESETS)
+    with recording_file(path, overwrite=overwrite) as rec:
+        _log(rec, what, seed)
+    return Path(path)
+
+
+def use_offline_assets() -> str:
+    """Make the notebook viewer load its files from the installed package (see the module
+    docstring); returns the ``RERUN_NOTEBOOK_ASSET`` value in force.
+
+    Has no effect once ``rerun_notebook`` is imported: its asset location is fixed then.
+    """
+    if "rerun_notebook" not in sys.modules:
+        os.environ.setdefault("RERUN_NOTEBOOK_ASSET", OFFLINE_ASSETS)
+    return os.environ.get("RERUN_NOTEBOOK_ASSET", "")
+
+
+def show(what: Recordable, *, seed: int = 1, width: int | str = "auto", height: int = 720) -> Any:
+    """The embedded Rerun viewer of a preset or of ``track`` results, for a notebook cell.
+
+    Return it as a cell's last value (or call ``.display()`` on it) to show it.
+
+    Args:
+        what: as for ``record``.
+        seed: root seed of a preset's Monte Carlo.
+        width: viewer width, pixels, or ``"auto"`` (the cell's width).
+        height: viewer height, pixels.
+
+    Returns:
+        A ``rerun.notebook.Viewer`` widget holding the recording.
+    """
+    check_int("seed", seed, low=0)
+    check_int("height", height, low=100, high=10_000)
+    use_offline_assets()
+    from rerun.notebook import Viewer
+
+    from radarviz.viz_app.rerun.recording import new_recording
+
+    rec = new_recording()
+    _log(rec, what, seed)
+    return Viewer(width=width, height=height, recording=rec)  # type: ignore[arg-type]
