@@ -146,6 +146,27 @@ def test_track_equals_the_file_tracker(tmp_path: Path) -> None:
     assert pos.shape == (len(plots), 3)
 
 
+def test_track_of_many_targets_equals_each_target_alone() -> None:
+    from dataclasses import replace
+
+    plots, radars = simulated_plots("prosov", 1, 1.0, 30)
+    other = [replace(p, azimuth_rad=p.azimuth_rad + 0.3, time_s=p.time_s + 0.5) for p in plots]
+    a = [replace(p, target="a") for p in plots]
+    b = [replace(p, target="b") for p in other]
+    mixed = sorted(a + b, key=lambda p: p.time_s)
+    both = radarviz.track(mixed, ["ucm", "ekf"], radars=radars)
+    table = radarviz.to_table(both)
+    assert set(table.target) == {"a", "b"}
+    for label, alone in (("a", plots), ("b", other)):
+        single = radarviz.track(alone, ["ucm", "ekf"])
+        mine = [s for s in both.steps if s.target == label]
+        assert len(mine) == len(single.steps) > 0
+        for s, t in zip(mine, single.steps, strict=True):
+            assert s.method == t.method
+            np.testing.assert_allclose(s.x, t.x, rtol=1e-12, atol=1e-9)
+            np.testing.assert_allclose(s.P, t.P, rtol=1e-12, atol=1e-9)
+
+
 def test_record_tracks_and_refuse_to_overwrite(tmp_path: Path) -> None:
     from radarviz.viz_app.rerun.recording import verify_recording
 

@@ -82,6 +82,8 @@ def _tracks(tracks: Tracks) -> Columns:
         "time_s": np.array([s.time_s for s in steps], dtype=float),
         "method": np.array([s.method for s in steps], dtype=object),
     }
+    if any(s.target for s in steps):
+        cols["target"] = np.array([s.target for s in steps], dtype=object)
     for j, name in enumerate(STATE_COLUMNS):
         cols[name] = x[:, j]
     for j, name in enumerate(STATE_COLUMNS):
@@ -106,8 +108,8 @@ def to_columns(result: object) -> Columns:
     Args:
         result: a ``run_prosov`` list (or one ``TrackingResult``): one row per (σβ, method,
             scan); a ``GorshkovRun`` or ``GorshkovResult``: one row per (radar, variant,
-            state, k); ``Tracks``: one row per (plot, method) with the state and its 1σ; a
-            ``VelocityEstimate``: one row.
+            state, k); ``Tracks``: one row per (plot, method) with the state and its 1σ (and
+            the target, for plots of many targets); a ``VelocityEstimate``: one row.
 
     Returns:
         Column name → (rows,) array.

@@ -24,6 +24,7 @@ class TrackStep:
         method: the filter.
         x: state (x, vx, y, vy, z, vz), shape (6,), m and m/s (2D plots: z = vz = 0).
         P: its covariance, shape (6, 6), in m², m²/s, m²/s².
+        target: the plot's target label ("" for plots of one target).
     """
 
     plot: int
@@ -31,6 +32,7 @@ class TrackStep:
     method: str
     x: NDArray[np.float64]
     P: NDArray[np.float64]
+    target: str = ""
 
 
 @dataclass(frozen=True)
@@ -80,12 +82,15 @@ def track(
     init_k: int = 3,
     radars: Iterable[Radar] = (),
 ) -> Tracks:
-    """Track one target's plots with every requested filter.
+    """Track plots with every requested filter: one target, or many by their labels.
 
-    The plots go to ``StreamTracker`` (the same tracker as ``radarviz track``) in blocks.
+    The plots go to the trackers of ``radarviz track`` in blocks: ``StreamTracker`` when no
+    plot has a ``target`` label, else ``TargetTracker`` (one track per target and method, all
+    targets on the batch axis; it needs the first-plot start).
 
     Args:
-        plots: ``Plot`` records in time order (2D, or all with elevations for 3D).
+        plots: ``Plot`` records in time order (2D, or all with elevations for 3D); for many
+            targets, each with its ``target`` label and in time order within its target.
         methods: filters (default every one of the plots' kind).
         sigma_a_mps2: process-noise acceleration std, m/s² (0: constant velocity exactly).
         sigma_v0_mps: velocity std of the start, m/s.
@@ -99,6 +104,7 @@ def track(
     """
     from radarviz.core.experiments.prosov import ALL_METHODS
     from radarviz.core.tracking.stream import METHODS_3D, StreamTracker
+    from radarviz.core.tracking.targets import TargetTracker
 
     options = _options(
         sigma_a_mps2=sigma_a_mps2,
@@ -110,7 +116,8 @@ def track(
     plots = tuple(plots)
     three_d = bool(plots) and plots[0].elevation_rad is not None
     used = tuple(methods) if methods is not None else (METHODS_3D if three_d else ALL_METHODS)
-    tracker = StreamTracker(used, three_d, options)
+    many = any(p.target for p in plots)
+    tracker = (TargetTracker if many else StreamTracker)(used, three_d, options)
     steps: list[TrackStep] = []
     block = 1000
     for i in range(0, len(plots), block):
@@ -120,7 +127,9 @@ def track(
         except PlotError as exc:
             raise ParameterError(f"plots[{i + exc.index}].{exc.column}: {exc}", "plots") from None
         for j, (p, rows) in enumerate(zip(chunk, rows_of, strict=True)):
-            steps += [TrackStep(i + j, p.time_s, m, x.copy(), P.copy()) for m, x, P in rows]
+            steps += [
+                TrackStep(i + j, p.time_s, m, x.copy(), P.copy(), p.target) for m, x, P in rows
+            ]
     return Tracks(plots, tuple(steps), used, three_d, tuple(radars))
 
 
@@ -163,12 +172,15 @@ def track_file(
     steps: list[TrackStep] = []
 
     def on_rows(plot: Plot, rows: list[StateRow]) -> None:
-        steps.extend(TrackStep(len(plots), plot.time_s, m, x.copy(), P.copy()) for m, x, P in rows)
+        steps.extend(
+            TrackStep(len(plots), plot.time_s, m, x.copy(), P.copy(), plot.target)
+            for m, x, P in rows
+        )
         plots.append(plot)
 
     with _open_input(measurements) as fh:
         src = bounded_lines(fh, measurements)
-        _, three_d, used = track_lines(
+        _, three_d, used, _ = track_lines(
             src, measurements, sites, None if methods is None else tuple(methods), options, on_rows
         )
     return Tracks(tuple(plots), tuple(steps), tuple(used), three_d, tuple(sites.values()))
