@@ -552,11 +552,11 @@ def test_reproduce_prosov_refuses_a_nan_or_negative_nees(
     expected: str,
     as_json: bool,
 ) -> None:
-    import radarviz.viz_app.cli.main as cli
+    import radarviz.experiments as api  # the CLI runs the experiments through the API
 
-    real = cli.run_tracking
+    real = api.run_tracking
     monkeypatch.setattr(
-        cli,
+        api,
         "run_tracking",
         lambda cfg, progress=None: _spoil(real(cfg), "ukf", "nees_pos", 12, value),
     )
@@ -577,8 +577,7 @@ def test_reproduce_gorshkov_undefined_is_null_and_a_nan_is_an_error(
     construction; a NaN where a value must exist (k = 5, scan 10) is an error."""
     import json
 
-    import radarviz.core.experiments.doppler_start as ds
-    import radarviz.core.finite_memory.fit as fit
+    import radarviz.experiments as api  # the CLI runs the experiments through the API
 
     argv = ["reproduce", "gorshkov", "--trials", "200", "--radars", "RLS1", "--k-max", "6"]
     argv += ["--tracking-runs", "20", "--json"]
@@ -590,23 +589,23 @@ def test_reproduce_gorshkov_undefined_is_null_and_a_nan_is_an_error(
     rmse = doc["tracking"]["variants"]["range_doppler"]["rmse_x"]
     assert rmse[: start - 1] == [None] * (start - 1) and None not in rmse[start - 1 :]
 
-    real_fit = fit.run_gorshkov
+    real_fit = api._run_gorshkov
 
     def spoiled_fit(*args, **kwargs):
         result = real_fit(*args, **kwargs)
         result.radars[0].range_only.sigma_mc[4, 0] = math.nan
         return result
 
-    monkeypatch.setattr(fit, "run_gorshkov", spoiled_fit)
+    monkeypatch.setattr(api, "_run_gorshkov", spoiled_fit)
     assert main(argv) == 1
     out, err = capsys.readouterr()
     assert out == ""
     one_error_line(err, "reproduce gorshkov: sigma_mc of range_only (RLS1) at k 5[0] is NaN")
 
-    monkeypatch.setattr(fit, "run_gorshkov", real_fit)
-    real_track = ds.run_doppler_tracking
+    monkeypatch.setattr(api, "_run_gorshkov", real_fit)
+    real_track = api.run_doppler_tracking
     monkeypatch.setattr(
-        ds,
+        api,
         "run_doppler_tracking",
         lambda cfg: _spoil(real_track(cfg), "range_only", "rmse_x", 10, math.nan),
     )
@@ -617,16 +616,16 @@ def test_reproduce_gorshkov_undefined_is_null_and_a_nan_is_an_error(
 def test_reproduce_velocity_refuses_a_nan(
     capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    import radarviz.core.velocity.estimate as est
+    import radarviz.experiments as api  # the CLI runs the experiments through the API
 
-    real = est.run_velocity_experiment
+    real = api.run_velocity_experiment
 
     def spoiled(*args, **kwargs):
         result = real(*args, **kwargs)
         result.baseline_mc.sigma[1] = math.nan
         return result
 
-    monkeypatch.setattr(est, "run_velocity_experiment", spoiled)
+    monkeypatch.setattr(api, "run_velocity_experiment", spoiled)
     assert main(["reproduce", "velocity", "--trials", "2000"]) == 1
     out, err = capsys.readouterr()
     assert out == ""

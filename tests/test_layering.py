@@ -16,12 +16,15 @@ imports its figure modules that way) -- and report each breach as ``file:line``.
 from __future__ import annotations
 
 import ast
+import importlib
 import re
 import tomllib
 from collections.abc import Iterator
 from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
+
+import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -275,6 +278,16 @@ def test_sources_are_found() -> None:
         assert expected in modules, f"{expected} not found under {ROOT}"
     assert "radarviz.viz_app.api" not in modules, "viz_app/api must map to radarviz"
     assert any(imp.target == "rerun" for imp in _all_imports()), "no 'import rerun' seen"
+
+
+def test_the_api_has_one_module_identity() -> None:
+    """viz_app/api is radarviz; importing it under radarviz.viz_app.api is refused (a second copy
+    of every module would make isinstance checks and test patches silently miss)."""
+    import radarviz
+
+    assert radarviz.__name__ == "radarviz"
+    with pytest.raises(ImportError, match="import radarviz instead"):
+        importlib.import_module("radarviz.viz_app.api")
 
 
 def test_forbidden_imports() -> None:

@@ -18,6 +18,11 @@ Example::
 
 from __future__ import annotations
 
+if __name__ != "radarviz":
+    # The folder also lies under radarviz.viz_app; imported from there, every module would load
+    # a second time as a separate copy (two Tracks classes, patches that miss the CLI's calls).
+    raise ImportError(f"{__name__} is the top-level package: import radarviz instead")
+
 from radarviz.core.params import ParameterError
 from radarviz.core.tracking.stream import Plot
 from radarviz.experiments import (
