@@ -18,7 +18,7 @@ the engine's own (prediction, update, IMM), nothing is filtered here.
 
       d² = νᵀ S⁻¹ ν,   S = H P⁻ Hᵀ + R,
 
-  exactly the statistic the method's update and the consistency monitor use
+  exactly the statistic the consistency monitor takes of the method's update
   (``core.filters.measurement.PlotMeasurement.innovation``; for ``ekf``/``ukf`` the polar
   innovation; for the IMM the combined prediction). The position alone gates (Doppler, when
   present, is used by the update but not by the gate), so d² ~ χ²(d) for the track's own
@@ -57,7 +57,7 @@ from typing import NamedTuple, TypeVar
 import numpy as np
 from numpy.typing import NDArray
 
-from radarviz.core.filters.measurement import PlotMeasurement
+from radarviz.core.filters.innovation import position_terms
 from radarviz.core.filters.methods import (
     METHODS,
     MethodGroup,
@@ -65,7 +65,7 @@ from radarviz.core.filters.methods import (
     PolarPlot,
     stack_parts,
 )
-from radarviz.core.filters.state import CVBatch
+from radarviz.core.filters.state import CVBatch, quad_form_inv
 from radarviz.core.params import ParameterError, check, check_choice, default
 from radarviz.core.tracking.stream import (
     ALL_METHODS,
@@ -156,8 +156,10 @@ def mahalanobis_matrix(
         site: (P, d) each plot's radar.
 
     The K × P pairs are one batch of shape (K, P): each track's prediction broadcast along
-    the plots, each plot along the tracks, and the statistic is
-    ``PlotMeasurement.innovation``'s (a NaN, for a broken track, is outside every gate).
+    the plots, each plot along the tracks; ν and R are the method's measurement
+    (``MethodGroup.measurement``, what its update and ``PlotMeasurement.innovation`` use), S
+    that of ``core.filters.innovation.position_terms`` (the NIS without log det S, which the
+    gate does not need). A broken track's d² (NaN) is outside every gate.
     """
     group = MethodGroup((method,))
     k, n = predicted.x.shape
@@ -172,8 +174,10 @@ def mahalanobis_matrix(
             parts = stack_parts([group.kinds[0].convert(plot, noise)])
     if parts is None:
         plot = PolarPlot(*(None if v is None else np.broadcast_to(v, (k, p)) for v in plot))
-    stats = PlotMeasurement(group, plot, noise, site, parts).innovation(CVBatch(x, P))
-    d2 = np.asarray(stats.nis).reshape(k, p)
+    state = CVBatch(x, P)
+    nu, S = position_terms(state, *group.measurement(state, plot, noise, site=site, parts=parts))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        d2 = quad_form_inv(S, nu).reshape(k, p)  # a NaN for an S not positive definite
     return np.where(np.isfinite(d2), d2, np.inf)
 
 
