@@ -1,5 +1,8 @@
 """Association of unlabelled plots: global nearest neighbour (GNN) with M-of-N confirmation.
 
+The scheme of Blackman and Popoli (1999): a χ² gate, one optimal assignment per scan, M-of-N
+confirmation of tentative tracks and deletion after consecutive misses.
+
 A measurement file without a ``target`` column may still hold many targets, and clutter.
 ``GNNTracker`` decides, scan by scan, which plot belongs to which track, and hands the plots,
 labelled with their track ids, to a ``core.tracking.targets.TargetTracker``: the filters are
@@ -30,7 +33,7 @@ the engine's own (prediction, update, IMM), nothing is filtered here.
   assigned", so leaving a track unassigned costs γ, the gate's edge). Confirmed tracks are
   assigned first, then tentative tracks on the plots left: a fresh track's wide gate (its
   velocity is still ±σv0) would otherwise take a confirmed track's plot whenever its d² is
-  the smaller one (Blackman and Popoli 1999, sec. 6.3, give confirmed tracks that priority).
+  the smaller one, since d² does not penalise a wide S.
 * **Initiation.** Every plot left unassigned starts a tentative track (the first-plot start).
 * **Confirmation, M of N.** A tentative track is confirmed at the scan of its M-th hit if
   that comes within its first N scans (the initiating scan counts as the first, and a hit);
