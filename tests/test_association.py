@@ -7,6 +7,9 @@
 * The GNN assignment equals a brute force over every partial assignment of a small gated
   matrix; the broadcast d² matrix equals a pair-by-pair EKF innovation written out here
   (finite-difference Jacobian), and the converted methods' pair by pair.
+* The gate's d² of a track's plot equals the NIS its update then reports (cv and IMM, converted
+  and polar methods): ``TargetTracker.predicted`` is the step's own prediction. A forgotten
+  track's row goes to a fresh track; the others are untouched.
 * Hand-built scans: two well separated targets keep ids "1" and "2"; a gated-out plot starts a
   tentative track that dies exactly when M of N has become impossible; confirmation at the
   M-th hit, to the scan; a confirmed track dies after ``delete_misses`` misses, to the scan.
@@ -15,7 +18,7 @@
   middle scan at the angle asked.
 * End to end: ``simulate --preset crossing`` then ``track --associate gnn``: few confirmed
   tracks, each target's track id stable away from the crossing, every method's rows of a plot
-  under the same track id.
+  under the same track id; the Rerun recording has every track.
 * Bad input: one line naming the flag and its range, exit 2, nothing written.
 """
 
@@ -25,6 +28,7 @@ import csv
 import itertools
 import json
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -301,6 +305,87 @@ def test_scans_are_runs_of_one_radar_within_the_window() -> None:
     sizes = [len(s) for s in scan_groups(items, 0.0)]
     assert sizes == [2, 1, 1, 1, 1]
     assert [len(s) for s in scan_groups(items, 2.0)] == [2, 2, 2]
+
+
+class NISLog:
+    """A stand-in consistency monitor that keeps every NIS it is given."""
+
+    def __init__(self) -> None:
+        self.values: dict[str, list[float]] = {}
+
+    def add(self, track: str, time_s: float, nis: float, dof: int) -> None:
+        self.values.setdefault(track, []).append(nis)
+
+
+@pytest.mark.parametrize("model", ["cv", "imm"])
+@pytest.mark.parametrize("method", ["ucm", "ducm", "ekf", "ukf"])
+def test_gate_d2_is_the_updates_nis(model: str, method: str) -> None:
+    """The d² of a track's plot before the scan (``predicted``: the prediction to the plot's
+    time, for the IMM the mixed models predicted and combined) equals the NIS the update then
+    reports to the consistency monitor (``cv_step`` / ``imm_step``'s own statistics)."""
+    log = NISLog()
+    options = StreamOptions(model=model, sigma_a_mps2=2.0, sigma_v0_mps=300.0, monitor=log)
+    gnn = GNNTracker((method,), False, options, AssociationOptions(method=method))
+    rng = np.random.default_rng(1)
+    gates = []
+    for k in range(8):
+        scan = []
+        for y0 in (0.0, 9e3):
+            x, y = target(k, y0)
+            r, b = polar(x, y)
+            scan.append(
+                Plot(
+                    5.0 * k,
+                    r + 50 * rng.standard_normal(),
+                    b + SIGMA_B * rng.standard_normal(),
+                    SIGMA_R,
+                    SIGMA_B,
+                    radar="radar",
+                )
+            )
+        if k:
+            d2 = gnn.distances(["1", "2"], scan)
+            gates.append(np.diag(d2))
+        assert gnn.add_scan(scan).track_ids == ["1", "2"]
+    nis = np.array([log.values[f"{t}/{method}"] for t in ("1", "2")]).T
+    assert np.allclose(np.array(gates), nis, rtol=1e-9, atol=1e-12)
+
+
+def test_forgotten_rows_are_reused_by_fresh_tracks() -> None:
+    """``TargetTracker.forget``: a new target takes a forgotten row and starts afresh; the
+    other targets' tracks are untouched (equal to a tracker that never forgot)."""
+    from radarviz.core.tracking.targets import TargetTracker
+
+    options = StreamOptions(model="cv", sigma_a_mps2=1.0)
+    a, b = TargetTracker(("ucm", "ekf"), False, options), TargetTracker(("ucm",), False, options)
+    c = TargetTracker(("ucm", "ekf"), False, options)
+    for k in range(4):
+        p, q = plot_at(5.0 * k, *target(k, 0.0)), plot_at(5.0 * k, *target(k, 5e3))
+        a.add_block([replace(p, target="x"), replace(q, target="y")])
+        c.add_block([replace(p, target="x")])
+    a.forget(["y"])
+    p, q = plot_at(20.0, *target(4, 0.0)), plot_at(20.0, *target(4, -5e3))
+    rows = a.add_block([replace(p, target="x"), replace(q, target="z")])
+    fresh = b.add_block([replace(q, target="z")])[0]
+    assert a.targets == ("x", "z") and a._rows_used == 2
+    assert np.array_equal(rows[1][0][1], fresh[0][1]) and np.array_equal(rows[1][0][2], fresh[0][2])
+    ref = c.add_block([replace(p, target="x")])[0]
+    for (m1, x1, P1), (m2, x2, P2) in zip(rows[0], ref, strict=True):
+        assert m1 == m2 and np.array_equal(x1, x2) and np.array_equal(P1, P2)
+
+
+def test_track_recording_has_every_track(tmp_path: Path, rrd_contents) -> None:
+    m, r, _ = simulate(tmp_path, "--clutter-per-scan", "1", "--scans", "12")
+    out, rrd = tmp_path / "t.csv", tmp_path / "t.rrd"
+    argv = ["track", "--input", str(m), "--radars", str(r), "--out", str(out), "--rrd", str(rrd)]
+    assert main([*argv, "--associate", "gnn", "--method", "ucm"]) == 0
+    with out.open() as fh:
+        ids = {row["target"] for row in csv.DictReader(fh)}
+    rows, _ = rrd_contents(rrd)
+    # /world/tracks/{id}/{method}/position, one entity per track.
+    recorded = {p.split("/")[3] for p in rows if p.startswith("/world/tracks/")}
+    assert {p.split("/")[4] for p in rows if p.startswith("/world/tracks/")} == {"ucm"}
+    assert len(ids) >= 2 and ids <= recorded, (ids, sorted(rows)[:20])
 
 
 # ------------------------------------------------------------------------------------------
