@@ -613,3 +613,27 @@ def test_reproduce_association_json_and_figure(
         assert band["mean"][0] == pytest.approx(doc["gospa"]["cutoff_m"])
     assert main(["reproduce", "association", "--runs", "1"]) == 2
     assert "--runs must be an integer in [2, 10000]" in capsys.readouterr().err
+
+
+def test_reproduce_association_refuses_a_nan(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import radarviz.core.experiments.association as exp
+
+    real = exp.run_association
+
+    def spoiled(cfg: exp.AssociationConfig) -> exp.AssociationResult:
+        result = real(cfg)
+        result.gospa[0, 1, 3, 0] = math.nan
+        return result
+
+    monkeypatch.setattr(exp, "run_association", spoiled)
+    png = tmp_path / "a.png"
+    argv = ["reproduce", "association", "--runs", "2", "--scans", "8", "--methods", "ucm"]
+    assert main([*argv, "--plot", str(png)]) == 1
+    out, err = capsys.readouterr()
+    assert out == "" and not png.exists()
+    assert err == (
+        "radarviz: error: reproduce association: methods.ucm.gospa_per_scan.mean[3] is NaN "
+        "(not a finite result)\n"
+    )
