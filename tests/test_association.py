@@ -637,3 +637,16 @@ def test_reproduce_association_refuses_a_nan(
         "radarviz: error: reproduce association: methods.ucm.gospa_per_scan.mean[3] is NaN "
         "(not a finite result)\n"
     )
+
+
+def test_bench_association_figures_are_consistent() -> None:
+    """``radarviz bench``'s association figures (speed is not asserted): the plots counted,
+    the ratio equal to its two rates, and the association without error on its easy grid."""
+    from radarviz.viz_app.bench.association import bench_association, format_association
+
+    doc = bench_association(30, scans=6)
+    assert (doc["targets"], doc["scans"], doc["correct"]) == (30, 6, True)
+    assert doc["association_over_labelled"] == pytest.approx(
+        doc["labelled_plots_per_s"] / doc["associated_plots_per_s"], rel=1e-12
+    )
+    assert "every track on one target" in format_association(doc)
