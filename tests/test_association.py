@@ -36,6 +36,7 @@ import pytest
 
 from radarviz.core.filters.methods import PolarNoise, PolarPlot
 from radarviz.core.filters.state import CVBatch
+from radarviz.core.params import ParameterError
 from radarviz.core.scenarios.crossing import CLUTTER, CrossingScene, crossing_scans
 from radarviz.core.tracking.association import (
     CONFIRMED,
@@ -322,33 +323,62 @@ class NISLog:
 def test_gate_d2_is_the_updates_nis(model: str, method: str) -> None:
     """The d² of a track's plot before the scan (``predicted``: the prediction to the plot's
     time, for the IMM the mixed models predicted and combined) equals the NIS the update then
-    reports to the consistency monitor (``cv_step`` / ``imm_step``'s own statistics)."""
+    reports to the consistency monitor (``cv_step`` / ``imm_step``'s own statistics). Two
+    radars take turns (one off the origin), and within a scan (window 1 s) the second
+    target's plot is 0.5 s after the first's: each pair is predicted to its plot's own time."""
     log = NISLog()
     options = StreamOptions(model=model, sigma_a_mps2=2.0, sigma_v0_mps=300.0, monitor=log)
-    gnn = GNNTracker((method,), False, options, AssociationOptions(method=method))
+    gnn = GNNTracker((method,), False, options, AssociationOptions(method=method, scan_window_s=1))
     rng = np.random.default_rng(1)
+    sites = {"a": (0.0, 0.0, 0.0), "b": (1e4, -2e4, 0.0)}
     gates = []
     for k in range(8):
+        radar = "ab"[k % 2]
+        sx, sy, _ = sites[radar]
         scan = []
-        for y0 in (0.0, 9e3):
+        for y0, dt in ((0.0, 0.0), (9e3, 0.5)):
             x, y = target(k, y0)
-            r, b = polar(x, y)
-            scan.append(
-                Plot(
-                    5.0 * k,
-                    r + 50 * rng.standard_normal(),
-                    b + SIGMA_B * rng.standard_normal(),
-                    SIGMA_R,
-                    SIGMA_B,
-                    radar="radar",
-                )
-            )
+            r, b = polar(x - sx, y - sy)
+            r += 50 * rng.standard_normal()
+            b += SIGMA_B * rng.standard_normal()
+            scan.append(Plot(5.0 * k + dt, r, b, SIGMA_R, SIGMA_B, sites[radar], radar))
         if k:
-            d2 = gnn.distances(["1", "2"], scan)
-            gates.append(np.diag(d2))
+            gates.append(np.diag(gnn.distances(["1", "2"], scan)))
+        assert [len(s) for s in scan_groups([(0, p) for p in scan], 1.0)] == [2]
         assert gnn.add_scan(scan).track_ids == ["1", "2"]
     nis = np.array([log.values[f"{t}/{method}"] for t in ("1", "2")]).T
     assert np.allclose(np.array(gates), nis, rtol=1e-9, atol=1e-12)
+
+
+def test_three_d_targets_keep_their_ids() -> None:
+    """3D plots (elevation): the gate is χ²(3) and two separated targets keep their ids."""
+    options = StreamOptions(model="cv", sigma_a_mps2=1.0, sigma_v0_mps=300.0)
+    gnn = GNNTracker(("ucm", "ekf"), True, options, AssociationOptions())
+    assert gnn.gate == pytest.approx(gate_threshold(0.999, 3))
+    se = math.radians(0.3)
+    for k in range(6):
+        scan = []
+        for y0, z in ((0.0, 3e3), (8e3, 9e3)):
+            x, y = target(k, y0)
+            ground = math.hypot(x, y)
+            r, el = math.hypot(ground, z), math.atan2(z, ground)
+            scan.append(
+                Plot(
+                    5.0 * k,
+                    r,
+                    math.atan2(y, x),
+                    SIGMA_R,
+                    SIGMA_B,
+                    radar="radar",
+                    elevation_rad=el,
+                    sigma_elevation_rad=se,
+                )
+            )
+        res = gnn.add_scan(scan[::-1] if k % 2 else scan)
+        assert res.track_ids == (["2", "1"] if k % 2 else ["1", "2"])
+    assert gnn.live(CONFIRMED) == ["1", "2"]
+    with pytest.raises(ParameterError, match="every plot of a 3D track needs an elevation"):
+        gnn.add_scan([plot_at(30.0, *target(6, 0.0))])
 
 
 def test_forgotten_rows_are_reused_by_fresh_tracks() -> None:
