@@ -610,6 +610,12 @@ def test_bad_scene_flags(
     aso = ["reproduce", "association", "--runs", "2", "--methods", "ucm", *extra]
     assert main(aso) == 2
     assert capsys.readouterr().err.startswith(f"radarviz: error: {message}")
+    # The scene's flags belong to the crossing preset: another preset refuses them.
+    argv[2] = "prosov"
+    assert main(argv) == 2
+    assert capsys.readouterr().err == (
+        f"radarviz: error: {extra[0]} is the crossing preset's (--preset crossing)\n"
+    )
 
 
 def test_reproduce_association_json_and_figure(

@@ -188,7 +188,7 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
         high=MAX_SIMULATE_STEPS,
         note="fusion and manoeuvre: per radar; crossing: 40",
     )
-    add_crossing_flags(sim)
+    add_crossing_flags(sim, given_only=True)
     sim.add_argument(
         "--truth-out",
         default=None,
@@ -198,25 +198,36 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     )
 
 
-def add_crossing_flags(parser: argparse.ArgumentParser) -> None:
-    """The crossing scene's flags (``simulate --preset crossing``, ``reproduce
-    association``)."""
-    note = "crossing"
-    add_parameter(parser, "crossing_targets", "--targets", note=note)
-    add_parameter(parser, "crossing_angle_deg", "--crossing-angle-deg", note=note)
-    add_parameter(parser, "detection_prob", "--pd", "--detection-prob", note=note)
-    add_parameter(parser, "clutter_per_scan", "--clutter-per-scan", note=note)
+#: The crossing scene's table parameters and their flags.
+CROSSING_FLAGS: tuple[tuple[str, tuple[str, ...]], ...] = (
+    ("crossing_targets", ("--targets",)),
+    ("crossing_angle_deg", ("--crossing-angle-deg",)),
+    ("detection_prob", ("--pd", "--detection-prob")),
+    ("clutter_per_scan", ("--clutter-per-scan",)),
+)
+
+
+def add_crossing_flags(parser: argparse.ArgumentParser, given_only: bool = False) -> None:
+    """The crossing scene's flags (``simulate --preset crossing``, ``reproduce association``);
+    ``given_only``: None unless given (``simulate`` refuses them for another preset)."""
+    for name, flags in CROSSING_FLAGS:
+        if given_only:
+            add_parameter(
+                parser, name, *flags, default=None, shown_default=default(name), note="crossing"
+            )
+        else:
+            add_parameter(parser, name, *flags)
 
 
 def crossing_scene(args: argparse.Namespace, scans: int | None) -> CrossingScene:
-    """The crossing scene of the flags (checked by ``CrossingScene``)."""
-    kw = {} if scans is None else {"scans": scans}
+    """The crossing scene of the flags (checked by ``CrossingScene``; a flag not given: the
+    table's default)."""
+    kw = {name: getattr(args, name) for name, _ in CROSSING_FLAGS}
+    kw = {k: v for k, v in kw.items() if v is not None}
+    if scans is not None:
+        kw["scans"] = scans
     return CrossingScene(
-        targets=args.crossing_targets,
-        crossing_angle_deg=args.crossing_angle_deg,
-        detection_prob=args.detection_prob,
-        clutter_per_scan=args.clutter_per_scan,
-        **kw,
+        **{("targets" if k == "crossing_targets" else k): v for k, v in kw.items()}
     )
 
 
@@ -392,12 +403,18 @@ def _inconsistent(bad: list[str], tracks: int) -> str:
 
 def cmd_simulate(args: argparse.Namespace) -> int:
     check_choice("--preset", args.preset, ALL_PRESETS)
-    if args.truth_out is not None and args.preset != "crossing":
-        raise ParameterError("--truth-out is the crossing preset's (--preset crossing)")
+    if args.preset != "crossing":
+        extra = [("--truth-out", args.truth_out)] + [
+            (flags[0], getattr(args, name)) for name, flags in CROSSING_FLAGS
+        ]
+        for flag, value in extra:
+            if value is not None:
+                raise ParameterError(f"{flag} is the crossing preset's (--preset crossing)")
     check_outputs(
         [("--out", args.out), ("--radars-out", args.radars_out), ("--truth-out", args.truth_out)]
     )
     if args.preset == "crossing":
+        check("sigma_beta_deg", args.sigma_beta_deg)  # the prosov preset's: checked, not used
         scene = crossing_scene(args, args.steps)
         plots, radars = crossing_file_plots(scene, args.seed)
         with commit_together():
