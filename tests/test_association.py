@@ -647,6 +647,14 @@ def test_reproduce_association_json_and_figure(
         )
         # No track at the first scan (M = 3): GOSPA is c (two targets missed, c²/2 each).
         assert band["mean"][0] == pytest.approx(doc["gospa"]["cutoff_m"])
+    # The paired differences from the reference (ucm): its own are 0; ekf's are the
+    # difference of the two methods' means (same runs).
+    assert doc["reference"] == "ucm"
+    ucm, ekf = doc["methods"]["ucm"], doc["methods"]["ekf"]
+    assert ucm["minus_reference"]["false_tracks"] == {"delta": 0.0, "lo": 0.0, "hi": 0.0}
+    for key in ("gospa", "swaps", "false_tracks"):
+        d = ekf["minus_reference"][key]["delta"]
+        assert d == pytest.approx(ekf[key]["mean"] - ucm[key]["mean"], abs=1e-9)
     assert main(["reproduce", "association", "--runs", "1"]) == 2
     assert "--runs must be an integer in [2, 10000]" in capsys.readouterr().err
 
