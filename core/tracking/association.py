@@ -264,7 +264,7 @@ class GNNTracker:
         if a.method in self.methods:
             gate_tracker = self.tracker
         else:
-            gate_tracker = TargetTracker((a.method,), three_d, replace_monitor(options))
+            gate_tracker = TargetTracker((a.method,), three_d, _without_monitor(options))
         self._gate = _Gate(a.method, gate_threshold(a.gate_probability, dims), gate_tracker)
         self.tracks: dict[str, TrackRecord] = {}
         self._started = 0
@@ -377,7 +377,7 @@ class GNNTracker:
         return ids, tracker.predicted(method, ids, time_s)
 
 
-def replace_monitor(options: StreamOptions) -> StreamOptions:
+def _without_monitor(options: StreamOptions) -> StreamOptions:
     """``options`` without the consistency monitor (the gating method's own tracks, when it
     is not a requested method, are not reported)."""
     return replace(options, monitor=None)
