@@ -133,12 +133,15 @@ class TrackCounter:
         if len(X) and len(Y):
             d = np.sqrt(((X[:, None, :] - Y[None, :, :]) ** 2).sum(axis=-1))
             column = {t: j for j, t in enumerate(track_ids)}
+            taken: set[int] = set()
             for i, name in enumerate(truth_ids):  # a valid match is kept
                 j = column.get(self._last.get(name, ""), -1)
-                if j >= 0 and d[i, j] < c and all(j != q for _, q in pairs):
+                if j >= 0 and j not in taken and d[i, j] < c:
                     pairs.append((i, j))
-            rest_i = [i for i in range(len(X)) if all(i != a for a, _ in pairs)]
-            rest_j = [j for j in range(len(Y)) if all(j != b for _, b in pairs)]
+                    taken.add(j)
+            kept = {i for i, _ in pairs}
+            rest_i = [i for i in range(len(X)) if i not in kept]
+            rest_j = [j for j in range(len(Y)) if j not in taken]
             if rest_i and rest_j:
                 sub = d[np.ix_(rest_i, rest_j)]
                 rows, cols = linear_sum_assignment(np.minimum(sub, c) - c)
