@@ -4,7 +4,10 @@ Measurement file (CSV, header line first, one row per plot, times non-decreasing
 
     time_s, radar, range_m, azimuth_deg [, elevation_deg] [, radial_velocity_mps] [, target]
 
-Without ``target`` every plot is of one target. With it (the radar's own track number, or any
+Without ``target`` every plot is of one target, or, with ``track --associate gnn``, of any
+number of targets and clutter, associated scan by scan (``core.tracking.association``; the
+track file then has ``target``, the track id, and ``status``, tentative or confirmed, after
+``time_s``). With it (the radar's own track number, or any
 label; no cell may be empty) the file holds many targets, interleaved: each target gets its
 own tracks, all targets advancing as one batch (``core.tracking.targets``); times need only
 not decrease within a target, and a target may change radar from plot to plot. The
