@@ -713,3 +713,26 @@ def test_reproduction_without_clutter_or_misses() -> None:
     assert np.all(res.gospa[:, :, 2:, 2] == 0) and np.all(res.gospa[..., 3] == 0)
     loc = res.gospa[:, :, 2:, 1]
     assert np.allclose(res.gospa[:, :, 2:, 0] ** 2, loc) and np.all(loc > 0)
+
+
+def test_simulate_crossing_writes_its_three_files_together(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The plots, the radars and the truth are one unit (``commit_together``): the truth's
+    rename failing leaves none of the three (they did not exist) and no temporary file."""
+    import errno
+    import os
+
+    m, r, t = tmp_path / "m.csv", tmp_path / "r.toml", tmp_path / "truth.csv"
+    real = os.replace
+
+    def failing(src, dst, *args, **kwargs):
+        if os.path.realpath(dst) == os.path.realpath(t):
+            raise OSError(errno.EIO, os.strerror(errno.EIO))
+        return real(src, dst, *args, **kwargs)
+
+    monkeypatch.setattr(os, "replace", failing)
+    argv = ["simulate", "--preset", "crossing", "--out", str(m), "--radars-out", str(r)]
+    assert main([*argv, "--truth-out", str(t)]) == 1
+    assert f"cannot write {t}" in capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == []
