@@ -350,6 +350,71 @@ PARAMETERS: dict[str, Parameter] = {
             200.0,
             low_open=False,
         ),
+        # Association of unlabelled plots (``core.tracking.association``).
+        Parameter(
+            "gate_probability",
+            "PG",
+            "probability that a track's own plot falls inside its chi-square gate",
+            "",
+            "real",
+            0.0,
+            1.0,
+            True,
+            True,
+            0.999,
+        ),
+        _int(
+            "confirm_m",
+            "M",
+            "hits that confirm a tentative track (M of its first N scans)",
+            1,
+            100,
+            3,
+        ),
+        _int("confirm_n", "N", "scans in which a tentative track must get M hits", 1, 100, 4),
+        _int(
+            "delete_misses", "Kdel", "consecutive misses that delete a confirmed track", 1, 1000, 3
+        ),
+        _real(
+            "scan_window_s",
+            "Δts",
+            "consecutive plots of one radar within this time of the first form one scan",
+            "s",
+            0.0,
+            3600.0,
+            0.0,
+            low_open=False,
+        ),
+        # The crossing scene (``core.scenarios.crossing``).
+        _int("crossing_targets", "n", "targets crossing at one point", 2, 1000, 2),
+        _real(
+            "crossing_angle_deg", "θ", "angle between neighbouring paths", "deg", 0.0, 180.0, 20.0
+        ),
+        Parameter(
+            "detection_prob",
+            "PD",
+            "detection probability per target and scan",
+            "",
+            "real",
+            0.0,
+            1.0,
+            True,
+            False,
+            0.9,
+        ),
+        _real(
+            "clutter_per_scan",
+            "λ",
+            "mean false plots per scan (Poisson, uniform over the region)",
+            "",
+            0.0,
+            1e4,
+            5.0,
+            low_open=False,
+        ),
+        # GOSPA (``core.tracking.gospa``).
+        _real("gospa_cutoff_m", "c", "GOSPA cut-off distance", "m", 0.0, 1e8, 2000.0),
+        _real("gospa_order", "p", "GOSPA order", "", 1.0, 100.0, 2.0, low_open=False),
     )
 }
 

@@ -75,6 +75,14 @@ def position_innovation(
 ) -> InnovationStats:
     """The statistics of a position measurement (``core.filters.position``): H = H_pos,
     S = H P⁻ Hᵀ + R; ``innovation`` has d components, ``R`` upper entries, each (...)."""
+    return gaussian_stats(*position_terms(state, innovation, R))
+
+
+def position_terms(
+    state: CVBatch, innovation: Sequence[Vec], R: dict[tuple[int, int], Vec]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """ν (..., d) and S = H_pos P⁻ H_posᵀ + R (..., d, d) of a position measurement (what
+    ``position_innovation`` takes the statistics of; a gate needs only νᵀ S⁻¹ ν)."""
     pos = position_index(state.dims)
     d = len(pos)
     shape = state.batch_shape
@@ -85,7 +93,7 @@ def position_innovation(
         nu[..., i] = innovation[i]
         for j in range(i, d):
             S[..., i, j] = S[..., j, i] = Pc[pos[i], pos[j]] + R[i, j]
-    return gaussian_stats(nu, S)
+    return nu, S
 
 
 def linear_innovation(

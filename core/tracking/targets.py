@@ -31,13 +31,21 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from radarviz.core.filters.imm import IMMState, imm_start, imm_step
+from radarviz.core.filters.imm import (
+    IMMState,
+    imm_combine,
+    imm_mix,
+    imm_predict,
+    imm_start,
+    imm_step,
+)
 from radarviz.core.filters.innovation import InnovationStats
 from radarviz.core.filters.measurement import DopplerMeasurement, PlotMeasurement
 from radarviz.core.filters.methods import MethodGroup, PolarNoise, PolarPlot, method_groups
 from radarviz.core.filters.models import CVModel, IMMModel
+from radarviz.core.filters.predict import cv_predict
 from radarviz.core.filters.state import CVBatch
-from radarviz.core.filters.step import Stage, cv_step
+from radarviz.core.filters.step import Stage, cv_step, moves
 from radarviz.core.params import ParameterError
 from radarviz.core.tracking.stream import (
     Plot,
@@ -183,6 +191,10 @@ class TargetTracker:
             m: (b, i) for b, bank in enumerate(self._banks) for i, m in enumerate(bank.methods)
         }
         self._slot: dict[str, int] = {}
+        # Rows of the target axis given back by ``forget`` (reused by new targets), and how
+        # many rows were ever handed out.
+        self._free: list[int] = []
+        self._rows_used = 0
         self._time_s = np.zeros(0)
 
     @property
@@ -217,11 +229,15 @@ class TargetTracker:
         for j, i in enumerate(wave):
             target = plots[i].target
             if target not in self._slot:
-                self._slot[target] = len(self._slot)
+                if self._free:
+                    self._slot[target] = self._free.pop()
+                else:
+                    self._slot[target] = self._rows_used
+                    self._rows_used += 1
                 new[j] = True
         capacity = self._time_s.size
-        if len(self._slot) > capacity:
-            capacity = max(len(self._slot), 2 * capacity, 16)
+        if self._rows_used > capacity:
+            capacity = max(self._rows_used, 2 * capacity, 16)
             for bank in self._banks:
                 bank.grow(capacity)
             self._time_s = np.concatenate([self._time_s, np.zeros(capacity - self._time_s.size)])
@@ -291,3 +307,31 @@ class TargetTracker:
                 assert monitor is not None and stats is not None
                 for p, v in zip(sub, nis.tolist(), strict=True):
                     monitor.add(track_name(p.target, m), p.time_s, v, stats.dof)
+
+    def predicted(self, method: str, targets: list[str], time_s: float) -> CVBatch:
+        """``method``'s tracks of ``targets`` (K,) predicted to ``time_s``, the tracks left as
+        they are: x (K, n), P (K, n, n) (the IMM's moment-matched combined prediction, the one
+        its consistency statistics use). A track last updated at ``time_s`` is returned as it
+        is (dt = 0). Every target's last plot must be at or before ``time_s``."""
+        b, row = self._where[method]
+        bank = self._banks[b]
+        ids = np.array([self._slot[t] for t in targets], dtype=np.intp)
+        dt = time_s - self._time_s[ids]
+        if dt.size and dt.min() < 0:
+            raise ValueError(f"predicted: time {time_s!r} is before a track's last plot")
+        arrays = [a[row][ids] if bank.axis else a[ids] for a in bank.arrays]
+        if isinstance(bank.motion, IMMModel):
+            mixed, c = imm_mix(
+                IMMState(CVBatch(arrays[0], arrays[1]), arrays[2]), bank.motion.transition_matrix()
+            )
+            pred = imm_predict(mixed, dt, bank.motion) if moves(dt) else mixed
+            return imm_combine(pred, c)
+        state = CVBatch(arrays[0], arrays[1])
+        return cv_predict(state, dt, bank.motion.sigma_a_mps2) if moves(dt) else state
+
+    def forget(self, targets: list[str]) -> None:
+        """Drop the tracks of ``targets`` (a deleted track): their rows go to new targets, so
+        memory follows the live tracks, not every track ever started. A label forgotten and
+        seen again starts a new track."""
+        for t in targets:
+            self._free.append(self._slot.pop(t))

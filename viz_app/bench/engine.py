@@ -33,6 +33,8 @@ Figures (ns per track-step = wall time / (runs × scans), one core):
   whole file (the plots made beforehand, not timed), beside the same plots tracked one
   target at a time (``StreamTracker``, on a subsample of ``loop_targets`` targets) in the
   same run; ``batched_over_loop`` the ratio of their plots per second.
+* ``association``: unlabelled plots associated (``core.tracking.association``) against the
+  same plots with their labels, ``viz_app.bench.association``.
 * ``peak_rss_mb``: peak resident memory of the process.
 """
 
@@ -60,6 +62,7 @@ from radarviz.core.filters.predict import transition_matrix
 from radarviz.core.filters.run import run_scans
 from radarviz.core.filters.state import cv_init
 from radarviz.core.scenarios.planar import polar_measurements, prosov_target
+from radarviz.viz_app.bench.association import bench_association, format_association
 from radarviz.viz_app.runtime import peak_rss_mb
 from radarviz.viz_app.tune.params import SCENES
 from radarviz.viz_app.tune.serve import measure_tune_latency
@@ -367,6 +370,7 @@ def run_bench(
         "tune_median_ms": {scene: measure_tune_latency(scene) for scene in SCENES},
         "imm": bench_imm(runs[0], filterpy_runs, config),
         "targets": bench_targets(targets, config),
+        "association": bench_association(targets),
         "peak_rss_mb": peak_rss_mb(),
     }
 
@@ -431,5 +435,6 @@ def format_bench(doc: dict[str, Any]) -> str:
         f"time ({tg['loop_targets']} targets): {tg['loop_plots_per_s']:.0f} plots/s "
         f"(batched/loop {tg['batched_over_loop']:.1f}×)"
     )
+    lines.append(format_association(doc["association"]))
     lines.append(f"peak RSS: {doc['peak_rss_mb']:.0f} MiB")
     return "\n".join(lines)

@@ -193,6 +193,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--json", action="store_true", help="print only the JSON document on standard output"
     )
 
+    _add_association(rep_sub)
+
     for module in (recording, track, sweep):
         module.add_commands(sub)
 
@@ -236,6 +238,76 @@ def build_parser() -> argparse.ArgumentParser:
         help="targets of the many-target tracker figure (default 1000)",
     )
     return parser
+
+
+def _add_association(rep_sub: argparse._SubParsersAction) -> None:
+    """``reproduce association``: its flags (the scene's and the association's from the
+    parameter table)."""
+    from radarviz.core.experiments.association import MAX_RUNS
+
+    aso = rep_sub.add_parser(
+        "association",
+        help="GNN association of crossing targets in clutter: GOSPA, swaps, false tracks",
+    )
+    add_parameter(aso, "runs", default=20, high=MAX_RUNS)
+    add_parameter(aso, "seed")
+    add_parameter(aso, "steps", "--scans", default=40, note="per run")
+    track.add_crossing_flags(aso)
+    for name, flag in track.ASSOCIATION_FLAGS[:-1]:  # one radar, one time per scan: no window
+        add_parameter(aso, name, flag)
+    add_parameter(aso, "gospa_cutoff_m", "--gospa-cutoff-m")
+    add_parameter(aso, "gospa_order", "--gospa-order")
+    add_parameter(aso, "sigma_a_mps2", "--sigma-a", default=1.0, note="cv model")
+    add_parameter(aso, "sigma_v0_mps", "--sigma-v0", default=300.0)
+    map_flag(aso, "methods", "--methods")
+    aso.add_argument(
+        "--methods",
+        nargs="+",
+        default=list(ALL_METHODS),
+        metavar="METHOD",
+        help=f"methods, each gating its own tracks (default all: {' '.join(ALL_METHODS)})",
+    )
+    aso.add_argument(
+        "--json", action="store_true", help="print only the JSON document on standard output"
+    )
+    aso.add_argument(
+        "--plot", metavar="FILE.png", help="write the figure (GOSPA per scan, parts, swaps)"
+    )
+
+
+def _cmd_reproduce_association(args: argparse.Namespace) -> int:
+    from radarviz.core.experiments.association import AssociationConfig, run_association
+    from radarviz.core.tracking.association import AssociationOptions
+
+    scene = track.crossing_scene(args, args.steps)
+    cfg = AssociationConfig(
+        scene=scene,
+        runs=args.runs,
+        seed=args.seed,
+        methods=tuple(args.methods),
+        association=AssociationOptions(
+            gate_probability=args.gate_probability,
+            confirm_m=args.confirm_m,
+            confirm_n=args.confirm_n,
+            delete_misses=args.delete_misses,
+        ),
+        sigma_a_mps2=args.sigma_a_mps2,
+        sigma_v0_mps=args.sigma_v0_mps,
+        gospa_cutoff_m=args.gospa_cutoff_m,
+        gospa_order=args.gospa_order,
+    )
+    check_outputs([("--plot", args.plot)])
+    from radarviz.viz_app.reports.association import (
+        association_document,
+        format_association_table,
+    )
+
+    return _emit(
+        args,
+        association_document(run_association(cfg)),
+        format_association_table,
+        "radarviz.viz_app.figures.association:plot_association",
+    )
 
 
 def _emit(
@@ -424,6 +496,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _cmd_reproduce_velocity(args)
         if args.command == "reproduce" and args.experiment == "manoeuvre":
             return _cmd_reproduce_manoeuvre(args)
+        if args.command == "reproduce" and args.experiment == "association":
+            return _cmd_reproduce_association(args)
         if args.command == "bench":
             return _cmd_bench(args)
         if args.command == "tune":

@@ -16,12 +16,20 @@ from contextlib import AbstractContextManager
 
 from radarviz.core.filters.models import DEFAULT_IMM
 from radarviz.core.params import ParameterError, check, check_choice, default
+from radarviz.core.scenarios.crossing import CrossingScene
+from radarviz.core.tracking.association import ASSOCIATE_MODES, AssociationOptions
 from radarviz.core.tracking.consistency import ConsistencyMonitor
 from radarviz.core.tracking.stream import INIT_MODES, METHODS_3D, StreamOptions
 from radarviz.viz_app.cli.args import integer, number
 from radarviz.viz_app.cli.params import add_parameter, map_flag
-from radarviz.viz_app.cli.presets import ALL_PRESETS, FLIGHT_NAMES, manoeuvre_file_plots
-from radarviz.viz_app.io.atomic import atomic_write, check_outputs
+from radarviz.viz_app.cli.presets import (
+    ALL_PRESETS,
+    FLIGHT_NAMES,
+    crossing_file_plots,
+    manoeuvre_file_plots,
+    write_crossing_truth,
+)
+from radarviz.viz_app.io.atomic import atomic_write, check_outputs, commit_together
 from radarviz.viz_app.io.plots import (
     DEFAULT_TRACKS,
     DOPPLER_MODES,
@@ -145,13 +153,16 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     tr.add_argument(
         "--json", action="store_true", help="print the consistency summary as JSON on stdout"
     )
+    _add_association_flags(tr)
 
     sim = sub.add_parser("simulate", help="write a preset's measurements and radars files")
     sim.add_argument(
         "--preset",
         required=True,
-        help="prosov (one 2D radar, the Prosov run), fusion (three 3D radars with Doppler) or "
-        "manoeuvre (a manoeuvring aircraft seen by three 3D radars, one with Doppler)",
+        help="prosov (one 2D radar, the Prosov run), fusion (three 3D radars with Doppler), "
+        "manoeuvre (a manoeuvring aircraft seen by three 3D radars, one with Doppler) or "
+        "crossing (crossing targets in clutter, P_D < 1, unlabelled plots of one 2D radar: "
+        "for track --associate gnn)",
     )
     map_flag(sim, "preset", "--preset")
     sim.add_argument(
@@ -175,8 +186,102 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
         default=None,
         shown_default=f"{default('steps')} (manoeuvre: the whole flight, 241)",
         high=MAX_SIMULATE_STEPS,
-        note="fusion and manoeuvre: per radar",
+        note="fusion and manoeuvre: per radar; crossing: 40",
     )
+    add_crossing_flags(sim, given_only=True)
+    sim.add_argument(
+        "--truth-out",
+        default=None,
+        metavar="TRUTH.csv",
+        help="crossing: also write the true states per scan and target (time_s, target, x_m, "
+        "y_m, vx_mps, vy_mps)",
+    )
+
+
+#: The crossing scene's table parameters and their flags.
+CROSSING_FLAGS: tuple[tuple[str, tuple[str, ...]], ...] = (
+    ("crossing_targets", ("--targets",)),
+    ("crossing_angle_deg", ("--crossing-angle-deg",)),
+    ("detection_prob", ("--pd", "--detection-prob")),
+    ("clutter_per_scan", ("--clutter-per-scan",)),
+)
+
+
+def add_crossing_flags(parser: argparse.ArgumentParser, given_only: bool = False) -> None:
+    """The crossing scene's flags (``simulate --preset crossing``, ``reproduce association``);
+    ``given_only``: None unless given (``simulate`` refuses them for another preset)."""
+    for name, flags in CROSSING_FLAGS:
+        if given_only:
+            add_parameter(
+                parser, name, *flags, default=None, shown_default=default(name), note="crossing"
+            )
+        else:
+            add_parameter(parser, name, *flags)
+
+
+def crossing_scene(args: argparse.Namespace, scans: int | None) -> CrossingScene:
+    """The crossing scene of the flags (checked by ``CrossingScene``; a flag not given: the
+    table's default)."""
+    kw = {name: getattr(args, name) for name, _ in CROSSING_FLAGS}
+    kw = {k: v for k, v in kw.items() if v is not None}
+    if scans is not None:
+        kw["scans"] = scans
+    return CrossingScene(
+        **{("targets" if k == "crossing_targets" else k): v for k, v in kw.items()}
+    )
+
+
+#: The association's table parameters and their ``track`` flags (given only with --associate).
+ASSOCIATION_FLAGS: tuple[tuple[str, str], ...] = (
+    ("gate_probability", "--gate-probability"),
+    ("confirm_m", "--confirm-m"),
+    ("confirm_n", "--confirm-n"),
+    ("delete_misses", "--delete-misses"),
+    ("scan_window_s", "--scan-window-s"),
+)
+
+
+def _add_association_flags(tr: argparse.ArgumentParser) -> None:
+    """``track``'s association flags (``core.tracking.association``)."""
+    tr.add_argument(
+        "--associate",
+        default="none",
+        metavar="MODE",
+        help="plots without a target column: none (one target, the default) or gnn (many "
+        "targets and clutter: global-nearest-neighbour association, M-of-N confirmation; the "
+        "track file's target column is the track id, status tentative or confirmed)",
+    )
+    map_flag(tr, "associate", "--associate")
+    tr.add_argument(
+        "--associate-method",
+        default=None,
+        metavar="METHOD",
+        help="with --associate gnn: the method whose prediction gates the plots; every "
+        "--method follows its assignment (default ucm)",
+    )
+    map_flag(tr, "associate_method", "--associate-method")
+    for name, flag in ASSOCIATION_FLAGS:
+        add_parameter(
+            tr, name, flag, default=None, shown_default=default(name), note="--associate gnn"
+        )
+
+
+def association_options(args: argparse.Namespace) -> AssociationOptions | None:
+    """The ``AssociationOptions`` of ``--associate gnn`` (checked there), or None; a flag of
+    the association without it is refused rather than ignored."""
+    mode = check_choice("associate", args.associate, ASSOCIATE_MODES)
+    given = {name: getattr(args, name) for name, _ in ASSOCIATION_FLAGS}
+    if mode == "none":
+        for (_, flag), value in zip(ASSOCIATION_FLAGS, given.values(), strict=True):
+            if value is not None:
+                raise ParameterError(f"{flag} is the association's; it needs --associate gnn")
+        if args.associate_method is not None:
+            raise ParameterError("--associate-method needs --associate gnn")
+        return None
+    kw = {k: v for k, v in given.items() if v is not None}
+    if args.associate_method is not None:
+        kw["method"] = args.associate_method
+    return AssociationOptions(**kw)
 
 
 def _recorder(path: str, monitor: ConsistencyMonitor | None = None) -> ObserverFactory:
@@ -236,6 +341,7 @@ def cmd_track(args: argparse.Namespace) -> int:
         [("--out", args.out), ("--rrd", args.rrd), ("--summary", args.summary)],
         [("--input", args.input), ("--radars", args.radars)],
     )
+    association = association_options(args)
     monitor = ConsistencyMonitor(args.nis_window, on_event=exit_warner(_warn))
     options = StreamOptions(
         sigma_v0_mps=args.sigma_v0_mps,
@@ -248,7 +354,7 @@ def cmd_track(args: argparse.Namespace) -> int:
     )
     methods = None if args.method is None else tuple(args.method)
     observer = None if args.rrd is None else _recorder(args.rrd, monitor)
-    s = run_track(args.input, args.radars, args.out, methods, options, observer)
+    s = run_track(args.input, args.radars, args.out, methods, options, observer, association)
     doc = track_summary_document(
         monitor,
         options,
@@ -274,6 +380,8 @@ def cmd_track(args: argparse.Namespace) -> int:
     extra += f" and {args.summary}" if args.summary else ""
     bad = doc["inconsistent_tracks"]
     of = f" of {len(s.targets)} targets" if s.targets else ""
+    if association is not None:
+        of = f" into {len(s.targets)} confirmed tracks (gnn, gate {association.method})"
     print(
         f"tracked {s.plots} plots{of} ({'3D' if s.three_d else '2D'}) with {len(s.methods)} "
         f"method(s), model {options.model}, into {args.out}{extra}: {s.rows} rows, "
@@ -295,7 +403,31 @@ def _inconsistent(bad: list[str], tracks: int) -> str:
 
 def cmd_simulate(args: argparse.Namespace) -> int:
     check_choice("--preset", args.preset, ALL_PRESETS)
-    check_outputs([("--out", args.out), ("--radars-out", args.radars_out)])
+    if args.preset != "crossing":
+        extra = [("--truth-out", args.truth_out)] + [
+            (flags[0], getattr(args, name)) for name, flags in CROSSING_FLAGS
+        ]
+        for flag, value in extra:
+            if value is not None:
+                raise ParameterError(f"{flag} is the crossing preset's (--preset crossing)")
+    check_outputs(
+        [("--out", args.out), ("--radars-out", args.radars_out), ("--truth-out", args.truth_out)]
+    )
+    if args.preset == "crossing":
+        check("sigma_beta_deg", args.sigma_beta_deg)  # the prosov preset's: checked, not used
+        scene = crossing_scene(args, args.steps)
+        plots, radars = crossing_file_plots(scene, args.seed)
+        with commit_together():
+            n = write_measurements(args.out, args.radars_out, plots, radars)
+            if args.truth_out is not None:
+                write_crossing_truth(args.truth_out, scene)
+        extra = f" and the truth to {args.truth_out}" if args.truth_out else ""
+        print(
+            f"wrote {n} plots ({scene.targets} crossing targets at {scene.crossing_angle_deg:g}°, "
+            f"P_D {scene.detection_prob:g}, {scene.clutter_per_scan:g} false plots per scan, "
+            f"{scene.scans} scans) to {args.out} and 1 radar to {args.radars_out}{extra}"
+        )
+        return 0
     if args.preset == "manoeuvre":
         check("sigma_beta_deg", args.sigma_beta_deg)
         check_choice("flight", args.flight, FLIGHT_NAMES)

@@ -4,7 +4,10 @@ Measurement file (CSV, header line first, one row per plot, times non-decreasing
 
     time_s, radar, range_m, azimuth_deg [, elevation_deg] [, radial_velocity_mps] [, target]
 
-Without ``target`` every plot is of one target. With it (the radar's own track number, or any
+Without ``target`` every plot is of one target, or, with ``track --associate gnn``, of any
+number of targets and clutter, associated scan by scan (``core.tracking.association``; the
+track file then has ``target``, the track id, and ``status``, tentative or confirmed, after
+``time_s``). With it (the radar's own track number, or any
 label; no cell may be empty) the file holds many targets, interleaved: each target gets its
 own tracks, all targets advancing as one batch (``core.tracking.targets``); times need only
 not decrease within a target, and a target may change radar from plot to plot. The
@@ -77,6 +80,7 @@ from radarviz.core.scenarios.multi_radar import (
     fusion_scenario,
     generate_measurements,
 )
+from radarviz.core.tracking.association import AssociationOptions, GNNTracker, scan_groups
 from radarviz.core.tracking.stream import (
     METHODS_3D,
     Plot,
@@ -380,10 +384,13 @@ class PlotReader:
             raise ParameterError(f"{source}: no plots after the header")
 
 
-def track_columns(targets: bool) -> tuple[str, ...]:
+def track_columns(targets: bool, status: bool = False) -> tuple[str, ...]:
     """The track file's header: ``TRACK_COLUMNS``, with ``target`` after ``time_s`` for a
-    measurement file of many targets."""
-    return (TRACK_COLUMNS[0], "target", *TRACK_COLUMNS[1:]) if targets else TRACK_COLUMNS
+    measurement file of many targets, and ``status`` after it for associated tracks
+    (``track --associate``: the track's status after the plot, tentative or confirmed)."""
+    if not targets:
+        return TRACK_COLUMNS
+    return (TRACK_COLUMNS[0], "target", *(("status",) if status else ()), *TRACK_COLUMNS[1:])
 
 
 #: Track rows written to the track file at a time (one pyarrow table).
@@ -402,12 +409,15 @@ class TrackWriter:
     Args:
         fh: the binary file to write (``atomic_write``'s).
         targets: the file has a ``target`` column (``track_columns``).
+        status: and a ``status`` column (associated tracks).
     """
 
-    def __init__(self, fh: IO[bytes], targets: bool):
+    def __init__(self, fh: IO[bytes], targets: bool, status: bool = False):
         self.fh = fh
         self.targets = targets
-        self.columns = track_columns(targets)
+        self.status = targets and status
+        self.columns = track_columns(targets, self.status)
+        self._statuses: list[str] = []
         self.rows = 0
         self._writer: Any = None
         self._times: list[float] = []
@@ -416,8 +426,9 @@ class TrackWriter:
         self._x: list[NDArray[np.float64]] = []
         self._P: list[NDArray[np.float64]] = []
 
-    def add(self, plot: Plot, rows: list[StateRow]) -> None:
-        """One plot's rows (method, x (6,), P (6, 6))."""
+    def add(self, plot: Plot, rows: list[StateRow], status: str = "") -> None:
+        """One plot's rows (method, x (6,), P (6, 6)); ``status``: its track's, if the file
+        has the column."""
         for m, x, P in rows:
             self._times.append(plot.time_s)
             self._methods.append(m)
@@ -425,6 +436,8 @@ class TrackWriter:
             self._P.append(P)
         if self.targets:
             self._labels.extend([plot.target] * len(rows))
+        if self.status:
+            self._statuses.extend([status] * len(rows))
         self.rows += len(rows)
         if len(self._times) >= WRITE_BLOCK:
             self.flush()
@@ -439,6 +452,8 @@ class TrackWriter:
         x = np.stack(self._x)[:, _STATE_INDEX]
         P = np.stack(self._P)[:, _COV_ROWS, _COV_COLS]
         text = [pa.array(self._labels, pa.string())] if self.targets else []
+        if self.status:
+            text.append(pa.array(self._statuses, pa.string()))
         columns = [
             pa.array(self._times, pa.float64()),
             *text,
@@ -451,7 +466,7 @@ class TrackWriter:
             options = pcsv.WriteOptions(quoting_style="needed")
             self._writer = pcsv.CSVWriter(self.fh, table.schema, write_options=options)
         self._writer.write_table(table)
-        for buf in (self._times, self._labels, self._methods, self._x, self._P):
+        for buf in (self._times, self._labels, self._statuses, self._methods, self._x, self._P):
             buf.clear()
 
     def close(self) -> None:
@@ -584,8 +599,9 @@ def track_lines(
     radars: dict[str, Radar],
     methods: tuple[str, ...] | None,
     options: StreamOptions,
-    on_rows: Callable[[Plot, list[StateRow]], None],
+    on_rows: Callable[..., None],
     on_start: Callable[[bool], None] | None = None,
+    association: AssociationOptions | None = None,
 ) -> tuple[int, bool, tuple[str, ...], tuple[str, ...]]:
     """Track a measurement CSV given as lines; ``on_rows(plot, rows)`` after every plot.
 
@@ -597,10 +613,17 @@ def track_lines(
     ``methods`` None: every method of the file's kind (``ALL_METHODS`` in 2D, ``METHODS_3D``
     in 3D). Returns (plots, three_d, methods, targets). Tracker errors come back as
     "SOURCE line L, column C: …".
+
+    With ``association`` (``track --associate gnn``) a file without a ``target`` column is
+    associated scan by scan (``core.tracking.association.GNNTracker``): ``on_rows(plot,
+    rows, status)`` then gets the plot labelled with its track id and the track's status, and
+    ``targets`` are the ids of the tracks ever confirmed. Memory holds one scan.
     """
     reader = PlotReader(lines, source, radars)
     if methods is None:
         methods = METHODS_3D if reader.three_d else ALL_METHODS
+    if association is not None:
+        return _associate_lines(reader, source, methods, options, association, on_rows, on_start)
     tracker: StreamTracker | TargetTracker
     try:
         if reader.targets:
@@ -637,6 +660,44 @@ def track_lines(
     return plots, reader.three_d, methods, targets
 
 
+def _associate_lines(
+    reader: PlotReader,
+    source: str,
+    methods: tuple[str, ...],
+    options: StreamOptions,
+    association: AssociationOptions,
+    on_rows: Callable[..., None],
+    on_start: Callable[[bool], None] | None,
+) -> tuple[int, bool, tuple[str, ...], tuple[str, ...]]:
+    """``track_lines`` with the association (its docstring)."""
+    if reader.targets:
+        raise ParameterError(
+            f"{source} line 1, column target: --associate is for plots without target labels "
+            "(this file labels its targets: track it without --associate)"
+        )
+    try:
+        tracker = GNNTracker(methods, reader.three_d, options, association)
+    except ParameterError as exc:
+        if exc.parameter:
+            raise
+        raise ParameterError(f"--{exc}") from None
+    if on_start is not None:
+        on_start(True)
+    plots = 0
+    for scan in scan_groups(reader, association.scan_window_s):
+        try:
+            result = tracker.add_scan([plot for _, plot in scan])
+        except PlotError as exc:
+            line = scan[exc.index][0]
+            raise ParameterError(f"{source} line {line}, column {exc.column}: {exc}") from None
+        for (_, plot), track, status, rows in zip(
+            scan, result.track_ids, result.statuses, result.rows, strict=True
+        ):
+            on_rows(replace(plot, target=track), rows, status)
+        plots += len(scan)
+    return plots, reader.three_d, methods, tuple(tracker.ever_confirmed)
+
+
 class RowObserver(Protocol):
     """What ``run_track`` can hand every plot and its track rows to (e.g. a Rerun recorder)."""
 
@@ -655,8 +716,11 @@ def run_track(
     methods: tuple[str, ...] | None = None,
     options: StreamOptions | None = None,
     observer: ObserverFactory | None = None,
+    association: AssociationOptions | None = None,
 ) -> TrackSummary:
-    """Track every plot of ``input_path`` into ``out_path``; ``observer`` also sees each plot."""
+    """Track every plot of ``input_path`` into ``out_path``; ``observer`` also sees each plot.
+    ``association``: associate unlabelled plots (``track_lines``); the track file then has
+    ``target`` (the track id) and ``status`` columns."""
     options = options or StreamOptions()
     radars = load_radars(radars_path)
     start = time.perf_counter()
@@ -669,17 +733,17 @@ def run_track(
 
         def on_start(targets: bool) -> None:
             nonlocal writer
-            writer = TrackWriter(out, targets)
+            writer = TrackWriter(out, targets, status=association is not None)
 
-        def on_rows(plot: Plot, rows: list[StateRow]) -> None:
+        def on_rows(plot: Plot, rows: list[StateRow], status: str = "") -> None:
             assert writer is not None
             check_track_rows(f"track: {input_path} at time {plot.time_s!r} s", rows)
-            writer.add(plot, rows)
+            writer.add(plot, rows, status)
             if logger is not None:
                 logger.add(plot, rows)
 
         plots, three_d, used, targets = track_lines(
-            src, input_path, radars, methods, options, on_rows, on_start
+            src, input_path, radars, methods, options, on_rows, on_start, association
         )
         assert writer is not None
         writer.close()

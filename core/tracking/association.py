@@ -1,0 +1,388 @@
+"""Association of unlabelled plots: global nearest neighbour (GNN) with M-of-N confirmation.
+
+The scheme of Blackman and Popoli (1999): a χ² gate, one optimal assignment per scan, M-of-N
+confirmation of tentative tracks and deletion after consecutive misses.
+
+A measurement file without a ``target`` column may still hold many targets, and clutter.
+``GNNTracker`` decides, scan by scan, which plot belongs to which track, and hands the plots,
+labelled with their track ids, to a ``core.tracking.targets.TargetTracker``: the filters are
+the engine's own (prediction, update, IMM), nothing is filtered here.
+
+* **Scans.** A scan is a run of consecutive plots (in file order) of one radar whose times lie
+  within ``scan_window_s`` of the run's first plot (``scan_groups``); the default window 0
+  groups the plots of one radar that share a time stamp. A track takes at most one plot per
+  scan, and a track with none in a scan has missed it. A radar whose plots carry each its own
+  time stamp needs a window of about one revolution, else every plot is a scan of its own and
+  every track misses most scans.
+* **Gate.** Each live track is predicted to each plot's time by the *gating method*
+  (``AssociationOptions.method``, default ``ucm``: a converted-measurement method whose
+  covariance is consistent at the measurement) and the plot is scored by the Mahalanobis
+  distance of its innovation,
+
+      d² = νᵀ S⁻¹ ν,   S = H P⁻ Hᵀ + R,
+
+  exactly the statistic the consistency monitor takes of the method's update
+  (``core.filters.measurement.PlotMeasurement.innovation``; for ``ekf``/``ukf`` the polar
+  innovation; for the IMM the combined prediction). The position alone gates (Doppler, when
+  present, is used by the update but not by the gate), so d² ~ χ²(d) for the track's own
+  plot, d = 2 or 3, and the gate is d² < γ with γ = F⁻¹_χ²(d)(P_G) (``gate_threshold``): the
+  track's own plot is inside it with probability P_G.
+* **Assignment.** Per scan, the assignment of plots to tracks maximises Σ (γ − d²) over the
+  assigned pairs, pairs outside the gate excluded (``gnn_assign``: one
+  ``scipy.optimize.linear_sum_assignment`` on the costs d² − γ; a pair of cost 0 is "not
+  assigned", so leaving a track unassigned costs γ, the gate's edge). Confirmed tracks are
+  assigned first, then tentative tracks on the plots left: a fresh track's wide gate (its
+  velocity is still ±σv0) would otherwise take a confirmed track's plot whenever its d² is
+  the smaller one, since d² does not penalise a wide S.
+* **Initiation.** Every plot left unassigned starts a tentative track (the first-plot start).
+* **Confirmation, M of N.** A tentative track is confirmed at the scan of its M-th hit if
+  that comes within its first N scans (the initiating scan counts as the first, and a hit);
+  it is deleted as soon as that has become impossible, hits + scans left < M. No separate
+  miss count is needed for tentative tracks: M-of-N deletes them after N − M + 1 misses.
+* **Deletion.** A confirmed track is deleted after ``delete_misses`` consecutive misses.
+
+Every requested method's tracks follow the one assignment the gating method made, so the
+methods are compared on identical plot-to-track data; the gating method's own tracks are kept
+beside them (in a tracker of their own, unmonitored, when it is not among the methods).
+Track ids are "1", "2", … in order of initiation, never reused.
+
+Cost: per scan one K × P matrix of d² for K live tracks and P plots, computed as one
+broadcast batch per distinct plot time (no loop over pairs), and one assignment, O((K + P)³)
+at worst; at 10³ tracks and plots a scan is a few 10⁶-element arrays.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass, field, replace
+from typing import NamedTuple, TypeVar
+
+import numpy as np
+from numpy.typing import NDArray
+
+from radarviz.core.filters.innovation import position_terms
+from radarviz.core.filters.methods import (
+    METHODS,
+    MethodGroup,
+    PolarNoise,
+    PolarPlot,
+    stack_parts,
+)
+from radarviz.core.filters.state import CVBatch, quad_form_inv
+from radarviz.core.params import ParameterError, check, check_choice, default
+from radarviz.core.tracking.stream import (
+    ALL_METHODS,
+    Plot,
+    PlotError,
+    StateRow,
+    StreamOptions,
+    polar_arrays,
+)
+from radarviz.core.tracking.targets import TargetTracker
+
+#: ``track --associate``: none (today's: one target, or the file's target labels) or gnn.
+ASSOCIATE_MODES: tuple[str, ...] = ("none", "gnn")
+TENTATIVE = "tentative"
+CONFIRMED = "confirmed"
+
+T = TypeVar("T")
+
+
+@dataclass(frozen=True)
+class AssociationOptions:
+    """How ``GNNTracker`` associates (module docstring; parameters of ``core.params``).
+
+    Attributes:
+        method: the gating method, whose prediction scores the plots.
+        gate_probability: P_G, in (0, 1).
+        confirm_m, confirm_n: M of the first N scans confirm a tentative track (M ≤ N).
+        delete_misses: consecutive misses that delete a confirmed track.
+        scan_window_s: plots of one radar within this time of a scan's first plot join it (s).
+    """
+
+    method: str = "ucm"
+    gate_probability: float = default("gate_probability")
+    confirm_m: int = default("confirm_m")
+    confirm_n: int = default("confirm_n")
+    delete_misses: int = default("delete_misses")
+    scan_window_s: float = default("scan_window_s")
+
+    def __post_init__(self) -> None:
+        check_choice("associate_method", self.method, ALL_METHODS)
+        check("gate_probability", self.gate_probability)
+        check("confirm_m", self.confirm_m)
+        check("confirm_n", self.confirm_n)
+        check("delete_misses", self.delete_misses)
+        check("scan_window_s", self.scan_window_s)
+        if self.confirm_m > self.confirm_n:
+            raise ParameterError(
+                f"confirm_m must be at most confirm_n = {self.confirm_n} (M of N scans; got "
+                f"{self.confirm_m})",
+                "confirm_m",
+            )
+
+
+def gate_threshold(gate_probability: float, dof: int) -> float:
+    """γ with P(χ²(dof) < γ) = P_G: the gate of a d-dimensional position innovation."""
+    from scipy.stats import chi2  # lazily: scipy.stats costs a command's start-up
+
+    return float(chi2.ppf(gate_probability, dof))
+
+
+def scan_groups(items: Iterable[tuple[T, Plot]], window_s: float) -> Iterator[list[tuple[T, Plot]]]:
+    """Cut (key, plot) pairs, in file order, into scans: runs of consecutive plots of one
+    radar whose times are within ``window_s`` of the run's first plot (module docstring)."""
+    scan: list[tuple[T, Plot]] = []
+    for item in items:
+        p = item[1]
+        if scan and (p.radar != scan[0][1].radar or p.time_s - scan[0][1].time_s > window_s):
+            yield scan
+            scan = []
+        scan.append(item)
+    if scan:
+        yield scan
+
+
+def mahalanobis_matrix(
+    method: str,
+    predicted: CVBatch,
+    plot: PolarPlot,
+    noise: PolarNoise,
+    site: NDArray[np.float64],
+) -> NDArray[np.float64]:
+    """d² = νᵀ S⁻¹ ν of every plot against every predicted track: (K, P).
+
+    Args:
+        method: the gating method (its measurement: ``MethodGroup.measurement``).
+        predicted: K tracks predicted to the plots' time, x (K, n), P (K, n, n).
+        plot, noise: P plots' polar values and noise std, (P,) arrays.
+        site: (P, d) each plot's radar.
+
+    The K × P pairs are one batch of shape (K, P): each track's prediction broadcast along
+    the plots, each plot along the tracks; ν and R are the method's measurement
+    (``MethodGroup.measurement``, what its update and ``PlotMeasurement.innovation`` use), S
+    that of ``core.filters.innovation.position_terms`` (the NIS without log det S, which the
+    gate does not need). A broken track's d² (NaN) is outside every gate.
+    """
+    group = MethodGroup((method,))
+    k, n = predicted.x.shape
+    p = np.size(plot.range_m)
+    x = np.broadcast_to(predicted.x[:, None, :], (k, p, n))
+    P = np.broadcast_to(predicted.P[:, None, :, :], (k, p, n, n))
+    parts = None
+    if group.converted:
+        x, P = x[None], P[None]  # the group's method axis
+        if not METHODS[method].about_prediction:
+            # One conversion per plot, broadcast over the tracks (``ducm`` converts per pair).
+            parts = stack_parts([group.kinds[0].convert(plot, noise)])
+    if parts is None:
+        plot = PolarPlot(*(None if v is None else np.broadcast_to(v, (k, p)) for v in plot))
+    state = CVBatch(x, P)
+    nu, S = position_terms(state, *group.measurement(state, plot, noise, site=site, parts=parts))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        d2 = quad_form_inv(S, nu).reshape(k, p)  # a NaN for an S not positive definite
+    return np.where(np.isfinite(d2), d2, np.inf)
+
+
+def gnn_assign(d2: NDArray[np.float64], gate: float) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """The global-nearest-neighbour assignment: (track rows, plot columns) of the pairs that
+    maximise Σ (γ − d²) over pairs inside the gate d² < γ (module docstring).
+
+    One ``linear_sum_assignment`` on the costs min(d² − γ, 0): every pair outside the gate
+    costs 0, the same as leaving both unassigned, and is dropped from the result.
+    """
+    from scipy.optimize import linear_sum_assignment
+
+    if d2.size == 0:
+        empty = np.zeros(0, dtype=np.intp)
+        return empty, empty
+    cost = np.minimum(d2 - gate, 0.0)
+    rows, cols = linear_sum_assignment(cost)
+    keep = cost[rows, cols] < 0.0
+    return rows[keep], cols[keep]
+
+
+@dataclass
+class TrackRecord:
+    """The association's book of one track: status, hits and scans since its start, and
+    the consecutive misses of a confirmed track."""
+
+    status: str = TENTATIVE
+    hits: int = 1
+    scans: int = 1
+    misses: int = 0
+
+
+class ScanResult(NamedTuple):
+    """What one scan did.
+
+    Attributes:
+        track_ids: (P,) per plot of the scan, the id of the track it went to.
+        statuses: (P,) that track's status after the scan.
+        rows: per plot, (method, x (6,), P (6, 6)) for every requested method.
+        confirmed: ids of the tracks confirmed at this scan.
+        deleted: ids of the tracks deleted at this scan.
+    """
+
+    track_ids: list[str]
+    statuses: list[str]
+    rows: list[list[StateRow]]
+    confirmed: list[str]
+    deleted: list[str]
+
+
+@dataclass
+class _Gate:
+    method: str
+    threshold: float
+    tracker: TargetTracker = field(repr=False)
+
+
+class GNNTracker:
+    """Tracks of many targets from unlabelled plots: GNN association, M-of-N confirmation.
+
+    Args:
+        methods: the filters whose tracks are returned (every one follows the association).
+        three_d: plots carry elevations.
+        options: the filters' ``StreamOptions`` (first-plot start; the monitor sees the
+            requested methods' tracks, named ``track_name(id, method)``).
+        association: ``AssociationOptions``.
+    """
+
+    def __init__(
+        self,
+        methods: tuple[str, ...],
+        three_d: bool,
+        options: StreamOptions,
+        association: AssociationOptions,
+    ):
+        self.methods = tuple(methods)
+        self.association = a = association
+        self.tracker = TargetTracker(self.methods, three_d, options)
+        dims = 3 if three_d else 2
+        self.dims = dims
+        if a.method in self.methods:
+            gate_tracker = self.tracker
+        else:
+            gate_tracker = TargetTracker((a.method,), three_d, _without_monitor(options))
+        self._gate = _Gate(a.method, gate_threshold(a.gate_probability, dims), gate_tracker)
+        self.tracks: dict[str, TrackRecord] = {}
+        self._started = 0
+        #: Ids of every track confirmed so far, in order of confirmation.
+        self.ever_confirmed: list[str] = []
+
+    @property
+    def gate(self) -> float:
+        """γ, the gate on d²."""
+        return self._gate.threshold
+
+    def live(self, status: str | None = None) -> list[str]:
+        """Ids of the live tracks (of one status, or all), in order of initiation."""
+        return [t for t, r in self.tracks.items() if status is None or r.status == status]
+
+    def distances(self, ids: list[str], plots: list[Plot]) -> NDArray[np.float64]:
+        """d² (len(ids), len(plots)) of ``plots`` against tracks ``ids``, each track predicted
+        to each plot's own time (one batch per distinct time)."""
+        g = self._gate
+        out = np.full((len(ids), len(plots)), np.inf)
+        if not ids or not plots:
+            return out
+        times = np.array([p.time_s for p in plots])
+        for t in np.unique(times):
+            cols = np.flatnonzero(times == t)
+            sub = [plots[j] for j in cols]
+            plot, noise = polar_arrays(sub, self.dims)
+            site = np.array([p.site for p in sub], dtype=np.float64)[:, : self.dims]
+            pred = g.tracker.predicted(g.method, ids, float(t))
+            out[:, cols] = mahalanobis_matrix(g.method, pred, plot, noise, site)
+        return out
+
+    def add_scan(self, plots: list[Plot]) -> ScanResult:
+        """Associate and filter one scan's plots (``scan_groups``); a ``PlotError`` carries
+        ``index``, the plot's position in the scan."""
+        for i, p in enumerate(plots):
+            if (self.dims == 3) != (p.elevation_rad is not None):
+                raise PlotError(
+                    "elevation_deg", "every plot of a 3D track needs an elevation", index=i
+                )
+        owner: list[str | None] = [None] * len(plots)
+        free = np.arange(len(plots))
+        for status in (CONFIRMED, TENTATIVE):  # confirmed tracks choose first
+            ids = self.live(status)
+            if not ids or not free.size:
+                continue
+            d2 = self.distances(ids, [plots[j] for j in free])
+            rows, cols = gnn_assign(d2, self._gate.threshold)
+            for r, c in zip(rows.tolist(), cols.tolist(), strict=True):
+                owner[int(free[c])] = ids[r]
+            free = np.delete(free, cols)
+        hit = {t for t in owner if t is not None}
+        for j in free.tolist():  # unassigned plots start tentative tracks
+            self._started += 1
+            owner[j] = str(self._started)
+        labelled = [_label(p, t) for p, t in zip(plots, owner, strict=True)]
+        rows_out = self.tracker.add_block(labelled)
+        if self._gate.tracker is not self.tracker:
+            self._gate.tracker.add_block(labelled)
+        confirmed, deleted = self._book(hit, [owner[j] for j in free.tolist()])
+        statuses = [self.tracks[t].status if t in self.tracks else TENTATIVE for t in owner]
+        # A track deleted at this scan cannot have a plot in it (it was missed): statuses hold.
+        return ScanResult([str(t) for t in owner], statuses, rows_out, confirmed, deleted)
+
+    def _book(self, hit: set[str], started: list[str | None]) -> tuple[list[str], list[str]]:
+        """Hits, misses, confirmation and deletion after a scan (module docstring)."""
+        a = self.association
+        confirmed: list[str] = []
+        deleted: list[str] = []
+        for t, r in self.tracks.items():
+            got = t in hit
+            if r.status == TENTATIVE:
+                r.scans += 1
+                r.hits += got
+                if r.hits >= a.confirm_m:
+                    r.status = CONFIRMED
+                    confirmed.append(t)
+                elif r.hits + (a.confirm_n - r.scans) < a.confirm_m:
+                    deleted.append(t)
+            else:
+                r.misses = 0 if got else r.misses + 1
+                if r.misses >= a.delete_misses:
+                    deleted.append(t)
+        for t in started:
+            assert t is not None
+            r = TrackRecord()
+            self.tracks[t] = r
+            if a.confirm_m <= 1:  # 1 of N: the initiating plot confirms
+                r.status = CONFIRMED
+                confirmed.append(t)
+        for t in deleted:
+            del self.tracks[t]
+        if deleted:
+            self.tracker.forget(deleted)
+            if self._gate.tracker is not self.tracker:
+                self._gate.tracker.forget(deleted)
+        self.ever_confirmed.extend(confirmed)
+        return confirmed, deleted
+
+    def states(
+        self, method: str, time_s: float, status: str = CONFIRMED
+    ) -> tuple[list[str], CVBatch]:
+        """The live tracks of ``status`` and ``method``'s estimates of them at ``time_s``
+        (predicted from their last plot; a track updated at ``time_s`` as it is)."""
+        ids = self.live(status)
+        tracker = self.tracker if method in self.methods else self._gate.tracker
+        if not ids:
+            n = 2 * self.dims
+            return ids, CVBatch(np.zeros((0, n)), np.zeros((0, n, n)))
+        return ids, tracker.predicted(method, ids, time_s)
+
+
+def _without_monitor(options: StreamOptions) -> StreamOptions:
+    """``options`` without the consistency monitor (the gating method's own tracks, when it
+    is not a requested method, are not reported)."""
+    return replace(options, monitor=None)
+
+
+def _label(p: Plot, track_id: str | None) -> Plot:
+    assert track_id is not None
+    return replace(p, target=track_id)
