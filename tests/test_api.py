@@ -167,6 +167,25 @@ def test_track_of_many_targets_equals_each_target_alone() -> None:
             np.testing.assert_allclose(s.P, t.P, rtol=1e-12, atol=1e-9)
 
 
+def test_track_file_associates_as_the_cli_does(tmp_path: Path) -> None:
+    m, r = tmp_path / "m.csv", tmp_path / "r.toml"
+    argv = ["simulate", "--preset", "crossing", "--out", str(m), "--radars-out", str(r)]
+    assert main([*argv, "--scans", "12", "--clutter-per-scan", "2"]) == 0
+    out = tmp_path / "tracks.csv"
+    flags = ["--associate", "gnn", "--method", "ucm", "ekf", "--confirm-m", "2", "--model", "cv"]
+    flags += ["--sigma-a", "0"]
+    assert main(["track", "--input", str(m), "--radars", str(r), "--out", str(out), *flags]) == 0
+    with out.open() as fh:
+        cli_rows = list(csv.DictReader(fh))
+    options = radarviz.AssociationOptions(confirm_m=2)
+    tracks = radarviz.track_file(str(m), str(r), ["ucm", "ekf"], association=options)
+    assert len(tracks.steps) == len(cli_rows) > 0
+    for s, row in zip(tracks.steps, cli_rows, strict=True):
+        assert (s.method, s.target, s.status) == (row["method"], row["target"], row["status"])
+        np.testing.assert_allclose(s.x, state_from_row(row)[0], rtol=1e-12, atol=1e-9)
+    assert {"target", "status"} <= set(radarviz.to_table(tracks).columns)
+
+
 def test_record_tracks_and_refuse_to_overwrite(tmp_path: Path) -> None:
     from radarviz.viz_app.rerun.recording import verify_recording
 

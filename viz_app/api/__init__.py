@@ -24,6 +24,7 @@ if __name__ != "radarviz":
     raise ImportError(f"{__name__} is the top-level package: import radarviz instead")
 
 from radarviz.core.params import ParameterError
+from radarviz.core.tracking.association import AssociationOptions
 from radarviz.core.tracking.stream import Plot
 from radarviz.experiments import (
     GorshkovRun,
@@ -42,6 +43,7 @@ __version__ = "0.1.0"
 
 __all__ = [
     "PRESETS",
+    "AssociationOptions",
     "GorshkovRun",
     "ParameterError",
     "Plot",

@@ -84,6 +84,8 @@ def _tracks(tracks: Tracks) -> Columns:
     }
     if any(s.target for s in steps):
         cols["target"] = np.array([s.target for s in steps], dtype=object)
+    if any(s.status for s in steps):
+        cols["status"] = np.array([s.status for s in steps], dtype=object)
     for j, name in enumerate(STATE_COLUMNS):
         cols[name] = x[:, j]
     for j, name in enumerate(STATE_COLUMNS):

@@ -10,6 +10,7 @@ from numpy.typing import NDArray
 
 from radarviz.core.filters.state import position_index
 from radarviz.core.params import ParameterError
+from radarviz.core.tracking.association import AssociationOptions
 from radarviz.core.tracking.stream import Plot, PlotError, StateRow, StreamOptions
 from radarviz.viz_app.io.plots import Radar, _open_input, bounded_lines, load_radars, track_lines
 
@@ -24,7 +25,10 @@ class TrackStep:
         method: the filter.
         x: state (x, vx, y, vy, z, vz), shape (6,), m and m/s (2D plots: z = vz = 0).
         P: its covariance, shape (6, 6), in m², m²/s, m²/s².
-        target: the plot's target label ("" for plots of one target).
+        target: the plot's target label ("" for plots of one target), or its track id when
+            ``track_file`` associates.
+        status: the track's status after the plot when associated (``tentative``,
+            ``confirmed``, ...), else "".
     """
 
     plot: int
@@ -33,6 +37,7 @@ class TrackStep:
     x: NDArray[np.float64]
     P: NDArray[np.float64]
     target: str = ""
+    status: str = ""
 
 
 @dataclass(frozen=True)
@@ -75,6 +80,7 @@ def track(
     plots: Iterable[Plot],
     methods: Sequence[str] | None = None,
     *,
+    model: str = "cv",
     sigma_a_mps2: float = 0.0,
     sigma_v0_mps: float = 1000.0,
     use_doppler: bool = True,
@@ -92,7 +98,11 @@ def track(
         plots: ``Plot`` records in time order (2D, or all with elevations for 3D); for many
             targets, each with its ``target`` label and in time order within its target.
         methods: filters (default every one of the plots' kind).
-        sigma_a_mps2: process-noise acceleration std, m/s² (0: constant velocity exactly).
+        model: ``cv`` (constant velocity with ``sigma_a_mps2``; the default here, the papers'
+            filter) or ``imm`` (the IMM of a quiet and a manoeuvre model, the default of
+            ``radarviz track``).
+        sigma_a_mps2: process-noise acceleration std of ``cv``, m/s² (0: constant velocity
+            exactly).
         sigma_v0_mps: velocity std of the start, m/s.
         use_doppler: use the plots' radial velocities where they have them.
         init: ``first-plot`` or ``finite-memory`` (Gorshkov and Zavizhenets' window fit).
@@ -107,6 +117,7 @@ def track(
     from radarviz.core.tracking.targets import TargetTracker
 
     options = _options(
+        model=model,
         sigma_a_mps2=sigma_a_mps2,
         sigma_v0_mps=sigma_v0_mps,
         use_doppler=use_doppler,
@@ -138,11 +149,13 @@ def track_file(
     radars: str,
     methods: Sequence[str] | None = None,
     *,
+    model: str = "cv",
     sigma_a_mps2: float = 0.0,
     sigma_v0_mps: float = 1000.0,
     use_doppler: bool = True,
     init: str = "first-plot",
     init_k: int = 3,
+    association: AssociationOptions | None = None,
 ) -> Tracks:
     """Track a measurement CSV file with its radars TOML file (the formats of ``radarviz
     track``, described in the README); nothing is written.
@@ -151,16 +164,22 @@ def track_file(
         measurements: path of the measurement CSV.
         radars: path of the radars TOML file (sites in m, accuracies).
         methods: see ``track``.
+        model: see ``track``.
         sigma_a_mps2: see ``track``.
         sigma_v0_mps: see ``track``.
         use_doppler: see ``track``.
         init: see ``track``.
         init_k: see ``track``.
+        association: for a file of many targets without a ``target`` column: the
+            global-nearest-neighbour association of ``radarviz track --associate gnn``
+            (``AssociationOptions``: gating method, gate probability, M of N, misses to
+            delete, scan window). Each step's ``target`` is then its track id.
 
     Returns:
         ``Tracks``, with the file's radars.
     """
     options = _options(
+        model=model,
         sigma_a_mps2=sigma_a_mps2,
         sigma_v0_mps=sigma_v0_mps,
         use_doppler=use_doppler,
@@ -171,9 +190,9 @@ def track_file(
     plots: list[Plot] = []
     steps: list[TrackStep] = []
 
-    def on_rows(plot: Plot, rows: list[StateRow]) -> None:
+    def on_rows(plot: Plot, rows: list[StateRow], status: str = "") -> None:
         steps.extend(
-            TrackStep(len(plots), plot.time_s, m, x.copy(), P.copy(), plot.target)
+            TrackStep(len(plots), plot.time_s, m, x.copy(), P.copy(), plot.target, status)
             for m, x, P in rows
         )
         plots.append(plot)
@@ -181,6 +200,12 @@ def track_file(
     with _open_input(measurements) as fh:
         src = bounded_lines(fh, measurements)
         _, three_d, used, _ = track_lines(
-            src, measurements, sites, None if methods is None else tuple(methods), options, on_rows
+            src,
+            measurements,
+            sites,
+            None if methods is None else tuple(methods),
+            options,
+            on_rows,
+            association=association,
         )
     return Tracks(tuple(plots), tuple(steps), tuple(used), three_d, tuple(sites.values()))
