@@ -146,7 +146,11 @@ def test_doppler_experiment_runs_the_converted_variant_from_the_same_start() -> 
     assert a.rmse_x[k] == b.rmse_x[k] and a.nees_pos[k] == b.nees_pos[k]
     assert not np.array_equal(a.nees_pos[k + 1 :], b.nees_pos[k + 1 :])
     (summary,) = [doppler_consistency(r) for r in compare_doppler_updates(("RLS2",), runs=60)]
-    assert [c.variant for c in summary] == ["range_doppler", "range_converted_doppler"]
+    assert [c.variant for c in summary] == [
+        "range_doppler",
+        "range_converted_doppler",
+        "range_joint_doppler",
+    ]
     for c in summary:
         assert c.nees_last_ci95[0] <= c.nees_last <= c.nees_last_ci95[1]
         assert c.verdict in ("consistent", "over-confident", "under-confident")
@@ -163,6 +167,7 @@ def test_cli_reproduce_doppler(capsys) -> None:
     assert {c["variant"] for c in doc["cases"][0]["consistency"]} == {
         "range_doppler",
         "range_converted_doppler",
+        "range_joint_doppler",
     }
     assert main(["reproduce", "doppler", "--radars", "RLS9", "--runs", "20"]) == 2
     assert "--radars must be among" in capsys.readouterr().err
