@@ -17,9 +17,11 @@ Monte Carlo, range only beside range + Doppler on the same measurements:
    ``range_joint_doppler`` makes the EKF and the line-of-sight Doppler one update with the
    correlation of their angle errors (``core.filters.joint_doppler``), numpy engine too.
 
-The line-of-sight update stays consistent for RLS1–RLS4; for RLS5–RLS6 at σβ = 1° its NEES
-still sits at 3–10 (the range-only EKF's at 2.5–4.4): the precise radars' errors are far from
-Gaussian after the polar-to-Cartesian step, and the app says so rather than hiding it.
+The line-of-sight update is consistent for RLS1 and over-confident by 2–4% for RLS2–RLS4
+(the bearing error it shares with the EKF; the joint update removes that); for RLS5–RLS6 at
+σβ = 1° its NEES sits at 3–10 (the range-only EKF's at 2.5–4.4): the precise radars' errors
+are far from Gaussian after the polar-to-Cartesian step, and the app says so rather than
+hiding it (``docs/finite_memory.md``, section 7).
 """
 
 from __future__ import annotations
