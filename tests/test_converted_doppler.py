@@ -146,7 +146,11 @@ def test_doppler_experiment_runs_the_converted_variant_from_the_same_start() -> 
     assert a.rmse_x[k] == b.rmse_x[k] and a.nees_pos[k] == b.nees_pos[k]
     assert not np.array_equal(a.nees_pos[k + 1 :], b.nees_pos[k + 1 :])
     (summary,) = [doppler_consistency(r) for r in compare_doppler_updates(("RLS2",), runs=60)]
-    assert [c.variant for c in summary] == ["range_doppler", "range_converted_doppler"]
+    assert [c.variant for c in summary] == [
+        "range_doppler",
+        "range_converted_doppler",
+        "range_joint_doppler",
+    ]
     for c in summary:
         assert c.nees_last_ci95[0] <= c.nees_last <= c.nees_last_ci95[1]
         assert c.verdict in ("consistent", "over-confident", "under-confident")
@@ -163,6 +167,204 @@ def test_cli_reproduce_doppler(capsys) -> None:
     assert {c["variant"] for c in doc["cases"][0]["consistency"]} == {
         "range_doppler",
         "range_converted_doppler",
+        "range_joint_doppler",
     }
     assert main(["reproduce", "doppler", "--radars", "RLS9", "--runs", "20"]) == 2
     assert "--radars must be among" in capsys.readouterr().err
+
+
+# ------------------------------------------------------------------ the stream tracker
+
+
+def _mc_converted_tracks(radar: str, runs: int, steps: int, seed: int = 3):
+    """The Monte Carlo engine's converted-Doppler filter (``range_converted_doppler`` of
+    ``core.experiments.doppler_start``: finite-memory start over k = 3 scans, then the polar
+    EKF and the r̂ V̂r update) on its own measurements: (config, measurements, {scan: (x, P)})."""
+    from radarviz.core.experiments.doppler_start import (
+        DopplerTrackingConfig,
+        _filter_numpy,
+        polar_doppler_measurements,
+    )
+    from radarviz.core.filters.compiled import FilterSettings
+    from radarviz.core.finite_memory.fit import finite_memory_fit
+    from radarviz.core.finite_memory.start import finite_memory_start
+
+    cfg = DopplerTrackingConfig(radar=radar, runs=runs, steps=steps, seed=seed, engine="numpy")
+    rp = cfg.radar_preset()
+    sb = float(np.deg2rad(cfg.sigma_beta_deg))
+    rng = np.random.default_rng(np.random.SeedSequence(seed))
+    meas = polar_doppler_measurements(
+        cfg.scenario().truth(),
+        sigma_r_m=rp.sigma_r_m,
+        sigma_azimuth_rad=sb,
+        sigma_vr_mps=rp.sigma_vr_mps,
+        runs=runs,
+        rng=rng,
+    )
+    k = cfg.start_scans
+    fit = finite_memory_fit(
+        k,
+        sigma_r_m=rp.sigma_r_m,
+        sigma_vr_mps=rp.sigma_vr_mps,
+        period_s=rp.period_s,
+        with_doppler=True,
+    )
+    start = finite_memory_start(
+        fit,
+        meas.r[:, :k],
+        meas.vr[:, :k],
+        meas.beta[:, k - 1],
+        sigma_azimuth_rad=sb,
+        sigma_v0_mps=cfg.sigma_v0_mps,
+    )
+    settings = FilterSettings(
+        rp.sigma_r_m,
+        sb,
+        rp.period_s,
+        cfg.sigma_a_mps2,
+        cfg.sigma_v0_mps,
+        sigma_vr_mps=rp.sigma_vr_mps,
+    )
+    states = {k - 1: (start.x, start.P)}
+    for n, x, P in _filter_numpy(meas.r, meas.beta, meas.vr, settings, (k - 1, start), "converted"):
+        states[n] = (x[0], P[0])
+    return cfg, meas, states
+
+
+def _plots_of_run(cfg, meas, j: int, target: str = ""):
+    from radarviz.core.tracking.stream import Plot
+
+    rp = cfg.radar_preset()
+    return [
+        Plot(
+            time_s=n * rp.period_s,
+            range_m=float(meas.r[j, n]),
+            azimuth_rad=float(meas.beta[j, n]),
+            sigma_r_m=rp.sigma_r_m,
+            sigma_azimuth_rad=float(np.deg2rad(cfg.sigma_beta_deg)),
+            radar="a",
+            radial_velocity_mps=float(meas.vr[j, n]),
+            sigma_radial_velocity_mps=rp.sigma_vr_mps,
+            target=target,
+        )
+        for n in range(meas.r.shape[1])
+    ]
+
+
+@pytest.mark.parametrize("radar", ["RLS3", "RLS5"])
+def test_stream_tracker_converted_doppler_equals_the_monte_carlo_engine(radar: str) -> None:
+    """``StreamOptions(doppler_update="converted")`` with the finite-memory start is the Monte
+    Carlo's ``range_converted_doppler`` filter on the same plots: every state to 1e-9 of its
+    own σ, every covariance entry to 1e-9 of its diagonal scale."""
+    from radarviz.core.tracking.stream import StreamOptions, StreamTracker
+
+    cfg, meas, states = _mc_converted_tracks(radar, runs=4, steps=15)
+    options = StreamOptions(
+        sigma_a_mps2=cfg.sigma_a_mps2,
+        sigma_v0_mps=cfg.sigma_v0_mps,
+        doppler_update="converted",
+        init="finite-memory",
+        init_k=cfg.start_scans,
+    )
+    los = StreamOptions(
+        sigma_a_mps2=cfg.sigma_a_mps2,
+        sigma_v0_mps=cfg.sigma_v0_mps,
+        init="finite-memory",
+        init_k=cfg.start_scans,
+    )
+    for j in range(4):
+        plots = _plots_of_run(cfg, meas, j)
+        rows = StreamTracker(("ekf",), False, options).add_block(plots)
+        other = StreamTracker(("ekf",), False, los).add_block(plots)
+        for n, (x_mc, P_mc) in states.items():
+            ((_, x, P),) = rows[n]
+            sd = np.sqrt(np.diag(P_mc[j]))
+            np.testing.assert_allclose((x[:4] - x_mc[j]) / sd, 0.0, atol=1e-9)
+            np.testing.assert_allclose((P[:4, :4] - P_mc[j]) / np.outer(sd, sd), 0.0, atol=1e-9)
+        # The default (line of sight) is another filter: the option changes the result.
+        assert not np.allclose(other[-1][0][1], rows[-1][0][1], rtol=1e-6)
+
+
+def test_converted_doppler_in_the_many_target_tracker_and_the_imm() -> None:
+    """Every method with ``doppler_update="converted"``: ``TargetTracker`` (two labelled targets,
+    one batch) equals ``StreamTracker`` run per target, and an IMM of two identical models
+    equals the CV filter (both to 1e-9); the monitor gets the converted update's NIS."""
+    from radarviz.core.filters.methods import ALL_METHODS
+    from radarviz.core.tracking.consistency import ConsistencyMonitor
+    from radarviz.core.tracking.stream import StreamOptions, StreamTracker
+    from radarviz.core.tracking.targets import TargetTracker
+
+    cfg, meas, _ = _mc_converted_tracks("RLS3", runs=2, steps=10)
+    options = StreamOptions(sigma_a_mps2=0.5, doppler_update="converted")
+    per_target = [
+        StreamTracker(ALL_METHODS, False, options).add_block(_plots_of_run(cfg, meas, j))
+        for j in range(2)
+    ]
+    mixed = [
+        p
+        for pair in zip(*(_plots_of_run(cfg, meas, j, f"t{j}") for j in range(2)), strict=True)
+        for p in pair
+    ]
+    both = TargetTracker(ALL_METHODS, False, options).add_block(mixed)
+    for i, rows in enumerate(both):
+        expected = per_target[i % 2][i // 2]
+        for (m, x, P), (m2, x2, P2) in zip(rows, expected, strict=True):
+            assert m == m2
+            sd = np.sqrt(np.diag(P2)[:4])
+            np.testing.assert_allclose((x[:4] - x2[:4]) / sd, 0.0, atol=1e-9, err_msg=m)
+            scale = np.outer(sd, sd)
+            np.testing.assert_allclose(P[:4, :4] / scale, P2[:4, :4] / scale, atol=1e-9)
+    monitor = ConsistencyMonitor(5)
+    imm = StreamOptions(
+        model="imm",
+        imm_sigma_a_mps2=(0.5, 0.5),
+        doppler_update="converted",
+        monitor=monitor,
+    )
+    rows_imm = StreamTracker(ALL_METHODS, False, imm).add_block(_plots_of_run(cfg, meas, 0))
+    for got, expected in zip(rows_imm, per_target[0], strict=True):
+        for (m, x, P), (_, x2, P2) in zip(got, expected, strict=True):
+            sd = np.sqrt(np.diag(P2)[:4])
+            np.testing.assert_allclose((x[:4] - x2[:4]) / sd, 0.0, atol=1e-9, err_msg=m)
+            np.testing.assert_allclose(
+                P[:4, :4] / np.outer(sd, sd), P2[:4, :4] / np.outer(sd, sd), atol=1e-9
+            )
+    assert set(monitor.tracks) == set(ALL_METHODS)
+    for m in ALL_METHODS:  # an NIS per update after the start, with the converted stage's
+        result = monitor.result(m)
+        assert result.updates == 9 and np.isfinite(result.mean_nis_per_dof)
+
+
+def test_track_doppler_converted_end_to_end_on_a_simulated_doppler_file(tmp_path, capsys) -> None:
+    """``simulate --preset fusion`` (three 3D radars with Doppler, off the origin) then
+    ``track --doppler converted``: exit 0, finite rows for every method, different from the
+    line-of-sight update's, and the summary names the update."""
+    import csv
+    import json
+
+    from radarviz.viz_app.cli.main import main
+
+    meas, radars = tmp_path / "m.csv", tmp_path / "r.toml"
+    sim = ["simulate", "--preset", "fusion", "--out", str(meas), "--radars-out", str(radars)]
+    assert main([*sim, "--scans", "12", "--seed", "2"]) == 0
+    tracks = {}
+    for mode in ("use", "converted"):
+        out, summary = tmp_path / f"{mode}.csv", tmp_path / f"{mode}.json"
+        args = ["track", "--input", str(meas), "--radars", str(radars), "--out", str(out)]
+        args += ["--doppler", mode, "--summary", str(summary), "--model", "cv", "--sigma-a", "1"]
+        assert main(args) == 0
+        with out.open() as fh:
+            tracks[mode] = list(csv.DictReader(fh))
+        assert json.loads(summary.read_text())["doppler_update"] == (
+            "converted" if mode == "converted" else "line_of_sight"
+        )
+    capsys.readouterr()
+    a, b = tracks["use"], tracks["converted"]
+    assert len(a) == len(b) > 0
+    assert {r["method"] for r in b} >= {"naive", "ucm", "ducm", "ekf", "ukf"}
+    cols = [c for c in b[0] if c.startswith(("x_", "vx", "vy", "vz", "y_", "z_"))] or [
+        c for c in b[0] if c not in ("method", "target", "radar", "time_s", "plot")
+    ]
+    vals = np.array([[float(r[c]) for c in cols if r[c] != ""] for r in b])
+    assert np.all(np.isfinite(vals))
+    assert any(ra != rb for ra, rb in zip(a, b, strict=True))

@@ -36,9 +36,10 @@ from radarviz.core.experiments.sweep import (
     reduce_chunks,
     run_sweep_serial,
 )
+from radarviz.core.metrics import nees_band
 from radarviz.core.params import ParameterError
 from radarviz.viz_app.cli.main import main
-from radarviz.viz_app.sweep.output import COLUMNS, METRIC_COLUMNS, sweep_table
+from radarviz.viz_app.sweep.output import COLUMNS, METRIC_COLUMNS, sweep_table, table_columns
 from radarviz.viz_app.sweep.run import ChunkStore, chunk_dir, parse_axis, run_sweep
 
 # Chunk functions defined here run on Dask workers, which cannot import this test module:
@@ -432,6 +433,13 @@ def test_grid_ranges_include_stop_on_the_grid_in_decimal() -> None:
         (["--runs", "1"], "--runs"),
         (["--methods", "kalman"], "--methods"),
         (["--preset", "gorshkov"], "--preset"),
+        (["--grid", "elevation_deg=0,30"], "--dims must be 3 for grid axis elevation_deg"),
+        (["--grid", "sigma_elevation_deg=1,2"], "--dims"),
+        (["--elevation-deg", "30"], "--elevation-deg needs --dims 3"),
+        (["--sigma-elevation-deg", "2"], "--sigma-elevation-deg needs --dims 3"),
+        (["--dims", "3", "--grid", "elevation_deg=0:90:30"], "--grid elevation_deg"),
+        (["--dims", "3", "--elevation-deg", "-81"], "--elevation-deg"),
+        (["--dims", "3", "--sigma-elevation-deg", "0"], "--sigma-elevation-deg"),
     ],
 )
 def test_bad_input_is_one_line_exit_2_and_writes_nothing(
@@ -555,3 +563,92 @@ def test_a_chunk_that_keeps_killing_workers_is_one_line_and_keeps_the_rest(
     doc = json.loads(capsys.readouterr().out)
     assert (doc["reused"], doc["computed"]) == (kept, 3 - kept)
     assert out.exists()
+
+
+# ------------------------------------------------------------------ 3D sweeps
+
+
+def _spec_3d(runs: int = 700, block: int = 300) -> SweepSpec:
+    """A 3D sweep over both elevation axes: 2 × 2 points of 3 chunks, 6 scans."""
+    base = SweepBase(runs=runs, seed=4, steps=6, methods=("naive", "seed", "ukf"), dims=3)
+    axes = (GridAxis("elevation_deg", (-20.0, 30.0)), GridAxis("sigma_elevation_deg", (0.5, 2.0)))
+    return SweepSpec(base=base, axes=axes, block=block)
+
+
+def test_3d_grid_point_is_the_3d_reproduction_bitwise() -> None:
+    """A 3D point's config is ``prosov_configs(dims=3)``'s at the same E and σε (range 150 km),
+    and its chunks, reduced in any order, are ``run_tracking`` of that config exactly."""
+    spec = _spec_3d()
+    for point, cfg in zip(spec.points(), spec.configs(), strict=True):
+        (expected,) = prosov_configs(
+            [1.0],
+            runs=700,
+            seed=4,
+            steps=6,
+            methods=("naive", "seed", "ukf"),
+            dims=3,
+            elevation_deg=point["elevation_deg"],
+            sigma_elevation_deg=point["sigma_elevation_deg"],
+        )
+        assert cfg == expected
+    cfg = spec.configs()[3]
+    chunks = [compute_chunk(cfg, b, s) for b, s in enumerate(block_sizes(cfg.runs, 300))]
+    got = reduce_chunks(cfg, chunks[::-1], block=300)
+    _assert_results_equal([got], [run_tracking(cfg, block=300)])
+    assert got.nees_pos_band95 == nees_band(3, 700)  # 3 degrees of freedom in 3D
+    # The elevation noise reaches the statistics: the points differ in their σε.
+    results = run_sweep_serial(spec)
+    assert results[2].metrics["naive"].bias_range[0] != results[3].metrics["naive"].bias_range[0]
+
+
+def test_3d_chunk_keys_see_elevation_and_sigma_elevation() -> None:
+    from radarviz.core.experiments.sweep import chunk_key
+
+    keys = {chunk_key(cfg, 0, 300) for cfg in _spec_3d().configs()}
+    assert len(keys) == 4
+    (flat,) = prosov_configs([1.0], runs=700, seed=4, steps=6, methods=("naive",))
+    (lifted,) = prosov_configs(
+        [1.0], runs=700, seed=4, steps=6, methods=("naive",), dims=3, sigma_elevation_deg=1.0
+    )
+    assert chunk_key(flat, 0, 300) != chunk_key(lifted, 0, 300)
+
+
+def test_3d_sweep_on_the_cluster_equals_serial(client) -> None:
+    run = run_sweep(_spec_3d(), store=None, client=client)
+    assert run.computed == 12
+    _assert_results_equal(run.results, run_sweep_serial(_spec_3d()))
+
+
+def test_3d_sweep_point_equals_reproduce_prosov_dims_3_json(tmp_path: Path, capsys) -> None:
+    """The CLI: a point of ``sweep --dims 3`` equals ``reproduce prosov --dims 3 --json`` with
+    the same runs and seed bit for bit, and the table has the elevation columns."""
+    common = ["--runs", "400", "--seed", "3", "--steps", "5", "--methods", "naive", "ukf"]
+    el = ["--elevation-deg", "25", "--sigma-elevation-deg", "1.5"]
+    assert (
+        main(
+            ["reproduce", "prosov", "--dims", "3", "--sigma-beta-deg", "1", *el, "--json", *common]
+        )
+        == 0
+    )
+    doc = json.loads(capsys.readouterr().out)
+    out = tmp_path / "three.parquet"
+    sweep = ["sweep", "--dims", "3", "--grid", "sigma_beta_deg=1,2", "--scheduler", "serial"]
+    assert main([*sweep, *el, "--out", str(out), "--json", *common]) == 0
+    capsys.readouterr()
+    table = pq.read_table(out)
+    assert tuple(table.column_names) == table_columns(3)
+    meta = json.loads(table.schema.metadata[b"radarviz.sweep"])
+    assert meta["dims"] == 3
+    assert meta["fixed"]["elevation_deg"] == 25.0 and meta["fixed"]["sigma_elevation_deg"] == 1.5
+    d = table.to_pydict()
+    assert set(d["elevation_deg"]) == {25.0} and set(d["sigma_elevation_deg"]) == {1.5}
+    assert set(d["nees_pos_lo95"]) == {nees_band(3, 400)[0]}
+    (case,) = doc["cases"]
+    for method in ("naive", "ukf"):
+        idx = [
+            i
+            for i, (sb, m) in enumerate(zip(d["sigma_beta_deg"], d["method"], strict=True))
+            if sb == 1.0 and m == method
+        ]
+        for key in ("rmse_x", "bias_range", "nees_pos", "nees_state", "sigma_x_filter"):
+            assert [d[key][i] for i in idx] == case["methods"][method][key], (method, key)

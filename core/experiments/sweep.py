@@ -1,7 +1,8 @@
 """Parameter sweeps of the Prosov experiment, cut into chunks that can run anywhere.
 
 A sweep is the Prosov Monte Carlo (``core.experiments.prosov``) repeated over a grid of parameters:
-σβ, σr, the target's initial range, the scan period. Each grid point is one ``TrackingConfig``;
+σβ, σr, the target's initial range, the scan period and, in 3D (``SweepBase.dims = 3``), the
+target's elevation and the elevation noise σε. Each grid point is one ``TrackingConfig``;
 its runs are cut into exactly the blocks ``run_tracking`` uses (``block_sizes``), and block b
 draws its noise from ``block_seed(seed, b)``. A *chunk* is one (grid point, block) pair.
 
@@ -39,6 +40,7 @@ from radarviz.core.experiments.prosov import (
 from radarviz.core.metrics import SUM_NAMES, MetricsAccumulator
 from radarviz.core.params import PARAMETERS, ParameterError, check, check_int, check_real, default
 from radarviz.core.scenarios.planar import ConstantVelocityTarget2D
+from radarviz.core.scenarios.spatial import ConstantVelocityTarget3D, prosov_target_3d
 
 #: Bump when a chunk's meaning changes (sums, filters, noise draw), so stored chunks of an
 #: older version are never mistaken for current ones.
@@ -48,29 +50,63 @@ MAX_POINTS = 100_000
 
 
 class AxisSpec(NamedTuple):
-    """What a grid axis means and the values it accepts: the interval (low, high]."""
+    """What a grid axis means and the values it accepts: the parameter table's interval
+    (``low_open``: low excluded, ``high_open``: high excluded; most axes are (low, high]).
+    ``dims``: the sweep dimensions the axis exists in."""
 
     unit: str
     meaning: str
     low: float
     high: float
+    low_open: bool = True
+    high_open: bool = False
+    dims: tuple[int, ...] = (2, 3)
+
+    def check(self, name: str, value: object) -> float:
+        """``value`` as a float, or ``ParameterError`` naming ``name`` and the interval."""
+        return check_real(
+            name,
+            value,
+            low=self.low,
+            high=self.high,
+            low_open=self.low_open,
+            high_open=self.high_open,
+        )
 
 
-def _axis(name: str, scale: float = 1.0, unit: str | None = None) -> AxisSpec:
+def _axis(
+    name: str, scale: float = 1.0, unit: str | None = None, dims: tuple[int, ...] = (2, 3)
+) -> AxisSpec:
     """The grid axis of table parameter ``name``, its values in units of ``scale`` × its unit."""
     p = PARAMETERS[name]
     assert p.low is not None and p.high is not None
-    return AxisSpec(unit or p.unit, f"{p.meaning} {p.symbol}", p.low / scale, p.high / scale)
+    return AxisSpec(
+        unit or p.unit,
+        f"{p.meaning} {p.symbol}",
+        p.low / scale,
+        p.high / scale,
+        p.low_open,
+        p.high_open,
+        dims,
+    )
 
 
 #: The parameters a grid may vary, with the bounds of the parameter table. ``range_km`` is
 #: ``target_range_m`` in km: the target starts at (range_km · 1000, 0) m and keeps the preset's
-#: motion, 200 m/s radially outward.
+#: motion, 200 m/s radially outward. ``elevation_deg`` (``target_elevation_deg``: the 3D target
+#: starts at range_km · 1000 · u(0, E) and moves outward along u(0, E)) and
+#: ``sigma_elevation_deg`` exist in 3D sweeps only.
 GRID_AXES: dict[str, AxisSpec] = {
     "sigma_beta_deg": _axis("sigma_beta_deg"),
     "sigma_r_m": _axis("sigma_r_m"),
     "range_km": _axis("target_range_m", 1000.0, "km"),
     "period_s": _axis("period_s"),
+    "elevation_deg": _axis("target_elevation_deg", dims=(3,)),
+    "sigma_elevation_deg": _axis("sigma_elevation_deg", dims=(3,)),
+}
+#: The grid axes of a ``dims``-D sweep (the Parquet columns of its parameters, in order).
+AXES_OF_DIMS: dict[int, tuple[str, ...]] = {
+    d: tuple(n for n, a in GRID_AXES.items() if d in a.dims) for d in (2, 3)
 }
 
 
@@ -90,7 +126,7 @@ class GridAxis:
         if not self.values:
             raise ParameterError(f"grid axis {self.name} needs at least one value")
         for v in self.values:
-            check_real(self.name, v, low=spec.low, high=spec.high)
+            spec.check(self.name, v)
         if len(set(self.values)) != len(self.values):
             raise ParameterError(f"grid axis {self.name} repeats a value ({self.values})")
 
@@ -100,7 +136,11 @@ class SweepBase:
     """The fixed parameters of a sweep; a grid axis overrides the field of the same name.
 
     The defaults are the Prosov experiment (``docs/conversion.md``): σr = 250 m,
-    σβ = 1°, target at 150 km moving outward at 200 m/s, T = 10 s, 60 scans.
+    σβ = 1°, target at 150 km moving outward at 200 m/s, T = 10 s, 60 scans. ``dims = 3``
+    is the 3D reproduction (``core.experiments.prosov.prosov_configs(dims=3)``): the target at
+    elevation ``elevation_deg``, the radar measuring elevation with noise
+    ``sigma_elevation_deg``, every method in 3D on the numpy engine; in 2D those two fields
+    are unused (and may not be gridded).
     """
 
     sigma_r_m: float = default("sigma_r_m")
@@ -112,10 +152,14 @@ class SweepBase:
     runs: int = default("runs")
     seed: int = default("seed")
     methods: tuple[str, ...] = ALL_METHODS
+    dims: int = 2
+    elevation_deg: float = default("target_elevation_deg")
+    sigma_elevation_deg: float = 1.0
 
     def __post_init__(self) -> None:
+        check_int("dims", self.dims, low=2, high=3)
         for name, spec in GRID_AXES.items():
-            check_real(name, getattr(self, name), low=spec.low, high=spec.high)
+            spec.check(name, getattr(self, name))
         for name in ("steps", "runs", "seed"):
             check(name, getattr(self, name))
         check("target_speed_mps", self.speed_mps)
@@ -167,6 +211,10 @@ class SweepSpec:
         for name in names:
             if names.count(name) > 1:
                 raise ParameterError(f"grid axis {name} is given more than once")
+            if name not in AXES_OF_DIMS[self.base.dims]:
+                raise ParameterError(
+                    f"dims must be 3 for grid axis {name} (got {self.base.dims})", "dims"
+                )
         check_int("block", self.block, low=1)
         count = int(np.prod(self.shape, dtype=np.int64))
         if count > MAX_POINTS:
@@ -178,9 +226,14 @@ class SweepSpec:
     def shape(self) -> tuple[int, ...]:
         return tuple(len(a.values) for a in self.axes)
 
+    @property
+    def axis_names(self) -> tuple[str, ...]:
+        """The parameters of this sweep's dimension (``AXES_OF_DIMS``), gridded or fixed."""
+        return AXES_OF_DIMS[self.base.dims]
+
     def points(self) -> list[dict[str, float]]:
-        """Every grid point as {parameter: value} over all of ``GRID_AXES`` (fixed ones too)."""
-        fixed = {name: float(getattr(self.base, name)) for name in GRID_AXES}
+        """Every grid point as {parameter: value} over ``axis_names`` (fixed ones too)."""
+        fixed = {name: float(getattr(self.base, name)) for name in self.axis_names}
         names = [a.name for a in self.axes]
         return [
             {**fixed, **dict(zip(names, combo, strict=True))}
@@ -206,21 +259,38 @@ class SweepSpec:
 def point_config(base: SweepBase, point: dict[str, float]) -> TrackingConfig:
     """The tracking experiment at one grid point.
 
-    The target starts at (range_km · 1000, 0) m and moves along +x at ``base.speed_mps``: at
-    range_km = 150 this is ``core.scenarios.planar.prosov_target`` exactly (150 · 1000.0 == 150e3).
+    2D: the target starts at (range_km · 1000, 0) m and moves along +x at ``base.speed_mps``;
+    at range_km = 150 this is ``core.scenarios.planar.prosov_target`` exactly
+    (150 · 1000.0 == 150e3). 3D: ``core.scenarios.spatial.prosov_target_3d`` at the point's
+    elevation and range, σε the point's, on the numpy engine, which at range_km = 150 is
+    ``prosov_configs(dims=3)``'s config exactly.
     """
-    values = {name: float(point.get(name, getattr(base, name))) for name in GRID_AXES}
+    values = {name: float(point.get(name, getattr(base, name))) for name in AXES_OF_DIMS[base.dims]}
+    common = {
+        "sigma_r_m": values["sigma_r_m"],
+        "sigma_beta_deg": values["sigma_beta_deg"],
+        "runs": base.runs,
+        "seed": base.seed,
+        "methods": tuple(base.methods),
+    }
+    if base.dims == 3:
+        target_3d = prosov_target_3d(
+            values["elevation_deg"],
+            values["period_s"],
+            base.steps,
+            target_range_m=values["range_km"] * 1000.0,
+            target_speed_mps=base.speed_mps,
+        )
+        return TrackingConfig(
+            target=target_3d,
+            engine="numpy",
+            sigma_elevation_deg=values["sigma_elevation_deg"],
+            **common,
+        )
     target = ConstantVelocityTarget2D(
         values["range_km"] * 1000.0, 0.0, base.speed_mps, 0.0, values["period_s"], base.steps
     )
-    return TrackingConfig(
-        sigma_r_m=values["sigma_r_m"],
-        sigma_beta_deg=values["sigma_beta_deg"],
-        runs=base.runs,
-        seed=base.seed,
-        target=target,
-        methods=tuple(base.methods),
-    )
+    return TrackingConfig(target=target, **common)
 
 
 def chunk_key(config: TrackingConfig, index: int, size: int) -> str:
@@ -229,9 +299,11 @@ def chunk_key(config: TrackingConfig, index: int, size: int) -> str:
     SHA-256 of a canonical description: every field of the config except ``runs`` (a block's
     sums depend on the total only through its size, so a longer sweep reuses the blocks of a
     shorter one), floats in exact hexadecimal, the block index and size, ``CHUNK_VERSION``.
+    A 3D config adds its height, vertical speed, σε and engine (a 2D key is unchanged, so the
+    stored 2D chunks stay valid).
     """
     t = config.target
-    desc = {
+    desc: dict[str, object] = {
         "version": CHUNK_VERSION,
         "sigma_r_m": float(config.sigma_r_m).hex(),
         "sigma_beta_deg": float(config.sigma_beta_deg).hex(),
@@ -244,6 +316,10 @@ def chunk_key(config: TrackingConfig, index: int, size: int) -> str:
         "index": int(index),
         "size": int(size),
     }
+    if isinstance(t, ConstantVelocityTarget3D):
+        desc["target_3d"] = [float(v).hex() for v in (t.z0_m, t.vz_mps)]
+        desc["sigma_elevation_deg"] = float(config.sigma_elevation_deg or 0.0).hex()  # given in 3D
+        desc["engine"] = config.engine
     text = json.dumps(desc, sort_keys=True, separators=(",", ":"))
     return hashlib.sha256(text.encode()).hexdigest()
 

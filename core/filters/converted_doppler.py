@@ -60,7 +60,7 @@ def converted_doppler_moments(
     return r * vr, np.maximum(r * r * var_v + vr * vr * var_r - floor, floor)
 
 
-def converted_doppler_update(
+def converted_doppler_terms(
     state: CVBatch,
     range_m: ArrayLike,
     radial_velocity_mps: ArrayLike,
@@ -68,17 +68,11 @@ def converted_doppler_update(
     sigma_r_m: ArrayLike,
     sigma_vr_mps: ArrayLike,
     site: ArrayLike | None = None,
-    out: CVBatch | None = None,
-) -> CVBatch:
-    """Update every track of a 2D or 3D batch with η̂ = r̂ V̂r (module docstring).
-
-    Args:
-        state: (..., n) states, n = 4 or 6, after this plot's position update.
-        range_m, radial_velocity_mps: the plot's measured r̂ (m) and V̂r (m/s), (...) or scalar.
-        sigma_r_m, sigma_vr_mps: their noise std.
-        site: the radar's position (d,) or (..., d), m; the origin if None.
-        out: optional preallocated batch to write into (must not alias ``state``).
-    """
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """The converted Doppler measurement as a linear one about the estimate: ν (..., 1),
+    H (..., 1, n) and R (..., 1, 1) = R_η + tr(P_pv P_pv) + tr(P_pp P_vv) (module docstring),
+    so that S = H P Hᵀ + R; for the update and the innovation statistics
+    (``core.filters.innovation``). Arguments as ``converted_doppler_update``."""
     x, P = state.x, state.P
     dims, n = state.dims, x.shape[-1]
     pos, vel = list(position_index(dims)), list(velocity_index(dims))
@@ -102,4 +96,34 @@ def converted_doppler_update(
     nu[..., 0] = eta - mean
     R = np.empty((*shape, 1, 1))
     R[..., 0, 0] = r_eta + second
+    return nu, H, R
+
+
+def converted_doppler_update(
+    state: CVBatch,
+    range_m: ArrayLike,
+    radial_velocity_mps: ArrayLike,
+    *,
+    sigma_r_m: ArrayLike,
+    sigma_vr_mps: ArrayLike,
+    site: ArrayLike | None = None,
+    out: CVBatch | None = None,
+) -> CVBatch:
+    """Update every track of a 2D or 3D batch with η̂ = r̂ V̂r (module docstring).
+
+    Args:
+        state: (..., n) states, n = 4 or 6, after this plot's position update.
+        range_m, radial_velocity_mps: the plot's measured r̂ (m) and V̂r (m/s), (...) or scalar.
+        sigma_r_m, sigma_vr_mps: their noise std.
+        site: the radar's position (d,) or (..., d), m; the origin if None.
+        out: optional preallocated batch to write into (must not alias ``state``).
+    """
+    nu, H, R = converted_doppler_terms(
+        state,
+        range_m,
+        radial_velocity_mps,
+        sigma_r_m=sigma_r_m,
+        sigma_vr_mps=sigma_vr_mps,
+        site=site,
+    )
     return dense_joseph_update(state, nu, H, R, out)

@@ -148,6 +148,29 @@ def doppler_terms(
     return _dense_terms(state, radial_velocity_mps, *geometry)
 
 
+def doppler_tilt_covariance(
+    state: CVBatch,
+    azimuth_rad: ArrayLike,
+    elevation_rad: ArrayLike = 0.0,
+    *,
+    sigma_vr_mps: ArrayLike,
+    sigma_azimuth_rad: ArrayLike,
+    sigma_elevation_rad: ArrayLike = 0.0,
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Cov(δβ, e) = −(g_β·v̂) σβ² and Cov(δε, e) = −(g_ε·v̂) σε², each (...): the covariance of
+    the plot's angle errors with this update's error e (module docstring), at the estimate's
+    velocity v̂ (``core.filters.joint_doppler``). ``sigma_vr_mps`` is not used (e_v is
+    independent of the angles); it is accepted so the keywords match ``doppler_terms``."""
+    dims = state.dims
+    _, g_b, g_e, _, var_b, var_e = _geometry(
+        dims, azimuth_rad, elevation_rad, sigma_vr_mps, sigma_azimuth_rad, sigma_elevation_rad
+    )
+    v = [state.x[..., i] for i in velocity_index(dims)]
+    gv_b = sum(g_b[a] * v[a] for a in range(min(dims, 2)))
+    gv_e = sum(g_e[a] * v[a] for a in range(dims))
+    return -gv_b * var_b, -gv_e * var_e
+
+
 def _geometry(
     dims: int,
     azimuth_rad: ArrayLike,

@@ -7,7 +7,13 @@ stage here knows its plot and offers two things on a predicted batch:
 * ``innovation(state)``: the innovation statistics (``core.filters.innovation``), for the
   consistency monitor and the IMM likelihoods;
 * ``update(state)``: the posterior, by the engine's own update functions
-  (``MethodGroup.update``, ``doppler_update``); nothing is re-implemented here.
+  (``MethodGroup.update``, ``doppler_update``, ``converted_doppler_update``); nothing is
+  re-implemented here.
+
+A plot's Doppler enters by one of ``DOPPLER_UPDATES``: ``"line_of_sight"``
+(``DopplerMeasurement``, ``core.filters.doppler``) or ``"converted"``
+(``ConvertedDopplerMeasurement``, the r̂ V̂r pseudo-measurement of
+``core.filters.converted_doppler``).
 
 ``models=True`` says the batch has one more, trailing axis than the plot's arrays were made
 for (the IMM's model axis, ``core.filters.imm``): every array of the plot gets a trailing
@@ -22,6 +28,10 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
+from radarviz.core.filters.converted_doppler import (
+    converted_doppler_terms,
+    converted_doppler_update,
+)
 from radarviz.core.filters.doppler import doppler_terms, doppler_update
 from radarviz.core.filters.innovation import (
     InnovationStats,
@@ -31,6 +41,10 @@ from radarviz.core.filters.innovation import (
 from radarviz.core.filters.methods import MethodGroup, Parts, PolarNoise, PolarPlot
 from radarviz.core.filters.position import innovation_update
 from radarviz.core.filters.state import CVBatch, Vec, position_index
+
+#: How a plot's radial velocity updates a track: along the measured line of sight
+#: (``core.filters.doppler``) or as the converted r̂ V̂r (``core.filters.converted_doppler``).
+DOPPLER_UPDATES: tuple[str, ...] = ("line_of_sight", "converted")
 
 
 def _expand(value: ArrayLike | None, models: bool) -> ArrayLike | None:
@@ -158,3 +172,69 @@ class DopplerMeasurement:
     def update(self, state: CVBatch, models: bool = False) -> CVBatch:
         vals, kw = self._args(models)
         return doppler_update(state, *vals, **kw)
+
+
+@dataclass(frozen=True)
+class ConvertedDopplerMeasurement:
+    """The Doppler stage of one plot as the converted pseudo-measurement η̂ = r̂ V̂r
+    (``core.filters.converted_doppler``): measured range and radial velocity, their noise
+    std and the radar's site ((d,) or one per track (..., d)), broadcasting against the batch.
+    """
+
+    range_m: ArrayLike
+    radial_velocity_mps: ArrayLike
+    sigma_r_m: ArrayLike
+    sigma_vr_mps: ArrayLike
+    site: ArrayLike | None = None
+
+    def _args(self, models: bool) -> tuple[list, dict]:
+        site = self.site
+        if models and site is not None and np.ndim(site) > 1:  # over the models
+            site = np.asarray(site, dtype=np.float64)[..., None, :]
+        vals = [_expand(v, models) for v in (self.range_m, self.radial_velocity_mps)]
+        kw = {
+            "sigma_r_m": _expand(self.sigma_r_m, models),
+            "sigma_vr_mps": _expand(self.sigma_vr_mps, models),
+            "site": site,
+        }
+        return vals, kw
+
+    def innovation(self, state: CVBatch, models: bool = False) -> InnovationStats:
+        vals, kw = self._args(models)
+        return linear_innovation(state, *converted_doppler_terms(state, *vals, **kw))
+
+    def update(self, state: CVBatch, models: bool = False) -> CVBatch:
+        vals, kw = self._args(models)
+        return converted_doppler_update(state, *vals, **kw)
+
+
+def doppler_measurement(
+    update: str,
+    *,
+    radial_velocity_mps: ArrayLike,
+    range_m: ArrayLike,
+    azimuth_rad: ArrayLike,
+    elevation_rad: ArrayLike,
+    sigma_vr_mps: ArrayLike,
+    sigma_r_m: ArrayLike,
+    sigma_azimuth_rad: ArrayLike,
+    sigma_elevation_rad: ArrayLike,
+    site: ArrayLike | None = None,
+) -> DopplerMeasurement | ConvertedDopplerMeasurement:
+    """The Doppler stage of a plot by ``update`` (one of ``DOPPLER_UPDATES``), from the plot's
+    measured values and noise std (elevation 0 for a 2D plot). The line-of-sight update is
+    linear in the velocity and needs no site; the converted one uses the offset from it."""
+    if update == "converted":
+        return ConvertedDopplerMeasurement(
+            range_m, radial_velocity_mps, sigma_r_m, sigma_vr_mps, site
+        )
+    if update != "line_of_sight":
+        raise ValueError(f"Doppler update must be one of {', '.join(DOPPLER_UPDATES)}: {update!r}")
+    return DopplerMeasurement(
+        radial_velocity_mps,
+        azimuth_rad,
+        elevation_rad,
+        sigma_vr_mps,
+        sigma_azimuth_rad,
+        sigma_elevation_rad,
+    )

@@ -18,8 +18,10 @@ with the same engine as the Monte Carlo (``core.filters``): a track is a batch o
   prediction as seen from that radar). A file from a radar at the origin gives
   ``filter_block``'s tracks.
 * **Doppler**: a plot's radial velocity, when present and ``use_doppler``, is a second, scalar
-  update after the position update (``core.filters.doppler``: linear along the measured line
-  of sight). On the first plot it follows the start.
+  update after the position update, by ``StreamOptions.doppler_update``: ``"line_of_sight"``
+  (the default; ``core.filters.doppler``, linear along the measured line of sight) or
+  ``"converted"`` (the r̂ V̂r pseudo-measurement of ``core.filters.converted_doppler``, the
+  Monte Carlo's ``range_converted_doppler`` update). On the first plot it follows the start.
 * **Start** ``"finite-memory"`` (Gorshkov and Zavizhenets' remark): the first ``init_k`` plots
   of the first plot's radar, which must be equally spaced in time, are fitted by least squares
   for (r, Vr, a) (``core.finite_memory``; range only when they carry no Doppler) and every
@@ -52,7 +54,11 @@ from numpy.typing import NDArray
 
 from radarviz.core.filters.imm import IMMState, imm_start, imm_step
 from radarviz.core.filters.innovation import InnovationStats
-from radarviz.core.filters.measurement import DopplerMeasurement, PlotMeasurement
+from radarviz.core.filters.measurement import (
+    DOPPLER_UPDATES,
+    PlotMeasurement,
+    doppler_measurement,
+)
 from radarviz.core.filters.methods import (
     ALL_METHODS,
     METHODS_3D,
@@ -187,9 +193,11 @@ class TrackGroup:
         use_doppler: bool = True,
         polar: tuple[PolarPlot, PolarNoise] | None = None,
         with_stats: bool = True,
+        doppler_update: str = "line_of_sight",
     ) -> tuple[CVBatch, InnovationStats | None]:
         """Filter one plot; ``pre`` this plot's slice of ``precompute`` (z (M,), R (M,));
-        ``polar``: the plot as (1,) arrays if the caller has them (every group shares them).
+        ``polar``: the plot as (1,) arrays if the caller has them (every group shares them);
+        ``doppler_update``: one of ``DOPPLER_UPDATES`` (``StreamOptions.doppler_update``).
 
         Returns the posterior (one row per method) and, with ``with_stats``, the plot's
         innovation statistics (None at the start, which has no prediction).
@@ -198,14 +206,17 @@ class TrackGroup:
         plot, noise = polar if polar is not None else polar_arrays([p], self.dims)
         doppler = None
         if use_doppler and p.radial_velocity_mps is not None:
-            # Linear in the velocity: the position frame does not matter.
-            doppler = DopplerMeasurement(
-                p.radial_velocity_mps,
-                p.azimuth_rad,
-                0.0 if p.elevation_rad is None else p.elevation_rad,
-                p.sigma_radial_velocity_mps,
-                p.sigma_azimuth_rad,
-                p.sigma_elevation_rad,
+            doppler = doppler_measurement(
+                doppler_update,
+                radial_velocity_mps=p.radial_velocity_mps,
+                range_m=p.range_m,
+                azimuth_rad=p.azimuth_rad,
+                elevation_rad=0.0 if p.elevation_rad is None else p.elevation_rad,
+                sigma_vr_mps=p.sigma_radial_velocity_mps,
+                sigma_r_m=p.sigma_r_m,
+                sigma_azimuth_rad=p.sigma_azimuth_rad,
+                sigma_elevation_rad=p.sigma_elevation_rad,
+                site=site,
             )
         return self.add_arrays(p.time_s, plot, noise, site, pre, doppler, with_stats)
 
@@ -216,7 +227,7 @@ class TrackGroup:
         noise: PolarNoise,
         site: NDArray[np.float64],
         pre: Parts | None,
-        doppler: DopplerMeasurement | None,
+        doppler: Stage | None,
         with_stats: bool = True,
     ) -> tuple[CVBatch, InnovationStats | None]:
         """``add`` for one plot time given as arrays: the plot's values broadcast against the
@@ -254,6 +265,11 @@ class StreamOptions:
             velocity exactly, the papers' Q = 0).
         sigma_v0_mps: velocity std of the start (the papers' 1000 m/s).
         use_doppler: use the plots' radial velocities (when they have them).
+        doppler_update: how a radial velocity updates a track, one of
+            ``core.filters.measurement.DOPPLER_UPDATES``: ``"line_of_sight"`` (default,
+            ``core.filters.doppler``) or ``"converted"`` (r̂ V̂r,
+            ``core.filters.converted_doppler``; numpy engine only, so a compiled fast path
+            must hand such a tracker to the numpy one).
         init: ``"first-plot"`` (the papers' start) or ``"finite-memory"`` (Gorshkov and
             Zavizhenets' window fit, ``docs/finite_memory.md``).
         init_k: plots in the finite-memory window (≥ 2 with Doppler, ≥ 3 without).
@@ -269,6 +285,7 @@ class StreamOptions:
     sigma_a_mps2: float = 0.0
     sigma_v0_mps: float = 1000.0
     use_doppler: bool = True
+    doppler_update: str = "line_of_sight"
     init: str = "first-plot"
     init_k: int = 3
     model: str = "cv"
@@ -280,6 +297,7 @@ class StreamOptions:
     def __post_init__(self) -> None:
         check("sigma_a_mps2", self.sigma_a_mps2)
         check("sigma_v0_mps", self.sigma_v0_mps)
+        check_choice("doppler_update", self.doppler_update, DOPPLER_UPDATES)
         check_choice("init", self.init, INIT_MODES)
         check_int("init_k", self.init_k, low=2, high=1000)
         check_choice("model", self.model, MOTION_MODELS)
@@ -365,7 +383,9 @@ class StreamTracker:
                 row = None
                 if parts is not None:
                     row = ([z[:, i] for z in parts[0]], {k: v[:, i] for k, v in parts[1].items()})
-                _, stats = g.add(p, row, use_doppler, polar, monitor is not None)
+                _, stats = g.add(
+                    p, row, use_doppler, polar, monitor is not None, self.options.doppler_update
+                )
                 if monitor is not None and stats is not None:
                     for j, m in enumerate(g.methods):
                         monitor.add(m, p.time_s, float(stats.nis[j]), stats.dof)

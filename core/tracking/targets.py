@@ -40,7 +40,7 @@ from radarviz.core.filters.imm import (
     imm_step,
 )
 from radarviz.core.filters.innovation import InnovationStats
-from radarviz.core.filters.measurement import DopplerMeasurement, PlotMeasurement
+from radarviz.core.filters.measurement import PlotMeasurement, doppler_measurement
 from radarviz.core.filters.methods import MethodGroup, PolarNoise, PolarPlot, method_groups
 from radarviz.core.filters.models import CVModel, IMMModel
 from radarviz.core.filters.predict import cv_predict
@@ -116,7 +116,7 @@ class _TargetBank:
         plot: PolarPlot,
         noise: PolarNoise,
         site: NDArray[np.float64],
-        doppler: DopplerMeasurement | None,
+        doppler: Stage | None,
         dt_s: NDArray[np.float64],
         with_stats: bool,
     ) -> tuple[CVBatch, InnovationStats | None]:
@@ -278,13 +278,19 @@ class TargetTracker:
         site = np.array([p.site for p in sub], dtype=np.float64)[:, : self.dims]
         doppler = None
         if with_doppler:
-            doppler = DopplerMeasurement(
-                np.array([p.radial_velocity_mps for p in sub], dtype=np.float64),
-                plot.azimuth_rad,
-                np.zeros(len(sub)) if plot.elevation_rad is None else plot.elevation_rad,
-                np.array([p.sigma_radial_velocity_mps for p in sub], dtype=np.float64),
-                noise.sigma_azimuth_rad,
-                noise.sigma_elevation_rad,
+            doppler = doppler_measurement(
+                self.options.doppler_update,
+                radial_velocity_mps=np.array([p.radial_velocity_mps for p in sub], dtype=float),
+                range_m=plot.range_m,
+                azimuth_rad=plot.azimuth_rad,
+                elevation_rad=np.zeros(len(sub))
+                if plot.elevation_rad is None
+                else plot.elevation_rad,
+                sigma_vr_mps=np.array([p.sigma_radial_velocity_mps for p in sub], dtype=float),
+                sigma_r_m=noise.sigma_r_m,
+                sigma_azimuth_rad=noise.sigma_azimuth_rad,
+                sigma_elevation_rad=noise.sigma_elevation_rad,
+                site=site,
             )
         monitor = self.options.monitor
         results = []

@@ -84,6 +84,7 @@ def track(
     sigma_a_mps2: float = 0.0,
     sigma_v0_mps: float = 1000.0,
     use_doppler: bool = True,
+    doppler_update: str = "line_of_sight",
     init: str = "first-plot",
     init_k: int = 3,
     radars: Iterable[Radar] = (),
@@ -105,6 +106,8 @@ def track(
             exactly).
         sigma_v0_mps: velocity std of the start, m/s.
         use_doppler: use the plots' radial velocities where they have them.
+        doppler_update: how they update the tracks: ``line_of_sight`` (along the measured
+            line of sight) or ``converted`` (the r̂·V̂r pseudo-measurement).
         init: ``first-plot`` or ``finite-memory`` (Gorshkov and Zavizhenets' window fit).
         init_k: plots in the finite-memory start window.
         radars: the sites, kept for ``record`` and ``show``.
@@ -121,6 +124,7 @@ def track(
         sigma_a_mps2=sigma_a_mps2,
         sigma_v0_mps=sigma_v0_mps,
         use_doppler=use_doppler,
+        doppler_update=doppler_update,
         init=init,
         init_k=init_k,
     )
@@ -153,6 +157,7 @@ def track_file(
     sigma_a_mps2: float = 0.0,
     sigma_v0_mps: float = 1000.0,
     use_doppler: bool = True,
+    doppler_update: str = "line_of_sight",
     init: str = "first-plot",
     init_k: int = 3,
     association: AssociationOptions | None = None,
@@ -168,6 +173,7 @@ def track_file(
         sigma_a_mps2: see ``track``.
         sigma_v0_mps: see ``track``.
         use_doppler: see ``track``.
+        doppler_update: see ``track``.
         init: see ``track``.
         init_k: see ``track``.
         association: for a file of many targets without a ``target`` column: the
@@ -183,6 +189,7 @@ def track_file(
         sigma_a_mps2=sigma_a_mps2,
         sigma_v0_mps=sigma_v0_mps,
         use_doppler=use_doppler,
+        doppler_update=doppler_update,
         init=init,
         init_k=init_k,
     )

@@ -93,7 +93,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     dop = rep_sub.add_parser(
         "doppler",
-        help="EKF + Doppler: line-of-sight against converted (r̂·V̂r) update, RLS1-RLS6",
+        help="EKF + Doppler: the line-of-sight, converted (r̂·V̂r) and joint (correlated) "
+        "updates, RLS1-RLS6",
     )
     dop.add_argument(
         "--radars",

@@ -89,6 +89,31 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
         note=where,
     )
     sw.add_argument(
+        "--dims",
+        type=integer,
+        default=2,
+        choices=(2, 3),
+        help="2: the paper's plane; 3: the same target at an elevation, the radar measuring "
+        "elevation too, every method in 3D (grid axes elevation_deg, sigma_elevation_deg)",
+    )
+    map_flag(sw, "dims", "--dims")
+    elevation_axis = GRID_AXES["elevation_deg"]
+    sw.add_argument(
+        "--elevation-deg",
+        type=number,
+        default=None,
+        help=f"{elevation_axis.meaning} (deg), in [{elevation_axis.low:g}, "
+        f"{elevation_axis.high:g}], default {preset.elevation_deg:g} (with --dims 3, {where})",
+    )
+    map_flag(sw, "elevation_deg", "--elevation-deg")
+    add_parameter(
+        sw,
+        "sigma_elevation_deg",
+        default=None,
+        shown_default=preset.sigma_elevation_deg,
+        note=f"with --dims 3, {where}",
+    )
+    sw.add_argument(
         "--methods",
         nargs="+",
         default=list(ALL_METHODS),
@@ -166,12 +191,14 @@ def _spec_from_args(args: argparse.Namespace) -> SweepSpec:
     check_int("--block", args.block, low=1, high=10_000_000)
     flags = parameter_flags(args)
     fixed: dict[str, float] = {}
-    for name in GRID_AXES:  # the values themselves are checked once, by SweepBase
+    for name, spec in GRID_AXES.items():  # the values themselves are checked once, by SweepBase
         value = getattr(args, name)
         if value is None:
             fixed[name] = getattr(preset, name)
         else:
             fixed[name] = value
+            if args.dims not in spec.dims:
+                raise ParameterError(f"{flags[name]} needs --dims 3")
             if any(a.name == name for a in axes):
                 raise ParameterError(
                     f"{flags[name]} conflicts with --grid {name}: give one of them"
@@ -191,6 +218,9 @@ def _spec_from_args(args: argparse.Namespace) -> SweepSpec:
         runs=args.runs,
         seed=args.seed,
         methods=tuple(args.methods),
+        dims=args.dims,
+        elevation_deg=fixed["elevation_deg"],
+        sigma_elevation_deg=fixed["sigma_elevation_deg"],
     )
     spec = SweepSpec(base=base, axes=axes, block=args.block)
     spec.configs()  # every grid point's config is checked before any work starts

@@ -91,8 +91,8 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
         "--doppler",
         default="use",
         metavar="MODE",
-        help="radial velocities: use (line-of-sight update), converted (the r̂·V̂r"
-        " pseudo-measurement) or ignore (default use)",
+        help="radial velocities: use (the update along the measured line of sight), "
+        "converted (the r̂·V̂r pseudo-measurement) or ignore (default use)",
     )
     tr.add_argument(
         "--model",
@@ -343,9 +343,11 @@ def cmd_track(args: argparse.Namespace) -> int:
     )
     association = association_options(args)
     monitor = ConsistencyMonitor(args.nis_window, on_event=exit_warner(_warn))
+    doppler_update = DOPPLER_MODES[check_choice("--doppler", args.doppler, DOPPLER_MODES)]
     options = StreamOptions(
         sigma_v0_mps=args.sigma_v0_mps,
-        use_doppler=check_choice("--doppler", args.doppler, DOPPLER_MODES) != "ignore",
+        use_doppler=doppler_update is not None,
+        doppler_update=doppler_update or "line_of_sight",
         init=args.init,
         init_k=args.init_k,
         finite_memory_k=args.finite_memory,

@@ -25,7 +25,11 @@ from radarviz.viz_app.figures.common import (
 )
 from radarviz.viz_app.reports.doppler import UPDATE_LABEL
 
-_COLOUR = {"range_doppler": PALETTE[0], "range_converted_doppler": PALETTE[1]}
+_COLOUR = {
+    "range_doppler": PALETTE[0],
+    "range_converted_doppler": PALETTE[1],
+    "range_joint_doppler": PALETTE[2],
+}
 
 
 def _panel(ax: Any, case: Mapping[str, Any], runs: Any) -> None:
@@ -75,7 +79,7 @@ def plot_doppler(doc: dict, path: str | os.PathLike) -> None:
     labels.append(band_label(doc.get("runs")) + " (shaded, per update)")
     fig.legend(handles, labels, loc="outside lower center", ncols=3, fontsize=9)
     fig.suptitle(
-        "EKF + Doppler: line-of-sight update against converted r̂·V̂r update"
+        "EKF + Doppler: line-of-sight, converted r̂·V̂r and joint (correlated) updates"
         f" — σβ = {doc.get('sigma_beta_deg')}°, {doc.get('runs')} runs"
     )
     write_figure_atomically(fig, Path(os.fsdecode(os.fspath(path))), DPI)

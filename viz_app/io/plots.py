@@ -99,8 +99,13 @@ RADAR_KEYS = ("x_m", "y_m", "z_m", "sigma_range_m", "sigma_azimuth_deg")
 OPTIONAL_RADAR_KEYS = ("sigma_elevation_deg", "sigma_radial_velocity_mps")
 DEFAULT_TRACKS = "tracks.csv"
 SIM_PRESETS = ("prosov", "fusion")
-#: ``track --doppler``: "use" (the line-of-sight update) or "ignore".
-DOPPLER_MODES = ("use", "ignore")
+#: ``track --doppler``: the Doppler update each mode asks for
+#: (``core.tracking.stream.StreamOptions.doppler_update``), None for "ignore".
+DOPPLER_MODES: dict[str, str | None] = {
+    "use": "line_of_sight",
+    "converted": "converted",
+    "ignore": None,
+}
 #: Most scans per radar ``simulate`` writes (files stream; the Monte Carlo limit does not apply).
 MAX_SIMULATE_STEPS = 10_000_000
 #: Physically meaningful ends of a plot's values (``core.params``: range_m, radial_velocity_mps,

@@ -81,6 +81,7 @@ def track_summary_document(
         "methods": list(methods),
         "targets": len(targets) or None,
         "model": motion_document(options),
+        "doppler_update": options.doppler_update if options.use_doppler else None,
         "finite_memory_k": options.finite_memory_k or None,
         "nis_window": monitor.window,
         "nis_band_level": monitor.level,

@@ -22,6 +22,7 @@ from radarviz.viz_app.reports.prosov import band_document, json_series
 UPDATE_LABEL: dict[str, str] = {
     "range_doppler": "line of sight (V̂r along û)",
     "range_converted_doppler": "converted (r̂·V̂r)",
+    "range_joint_doppler": "joint (correlated EKF+V̂r)",
 }
 
 

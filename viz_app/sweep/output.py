@@ -3,9 +3,11 @@
 The Parquet table has one row per (grid point, method, scan n), columns:
 
     point            grid point index, C order over the --grid axes (first axis slowest)
-    sigma_beta_deg, sigma_r_m, range_km, period_s
+    sigma_beta_deg, sigma_r_m, range_km, period_s[, elevation_deg, sigma_elevation_deg]
                      the point's parameters (gridded or fixed); the target starts at
-                     (range_km · 1000, 0) m and moves radially outward at 200 m/s
+                     (range_km · 1000, 0) m and moves radially outward at 200 m/s; a 3D
+                     sweep adds the target's elevation E and σε (the target starts at
+                     range_km · 1000 · u(0, E) and moves outward along u(0, E))
     method           naive, seed, cmkf_d, ucm, ducm, ekf, ukf
     scan, time_s     n = 1 … N and (n − 1) T
     runs, seed       Monte Carlo runs M at the point and the root seed
@@ -13,7 +15,8 @@ The Parquet table has one row per (grid point, method, scan n), columns:
     nees_pos, nees_state
                      the per-scan statistics of ``core.metrics`` (m; NEES dimensionless)
     nees_pos_lo95, nees_pos_hi95, nees_state_lo95, nees_state_hi95
-                     95% χ² band of the run-averaged NEES of a consistent filter
+                     95% χ² band of the run-averaged NEES of a consistent filter (2 and 4
+                     degrees of freedom in 2D, 3 and 6 in 3D)
 
 The schema metadata key ``radarviz.sweep`` holds a JSON description (axes, fixed values,
 runs, seed, block, methods). Heat maps show the last scan over the last two grid axes.
@@ -31,7 +34,8 @@ import pyarrow.parquet as pq
 from numpy.typing import NDArray
 
 from radarviz.core.experiments.prosov import TrackingResult
-from radarviz.core.experiments.sweep import GRID_AXES, SweepSpec
+from radarviz.core.experiments.sweep import AXES_OF_DIMS, GRID_AXES, SweepSpec
+from radarviz.core.metrics import nees_dof
 from radarviz.viz_app.io.atomic import atomic_write
 
 #: The TrackMetrics fields written to the table, in column order.
@@ -47,26 +51,33 @@ METRIC_COLUMNS: tuple[str, ...] = (
     "nees_pos",
     "nees_state",
 )
-#: Every column of the table, in order.
-COLUMNS: tuple[str, ...] = (
-    "point",
-    *GRID_AXES,
-    "method",
-    "scan",
-    "time_s",
-    "runs",
-    "seed",
-    *METRIC_COLUMNS,
-    "nees_pos_lo95",
-    "nees_pos_hi95",
-    "nees_state_lo95",
-    "nees_state_hi95",
-)
+
+
+def table_columns(dims: int) -> tuple[str, ...]:
+    """Every column of a ``dims``-D sweep's table, in order."""
+    return (
+        "point",
+        *AXES_OF_DIMS[dims],
+        "method",
+        "scan",
+        "time_s",
+        "runs",
+        "seed",
+        *METRIC_COLUMNS,
+        "nees_pos_lo95",
+        "nees_pos_hi95",
+        "nees_state_lo95",
+        "nees_state_hi95",
+    )
+
+
+#: Every column of a 2D sweep's table, in order (``table_columns(3)`` for a 3D one).
+COLUMNS: tuple[str, ...] = table_columns(2)
 #: Heat-map metrics at the last scan: column, title, colour map.
 HEATMAPS: tuple[tuple[str, str, str], ...] = (
     ("rmse_x", "RMSE of x at the last scan, m", "viridis"),
     ("bias_range", "range bias at the last scan, m", "RdBu_r"),
-    ("nees_pos", "position NEES at the last scan (consistent: 2)", "RdBu_r"),
+    ("nees_pos", "position NEES at the last scan", "RdBu_r"),
 )
 
 
@@ -75,12 +86,15 @@ def sweep_metadata(spec: SweepSpec) -> dict[str, Any]:
     b = spec.base
     return {
         "format": "radarviz.sweep/1",
+        "dims": b.dims,
         "axes": [
             {"name": a.name, "unit": GRID_AXES[a.name].unit, "values": list(a.values)}
             for a in spec.axes
         ],
         "fixed": {
-            name: getattr(b, name) for name in GRID_AXES if name not in {a.name for a in spec.axes}
+            name: getattr(b, name)
+            for name in spec.axis_names
+            if name not in {a.name for a in spec.axes}
         },
         "steps": b.steps,
         "speed_mps": b.speed_mps,
@@ -88,20 +102,21 @@ def sweep_metadata(spec: SweepSpec) -> dict[str, Any]:
         "seed": b.seed,
         "block": spec.block,
         "methods": list(b.methods),
-        "columns": list(COLUMNS),
+        "columns": list(table_columns(b.dims)),
     }
 
 
 def sweep_table(spec: SweepSpec, results: list[TrackingResult]) -> pa.Table:
     """The tidy table: one row per (grid point, method, scan)."""
     points = spec.points()
-    cols: dict[str, list[NDArray]] = {c: [] for c in COLUMNS}
+    columns = table_columns(spec.base.dims)
+    cols: dict[str, list[NDArray]] = {c: [] for c in columns}
     for p, (point, res) in enumerate(zip(points, results, strict=True)):
         cfg = res.config
         steps = len(res.n)
         for method, m in res.metrics.items():
             cols["point"].append(np.full(steps, p, dtype=np.int32))
-            for name in GRID_AXES:
+            for name in spec.axis_names:
                 cols[name].append(np.full(steps, point[name], dtype=np.float64))
             cols["method"].append(np.full(steps, method, dtype=object))
             cols["scan"].append(res.n.astype(np.int32))
@@ -117,7 +132,7 @@ def sweep_table(spec: SweepSpec, results: list[TrackingResult]) -> pa.Table:
                 cols[f"{k}_lo95"].append(np.full(steps, band[0]))
                 cols[f"{k}_hi95"].append(np.full(steps, band[1]))
     arrays = {}
-    for c in COLUMNS:
+    for c in columns:
         data = np.concatenate(cols[c])
         arrays[c] = pa.array(data, type=pa.string()) if c == "method" else pa.array(data)
     table = pa.table(arrays)
@@ -171,6 +186,7 @@ def plot_sweep(spec: SweepSpec, results: list[TrackingResult], directory: Path) 
 
     methods = spec.base.methods
     axes = spec.axes
+    nominal = float(nees_dof(spec.base.dims)[0])  # a consistent filter's position NEES
     x_axis = axes[-1] if axes else None
     y_axis = axes[-2] if len(axes) >= 2 else None
     written = []
@@ -180,10 +196,11 @@ def plot_sweep(spec: SweepSpec, results: list[TrackingResult], directory: Path) 
             data = {m: grids[m][s][1] for m in methods}
             finite = np.concatenate([d[np.isfinite(d)] for d in data.values()])
             if metric == "nees_pos":
-                # Diverging around the nominal 2 so inconsistent cells stand out either way.
-                lo = min(finite.min(), 1.9) if finite.size else 1.0
-                hi = max(finite.max(), 2.1) if finite.size else 3.0
-                norm: colors.Normalize = colors.TwoSlopeNorm(2.0, lo, hi)
+                # Diverging around the nominal (2, or 3 in 3D) so inconsistent cells stand out
+                # either way.
+                lo = min(finite.min(), nominal - 0.1) if finite.size else nominal - 1.0
+                hi = max(finite.max(), nominal + 0.1) if finite.size else nominal + 1.0
+                norm: colors.Normalize = colors.TwoSlopeNorm(nominal, lo, hi)
             elif metric == "bias_range":
                 lim = float(np.abs(finite).max()) if finite.size else 1.0
                 norm = colors.Normalize(-lim or -1.0, lim or 1.0)
@@ -230,8 +247,9 @@ def plot_sweep(spec: SweepSpec, results: list[TrackingResult], directory: Path) 
             if image is not None:
                 fig.colorbar(image, ax=panels, shrink=0.8)
             b = spec.base
+            shown = f"{title} (consistent: {nominal:g})" if metric == "nees_pos" else title
             fig.suptitle(
-                f"{title} — {b.runs} runs per point, seed {b.seed}"
+                f"{shown} — {b.runs} runs per point, seed {b.seed}"
                 + (f" ({label})" if label else "")
             )
             suffix = f"_{s:03d}" if label else ""

@@ -44,7 +44,7 @@ from radarviz.core.experiments.sweep import (
     compute_chunk,
     reduce_chunks,
 )
-from radarviz.core.params import ParameterError, check_choice, check_real
+from radarviz.core.params import ParameterError, check_choice
 from radarviz.viz_app.io.atomic import atomic_write
 from radarviz.viz_app.runtime import tune_allocator
 
@@ -113,7 +113,7 @@ def parse_axis(text: str) -> GridAxis:
         decimals = [_decimal(name, p, "value") for p in items]
     values = tuple(float(d) for d in decimals)
     for v in values:
-        check_real(f"--grid {name} ({spec.unit})", v, low=spec.low, high=spec.high)
+        spec.check(f"--grid {name} ({spec.unit})", v)
     if len(set(values)) != len(values):
         raise ParameterError(f"--grid {name} repeats a value ({rest})")
     return GridAxis(name, values)
