@@ -29,6 +29,7 @@ from radarviz.viz_app.io.plots import (
     ObserverFactory,
     Radar,
     RowObserver,
+    input_format_of,
     run_track,
     simulated_plots,
     write_measurements,
@@ -43,8 +44,21 @@ from radarviz.viz_app.runtime import peak_rss_mb
 
 def add_commands(sub: argparse._SubParsersAction) -> None:
     """Register ``track`` and ``simulate`` on the ``radarviz`` parser."""
-    tr = sub.add_parser("track", help="track a measurement CSV file into a track CSV file")
-    tr.add_argument("--input", required=True, metavar="MEAS.csv", help="measurement CSV")
+    tr = sub.add_parser("track", help="track a measurement file into a track CSV file")
+    tr.add_argument(
+        "--input",
+        required=True,
+        metavar="MEAS",
+        help="measurement file: CSV, or ASTERIX CAT048 (.ast)",
+    )
+    tr.add_argument(
+        "--format",
+        default="auto",
+        metavar="FORMAT",
+        help="the input's format: csv, asterix (CAT048 target reports; radars need sac and "
+        "sic) or auto (by suffix: .ast and .asterix are ASTERIX; the default)",
+    )
+    map_flag(tr, "format", "--format")
     tr.add_argument("--radars", required=True, metavar="RADARS.toml", help="radar sites, σ")
     tr.add_argument(
         "--method",
@@ -161,7 +175,17 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
         help=f"manoeuvre: the flight, one of {', '.join(FLIGHT_NAMES)} (default {FLIGHT_NAMES[0]})",
     )
     map_flag(sim, "flight", "--flight")
-    sim.add_argument("--out", required=True, metavar="MEAS.csv", help="measurement CSV to write")
+    sim.add_argument(
+        "--out", required=True, metavar="MEAS", help="measurement file to write (CSV or .ast)"
+    )
+    sim.add_argument(
+        "--format",
+        default="auto",
+        metavar="FORMAT",
+        help="the output's format: csv, asterix (CAT048, at the items' resolution; the radars "
+        "get sac 0 and sic 1, 2, …) or auto (by suffix; the default)",
+    )
+    map_flag(sim, "format", "--format")
     sim.add_argument(
         "--radars-out", required=True, metavar="RADARS.toml", help="radars TOML to write"
     )
@@ -248,7 +272,9 @@ def cmd_track(args: argparse.Namespace) -> int:
     )
     methods = None if args.method is None else tuple(args.method)
     observer = None if args.rrd is None else _recorder(args.rrd, monitor)
-    s = run_track(args.input, args.radars, args.out, methods, options, observer)
+    s = run_track(
+        args.input, args.radars, args.out, methods, options, observer, input_format=args.format
+    )
     doc = track_summary_document(
         monitor,
         options,
@@ -295,6 +321,7 @@ def _inconsistent(bad: list[str], tracks: int) -> str:
 
 def cmd_simulate(args: argparse.Namespace) -> int:
     check_choice("--preset", args.preset, ALL_PRESETS)
+    fmt = input_format_of(args.out, args.format)
     check_outputs([("--out", args.out), ("--radars-out", args.radars_out)])
     if args.preset == "manoeuvre":
         check("sigma_beta_deg", args.sigma_beta_deg)
@@ -305,8 +332,14 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     else:
         steps = default("steps") if args.steps is None else args.steps
         plots, radars = simulated_plots(args.preset, args.seed, args.sigma_beta_deg, steps)
-    n = write_measurements(args.out, args.radars_out, plots, radars)
-    print(f"wrote {n} plots to {args.out} and {len(radars)} radar(s) to {args.radars_out}")
+    if fmt == "asterix":
+        from radarviz.viz_app.io.asterix import write_asterix
+
+        n = write_asterix(args.out, args.radars_out, plots, radars)
+    else:
+        n = write_measurements(args.out, args.radars_out, plots, radars)
+    kind = " (ASTERIX CAT048)" if fmt == "asterix" else ""
+    print(f"wrote {n} plots to {args.out}{kind} and {len(radars)} radar(s) to {args.radars_out}")
     return 0
 
 

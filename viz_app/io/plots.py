@@ -93,7 +93,14 @@ REQUIRED_COLUMNS = ("time_s", "radar", "range_m", "azimuth_deg")
 OPTIONAL_COLUMNS = ("elevation_deg", "radial_velocity_mps", "target")
 RADAR_KEYS = ("x_m", "y_m", "z_m", "sigma_range_m", "sigma_azimuth_deg")
 OPTIONAL_RADAR_KEYS = ("sigma_elevation_deg", "sigma_radial_velocity_mps")
+#: The ASTERIX data source identifier of a radar (I048/010): integers in [0, 255], both or
+#: neither; no two radars may share a pair.
+SOURCE_KEYS = ("sac", "sic")
 DEFAULT_TRACKS = "tracks.csv"
+#: Measurement file formats (``track --format``, ``simulate --format``); "auto" picks by suffix.
+FILE_FORMATS = ("auto", "csv", "asterix")
+#: File name suffixes taken as ASTERIX by "auto" (any other: CSV).
+ASTERIX_SUFFIXES = (".ast", ".asterix")
 SIM_PRESETS = ("prosov", "fusion")
 #: ``track --doppler``: "use" (the line-of-sight update) or "ignore".
 DOPPLER_MODES = ("use", "ignore")
@@ -143,6 +150,10 @@ class Radar:
     sigma_azimuth_deg: float
     sigma_elevation_deg: float | None = None
     sigma_radial_velocity_mps: float | None = None
+    #: The ASTERIX data source (I048/010 SAC, SIC) whose records are this radar's; None: the
+    #: radar is not in ASTERIX files (``viz_app.io.asterix``).
+    sac: int | None = None
+    sic: int | None = None
 
 
 # --------------------------------------------------------------------------------------------
@@ -182,11 +193,11 @@ def parse_radars(text: str, source: str) -> dict[str, Radar]:
         where = f"{source}, radar {name!r}"
         if not isinstance(table, dict):
             raise ParameterError(f"{where}: must be a table [radars.{name}]")
+        known = RADAR_KEYS + OPTIONAL_RADAR_KEYS + SOURCE_KEYS
         for key in table:
-            if key not in RADAR_KEYS + OPTIONAL_RADAR_KEYS:
+            if key not in known:
                 raise ParameterError(
-                    f"{where}, key {key}: unknown key "
-                    f"(expected {', '.join(RADAR_KEYS + OPTIONAL_RADAR_KEYS)})"
+                    f"{where}, key {key}: unknown key (expected {', '.join(known)})"
                 )
         vals: dict[str, float] = {}
         for key in RADAR_KEYS + OPTIONAL_RADAR_KEYS:
@@ -205,8 +216,35 @@ def parse_radars(text: str, source: str) -> dict[str, Radar]:
                     f"{where}, key {key}: must be a finite number {rng}".rstrip() + f" (got {v!r})"
                 )
             vals[key] = float(v)
-        radars[name] = Radar(name, *(vals.get(k) for k in RADAR_KEYS + OPTIONAL_RADAR_KEYS))
+        sac, sic = _source_id(where, table, radars.values())
+        radars[name] = Radar(
+            name, *(vals.get(k) for k in RADAR_KEYS + OPTIONAL_RADAR_KEYS), sac=sac, sic=sic
+        )
     return radars
+
+
+def _source_id(
+    where: str, table: dict[str, Any], others: Iterable[Radar]
+) -> tuple[int | None, int | None]:
+    """A radar table's (sac, sic), checked: integers in [0, 255], both or neither, a pair no
+    earlier radar has; (None, None) when the table has neither."""
+    given = [k for k in SOURCE_KEYS if k in table]
+    if not given:
+        return None, None
+    if len(given) == 1:
+        missing = "sic" if given[0] == "sac" else "sac"
+        raise ParameterError(f"{where}, key {missing}: missing (sac and sic go together)")
+    for key in SOURCE_KEYS:
+        v = table[key]
+        if not (isinstance(v, int) and not isinstance(v, bool) and 0 <= v <= 255):
+            raise ParameterError(f"{where}, key {key}: must be an integer in [0, 255] (got {v!r})")
+    sac, sic = table["sac"], table["sic"]
+    for other in others:
+        if (other.sac, other.sic) == (sac, sic):
+            raise ParameterError(
+                f"{where}, key sic: data source SAC {sac} SIC {sic} is radar {other.name!r}'s too"
+            )
+    return sac, sic
 
 
 def _is_real(v: object) -> bool:
@@ -578,6 +616,26 @@ class TrackSummary:
     targets: tuple[str, ...] = ()
 
 
+class PlotSource(Protocol):
+    """What ``track_plots`` reads: a measurement file's plots, with what its start told.
+
+    ``PlotReader`` (CSV) and ``viz_app.io.asterix.AsterixReader`` (ASTERIX CAT048) are the
+    two; iterating yields (position, ``Plot``), the position being what ``track_plots``'s
+    ``locate`` turns into words (a line number; a byte offset).
+    """
+
+    #: Plots carry elevations (3D).
+    three_d: bool
+    #: Plots carry target labels (a file of many targets).
+    targets: bool
+
+    def __iter__(self) -> Iterator[tuple[int, Plot]]: ...
+
+
+def _csv_locate(line: int, column: str) -> str:
+    return f"line {line}, column {column}"
+
+
 def track_lines(
     lines: Iterable[str],
     source: str,
@@ -587,32 +645,47 @@ def track_lines(
     on_rows: Callable[[Plot, list[StateRow]], None],
     on_start: Callable[[bool], None] | None = None,
 ) -> tuple[int, bool, tuple[str, ...], tuple[str, ...]]:
-    """Track a measurement CSV given as lines; ``on_rows(plot, rows)`` after every plot.
+    """Track a measurement CSV given as lines (``track_plots`` of its ``PlotReader``)."""
+    reader = PlotReader(lines, source, radars)
+    return track_plots(reader, source, methods, options, on_rows, on_start, _csv_locate)
 
-    Plots are read and tracked ``READ_BLOCK`` at a time, so at most that many are held. A file
-    with a ``target`` column is tracked by ``core.tracking.targets.TargetTracker`` (one track
+
+def track_plots(
+    reader: PlotSource,
+    source: str,
+    methods: tuple[str, ...] | None,
+    options: StreamOptions,
+    on_rows: Callable[[Plot, list[StateRow]], None],
+    on_start: Callable[[bool], None] | None = None,
+    locate: Callable[[int, str], str] = _csv_locate,
+) -> tuple[int, bool, tuple[str, ...], tuple[str, ...]]:
+    """Track a file's plots; ``on_rows(plot, rows)`` after every plot.
+
+    ``reader`` is a ``PlotSource`` (its ``three_d`` and ``targets`` known before the first
+    plot). Plots are read and tracked ``READ_BLOCK`` at a time, so at most that many are held.
+    A file with target labels is tracked by ``core.tracking.targets.TargetTracker`` (one track
     per target and method, all targets in one batch), one without by ``StreamTracker``;
-    ``on_start(targets)`` is called once the header has told which.
+    ``on_start(targets)`` is called once the reader has told which.
 
     ``methods`` None: every method of the file's kind (``ALL_METHODS`` in 2D, ``METHODS_3D``
     in 3D). Returns (plots, three_d, methods, targets). Tracker errors come back as
-    "SOURCE line L, column C: …".
+    "SOURCE " + ``locate(position, column)`` + ": …".
     """
-    reader = PlotReader(lines, source, radars)
+    three_d, labelled = reader.three_d, reader.targets
     if methods is None:
-        methods = METHODS_3D if reader.three_d else ALL_METHODS
+        methods = METHODS_3D if three_d else ALL_METHODS
     tracker: StreamTracker | TargetTracker
     try:
-        if reader.targets:
-            tracker = TargetTracker(methods, reader.three_d, options)
+        if labelled:
+            tracker = TargetTracker(methods, three_d, options)
         else:
-            tracker = StreamTracker(methods, reader.three_d, options)
+            tracker = StreamTracker(methods, three_d, options)
     except ParameterError as exc:  # errors about the options: the CLI names the flag
         if exc.parameter:
             raise
         raise ParameterError(f"--{exc}") from None
     if on_start is not None:
-        on_start(reader.targets)
+        on_start(labelled)
     plots = 0
     block: list[tuple[int, Plot]] = []
 
@@ -620,21 +693,30 @@ def track_lines(
         try:
             rows = tracker.add_block([plot for _, plot in block])
         except PlotError as exc:
-            line = block[exc.index][0]
-            raise ParameterError(f"{source} line {line}, column {exc.column}: {exc}") from None
+            where = locate(block[exc.index][0], exc.column)
+            raise ParameterError(f"{source} {where}: {exc}") from None
         for (_, plot), plot_rows in zip(block, rows, strict=True):
             on_rows(plot, plot_rows)
         block.clear()
 
-    for line, plot in reader:
-        block.append((line, plot))
+    for position, plot in reader:
+        block.append((position, plot))
         plots += 1
         if len(block) == READ_BLOCK:
             run_block()
     if block:
         run_block()
     targets = tracker.targets if isinstance(tracker, TargetTracker) else ()
-    return plots, reader.three_d, methods, targets
+    return plots, three_d, methods, targets
+
+
+def input_format_of(path: str, file_format: str = "auto") -> str:
+    """``"csv"`` or ``"asterix"``: ``file_format`` itself, or with ``"auto"`` by the suffix of
+    ``path`` (``ASTERIX_SUFFIXES``: ASTERIX; anything else: CSV)."""
+    check_choice("format", file_format, FILE_FORMATS)
+    if file_format != "auto":
+        return file_format
+    return "asterix" if path.lower().endswith(ASTERIX_SUFFIXES) else "csv"
 
 
 class RowObserver(Protocol):
@@ -655,14 +737,29 @@ def run_track(
     methods: tuple[str, ...] | None = None,
     options: StreamOptions | None = None,
     observer: ObserverFactory | None = None,
+    input_format: str = "auto",
 ) -> TrackSummary:
-    """Track every plot of ``input_path`` into ``out_path``; ``observer`` also sees each plot."""
+    """Track every plot of ``input_path`` into ``out_path``; ``observer`` also sees each plot.
+
+    ``input_format``: ``"csv"``, ``"asterix"`` (CAT048, ``viz_app.io.asterix``) or ``"auto"``
+    (``input_format_of``: by the file name's suffix)."""
     options = options or StreamOptions()
+    fmt = input_format_of(input_path, input_format)
     radars = load_radars(radars_path)
     start = time.perf_counter()
     with ExitStack() as stack:
         stack.enter_context(commit_together())  # the tracks and the recording: both or neither
-        src = bounded_lines(stack.enter_context(_open_input(input_path)), input_path)
+        fh = stack.enter_context(_open_input(input_path))
+        reader: PlotSource
+        locate: Callable[[int, str], str]
+        if fmt == "asterix":  # the one place the input format is chosen
+            from radarviz.viz_app.io.asterix import AsterixReader
+
+            reader = AsterixReader(fh, input_path, radars)
+            locate = reader.locate
+        else:
+            reader = PlotReader(bounded_lines(fh, input_path), input_path, radars)
+            locate = _csv_locate
         out = stack.enter_context(atomic_write(out_path, "wb"))
         logger = None if observer is None else stack.enter_context(observer(radars.values()))
         writer: TrackWriter | None = None
@@ -678,8 +775,8 @@ def run_track(
             if logger is not None:
                 logger.add(plot, rows)
 
-        plots, three_d, used, targets = track_lines(
-            src, input_path, radars, methods, options, on_rows, on_start
+        plots, three_d, used, targets = track_plots(
+            reader, input_path, methods, options, on_rows, on_start, locate
         )
         assert writer is not None
         writer.close()
@@ -708,6 +805,9 @@ def _radar_toml(radars: Iterable[Radar]) -> str:
             v = getattr(r, key)
             if v is not None:
                 out.append(f"{key} = {float(v)!r}")
+        if r.sac is not None and r.sic is not None:
+            out.append(f"sac = {r.sac}")
+            out.append(f"sic = {r.sic}")
         out.append("")
     return "\n".join(out)
 
