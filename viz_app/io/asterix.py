@@ -62,7 +62,14 @@ from typing import IO, Any
 from radarviz.core.params import ParameterError
 from radarviz.core.tracking.stream import Plot
 from radarviz.viz_app.io.atomic import commit_together
-from radarviz.viz_app.io.plots import MAX_TIME_S, Radar, _radar_toml, atomic_text
+from radarviz.viz_app.io.plots import (
+    MAX_TIME_S,
+    Locate,
+    PlotSource,
+    Radar,
+    _radar_toml,
+    atomic_text,
+)
 
 CATEGORY = 48
 #: Metres per nautical mile and per foot (exact by definition).
@@ -400,6 +407,14 @@ class AsterixReader:
 
     def _bad(self, position: int, item: str, what: str) -> ParameterError:
         return ParameterError(f"{self.source} {self._where(position)}, item {item}: {what}")
+
+
+def asterix_source(
+    fh: IO[bytes], source: str, radars: dict[str, Radar]
+) -> tuple[PlotSource, Locate]:
+    """``run_track``'s reader of an ASTERIX file (a ``viz_app.io.plots.SourceFactory``)."""
+    reader = AsterixReader(fh, source, radars)
+    return reader, reader.locate
 
 
 def _height_m(rec: Any) -> float | None:

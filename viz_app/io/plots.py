@@ -632,8 +632,20 @@ class PlotSource(Protocol):
     def __iter__(self) -> Iterator[tuple[int, Plot]]: ...
 
 
+#: Where a plot's value is in its file, from the reader's position and the input column.
+Locate = Callable[[int, str], str]
+#: Given the opened binary input, its name and the radars: the plots' reader and its
+#: ``Locate``. ``csv_source`` is the CSV's; ``viz_app.io.asterix.asterix_source`` ASTERIX's.
+SourceFactory = Callable[[IO[bytes], str, dict[str, "Radar"]], tuple[PlotSource, Locate]]
+
+
 def _csv_locate(line: int, column: str) -> str:
     return f"line {line}, column {column}"
+
+
+def csv_source(fh: IO[bytes], source: str, radars: dict[str, Radar]) -> tuple[PlotSource, Locate]:
+    """The plots of a measurement CSV (``PlotReader``) and their "line L, column C"."""
+    return PlotReader(bounded_lines(fh, source), source, radars), _csv_locate
 
 
 def track_lines(
@@ -657,7 +669,7 @@ def track_plots(
     options: StreamOptions,
     on_rows: Callable[[Plot, list[StateRow]], None],
     on_start: Callable[[bool], None] | None = None,
-    locate: Callable[[int, str], str] = _csv_locate,
+    locate: Locate = _csv_locate,
 ) -> tuple[int, bool, tuple[str, ...], tuple[str, ...]]:
     """Track a file's plots; ``on_rows(plot, rows)`` after every plot.
 
@@ -737,29 +749,20 @@ def run_track(
     methods: tuple[str, ...] | None = None,
     options: StreamOptions | None = None,
     observer: ObserverFactory | None = None,
-    input_format: str = "auto",
+    open_source: SourceFactory | None = None,
 ) -> TrackSummary:
     """Track every plot of ``input_path`` into ``out_path``; ``observer`` also sees each plot.
 
-    ``input_format``: ``"csv"``, ``"asterix"`` (CAT048, ``viz_app.io.asterix``) or ``"auto"``
-    (``input_format_of``: by the file name's suffix)."""
+    ``open_source`` reads the input's plots (``csv_source`` by default; the command hands in
+    ``viz_app.io.asterix.asterix_source`` for an ASTERIX file, see ``input_format_of``)."""
     options = options or StreamOptions()
-    fmt = input_format_of(input_path, input_format)
+    open_source = open_source or csv_source
     radars = load_radars(radars_path)
     start = time.perf_counter()
     with ExitStack() as stack:
         stack.enter_context(commit_together())  # the tracks and the recording: both or neither
         fh = stack.enter_context(_open_input(input_path))
-        reader: PlotSource
-        locate: Callable[[int, str], str]
-        if fmt == "asterix":  # the one place the input format is chosen
-            from radarviz.viz_app.io.asterix import AsterixReader
-
-            reader = AsterixReader(fh, input_path, radars)
-            locate = reader.locate
-        else:
-            reader = PlotReader(bounded_lines(fh, input_path), input_path, radars)
-            locate = _csv_locate
+        reader, locate = open_source(fh, input_path, radars)
         out = stack.enter_context(atomic_write(out_path, "wb"))
         logger = None if observer is None else stack.enter_context(observer(radars.values()))
         writer: TrackWriter | None = None
