@@ -427,3 +427,26 @@ def test_simulate_refuses_values_the_items_cannot_hold() -> None:
     fast = Plot(0.0, 1e5, 0.0, 1.0, 0.01, radar="r", radial_velocity_mps=600.0)
     with pytest.raises(ParameterError, match="beyond I048/120 CAL's ±511 m/s"):
         ax.record_items(fast, radar, None)
+
+
+def test_reading_memory_does_not_grow_with_the_file(tmp_path: Path, monkeypatch) -> None:
+    """The peak of Python's allocations while reading a file (no plot kept) is the same for a
+    file four times longer, and a small part of it: one read and one data block are held,
+    not the file."""
+    import tracemalloc
+
+    monkeypatch.setattr(ax, "READ_BYTES", 4096)
+    blocks = [block(*(rec(128 * (8 * j + k + 1), 2560 + k) for k in range(8))) for j in range(1200)]
+    short, long = tmp_path / "short.ast", tmp_path / "long.ast"
+    short.write_bytes(b"".join(blocks[:300]))
+    long.write_bytes(b"".join(blocks))
+    peaks = []
+    for path in (short, short, long):  # the first pass warms up (one-time allocations)
+        with open(path, "rb") as fh:
+            tracemalloc.start()
+            n = sum(1 for _ in ax.AsterixReader(fh, "f.ast", radars()))
+            peaks.append(tracemalloc.get_traced_memory()[1])
+            tracemalloc.stop()
+        assert n == path.stat().st_size // len(blocks[0]) * 8
+    assert peaks[2] < peaks[1] + 4096, peaks
+    assert peaks[2] < long.stat().st_size / 4, (peaks, long.stat().st_size)

@@ -93,7 +93,7 @@ MAX_CAL_LSB = 2**9 - 1
 #: Records ``write_asterix`` puts in one data block.
 BLOCK_RECORDS = 128
 #: Bytes read from the file at a time.
-READ_BYTES = 1 << 20
+READ_BYTES = 1 << 18
 #: The input columns' items (the tracker's errors name a column).
 ITEM_OF_COLUMN = {
     "time_s": "I048/140",
