@@ -450,3 +450,17 @@ def test_reading_memory_does_not_grow_with_the_file(tmp_path: Path, monkeypatch)
         assert n == path.stat().st_size // len(blocks[0]) * 8
     assert peaks[2] < peaks[1] + 4096, peaks
     assert peaks[2] < long.stat().st_size / 4, (peaks, long.stat().st_size)
+
+
+def test_the_api_reads_asterix_files_too(tmp_path: Path) -> None:
+    import radarviz
+
+    plots, radar_list = simulated_plots("prosov", 5, 1.0, 60)
+    ast, toml = tmp_path / "m.ast", tmp_path / "r.toml"
+    ax.write_asterix(str(ast), str(toml), plots, radar_list)
+    rounded_csv(tmp_path / "m.csv", plots, radar_list, None)
+    a = radarviz.track_file(str(ast), str(toml), ["ucm"])
+    c = radarviz.track_file(str(tmp_path / "m.csv"), str(toml), ["ucm"])
+    assert a.plots == c.plots and len(a.steps) == len(plots)
+    for sa, sc in zip(a.steps, c.steps, strict=True):
+        assert np.array_equal(sa.x, sc.x) and np.array_equal(sa.P, sc.P)

@@ -11,7 +11,7 @@ from numpy.typing import NDArray
 from radarviz.core.filters.state import position_index
 from radarviz.core.params import ParameterError
 from radarviz.core.tracking.stream import Plot, PlotError, StateRow, StreamOptions
-from radarviz.viz_app.io.plots import Radar, _open_input, bounded_lines, load_radars, track_lines
+from radarviz.viz_app.io.plots import Radar, _open_input, load_radars, track_plots
 
 
 @dataclass(frozen=True)
@@ -143,12 +143,13 @@ def track_file(
     use_doppler: bool = True,
     init: str = "first-plot",
     init_k: int = 3,
+    input_format: str = "auto",
 ) -> Tracks:
-    """Track a measurement CSV file with its radars TOML file (the formats of ``radarviz
-    track``, described in the README); nothing is written.
+    """Track a measurement file (CSV or ASTERIX CAT048) with its radars TOML file (the formats
+    of ``radarviz track``, described in the README); nothing is written.
 
     Args:
-        measurements: path of the measurement CSV.
+        measurements: path of the measurement CSV or ASTERIX file.
         radars: path of the radars TOML file (sites in m, accuracies).
         methods: see ``track``.
         sigma_a_mps2: see ``track``.
@@ -156,6 +157,8 @@ def track_file(
         use_doppler: see ``track``.
         init: see ``track``.
         init_k: see ``track``.
+        input_format: "csv", "asterix" or "auto" (by the suffix: ``.ast``, ``.asterix`` are
+            ASTERIX), as ``radarviz track --format``.
 
     Returns:
         ``Tracks``, with the file's radars.
@@ -178,9 +181,13 @@ def track_file(
         )
         plots.append(plot)
 
+    from radarviz.viz_app.io.asterix import source_for
+
+    open_source = source_for(measurements, input_format)
     with _open_input(measurements) as fh:
-        src = bounded_lines(fh, measurements)
-        _, three_d, used, _ = track_lines(
-            src, measurements, sites, None if methods is None else tuple(methods), options, on_rows
+        reader, locate = open_source(fh, measurements, sites)
+        used_methods = None if methods is None else tuple(methods)
+        _, three_d, used, _ = track_plots(
+            reader, measurements, used_methods, options, on_rows, None, locate
         )
     return Tracks(tuple(plots), tuple(steps), tuple(used), three_d, tuple(sites.values()))

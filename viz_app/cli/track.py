@@ -272,11 +272,9 @@ def cmd_track(args: argparse.Namespace) -> int:
     )
     methods = None if args.method is None else tuple(args.method)
     observer = None if args.rrd is None else _recorder(args.rrd, monitor)
-    open_source = None  # the CSV reader
-    if input_format_of(args.input, args.format) == "asterix":
-        from radarviz.viz_app.io.asterix import asterix_source
+    from radarviz.viz_app.io.asterix import source_for
 
-        open_source = asterix_source
+    open_source = source_for(args.input, args.format)
     s = run_track(args.input, args.radars, args.out, methods, options, observer, open_source)
     doc = track_summary_document(
         monitor,

@@ -55,6 +55,7 @@ differs from the simulated one by at most half a least significant bit of each i
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Iterable, Iterator
 from typing import IO, Any
@@ -67,8 +68,11 @@ from radarviz.viz_app.io.plots import (
     Locate,
     PlotSource,
     Radar,
+    SourceFactory,
     _radar_toml,
     atomic_text,
+    csv_source,
+    input_format_of,
 )
 
 CATEGORY = 48
@@ -301,11 +305,8 @@ class AsterixReader:
         # Per data source: (radar, σr, σβ rad, site, σε rad, σVr), computed once.
         consts: dict[tuple[int, int], tuple[Radar, float, float, Any, float, float]] = {}
 
-        def records() -> Iterator[tuple[int, Any]]:
-            yield self._first
-            yield from self._records
-
-        for position, rec in records():
+        radians = math.radians
+        for position, rec in itertools.chain((self._first,), self._records):
             c = consts.get((rec.get("sac"), rec.get("sic")))  # type: ignore[arg-type]
             if c is None:
                 radar = self._radar(position, rec)
@@ -383,7 +384,7 @@ class AsterixReader:
                         f"range {r:.1f} m from radar {radar.name!r} at {radar.z_m:g} m "
                         f"(sin elevation {s:.4g})"
                     )  # fmt: skip
-                el = math.radians(elevation_deg_of_sin(s))
+                el = radians(elevation_deg_of_sin(s))
             vr = None
             if sigma_vr > 0 and rec.get("cal_valid"):
                 vr = rec["cal_doppler_m_per_s"]
@@ -392,7 +393,7 @@ class AsterixReader:
                 Plot(
                     t,
                     r,
-                    math.radians(beta_deg),
+                    radians(beta_deg),
                     sigma_r,
                     sigma_az,
                     site,
@@ -415,6 +416,13 @@ def asterix_source(
     """``run_track``'s reader of an ASTERIX file (a ``viz_app.io.plots.SourceFactory``)."""
     reader = AsterixReader(fh, source, radars)
     return reader, reader.locate
+
+
+def source_for(path: str, file_format: str = "auto") -> SourceFactory:
+    """The reader of the measurement file ``path``: ``asterix_source`` or
+    ``viz_app.io.plots.csv_source``, by ``file_format`` (``input_format_of``: "auto" goes by
+    the suffix). The one place the input format is chosen (``track``, ``radarviz.track_file``)."""
+    return asterix_source if input_format_of(path, file_format) == "asterix" else csv_source
 
 
 def _height_m(rec: Any) -> float | None:
