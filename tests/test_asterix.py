@@ -464,3 +464,20 @@ def test_the_api_reads_asterix_files_too(tmp_path: Path) -> None:
     assert a.plots == c.plots and len(a.steps) == len(plots)
     for sa, sc in zip(a.steps, c.steps, strict=True):
         assert np.array_equal(sa.x, sc.x) and np.array_equal(sa.P, sc.P)
+
+
+def test_bench_section_figures_are_consistent(capsys) -> None:
+    """``bench --only asterix``: the plots asked for, the ratio its own two rates' (speed is
+    measured by running the benchmark, never asserted here)."""
+    import json
+
+    assert main(["bench", "--only", "asterix", "--asterix-plots", "300", "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)["asterix"]
+    assert doc["plots"] == 300 and doc["repeats"] == 3
+    assert doc["asterix_over_csv"] == pytest.approx(
+        doc["asterix_plots_per_s"] / doc["csv_plots_per_s"], rel=1e-12
+    )
+    assert doc["bytes_per_plot"]["asterix"] * 300 == pytest.approx(doc["file_kib"] * 1024)
+    assert 0 < doc["read_peak_kib"]
+    assert main(["bench", "--only", "asterix", "--asterix-plots", "300"]) == 0
+    assert capsys.readouterr().out.startswith("ASTERIX CAT048 reading, 300 fusion plots")
