@@ -481,3 +481,13 @@ def test_bench_section_figures_are_consistent(capsys) -> None:
     assert 0 < doc["read_peak_kib"]
     assert main(["bench", "--only", "asterix", "--asterix-plots", "300"]) == 0
     assert capsys.readouterr().out.startswith("ASTERIX CAT048 reading, 300 fusion plots")
+
+
+def test_simulate_writes_nothing_for_a_nan(tmp_path: Path) -> None:
+    from radarviz.core.finite import ResultError
+
+    plots, radar_list = simulated_plots("prosov", 1, 1.0, 60)
+    plots[5] = replace(plots[5], range_m=math.nan)
+    with pytest.raises(ResultError, match="range_m"):
+        ax.write_asterix(str(tmp_path / "m.ast"), str(tmp_path / "r.toml"), plots, radar_list)
+    assert list(tmp_path.iterdir()) == []

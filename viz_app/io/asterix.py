@@ -71,6 +71,7 @@ from radarviz.viz_app.io.plots import (
     SourceFactory,
     _radar_toml,
     atomic_text,
+    check_plots_finite,
     csv_source,
     input_format_of,
 )
@@ -539,9 +540,11 @@ def encode_plots(plots: list[Plot], radars: list[Radar]) -> Iterator[bytes]:
 
 def write_asterix(meas_path: str, radars_path: str, plots: list[Plot], radars: list[Radar]) -> int:
     """Plots as an ASTERIX CAT048 file and their radars (given SAC/SIC by ``with_source_ids``)
-    as TOML, committed together; returns plots."""
+    as TOML, committed together (both or neither; nothing on an error); returns plots. The
+    plots pass the finite-result check first, as ``write_measurements``'s do."""
     from radarviz.viz_app.io.atomic import atomic_write
 
+    check_plots_finite(plots)  # a NaN is an error, not a record
     radars = with_source_ids(radars)
     blocks = encode_plots(plots, radars)
     with commit_together(), atomic_write(meas_path, "wb") as fh, atomic_text(radars_path) as rh:

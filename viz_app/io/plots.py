@@ -892,13 +892,9 @@ def fusion_plots(seed: int = 1, steps: int = 60) -> tuple[list[Plot], list[Radar
     return plots, radars
 
 
-def write_measurements(
-    meas_path: str, radars_path: str, plots: list[Plot], radars: list[Radar]
-) -> int:
-    """Plots as a measurement CSV and their radars as TOML, committed together; returns
-    plots (with a ``target`` column when any plot has a target label). Every plot's values
-    pass the finite-result check first (a range or an angle that came out NaN is an error,
-    not a row; ranges must be > 0 to be read back)."""
+def check_plots_finite(plots: list[Plot]) -> None:
+    """The finite-result check (``core.finite``) of plots about to be written (``simulate``):
+    times, ranges (> 0), angles and radial velocities finite."""
     for column, values, positive in (
         ("time_s", [p.time_s for p in plots], False),
         ("range_m", [p.range_m for p in plots], True),
@@ -911,6 +907,16 @@ def write_measurements(
         ),
     ):
         check_finite_result("simulate", column, values, nonnegative=positive, index_name="plot")
+
+
+def write_measurements(
+    meas_path: str, radars_path: str, plots: list[Plot], radars: list[Radar]
+) -> int:
+    """Plots as a measurement CSV and their radars as TOML, committed together; returns
+    plots (with a ``target`` column when any plot has a target label). Every plot's values
+    pass the finite-result check first (a range or an angle that came out NaN is an error,
+    not a row; ranges must be > 0 to be read back)."""
+    check_plots_finite(plots)
     three_d = plots[0].elevation_rad is not None
     doppler = any(p.radial_velocity_mps is not None for p in plots)
     labelled = any(p.target for p in plots)
