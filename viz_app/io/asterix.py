@@ -29,7 +29,8 @@ name byte offsets and to keep memory flat) and turns the decoded items into plot
   as height above mean sea level: the standard atmosphere, no QNH correction) → elevation by
   ``elevation_from_height`` (the 4/3 effective-earth-radius model, the radar's ``z_m`` its
   antenna's height above mean sea level). Heights are used only from a radar with
-  ``sigma_elevation_deg`` in the radars file (any other radar's plots are 2D).
+  ``sigma_elevation_deg`` in the radars file (another radar's plots are 2D, refused in a 3D
+  file).
 * I048/120 radial Doppler speed, subfield CAL (calculated Doppler speed, 1 m/s, positive away
   from the radar): ``radial_velocity_mps``, when D = 0 (valid) and the radar has
   ``sigma_radial_velocity_mps``; a doubtful one (D = 1) is not used.
@@ -41,10 +42,12 @@ of other categories (e.g. CAT034 service messages) are skipped whole. Within a t
 whole file, without track numbers) times must not decrease, as in a CSV.
 
 **Bad input** is one ``ParameterError`` line naming the file and the byte offset: a data block
-whose LEN is under 3 or runs past the end of the file (truncated), a record the decoder cannot
-parse (named by its data block's offset and its index in the block), an unknown SAC/SIC, a
-height impossible at the plot's range. The file is read ``READ_BYTES`` at a time, one data
-block (≤ 64 KiB) decoded at a time: memory does not grow with the file.
+whose LEN is under 3 or runs past the end of the file (truncated), a data block the decoder
+cannot parse (an item running past its end: the block's offset and the decoder's reason), a
+record announcing items beyond the UAP, an unknown SAC/SIC, a height impossible at the plot's
+range (these by the block's offset and the record's index in it). The file is read
+``READ_BYTES`` at a time, one data block (≤ 64 KiB) decoded at a time: memory does not grow
+with the file.
 
 ``write_asterix`` is ``simulate --format asterix``: each plot as a record with I048/010, /140,
 /040, /161 (for labelled plots), /110 (3D plots: the height ``height_from_elevation`` gives,
