@@ -359,7 +359,24 @@ def overrun() -> bytes:
     return GOOD + bytes([48]) + (3 + len(body)).to_bytes(2, "big") + body
 
 
+def beyond_uap() -> bytes:
+    # FSPEC of five octets: FRN 29, past CAT048's 28 items (another edition's record).
+    body = bytes([0x01, 0x01, 0x01, 0x01, 0x80, 0x00])
+    return GOOD + bytes([48]) + (3 + len(body)).to_bytes(2, "big") + body
+
+
+def height_then_none() -> bytes:
+    return block(rec(128, more={"110": (0, 200)}), rec(256))
+
+
+def track_then_none() -> bytes:
+    return block(rec(128, more={"161": (0, ("TRN", 5))}), rec(256))
+
+
 BAD_FILES = {
+    "beyond UAP": (beyond_uap, f"byte {len(GOOD)}, record 1: the FSPEC announces items beyond"),
+    "3D, then no height": (height_then_none, "record 2, item I048/110 or I048/090: missing"),
+    "labelled, then none": (track_then_none, "record 2, item I048/161: missing"),
     "truncated": (
         lambda: GOOD[:-5],
         f"byte 0: truncated data block (CAT 048 declares LEN {len(GOOD)}",
