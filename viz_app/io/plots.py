@@ -1,5 +1,8 @@
 """``radarviz track`` and ``radarviz simulate``: measurement files in, track files out.
 
+(This module is the CSV's; ASTERIX CAT048 files are ``viz_app.io.asterix``'s, handed to
+``run_track`` as its ``open_source``.)
+
 Measurement file (CSV, header line first, one row per plot, times non-decreasing)::
 
     time_s, radar, range_m, azimuth_deg [, elevation_deg] [, radial_velocity_mps] [, target]
@@ -24,6 +27,8 @@ Radars file (TOML, read with ``tomllib``)::
     sigma_azimuth_deg = 1.0                  # in (0, 20]
     sigma_elevation_deg = 0.5                # in (0, 20]; needed by plots with an elevation
     sigma_radial_velocity_mps = 1.0          # > 0; needed by plots with a radial velocity
+    sac = 25; sic = 201                      # ASTERIX data source, integers in [0, 255]; both
+                                             # or neither; needed to read ASTERIX files
 
 Each method keeps one track (``core.tracking.stream.StreamTracker``): started from the first plot
 (the first-plot start: converted point, velocity 0 ± ``--sigma-v0``) or, with ``--init
@@ -636,7 +641,7 @@ class PlotSource(Protocol):
 Locate = Callable[[int, str], str]
 #: Given the opened binary input, its name and the radars: the plots' reader and its
 #: ``Locate``. ``csv_source`` is the CSV's; ``viz_app.io.asterix.asterix_source`` ASTERIX's.
-SourceFactory = Callable[[IO[bytes], str, dict[str, "Radar"]], tuple[PlotSource, Locate]]
+SourceFactory = Callable[[IO[bytes], str, dict[str, Radar]], tuple[PlotSource, Locate]]
 
 
 def _csv_locate(line: int, column: str) -> str:
