@@ -508,3 +508,25 @@ def test_simulate_writes_nothing_for_a_nan(tmp_path: Path) -> None:
     with pytest.raises(ResultError, match="range_m"):
         ax.write_asterix(str(tmp_path / "m.ast"), str(tmp_path / "r.toml"), plots, radar_list)
     assert list(tmp_path.iterdir()) == []
+
+
+def test_items_not_used_are_read_past() -> None:
+    """A record as a secondary radar sends it (Mode 3/A, aircraft address and identification,
+    track status, track velocity, Mode S capability, all read past) gives the plot of the bare
+    record."""
+    extra = {
+        "020": ((1, 0, 0, 0, 0, None),),  # target report descriptor (one octet; None: FX)
+        "070": (0, 0, 0, 0, ("MODE3A", "7421")),
+        "220": 0x3C6DA9,
+        "240": "DLH4AB",
+        "170": ((1, 2, 0, 0, 0, None), (0, 0, 0, 0, 0, None)),  # track status, extended
+        "200": (("GSP", 1000), ("HDG", 16384)),
+        "230": (1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0),
+        "161": (0, ("TRN", 77)),
+    }
+    bare = rec(128, more={"161": (0, ("TRN", 77))})
+    data = block(rec(128, more=extra))
+    assert len(data) == len(block(bare)) + 1 + 2 + 3 + 6 + 2 + 4 + 2 + 1  # items + FSPEC octet
+    _, full = read(data)
+    _, plain = read(block(bare))
+    assert full == plain and full[0].target == "77"
