@@ -160,7 +160,10 @@ def test_bench_figures_are_consistent(capsys) -> None:
 
     rss_before = _high_water_rss_mib()
     code = main(
-        ["bench", "--json", "--runs", "500", "1000", "--filterpy-runs", "3", "--targets", "30"]
+        [
+            *("bench", "--json", "--runs", "500", "1000", "--filterpy-runs", "3"),
+            *("--targets", "30", "--asterix-plots", "300"),
+        ]
     )
     assert code == 0
     ru_after = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
@@ -210,6 +213,7 @@ def test_bench_figures_are_consistent(capsys) -> None:
     assert tg["batched_over_loop"] == pytest.approx(
         tg["batched_plots_per_s"] / tg["loop_plots_per_s"], rel=1e-12
     )
+    assert doc["asterix"]["plots"] == 300  # the section's own figures: tests/test_asterix.py
     # JSON keeps full precision: the ratio is exact to rounding.
     for ours, ratio in zip(kf, doc["speedup_vs_filterpy"], strict=True):
         assert ratio == pytest.approx(fp / ours, rel=1e-12)

@@ -722,7 +722,7 @@ def test_bench_refuses_a_nan_figure(
     monkeypatch.setattr(
         engine,
         "run_bench",
-        lambda runs, filterpy_runs, targets: {"runs": list(runs), "kf_ns": [math.nan]},
+        lambda runs, filterpy_runs, targets, **_: {"runs": list(runs), "kf_ns": [math.nan]},
     )
     assert main(["bench", "--json", "--runs", "100"]) == 1
     out, err = capsys.readouterr()

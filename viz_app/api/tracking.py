@@ -12,7 +12,7 @@ from radarviz.core.filters.state import position_index
 from radarviz.core.params import ParameterError
 from radarviz.core.tracking.association import AssociationOptions
 from radarviz.core.tracking.stream import Plot, PlotError, StateRow, StreamOptions
-from radarviz.viz_app.io.plots import Radar, _open_input, bounded_lines, load_radars, track_lines
+from radarviz.viz_app.io.plots import Radar, _open_input, load_radars, track_plots
 
 
 @dataclass(frozen=True)
@@ -161,12 +161,13 @@ def track_file(
     init: str = "first-plot",
     init_k: int = 3,
     association: AssociationOptions | None = None,
+    input_format: str = "auto",
 ) -> Tracks:
-    """Track a measurement CSV file with its radars TOML file (the formats of ``radarviz
-    track``, described in the README); nothing is written.
+    """Track a measurement file (CSV or ASTERIX CAT048) with its radars TOML file (the formats
+    of ``radarviz track``, described in the README); nothing is written.
 
     Args:
-        measurements: path of the measurement CSV.
+        measurements: path of the measurement CSV or ASTERIX file.
         radars: path of the radars TOML file (sites in m, accuracies).
         methods: see ``track``.
         model: see ``track``.
@@ -180,6 +181,8 @@ def track_file(
             global-nearest-neighbour association of ``radarviz track --associate gnn``
             (``AssociationOptions``: gating method, gate probability, M of N, misses to
             delete, scan window). Each step's ``target`` is then its track id.
+        input_format: "csv", "asterix" or "auto" (by the suffix: ``.ast``, ``.asterix`` are
+            ASTERIX), as ``radarviz track --format``.
 
     Returns:
         ``Tracks``, with the file's radars.
@@ -204,15 +207,13 @@ def track_file(
         )
         plots.append(plot)
 
+    from radarviz.viz_app.io.asterix import source_for
+
+    open_source = source_for(measurements, input_format)
     with _open_input(measurements) as fh:
-        src = bounded_lines(fh, measurements)
-        _, three_d, used, _ = track_lines(
-            src,
-            measurements,
-            sites,
-            None if methods is None else tuple(methods),
-            options,
-            on_rows,
-            association=association,
+        reader, locate = open_source(fh, measurements, sites)
+        used_methods = None if methods is None else tuple(methods)
+        _, three_d, used, _ = track_plots(
+            reader, measurements, used_methods, options, on_rows, None, locate, association
         )
     return Tracks(tuple(plots), tuple(steps), tuple(used), three_d, tuple(sites.values()))

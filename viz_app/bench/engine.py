@@ -35,6 +35,9 @@ Figures (ns per track-step = wall time / (runs × scans), one core):
   same run; ``batched_over_loop`` the ratio of their plots per second.
 * ``association``: unlabelled plots associated (``core.tracking.association``) against the
   same plots with their labels, ``viz_app.bench.association``.
+* ``asterix``: reading an ASTERIX CAT048 file of the fusion plots against reading the same
+  plots from CSV, plots per second and their same-run ratio (``viz_app.bench.asterix``; alone:
+  ``radarviz bench --only asterix``).
 * ``peak_rss_mb``: peak resident memory of the process.
 """
 
@@ -341,9 +344,14 @@ def bench_targets(targets: int, config: TrackingConfig, loop_targets: int = 20) 
 
 
 def run_bench(
-    runs: Sequence[int] = (10_000, 100_000), filterpy_runs: int = 200, targets: int = 1000
+    runs: Sequence[int] = (10_000, 100_000),
+    filterpy_runs: int = 200,
+    targets: int = 1000,
+    asterix_plots: int = 20_000,
 ) -> dict[str, Any]:
     """All figures of ``radarviz bench`` as a JSON-ready dict."""
+    from radarviz.viz_app.bench.asterix import bench_asterix
+
     config = TrackingConfig(runs=2, target=prosov_target())
     gorshkov_s = bench_gorshkov()
     fp = bench_filterpy(filterpy_runs, config)
@@ -371,6 +379,7 @@ def run_bench(
         "imm": bench_imm(runs[0], filterpy_runs, config),
         "targets": bench_targets(targets, config),
         "association": bench_association(targets),
+        "asterix": bench_asterix(asterix_plots),
         "peak_rss_mb": peak_rss_mb(),
     }
 
@@ -436,5 +445,8 @@ def format_bench(doc: dict[str, Any]) -> str:
         f"(batched/loop {tg['batched_over_loop']:.1f}×)"
     )
     lines.append(format_association(doc["association"]))
+    from radarviz.viz_app.bench.asterix import format_asterix
+
+    lines.append(format_asterix(doc["asterix"]))
     lines.append(f"peak RSS: {doc['peak_rss_mb']:.0f} MiB")
     return "\n".join(lines)

@@ -238,6 +238,18 @@ def build_parser() -> argparse.ArgumentParser:
         default=1000,
         help="targets of the many-target tracker figure (default 1000)",
     )
+    bench.add_argument(
+        "--asterix-plots",
+        type=integer,
+        default=20_000,
+        help="plots of the ASTERIX reading figure (default 20000)",
+    )
+    bench.add_argument(
+        "--only",
+        choices=("asterix",),
+        default=None,
+        help="run one section: asterix (ASTERIX CAT048 reading vs CSV); default all",
+    )
     return parser
 
 
@@ -463,6 +475,14 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         check_int("--runs", m, low=100, high=10_000_000)
     check_int("--filterpy-runs", args.filterpy_runs, low=1, high=100_000)
     check_int("--targets", args.targets, low=1, high=100_000)
+    check_int("--asterix-plots", args.asterix_plots, low=100, high=10_000_000)
+    if args.only == "asterix":
+        from radarviz.viz_app.bench.asterix import bench_asterix, format_asterix
+
+        doc = {"asterix": bench_asterix(args.asterix_plots)}
+        check_finite_document("bench", doc, nonnegative=True)
+        print_report(doc, args.json, lambda d: format_asterix(d["asterix"]))
+        return 0
     if args.device == "gpu":
         from radarviz.viz_app.bench.device import NoGPUError, bench_gpu, format_gpu
 
@@ -477,7 +497,12 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     from radarviz.viz_app.runtime import tune_allocator
 
     tune_allocator()
-    doc = run_bench(runs=args.runs, filterpy_runs=args.filterpy_runs, targets=args.targets)
+    doc = run_bench(
+        runs=args.runs,
+        filterpy_runs=args.filterpy_runs,
+        targets=args.targets,
+        asterix_plots=args.asterix_plots,
+    )
     check_finite_document("bench", doc, nonnegative=True)  # times, rates and ratios
     print_report(doc, args.json, format_bench)
     return 0

@@ -19,7 +19,7 @@ from radarviz.core.params import ParameterError, check, check_choice, default
 from radarviz.core.scenarios.crossing import CrossingScene
 from radarviz.core.tracking.association import ASSOCIATE_MODES, AssociationOptions
 from radarviz.core.tracking.consistency import ConsistencyMonitor
-from radarviz.core.tracking.stream import INIT_MODES, METHODS_3D, StreamOptions
+from radarviz.core.tracking.stream import INIT_MODES, METHODS_3D, Plot, StreamOptions
 from radarviz.viz_app.cli.args import integer, number
 from radarviz.viz_app.cli.params import add_parameter, map_flag
 from radarviz.viz_app.cli.presets import (
@@ -37,6 +37,7 @@ from radarviz.viz_app.io.plots import (
     ObserverFactory,
     Radar,
     RowObserver,
+    input_format_of,
     run_track,
     simulated_plots,
     write_measurements,
@@ -51,8 +52,21 @@ from radarviz.viz_app.runtime import peak_rss_mb
 
 def add_commands(sub: argparse._SubParsersAction) -> None:
     """Register ``track`` and ``simulate`` on the ``radarviz`` parser."""
-    tr = sub.add_parser("track", help="track a measurement CSV file into a track CSV file")
-    tr.add_argument("--input", required=True, metavar="MEAS.csv", help="measurement CSV")
+    tr = sub.add_parser("track", help="track a measurement file into a track CSV file")
+    tr.add_argument(
+        "--input",
+        required=True,
+        metavar="MEAS",
+        help="measurement file: CSV, or ASTERIX CAT048 (.ast)",
+    )
+    tr.add_argument(
+        "--format",
+        default="auto",
+        metavar="FORMAT",
+        help="the input's format: csv, asterix (CAT048 target reports; radars need sac and "
+        "sic) or auto (by suffix: .ast and .asterix are ASTERIX; the default)",
+    )
+    map_flag(tr, "format", "--format")
     tr.add_argument("--radars", required=True, metavar="RADARS.toml", help="radar sites, σ")
     tr.add_argument(
         "--method",
@@ -172,7 +186,17 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
         help=f"manoeuvre: the flight, one of {', '.join(FLIGHT_NAMES)} (default {FLIGHT_NAMES[0]})",
     )
     map_flag(sim, "flight", "--flight")
-    sim.add_argument("--out", required=True, metavar="MEAS.csv", help="measurement CSV to write")
+    sim.add_argument(
+        "--out", required=True, metavar="MEAS", help="measurement file to write (CSV or .ast)"
+    )
+    sim.add_argument(
+        "--format",
+        default="auto",
+        metavar="FORMAT",
+        help="the output's format: csv, asterix (CAT048, at the items' resolution; the radars "
+        "get sac 0 and sic 1, 2, …) or auto (by suffix; the default)",
+    )
+    map_flag(sim, "format", "--format")
     sim.add_argument(
         "--radars-out", required=True, metavar="RADARS.toml", help="radars TOML to write"
     )
@@ -356,7 +380,12 @@ def cmd_track(args: argparse.Namespace) -> int:
     )
     methods = None if args.method is None else tuple(args.method)
     observer = None if args.rrd is None else _recorder(args.rrd, monitor)
-    s = run_track(args.input, args.radars, args.out, methods, options, observer, association)
+    from radarviz.viz_app.io.asterix import source_for
+
+    open_source = source_for(args.input, args.format)
+    s = run_track(
+        args.input, args.radars, args.out, methods, options, observer, open_source, association
+    )
     doc = track_summary_document(
         monitor,
         options,
@@ -412,22 +441,24 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         for flag, value in extra:
             if value is not None:
                 raise ParameterError(f"{flag} is the crossing preset's (--preset crossing)")
+    fmt = input_format_of(args.out, args.format)
     check_outputs(
         [("--out", args.out), ("--radars-out", args.radars_out), ("--truth-out", args.truth_out)]
     )
+    kind = " (ASTERIX CAT048)" if fmt == "asterix" else ""
     if args.preset == "crossing":
         check("sigma_beta_deg", args.sigma_beta_deg)  # the prosov preset's: checked, not used
         scene = crossing_scene(args, args.steps)
         plots, radars = crossing_file_plots(scene, args.seed)
         with commit_together():
-            n = write_measurements(args.out, args.radars_out, plots, radars)
+            n = _write_plots(fmt, args.out, args.radars_out, plots, radars)
             if args.truth_out is not None:
                 write_crossing_truth(args.truth_out, scene)
         extra = f" and the truth to {args.truth_out}" if args.truth_out else ""
         print(
             f"wrote {n} plots ({scene.targets} crossing targets at {scene.crossing_angle_deg:g}°, "
             f"P_D {scene.detection_prob:g}, {scene.clutter_per_scan:g} false plots per scan, "
-            f"{scene.scans} scans) to {args.out} and 1 radar to {args.radars_out}{extra}"
+            f"{scene.scans} scans) to {args.out}{kind} and 1 radar to {args.radars_out}{extra}"
         )
         return 0
     if args.preset == "manoeuvre":
@@ -439,9 +470,20 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     else:
         steps = default("steps") if args.steps is None else args.steps
         plots, radars = simulated_plots(args.preset, args.seed, args.sigma_beta_deg, steps)
-    n = write_measurements(args.out, args.radars_out, plots, radars)
-    print(f"wrote {n} plots to {args.out} and {len(radars)} radar(s) to {args.radars_out}")
+    n = _write_plots(fmt, args.out, args.radars_out, plots, radars)
+    print(f"wrote {n} plots to {args.out}{kind} and {len(radars)} radar(s) to {args.radars_out}")
     return 0
+
+
+def _write_plots(
+    fmt: str, out: str, radars_out: str, plots: list[Plot], radars: list[Radar]
+) -> int:
+    """Write plots and their radars as a measurement CSV or an ASTERIX CAT048 file."""
+    if fmt == "asterix":
+        from radarviz.viz_app.io.asterix import write_asterix
+
+        return write_asterix(out, radars_out, plots, radars)
+    return write_measurements(out, radars_out, plots, radars)
 
 
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {

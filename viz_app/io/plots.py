@@ -1,5 +1,8 @@
 """``radarviz track`` and ``radarviz simulate``: measurement files in, track files out.
 
+(This module is the CSV's; ASTERIX CAT048 files are ``viz_app.io.asterix``'s, handed to
+``run_track`` as its ``open_source``.)
+
 Measurement file (CSV, header line first, one row per plot, times non-decreasing)::
 
     time_s, radar, range_m, azimuth_deg [, elevation_deg] [, radial_velocity_mps] [, target]
@@ -27,6 +30,8 @@ Radars file (TOML, read with ``tomllib``)::
     sigma_azimuth_deg = 1.0                  # in (0, 20]
     sigma_elevation_deg = 0.5                # in (0, 20]; needed by plots with an elevation
     sigma_radial_velocity_mps = 1.0          # > 0; needed by plots with a radial velocity
+    sac = 25; sic = 201                      # ASTERIX data source, integers in [0, 255]; both
+                                             # or neither; needed to read ASTERIX files
 
 Each method keeps one track (``core.tracking.stream.StreamTracker``): started from the first plot
 (the first-plot start: converted point, velocity 0 ± ``--sigma-v0``) or, with ``--init
@@ -97,7 +102,14 @@ REQUIRED_COLUMNS = ("time_s", "radar", "range_m", "azimuth_deg")
 OPTIONAL_COLUMNS = ("elevation_deg", "radial_velocity_mps", "target")
 RADAR_KEYS = ("x_m", "y_m", "z_m", "sigma_range_m", "sigma_azimuth_deg")
 OPTIONAL_RADAR_KEYS = ("sigma_elevation_deg", "sigma_radial_velocity_mps")
+#: The ASTERIX data source identifier of a radar (I048/010): integers in [0, 255], both or
+#: neither; no two radars may share a pair.
+SOURCE_KEYS = ("sac", "sic")
 DEFAULT_TRACKS = "tracks.csv"
+#: Measurement file formats (``track --format``, ``simulate --format``); "auto" picks by suffix.
+FILE_FORMATS = ("auto", "csv", "asterix")
+#: File name suffixes taken as ASTERIX by "auto" (any other: CSV).
+ASTERIX_SUFFIXES = (".ast", ".asterix")
 SIM_PRESETS = ("prosov", "fusion")
 #: ``track --doppler``: the Doppler update each mode asks for
 #: (``core.tracking.stream.StreamOptions.doppler_update``), None for "ignore".
@@ -152,6 +164,10 @@ class Radar:
     sigma_azimuth_deg: float
     sigma_elevation_deg: float | None = None
     sigma_radial_velocity_mps: float | None = None
+    #: The ASTERIX data source (I048/010 SAC, SIC) whose records are this radar's; None: the
+    #: radar is not in ASTERIX files (``viz_app.io.asterix``).
+    sac: int | None = None
+    sic: int | None = None
 
 
 # --------------------------------------------------------------------------------------------
@@ -191,11 +207,11 @@ def parse_radars(text: str, source: str) -> dict[str, Radar]:
         where = f"{source}, radar {name!r}"
         if not isinstance(table, dict):
             raise ParameterError(f"{where}: must be a table [radars.{name}]")
+        known = RADAR_KEYS + OPTIONAL_RADAR_KEYS + SOURCE_KEYS
         for key in table:
-            if key not in RADAR_KEYS + OPTIONAL_RADAR_KEYS:
+            if key not in known:
                 raise ParameterError(
-                    f"{where}, key {key}: unknown key "
-                    f"(expected {', '.join(RADAR_KEYS + OPTIONAL_RADAR_KEYS)})"
+                    f"{where}, key {key}: unknown key (expected {', '.join(known)})"
                 )
         vals: dict[str, float] = {}
         for key in RADAR_KEYS + OPTIONAL_RADAR_KEYS:
@@ -214,8 +230,35 @@ def parse_radars(text: str, source: str) -> dict[str, Radar]:
                     f"{where}, key {key}: must be a finite number {rng}".rstrip() + f" (got {v!r})"
                 )
             vals[key] = float(v)
-        radars[name] = Radar(name, *(vals.get(k) for k in RADAR_KEYS + OPTIONAL_RADAR_KEYS))
+        sac, sic = _source_id(where, table, radars.values())
+        radars[name] = Radar(
+            name, *(vals.get(k) for k in RADAR_KEYS + OPTIONAL_RADAR_KEYS), sac=sac, sic=sic
+        )
     return radars
+
+
+def _source_id(
+    where: str, table: dict[str, Any], others: Iterable[Radar]
+) -> tuple[int | None, int | None]:
+    """A radar table's (sac, sic), checked: integers in [0, 255], both or neither, a pair no
+    earlier radar has; (None, None) when the table has neither."""
+    given = [k for k in SOURCE_KEYS if k in table]
+    if not given:
+        return None, None
+    if len(given) == 1:
+        missing = "sic" if given[0] == "sac" else "sac"
+        raise ParameterError(f"{where}, key {missing}: missing (sac and sic go together)")
+    for key in SOURCE_KEYS:
+        v = table[key]
+        if not (isinstance(v, int) and not isinstance(v, bool) and 0 <= v <= 255):
+            raise ParameterError(f"{where}, key {key}: must be an integer in [0, 255] (got {v!r})")
+    sac, sic = table["sac"], table["sic"]
+    for other in others:
+        if (other.sac, other.sic) == (sac, sic):
+            raise ParameterError(
+                f"{where}, key sic: data source SAC {sac} SIC {sic} is radar {other.name!r}'s too"
+            )
+    return sac, sic
 
 
 def _is_real(v: object) -> bool:
@@ -598,6 +641,38 @@ class TrackSummary:
     targets: tuple[str, ...] = ()
 
 
+class PlotSource(Protocol):
+    """What ``track_plots`` reads: a measurement file's plots, with what its start told.
+
+    ``PlotReader`` (CSV) and ``viz_app.io.asterix.AsterixReader`` (ASTERIX CAT048) are the
+    two; iterating yields (position, ``Plot``), the position being what ``track_plots``'s
+    ``locate`` turns into words (a line number; a byte offset).
+    """
+
+    #: Plots carry elevations (3D).
+    three_d: bool
+    #: Plots carry target labels (a file of many targets).
+    targets: bool
+
+    def __iter__(self) -> Iterator[tuple[int, Plot]]: ...
+
+
+#: Where a plot's value is in its file, from the reader's position and the input column.
+Locate = Callable[[int, str], str]
+#: Given the opened binary input, its name and the radars: the plots' reader and its
+#: ``Locate``. ``csv_source`` is the CSV's; ``viz_app.io.asterix.asterix_source`` ASTERIX's.
+SourceFactory = Callable[[IO[bytes], str, dict[str, Radar]], tuple[PlotSource, Locate]]
+
+
+def _csv_locate(line: int, column: str) -> str:
+    return f"line {line}, column {column}"
+
+
+def csv_source(fh: IO[bytes], source: str, radars: dict[str, Radar]) -> tuple[PlotSource, Locate]:
+    """The plots of a measurement CSV (``PlotReader``) and their "line L, column C"."""
+    return PlotReader(bounded_lines(fh, source), source, radars), _csv_locate
+
+
 def track_lines(
     lines: Iterable[str],
     source: str,
@@ -608,39 +683,59 @@ def track_lines(
     on_start: Callable[[bool], None] | None = None,
     association: AssociationOptions | None = None,
 ) -> tuple[int, bool, tuple[str, ...], tuple[str, ...]]:
-    """Track a measurement CSV given as lines; ``on_rows(plot, rows)`` after every plot.
+    """Track a measurement CSV given as lines (``track_plots`` of its ``PlotReader``)."""
+    reader = PlotReader(lines, source, radars)
+    return track_plots(
+        reader, source, methods, options, on_rows, on_start, _csv_locate, association
+    )
 
-    Plots are read and tracked ``READ_BLOCK`` at a time, so at most that many are held. A file
-    with a ``target`` column is tracked by ``core.tracking.targets.TargetTracker`` (one track
+
+def track_plots(
+    reader: PlotSource,
+    source: str,
+    methods: tuple[str, ...] | None,
+    options: StreamOptions,
+    on_rows: Callable[..., None],
+    on_start: Callable[[bool], None] | None = None,
+    locate: Locate = _csv_locate,
+    association: AssociationOptions | None = None,
+) -> tuple[int, bool, tuple[str, ...], tuple[str, ...]]:
+    """Track a file's plots; ``on_rows(plot, rows)`` after every plot.
+
+    ``reader`` is a ``PlotSource`` (its ``three_d`` and ``targets`` known before the first
+    plot). Plots are read and tracked ``READ_BLOCK`` at a time, so at most that many are held.
+    A file with target labels is tracked by ``core.tracking.targets.TargetTracker`` (one track
     per target and method, all targets in one batch), one without by ``StreamTracker``;
-    ``on_start(targets)`` is called once the header has told which.
+    ``on_start(targets)`` is called once the reader has told which.
 
     ``methods`` None: every method of the file's kind (``ALL_METHODS`` in 2D, ``METHODS_3D``
     in 3D). Returns (plots, three_d, methods, targets). Tracker errors come back as
-    "SOURCE line L, column C: …".
+    "SOURCE " + ``locate(position, column)`` + ": …".
 
-    With ``association`` (``track --associate gnn``) a file without a ``target`` column is
+    With ``association`` (``track --associate gnn``) a file without target labels is
     associated scan by scan (``core.tracking.association.GNNTracker``): ``on_rows(plot,
     rows, status)`` then gets the plot labelled with its track id and the track's status, and
     ``targets`` are the ids of the tracks ever confirmed. Memory holds one scan.
     """
-    reader = PlotReader(lines, source, radars)
+    three_d, labelled = reader.three_d, reader.targets
     if methods is None:
-        methods = METHODS_3D if reader.three_d else ALL_METHODS
+        methods = METHODS_3D if three_d else ALL_METHODS
     if association is not None:
-        return _associate_lines(reader, source, methods, options, association, on_rows, on_start)
+        return _associate_plots(
+            reader, source, methods, options, association, on_rows, on_start, locate
+        )
     tracker: StreamTracker | TargetTracker
     try:
-        if reader.targets:
-            tracker = TargetTracker(methods, reader.three_d, options)
+        if labelled:
+            tracker = TargetTracker(methods, three_d, options)
         else:
-            tracker = StreamTracker(methods, reader.three_d, options)
+            tracker = StreamTracker(methods, three_d, options)
     except ParameterError as exc:  # errors about the options: the CLI names the flag
         if exc.parameter:
             raise
         raise ParameterError(f"--{exc}") from None
     if on_start is not None:
-        on_start(reader.targets)
+        on_start(labelled)
     plots = 0
     block: list[tuple[int, Plot]] = []
 
@@ -648,36 +743,46 @@ def track_lines(
         try:
             rows = tracker.add_block([plot for _, plot in block])
         except PlotError as exc:
-            line = block[exc.index][0]
-            raise ParameterError(f"{source} line {line}, column {exc.column}: {exc}") from None
+            where = locate(block[exc.index][0], exc.column)
+            raise ParameterError(f"{source} {where}: {exc}") from None
         for (_, plot), plot_rows in zip(block, rows, strict=True):
             on_rows(plot, plot_rows)
         block.clear()
 
-    for line, plot in reader:
-        block.append((line, plot))
+    for position, plot in reader:
+        block.append((position, plot))
         plots += 1
         if len(block) == READ_BLOCK:
             run_block()
     if block:
         run_block()
     targets = tracker.targets if isinstance(tracker, TargetTracker) else ()
-    return plots, reader.three_d, methods, targets
+    return plots, three_d, methods, targets
 
 
-def _associate_lines(
-    reader: PlotReader,
+def input_format_of(path: str, file_format: str = "auto") -> str:
+    """``"csv"`` or ``"asterix"``: ``file_format`` itself, or with ``"auto"`` by the suffix of
+    ``path`` (``ASTERIX_SUFFIXES``: ASTERIX; anything else: CSV)."""
+    check_choice("format", file_format, FILE_FORMATS)
+    if file_format != "auto":
+        return file_format
+    return "asterix" if path.lower().endswith(ASTERIX_SUFFIXES) else "csv"
+
+
+def _associate_plots(
+    reader: PlotSource,
     source: str,
     methods: tuple[str, ...],
     options: StreamOptions,
     association: AssociationOptions,
     on_rows: Callable[..., None],
     on_start: Callable[[bool], None] | None,
+    locate: Locate,
 ) -> tuple[int, bool, tuple[str, ...], tuple[str, ...]]:
-    """``track_lines`` with the association (its docstring)."""
+    """``track_plots`` with the association (its docstring)."""
     if reader.targets:
         raise ParameterError(
-            f"{source} line 1, column target: --associate is for plots without target labels "
+            f"{source} {locate(1, 'target')}: --associate is for plots without target labels "
             "(this file labels its targets: track it without --associate)"
         )
     try:
@@ -693,8 +798,8 @@ def _associate_lines(
         try:
             result = tracker.add_scan([plot for _, plot in scan])
         except PlotError as exc:
-            line = scan[exc.index][0]
-            raise ParameterError(f"{source} line {line}, column {exc.column}: {exc}") from None
+            where = locate(scan[exc.index][0], exc.column)
+            raise ParameterError(f"{source} {where}: {exc}") from None
         for (_, plot), track, status, rows in zip(
             scan, result.track_ids, result.statuses, result.rows, strict=True
         ):
@@ -721,17 +826,23 @@ def run_track(
     methods: tuple[str, ...] | None = None,
     options: StreamOptions | None = None,
     observer: ObserverFactory | None = None,
+    open_source: SourceFactory | None = None,
     association: AssociationOptions | None = None,
 ) -> TrackSummary:
     """Track every plot of ``input_path`` into ``out_path``; ``observer`` also sees each plot.
-    ``association``: associate unlabelled plots (``track_lines``); the track file then has
+
+    ``open_source`` reads the input's plots (``csv_source`` by default; the command hands in
+    ``viz_app.io.asterix.asterix_source`` for an ASTERIX file, see ``input_format_of``).
+    ``association``: associate unlabelled plots (``track_plots``); the track file then has
     ``target`` (the track id) and ``status`` columns."""
     options = options or StreamOptions()
+    open_source = open_source or csv_source
     radars = load_radars(radars_path)
     start = time.perf_counter()
     with ExitStack() as stack:
         stack.enter_context(commit_together())  # the tracks and the recording: both or neither
-        src = bounded_lines(stack.enter_context(_open_input(input_path)), input_path)
+        fh = stack.enter_context(_open_input(input_path))
+        reader, locate = open_source(fh, input_path, radars)
         out = stack.enter_context(atomic_write(out_path, "wb"))
         logger = None if observer is None else stack.enter_context(observer(radars.values()))
         writer: TrackWriter | None = None
@@ -747,8 +858,8 @@ def run_track(
             if logger is not None:
                 logger.add(plot, rows)
 
-        plots, three_d, used, targets = track_lines(
-            src, input_path, radars, methods, options, on_rows, on_start, association
+        plots, three_d, used, targets = track_plots(
+            reader, input_path, methods, options, on_rows, on_start, locate, association
         )
         assert writer is not None
         writer.close()
@@ -777,6 +888,9 @@ def _radar_toml(radars: Iterable[Radar]) -> str:
             v = getattr(r, key)
             if v is not None:
                 out.append(f"{key} = {float(v)!r}")
+        if r.sac is not None and r.sic is not None:
+            out.append(f"sac = {r.sac}")
+            out.append(f"sic = {r.sic}")
         out.append("")
     return "\n".join(out)
 
@@ -858,13 +972,9 @@ def fusion_plots(seed: int = 1, steps: int = 60) -> tuple[list[Plot], list[Radar
     return plots, radars
 
 
-def write_measurements(
-    meas_path: str, radars_path: str, plots: list[Plot], radars: list[Radar]
-) -> int:
-    """Plots as a measurement CSV and their radars as TOML, committed together; returns
-    plots (with a ``target`` column when any plot has a target label). Every plot's values
-    pass the finite-result check first (a range or an angle that came out NaN is an error,
-    not a row; ranges must be > 0 to be read back)."""
+def check_plots_finite(plots: list[Plot]) -> None:
+    """The finite-result check (``core.finite``) of plots about to be written (``simulate``):
+    times, ranges (> 0), angles and radial velocities finite."""
     for column, values, positive in (
         ("time_s", [p.time_s for p in plots], False),
         ("range_m", [p.range_m for p in plots], True),
@@ -877,6 +987,16 @@ def write_measurements(
         ),
     ):
         check_finite_result("simulate", column, values, nonnegative=positive, index_name="plot")
+
+
+def write_measurements(
+    meas_path: str, radars_path: str, plots: list[Plot], radars: list[Radar]
+) -> int:
+    """Plots as a measurement CSV and their radars as TOML, committed together; returns
+    plots (with a ``target`` column when any plot has a target label). Every plot's values
+    pass the finite-result check first (a range or an angle that came out NaN is an error,
+    not a row; ranges must be > 0 to be read back)."""
+    check_plots_finite(plots)
     three_d = plots[0].elevation_rad is not None
     doppler = any(p.radial_velocity_mps is not None for p in plots)
     labelled = any(p.target for p in plots)
