@@ -20,7 +20,6 @@ from radarviz.core.filters.compiled import (
     COMPILED_METHODS,
     FilterSettings,
     filter_history,
-    metric_terms,
 )
 from radarviz.core.filters.doppler import doppler_update
 from radarviz.core.filters.methods import ALL_METHODS, METHODS, PolarNoise, PolarPlot
@@ -175,22 +174,6 @@ def test_doppler_experiment_engines_agree() -> None:
             np.testing.assert_allclose(va, vb, rtol=0, atol=TOL * np.nanmax(np.abs(vb)))
         np.testing.assert_allclose(a.rmse_vr[variant], b.rmse_vr[variant], rtol=TOL)
         np.testing.assert_allclose(a.sigma_vr_filter[variant], b.sigma_vr_filter[variant], rtol=TOL)
-
-
-def test_compiled_metric_terms_match_scan_terms() -> None:
-    cfg = TrackingConfig(sigma_beta_deg=2.0, seed=8)
-    truth = cfg.target.truth()
-    r_hat, beta_hat = block_measurements(cfg, 0, 50, truth)
-    s = FilterSettings(cfg.sigma_r_m, cfg.sigma_beta_rad, cfg.target.period_s, 0.0, 1000.0)
-    x, P = filter_history("ukf", r_hat, beta_hat, s)
-    los = truth_line_of_sight(truth)
-    a, b = metric_terms(x, P, truth, los), scan_terms(x, P, truth)
-    scale = np.abs(b).max(axis=(1, 2), keepdims=True)
-    assert np.max(np.abs(a - b) / scale) < TOL
-    P_bad = P.copy()
-    P_bad[5, 3] *= -1.0  # not positive definite: the state NEES is NaN in both
-    assert np.isnan(metric_terms(x, P_bad, truth, los)[9, 5, 3])
-    assert np.isnan(scan_terms(x, P_bad, truth)[9, 5, 3])
 
 
 def test_threads_over_blocks_give_the_one_thread_result_bit_for_bit() -> None:
