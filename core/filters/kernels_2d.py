@@ -145,20 +145,33 @@ def store(xt, p, x, P):
 
 @_inline
 def load_row(state, m):
-    """(x, p) of row m of a (runs, 14) state array: x then p."""
-    r = state[m]
-    return (r[0], r[1], r[2], r[3]), (
-        r[4], r[5], r[6], r[7], r[8], r[9], r[10], r[11], r[12], r[13]
+    """(x, p) of row m of a (runs, 14) state array: x then p. (Indexed in place: a view
+    per call would cost a reference count per track-step.)"""
+    return (state[m, 0], state[m, 1], state[m, 2], state[m, 3]), (
+        state[m, 4], state[m, 5], state[m, 6], state[m, 7], state[m, 8], state[m, 9],
+        state[m, 10], state[m, 11], state[m, 12], state[m, 13],
     )  # fmt: skip
 
 
 @_inline
 def store_row(xt, p, state, m):
-    r = state[m]
     for i in range(4):
-        r[i] = xt[i]
+        state[m, i] = xt[i]
     for i in range(10):
-        r[4 + i] = p[i]
+        state[m, 4 + i] = p[i]
+
+
+@_inline
+def store_at(xt, p, xs, Ps, i, j):
+    """Write (x, p) into xs[i, j] (4,) and the symmetric Ps[i, j] (4, 4), in place."""
+    for a in range(4):
+        xs[i, j, a] = xt[a]
+    k = 0
+    for a in range(4):
+        for b_ in range(a, 4):
+            Ps[i, j, a, b_] = p[k]
+            Ps[i, j, b_, a] = p[k]
+            k += 1
 
 
 @_inline
@@ -425,35 +438,36 @@ def doppler_update_s(xt, p, vr_hat: float, b: float, var_vr: float, vb: float):
 
 
 @_inline
-def _sqrt_or_nan(a: float) -> float:
-    return sqrt(a) if a >= 0.0 else math.nan
-
-
-@_inline
 def terms_s(xt, p, t, c: float, s: float):
     """The metric terms of one track at one scan (``core.metrics.scan_terms``, in
-    ``SUM_NAMES`` order): xt, p the state, t the (4,) truth, (c, s) the true line of sight.
-    The state NEES eᵀ P⁻¹ e by the Cholesky factor of P (``core.filters.state.quad_form_inv``;
-    NaN where P is not positive definite)."""
+    ``SUM_NAMES`` order): xt, p the state, t the true state (a 4-tuple), (c, s) the true line
+    of sight.
+
+    The NEES by blocks: with A = P_pos (x, y), B = P_vel, C their cross-covariance and
+    S = B − Cᵀ A⁻¹ C (the Schur complement), eᵀ P⁻¹ e = e_posᵀ A⁻¹ e_pos + rᵀ S⁻¹ r with
+    r = e_vel − Cᵀ A⁻¹ e_pos: two 2 × 2 inverses, no square root (a Cholesky factor's chain
+    of roots and divisions costs more than the filter's update). NaN unless P is positive
+    definite (A and S are), as ``core.filters.state.quad_form_inv`` gives."""
     ex, ey = xt[0] - t[0], xt[2] - t[2]
-    e1, e3 = xt[1] - t[1], xt[3] - t[3]
+    ev, ew = xt[1] - t[1], xt[3] - t[3]
     p00, p01, p02, p03, p11, p12, p13, p22, p23, p33 = p
-    nees_pos = (p22 * ex * ex - 2.0 * p02 * ex * ey + p00 * ey * ey) / (p00 * p22 - p02 * p02)
-    # L Lᵀ = P, y = L⁻¹ e, eᵀ P⁻¹ e = |y|²; the pivots' reciprocals, one division each
-    d0 = 1.0 / _sqrt_or_nan(p00)
-    l10, l20, l30 = p01 * d0, p02 * d0, p03 * d0
-    d1 = 1.0 / _sqrt_or_nan(p11 - l10 * l10)
-    l21, l31 = (p12 - l20 * l10) * d1, (p13 - l30 * l10) * d1
-    d2 = 1.0 / _sqrt_or_nan(p22 - l20 * l20 - l21 * l21)
-    l32 = (p23 - l30 * l20 - l31 * l21) * d2
-    d3 = 1.0 / _sqrt_or_nan(p33 - l30 * l30 - l31 * l31 - l32 * l32)
-    y0 = ex * d0
-    y1 = (e1 - l10 * y0) * d1
-    y2 = (ey - l20 * y0 - l21 * y1) * d2
-    y3 = (e3 - l30 * y0 - l31 * y1 - l32 * y2) * d3
+    det_a = p00 * p22 - p02 * p02
+    ia = 1.0 / det_a
+    a0, a1 = (p22 * ex - p02 * ey) * ia, (p00 * ey - p02 * ex) * ia  # A⁻¹ e_pos
+    nees_pos = ex * a0 + ey * a1
+    # M = A⁻¹ C, C = [[p01, p03], [p12, p23]] (rows x, y; columns ẋ, ẏ)
+    m00, m10 = (p22 * p01 - p02 * p12) * ia, (p00 * p12 - p02 * p01) * ia
+    m01, m11 = (p22 * p03 - p02 * p23) * ia, (p00 * p23 - p02 * p03) * ia
+    s00 = p11 - (p01 * m00 + p12 * m10)
+    s01 = p13 - (p01 * m01 + p12 * m11)
+    s11 = p33 - (p03 * m01 + p23 * m11)
+    det_s = s00 * s11 - s01 * s01
+    r0, r1 = ev - (p01 * a0 + p12 * a1), ew - (p03 * a0 + p23 * a1)
+    nees = nees_pos + (s11 * r0 * r0 - 2.0 * s01 * r0 * r1 + s00 * r1 * r1) / det_s
+    if not (p00 > 0.0 and det_a > 0.0 and s00 > 0.0 and det_s > 0.0):
+        nees = math.nan
     return (
-        ex, ex * ex, ey, ey * ey, c * ex + s * ey, c * ey - s * ex, p00, p22, nees_pos,
-        y0 * y0 + y1 * y1 + y2 * y2 + y3 * y3,
+        ex, ex * ex, ey, ey * ey, c * ex + s * ey, c * ey - s * ex, p00, p22, nees_pos, nees,
     )  # fmt: skip
 
 
@@ -506,7 +520,7 @@ def track_terms(x, P, t, c, s, out, k, m, L, y, e):
     """The terms of one track at one scan into out[:, k, m]: x (4,), P (4, 4), t the (4,)
     truth, (c, s) the true line of sight (``terms_s``; L, y, e unused scratch)."""
     xt, p = load(x, P)
-    tm = terms_s(xt, p, t, c, s)
+    tm = terms_s(xt, p, (t[0], t[1], t[2], t[3]), c, s)
     for a in range(10):
         out[a, k, m] = tm[a]
 
@@ -528,6 +542,39 @@ def _step(code, xt, p, r, b, vr_hat, doppler, sr2, s, svr2, T, q, sx, sy, co, c,
 
 
 @_jit
+def _filter_run(
+    m, code, start_code, r_hat, b_hat, vr_hat, doppler, first, last, sr2, s, svr2, T, q, v0,
+    sx, sy, co, co_start, c, wm0, wc0, w, state, keep, xs, Ps, n_terms, truth, cos_los,
+    sin_los, acc,
+):  # fmt: skip
+    # run m over scans first … last − 1: its terms added into acc (K, 10) if m < n_terms,
+    # else (with ``keep``) its states written into xs, Ps
+    if first == 0:
+        zx, zy, r00, r01, r11 = convert(
+            start_code, r_hat[m, 0], b_hat[m, 0], sr2, s, 0.0, 0.0, co_start
+        )
+        xt, p = start_s(zx + sx, zy + sy, r00, r01, r11, v0)
+    else:
+        xt, p = load_row(state, m)
+    for n in range(first, last):
+        if n > 0:
+            v = vr_hat[m, n] if doppler else 0.0
+            xt, p = _step(
+                code, xt, p, r_hat[m, n], b_hat[m, n], v, doppler, sr2, s, svr2, T, q,
+                sx, sy, co, c, wm0, wc0, w,
+            )  # fmt: skip
+        i = n - first
+        if m < n_terms:
+            t = (truth[n, 0], truth[n, 1], truth[n, 2], truth[n, 3])
+            tm = terms_s(xt, p, t, cos_los[n, 0], sin_los[n, 0])
+            for a in range(10):
+                acc[i, a] += tm[a]
+        elif keep:
+            store_at(xt, p, xs, Ps, i, m - n_terms)
+    store_row(xt, p, state, m)
+
+
+@_jit
 def filter_scans_2d(
     code, start_code, r_hat, b_hat, vr_hat, doppler, first, last, sr, sb, svr, T, sa,
     v0, sx, sy, c, wm0, wc0, w, state, keep, xs, Ps, n_terms, truth, cos_los, sin_los,
@@ -539,8 +586,8 @@ def filter_scans_2d(
 
     r_hat, b_hat, vr_hat: (m, N) as measured, one run a row. Runs m < ``n_terms`` add their
     metric terms (``terms_s``) at scan n into group_sums[g, n − first] ((G, K, 10)), g =
-    (group_offset + m) mod G (``core.confidence.group_sums``' dealing), run after run; with
-    ``keep`` the others write their states into xs[n − first, m − n_terms], Ps[…].
+    (group_offset + m) mod G (``core.confidence.group_sums``' dealing), in the order of m;
+    with ``keep`` the others write their states into xs[n − first, m − n_terms], Ps[…].
 
     Run-major: a run's state stays in registers over the chunk's scans and its measurements
     are read in memory order; the state goes through memory once a chunk."""
@@ -549,27 +596,8 @@ def filter_scans_2d(
     co, co_start = coefficients(code, s, sr2), coefficients(start_code, s, sr2)
     groups = group_sums.shape[0]
     for m in range(r_hat.shape[0]):
-        g = (group_offset + m) % groups
-        if first == 0:
-            zx, zy, r00, r01, r11 = convert(
-                start_code, r_hat[m, 0], b_hat[m, 0], sr2, s, 0.0, 0.0, co_start
-            )
-            xt, p = start_s(zx + sx, zy + sy, r00, r01, r11, v0)
-        else:
-            xt, p = load_row(state, m)
-        for n in range(first, last):
-            if n > 0:
-                v = vr_hat[m, n] if doppler else 0.0
-                xt, p = _step(
-                    code, xt, p, r_hat[m, n], b_hat[m, n], v, doppler, sr2, s, svr2, T, q,
-                    sx, sy, co, c, wm0, wc0, w,
-                )  # fmt: skip
-            i = n - first
-            if m < n_terms:
-                tm = terms_s(xt, p, truth[n], cos_los[n, 0], sin_los[n, 0])
-                out = group_sums[g, i]
-                for a in range(10):
-                    out[a] += tm[a]
-            elif keep:
-                store(xt, p, xs[i, m - n_terms], Ps[i, m - n_terms])
-        store_row(xt, p, state, m)
+        _filter_run(
+            m, code, start_code, r_hat, b_hat, vr_hat, doppler, first, last, sr2, s, svr2, T,
+            q, v0, sx, sy, co, co_start, c, wm0, wc0, w, state, keep, xs, Ps, n_terms, truth,
+            cos_los, sin_los, group_sums[(group_offset + m) % groups],
+        )  # fmt: skip
