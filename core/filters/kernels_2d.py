@@ -1,5 +1,11 @@
 """The compiled (numba) kernel behind ``core.filters.compiled``: scalar code, one track at a
-time, mirroring the numpy engine's equations line by line (see that module's table).
+time, the numpy engine's equations (see that module's table) on each track's state held in
+local scalars (x and the ten upper entries of P), so the whole step stays in registers.
+
+The per-step functions come in two forms: ``*_s`` on (x, p) tuples, which the Monte Carlo
+kernel ``filter_scans_2d`` chains, and the array forms (``start``, ``predict``,
+``position_update``, ``ukf_update``, ``doppler_update``, ``track_terms``) that load a track
+from arrays, call them and store it, for callers holding one track in arrays.
 
 Imported only by ``core.filters.compiled._kernel`` on first use, so importing numba (and
 loading the cached machine code) is paid only by commands that filter a Monte Carlo.
@@ -8,13 +14,14 @@ loading the cached machine code) is paid only by commands that filter a Monte Ca
 from __future__ import annotations
 
 import math
-from math import atan2, ceil, cos, cosh, exp, expm1, sin, sinh, sqrt
+from math import atan2, ceil, cos, sin, sqrt
 
 import numba
 import numpy as np
 
 # A Cholesky pivot within this fraction of its diagonal is a direction of zero variance (a
 # zero column); below it the track is NaN (numba reads it as a compile-time constant).
+from radarviz.core.conversion.elementwise import conversion_coefficients, converted_point
 from radarviz.core.filters.polar_ukf import SEMIDEFINITE_RTOL
 
 # error_model="numpy": a division by zero or a negative pivot gives inf / NaN for that track,
@@ -41,79 +48,33 @@ def wrap(a: float) -> float:
     return a - _TWO_PI * ceil(a * (1.0 / _TWO_PI) - 0.5)
 
 
+# The conversions' arithmetic lives in ``core.conversion.elementwise`` (shared with the
+# array-API path), compiled here.
+_coefficients = _inline(conversion_coefficients)
+_converted_point = _inline(converted_point)
+
+
 @_jit
 def coefficients(code: int, s: float, sr2: float):
     """The scalars of a conversion that depend on s = σβ² and σr² only, formed once per block
-    (they are most of a conversion's transcendental functions)."""
-    co = np.zeros(8)
-    if code == 1 or code == 2:
-        # seed κ = 1 − s/2 (eq. 10 as printed); cmkf_d κ = 1 − (e^(−s) − e^(−s/2))
-        co[0] = 1.0 - s / 2.0 if code == 1 else 1.0 - (exp(-s) - exp(-s / 2.0))
-        # eq. 11: e^(−2s), cosh 2s − cosh s and sinh 2s − sinh s as products, 2 cosh 2s −
-        # cosh s, 2 sinh 2s − sinh s, e^(−4s), e^s − 1 (core.conversion.planar._averaged_parts)
-        sh_half = sinh(0.5 * s)
-        co[1] = exp(-2.0 * s)
-        co[2], co[3] = 2.0 * sinh(1.5 * s) * sh_half, 2.0 * cosh(1.5 * s) * sh_half
-        co[4], co[5] = 2.0 * cosh(2.0 * s) - cosh(s), 2.0 * sinh(2.0 * s) - sinh(s)
-        co[6], co[7] = exp(-4.0 * s), expm1(s)
-    elif code == 3 or code == 4:
-        # ucm / ducm: κ = e^(s/2); _true_cov_parts × e^s: A = a1 r² + a0, B = b1 (r² + σr²),
-        # C = c1 r² + c0
-        k = exp(s)
-        e1, e2 = exp(-s), exp(-2.0 * s)
-        om1, om2 = -expm1(-s), -expm1(-2.0 * s)
-        co[0] = sqrt(k)
-        co[1], co[2] = (0.5 * k) * om1 * om1, (0.5 * k) * sr2 * (1.0 + e2)
-        co[3] = (0.5 * k) * om2
-        co[4], co[5] = -k * e1 * om1, k * sr2 * e2
+    (they are most of a conversion's transcendental functions): an (8,) array
+    (``core.conversion.elementwise.conversion_coefficients``)."""
+    t = _coefficients(code, s, sr2)
+    co = np.empty(8)
+    for i in range(8):
+        co[i] = t[i]
     return co
-
-
-@_inline
-def true_cov(r: float, c: float, sn: float, sr2: float, co):
-    # core.conversion.planar._true_cov_parts: the exact true-conditioned covariance × e^s
-    r2 = r * r
-    a = r2 * co[1] + co[2]
-    b = (r2 + sr2) * co[3]
-    cc = r2 * co[4] + co[5]
-    return c * c * a + sn * sn * b, cc * (sn * c), sn * sn * a + c * c * b
-
-
-@_inline
-def averaged_cov(r: float, c: float, sn: float, sr2: float, co):
-    # core.conversion.planar._averaged_parts: Prosov eq. 11a–c at the measurement
-    c2, s2 = c * c, sn * sn
-    e2, a_c, a_s, b_c, b_s = co[1], co[2], co[3], co[4], co[5]
-    r2 = r * r
-    c11 = r2 * (e2 * (c2 * a_c + s2 * a_s)) + sr2 * e2 * (c2 * b_c + s2 * b_s)
-    c22 = r2 * (e2 * (s2 * a_c + c2 * a_s)) + sr2 * e2 * (s2 * b_c + c2 * b_s)
-    c12 = sn * c * co[6] * (sr2 - (r2 + sr2) * co[7])
-    return c11, c12, c22
 
 
 @_inline
 def convert(code: int, r: float, b: float, sr2: float, s: float, px: float, py: float, co):
     # The five conversions of core.conversion.planar: point and covariance (radar-centred);
-    # ``co``: ``coefficients(code, s, sr2)``.
-    c, sn = cos(b), sin(b)
-    if code == 0:  # naive: eq. 8, linearised covariance eq. 9
-        rs = r * r * s
-        return (
-            r * c,
-            r * sn,
-            sr2 * c * c + rs * sn * sn,
-            (sr2 - rs) * sn * c,
-            (sr2 * sn * sn + rs * c * c),
-        )
-    kr = co[0] * r
-    if code == 1 or code == 2:  # seed / cmkf_d, covariance eq. 11
-        c11, c12, c22 = averaged_cov(r, c, sn, sr2, co)
-    elif code == 3:  # ucm: exact covariance at the measurement
-        c11, c12, c22 = true_cov(r, c, sn, sr2, co)
-    else:  # ducm: the same covariance at the predicted position
+    # ``co``: ``coefficients(code, s, sr2)``; (px, py) the radar-centred prediction (ducm).
+    rp = cp = sp = 0.0
+    if code == 4:  # ducm: the covariance at the predicted position
         rp = norm(px, py)
-        c11, c12, c22 = true_cov(rp, px / rp, py / rp, sr2, co)
-    return kr * c, kr * sn, c11, c12, c22
+        cp, sp = px / rp, py / rp
+    return _converted_point(code, r, cos(b), sin(b), sr2, s, co, rp, cp, sp)
 
 
 # The state of one track as scalars: x = (x, ẋ, y, ẏ) and p = the ten upper entries of the

@@ -161,7 +161,13 @@ def _naive_point(r, b, sr2, s):
     # eq. 8 (r̂ cos β̂, r̂ sin β̂) with the linearised covariance of eq. 9
     c, sn = math.cos(b), math.sin(b)
     rs = r * r * s
-    return r * c, r * sn, sr2 * c * c + rs * sn * sn, (sr2 - rs) * sn * c, sr2 * sn * sn + rs * c * c
+    return (
+        r * c,
+        r * sn,
+        sr2 * c * c + rs * sn * sn,
+        (sr2 - rs) * sn * c,
+        sr2 * sn * sn + rs * c * c,
+    )
 
 
 @_jit
@@ -230,7 +236,9 @@ def seed(r_hat, b_hat, sr, sb, T, q, v0, x_out, P_out):
 def cmkf_d(r_hat, b_hat, sr, sb, T, q, v0, x_out, P_out):
     """Lerro and Bar-Shalom's debiasing κ = 1 − (e^(−s) − e^(−s/2)), covariance eq. 11."""
     s = sb * sb
-    _averaged(r_hat, b_hat, sr, sb, T, q, v0, 1.0 - (math.exp(-s) - math.exp(-s / 2.0)), x_out, P_out)
+    _averaged(
+        r_hat, b_hat, sr, sb, T, q, v0, 1.0 - (math.exp(-s) - math.exp(-s / 2.0)), x_out, P_out
+    )
 
 
 @_jit
