@@ -19,14 +19,18 @@ from math import atan2, ceil, cos, sin, sqrt
 import numba
 import numpy as np
 
+from radarviz.core.conversion.elementwise import conversion_coefficients, converted_point
+
 # A Cholesky pivot within this fraction of its diagonal is a direction of zero variance (a
 # zero column); below it the track is NaN (numba reads it as a compile-time constant).
-from radarviz.core.conversion.elementwise import conversion_coefficients, converted_point
 from radarviz.core.filters.polar_ukf import SEMIDEFINITE_RTOL
 
 # error_model="numpy": a division by zero or a negative pivot gives inf / NaN for that track,
 # as the numpy engine does, instead of raising. cache=True: compiled once per machine.
 # nogil=True: blocks of runs filter in parallel threads (``core.experiments.prosov``).
+# fastmath: fused multiply-adds and reordered sums (results move by rounding only, far inside
+# the 1e-9 the tests hold the kernel to); never "nnan"/"ninf", which NaN tracks rely on.
+# inline="always" on the small scalar functions: their tuples become registers.
 _FAST = {"contract", "reassoc", "nsz", "arcp"}
 _jit = numba.njit(cache=True, error_model="numpy", nogil=True, fastmath=_FAST)
 _inline = numba.njit(cache=True, error_model="numpy", nogil=True, inline="always", fastmath=_FAST)
