@@ -64,6 +64,8 @@ START_CODES: dict[str, int] = {
     "ukf": 0,
 }
 COMPILED_METHODS: tuple[str, ...] = tuple(METHOD_CODES)
+#: Chunks of fewer scans read the measurements scan-major (``filter_scans``).
+SCAN_MAJOR_BELOW = 16
 #: The Monte Carlo engines an experiment can run on: this module, or the numpy engine (the
 #: reference the tests hold this one to).
 ENGINES: tuple[str, ...] = ("compiled", "numpy")
@@ -161,21 +163,22 @@ def filter_scans(
         ``ScanChunk`` s covering the filtered scans in order (a start at scan 0 included).
     """
     kernel = _kernel()
-    # The kernel walks each run's scans in memory order: the (m, N) arrays as measured.
-    r_runs = np.ascontiguousarray(r_hat, dtype=np.float64)
-    b_runs = np.ascontiguousarray(beta_hat, dtype=np.float64)
-    runs, steps = r_runs.shape
+    runs, steps = np.shape(r_hat)
+    begin = 0 if start is None else start[0] + 1
+    k = max(1, min(int(chunk_scans), steps - begin))
+    # The kernel walks run after run, each over the chunk's scans. Over many scans a run's
+    # row of the (m, N) arrays is read in memory order; over a few, the scan-major (column-
+    # major) copy puts consecutive runs' plots side by side instead (a run-major row per
+    # run and scan would cost a cache line for 8 bytes).
+    layout = np.asfortranarray if k < SCAN_MAJOR_BELOW else np.ascontiguousarray
+    r_runs = layout(r_hat, dtype=np.float64)
+    b_runs = layout(beta_hat, dtype=np.float64)
     doppler = radial_velocity_mps is not None
-    vr_runs = (
-        np.ascontiguousarray(radial_velocity_mps, dtype=np.float64) if doppler else np.zeros((1, 1))
-    )
+    vr_runs = layout(radial_velocity_mps, dtype=np.float64) if doppler else layout(np.zeros((1, 1)))
     state = np.empty((runs, 14))  # each run's x, then the upper entries of P (row-major)
-    begin = 0
     if start is not None:
-        begin = start[0] + 1
         state[:, :4] = start[1].x
         state[:, 4:] = start[1].P[:, *np.triu_indices(4)]
-    k = max(1, min(int(chunk_scans), steps - begin))
     n_terms = 0 if terms is None else int(terms.runs)
     kept = runs - n_terms if states else 0
     xs = np.empty((k, kept, 4))

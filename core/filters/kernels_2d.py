@@ -507,39 +507,6 @@ def _step(code, xt, p, r, b, vr_hat, doppler, sr2, s, svr2, T, q, sx, sy, co, c,
 
 
 @_jit
-def _filter_run(
-    m, code, start_code, r_hat, b_hat, vr_hat, doppler, first, last, sr2, s, svr2, T, q, v0,
-    sx, sy, co, co_start, c, wm0, wc0, w, state, keep, xs, Ps, n_terms, truth, cos_los,
-    sin_los, acc,
-):  # fmt: skip
-    # run m over scans first … last − 1: its terms added into acc (K, 10) if m < n_terms,
-    # else (with ``keep``) its states written into xs, Ps
-    if first == 0:
-        zx, zy, r00, r01, r11 = convert(
-            start_code, r_hat[m, 0], b_hat[m, 0], sr2, s, 0.0, 0.0, co_start
-        )
-        xt, p = start_s(zx + sx, zy + sy, r00, r01, r11, v0)
-    else:
-        xt, p = load_row(state, m)
-    for n in range(first, last):
-        if n > 0:
-            v = vr_hat[m, n] if doppler else 0.0
-            xt, p = _step(
-                code, xt, p, r_hat[m, n], b_hat[m, n], v, doppler, sr2, s, svr2, T, q,
-                sx, sy, co, c, wm0, wc0, w,
-            )  # fmt: skip
-        i = n - first
-        if m < n_terms:
-            t = (truth[n, 0], truth[n, 1], truth[n, 2], truth[n, 3])
-            tm = terms_s(xt, p, t, cos_los[n, 0], sin_los[n, 0])
-            for a in range(10):
-                acc[i, a] += tm[a]
-        elif keep:
-            store_at(xt, p, xs, Ps, i, m - n_terms)
-    store_row(xt, p, state, m)
-
-
-@_jit
 def filter_scans_2d(
     code, start_code, r_hat, b_hat, vr_hat, doppler, first, last, sr, sb, svr, T, sa,
     v0, sx, sy, c, wm0, wc0, w, state, keep, xs, Ps, n_terms, truth, cos_los, sin_los,
@@ -549,20 +516,41 @@ def filter_scans_2d(
     ``start_code``), later scans continue from ``state`` (runs, 14): each run's x then the
     upper entries of P (``load_row``), updated in place.
 
-    r_hat, b_hat, vr_hat: (m, N) as measured, one run a row. Runs m < ``n_terms`` add their
-    metric terms (``terms_s``) at scan n into group_sums[g, n − first] ((G, K, 10)), g =
-    (group_offset + m) mod G (``core.confidence.group_sums``' dealing), in the order of m;
-    with ``keep`` the others write their states into xs[n − first, m − n_terms], Ps[…].
+    r_hat, b_hat, vr_hat: (m, N) measurements, one run a row (any memory layout). Runs
+    m < ``n_terms`` add their metric terms (``terms_s``) at scan n into
+    group_sums[g, n − first] ((G, K, 10)), g = (group_offset + m) mod G
+    (``core.confidence.group_sums``' dealing), in the order of m; with ``keep`` the others
+    write their states into xs[n − first, m − n_terms], Ps[…].
 
-    Run-major: a run's state stays in registers over the chunk's scans and its measurements
-    are read in memory order; the state goes through memory once a chunk."""
+    Run-major: a run's state stays in registers over the chunk's scans; the state goes
+    through memory once a chunk. (One loop, no call per run: a call's array arguments cost
+    a reference count each.)"""
     sr2, s, q = sr * sr, sb * sb, sa * sa
     svr2 = svr * svr
     co, co_start = coefficients(code, s, sr2), coefficients(start_code, s, sr2)
     groups = group_sums.shape[0]
     for m in range(r_hat.shape[0]):
-        _filter_run(
-            m, code, start_code, r_hat, b_hat, vr_hat, doppler, first, last, sr2, s, svr2, T,
-            q, v0, sx, sy, co, co_start, c, wm0, wc0, w, state, keep, xs, Ps, n_terms, truth,
-            cos_los, sin_los, group_sums[(group_offset + m) % groups],
-        )  # fmt: skip
+        g = (group_offset + m) % groups
+        if first == 0:
+            zx, zy, r00, r01, r11 = convert(
+                start_code, r_hat[m, 0], b_hat[m, 0], sr2, s, 0.0, 0.0, co_start
+            )
+            xt, p = start_s(zx + sx, zy + sy, r00, r01, r11, v0)
+        else:
+            xt, p = load_row(state, m)
+        for n in range(first, last):
+            if n > 0:
+                v = vr_hat[m, n] if doppler else 0.0
+                xt, p = _step(
+                    code, xt, p, r_hat[m, n], b_hat[m, n], v, doppler, sr2, s, svr2, T, q,
+                    sx, sy, co, c, wm0, wc0, w,
+                )  # fmt: skip
+            i = n - first
+            if m < n_terms:
+                t = (truth[n, 0], truth[n, 1], truth[n, 2], truth[n, 3])
+                tm = terms_s(xt, p, t, cos_los[n, 0], sin_los[n, 0])
+                for a in range(10):
+                    group_sums[g, i, a] += tm[a]
+            elif keep:
+                store_at(xt, p, xs, Ps, i, m - n_terms)
+        store_row(xt, p, state, m)
