@@ -82,7 +82,7 @@ def _position_update(x, p, zx, zy, r00, r01, r11):
     """The Kalman update by a measured position z with covariance R (H picks x and y):
     S = P_pos + R, K = P Hᵀ S⁻¹, x + K (z − H x), Joseph (I − KH) P (I − KH)ᵀ + K R Kᵀ."""
     x0, x1, x2, x3 = x
-    p00, p01, p02, p03, p11, p12, p13, p22, p23, p33 = p
+    p00, p01, p02, p03, _, p12, _, p22, p23, _ = p  # the x, y rows
     s00, s01, s11 = p00 + r00, p02 + r01, p22 + r11
     d = 1.0 / (s00 * s11 - s01 * s01)
     i00, i01, i11 = s11 * d, -s01 * d, s00 * d
@@ -310,7 +310,7 @@ def _ekf_update(x, p, r, b, vr, vb):
     """The polar EKF: h(x) = (|p|, atan2(y, x)), H its Jacobian at the prediction, R =
     diag(σr², σβ²), S = H P Hᵀ + R, K = P Hᵀ S⁻¹, Joseph form with K H in place of H."""
     x0, x1, x2, x3 = x
-    p00, p01, p02, p03, p11, p12, p13, p22, p23, p33 = p
+    p00, p01, p02, p03, _, p12, _, p22, p23, _ = p  # the x, y rows
     r2 = x0 * x0 + x2 * x2
     rp = math.sqrt(r2)
     # H = [[x/r, 0, y/r, 0], [−y/r², 0, x/r², 0]]
