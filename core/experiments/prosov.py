@@ -72,6 +72,10 @@ from radarviz.core.scenarios.spatial import (
     spherical_measurements,
 )
 
+#: Scans per pass of the compiled kernel when it sums the metric terms: a pass's per-group sums
+#: (BAND_GROUPS × scans × 10 doubles, 20 kB) stay in the nearest cache, and a run's plots of
+#: a pass are about one cache line.
+TERMS_SCANS = 8
 #: Runs per block: large enough that vector operations dominate Python overhead, small enough
 #: that a block's working set stays in cache.
 BLOCK_RUNS = 16384
@@ -465,10 +469,10 @@ def _run_block(
             config.sigma_v0_mps,
         )
         # The kernel sums every run's metric terms per group as it goes (only the shown run's
-        # states leave it), all the scans in one pass.
+        # states leave it), ``TERMS_SCANS`` scans a pass.
         want = TermsRequest(size, truth, truth_line_of_sight(truth))
         for method in compiled:
-            for c in filter_scans(method, r_hat, beta_hat, settings, steps, terms=want):
+            for c in filter_scans(method, r_hat, beta_hat, settings, TERMS_SCANS, terms=want):
                 out[method].add_group_sums(c.first, size, c.group_sums)
                 if shown is not None:
                     span = slice(c.first, c.first + c.x.shape[0])

@@ -65,7 +65,7 @@ START_CODES: dict[str, int] = {
 }
 COMPILED_METHODS: tuple[str, ...] = tuple(METHOD_CODES)
 #: Chunks of fewer scans read the measurements scan-major (``filter_scans``).
-SCAN_MAJOR_BELOW = 16
+SCAN_MAJOR_BELOW = 8
 #: The Monte Carlo engines an experiment can run on: this module, or the numpy engine (the
 #: reference the tests hold this one to).
 ENGINES: tuple[str, ...] = ("compiled", "numpy")
