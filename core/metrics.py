@@ -269,8 +269,7 @@ class MetricsAccumulator:
         self.add_terms(first, scan_terms(x, P, np.asarray(truth), los))
 
     def add_terms(self, first: int, terms: NDArray[np.float64]) -> None:
-        """``add_scans`` given the per-run terms (len(SUM_NAMES), K, m) of ``scan_terms`` (or
-        of its compiled mirror, ``core.filters.compiled.metric_terms``)."""
+        """``add_scans`` given the per-run terms (len(SUM_NAMES), K, m) of ``scan_terms``."""
         self._flush()
         k, m = terms.shape[1:]
         scans = list(range(first, first + k))
@@ -283,6 +282,33 @@ class MetricsAccumulator:
         self.runs[first : first + k] += m
         self._add_sums(scans, terms.sum(axis=-1))
         self._add_group_sums(scans, offsets, terms)
+
+    def add_group_sums(
+        self, first: int, runs: int, sums: NDArray[np.float64], offset: int = 0
+    ) -> None:
+        """Add ``runs`` runs at K consecutive scans ``first … first + K − 1`` given the sums of
+        their terms per group: sums (G, K, len(SUM_NAMES)) with run j (0 … runs − 1) in group
+        (offset + j) mod G, as the compiled kernel forms them (``core.filters.compiled``'s
+        ``TermsRequest``). ``offset`` must be the runs already counted at each of these scans
+        (so the runs are dealt to the groups as ``add`` deals them). The scan's totals are
+        the group sums added up."""
+        self._flush()
+        k = sums.shape[1]
+        if sums.shape != (BAND_GROUPS, k, len(SUM_NAMES)) or first + k > self.steps:
+            raise ValueError(
+                f"group sums must be ({BAND_GROUPS}, K, {len(SUM_NAMES)}) for scans within "
+                f"0 … {self.steps - 1}, got {sums.shape} from scan {first}"
+            )
+        span = slice(first, first + k)
+        if np.any(self.runs[span] != offset):
+            raise ValueError(
+                f"offset {offset} is not the runs counted at scans {first} … {first + k - 1}"
+            )
+        self.group_runs[:, span] += group_counts(offset, runs)[:, None]
+        self.runs[span] += runs
+        part = np.moveaxis(sums, 2, 0)  # (len(SUM_NAMES), G, K)
+        self._group_sums[:, :, span] += part
+        self._sums[:, span] += part.sum(axis=1)
 
     def _flush(self) -> None:
         """Turn the staged scans into sums."""

@@ -190,6 +190,27 @@ def test_bench_figures_are_consistent(capsys) -> None:
         assert doc["compiled_speedup"][m] == pytest.approx(
             doc["numpy_ns_per_step"][m] / doc["compiled_ns_per_step"][m], rel=1e-12
         )
+    from radarviz.viz_app.bench.scalar_reference import REFERENCE_METHODS
+
+    pm = doc["per_method"]
+    assert pm["per_method_runs"] == 500 and pm["filterpy_runs"] == 3
+    for name in (
+        "engine_filter_ns_per_step",
+        "engine_metrics_ns_per_step",
+        "reference_ns_per_step",
+        "filterpy_ns_per_step",
+    ):
+        assert list(pm[name]) == list(REFERENCE_METHODS), name
+        assert all(math.isfinite(v) and v > 0 for v in pm[name].values()), (name, pm[name])
+    for m in REFERENCE_METHODS:
+        assert pm["filterpy_over_engine"][m] == pytest.approx(
+            pm["filterpy_ns_per_step"][m] / pm["engine_filter_ns_per_step"][m], rel=1e-12
+        )
+        for ratio in ("engine_over_reference", "metrics_over_reference"):
+            # medians of same-repeat ratios, not ratios of medians: only their sign is exact
+            assert math.isfinite(pm[ratio][m]) and pm[ratio][m] > 0, (ratio, m)
+    for k in ("whole_run_ns_per_method_step", "filter_ns_per_method_step", "whole_run_over_filter"):
+        assert math.isfinite(pm[k]) and pm[k] > 0, k
     assert doc["engine_runs"] == 500 and doc["parallel_runs"] == 1000
     assert doc["parallel_bit_identical"] is True
     assert doc["parallel_efficiency"] == pytest.approx(
@@ -237,6 +258,11 @@ def test_bench_figures_are_consistent(capsys) -> None:
         ratio = fp_printed / ours
         assert abs(speedup - ratio) <= 0.5 + ratio * (0.5 / fp_printed + 0.05 / ours), line
     assert f"peak RSS: {doc['peak_rss_mb']:.0f} MiB" in table
+    for m in REFERENCE_METHODS:  # one table row per method, its engine figure to 0.1 ns
+        row = [line for line in table if line.split()[:1] == [m]]
+        assert len(row) == 1 and float(row[0].split()[1]) == round(
+            pm["engine_filter_ns_per_step"][m], 1
+        ), m
 
 
 def test_reproduce_gorshkov_json_document(capsys) -> None:

@@ -20,7 +20,6 @@ from radarviz.core.filters.compiled import (
     COMPILED_METHODS,
     FilterSettings,
     filter_history,
-    metric_terms,
 )
 from radarviz.core.filters.doppler import doppler_update
 from radarviz.core.filters.methods import ALL_METHODS, METHODS, PolarNoise, PolarPlot
@@ -177,20 +176,67 @@ def test_doppler_experiment_engines_agree() -> None:
         np.testing.assert_allclose(a.sigma_vr_filter[variant], b.sigma_vr_filter[variant], rtol=TOL)
 
 
-def test_compiled_metric_terms_match_scan_terms() -> None:
+def test_kernel_metric_terms_match_scan_terms() -> None:
+    """The kernel's per-track terms (NEES by the Schur complement) against the numpy
+    ``scan_terms`` (NEES by the Cholesky factor), and NaN for a P that is not positive
+    definite in both."""
+    from radarviz.core.filters.kernels_2d import track_terms
+
     cfg = TrackingConfig(sigma_beta_deg=2.0, seed=8)
     truth = cfg.target.truth()
-    r_hat, beta_hat = block_measurements(cfg, 0, 50, truth)
+    r_hat, beta_hat = block_measurements(cfg, 0, 20, truth)
     s = FilterSettings(cfg.sigma_r_m, cfg.sigma_beta_rad, cfg.target.period_s, 0.0, 1000.0)
     x, P = filter_history("ukf", r_hat, beta_hat, s)
-    los = truth_line_of_sight(truth)
-    a, b = metric_terms(x, P, truth, los), scan_terms(x, P, truth)
+    c, sn = truth_line_of_sight(truth)
+
+    def kernel_terms(P):
+        out = np.empty((10, *x.shape[:2]))
+        for k in range(x.shape[0]):
+            for m in range(x.shape[1]):
+                track_terms(x[k, m], P[k, m], truth[k], c[k, 0], sn[k, 0], out, k, m, 0, 0, 0)
+        return out
+
+    a, b = kernel_terms(P), scan_terms(x, P, truth)
     scale = np.abs(b).max(axis=(1, 2), keepdims=True)
     assert np.max(np.abs(a - b) / scale) < TOL
     P_bad = P.copy()
-    P_bad[5, 3] *= -1.0  # not positive definite: the state NEES is NaN in both
-    assert np.isnan(metric_terms(x, P_bad, truth, los)[9, 5, 3])
+    P_bad[5, 3, 1, 1] *= -1.0  # a negative velocity variance: not positive definite
+    assert np.isnan(kernel_terms(P_bad)[9, 5, 3])
     assert np.isnan(scan_terms(x, P_bad, truth)[9, 5, 3])
+
+
+def test_kernel_group_sums_deal_runs_as_the_accumulator_does() -> None:
+    """Two blocks (64 runs, then 45 more at offset 64) summed per group in the kernel give the
+    sums and the per-group sums of the numpy terms of the same states."""
+    from radarviz.core.filters.compiled import TermsRequest, filter_scans
+    from radarviz.core.metrics import MetricsAccumulator
+
+    cfg = TrackingConfig(sigma_beta_deg=1.0, seed=3)
+    truth = cfg.target.truth()
+    los = truth_line_of_sight(truth)
+    s = FilterSettings(cfg.sigma_r_m, cfg.sigma_beta_rad, cfg.target.period_s, 0.3, 1000.0)
+    steps = truth.shape[0]
+    kernel, numpy = MetricsAccumulator(steps), MetricsAccumulator(steps)
+    offset = 0
+    for index, size in ((0, 64), (1, 45)):
+        r_hat, beta_hat = block_measurements(cfg, index, size, truth)
+        want = TermsRequest(size, truth, los, offset)
+        for c in filter_scans("ucm", r_hat, beta_hat, s, 7, terms=want):
+            kernel.add_group_sums(c.first, size, c.group_sums, offset)
+        x, P = filter_history("ucm", r_hat, beta_hat, s)
+        numpy.add_scans(0, x, P, truth, los)
+        offset += size
+    np.testing.assert_array_equal(kernel.runs, numpy.runs)
+    np.testing.assert_array_equal(kernel.group_runs, numpy.group_runs)
+    for a, b in (
+        (kernel.result(), numpy.result()),
+        (kernel.leave_one_out(), numpy.leave_one_out()),
+    ):
+        for name, va in a._asdict().items():
+            vb = getattr(b, name)
+            np.testing.assert_allclose(va, vb, rtol=TOL, atol=TOL * np.nanmax(np.abs(vb)))
+    with pytest.raises(ValueError, match="offset 0 is not the runs counted"):
+        kernel.add_group_sums(0, 1, np.zeros((32, 1, 10)))
 
 
 def test_threads_over_blocks_give_the_one_thread_result_bit_for_bit() -> None:

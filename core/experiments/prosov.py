@@ -72,8 +72,10 @@ from radarviz.core.scenarios.spatial import (
     spherical_measurements,
 )
 
-#: Run-scans of metric terms per pass of the compiled engine (80 B each: 5 MB).
-TERMS_ROWS = 1 << 16
+#: Scans per pass of the compiled kernel when it sums the metric terms: a pass's per-group sums
+#: (BAND_GROUPS × scans × 10 doubles, 20 kB) stay in the nearest cache, and a run's plots of
+#: a pass are about one cache line.
+TERMS_SCANS = 8
 #: Runs per block: large enough that vector operations dominate Python overhead, small enough
 #: that a block's working set stays in cache.
 BLOCK_RUNS = 16384
@@ -466,13 +468,12 @@ def _run_block(
             config.sigma_a_mps2,
             config.sigma_v0_mps,
         )
-        # The kernel forms every run's metric terms as it goes (only the shown run's states
-        # leave it); a chunk's terms stay within a few MB.
-        chunk = max(1, TERMS_ROWS // r_hat.shape[0])
+        # The kernel sums every run's metric terms per group as it goes (only the shown run's
+        # states leave it), ``TERMS_SCANS`` scans a pass.
         want = TermsRequest(size, truth, truth_line_of_sight(truth))
         for method in compiled:
-            for c in filter_scans(method, r_hat, beta_hat, settings, chunk, terms=want):
-                out[method].add_terms(c.first, c.terms)
+            for c in filter_scans(method, r_hat, beta_hat, settings, TERMS_SCANS, terms=want):
+                out[method].add_group_sums(c.first, size, c.group_sums)
                 if shown is not None:
                     span = slice(c.first, c.first + c.x.shape[0])
                     tracks[method].x[span] = c.x[:, 0]

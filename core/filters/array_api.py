@@ -24,6 +24,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
+from radarviz.core.conversion.elementwise import DUCM, conversion_coefficients, converted_point
 from radarviz.core.filters.compiled import METHOD_CODES, START_CODES, FilterSettings
 from radarviz.core.filters.polar_ukf import SEMIDEFINITE_RTOL
 
@@ -36,66 +37,14 @@ def _wrap(xp: Any, a: Array) -> Array:
     return a - _TWO_PI * xp.ceil(a * (1.0 / _TWO_PI) - 0.5)
 
 
-def _coefficients(code: int, s: float, sr2: float) -> tuple[float, ...]:
-    """The conversion's scalars that depend on s = σβ² and σr² only (the compiled kernel's
-    ``coefficients``)."""
-    if code in (1, 2):
-        kappa = 1.0 - s / 2.0 if code == 1 else 1.0 - (math.exp(-s) - math.exp(-s / 2.0))
-        sh_half = math.sinh(0.5 * s)
-        return (
-            kappa,
-            math.exp(-2.0 * s),
-            2.0 * math.sinh(1.5 * s) * sh_half,
-            2.0 * math.cosh(1.5 * s) * sh_half,
-            2.0 * math.cosh(2.0 * s) - math.cosh(s),
-            2.0 * math.sinh(2.0 * s) - math.sinh(s),
-            math.exp(-4.0 * s),
-            math.expm1(s),
-        )
-    if code in (3, 4):
-        k = math.exp(s)
-        om1, om2 = -math.expm1(-s), -math.expm1(-2.0 * s)
-        return (
-            math.sqrt(k),
-            (0.5 * k) * om1 * om1,
-            (0.5 * k) * sr2 * (1.0 + math.exp(-2.0 * s)),
-            (0.5 * k) * om2,
-            -k * math.exp(-s) * om1,
-            k * sr2 * math.exp(-2.0 * s),
-        )
-    return ()
-
-
-def _convert(xp, code: int, r, b, sr2: float, s: float, co, px=None, py=None):
-    """The five 2D conversions: (x, y, R00, R01, R11), radar-centred (``core.conversion``)."""
-    c, sn = xp.cos(b), xp.sin(b)
-    if code == 0:  # naive: eq. 8, linearised covariance eq. 9
-        rs = r * r * s
-        return (
-            r * c,
-            r * sn,
-            sr2 * c * c + rs * sn * sn,
-            (sr2 - rs) * sn * c,
-            sr2 * sn * sn + rs * c * c,
-        )
-    kr = co[0] * r
-    if code in (1, 2):  # seed / cmkf_d: eq. 11 at the measurement
-        e2, a_c, a_s, b_c, b_s = co[1:6]
-        c2, s2, r2 = c * c, sn * sn, r * r
-        c11 = r2 * (e2 * (c2 * a_c + s2 * a_s)) + sr2 * e2 * (c2 * b_c + s2 * b_s)
-        c22 = r2 * (e2 * (s2 * a_c + c2 * a_s)) + sr2 * e2 * (s2 * b_c + c2 * b_s)
-        c12 = sn * c * co[6] * (sr2 - (r2 + sr2) * co[7])
-        return kr * c, kr * sn, c11, c12, c22
-    if code == 3:  # ucm: exact covariance at the measurement
-        rc, cc, sc = r, c, sn
-    else:  # ducm: at the predicted position
-        rc = xp.hypot(px, py)
-        cc, sc = px / rc, py / rc
-    r2 = rc * rc
-    a = r2 * co[1] + co[2]
-    bb = (r2 + sr2) * co[3]
-    cx = r2 * co[4] + co[5]
-    return kr * c, kr * sn, cc * cc * a + sc * sc * bb, cx * (sc * cc), sc * sc * a + cc * cc * bb
+def _convert(xp: Any, code: int, r, b, sr2: float, s: float, co, px=None, py=None):
+    """The five 2D conversions: (x, y, R00, R01, R11), radar-centred
+    (``core.conversion.elementwise.converted_point``; (px, py) the prediction, for ducm)."""
+    rp = cp = sp = None
+    if code == DUCM:
+        rp = xp.hypot(px, py)
+        cp, sp = px / rp, py / rp
+    return converted_point(code, r, xp.cos(b), xp.sin(b), sr2, s, co, rp, cp, sp)
 
 
 def _predict(x: list, P: dict, T: float, q: float) -> tuple[list, dict]:
@@ -259,7 +208,8 @@ def filter_history_xp(
     s_ = settings
     code, start_code = METHOD_CODES[method], START_CODES[method]
     sr2, s = s_.sigma_r_m**2, s_.sigma_azimuth_rad**2
-    co, co_start = _coefficients(code, s, sr2), _coefficients(start_code, s, sr2)
+    co = conversion_coefficients(code, s, sr2)
+    co_start = conversion_coefficients(start_code, s, sr2)
     sx, sy = s_.site_m
     T, q = s_.period_s, s_.sigma_a_mps2**2
     prm = s_.ukf.weights(4)

@@ -37,8 +37,10 @@ from typing import Any, NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
+from radarviz.core.confidence import BAND_GROUPS
 from radarviz.core.filters.polar_ukf import UKFParams
 from radarviz.core.filters.state import CVBatch
+from radarviz.core.metrics import SUM_NAMES
 
 #: Kernel codes of the 2D methods (``core.filters.methods.METHODS`` names).
 METHOD_CODES: dict[str, int] = {
@@ -62,6 +64,8 @@ START_CODES: dict[str, int] = {
     "ukf": 0,
 }
 COMPILED_METHODS: tuple[str, ...] = tuple(METHOD_CODES)
+#: Chunks of fewer scans read the measurements scan-major (``filter_scans``).
+SCAN_MAJOR_BELOW = 8
 #: The Monte Carlo engines an experiment can run on: this module, or the numpy engine (the
 #: reference the tests hold this one to).
 ENGINES: tuple[str, ...] = ("compiled", "numpy")
@@ -91,30 +95,37 @@ class FilterSettings(NamedTuple):
 
 class ScanChunk(NamedTuple):
     """Scans ``first … first + K − 1``: the states x (K, m', 4), P (K, m', 4, 4) of the runs
-    that give states, and the metric terms (len(SUM_NAMES), K, m − m') of the first runs when
-    ``filter_scans`` was asked for them (else None).
+    that give states and, when ``filter_scans`` was asked for metric terms, their sums per
+    group of runs (else None).
+
+    Attributes:
+        group_sums: (G, K, len(SUM_NAMES)) sums of the first runs' metric terms
+            (``core.metrics.scan_terms``) at each scan, run j in group (offset + j) mod G,
+            G = ``core.confidence.BAND_GROUPS`` (``MetricsAccumulator.add_group_sums``).
 
     The arrays are reused for the next chunk: copy what must be kept."""
 
     first: int
     x: NDArray[np.float64]
     P: NDArray[np.float64]
-    terms: NDArray[np.float64] | None = None
+    group_sums: NDArray[np.float64] | None = None
 
 
 class TermsRequest(NamedTuple):
-    """Ask ``filter_scans`` for the metric terms (``core.metrics.scan_terms``) of the first
-    ``runs`` runs instead of their states: computed in the kernel as each state is formed, so
-    the states of a Monte Carlo never go through memory.
+    """Ask ``filter_scans`` for the sums of the metric terms (``core.metrics.scan_terms``) of
+    the first ``runs`` runs per group of runs instead of their states: formed in the kernel as
+    each state is, so the states of a Monte Carlo never go through memory.
 
     Attributes:
         runs: how many of the first runs give terms.
         truth: (N, 4) true states; los: ``core.metrics.truth_line_of_sight(truth)``.
+        offset: runs already counted at these scans: run j goes to group (offset + j) mod G.
     """
 
     runs: int
     truth: NDArray[np.float64]
     los: tuple[NDArray[np.float64], NDArray[np.float64]]
+    offset: int = 0
 
 
 def filter_scans(
@@ -127,6 +138,7 @@ def filter_scans(
     radial_velocity_mps: NDArray[np.float64] | None = None,
     start: tuple[int, CVBatch] | None = None,
     terms: TermsRequest | None = None,
+    states: bool = True,
 ) -> Iterator[ScanChunk]:
     """Filter every run's scans, ``chunk_scans`` at a time.
 
@@ -143,47 +155,53 @@ def filter_scans(
         radial_velocity_mps: (m, N) measured V̂r: after each plot's update, the Doppler update
             along the measured line of sight (``core.filters.doppler``) with σVr
             ``settings.sigma_vr_mps``.
-        terms: the metric terms of the first runs instead of their states.
+        terms: the sums of the metric terms of the first runs instead of their states.
+        states: False: the other runs give no states either (the chunks' x, P hold 0 runs):
+            the filter alone, for timing it.
 
     Yields:
         ``ScanChunk`` s covering the filtered scans in order (a start at scan 0 included).
     """
     kernel = _kernel()
-    r_scans = np.ascontiguousarray(np.asarray(r_hat, dtype=np.float64).T)
-    b_scans = np.ascontiguousarray(np.asarray(beta_hat, dtype=np.float64).T)
-    steps, runs = r_scans.shape
-    doppler = radial_velocity_mps is not None
-    vr_scans = (
-        np.ascontiguousarray(np.asarray(radial_velocity_mps, dtype=np.float64).T)
-        if doppler
-        else np.zeros((1, 1))
-    )
-    x = np.empty((runs, 4))
-    P = np.empty((runs, 4, 4))
-    begin = 0
-    if start is not None:
-        begin = start[0] + 1
-        x[...], P[...] = start[1].x, start[1].P
+    runs, steps = np.shape(r_hat)
+    begin = 0 if start is None else start[0] + 1
     k = max(1, min(int(chunk_scans), steps - begin))
+    # The kernel walks run after run, each over the chunk's scans. Over many scans a run's
+    # row of the (m, N) arrays is read in memory order; over a few, the scan-major (column-
+    # major) copy puts consecutive runs' plots side by side instead (a run-major row per
+    # run and scan would cost a cache line for 8 bytes).
+    layout = np.asfortranarray if k < SCAN_MAJOR_BELOW else np.ascontiguousarray
+    r_runs = layout(r_hat, dtype=np.float64)
+    b_runs = layout(beta_hat, dtype=np.float64)
+    doppler = radial_velocity_mps is not None
+    vr_runs = layout(radial_velocity_mps, dtype=np.float64) if doppler else layout(np.zeros((1, 1)))
+    state = np.empty((runs, 14))  # each run's x, then the upper entries of P (row-major)
+    if start is not None:
+        state[:, :4] = start[1].x
+        state[:, 4:] = start[1].P[:, *np.triu_indices(4)]
     n_terms = 0 if terms is None else int(terms.runs)
-    xs = np.empty((k, runs - n_terms, 4))
-    Ps = np.empty((k, runs - n_terms, 4, 4))
-    out_terms = np.empty((10, k, n_terms))  # len(core.metrics.SUM_NAMES) rows
+    kept = runs - n_terms if states else 0
+    xs = np.empty((k, kept, 4))
+    Ps = np.empty((k, kept, 4, 4))
+    sums = np.empty((BAND_GROUPS, k, len(SUM_NAMES)))
     if terms is None:
         truth, cos_los, sin_los = np.zeros((1, 4)), np.zeros((1, 1)), np.zeros((1, 1))
+        offset = 0
     else:
         truth = np.ascontiguousarray(terms.truth, dtype=np.float64)
         cos_los, sin_los = terms.los
+        offset = int(terms.offset)
     s = settings
     c, wm0, wc0, w = s.ukf.weights(4)
     for first in range(begin, steps, k):
         last = min(first + k, steps)
+        sums[...] = 0.0
         kernel(
             METHOD_CODES[method],
             START_CODES[method],
-            r_scans,
-            b_scans,
-            vr_scans,
+            r_runs,
+            b_runs,
+            vr_runs,
             doppler,
             first,
             last,
@@ -199,18 +217,19 @@ def filter_scans(
             float(wm0),
             float(wc0),
             float(w),
-            x,
-            P,
+            state,
+            states,
             xs,
             Ps,
             n_terms,
             truth,
             cos_los,
             sin_los,
-            out_terms,
+            sums,
+            offset,
         )
         n = last - first
-        yield ScanChunk(first, xs[:n], Ps[:n], out_terms[:, :n] if terms is not None else None)
+        yield ScanChunk(first, xs[:n], Ps[:n], sums[:, :n] if terms is not None else None)
 
 
 def filter_history(
@@ -224,25 +243,6 @@ def filter_history(
     in one chunk; for tests and small batches)."""
     (chunk,) = list(filter_scans(method, r_hat, beta_hat, settings, np.shape(r_hat)[1], **kw))
     return chunk.x, chunk.P
-
-
-def metric_terms(
-    x: NDArray[np.float64],
-    P: NDArray[np.float64],
-    truth: NDArray[np.float64],
-    los: tuple[NDArray[np.float64], NDArray[np.float64]],
-) -> NDArray[np.float64]:
-    """``core.metrics.scan_terms`` by the compiled kernel: (len(SUM_NAMES), K, m) terms of
-    x (K, m, 4), P (K, m, 4, 4) against truth (K, 4), ``los`` = ``truth_line_of_sight``.
-
-    Equal to the numpy function to rounding (``tests/test_compiled.py``); one pass over the
-    states instead of a few dozen vector operations and their temporaries.
-    """
-    from radarviz.core.filters.kernels_2d import metric_terms_2d
-
-    out = np.empty((10, *x.shape[:2]))
-    metric_terms_2d(x, P, np.ascontiguousarray(truth), los[0], los[1], out)
-    return out
 
 
 @functools.cache

@@ -1,5 +1,11 @@
 """The compiled (numba) kernel behind ``core.filters.compiled``: scalar code, one track at a
-time, mirroring the numpy engine's equations line by line (see that module's table).
+time, the numpy engine's equations (see that module's table) on each track's state held in
+local scalars (x and the ten upper entries of P), so the whole step stays in registers.
+
+The per-step functions come in two forms: ``*_s`` on (x, p) tuples, which the Monte Carlo
+kernel ``filter_scans_2d`` chains, and the array forms (``start``, ``predict``,
+``position_update``, ``ukf_update``, ``doppler_update``, ``track_terms``) that load a track
+from arrays, call them and store it, for callers holding one track in arrays.
 
 Imported only by ``core.filters.compiled._kernel`` on first use, so importing numba (and
 loading the cached machine code) is paid only by commands that filter a Monte Carlo.
@@ -8,10 +14,12 @@ loading the cached machine code) is paid only by commands that filter a Monte Ca
 from __future__ import annotations
 
 import math
-from math import atan2, ceil, cos, cosh, exp, expm1, hypot, sin, sinh, sqrt
+from math import atan2, ceil, cos, sin, sqrt
 
 import numba
 import numpy as np
+
+from radarviz.core.conversion.elementwise import conversion_coefficients, converted_point
 
 # A Cholesky pivot within this fraction of its diagonal is a direction of zero variance (a
 # zero column); below it the track is NaN (numba reads it as a compile-time constant).
@@ -20,382 +28,529 @@ from radarviz.core.filters.polar_ukf import SEMIDEFINITE_RTOL
 # error_model="numpy": a division by zero or a negative pivot gives inf / NaN for that track,
 # as the numpy engine does, instead of raising. cache=True: compiled once per machine.
 # nogil=True: blocks of runs filter in parallel threads (``core.experiments.prosov``).
-_jit = numba.njit(cache=True, error_model="numpy", nogil=True)
+# fastmath: fused multiply-adds and reordered sums (results move by rounding only, far inside
+# the 1e-9 the tests hold the kernel to); never "nnan"/"ninf", which NaN tracks rely on.
+# inline="always" on the small scalar functions: their tuples become registers.
+_FAST = {"contract", "reassoc", "nsz", "arcp"}
+_jit = numba.njit(cache=True, error_model="numpy", nogil=True, fastmath=_FAST)
+_inline = numba.njit(cache=True, error_model="numpy", nogil=True, inline="always", fastmath=_FAST)
 
 
 _TWO_PI = 2.0 * math.pi
 
 
-@_jit
+@_inline
+def norm(x: float, y: float) -> float:
+    # √(x² + y²): hypot's guard against overflow is not needed at radar ranges, and costs
+    # several times the square root
+    return sqrt(x * x + y * y)
+
+
+@_inline
 def wrap(a: float) -> float:
     # core.geometry.wrap_angle: a − 2π ceil(a/(2π) − ½), to (−π, π]
     return a - _TWO_PI * ceil(a * (1.0 / _TWO_PI) - 0.5)
 
 
+# The conversions' arithmetic lives in ``core.conversion.elementwise`` (shared with the
+# array-API path), compiled here.
+_coefficients = _inline(conversion_coefficients)
+_converted_point = _inline(converted_point)
+
+
 @_jit
 def coefficients(code: int, s: float, sr2: float):
     """The scalars of a conversion that depend on s = σβ² and σr² only, formed once per block
-    (they are most of a conversion's transcendental functions)."""
-    co = np.zeros(8)
-    if code == 1 or code == 2:
-        # seed κ = 1 − s/2 (eq. 10 as printed); cmkf_d κ = 1 − (e^(−s) − e^(−s/2))
-        co[0] = 1.0 - s / 2.0 if code == 1 else 1.0 - (exp(-s) - exp(-s / 2.0))
-        # eq. 11: e^(−2s), cosh 2s − cosh s and sinh 2s − sinh s as products, 2 cosh 2s −
-        # cosh s, 2 sinh 2s − sinh s, e^(−4s), e^s − 1 (core.conversion.planar._averaged_parts)
-        sh_half = sinh(0.5 * s)
-        co[1] = exp(-2.0 * s)
-        co[2], co[3] = 2.0 * sinh(1.5 * s) * sh_half, 2.0 * cosh(1.5 * s) * sh_half
-        co[4], co[5] = 2.0 * cosh(2.0 * s) - cosh(s), 2.0 * sinh(2.0 * s) - sinh(s)
-        co[6], co[7] = exp(-4.0 * s), expm1(s)
-    elif code == 3 or code == 4:
-        # ucm / ducm: κ = e^(s/2); _true_cov_parts × e^s: A = a1 r² + a0, B = b1 (r² + σr²),
-        # C = c1 r² + c0
-        k = exp(s)
-        e1, e2 = exp(-s), exp(-2.0 * s)
-        om1, om2 = -expm1(-s), -expm1(-2.0 * s)
-        co[0] = sqrt(k)
-        co[1], co[2] = (0.5 * k) * om1 * om1, (0.5 * k) * sr2 * (1.0 + e2)
-        co[3] = (0.5 * k) * om2
-        co[4], co[5] = -k * e1 * om1, k * sr2 * e2
+    (they are most of a conversion's transcendental functions): an (8,) array
+    (``core.conversion.elementwise.conversion_coefficients``)."""
+    t = _coefficients(code, s, sr2)
+    co = np.empty(8)
+    for i in range(8):
+        co[i] = t[i]
     return co
 
 
-@_jit
-def true_cov(r: float, c: float, sn: float, sr2: float, co):
-    # core.conversion.planar._true_cov_parts: the exact true-conditioned covariance × e^s
-    r2 = r * r
-    a = r2 * co[1] + co[2]
-    b = (r2 + sr2) * co[3]
-    cc = r2 * co[4] + co[5]
-    return c * c * a + sn * sn * b, cc * (sn * c), sn * sn * a + c * c * b
-
-
-@_jit
-def averaged_cov(r: float, c: float, sn: float, sr2: float, co):
-    # core.conversion.planar._averaged_parts: Prosov eq. 11a–c at the measurement
-    c2, s2 = c * c, sn * sn
-    e2, a_c, a_s, b_c, b_s = co[1], co[2], co[3], co[4], co[5]
-    r2 = r * r
-    c11 = r2 * (e2 * (c2 * a_c + s2 * a_s)) + sr2 * e2 * (c2 * b_c + s2 * b_s)
-    c22 = r2 * (e2 * (s2 * a_c + c2 * a_s)) + sr2 * e2 * (s2 * b_c + c2 * b_s)
-    c12 = sn * c * co[6] * (sr2 - (r2 + sr2) * co[7])
-    return c11, c12, c22
-
-
-@_jit
+@_inline
 def convert(code: int, r: float, b: float, sr2: float, s: float, px: float, py: float, co):
     # The five conversions of core.conversion.planar: point and covariance (radar-centred);
-    # ``co``: ``coefficients(code, s, sr2)``.
-    c, sn = cos(b), sin(b)
-    if code == 0:  # naive: eq. 8, linearised covariance eq. 9
-        rs = r * r * s
-        return (
-            r * c,
-            r * sn,
-            sr2 * c * c + rs * sn * sn,
-            (sr2 - rs) * sn * c,
-            (sr2 * sn * sn + rs * c * c),
-        )
-    kr = co[0] * r
-    if code == 1 or code == 2:  # seed / cmkf_d, covariance eq. 11
-        c11, c12, c22 = averaged_cov(r, c, sn, sr2, co)
-    elif code == 3:  # ucm: exact covariance at the measurement
-        c11, c12, c22 = true_cov(r, c, sn, sr2, co)
-    else:  # ducm: the same covariance at the predicted position
-        rp = hypot(px, py)
-        c11, c12, c22 = true_cov(rp, px / rp, py / rp, sr2, co)
-    return kr * c, kr * sn, c11, c12, c22
+    # ``co``: ``coefficients(code, s, sr2)``; (px, py) the radar-centred prediction (ducm).
+    rp = cp = sp = 0.0
+    if code == 4:  # ducm: the covariance at the predicted position
+        rp = norm(px, py)
+        cp, sp = px / rp, py / rp
+    return _converted_point(code, r, cos(b), sin(b), sr2, s, co, rp, cp, sp)
+
+
+# The state of one track as scalars: x = (x, ẋ, y, ẏ) and p = the ten upper entries of the
+# symmetric P, (p00, p01, p02, p03, p11, p12, p13, p22, p23, p33). The Monte Carlo kernel keeps
+# them in registers for all the scans of a run; the array forms below (``start``, ``predict``,
+# ``position_update``, ``ukf_update``, ``doppler_update``: x (4,), P (4, 4) updated in place,
+# for callers holding one track in arrays) load, call these and store.
+
+
+@_inline
+def load(x, P):
+    """(x, p) of the arrays x (4,), P (4, 4) (P's upper triangle)."""
+    return (x[0], x[1], x[2], x[3]), (
+        P[0, 0], P[0, 1], P[0, 2], P[0, 3], P[1, 1], P[1, 2], P[1, 3], P[2, 2], P[2, 3], P[3, 3]
+    )  # fmt: skip
+
+
+@_inline
+def store(xt, p, x, P):
+    """Write (x, p) into x (4,) and the symmetric P (4, 4)."""
+    for i in range(4):
+        x[i] = xt[i]
+    p00, p01, p02, p03, p11, p12, p13, p22, p23, p33 = p
+    P[0, 0], P[0, 1], P[0, 2], P[0, 3] = p00, p01, p02, p03
+    P[1, 0], P[1, 1], P[1, 2], P[1, 3] = p01, p11, p12, p13
+    P[2, 0], P[2, 1], P[2, 2], P[2, 3] = p02, p12, p22, p23
+    P[3, 0], P[3, 1], P[3, 2], P[3, 3] = p03, p13, p23, p33
+
+
+@_inline
+def load_row(state, m):
+    """(x, p) of row m of a (runs, 14) state array: x then p. (Indexed in place: a view
+    per call would cost a reference count per track-step.)"""
+    return (state[m, 0], state[m, 1], state[m, 2], state[m, 3]), (
+        state[m, 4], state[m, 5], state[m, 6], state[m, 7], state[m, 8], state[m, 9],
+        state[m, 10], state[m, 11], state[m, 12], state[m, 13],
+    )  # fmt: skip
+
+
+@_inline
+def store_row(xt, p, state, m):
+    for i in range(4):
+        state[m, i] = xt[i]
+    for i in range(10):
+        state[m, 4 + i] = p[i]
+
+
+@_inline
+def store_at(xt, p, xs, Ps, i, j):
+    """Write (x, p) into xs[i, j] (4,) and the symmetric Ps[i, j] (4, 4), in place."""
+    for a in range(4):
+        xs[i, j, a] = xt[a]
+    k = 0
+    for a in range(4):
+        for b_ in range(a, 4):
+            Ps[i, j, a, b_] = p[k]
+            Ps[i, j, b_, a] = p[k]
+            k += 1
+
+
+@_inline
+def start_s(zx: float, zy: float, r00: float, r01: float, r11: float, v0: float):
+    # cv_init: position z with covariance R, velocity 0 with variance σv0²
+    v = v0 * v0
+    return (zx, 0.0, zy, 0.0), (r00, 0.0, r01, 0.0, v, 0.0, 0.0, r11, 0.0, v)
+
+
+@_inline
+def predict_s(xt, p, T: float, q: float):
+    # cv_predict: x⁻ = F x, P⁻ = F P Fᵀ + Q (per axis F = [[1, T], [0, 1]], Q = σa² g gᵀ,
+    # g = (T²/2, T))
+    x0, x1, x2, x3 = xt
+    p00, p01, p02, p03, p11, p12, p13, p22, p23, p33 = p
+    T2 = T * T
+    qa, qb, qc = q * T2 * T2 / 4.0, q * T2 * T / 2.0, q * T2
+    return (x0 + T * x1, x1, x2 + T * x3, x3), (
+        (p00 + T * p01) + T * (p01 + T * p11) + qa,
+        p01 + T * p11 + qb,
+        (p02 + T * p12) + T * (p03 + T * p13),
+        p03 + T * p13,
+        p11 + qc,
+        p12 + T * p13,
+        p13,
+        (p22 + T * p23) + T * (p23 + T * p33) + qa,
+        p23 + T * p33 + qb,
+        p33 + qc,
+    )
+
+
+@_inline
+def _joseph_entry(p_ij, ki0, ki1, kj0, kj1, ui0, ui1, uj0, uj1, s00, s01, s11):
+    # (P − K Uᵀ + (K S − U) Kᵀ)_ij with U = P Hᵀ: the Joseph form multiplied out
+    vi0 = ki0 * s00 + ki1 * s01 - ui0
+    vi1 = ki0 * s01 + ki1 * s11 - ui1
+    return p_ij - (ki0 * uj0 + ki1 * uj1) + (vi0 * kj0 + vi1 * kj1)
+
+
+@_inline
+def position_update_s(xt, p, nx: float, ny: float, r00: float, r01: float, r11: float):
+    # core.filters.position: S = H P Hᵀ + R, K = P Hᵀ S⁻¹, x⁺ = x + K ν,
+    # P⁺ = P − K Uᵀ + (K S − U) Kᵀ with U = P Hᵀ (Joseph form multiplied out).
+    x0, x1, x2, x3 = xt
+    p00, p01, p02, p03, p11, p12, p13, p22, p23, p33 = p
+    s00, s01, s11 = p00 + r00, p02 + r01, p22 + r11
+    det = s00 * s11 - s01 * s01
+    i00, i01, i11 = s11 / det, -s01 / det, s00 / det
+    # U's columns: P's x and y columns
+    u00, u01, u10, u11, u20, u21, u30, u31 = p00, p02, p01, p12, p02, p22, p03, p23
+    k00, k01 = u00 * i00 + u01 * i01, u00 * i01 + u01 * i11
+    k10, k11 = u10 * i00 + u11 * i01, u10 * i01 + u11 * i11
+    k20, k21 = u20 * i00 + u21 * i01, u20 * i01 + u21 * i11
+    k30, k31 = u30 * i00 + u31 * i01, u30 * i01 + u31 * i11
+    xn = (
+        x0 + (k00 * nx + k01 * ny),
+        x1 + (k10 * nx + k11 * ny),
+        x2 + (k20 * nx + k21 * ny),
+        x3 + (k30 * nx + k31 * ny),
+    )
+    return xn, (
+        _joseph_entry(p00, k00, k01, k00, k01, u00, u01, u00, u01, s00, s01, s11),
+        _joseph_entry(p01, k00, k01, k10, k11, u00, u01, u10, u11, s00, s01, s11),
+        _joseph_entry(p02, k00, k01, k20, k21, u00, u01, u20, u21, s00, s01, s11),
+        _joseph_entry(p03, k00, k01, k30, k31, u00, u01, u30, u31, s00, s01, s11),
+        _joseph_entry(p11, k10, k11, k10, k11, u10, u11, u10, u11, s00, s01, s11),
+        _joseph_entry(p12, k10, k11, k20, k21, u10, u11, u20, u21, s00, s01, s11),
+        _joseph_entry(p13, k10, k11, k30, k31, u10, u11, u30, u31, s00, s01, s11),
+        _joseph_entry(p22, k20, k21, k20, k21, u20, u21, u20, u21, s00, s01, s11),
+        _joseph_entry(p23, k20, k21, k30, k31, u20, u21, u30, u31, s00, s01, s11),
+        _joseph_entry(p33, k30, k31, k30, k31, u30, u31, u30, u31, s00, s01, s11),
+    )
+
+
+@_inline
+def ekf_update_s(xt, p, r: float, b: float, vr: float, vb: float, sx: float, sy: float):
+    # core.filters.polar_ekf: ν' = J ν and R' = J R Jᵀ at the prediction (J the polar-to-
+    # Cartesian Jacobian), then the position update
+    px, py = xt[0] - sx, xt[2] - sy
+    rp = norm(px, py)
+    cb, sb_ = px / rp, py / rp
+    nr, nb = r - rp, wrap(b - atan2(py, px))
+    return position_update_s(
+        xt,
+        p,
+        cb * nr - py * nb,
+        sb_ * nr + px * nb,
+        cb * cb * vr + py * py * vb,
+        cb * sb_ * vr - px * py * vb,
+        sb_ * sb_ * vr + px * px * vb,
+    )
+
+
+@_inline
+def _pivot(d: float, tol: float):
+    # A Cholesky pivot within ``tol`` of 0 is a null direction (0); below −tol: NaN
+    null = abs(d) <= tol
+    if null:
+        d = 0.0
+    elif d < -tol:
+        d = math.nan  # indefinite beyond rounding: this track becomes NaN
+    return sqrt(d), null
+
+
+@_inline
+def _below(e: float, d: float, null: bool) -> float:
+    return 0.0 if null else e / d
+
+
+@_inline
+def semidefinite_cholesky_s(p, c: float):
+    """The lower Cholesky factor of c·P (``polar_ukf.semidefinite_cholesky``) as its columns
+    (L[:, 0], …, L[:, 3]), 4-tuples each."""
+    p00, p01, p02, p03, p11, p12, p13, p22, p23, p33 = p
+    rt = SEMIDEFINITE_RTOL
+    l00, n0 = _pivot(c * p00, rt * c * p00)
+    l10, l20, l30 = _below(c * p01, l00, n0), _below(c * p02, l00, n0), _below(c * p03, l00, n0)
+    l11, n1 = _pivot(c * p11 - l10 * l10, rt * c * p11)
+    l21 = _below(c * p12 - l20 * l10, l11, n1)
+    l31 = _below(c * p13 - l30 * l10, l11, n1)
+    l22, n2 = _pivot(c * p22 - l20 * l20 - l21 * l21, rt * c * p22)
+    l32 = _below(c * p23 - l30 * l20 - l31 * l21, l22, n2)
+    l33, _ = _pivot(c * p33 - l30 * l30 - l31 * l31 - l32 * l32, rt * c * p33)
+    return (l00, l10, l20, l30), (0.0, l11, l21, l31), (0.0, 0.0, l22, l32), (0.0, 0.0, 0.0, l33)
+
+
+@_inline
+def _add_outer(p, w: float, e):
+    # P + w e eᵀ (upper entries)
+    e0, e1, e2, e3 = e
+    return (
+        p[0] + w * e0 * e0, p[1] + w * e0 * e1, p[2] + w * e0 * e2, p[3] + w * e0 * e3,
+        p[4] + w * e1 * e1, p[5] + w * e1 * e2, p[6] + w * e1 * e3,
+        p[7] + w * e2 * e2, p[8] + w * e2 * e3,
+        p[9] + w * e3 * e3,
+    )  # fmt: skip
+
+
+@_inline
+def _point_error(f: float, col, k0, k1, d0: float, d1: float):
+    # e = f L[:, k] − K d for the point ±column k with residual d
+    return (
+        f * col[0] - (k0[0] * d0 + k1[0] * d1),
+        f * col[1] - (k0[1] * d0 + k1[1] * d1),
+        f * col[2] - (k0[2] * d0 + k1[2] * d1),
+        f * col[3] - (k0[3] * d0 + k1[3] * d1),
+    )
+
+
+@_inline
+def _gain_row(l0, l1, l2, e0r, e1r, e2r, e0b, e1b, e2b, w, i00, i01, i11):
+    # row i of K = Pxz S⁻¹, Pxz's row W Σ_k L[i, k] (d_k+ − d_k−) (column 3's difference is 0)
+    a0 = w * (l0 * e0r + l1 * e1r + l2 * e2r)
+    a1 = w * (l0 * e0b + l1 * e1b + l2 * e2b)
+    return a0 * i00 + a1 * i01, a0 * i01 + a1 * i11
+
+
+@_inline
+def ukf_update_s(xt, p, r, b, vr, vb, sx, sy, c, wm0, wc0, w):
+    # core.filters.polar_ukf: sigma points of (x⁻, P⁻) through the polar map, unscented S and
+    # Pxz, K = Pxz S⁻¹, x⁺ = x + K ν, and P⁺ in Joseph form, Σ_p Wc_p e_p e_pᵀ + K R Kᵀ with
+    # e_p = (χ_p − x⁻) − K d_p (a sum of semi-definite terms: it cannot turn indefinite).
+    L0, L1, L2, L3 = semidefinite_cholesky_s(p, c)
+    px, py = xt[0] - sx, xt[2] - sy
+    r0, b0 = norm(px, py), atan2(py, px)
+    # The polar map reads the position only, and column k of the lower factor moves it by
+    # (L[0, k], L[2, k]) = (L00, L20), (0, L21), (0, L22), (0, 0): column 3's two points are
+    # the central point, and columns 1, 2 move y alone.
+    ra, ba = norm(px + L0[0], py + L0[2]), atan2(py + L0[2], px + L0[0])
+    rb, bb = norm(px - L0[0], py - L0[2]), atan2(py - L0[2], px - L0[0])
+    rc, bc = norm(px, py + L1[2]), atan2(py + L1[2], px)
+    rd, bd = norm(px, py - L1[2]), atan2(py - L1[2], px)
+    re, be = norm(px, py + L2[2]), atan2(py + L2[2], px)
+    rf, bf = norm(px, py - L2[2]), atan2(py - L2[2], px)
+    # the unscented mean: z̄r = Wm0 r0 + W Σ r_p, z̄β = β0 + W Σ wrap(β_p − β0)
+    zr = wm0 * r0 + w * (ra + rb + rc + rd + re + rf + 2.0 * r0)
+    acc = wrap(ba - b0) + wrap(bb - b0) + wrap(bc - b0) + wrap(bd - b0)
+    zb = wrap(b0 + w * (acc + wrap(be - b0) + wrap(bf - b0)))
+    # residuals d_p = (r_p − z̄r, wrap(β_p − z̄β)): central (g), ±column 0 (a, b), 1 (c, d),
+    # 2 (e, f); column 3's are the central one
+    gr, gb = r0 - zr, wrap(b0 - zb)
+    dar, dab = ra - zr, wrap(ba - zb)
+    dbr, dbb = rb - zr, wrap(bb - zb)
+    dcr, dcb = rc - zr, wrap(bc - zb)
+    ddr, ddb = rd - zr, wrap(bd - zb)
+    der, deb = re - zr, wrap(be - zb)
+    dfr, dfb = rf - zr, wrap(bf - zb)
+    wg = wc0 + 2.0 * w
+    s00 = dar * dar + dbr * dbr + dcr * dcr + ddr * ddr + der * der + dfr * dfr
+    s01 = dar * dab + dbr * dbb + dcr * dcb + ddr * ddb + der * deb + dfr * dfb
+    s11 = dab * dab + dbb * dbb + dcb * dcb + ddb * ddb + deb * deb + dfb * dfb
+    s00 = vr + wg * gr * gr + w * s00
+    s01 = wg * gr * gb + w * s01
+    s11 = vb + wg * gb * gb + w * s11
+    det = s00 * s11 - s01 * s01
+    i00, i01, i11 = s11 / det, -s01 / det, s00 / det
+    e0r, e1r, e2r = dar - dbr, dcr - ddr, der - dfr
+    e0b, e1b, e2b = dab - dbb, dcb - ddb, deb - dfb
+    k00, k01 = _gain_row(L0[0], L1[0], L2[0], e0r, e1r, e2r, e0b, e1b, e2b, w, i00, i01, i11)
+    k10, k11 = _gain_row(L0[1], L1[1], L2[1], e0r, e1r, e2r, e0b, e1b, e2b, w, i00, i01, i11)
+    k20, k21 = _gain_row(L0[2], L1[2], L2[2], e0r, e1r, e2r, e0b, e1b, e2b, w, i00, i01, i11)
+    k30, k31 = _gain_row(L0[3], L1[3], L2[3], e0r, e1r, e2r, e0b, e1b, e2b, w, i00, i01, i11)
+    k0, k1 = (k00, k10, k20, k30), (k01, k11, k21, k31)
+    nr, nb = r - zr, wrap(b - zb)
+    xn = (
+        xt[0] + (k00 * nr + k01 * nb),
+        xt[1] + (k10 * nr + k11 * nb),
+        xt[2] + (k20 * nr + k21 * nb),
+        xt[3] + (k30 * nr + k31 * nb),
+    )
+    # P⁺: the central point (e = −K d₀), K R Kᵀ, then the points ± column k: e = ±L[:, k] − K d
+    zero = (0.0, 0.0, 0.0, 0.0)
+    pn = _add_outer((0.0,) * 10, wc0, _point_error(0.0, zero, k0, k1, gr, gb))
+    pn = _add_outer(pn, vr, k0)
+    pn = _add_outer(pn, vb, k1)
+    pn = _add_outer(pn, w, _point_error(1.0, L0, k0, k1, dar, dab))
+    pn = _add_outer(pn, w, _point_error(-1.0, L0, k0, k1, dbr, dbb))
+    pn = _add_outer(pn, w, _point_error(1.0, L1, k0, k1, dcr, dcb))
+    pn = _add_outer(pn, w, _point_error(-1.0, L1, k0, k1, ddr, ddb))
+    pn = _add_outer(pn, w, _point_error(1.0, L2, k0, k1, der, deb))
+    pn = _add_outer(pn, w, _point_error(-1.0, L2, k0, k1, dfr, dfb))
+    pn = _add_outer(pn, w, _point_error(1.0, L3, k0, k1, gr, gb))
+    pn = _add_outer(pn, w, _point_error(-1.0, L3, k0, k1, gr, gb))
+    return xn, pn
+
+
+@_inline
+def _doppler_entry(pij, ki, kj, ui, uj, S):
+    # (P − k Uᵀ − U kᵀ + S k kᵀ)_ij
+    return pij - (ki * uj + ui * kj) + S * ki * kj
+
+
+@_inline
+def doppler_update_s(xt, p, vr_hat: float, b: float, var_vr: float, vb: float):
+    # core.filters.doppler: V̂r = û·v + e along the measured line of sight û = (cos β̂, sin β̂),
+    # var e = σVr² + σβ² ((g·v)² + gᵀ P_vv g), g = (−sin β̂, cos β̂); scalar Joseph form
+    # P − k Uᵀ − U kᵀ + S k kᵀ with U = P hᵀ, k = U / S.
+    x0, x1, x2, x3 = xt
+    p00, p01, p02, p03, p11, p12, p13, p22, p23, p33 = p
+    u0, u1 = cos(b), sin(b)
+    g0, g1 = -u1, u0
+    gv = g0 * x1 + g1 * x3
+    gpg = g0 * g0 * p11 + g1 * g1 * p33 + 2.0 * g1 * g0 * p13
+    r_e = var_vr + vb * (gv * gv + gpg)
+    U0, U1 = p01 * u0 + p03 * u1, p11 * u0 + p13 * u1
+    U2, U3 = p12 * u0 + p23 * u1, p13 * u0 + p33 * u1
+    S = u0 * U1 + u1 * U3 + r_e
+    nu = vr_hat - (u0 * x1 + u1 * x3)
+    f = 1.0 / S
+    k0, k1, k2, k3 = U0 * f, U1 * f, U2 * f, U3 * f
+    xn = (x0 + k0 * nu, x1 + k1 * nu, x2 + k2 * nu, x3 + k3 * nu)
+    return xn, (
+        _doppler_entry(p00, k0, k0, U0, U0, S),
+        _doppler_entry(p01, k0, k1, U0, U1, S),
+        _doppler_entry(p02, k0, k2, U0, U2, S),
+        _doppler_entry(p03, k0, k3, U0, U3, S),
+        _doppler_entry(p11, k1, k1, U1, U1, S),
+        _doppler_entry(p12, k1, k2, U1, U2, S),
+        _doppler_entry(p13, k1, k3, U1, U3, S),
+        _doppler_entry(p22, k2, k2, U2, U2, S),
+        _doppler_entry(p23, k2, k3, U2, U3, S),
+        _doppler_entry(p33, k3, k3, U3, U3, S),
+    )
+
+
+@_inline
+def terms_s(xt, p, t, c: float, s: float):
+    """The metric terms of one track at one scan (``core.metrics.scan_terms``, in
+    ``SUM_NAMES`` order): xt, p the state, t the true state (a 4-tuple), (c, s) the true line
+    of sight.
+
+    The NEES by blocks: with A = P_pos (x, y), B = P_vel, C their cross-covariance and
+    S = B − Cᵀ A⁻¹ C (the Schur complement), eᵀ P⁻¹ e = e_posᵀ A⁻¹ e_pos + rᵀ S⁻¹ r with
+    r = e_vel − Cᵀ A⁻¹ e_pos: two 2 × 2 inverses, no square root (a Cholesky factor's chain
+    of roots and divisions costs more than the filter's update). NaN unless P is positive
+    definite (A and S are), as ``core.filters.state.quad_form_inv`` gives."""
+    ex, ey = xt[0] - t[0], xt[2] - t[2]
+    ev, ew = xt[1] - t[1], xt[3] - t[3]
+    p00, p01, p02, p03, p11, p12, p13, p22, p23, p33 = p
+    det_a = p00 * p22 - p02 * p02
+    ia = 1.0 / det_a
+    a0, a1 = (p22 * ex - p02 * ey) * ia, (p00 * ey - p02 * ex) * ia  # A⁻¹ e_pos
+    nees_pos = ex * a0 + ey * a1
+    # M = A⁻¹ C, C = [[p01, p03], [p12, p23]] (rows x, y; columns ẋ, ẏ)
+    m00, m10 = (p22 * p01 - p02 * p12) * ia, (p00 * p12 - p02 * p01) * ia
+    m01, m11 = (p22 * p03 - p02 * p23) * ia, (p00 * p23 - p02 * p03) * ia
+    s00 = p11 - (p01 * m00 + p12 * m10)
+    s01 = p13 - (p01 * m01 + p12 * m11)
+    s11 = p33 - (p03 * m01 + p23 * m11)
+    det_s = s00 * s11 - s01 * s01
+    r0, r1 = ev - (p01 * a0 + p12 * a1), ew - (p03 * a0 + p23 * a1)
+    nees = nees_pos + (s11 * r0 * r0 - 2.0 * s01 * r0 * r1 + s00 * r1 * r1) / det_s
+    if not (p00 > 0.0 and det_a > 0.0 and s00 > 0.0 and det_s > 0.0):
+        nees = math.nan
+    return (
+        ex, ex * ex, ey, ey * ey, c * ex + s * ey, c * ey - s * ex, p00, p22, nees_pos, nees,
+    )  # fmt: skip
+
+
+# The per-step functions on arrays: x (4,), P (4, 4) updated in place (P written symmetric),
+# for callers that hold a track in arrays. K, V, L, Z, E: scratch arrays the signatures keep
+# (the scalar forms above need none).
 
 
 @_jit
 def start(x, P, zx: float, zy: float, r00: float, r01: float, r11: float, v0: float):
     # cv_init: position z with covariance R, velocity 0 with variance σv0²
-    for i in range(4):
-        x[i] = 0.0
-        for j in range(4):
-            P[i, j] = 0.0
-    x[0], x[2] = zx, zy
-    P[0, 0], P[0, 2], P[2, 0], P[2, 2] = r00, r01, r01, r11
-    P[1, 1] = P[3, 3] = v0 * v0
+    xt, p = start_s(zx, zy, r00, r01, r11, v0)
+    store(xt, p, x, P)
 
 
 @_jit
 def predict(x, P, T: float, q: float):
-    # cv_predict: x⁻ = F x, P⁻ = F P Fᵀ + Q (per axis [[1, T], [0, 1]]; Q = σa² g gᵀ)
-    x[0] += T * x[1]
-    x[2] += T * x[3]
-    for j in range(4):  # rows of F P
-        P[0, j] += T * P[1, j]
-        P[2, j] += T * P[3, j]
-    for i in range(4):  # columns of (F P) Fᵀ
-        P[i, 0] += T * P[i, 1]
-        P[i, 2] += T * P[i, 3]
-    if q != 0.0:
-        T2 = T * T
-        for p in (0, 2):
-            P[p, p] += q * T2 * T2 / 4.0
-            P[p, p + 1] += q * T2 * T / 2.0
-            P[p + 1, p] += q * T2 * T / 2.0
-            P[p + 1, p + 1] += q * T2
+    # cv_predict: x⁻ = F x, P⁻ = F P Fᵀ + Q
+    xt, p = load(x, P)
+    xt, p = predict_s(xt, p, T, q)
+    store(xt, p, x, P)
 
 
 @_jit
 def position_update(x, P, nx: float, ny: float, r00: float, r01: float, r11: float, K, V):
-    # core.filters.position: S = H P Hᵀ + R, K = P Hᵀ S⁻¹, x⁺ = x + K ν,
-    # P⁺ = P − K Uᵀ + (K S − U) Kᵀ with U = P Hᵀ (Joseph form multiplied out).
-    s00, s01, s11 = P[0, 0] + r00, P[0, 2] + r01, P[2, 2] + r11
-    det = s00 * s11 - s01 * s01
-    i00, i01, i11 = s11 / det, -s01 / det, s00 / det
-    for i in range(4):
-        u0, u1 = P[i, 0], P[i, 2]
-        K[i, 0] = u0 * i00 + u1 * i01
-        K[i, 1] = u0 * i01 + u1 * i11
-    for i in range(4):
-        V[i, 0] = K[i, 0] * s00 + K[i, 1] * s01 - P[i, 0]
-        V[i, 1] = K[i, 0] * s01 + K[i, 1] * s11 - P[i, 2]
-    for i in range(4):
-        x[i] += K[i, 0] * nx + K[i, 1] * ny
-    # U's columns are P's position columns: read them before P is overwritten.
-    for i in range(4):
-        for j in range(i, 4):
-            V[j, 2] = P[j, 0]
-            V[j, 3] = P[j, 2]
-    for i in range(4):
-        for j in range(i, 4):
-            u0, u1 = V[j, 2], V[j, 3]
-            P[i, j] = (
-                P[i, j] - (K[i, 0] * u0 + K[i, 1] * u1) + (V[i, 0] * K[j, 0] + V[i, 1] * K[j, 1])
-            )
-    for i in range(4):
-        for j in range(i):
-            P[i, j] = P[j, i]
+    # core.filters.position: the Joseph-form update by the innovation ν = (nx, ny), R
+    xt, p = load(x, P)
+    xt, p = position_update_s(xt, p, nx, ny, r00, r01, r11)
+    store(xt, p, x, P)
 
 
 @_jit
 def ukf_update(x, P, r, b, vr, vb, sx, sy, prm, L, Z, K, E):
-    # core.filters.polar_ukf: sigma points of (x⁻, P⁻) through the polar map, unscented S and
-    # Pxz, K = Pxz S⁻¹, x⁺ = x + K ν, and P⁺ in Joseph form, Σ_p Wc_p e_p e_pᵀ + K R Kᵀ with
-    # e_p = (χ_p − x⁻) − K d_p (a sum of semi-definite terms: it cannot turn indefinite).
-    c, wm0, wc0, w = prm[0], prm[1], prm[2], prm[3]
-    for j in range(4):  # lower Cholesky factor of c·P, semi-definite (semidefinite_cholesky)
-        d = c * P[j, j]
-        for k in range(j):
-            d -= L[j, k] * L[j, k]
-        tol = SEMIDEFINITE_RTOL * c * P[j, j]
-        null = abs(d) <= tol
-        if null:
-            d = 0.0
-        elif d < -tol:
-            d = math.nan  # indefinite beyond rounding: this track becomes NaN
-        d = sqrt(d)
-        L[j, j] = d
-        for i in range(j + 1, 4):
-            e = c * P[i, j]
-            for k in range(j):
-                e -= L[i, k] * L[j, k]
-            L[i, j] = 0.0 if null else e / d
-        for i in range(j):
-            L[i, j] = 0.0
-    px, py = x[0] - sx, x[2] - sy
-    r0, b0 = hypot(px, py), atan2(py, px)
-    # Z[p] = (range, bearing) of point p: 0 central, 1 + 2k = +column k, 2 + 2k = −column k
-    Z[0, 0], Z[0, 1] = r0, b0
-    for k in range(4):
-        for sgn in range(2):
-            f = 1.0 if sgn == 0 else -1.0
-            qx, qy = px + f * L[0, k], py + f * L[2, k]
-            Z[1 + 2 * k + sgn, 0] = hypot(qx, qy)
-            Z[1 + 2 * k + sgn, 1] = atan2(qy, qx)
-    zr = wm0 * r0
-    acc = 0.0
-    for p in range(1, 9):
-        zr += w * Z[p, 0]
-        acc += wrap(Z[p, 1] - b0)
-    zb = wrap(b0 + w * acc)
-    s00, s01, s11 = vr, 0.0, vb
-    for p in range(9):
-        wp = wc0 if p == 0 else w
-        dr, db = Z[p, 0] - zr, wrap(Z[p, 1] - zb)
-        Z[p, 0], Z[p, 1] = dr, db
-        s00 += wp * dr * dr
-        s01 += wp * dr * db
-        s11 += wp * db * db
-    det = s00 * s11 - s01 * s01
-    i00, i01, i11 = s11 / det, -s01 / det, s00 / det
-    nr, nb = r - zr, wrap(b - zb)
-    for i in range(4):  # Pxz = W Σ_k L[:, k] (d_k+ − d_k−)ᵀ, then K = Pxz S⁻¹
-        a0, a1 = 0.0, 0.0
-        for k in range(4):
-            a0 += L[i, k] * (Z[1 + 2 * k, 0] - Z[2 + 2 * k, 0])
-            a1 += L[i, k] * (Z[1 + 2 * k, 1] - Z[2 + 2 * k, 1])
-        a0 *= w
-        a1 *= w
-        K[i, 0] = a0 * i00 + a1 * i01
-        K[i, 1] = a0 * i01 + a1 * i11
-    for i in range(4):
-        x[i] += K[i, 0] * nr + K[i, 1] * nb
-    for i in range(4):  # the central point (e = −K d₀) and K R Kᵀ
-        E[i] = K[i, 0] * Z[0, 0] + K[i, 1] * Z[0, 1]
-    for i in range(4):
-        for j in range(i, 4):
-            P[i, j] = wc0 * E[i] * E[j] + vr * K[i, 0] * K[j, 0] + vb * K[i, 1] * K[j, 1]
-    for k in range(4):  # the points ± column k: e = ±L[:, k] − K d
-        for sgn in range(2):
-            p, f = 1 + 2 * k + sgn, 1.0 if sgn == 0 else -1.0
-            for i in range(4):
-                E[i] = f * L[i, k] - (K[i, 0] * Z[p, 0] + K[i, 1] * Z[p, 1])
-            for i in range(4):
-                for j in range(i, 4):
-                    P[i, j] += w * E[i] * E[j]
-    for i in range(4):
-        for j in range(i):
-            P[i, j] = P[j, i]
+    # core.filters.polar_ukf with prm = (c, Wm0, Wc0, W) (``UKFParams.weights``)
+    xt, p = load(x, P)
+    xt, p = ukf_update_s(xt, p, r, b, vr, vb, sx, sy, prm[0], prm[1], prm[2], prm[3])
+    store(xt, p, x, P)
 
 
 @_jit
 def doppler_update(x, P, vr_hat: float, b: float, var_vr: float, vb: float, K):
-    # core.filters.doppler: V̂r = û·v + e along the measured line of sight û = (cos β̂, sin β̂),
-    # var e = σVr² + σβ² ((g·v)² + gᵀ P_vv g), g = (−sin β̂, cos β̂); scalar Joseph form.
-    u0, u1 = cos(b), sin(b)
-    g0, g1 = -u1, u0
-    gv = g0 * x[1] + g1 * x[3]
-    gpg = g0 * g0 * P[1, 1] + g1 * g1 * P[3, 3] + 2.0 * g1 * g0 * P[3, 1]
-    r_e = var_vr + vb * (gv * gv + gpg)
-    for i in range(4):  # U = P hᵀ in column 2 of K, the gain in column 3
-        K[i, 2] = P[i, 1] * u0 + P[i, 3] * u1
-    S = u0 * K[1, 2] + u1 * K[3, 2] + r_e
-    nu = vr_hat - (u0 * x[1] + u1 * x[3])
-    for i in range(4):
-        K[i, 3] = K[i, 2] * (1.0 / S)
-        x[i] += K[i, 3] * nu
-    for i in range(4):
-        for j in range(i, 4):
-            a = P[i, j] - K[i, 3] * K[j, 2] + (K[i, 3] * S - K[i, 2]) * K[j, 3]
-            if i != j:
-                a = 0.5 * (a + P[j, i] - K[j, 3] * K[i, 2] + (K[j, 3] * S - K[j, 2]) * K[i, 3])
-            P[i, j] = a
-    for i in range(4):
-        for j in range(i):
-            P[i, j] = P[j, i]
-
-
-@_jit
-def filter_scans_2d(
-    code, start_code, r_scans, b_scans, vr_scans, doppler, first, last, sr, sb, svr, T, sa,
-    v0, sx, sy, c, wm0, wc0, w, x_state, P_state, xs, Ps, n_terms, truth, cos_los, sin_los,
-    terms,
-):  # fmt: skip
-    """Scans ``first … last − 1`` of every run; scan 0 starts a track from its plot (code
-    ``start_code``), later scans continue from ``x_state``/``P_state`` (updated in place).
-
-    Runs m < ``n_terms`` give their metric terms (``track_terms``) at each scan into
-    terms[:, n − first, m] (truth, cos_los, sin_los indexed by scan); the others their states
-    into xs[n − first, m − n_terms], Ps[…]."""
-    sr2, s, vr, vb, q = sr * sr, sb * sb, sr * sr, sb * sb, sa * sa
-    prm = np.array([c, wm0, wc0, w])
-    co, co_start = coefficients(code, s, sr2), coefficients(start_code, s, sr2)
-    K = np.empty((4, 4))
-    L = np.empty((4, 4))
-    Z = np.empty((9, 2))
-    x, P = np.empty(4), np.empty((4, 4))  # one track's state, in and out of the batch arrays
-    y, e, E = np.empty(4), np.empty(4), np.empty(4)
-    runs = r_scans.shape[1]
-    # Scan-major: at each scan the runs' states, measurements and outputs are walked in
-    # memory order (run-major walks stride through every scan's rows: 3× slower).
-    for n in range(first, last):
-        for m in range(runs):
-            r, b = r_scans[n, m], b_scans[n, m]
-            if n == 0:
-                zx, zy, r00, r01, r11 = convert(start_code, r, b, sr2, s, 0.0, 0.0, co_start)
-                start(x, P, zx + sx, zy + sy, r00, r01, r11, v0)
-            else:
-                for a in range(4):
-                    x[a] = x_state[m, a]
-                    for b_ in range(4):
-                        P[a, b_] = P_state[m, a, b_]
-                predict(x, P, T, q)
-                if code == 5:  # ekf: ν' = J ν and R' = J R Jᵀ at the prediction
-                    px, py = x[0] - sx, x[2] - sy
-                    rp = hypot(px, py)
-                    cb, sb_ = px / rp, py / rp
-                    nr, nb = r - rp, wrap(b - atan2(py, px))
-                    position_update(
-                        x,
-                        P,
-                        cb * nr - py * nb,
-                        sb_ * nr + px * nb,
-                        cb * cb * vr + py * py * vb,
-                        cb * sb_ * vr - px * py * vb,
-                        sb_ * sb_ * vr + px * px * vb,
-                        K,
-                        L,
-                    )
-                elif code == 6:
-                    ukf_update(x, P, r, b, vr, vb, sx, sy, prm, L, Z, K, E)
-                else:
-                    px, py = x[0] - sx, x[2] - sy
-                    zx, zy, r00, r01, r11 = convert(code, r, b, sr2, s, px, py, co)
-                    position_update(x, P, zx + sx - x[0], zy + sy - x[2], r00, r01, r11, K, L)
-                if doppler:
-                    doppler_update(x, P, vr_scans[n, m], b, svr * svr, vb, K)
-            for a in range(4):
-                x_state[m, a] = x[a]
-                for b_ in range(4):
-                    P_state[m, a, b_] = P[a, b_]
-            i = n - first
-            if m < n_terms:
-                track_terms(x, P, truth[n], cos_los[n, 0], sin_los[n, 0], terms, i, m, L, y, e)
-            else:
-                j = m - n_terms
-                for a in range(4):
-                    xs[i, j, a] = x[a]
-                    for b_ in range(4):
-                        Ps[i, j, a, b_] = P[a, b_]
+    # core.filters.doppler: the update by V̂r along the measured line of sight
+    xt, p = load(x, P)
+    xt, p = doppler_update_s(xt, p, vr_hat, b, var_vr, vb)
+    store(xt, p, x, P)
 
 
 @_jit
 def track_terms(x, P, t, c, s, out, k, m, L, y, e):
-    """The terms of one track at one scan into out[:, k, m] (``metric_terms_2d``): x (4,),
-    P (4, 4), t the (4,) truth, (c, s) the true line of sight."""
-    ex, ey = x[0] - t[0], x[2] - t[2]
-    pxx, pyy, pxy = P[0, 0], P[2, 2], P[0, 2]
-    out[0, k, m], out[1, k, m] = ex, ex * ex
-    out[2, k, m], out[3, k, m] = ey, ey * ey
-    out[4, k, m], out[5, k, m] = c * ex + s * ey, c * ey - s * ex
-    out[6, k, m], out[7, k, m] = pxx, pyy
-    out[8, k, m] = (pyy * ex * ex - 2.0 * pxy * ex * ey + pxx * ey * ey) / (pxx * pyy - pxy * pxy)
-    for i in range(4):
-        e[i] = x[i] - t[i]
-    total = 0.0
-    for i in range(4):  # eᵀ P⁻¹ e by the Cholesky factor (core.filters.state.quad_form_inv)
-        for j in range(i + 1):
-            acc = P[i, j]
-            for q in range(j):
-                acc -= L[i, q] * L[j, q]
-            if i == j:
-                L[i, i] = sqrt(acc) if acc >= 0.0 else np.nan
-            else:
-                L[i, j] = acc / L[j, j]
-        yi = e[i]
-        for q in range(i):
-            yi -= L[i, q] * y[q]
-        yi /= L[i, i]
-        y[i] = yi
-        total += yi * yi
-    out[9, k, m] = total
+    """The terms of one track at one scan into out[:, k, m]: x (4,), P (4, 4), t the (4,)
+    truth, (c, s) the true line of sight (``terms_s``; L, y, e unused scratch)."""
+    xt, p = load(x, P)
+    tm = terms_s(xt, p, (t[0], t[1], t[2], t[3]), c, s)
+    for a in range(10):
+        out[a, k, m] = tm[a]
+
+
+@_inline
+def _step(code, xt, p, r, b, vr_hat, doppler, sr2, s, svr2, T, q, sx, sy, co, c, wm0, wc0, w):
+    # one scan of a track: predict, the method's update, then Doppler's when V̂r is given
+    xt, p = predict_s(xt, p, T, q)
+    if code == 5:
+        xt, p = ekf_update_s(xt, p, r, b, sr2, s, sx, sy)
+    elif code == 6:
+        xt, p = ukf_update_s(xt, p, r, b, sr2, s, sx, sy, c, wm0, wc0, w)
+    else:
+        zx, zy, r00, r01, r11 = convert(code, r, b, sr2, s, xt[0] - sx, xt[2] - sy, co)
+        xt, p = position_update_s(xt, p, zx + sx - xt[0], zy + sy - xt[2], r00, r01, r11)
+    if doppler:
+        xt, p = doppler_update_s(xt, p, vr_hat, b, svr2, s)
+    return xt, p
 
 
 @_jit
-def metric_terms_2d(x, P, truth, cos_los, sin_los, out):
-    """``core.metrics.scan_terms`` compiled: the per-run terms of the running sums, out
-    (len(SUM_NAMES), K, m), of x (K, m, 4), P (K, m, 4, 4) against truth (K, 4), with the true
-    line of sight cos_los, sin_los (K, 1). NEES by the Cholesky factor of P, as
-    ``core.filters.state.quad_form_inv`` (NaN where P is not positive definite)."""
-    L = np.empty((4, 4))
-    y = np.empty(4)
-    e = np.empty(4)
-    for k in range(x.shape[0]):
-        for m in range(x.shape[1]):
-            track_terms(
-                x[k, m], P[k, m], truth[k], cos_los[k, 0], sin_los[k, 0], out, k, m, L, y, e
+def filter_scans_2d(
+    code, start_code, r_hat, b_hat, vr_hat, doppler, first, last, sr, sb, svr, T, sa,
+    v0, sx, sy, c, wm0, wc0, w, state, keep, xs, Ps, n_terms, truth, cos_los, sin_los,
+    group_sums, group_offset,
+):  # fmt: skip
+    """Scans ``first … last − 1`` of every run; scan 0 starts a track from its plot (code
+    ``start_code``), later scans continue from ``state`` (runs, 14): each run's x then the
+    upper entries of P (``load_row``), updated in place.
+
+    r_hat, b_hat, vr_hat: (m, N) measurements, one run a row (any memory layout). Runs
+    m < ``n_terms`` add their metric terms (``terms_s``) at scan n into
+    group_sums[g, n − first] ((G, K, 10)), g = (group_offset + m) mod G
+    (``core.confidence.group_sums``' dealing), in the order of m; with ``keep`` the others
+    write their states into xs[n − first, m − n_terms], Ps[…].
+
+    Run-major: a run's state stays in registers over the chunk's scans; the state goes
+    through memory once a chunk. (One loop, no call per run: a call's array arguments cost
+    a reference count each.)"""
+    sr2, s, q = sr * sr, sb * sb, sa * sa
+    svr2 = svr * svr
+    co, co_start = coefficients(code, s, sr2), coefficients(start_code, s, sr2)
+    groups = group_sums.shape[0]
+    for m in range(r_hat.shape[0]):
+        g = (group_offset + m) % groups
+        if first == 0:
+            zx, zy, r00, r01, r11 = convert(
+                start_code, r_hat[m, 0], b_hat[m, 0], sr2, s, 0.0, 0.0, co_start
             )
+            xt, p = start_s(zx + sx, zy + sy, r00, r01, r11, v0)
+        else:
+            xt, p = load_row(state, m)
+        for n in range(first, last):
+            if n > 0:
+                v = vr_hat[m, n] if doppler else 0.0
+                xt, p = _step(
+                    code, xt, p, r_hat[m, n], b_hat[m, n], v, doppler, sr2, s, svr2, T, q,
+                    sx, sy, co, c, wm0, wc0, w,
+                )  # fmt: skip
+            i = n - first
+            if m < n_terms:
+                t = (truth[n, 0], truth[n, 1], truth[n, 2], truth[n, 3])
+                tm = terms_s(xt, p, t, cos_los[n, 0], sin_los[n, 0])
+                for a in range(10):
+                    group_sums[g, i, a] += tm[a]
+            elif keep:
+                store_at(xt, p, xs, Ps, i, m - n_terms)
+        store_row(xt, p, state, m)

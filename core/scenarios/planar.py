@@ -91,6 +91,11 @@ def polar_measurements(
     """
     r, beta = polar_coordinates([truth[:, 0], truth[:, 2]])
     steps = truth.shape[0]
-    r_hat = r + sigma_r_m * rng.standard_normal((runs, steps))
-    beta_hat = beta + sigma_azimuth_rad * rng.standard_normal((runs, steps))
+    # r + σ v formed in the draws' own arrays (no temporaries; the same numbers bit for bit)
+    r_hat = rng.standard_normal((runs, steps))
+    r_hat *= sigma_r_m
+    r_hat += r
+    beta_hat = rng.standard_normal((runs, steps))
+    beta_hat *= sigma_azimuth_rad
+    beta_hat += beta
     return r_hat, beta_hat

@@ -16,6 +16,8 @@ Figures (ns per track-step = wall time / (runs × scans), one core):
   on the same measurements, best of three; ``compiled_speedup`` their ratio.
 * ``experiment_ns_per_step`` / ``experiment_over_filter``: the whole one-method Monte Carlo
   (measurements, compiled filter, statistics) per track-step, and its ratio to the filter.
+* ``per_method``: the engine against the compiled scalar reference and filterpy, per method,
+  and the all-method Monte Carlo against the filter alone (``viz_app.bench.per_method``).
 * ``one_thread_s`` / ``all_cores_s`` / ``parallel_efficiency``: the all-method Monte Carlo
   of ``parallel_runs`` runs on one thread and on every core (blocks over threads), with
   speed-up / cores; ``parallel_bit_identical`` checks the two results equal.
@@ -66,6 +68,7 @@ from radarviz.core.filters.run import run_scans
 from radarviz.core.filters.state import cv_init
 from radarviz.core.scenarios.planar import polar_measurements, prosov_target
 from radarviz.viz_app.bench.association import bench_association, format_association
+from radarviz.viz_app.bench.per_method import bench_filterpy_per_method, bench_per_method
 from radarviz.viz_app.runtime import peak_rss_mb
 from radarviz.viz_app.tune.params import SCENES
 from radarviz.viz_app.tune.serve import measure_tune_latency
@@ -361,10 +364,18 @@ def run_bench(
         kf.append(e2e)
         kf_only.append(only)
     engines = bench_engines(min(runs), config)
+    per_method = bench_per_method(config, min(runs))
+    fp_methods = bench_filterpy_per_method(config, filterpy_runs)
+    per_method["filterpy_runs"] = filterpy_runs
+    per_method["filterpy_ns_per_step"] = fp_methods
+    per_method["filterpy_over_engine"] = {
+        m: v / per_method["engine_filter_ns_per_step"][m] for m, v in fp_methods.items()
+    }
     parallel = bench_parallel(max(runs))
     return {
         **engines,
         **parallel,
+        "per_method": per_method,
         "runs": list(runs),
         "scans": config.target.steps,
         "block_runs": BLOCK_RUNS,
@@ -412,6 +423,31 @@ def format_bench(doc: dict[str, Any]) -> str:
             f"  {method:>7}: {v:6.1f} → {c:6.1f}  ({ratio:.1f}×);  whole Monte Carlo "
             f"(measurements, filter, statistics) {e:6.1f} = {over:.2f}× the filter"
         )
+    pm = doc["per_method"]
+    lines.append(
+        f"engine vs compiled scalar reference vs filterpy, {pm['per_method_runs']} runs × "
+        f"{doc['scans']} scans (filterpy {pm['filterpy_runs']} runs), ns per track-step, "
+        f"medians of {pm['per_method_repeats']} interleaved repeats:"
+    )
+    lines.append(
+        "   method   engine  reference  engine/ref   +metrics  metrics/ref   filterpy  "
+        "filterpy/engine"
+    )
+    for method, e in pm["engine_filter_ns_per_step"].items():
+        lines.append(
+            f"  {method:>11} {e:7.1f} {pm['reference_ns_per_step'][method]:10.1f} "
+            f"{pm['engine_over_reference'][method]:10.2f}× "
+            f"{pm['engine_metrics_ns_per_step'][method]:9.1f} "
+            f"{pm['metrics_over_reference'][method]:11.2f}× "
+            f"{pm['filterpy_ns_per_step'][method]:10.0f} "
+            f"{pm['filterpy_over_engine'][method]:14.0f}×"
+        )
+    lines.append(
+        f"whole Monte Carlo (all methods: measurements, filters, statistics), one thread: "
+        f"{pm['whole_run_ns_per_method_step']:.1f} ns per method-track-step = "
+        f"{pm['whole_run_over_filter']:.2f}× the filters alone "
+        f"({pm['filter_ns_per_method_step']:.1f})"
+    )
     lines.append(
         f"Prosov Monte Carlo, {doc['parallel_runs']} runs, all methods (blocks of "
         f"{doc['parallel_block']}): {doc['one_thread_s']:.2f} s on one thread, "
