@@ -39,14 +39,18 @@ from radarviz.core.filters.models import CVModel, IMMModel
 from radarviz.core.filters.state import CVBatch
 from radarviz.core.filters.step import Stage, cv_step
 from radarviz.core.params import ParameterError
+from radarviz.core.tracking.compiled import CompiledTracks, OutOfOrderError, PlotBlock, TrackBlock
 from radarviz.core.tracking.stream import (
     Plot,
     PlotError,
     StateRow,
     StreamOptions,
     as_6,
+    block_plots,
     check_methods,
+    plot_block,
     polar_arrays,
+    state_rows,
 )
 
 
@@ -184,11 +188,50 @@ class TargetTracker:
         }
         self._slot: dict[str, int] = {}
         self._time_s = np.zeros(0)
+        self._compiled: CompiledTracks | None = None
+        if options.compiled(three_d):
+            self._compiled = CompiledTracks(
+                self.methods,
+                options.sigma_a_mps2,
+                options.sigma_v0_mps,
+                options.use_doppler,
+                options.monitor,
+                track_name,
+            )
 
     @property
     def targets(self) -> tuple[str, ...]:
         """The targets seen so far, in order of their first plot."""
+        if self._compiled is not None:
+            return self._compiled.targets
         return tuple(self._slot)
+
+    @property
+    def engine(self) -> str:
+        """The engine the tracks run on (``StreamOptions.engine``, or numpy for a track the
+        compiled engine has no kernel for)."""
+        return "numpy" if self._compiled is None else "compiled"
+
+    def add_arrays(self, block: PlotBlock) -> TrackBlock:
+        """Filter a block given as arrays (the fast path: no ``Plot`` per row); returns every
+        method's posterior after each plot, x (B, M, n), P (B, M, n, n), n = 2·dims, in
+        ``methods`` order. A ``PlotError`` carries ``index`` (the plot's position)."""
+        if (block.elevation_rad is not None) != self.three_d:
+            raise PlotError("elevation_deg", "every plot of a 3D track needs an elevation")
+        if self._compiled is None:
+            tb = _stacked(self.add_block(block_plots(block)), 2 * self.dims)
+            slots = np.array([self._slot[t] for t in block.labels], dtype=np.intp)
+            return tb._replace(target=slots[block.target])
+        try:
+            return self._compiled.add(block)
+        except OutOfOrderError as exc:
+            target = block.labels[block.target[exc.index]]
+            raise PlotError(
+                "time_s",
+                f"target {target!r}: times must not decrease within a target (got "
+                f"{exc.time_s!r} after {exc.previous_s!r})",
+                index=exc.index,
+            ) from None
 
     def add_block(self, plots: list[Plot]) -> list[list[StateRow]]:
         """Filter a block of plots; returns, per plot, (method, x (6,), P (6, 6)) per method
@@ -201,6 +244,9 @@ class TargetTracker:
                 raise PlotError(
                     "elevation_deg", "every plot of a 3D track needs an elevation", index=i
                 )
+        if self._compiled is not None:
+            return state_rows(self.add_arrays(plot_block(plots)), self.methods)
+        for i, p in enumerate(plots):
             w = seen.get(p.target, 0)
             seen[p.target] = w + 1
             if w == len(waves):
@@ -291,3 +337,10 @@ class TargetTracker:
                 assert monitor is not None and stats is not None
                 for p, v in zip(sub, nis.tolist(), strict=True):
                     monitor.add(track_name(p.target, m), p.time_s, v, stats.dof)
+
+
+def _stacked(rows: list[list[StateRow]], n: int) -> TrackBlock:
+    """Rows of ``add_block`` as a ``TrackBlock`` of state size n (targets not filled in)."""
+    x = np.array([[x6[:n] for _, x6, _ in r] for r in rows]).reshape(len(rows), -1, n)
+    P = np.array([[P6[:n, :n] for _, _, P6 in r] for r in rows]).reshape(len(rows), -1, n, n)
+    return TrackBlock(x, P, np.zeros(len(rows), dtype=np.intp))
