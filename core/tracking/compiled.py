@@ -120,10 +120,18 @@ class CompiledTracks:
         self.last_t = np.zeros(0)
         self.feed = None if monitor is None else MonitorFeed(monitor, len(methods))
         self.name = name or (lambda target, method: method)
+        self._track_names: list[str] = []
 
     @property
     def targets(self) -> tuple[str, ...]:
         return tuple(self.slots)
+
+    def _names(self) -> list[str]:
+        """The monitor's name of every track t·M + j (extended as targets come)."""
+        have = len(self._track_names) // max(1, len(self.methods))
+        for t in list(self.slots)[have:]:
+            self._track_names.extend(self.name(t, m) for m in self.methods)
+        return self._track_names
 
     def _slots(self, labels: tuple[str, ...]) -> NDArray[np.intp]:
         """Each label's slot, new targets added (the state arrays grow by doubling)."""
@@ -195,7 +203,7 @@ class CompiledTracks:
                 out_nis[:done],
                 2 + has_vr[:done].astype(np.int64),
                 ~starts[:done],
-                [self.name(t, meth) for t in self.slots for meth in self.methods],
+                self._names(),
             )
         if bad >= 0:
             k = slot[bad]
@@ -223,7 +231,11 @@ class MonitorFeed:
         self.lo = np.array([b[0] for b in bands])
         self.hi = np.array([b[1] for b in bands])
         self.arrays: dict[str, NDArray[Any]] = {}
+        self.order: list[int] = []
+        self.names: list[str] = []
+        self.dirty = False
         self.grow(0)
+        monitor.feeds.append(self)
 
     _FLOAT = ("nis_sum", "total_nis", "first_exit")
     _INT = ("count", "dof_sum", "total_dof", "updates", "windows", "above", "below", "run_out")
@@ -235,6 +247,7 @@ class MonitorFeed:
             "ring_nis": np.zeros((t, self.w)),
             "ring_dof": np.zeros((t, self.w), dtype=np.int64),
             "left": np.zeros(t, dtype=np.bool_),
+            "seen": np.zeros(t, dtype=np.bool_),
             **{k: np.zeros(t) for k in self._FLOAT},
             **{k: np.zeros(t, dtype=np.int64) for k in self._INT},
         }
@@ -253,7 +266,8 @@ class MonitorFeed:
         names: list[str],
     ) -> None:
         """The updates (plots where ``update``) of a block's (B, M) NIS, in plot then method
-        order; ``names`` the monitor's name of every track t·M + j."""
+        order; ``names`` the monitor's name of every track t·M + j. Events go to the monitor
+        at once; the tracks' records when it is next read (``store``)."""
         from radarviz.core.tracking.kernels_monitor import monitor_updates
 
         m = self.m
@@ -262,33 +276,39 @@ class MonitorFeed:
         times = np.repeat(time_s[rows], m)
         dofs = np.repeat(dof[rows], m)
         vals = np.ascontiguousarray(nis[rows].ravel())
-        # The tracks in order of their first update (the monitor lists them so).
-        uniq, first = np.unique(track, return_index=True)
-        touched = uniq[np.argsort(first, kind="stable")]
-        self._load(touched, names)
-        u = track.size
-        ev = (
-            np.empty(u, np.int64),
-            np.empty(u),
-            np.empty(u, np.int64),
-            *(np.empty(u) for _ in "qlh"),
-        )
+        self.names = names
         a = self.arrays
+        # Tracks new to this feed, in order of their first update (the monitor lists them so).
+        fresh = ~a["seen"][track]
+        if fresh.any():
+            uniq, first = np.unique(track[fresh], return_index=True)
+            new = uniq[np.argsort(first, kind="stable")]
+            a["seen"][new] = True
+            self._load(new, names)
+            self.order.extend(new.tolist())
+        u = track.size
+        ev = (np.empty(u, np.int64), np.empty(u), np.empty(u, np.int64), np.empty(u))
+        ev = (*ev, np.empty(u), np.empty(u))
         n_ev = monitor_updates(
             track, _f(times), vals, dofs, self.w, self.monitor.sustain, self.lo, self.hi,
             a["ring_nis"], a["ring_dof"], a["count"], a["nis_sum"], a["dof_sum"],
             a["total_nis"], a["total_dof"], a["updates"], a["windows"], a["above"], a["below"],
             a["run_out"], a["left"], a["first_exit"], *ev,
         )  # fmt: skip
-        self._store(touched, names, ev, n_ev)
+        self.dirty = True
+        if n_ev:
+            self._events(ev, n_ev)
 
     def _load(self, tracks: NDArray[np.intp], names: list[str]) -> None:
-        """Tracks the monitor knows (from before this tracker) start from its records."""
+        """Tracks the monitor knows (from before this feed) start from its records."""
+        self.monitor._sync()
         known = self.monitor._tracks
+        if not known:
+            return
         a = self.arrays
         for t in tracks.tolist():
             rec = known.get(names[t])
-            if rec is None or a["updates"][t] == rec.updates:
+            if rec is None:
                 continue
             win = list(rec.window)
             a["count"][t] = len(win)
@@ -300,37 +320,49 @@ class MonitorFeed:
                 a[k][t] = getattr(rec, k)
             a["first_exit"][t] = np.nan if rec.first_exit_s is None else rec.first_exit_s
 
-    def _store(self, tracks: NDArray[np.intp], names: list[str], ev: tuple, n_ev: int) -> None:
-        from collections import deque
+    def _events(self, ev: tuple, n_ev: int) -> None:
+        from radarviz.core.tracking.consistency import ConsistencyEvent
 
-        from radarviz.core.tracking.consistency import ConsistencyEvent, _Track
-
-        mon, a = self.monitor, self.arrays
-        # Events first, in order (a track first seen in this block is created by its first
-        # update, which comes before its first event).
-        pending = []
+        mon = self.monitor
         for e in range(n_ev):
-            t = int(ev[0][e])
-            q, lo, hi = float(ev[3][e]), float(ev[4][e]), float(ev[5][e])
             kind = "leaves" if ev[2][e] else "returns"
-            pending.append(ConsistencyEvent(names[t], float(ev[1][e]), kind, q, lo, hi))
-        for t in tracks.tolist():
-            rec = mon._tracks.setdefault(names[t], _Track())
-            c = int(a["count"][t])
-            rec.window = deque(
-                zip(a["ring_nis"][t, :c].tolist(), a["ring_dof"][t, :c].tolist(), strict=True)
+            event = ConsistencyEvent(
+                self.names[int(ev[0][e])],
+                float(ev[1][e]),
+                kind,
+                float(ev[3][e]),
+                float(ev[4][e]),
+                float(ev[5][e]),
             )
-            for k in ("nis_sum", "total_nis"):
-                setattr(rec, k, float(a[k][t]))
-            for k in ("dof_sum", "total_dof", "updates", "windows", "above", "below", "run_out"):
-                setattr(rec, k, int(a[k][t]))
-            rec.left = bool(a["left"][t])
-            fe = float(a["first_exit"][t])
-            rec.first_exit_s = None if np.isnan(fe) else fe
-        for event in pending:
             mon.events.append(event)
             if mon.on_event is not None:
                 mon.on_event(event)
+
+    def store(self) -> None:
+        """Write every track's state into the monitor's records (``ConsistencyMonitor``
+        calls this before it reads them)."""
+        from collections import deque
+
+        from radarviz.core.tracking.consistency import _Track
+
+        if not self.dirty:
+            return
+        self.dirty = False
+        mon, a, names = self.monitor, self.arrays, self.names
+        cols = {k: a[k][self.order].tolist() for k in self._FLOAT + self._INT + ("left",)}
+        for i, t in enumerate(self.order):
+            rec = mon._tracks.setdefault(names[t], _Track())
+            c = cols["count"][i]
+            rec.window = deque(
+                zip(a["ring_nis"][t, :c].tolist(), a["ring_dof"][t, :c].tolist(), strict=True)
+            )
+            for k in ("nis_sum", "total_nis", "dof_sum", "total_dof", "updates", "windows"):
+                setattr(rec, k, cols[k][i])
+            for k in ("above", "below", "run_out"):
+                setattr(rec, k, cols[k][i])
+            rec.left = bool(cols["left"][i])
+            fe = cols["first_exit"][i]
+            rec.first_exit_s = None if fe != fe else fe
 
 
 @functools.cache

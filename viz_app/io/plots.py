@@ -256,31 +256,45 @@ class PlotReader:
         #: The file labels its plots' targets (a ``target`` column): many targets.
         self.targets = "target" in header
 
+        #: Validation state carried from row to row (and block to block, ``PlotBlockReader``):
+        #: the previous time, of each target with a target column, and the plots so far.
+        self.last_t = -math.inf
+        self.last_of: dict[str, float] = {}
+        self.count = 0
+
     def __iter__(self) -> Iterator[tuple[int, Plot]]:
-        source, radars, reader, header = self.source, self.radars, self._reader, self.header
+        yield from self.plots(self._reader, 0)
+        if self.count == 0:
+            raise ParameterError(f"{self.source}: no plots after the header")
+
+    def plots(self, reader: Any, first_line: int) -> Iterator[tuple[int, Plot]]:
+        """The validated plots of the rows of a ``csv.reader`` whose line 1 is the file's
+        line ``first_line`` + 1 (0: the reader is the file's, header read)."""
+        source, radars, header = self.source, self.radars, self.header
         idx = {h: i for i, h in enumerate(header)}
         i_t, i_radar, i_r, i_az = (idx[h] for h in REQUIRED_COLUMNS)
         i_el = idx.get("elevation_deg")
         i_vr = idx.get("radial_velocity_mps")
         i_target = idx.get("target")
         width = len(header)
-        last_t = -math.inf
+        last_t = self.last_t
         # With a target column, times need only not decrease within each target.
-        last_of: dict[str, float] = {}
+        last_of = self.last_of
         target = ""
-        count = 0
         while True:
             try:
                 row = next(reader, None)
             except UnicodeDecodeError:
                 raise ParameterError(
-                    f"{source} line {reader.line_num + 1}: not UTF-8 text"
+                    f"{source} line {first_line + reader.line_num + 1}: not UTF-8 text"
                 ) from None
             except csv.Error as exc:
-                raise ParameterError(f"{source} line {reader.line_num}: {exc}") from None
+                raise ParameterError(
+                    f"{source} line {first_line + reader.line_num}: {exc}"
+                ) from None
             if row is None:
                 break
-            line = reader.line_num
+            line = first_line + reader.line_num
             if not row or (len(row) == 1 and not row[0].strip()):
                 continue  # blank line
             where = f"{source} line {line}"
@@ -355,10 +369,10 @@ class PlotReader:
                         f"radar {name!r} has no sigma_radial_velocity_mps in the radars file",
                         row[i_vr],
                     )
-            last_t = t
+            last_t = self.last_t = t
             if i_target is not None:
                 last_of[target] = t
-            count += 1
+            self.count += 1
             yield (
                 line,
                 Plot(
@@ -376,8 +390,6 @@ class PlotReader:
                     target,
                 ),
             )
-        if count == 0:
-            raise ParameterError(f"{source}: no plots after the header")
 
 
 def track_columns(targets: bool) -> tuple[str, ...]:
@@ -660,6 +672,8 @@ def run_track(
     options = options or StreamOptions()
     radars = load_radars(radars_path)
     start = time.perf_counter()
+    if observer is None and options.init == "first-plot" and not options.finite_memory_k:
+        return _run_track_blocks(input_path, radars, out_path, methods, options, start)
     with ExitStack() as stack:
         stack.enter_context(commit_together())  # the tracks and the recording: both or neither
         src = bounded_lines(stack.enter_context(_open_input(input_path)), input_path)
@@ -693,6 +707,33 @@ def run_track(
                 "init_k",
             )
     return TrackSummary(plots, written, three_d, tuple(used), time.perf_counter() - start, targets)
+
+
+def _run_track_blocks(
+    input_path: str,
+    radars: dict[str, Radar],
+    out_path: str,
+    methods: tuple[str, ...] | None,
+    options: StreamOptions,
+    start: float,
+) -> TrackSummary:
+    """``run_track`` without a recording: read, tracked and written in blocks of columns
+    (``viz_app.io.plot_blocks``; the tracks ``track_lines`` gives, to rounding)."""
+    from radarviz.viz_app.io.plot_blocks import BlockWriter, PlotBlockReader, track_blocks
+
+    with ExitStack() as stack:
+        fh = stack.enter_context(_open_input(input_path))
+        reader = PlotBlockReader(fh, input_path, radars)
+        three_d = reader.reader.three_d
+        if methods is None:
+            methods = METHODS_3D if three_d else ALL_METHODS
+        out = stack.enter_context(atomic_write(out_path, "wb"))
+        writer = BlockWriter(out, reader.reader.targets, tuple(methods), f"track: {input_path}")
+        plots, targets = track_blocks(reader, tuple(methods), options, writer.add)
+        writer.close()
+    return TrackSummary(
+        plots, writer.rows, three_d, tuple(methods), time.perf_counter() - start, targets
+    )
 
 
 # --------------------------------------------------------------------------------------------
