@@ -3,8 +3,9 @@ arrays, one compiled pass per block (``core.filters.kernels_track``).
 
 ``core.tracking.targets.TargetTracker`` and ``core.tracking.stream.StreamTracker`` run here
 when their options ask for ``engine="compiled"`` (the default) and the track is one the
-kernel has: 2D, the constant-velocity model, the first-plot start, no finite-memory track.
-Everything else (3D, the IMM, the finite-memory start and track) stays on the numpy engine,
+kernels have: 2D (``core.filters.kernels_track``) or 3D (``core.filters.kernels_3d``), every
+method, Doppler, the constant-velocity model, the first-plot start, no finite-memory track.
+The rest (the IMM, the finite-memory start and track) stays on the numpy engine,
 which is also the reference these tracks are checked against (``tests/test_track_compiled.py``,
 to 1e-9 relative).
 
@@ -28,7 +29,7 @@ from radarviz.core.filters.polar_ukf import UKFParams
 from radarviz.core.tracking.consistency import ConsistencyMonitor, nis_band
 
 #: The dimensions the compiled tracker has a kernel for.
-COMPILED_DIMS: tuple[int, ...] = (2,)
+COMPILED_DIMS: tuple[int, ...] = (2, 3)
 
 
 class RadarTable(NamedTuple):
@@ -91,7 +92,8 @@ class CompiledTracks:
     """Every method's track of every target on the compiled engine (module docstring).
 
     Args:
-        methods: 2D methods (``core.filters.compiled.COMPILED_METHODS``).
+        methods: from ``core.filters.compiled.COMPILED_METHODS`` (every method, 2D and 3D).
+        dims: 2 or 3 (``COMPILED_DIMS``).
         sigma_a_mps2, sigma_v0_mps, use_doppler: as ``StreamOptions``.
         monitor: fed every update's NIS (track names ``name(target, method)``), or None.
         name: the monitor's track name of (target, method).
@@ -100,6 +102,7 @@ class CompiledTracks:
     def __init__(
         self,
         methods: tuple[str, ...],
+        dims: int,
         sigma_a_mps2: float,
         sigma_v0_mps: float,
         use_doppler: bool,
@@ -111,11 +114,13 @@ class CompiledTracks:
         self.start_codes = np.array([START_CODES[m] for m in methods], dtype=np.int64)
         self.sigma_a, self.sigma_v0 = float(sigma_a_mps2), float(sigma_v0_mps)
         self.use_doppler = bool(use_doppler)
-        self.prm = np.array(UKFParams().weights(4), dtype=np.float64)
+        self.dims = int(dims)
+        ns = 2 * self.dims  # the state size
+        self.prm = np.array(UKFParams().weights(ns), dtype=np.float64)
         self.slots: dict[str, int] = {}
         m = len(methods)
-        self.xs = np.zeros((0, m, 4))
-        self.Ps = np.zeros((0, m, 4, 4))
+        self.xs = np.zeros((0, m, ns))
+        self.Ps = np.zeros((0, m, ns, ns))
         self.started = np.zeros(0, dtype=np.bool_)
         self.last_t = np.zeros(0)
         self.feed = None if monitor is None else MonitorFeed(monitor, len(methods))
@@ -150,7 +155,7 @@ class CompiledTracks:
         return ids
 
     def add(self, block: PlotBlock) -> TrackBlock:
-        """Filter a 2D block in order; raises ``OutOfOrderError`` at a plot earlier than its
+        """Filter a block in order; raises ``OutOfOrderError`` at a plot earlier than its
         target's previous one (the plots before it are filtered, it and later ones not)."""
         slot = self._slots(block.labels)[block.target]
         n, m = len(block), len(self.methods)
@@ -160,23 +165,27 @@ class CompiledTracks:
             has_vr[:] = False
         vr = np.zeros(n) if vr is None else vr
         rd = block.radars
-        out_x = np.empty((n, m, 4))
-        out_P = np.empty((n, m, 4, 4))
+        ns = 2 * self.dims
+        out_x = np.empty((n, m, ns))
+        out_P = np.empty((n, m, ns, ns))
         out_nis = np.empty((n, m))
         new = ~self.started[slot] if self.feed is not None else None
-        bad = _track_kernel()(
+        plot = [_f(block.time_s), _f(block.range_m), _f(block.azimuth_rad)]
+        noise = [_f(rd.sigma_r_m), _f(rd.sigma_azimuth_rad)]
+        if self.dims == 3:
+            assert block.elevation_rad is not None
+            plot.append(_f(block.elevation_rad))
+            noise.append(_f(rd.sigma_elevation_rad))
+        bad = _track_kernel(self.dims)(
             self.codes,
             self.start_codes,
             slot,
-            _f(block.time_s),
-            _f(block.range_m),
-            _f(block.azimuth_rad),
+            *plot,
             _f(vr),
             has_vr,
             np.ascontiguousarray(block.radar, dtype=np.intp),
-            np.ascontiguousarray(rd.site_m[:, :2], dtype=np.float64),
-            _f(rd.sigma_r_m),
-            _f(rd.sigma_azimuth_rad),
+            np.ascontiguousarray(rd.site_m[:, : self.dims], dtype=np.float64),
+            *noise,
             _f(rd.sigma_radial_velocity_mps),
             self.sigma_a,
             self.sigma_v0,
@@ -201,7 +210,7 @@ class CompiledTracks:
                 slot[:done],
                 block.time_s[:done],
                 out_nis[:done],
-                2 + has_vr[:done].astype(np.int64),
+                self.dims + has_vr[:done].astype(np.int64),
                 ~starts[:done],
                 self._names(),
             )
@@ -366,8 +375,13 @@ class MonitorFeed:
 
 
 @functools.cache
-def _track_kernel() -> Callable[..., int]:
-    """The compiled tracker kernel, compiled (or loaded from numba's cache) on first use."""
+def _track_kernel(dims: int) -> Callable[..., int]:
+    """The compiled tracker kernel of ``dims`` (2 or 3), compiled (or loaded from numba's
+    cache) on first use."""
+    if dims == 3:
+        from radarviz.core.filters.kernels_3d import track_plots_3d
+
+        return track_plots_3d
     from radarviz.core.filters.kernels_track import track_plots_2d
 
     return track_plots_2d

@@ -274,7 +274,7 @@ class StreamOptions:
         monitor: a consistency monitor fed every update's NIS, track name = method
             (``core.tracking.consistency``), or None.
         engine: ``"compiled"`` (``core.tracking.compiled``: one compiled pass per block of
-            plots, for the tracks it has a kernel for: 2D, ``cv``, the first-plot start, no
+            plots, for the tracks it has a kernel for: 2D or 3D, ``cv``, the first-plot start, no
             finite-memory track; the others run on numpy) or ``"numpy"`` (the reference).
     """
 
@@ -355,7 +355,7 @@ class StreamTracker:
         self._compiled = None
         if o.compiled(three_d) and o.init == "first-plot" and not o.finite_memory_k:
             self._compiled = CompiledTracks(
-                self.methods, o.sigma_a_mps2, o.sigma_v0_mps, o.use_doppler, o.monitor
+                self.methods, dims, o.sigma_a_mps2, o.sigma_v0_mps, o.use_doppler, o.monitor
             )
         self._started = False
         self._fm_window: list[Plot] = []

@@ -192,6 +192,7 @@ class TargetTracker:
         if options.compiled(three_d):
             self._compiled = CompiledTracks(
                 self.methods,
+                self.dims,
                 options.sigma_a_mps2,
                 options.sigma_v0_mps,
                 options.use_doppler,
