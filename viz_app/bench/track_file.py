@@ -2,13 +2,13 @@
 
 ``air_traffic_file`` writes a measurement file of ``targets`` aircraft flying straight at
 constant speed (random start, heading and speed 100–300 m/s, within 20–180 km of the first
-radar), seen by ``radars`` radars with staggered scans of period 5 s: each scan of each
-radar gives one plot of every target, with noise σr, σβ (σε in 3D) and a radial velocity
-(σVr) in 3D. Plots are in time order, targets interleaved; written with pyarrow's CSV writer
-a scan at a time (the file can be larger than the memory the tracker may use).
+radar), seen by two radars with staggered scans of period 5 s: each scan of each radar gives
+one plot of every target, with noise σr, σβ (σε in 3D) and, in 3D, a radial velocity (σVr);
+a 2D file is the same scene in the x–y plane. Plots are in time order, targets interleaved,
+written with pyarrow's CSV writer a scan at a time.
 
-``time_track`` runs ``radarviz track`` on it in a fresh process (so the peak memory is the
-command's own), and returns the wall time and the peak resident memory.
+``time_track`` runs ``radarviz track`` on it in a fresh process (so the peak memory and the
+CPU time are the command's own) and returns them with the wall time.
 """
 
 from __future__ import annotations
@@ -18,6 +18,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -54,6 +55,8 @@ def air_traffic_file(
                 # Targets swept in azimuth order within a scan: 1 ms apart.
                 t = n * PERIOD_S + g * PERIOD_S / n_radars + 1e-3 * np.arange(targets)
                 pos = p0 + v * t[:, None] - np.asarray(site)
+                if not three_d:  # a 2D file: the plane of the radars
+                    pos[:, 2] = 0.0
                 r = np.linalg.norm(pos, axis=1)
                 cols = {
                     "time_s": t,
@@ -95,16 +98,24 @@ def air_traffic_file(
     return written
 
 
-def time_track(
-    meas: Path, radars: Path, out: Path, extra: tuple[str, ...] = ()
-) -> tuple[float, float]:
-    """Wall time (s) and peak resident memory (MB) of ``radarviz track`` on the file, in a
-    fresh process (numba's cached kernels loaded, not compiled: a first run compiles)."""
+class TrackRun(NamedTuple):
+    """One ``radarviz track`` run: wall time and CPU time (user + system) in s, peak resident
+    memory in MB."""
+
+    wall_s: float
+    cpu_s: float
+    peak_rss_mb: float
+
+
+def time_track(meas: Path, radars: Path, out: Path, extra: tuple[str, ...] = ()) -> TrackRun:
+    """``radarviz track`` on the file in a fresh process (so the memory and CPU time are the
+    command's own; numba's cached kernels are loaded, not compiled: a first run compiles)."""
     code = (
         "import resource, sys\n"
         "from radarviz.viz_app.cli.main import main\n"
         "rc = main(sys.argv[1:])\n"
-        "print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, file=sys.stderr)\n"
+        "u = resource.getrusage(resource.RUSAGE_SELF)\n"
+        "print(u.ru_utime + u.ru_stime, u.ru_maxrss, file=sys.stderr)\n"
         "sys.exit(rc)\n"
     )
     cmd = [sys.executable, "-c", code, "track"]
@@ -112,5 +123,5 @@ def time_track(
     t0 = time.perf_counter()
     done = subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     wall = time.perf_counter() - t0
-    peak_kb = int(done.stderr.decode().strip().splitlines()[-1])
-    return wall, peak_kb / 1024.0
+    cpu, peak_kb = done.stderr.decode().strip().splitlines()[-1].split()
+    return TrackRun(wall, float(cpu), int(peak_kb) / 1024.0)

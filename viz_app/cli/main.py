@@ -235,6 +235,12 @@ def build_parser() -> argparse.ArgumentParser:
         default=1000,
         help="targets of the many-target tracker figure (default 1000)",
     )
+    bench.add_argument(
+        "--track-plots",
+        type=integer,
+        default=1_000_000,
+        help="plots of the radarviz track figure's air-traffic file (default 1000000)",
+    )
     return parser
 
 
@@ -390,6 +396,7 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         check_int("--runs", m, low=100, high=10_000_000)
     check_int("--filterpy-runs", args.filterpy_runs, low=1, high=100_000)
     check_int("--targets", args.targets, low=1, high=100_000)
+    check_int("--track-plots", args.track_plots, low=1000, high=10_000_000)
     if args.device == "gpu":
         from radarviz.viz_app.bench.device import NoGPUError, bench_gpu, format_gpu
 
@@ -404,7 +411,12 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     from radarviz.viz_app.runtime import tune_allocator
 
     tune_allocator()
-    doc = run_bench(runs=args.runs, filterpy_runs=args.filterpy_runs, targets=args.targets)
+    doc = run_bench(
+        runs=args.runs,
+        filterpy_runs=args.filterpy_runs,
+        targets=args.targets,
+        track_plots=args.track_plots,
+    )
     check_finite_document("bench", doc, nonnegative=True)  # times, rates and ratios
     print_report(doc, args.json, format_bench)
     return 0

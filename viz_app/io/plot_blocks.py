@@ -45,8 +45,9 @@ from radarviz.viz_app.io.plots import (
     track_columns,
 )
 
-#: Bytes of the measurement file read and tracked at a time (≈ 2·10⁴ plots of ~50 bytes).
-BLOCK_BYTES = 1 << 20
+#: Bytes of the measurement file read and tracked at a time (≈ 2 500 plots of ~50 bytes: the
+#: block, its tracks and their text are most of the command's memory above its libraries).
+BLOCK_BYTES = 1 << 17
 #: Most threads that format the track file's numbers (pyarrow's formatting is most of the
 #: time of ``radarviz track``).
 WRITE_THREADS = 4
