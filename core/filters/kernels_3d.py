@@ -102,8 +102,9 @@ def convert_3d(code, r, b, el, sr2, sb2, se2, px, py, pz, z, R, mb, me, tmp):
         je = (je0, je1, je2)
         uu = (u0, u1, u2)
         for i in range(3):
-            for j in range(3):
+            for j in range(i, 3):
                 R[i, j] = sr2 * uu[i] * uu[j] + sb2 * jb[i] * jb[j] + se2 * je[i] * je[j]
+                R[j, i] = R[i, j]  # exactly symmetric (products in one order)
         return
     if code == 1 or code == 2:
         if code == 1:  # seed: the naive point + Prosov's second-order term (eq. 10's sign)
@@ -129,8 +130,9 @@ def convert_3d(code, r, b, el, sr2, sb2, se2, px, py, pz, z, R, mb, me, tmp):
         given_truth_cov(rp, atan2(py, px), atan2(pz, rho), sr2, sb2, se2, R, mb, me)
     kap = (k_xy, k_xy, k_z)
     for i in range(3):
-        for j in range(3):
+        for j in range(i, 3):
             R[i, j] = kap[i] * R[i, j] * kap[j]
+            R[j, i] = R[i, j]
 
 
 @_jit
@@ -257,8 +259,9 @@ def ekf_measurement_3d(x, r, b, el, sr2, sb2, se2, sx, sy, sz, nu, R):
     nr, nb, ne = r - rp, wrap(b - bp), el - ep
     for i in range(3):
         nu[i] = u[i] * nr + jb[i] * nb + je[i] * ne
-        for j in range(3):
+        for j in range(i, 3):
             R[i, j] = u[i] * u[j] * sr2 + jb[i] * jb[j] * sb2 + je[i] * je[j] * se2
+            R[j, i] = R[i, j]
 
 
 @_jit

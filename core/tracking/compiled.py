@@ -66,7 +66,9 @@ class PlotBlock(NamedTuple):
     target: NDArray[np.intp]
     labels: tuple[str, ...]
 
-    def __len__(self) -> int:
+    @property
+    def size(self) -> int:
+        """B, the plots of the block (``len`` is the tuple's, as for any NamedTuple)."""
         return int(self.time_s.shape[0])
 
 
@@ -158,7 +160,7 @@ class CompiledTracks:
         """Filter a block in order; raises ``OutOfOrderError`` at a plot earlier than its
         target's previous one (the plots before it are filtered, it and later ones not)."""
         slot = self._slots(block.labels)[block.target]
-        n, m = len(block), len(self.methods)
+        n, m = block.size, len(self.methods)
         vr = block.radial_velocity_mps
         has_vr = np.zeros(n, dtype=np.bool_) if vr is None else ~np.isnan(vr)
         if not self.use_doppler:

@@ -573,7 +573,7 @@ def block_plots(block: PlotBlock) -> list[Plot]:
     rd = block.radars
     el, vr = block.elevation_rad, block.radial_velocity_mps
     out = []
-    for i in range(len(block)):
+    for i in range(block.size):
         g = int(block.radar[i])
         v = None if vr is None or np.isnan(vr[i]) else float(vr[i])
         out.append(

@@ -23,7 +23,7 @@ import csv
 import io
 from collections.abc import Callable, Iterator
 from concurrent.futures import Future
-from typing import IO, Any, NamedTuple
+from typing import IO, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -48,8 +48,8 @@ from radarviz.viz_app.io.plots import (
 #: Bytes of the measurement file read and tracked at a time (≈ 2 500 plots of ~50 bytes: the
 #: block, its tracks and their text are most of the command's memory above its libraries).
 BLOCK_BYTES = 1 << 17
-#: Most threads that format the track file's numbers (pyarrow's formatting is most of the
-#: time of ``radarviz track``).
+#: Most threads that format the track file's numbers (the formatting is most of the time of
+#: ``radarviz track``).
 WRITE_THREADS = 4
 _NUMERIC = ("time_s", "range_m", "azimuth_deg", "elevation_deg", "radial_velocity_mps")
 
@@ -131,7 +131,7 @@ class PlotBlockReader:
     def _block(self, chunk: bytes, line: int) -> Iterator[LinedBlock]:
         fast = self._fast(chunk, line)
         if fast is not None:
-            self.reader.count += len(fast.plots)
+            self.reader.count += fast.plots.size
             yield fast
             return
         # Row by row, with ``bounded_lines``' checks on each line: the exact errors.
@@ -270,9 +270,19 @@ class PlotBlockReader:
 _STATE_COLS = [k for _, k in _COMPONENTS]  # index into (x, ẋ, y, ẏ, z, ż) per column
 
 
+def _quoted(text: str) -> bytes:
+    """A text cell as pyarrow's writer quotes it (always, inner quotes doubled)."""
+    return b'"' + text.replace('"', '""').encode("utf-8") + b'"'
+
+
 class BlockWriter:
-    """The track file written one block of plots at a time as a pyarrow table (the same
-    columns and number formatting as ``viz_app.io.plots.TrackWriter``).
+    """The track file written one block of plots at a time (the columns and the number
+    formatting of ``viz_app.io.plots.TrackWriter``, pyarrow's, byte for byte).
+
+    The rows are formatted by the compiled ``viz_app.io.csv_text.format_rows`` (Ryū's
+    shortest round-trip digits, in pyarrow's layout; 2× pyarrow's speed), a block's rows split
+    over ``WRITE_THREADS`` threads (the kernel releases the GIL) while the next block is read
+    and tracked, and written in order.
 
     Args:
         fh: the binary file (``atomic_write``'s).  targets: with a ``target`` column.
@@ -292,48 +302,57 @@ class BlockWriter:
         n = max(1, min(WRITE_THREADS, available_cores()))
         self._workers = [ThreadPoolExecutor(1) for _ in range(n)]
         self._pending: list[Future[bytes]] = []
+        self._methods = [_quoted(m) for m in methods]
 
     def add(self, block: PlotBlock, tracks: TrackBlock) -> None:
         """One block's plots and every method's posterior after each (B, M, n)."""
-        import pyarrow as pa
-
         b, m, n = tracks.x.shape
-        # Component-major copies: each output column is one contiguous row.
-        xt = np.ascontiguousarray(tracks.x.reshape(b * m, n).T)
-        Pt = np.ascontiguousarray(tracks.P.reshape(b * m, n * n).T)
-        zero = np.zeros(b * m)
-        state = [xt[k] if k < n else zero for k in _STATE_COLS]
-        cov = [
-            Pt[i * n + j] if i < n and j < n else zero
-            for i, j in ((_COMPONENTS[p][1], _COMPONENTS[q][1]) for p, q in _PAIRS)
-        ]
+        rows = b * m
+        # Component-major: each output column one contiguous row of ``columns``.
+        xt = tracks.x.reshape(rows, n).T
+        Pt = tracks.P.reshape(rows, n * n).T
         self._check(block, tracks, xt, Pt)
-        method_col = pa.DictionaryArray.from_arrays(
-            pa.array(np.tile(np.arange(m, dtype=np.int32), b)), pa.array(list(self.methods))
-        ).cast(pa.string())
-        text = []
-        if self.targets:
-            labels = pa.array(list(block.labels), pa.string())
-            idx = pa.array(np.repeat(block.target.astype(np.int32), m))
-            text = [pa.DictionaryArray.from_arrays(idx, labels).cast(pa.string())]
-        columns = [
-            pa.array(np.repeat(block.time_s, m)),
-            *text,
-            method_col,
-            *(pa.array(v) for v in state + cov),
-        ]
-        table = pa.Table.from_arrays(columns, names=list(self.columns))
+        columns = np.zeros((len(_STATE_COLS) + len(_PAIRS), rows))
+        for c, k in enumerate(_STATE_COLS):
+            if k < n:
+                columns[c] = xt[k]
+        for c, (p, q) in enumerate(_PAIRS, start=len(_STATE_COLS)):
+            i, j = _COMPONENTS[p][1], _COMPONENTS[q][1]
+            if i < n and j < n:
+                columns[c] = Pt[i * n + j]
+        # The text cells: the block's labels, then the methods, each quoted once.
+        cells = ([_quoted(t) for t in block.labels] if self.targets else []) + self._methods
+        text = np.frombuffer(b"".join(cells), dtype=np.uint8)
+        start = np.zeros(len(cells) + 1, dtype=np.int64)
+        start[1:] = np.cumsum([len(c) for c in cells])
+        method_of = np.tile(np.arange(m, dtype=np.int64), b) + (len(cells) - m)
+        text_of = (
+            np.stack([np.repeat(block.target.astype(np.int64), m), method_of])
+            if self.targets
+            else method_of[None]
+        )
+        widest = max(len(c) for c in cells)
         self._drain()
-        header = self.rows == 0
-        self.rows += b * m
-        # pyarrow formats the numbers without the GIL: the block's slices are formatted on
-        # the pool's threads while the next block is read and tracked; written in order.
+        if self.rows == 0:
+            self.fh.write(b",".join(_quoted(c) for c in self.columns) + b"\n")
+        self.rows += rows
         k = len(self._workers)
-        step = -(-table.num_rows // k)
+        step = -(-rows // k)
+        step += (-step) % m  # slices of whole plots (a plot's rows share its time)
+        times = np.ascontiguousarray(block.time_s, dtype=np.float64)
         self._pending = [
-            pool.submit(_csv_bytes, table.slice(i * step, step), header and i == 0)
+            pool.submit(
+                _format,
+                times[i * step // m : (i + 1) * step // m],
+                m,
+                text,
+                start,
+                np.ascontiguousarray(text_of[:, i * step : (i + 1) * step]),
+                np.ascontiguousarray(columns[:, i * step : (i + 1) * step]),
+                widest,
+            )
             for i, pool in enumerate(self._workers)
-            if i * step < table.num_rows
+            if i * step < rows
         ]
 
     def _drain(self) -> None:
@@ -363,15 +382,29 @@ class BlockWriter:
                 pool.shutdown(wait=True, cancel_futures=True)
 
 
-def _csv_bytes(table: Any, header: bool) -> bytes:
-    """``table`` as CSV bytes (pyarrow's writer: shortest round-trip floats, text quoted)."""
-    import pyarrow as pa
-    import pyarrow.csv as pcsv
+#: Most bytes of one formatted float ("-1.2345678901234567e-308").
+_FLOAT_BYTES = 24
 
-    sink = pa.BufferOutputStream()
-    options = pcsv.WriteOptions(quoting_style="needed", include_header=header)
-    pcsv.write_csv(table, sink, write_options=options)
-    return sink.getvalue().to_pybytes()
+
+def _format(
+    times: NDArray,
+    repeat: int,
+    text: NDArray,
+    start: NDArray,
+    text_of: NDArray,
+    columns: NDArray,
+    widest: int,
+) -> bytes:
+    """Rows as CSV bytes by ``csv_text.format_rows`` (a thread of the writer's pool)."""
+    from radarviz.viz_app.io.csv_text import format_rows
+
+    n_cols = 1 + text_of.shape[0] + columns.shape[0]
+    per_row = n_cols * (_FLOAT_BYTES + 1) + text_of.shape[0] * widest + 1
+    buf = np.empty(per_row * columns.shape[1] + 64, dtype=np.uint8)
+    size = format_rows(
+        times.view(np.uint64), repeat, text, start, text_of, columns.view(np.uint64), buf
+    )
+    return buf[:size].tobytes()
 
 
 def track_blocks(
@@ -401,5 +434,5 @@ def track_blocks(
                 f"{reader.source} line {line}, column {exc.column}: {exc}"
             ) from None
         on_block(blk.plots, tracks)
-        plots += len(blk.plots)
+        plots += blk.plots.size
     return plots, tracker.targets if reader.reader.targets else ()
