@@ -22,6 +22,7 @@ from radarviz.viz_app.cli.args import integer, number
 from radarviz.viz_app.cli.params import add_parameter, map_flag
 from radarviz.viz_app.cli.presets import ALL_PRESETS, FLIGHT_NAMES, manoeuvre_file_plots
 from radarviz.viz_app.io.atomic import atomic_write, check_outputs
+from radarviz.viz_app.io.plot_blocks import run_track
 from radarviz.viz_app.io.plots import (
     DEFAULT_TRACKS,
     DOPPLER_MODES,
@@ -29,7 +30,6 @@ from radarviz.viz_app.io.plots import (
     ObserverFactory,
     Radar,
     RowObserver,
-    run_track,
     simulated_plots,
     write_measurements,
 )

@@ -20,6 +20,7 @@ two paths check one file as one.
 from __future__ import annotations
 
 import csv
+import functools
 import io
 from collections.abc import Callable, Iterator
 from concurrent.futures import Future
@@ -39,8 +40,10 @@ from radarviz.viz_app.io.plots import (
     MAX_RADIAL_VELOCITY_MPS,
     MAX_RANGE_M,
     MAX_TIME_S,
+    ObserverFactory,
     PlotReader,
     Radar,
+    TrackSummary,
     check_track_rows,
     track_columns,
 )
@@ -270,6 +273,7 @@ class PlotBlockReader:
 _STATE_COLS = [k for _, k in _COMPONENTS]  # index into (x, ẋ, y, ẏ, z, ż) per column
 
 
+@functools.lru_cache(maxsize=65_536)
 def _quoted(text: str) -> bytes:
     """A text cell as pyarrow's writer quotes it (always, inner quotes doubled)."""
     return b'"' + text.replace('"', '""').encode("utf-8") + b'"'
@@ -436,3 +440,46 @@ def track_blocks(
         on_block(blk.plots, tracks)
         plots += blk.plots.size
     return plots, tracker.targets if reader.reader.targets else ()
+
+
+def run_track(
+    input_path: str,
+    radars_path: str,
+    out_path: str,
+    methods: tuple[str, ...] | None = None,
+    options: StreamOptions | None = None,
+    observer: ObserverFactory | None = None,
+) -> TrackSummary:
+    """``radarviz track``: ``input_path`` tracked into ``out_path``. Without a recording
+    (``observer``) and with the first-plot start and no finite-memory track, in blocks of
+    columns (this module; the tracks of ``viz_app.io.plots.run_track`` to rounding, the same
+    errors); otherwise by ``viz_app.io.plots.run_track``, a ``Plot`` at a time."""
+    import time
+    from contextlib import ExitStack
+
+    from radarviz.core.experiments.prosov import ALL_METHODS
+    from radarviz.core.tracking.stream import METHODS_3D
+    from radarviz.viz_app.io.atomic import atomic_write
+    from radarviz.viz_app.io.plots import _open_input, load_radars
+    from radarviz.viz_app.io.plots import run_track as run_track_rows
+
+    options = options or StreamOptions()
+    if observer is not None or options.init != "first-plot" or options.finite_memory_k:
+        return run_track_rows(input_path, radars_path, out_path, methods, options, observer)
+    radars = load_radars(radars_path)
+    start = time.perf_counter()
+    with ExitStack() as stack:
+        fh = stack.enter_context(_open_input(input_path))
+        reader = PlotBlockReader(fh, input_path, radars)
+        three_d = reader.reader.three_d
+        if methods is None:
+            methods = METHODS_3D if three_d else ALL_METHODS
+        out = stack.enter_context(atomic_write(out_path, "wb"))
+        writer = BlockWriter(out, reader.reader.targets, tuple(methods), f"track: {input_path}")
+        try:
+            plots, targets = track_blocks(reader, tuple(methods), options, writer.add)
+        finally:
+            writer.close()
+    return TrackSummary(
+        plots, writer.rows, three_d, tuple(methods), time.perf_counter() - start, targets
+    )

@@ -668,12 +668,12 @@ def run_track(
     options: StreamOptions | None = None,
     observer: ObserverFactory | None = None,
 ) -> TrackSummary:
-    """Track every plot of ``input_path`` into ``out_path``; ``observer`` also sees each plot."""
+    """Track every plot of ``input_path`` into ``out_path``, a ``Plot`` at a time;
+    ``observer`` also sees each plot (``viz_app.io.plot_blocks.run_track`` is the command's
+    entry: this path for a recording or a finite-memory start, blocks of columns otherwise)."""
     options = options or StreamOptions()
     radars = load_radars(radars_path)
     start = time.perf_counter()
-    if observer is None and options.init == "first-plot" and not options.finite_memory_k:
-        return _run_track_blocks(input_path, radars, out_path, methods, options, start)
     with ExitStack() as stack:
         stack.enter_context(commit_together())  # the tracks and the recording: both or neither
         src = bounded_lines(stack.enter_context(_open_input(input_path)), input_path)
@@ -707,33 +707,6 @@ def run_track(
                 "init_k",
             )
     return TrackSummary(plots, written, three_d, tuple(used), time.perf_counter() - start, targets)
-
-
-def _run_track_blocks(
-    input_path: str,
-    radars: dict[str, Radar],
-    out_path: str,
-    methods: tuple[str, ...] | None,
-    options: StreamOptions,
-    start: float,
-) -> TrackSummary:
-    """``run_track`` without a recording: read, tracked and written in blocks of columns
-    (``viz_app.io.plot_blocks``; the tracks ``track_lines`` gives, to rounding)."""
-    from radarviz.viz_app.io.plot_blocks import BlockWriter, PlotBlockReader, track_blocks
-
-    with ExitStack() as stack:
-        fh = stack.enter_context(_open_input(input_path))
-        reader = PlotBlockReader(fh, input_path, radars)
-        three_d = reader.reader.three_d
-        if methods is None:
-            methods = METHODS_3D if three_d else ALL_METHODS
-        out = stack.enter_context(atomic_write(out_path, "wb"))
-        writer = BlockWriter(out, reader.reader.targets, tuple(methods), f"track: {input_path}")
-        plots, targets = track_blocks(reader, tuple(methods), options, writer.add)
-        writer.close()
-    return TrackSummary(
-        plots, writer.rows, three_d, tuple(methods), time.perf_counter() - start, targets
-    )
 
 
 # --------------------------------------------------------------------------------------------
