@@ -230,6 +230,7 @@ def test_bench_figures_are_consistent(capsys) -> None:
         tg["batched_plots_per_s"] / tg["numpy_plots_per_s"], rel=1e-12
     )
     assert set(tg["one_target_ns_per_step"]) == set(ALL_METHODS)
+    assert set(tg["one_target_plot_list_ns_per_step"]) == set(ALL_METHODS)
     for m, v in tg["one_target_ns_per_step"].items():
         assert tg["one_target_speedup_vs_filterpy"][m] == pytest.approx(fp / v, rel=1e-12)
     assert set(tg["file"]) == {"2d", "3d"}

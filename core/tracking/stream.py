@@ -529,39 +529,34 @@ class StreamTracker:
 
 def plot_block(plots: list[Plot]) -> PlotBlock:
     """A list of ``Plot`` as a ``PlotBlock`` (radars: one per distinct site and noise)."""
-    keys: dict[tuple, int] = {}
+    n = len(plots)
+    keys = np.array(
+        [
+            (*p.site, p.sigma_r_m, p.sigma_azimuth_rad, p.sigma_elevation_rad,
+             p.sigma_radial_velocity_mps)
+            for p in plots
+        ],
+        dtype=np.float64,
+    ).reshape(n, 7)  # fmt: skip
+    rows, first, radar = np.unique(keys, axis=0, return_index=True, return_inverse=True)
+    # The radars in order of their first plot (np.unique sorts them).
+    order = np.argsort(first, kind="stable")
+    rank = np.empty_like(order)
+    rank[order] = np.arange(order.size)
+    rows = rows[order]
+    radars = RadarTable(rows[:, :3].copy(), *(rows[:, c].copy() for c in range(3, 7)))
     labels: dict[str, int] = {}
-    radar = np.empty(len(plots), dtype=np.intp)
-    target = np.empty(len(plots), dtype=np.intp)
-    for i, p in enumerate(plots):
-        key = (
-            tuple(p.site),
-            p.sigma_r_m,
-            p.sigma_azimuth_rad,
-            p.sigma_elevation_rad,
-            p.sigma_radial_velocity_mps,
-        )
-        radar[i] = keys.setdefault(key, len(keys))
-        target[i] = labels.setdefault(p.target, len(labels))
-    rows = list(keys)
-    radars = RadarTable(
-        np.array([k[0] for k in rows], dtype=np.float64).reshape(-1, 3),
-        *(np.array([k[c] for k in rows], dtype=np.float64) for c in range(1, 5)),
-    )
-    three_d = bool(plots) and plots[0].elevation_rad is not None
-    doppler = any(p.radial_velocity_mps is not None for p in plots)
+    target = np.array([labels.setdefault(p.target, len(labels)) for p in plots], dtype=np.intp)
+    three_d = n > 0 and plots[0].elevation_rad is not None
+    vr = [p.radial_velocity_mps for p in plots]
+    doppler = any(v is not None for v in vr)
     return PlotBlock(
         np.array([p.time_s for p in plots], dtype=np.float64),
         np.array([p.range_m for p in plots], dtype=np.float64),
         np.array([p.azimuth_rad for p in plots], dtype=np.float64),
         np.array([p.elevation_rad for p in plots], dtype=np.float64) if three_d else None,
-        np.array(
-            [np.nan if p.radial_velocity_mps is None else p.radial_velocity_mps for p in plots],
-            dtype=np.float64,
-        )
-        if doppler
-        else None,
-        radar,
+        np.array([np.nan if v is None else v for v in vr], dtype=np.float64) if doppler else None,
+        rank[radar.ravel()].astype(np.intp),
         radars,
         target,
         tuple(labels),

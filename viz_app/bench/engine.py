@@ -35,10 +35,12 @@ Figures (ns per track-step = wall time / (runs × scans), one core):
   (``add_block``), ``compiled_over_numpy`` their ratio; beside them the same plots tracked
   one target at a time (``StreamTracker``, on a subsample of ``loop_targets`` targets),
   ``batched_over_loop`` the ratio of plots per second. ``one_target_ns_per_step``: per
-  method, one target's long stream of plots (``one_target_plots``) in the file reader's
-  blocks, ns per method-step, and ``one_target_speedup_vs_filterpy`` = filterpy's
-  ``filterpy_ns_per_step`` (measured above in the same run, converted points given) / ours;
-  ``one_plot_per_call_ns_per_step``: the same tracker called once per plot (all methods).
+  method, one target's long stream of plots (``one_target_plots``) as the track file's
+  blocks of arrays (``add_arrays``, 2 500 plots), ns per method-step, and
+  ``one_target_speedup_vs_filterpy`` = filterpy's ``filterpy_ns_per_step`` (measured above
+  in the same run, converted points given) / ours; ``one_target_plot_list_ns_per_step``: the
+  same plots as lists of ``Plot`` (``StreamTracker.add_block``, 1 024 at a time);
+  ``one_plot_per_call_ns_per_step``: one ``Plot`` per call (all methods).
   ``file``: ``radarviz track`` end to end in its own process (read, all seven methods,
   the tracks written) on the air-traffic file (``viz_app.bench.track_file``: 1000 targets,
   two radars, 2D and 3D with Doppler, cv model) of ``--track-plots`` plots and of a tenth
@@ -373,20 +375,29 @@ def bench_targets(
         for k in range(runs)
         for n in range(steps)
     ]
+    one_block = plot_block(one)
+    step = 2500  # plots per block of the track file's reader (~128 KB)
     single: dict[str, float] = {}
+    listed: dict[str, float] = {}
     for m in ALL_METHODS:
+        arrays = TargetTracker((m,), False, options)
+        t0 = time.perf_counter()
+        for i in range(0, len(one), step):
+            arrays.add_arrays(_block_slice(one_block, i, i + step))
+        single[m] = (time.perf_counter() - t0) / len(one) * 1e9
         tracker = StreamTracker((m,), False, options)
         t0 = time.perf_counter()
         for i in range(0, len(one), READ_BLOCK):
             tracker.add_block(one[i : i + READ_BLOCK])
-        single[m] = (time.perf_counter() - t0) / len(one) * 1e9
+        listed[m] = (time.perf_counter() - t0) / len(one) * 1e9
     # The same, one plot per call (a caller that has one plot at a time).
     tracker = StreamTracker(ALL_METHODS, False, options)
     t0 = time.perf_counter()
     for p in one[:2000]:
         tracker.add(p)
     per_call = (time.perf_counter() - t0) / (2000 * len(ALL_METHODS)) * 1e9
-    assert all(math.isfinite(v) for v in (*rate.values(), loop, per_call, *single.values()))
+    figures = (*rate.values(), loop, per_call, *single.values(), *listed.values())
+    assert all(math.isfinite(v) for v in figures)
     return {
         "targets": targets,
         "scans": steps,
@@ -400,6 +411,7 @@ def bench_targets(
         "one_target_plots": len(one),
         "one_target_ns_per_step": single,
         "one_target_speedup_vs_filterpy": {m: filterpy_ns / v for m, v in single.items()},
+        "one_target_plot_list_ns_per_step": listed,
         "one_plot_per_call_ns_per_step": per_call,
         "file": bench_track_file(track_plots),
     }
@@ -545,9 +557,11 @@ def format_bench(doc: dict[str, Any]) -> str:
         f"{m} {v:.0f} ns ({tg['one_target_speedup_vs_filterpy'][m]:.0f}×)"
         for m, v in tg["one_target_ns_per_step"].items()
     )
+    listed = ", ".join(f"{m} {v:.0f} ns" for m, v in tg["one_target_plot_list_ns_per_step"].items())
     lines.append(
-        f"one target, {tg['one_target_plots']} plots, per method-step (vs filterpy): {per}; "
-        f"one plot per call: {tg['one_plot_per_call_ns_per_step']:.0f} ns"
+        f"one target, {tg['one_target_plots']} plots, per method-step, blocks of arrays (vs "
+        f"filterpy): {per}; lists of Plot: {listed}; one plot per call: "
+        f"{tg['one_plot_per_call_ns_per_step']:.0f} ns"
     )
     for dims, runs in tg["file"].items():
         for r in runs.values():

@@ -115,7 +115,9 @@ def time_track(meas: Path, radars: Path, out: Path, extra: tuple[str, ...] = ())
         "from radarviz.viz_app.cli.main import main\n"
         "rc = main(sys.argv[1:])\n"
         "u = resource.getrusage(resource.RUSAGE_SELF)\n"
-        "print(u.ru_utime + u.ru_stime, u.ru_maxrss, file=sys.stderr)\n"
+        # VmHWM is this program's own peak; ru_maxrss would keep the forking parent's.
+        "hwm = [ln.split()[1] for ln in open('/proc/self/status') if ln.startswith('VmHWM')]\n"
+        "print(u.ru_utime + u.ru_stime, (hwm or [u.ru_maxrss])[0], file=sys.stderr)\n"
         "sys.exit(rc)\n"
     )
     cmd = [sys.executable, "-c", code, "track"]

@@ -110,7 +110,8 @@ class PlotBlockReader:
         line = 1  # lines before the block
         rest = b""
         while True:
-            data = self.fh.read(BLOCK_BYTES)
+            # read1: what is there (a FIFO fed live is tracked as it comes), at most a block.
+            data = self.fh.read1(BLOCK_BYTES)
             buf = rest + data
             if not data:
                 if buf:
