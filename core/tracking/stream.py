@@ -530,20 +530,19 @@ class StreamTracker:
 def plot_block(plots: list[Plot]) -> PlotBlock:
     """A list of ``Plot`` as a ``PlotBlock`` (radars: one per distinct site and noise)."""
     n = len(plots)
-    keys = np.array(
+    index: dict[tuple, int] = {}
+    radar = np.array(
         [
-            (*p.site, p.sigma_r_m, p.sigma_azimuth_rad, p.sigma_elevation_rad,
-             p.sigma_radial_velocity_mps)
+            index.setdefault(
+                (p.site, p.sigma_r_m, p.sigma_azimuth_rad, p.sigma_elevation_rad,
+                 p.sigma_radial_velocity_mps),
+                len(index),
+            )
             for p in plots
         ],
-        dtype=np.float64,
-    ).reshape(n, 7)  # fmt: skip
-    rows, first, radar = np.unique(keys, axis=0, return_index=True, return_inverse=True)
-    # The radars in order of their first plot (np.unique sorts them).
-    order = np.argsort(first, kind="stable")
-    rank = np.empty_like(order)
-    rank[order] = np.arange(order.size)
-    rows = rows[order]
+        dtype=np.intp,
+    )  # fmt: skip
+    rows = np.array([(*k[0], *k[1:]) for k in index], dtype=np.float64).reshape(-1, 7)
     radars = RadarTable(rows[:, :3].copy(), *(rows[:, c].copy() for c in range(3, 7)))
     labels: dict[str, int] = {}
     target = np.array([labels.setdefault(p.target, len(labels)) for p in plots], dtype=np.intp)
@@ -556,7 +555,7 @@ def plot_block(plots: list[Plot]) -> PlotBlock:
         np.array([p.azimuth_rad for p in plots], dtype=np.float64),
         np.array([p.elevation_rad for p in plots], dtype=np.float64) if three_d else None,
         np.array([np.nan if v is None else v for v in vr], dtype=np.float64) if doppler else None,
-        rank[radar.ravel()].astype(np.intp),
+        radar,
         radars,
         target,
         tuple(labels),
