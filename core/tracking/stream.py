@@ -45,7 +45,7 @@ State rows are always in the 3D layout (x, ẋ, y, ẏ, z, ż), z = ż = 0 for 2
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
@@ -417,7 +417,7 @@ class StreamTracker:
         """``add_block`` on the compiled engine (``core.tracking.compiled``)."""
         assert self._compiled is not None
         try:
-            tb = self._compiled.add(plot_block([replace(p, target="") for p in plots]))
+            tb = self._compiled.add(plot_block(plots, one_target=True))
         except OutOfOrderError as exc:
             raise ValueError(
                 f"times must not decrease (got {exc.time_s} after {exc.previous_s})"
@@ -527,8 +527,9 @@ class StreamTracker:
         return FINITE_MEMORY_TRACK, *_rows_6(st, 0)
 
 
-def plot_block(plots: list[Plot]) -> PlotBlock:
-    """A list of ``Plot`` as a ``PlotBlock`` (radars: one per distinct site and noise)."""
+def plot_block(plots: list[Plot], one_target: bool = False) -> PlotBlock:
+    """A list of ``Plot`` as a ``PlotBlock`` (radars: one per distinct site and noise);
+    ``one_target``: every plot is of one target (labelled ""), whatever its label."""
     n = len(plots)
     index: dict[tuple, int] = {}
     radar = np.array(
@@ -544,8 +545,11 @@ def plot_block(plots: list[Plot]) -> PlotBlock:
     )  # fmt: skip
     rows = np.array([(*k[0], *k[1:]) for k in index], dtype=np.float64).reshape(-1, 7)
     radars = RadarTable(rows[:, :3].copy(), *(rows[:, c].copy() for c in range(3, 7)))
-    labels: dict[str, int] = {}
-    target = np.array([labels.setdefault(p.target, len(labels)) for p in plots], dtype=np.intp)
+    labels: dict[str, int] = {"": 0} if one_target else {}
+    if one_target:
+        target = np.zeros(n, dtype=np.intp)
+    else:
+        target = np.array([labels.setdefault(p.target, len(labels)) for p in plots], np.intp)
     three_d = n > 0 and plots[0].elevation_rad is not None
     vr = [p.radial_velocity_mps for p in plots]
     doppler = any(v is not None for v in vr)

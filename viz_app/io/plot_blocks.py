@@ -109,9 +109,11 @@ class PlotBlockReader:
     def __iter__(self) -> Iterator[LinedBlock]:
         line = 1  # lines before the block
         rest = b""
+        # A file: whole blocks. A pipe or FIFO fed live: what is there, at most a block (its
+        # plots are tracked as they come).
+        read = self.fh.read if self.fh.seekable() else self.fh.read1
         while True:
-            # read1: what is there (a FIFO fed live is tracked as it comes), at most a block.
-            data = self.fh.read1(BLOCK_BYTES)
+            data = read(BLOCK_BYTES)
             buf = rest + data
             if not data:
                 if buf:
