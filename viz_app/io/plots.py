@@ -48,8 +48,11 @@ writer, a block of rows at a time; text cells quoted), so nothing is lost.
 the command, ``viz_app.cli.track``: this module never imports Rerun). Both commands
 write to a temporary file beside the target and rename it when complete, so a bad input (one line on
 standard error naming file, line and column; exit 2) or a crash leaves no output and an
-existing file untouched. The measurement file is read row by row and the tracks written row by
-row: memory does not grow with the file (the recording buffers at most ``RRD_CHUNK`` plots).
+existing file untouched. Here the measurement file is read row by row and the tracks written
+row by row (``run_track``: with a recording, or the finite-memory start or track); the command
+otherwise reads, tracks and writes blocks of columns (``viz_app.io.plot_blocks.run_track``,
+the same checks and messages). Either way memory does not grow with the file (the recording
+buffers at most ``RRD_CHUNK`` plots).
 """
 
 from __future__ import annotations
