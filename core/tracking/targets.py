@@ -22,6 +22,13 @@ IMM each has its trailing model axis too (``core.filters.imm``).
 * **Start**: the first-plot start only (the finite-memory start and track fit a window of one
   radar's plots per target; they are ``StreamTracker``'s, for files of one target).
 
+* **Engines.** The above is the numpy engine (``StreamOptions.engine="numpy"``, the
+  reference). On the compiled engine (the default) a block goes through one compiled pass in
+  plot order instead (``core.tracking.compiled``; no waves), for the cv model; the IMM runs
+  on numpy whatever the option (``engine`` tells which ran). ``add_arrays`` takes a block as
+  arrays (``PlotBlock``) and returns the states as arrays (``TrackBlock``), beside
+  ``add_block``'s lists of ``Plot`` and rows.
+
 Times must not decrease within a target (across targets they may). The consistency monitor
 names a track ``track_name(target, method)``.
 """
