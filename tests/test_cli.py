@@ -147,6 +147,10 @@ def _high_water_rss_mib() -> float:
     pytest.skip("no VmHWM in /proc/self/status")
 
 
+def physical_mib_of_machine() -> float:
+    return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") / 2**20
+
+
 def test_bench_figures_are_consistent(capsys) -> None:
     """The benchmark's figures agree with each other and with what was asked.
 
@@ -162,7 +166,7 @@ def test_bench_figures_are_consistent(capsys) -> None:
     code = main(
         [
             *("bench", "--json", "--runs", "500", "1000", "--filterpy-runs", "3"),
-            *("--targets", "30", "--asterix-plots", "300"),
+            *("--targets", "30", "--asterix-plots", "300", "--track-plots", "2000"),
         ]
     )
     assert code == 0
@@ -235,6 +239,22 @@ def test_bench_figures_are_consistent(capsys) -> None:
         tg["batched_plots_per_s"] / tg["loop_plots_per_s"], rel=1e-12
     )
     assert doc["asterix"]["plots"] == 300  # the section's own figures: tests/test_asterix.py
+    assert tg["compiled_over_numpy"] == pytest.approx(
+        tg["batched_plots_per_s"] / tg["numpy_plots_per_s"], rel=1e-12
+    )
+    assert set(tg["one_target_ns_per_step"]) == set(ALL_METHODS)
+    assert set(tg["one_target_plot_list_ns_per_step"]) == set(ALL_METHODS)
+    for m, v in tg["one_target_ns_per_step"].items():
+        assert tg["one_target_speedup_vs_filterpy"][m] == pytest.approx(fp / v, rel=1e-12)
+    assert set(tg["file"]) == {"2d", "3d"}
+    for runs in tg["file"].values():
+        # Two runs (a tenth of --track-plots, then all): the plots written, 2 radars × 20
+        # targets × whole scans, at least as many as asked.
+        assert [r["plots"] for r in runs.values()] == [200, 2000]
+        for r in runs.values():
+            assert r["plots_per_s"] == pytest.approx(r["plots"] / r["wall_s"], rel=1e-12)
+            assert r["plots_per_cpu_s"] == pytest.approx(r["plots"] / r["cpu_s"], rel=1e-12)
+            assert 0 < r["peak_rss_mb"] < physical_mib_of_machine()
     # JSON keeps full precision: the ratio is exact to rounding.
     for ours, ratio in zip(kf, doc["speedup_vs_filterpy"], strict=True):
         assert ratio == pytest.approx(fp / ours, rel=1e-12)

@@ -258,6 +258,9 @@ class GNNTracker:
     ):
         self.methods = tuple(methods)
         self.association = a = association
+        # The gate reads predictions and deletes tracks (TargetTracker.predicted, forget),
+        # which the numpy engine's banks hold; the compiled engine keeps no such banks.
+        options = replace(options, engine="numpy")
         self.tracker = TargetTracker(self.methods, three_d, options)
         dims = 3 if three_d else 2
         self.dims = dims

@@ -27,7 +27,7 @@ import math
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Literal, NamedTuple
+from typing import Any, Literal, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -43,11 +43,16 @@ INCONSISTENT_FRACTION = 0.2
 
 @functools.lru_cache(maxsize=256)
 def nis_band(dof: int, level: float = NIS_BAND_LEVEL) -> tuple[float, float]:
-    """The band (lo, hi) of the normalised windowed NIS q = Σ NIS / D for D = ``dof``."""
-    from scipy import stats
+    """The band (lo, hi) of the normalised windowed NIS q = Σ NIS / D for D = ``dof``.
+
+    The χ²_D quantile is 2 P⁻¹(D/2, p) (the inverse regularised lower incomplete gamma
+    function), which is what ``scipy.stats.chi2.ppf`` evaluates, bit for bit; taken from
+    ``scipy.special`` because ``scipy.stats`` is half the memory of a ``track`` run.
+    """
+    from scipy import special
 
     tail = (1.0 - level) / 2.0
-    lo, hi = stats.chi2.ppf([tail, 1.0 - tail], dof) / dof
+    lo, hi = 2.0 * special.gammaincinv(dof / 2.0, np.array([tail, 1.0 - tail])) / dof
     return float(lo), float(hi)
 
 
@@ -144,13 +149,23 @@ class ConsistencyMonitor:
         self.keep_history = keep_history
         self.events: list[ConsistencyEvent] = []
         self._tracks: dict[str, _Track] = {}
+        #: Feeds that hold some tracks' state in arrays (``core.tracking.compiled``): their
+        #: state is written into the records before any is read.
+        self.feeds: list[Any] = []
+
+    def _sync(self) -> None:
+        for feed in self.feeds:
+            feed.store()
 
     @property
     def tracks(self) -> tuple[str, ...]:
+        self._sync()
         return tuple(self._tracks)
 
     def add(self, track: str, time_s: float, nis: float, dof: int) -> None:
         """One update's NIS (with m = ``dof`` components) for ``track`` at ``time_s``."""
+        if self.feeds:
+            self._sync()
         if not math.isfinite(nis):
             nis = math.inf  # a broken track is as far out of its band as it gets
         tr = self._tracks.setdefault(track, _Track())
@@ -188,6 +203,7 @@ class ConsistencyMonitor:
 
     def result(self, track: str) -> TrackConsistency:
         """The figures of ``track`` so far."""
+        self._sync()
         tr = self._tracks[track]
         frac = (tr.above + tr.below) / tr.windows if tr.windows else math.nan
         mean = tr.total_nis / tr.total_dof if tr.total_dof else math.nan
@@ -204,10 +220,12 @@ class ConsistencyMonitor:
 
     def history(self, track: str) -> NDArray[np.float64]:
         """(W, 4) rows (time, q, lo, hi) of every window of ``track`` (``keep_history``)."""
+        self._sync()
         rows = self._tracks[track].history if track in self._tracks else []
         return np.array(rows, dtype=np.float64).reshape(-1, 4)
 
     def results(self) -> dict[str, TrackConsistency]:
+        self._sync()
         return {name: self.result(name) for name in self._tracks}
 
 

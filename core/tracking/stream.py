@@ -52,6 +52,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from radarviz.core.filters.compiled import ENGINES
 from radarviz.core.filters.imm import IMMState, imm_start, imm_step
 from radarviz.core.filters.innovation import InnovationStats
 from radarviz.core.filters.measurement import (
@@ -74,6 +75,14 @@ from radarviz.core.filters.step import Stage, cv_step
 from radarviz.core.finite_memory.fit import finite_memory_fit
 from radarviz.core.finite_memory.start import finite_memory_start
 from radarviz.core.params import ParameterError, check, check_choice, check_int
+from radarviz.core.tracking.compiled import (
+    COMPILED_DIMS,
+    CompiledTracks,
+    OutOfOrderError,
+    PlotBlock,
+    RadarTable,
+    TrackBlock,
+)
 from radarviz.core.tracking.consistency import ConsistencyMonitor
 
 INIT_MODES: tuple[str, ...] = ("first-plot", "finite-memory")
@@ -280,6 +289,10 @@ class StreamOptions:
             beside the recursive ones (rows named ``FINITE_MEMORY_TRACK``).
         monitor: a consistency monitor fed every update's NIS, track name = method
             (``core.tracking.consistency``), or None.
+        engine: ``"compiled"`` (``core.tracking.compiled``: one compiled pass per block of
+            plots, for the tracks it has a kernel for: 2D or 3D, ``cv``, the line-of-sight Doppler
+            update, the first-plot start, no finite-memory track; the others run on numpy) or
+            ``"numpy"`` (the reference).
     """
 
     sigma_a_mps2: float = 0.0
@@ -293,8 +306,10 @@ class StreamOptions:
     transition_prob: tuple[tuple[float, ...], ...] = DEFAULT_IMM.transition
     finite_memory_k: int = 0
     monitor: ConsistencyMonitor | None = field(default=None, compare=False)
+    engine: str = "compiled"
 
     def __post_init__(self) -> None:
+        check_choice("engine", self.engine, ENGINES)
         check("sigma_a_mps2", self.sigma_a_mps2)
         check("sigma_v0_mps", self.sigma_v0_mps)
         check_choice("doppler_update", self.doppler_update, DOPPLER_UPDATES)
@@ -304,6 +319,17 @@ class StreamOptions:
         self.motion()
         if self.finite_memory_k:
             check_int("finite_memory_k", self.finite_memory_k, low=2, high=1000)
+
+    def compiled(self, three_d: bool) -> bool:
+        """Whether a track of many targets with these options runs on the compiled engine."""
+        history = self.monitor is not None and self.monitor.keep_history
+        return (
+            self.engine == "compiled"
+            and self.model == "cv"
+            and self.doppler_update == "line_of_sight"
+            and (3 if three_d else 2) in COMPILED_DIMS
+            and not history
+        )
 
     def motion(self) -> CVModel | IMMModel:
         """The motion model these options ask for."""
@@ -346,6 +372,11 @@ class StreamTracker:
             m: (k, i) for k, tr in enumerate(self._groups) for i, m in enumerate(tr.methods)
         }
         self._window: list[Plot] | None = [] if o.init == "finite-memory" else None
+        self._compiled = None
+        if o.compiled(three_d) and o.init == "first-plot" and not o.finite_memory_k:
+            self._compiled = CompiledTracks(
+                self.methods, dims, o.sigma_a_mps2, o.sigma_v0_mps, o.use_doppler, o.monitor
+            )
         self._started = False
         self._fm_window: list[Plot] = []
         self._fm_radar: str | None = None
@@ -365,6 +396,8 @@ class StreamTracker:
                 raise PlotError(
                     "elevation_deg", "every plot of a 3D track needs an elevation", index=i
                 )
+        if self._compiled is not None:
+            return self._compiled_block(plots)
         use_doppler = self.options.use_doppler
         pre = [g.precompute(plots) for g in self._groups]
         out: list[list[StateRow]] = []
@@ -401,6 +434,17 @@ class StreamTracker:
                     rows.append(fm)
             out.append(rows)
         return out
+
+    def _compiled_block(self, plots: list[Plot]) -> list[list[StateRow]]:
+        """``add_block`` on the compiled engine (``core.tracking.compiled``)."""
+        assert self._compiled is not None
+        try:
+            tb = self._compiled.add(plot_block(plots, one_target=True))
+        except OutOfOrderError as exc:
+            raise ValueError(
+                f"times must not decrease (got {exc.time_s} after {exc.previous_s})"
+            ) from None
+        return state_rows(tb, self.methods)
 
     def _rows(self) -> list[StateRow]:
         rows = []
@@ -503,6 +547,83 @@ class StreamTracker:
             return None
         st = self._window_fit(win, "the finite-memory track", "finite_memory_k")
         return FINITE_MEMORY_TRACK, *_rows_6(st, 0)
+
+
+def plot_block(plots: list[Plot], one_target: bool = False) -> PlotBlock:
+    """A list of ``Plot`` as a ``PlotBlock`` (radars: one per distinct site and noise);
+    ``one_target``: every plot is of one target (labelled ""), whatever its label."""
+    n = len(plots)
+    index: dict[tuple, int] = {}
+    radar = np.array(
+        [
+            index.setdefault(
+                (p.site, p.sigma_r_m, p.sigma_azimuth_rad, p.sigma_elevation_rad,
+                 p.sigma_radial_velocity_mps),
+                len(index),
+            )
+            for p in plots
+        ],
+        dtype=np.intp,
+    )  # fmt: skip
+    rows = np.array([(*k[0], *k[1:]) for k in index], dtype=np.float64).reshape(-1, 7)
+    radars = RadarTable(rows[:, :3].copy(), *(rows[:, c].copy() for c in range(3, 7)))
+    labels: dict[str, int] = {"": 0} if one_target else {}
+    if one_target:
+        target = np.zeros(n, dtype=np.intp)
+    else:
+        target = np.array([labels.setdefault(p.target, len(labels)) for p in plots], np.intp)
+    three_d = n > 0 and plots[0].elevation_rad is not None
+    vr = [p.radial_velocity_mps for p in plots]
+    doppler = any(v is not None for v in vr)
+    return PlotBlock(
+        np.array([p.time_s for p in plots], dtype=np.float64),
+        np.array([p.range_m for p in plots], dtype=np.float64),
+        np.array([p.azimuth_rad for p in plots], dtype=np.float64),
+        np.array([p.elevation_rad for p in plots], dtype=np.float64) if three_d else None,
+        np.array([np.nan if v is None else v for v in vr], dtype=np.float64) if doppler else None,
+        radar,
+        radars,
+        target,
+        tuple(labels),
+    )
+
+
+def block_plots(block: PlotBlock) -> list[Plot]:
+    """A ``PlotBlock`` as a list of ``Plot`` (the inverse of ``plot_block``)."""
+    rd = block.radars
+    el, vr = block.elevation_rad, block.radial_velocity_mps
+    out = []
+    for i in range(block.size):
+        g = int(block.radar[i])
+        v = None if vr is None or np.isnan(vr[i]) else float(vr[i])
+        out.append(
+            Plot(
+                float(block.time_s[i]),
+                float(block.range_m[i]),
+                float(block.azimuth_rad[i]),
+                float(rd.sigma_r_m[g]),
+                float(rd.sigma_azimuth_rad[g]),
+                tuple(map(float, rd.site_m[g])),
+                "",
+                None if el is None else float(el[i]),
+                float(rd.sigma_elevation_rad[g]),
+                v,
+                float(rd.sigma_radial_velocity_mps[g]),
+                block.labels[int(block.target[i])],
+            )
+        )
+    return out
+
+
+def state_rows(tb: TrackBlock, methods: tuple[str, ...]) -> list[list[StateRow]]:
+    """A ``TrackBlock`` as rows: per plot, (method, x (6,), P (6, 6)) per method (the 3D
+    layout, z = ż = 0 for 2D), as ``TargetTracker.add_block`` returns them."""
+    b, m, n = tb.x.shape
+    x6 = np.zeros((b, m, 6))
+    P6 = np.zeros((b, m, 6, 6))
+    x6[..., :n] = tb.x
+    P6[..., :n, :n] = tb.P
+    return [[(meth, x6[i, j], P6[i, j]) for j, meth in enumerate(methods)] for i in range(b)]
 
 
 def as_6(st: CVBatch) -> tuple[NDArray[np.float64], NDArray[np.float64]]:

@@ -22,6 +22,13 @@ IMM each has its trailing model axis too (``core.filters.imm``).
 * **Start**: the first-plot start only (the finite-memory start and track fit a window of one
   radar's plots per target; they are ``StreamTracker``'s, for files of one target).
 
+* **Engines.** The above is the numpy engine (``StreamOptions.engine="numpy"``, the
+  reference). On the compiled engine (the default) a block goes through one compiled pass in
+  plot order instead (``core.tracking.compiled``; no waves), for the cv model; the IMM runs
+  on numpy whatever the option (``engine`` tells which ran). ``add_arrays`` takes a block as
+  arrays (``PlotBlock``) and returns the states as arrays (``TrackBlock``), beside
+  ``add_block``'s lists of ``Plot`` and rows.
+
 Times must not decrease within a target (across targets they may). The consistency monitor
 names a track ``track_name(target, method)``.
 """
@@ -47,14 +54,18 @@ from radarviz.core.filters.predict import cv_predict
 from radarviz.core.filters.state import CVBatch
 from radarviz.core.filters.step import Stage, cv_step, moves
 from radarviz.core.params import ParameterError
+from radarviz.core.tracking.compiled import CompiledTracks, OutOfOrderError, PlotBlock, TrackBlock
 from radarviz.core.tracking.stream import (
     Plot,
     PlotError,
     StateRow,
     StreamOptions,
     as_6,
+    block_plots,
     check_methods,
+    plot_block,
     polar_arrays,
+    state_rows,
 )
 
 
@@ -196,11 +207,51 @@ class TargetTracker:
         self._free: list[int] = []
         self._rows_used = 0
         self._time_s = np.zeros(0)
+        self._compiled: CompiledTracks | None = None
+        if options.compiled(three_d):
+            self._compiled = CompiledTracks(
+                self.methods,
+                self.dims,
+                options.sigma_a_mps2,
+                options.sigma_v0_mps,
+                options.use_doppler,
+                options.monitor,
+                track_name,
+            )
 
     @property
     def targets(self) -> tuple[str, ...]:
         """The targets seen so far, in order of their first plot."""
+        if self._compiled is not None:
+            return self._compiled.targets
         return tuple(self._slot)
+
+    @property
+    def engine(self) -> str:
+        """The engine the tracks run on (``StreamOptions.engine``, or numpy for a track the
+        compiled engine has no kernel for)."""
+        return "numpy" if self._compiled is None else "compiled"
+
+    def add_arrays(self, block: PlotBlock) -> TrackBlock:
+        """Filter a block given as arrays (the fast path: no ``Plot`` per row); returns every
+        method's posterior after each plot, x (B, M, n), P (B, M, n, n), n = 2·dims, in
+        ``methods`` order. A ``PlotError`` carries ``index`` (the plot's position)."""
+        if (block.elevation_rad is not None) != self.three_d:
+            raise PlotError("elevation_deg", "every plot of a 3D track needs an elevation")
+        if self._compiled is None:
+            tb = _stacked(self.add_block(block_plots(block)), 2 * self.dims)
+            slots = np.array([self._slot[t] for t in block.labels], dtype=np.intp)
+            return tb._replace(target=slots[block.target])
+        try:
+            return self._compiled.add(block)
+        except OutOfOrderError as exc:
+            target = block.labels[block.target[exc.index]]
+            raise PlotError(
+                "time_s",
+                f"target {target!r}: times must not decrease within a target (got "
+                f"{exc.time_s!r} after {exc.previous_s!r})",
+                index=exc.index,
+            ) from None
 
     def add_block(self, plots: list[Plot]) -> list[list[StateRow]]:
         """Filter a block of plots; returns, per plot, (method, x (6,), P (6, 6)) per method
@@ -213,6 +264,9 @@ class TargetTracker:
                 raise PlotError(
                     "elevation_deg", "every plot of a 3D track needs an elevation", index=i
                 )
+        if self._compiled is not None:
+            return state_rows(self.add_arrays(plot_block(plots)), self.methods)
+        for i, p in enumerate(plots):
             w = seen.get(p.target, 0)
             seen[p.target] = w + 1
             if w == len(waves):
@@ -319,6 +373,8 @@ class TargetTracker:
         they are: x (K, n), P (K, n, n) (the IMM's moment-matched combined prediction, the one
         its consistency statistics use). A track last updated at ``time_s`` is returned as it
         is (dt = 0). Every target's last plot must be at or before ``time_s``."""
+        if self._compiled is not None:
+            raise ValueError("predicted needs the numpy engine (StreamOptions.engine='numpy')")
         b, row = self._where[method]
         bank = self._banks[b]
         ids = np.array([self._slot[t] for t in targets], dtype=np.intp)
@@ -339,5 +395,14 @@ class TargetTracker:
         """Drop the tracks of ``targets`` (a deleted track): their rows go to new targets, so
         memory follows the live tracks, not every track ever started. A label forgotten and
         seen again starts a new track."""
+        if self._compiled is not None:
+            raise ValueError("forget needs the numpy engine (StreamOptions.engine='numpy')")
         for t in targets:
             self._free.append(self._slot.pop(t))
+
+
+def _stacked(rows: list[list[StateRow]], n: int) -> TrackBlock:
+    """Rows of ``add_block`` as a ``TrackBlock`` of state size n (targets not filled in)."""
+    x = np.array([[x6[:n] for _, x6, _ in r] for r in rows]).reshape(len(rows), -1, n)
+    P = np.array([[P6[:n, :n] for _, _, P6 in r] for r in rows]).reshape(len(rows), -1, n, n)
+    return TrackBlock(x, P, np.zeros(len(rows), dtype=np.intp))

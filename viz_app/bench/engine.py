@@ -32,9 +32,22 @@ Figures (ns per track-step = wall time / (runs × scans), one core):
 * ``targets``: the tracker of many targets (``core.tracking.targets.TargetTracker``) on
   ``targets`` Prosov runs as targets (one plot per target per scan, times offset by 1 ms per
   target, all seven 2D methods, the cv model with σa = 1 m/s²), plots per second over the
-  whole file (the plots made beforehand, not timed), beside the same plots tracked one
-  target at a time (``StreamTracker``, on a subsample of ``loop_targets`` targets) in the
-  same run; ``batched_over_loop`` the ratio of their plots per second.
+  whole file (the plots made beforehand, not timed): ``batched_plots_per_s`` on the compiled
+  engine (``TargetTracker.add_arrays``), ``numpy_plots_per_s`` on the numpy engine
+  (``add_block``), ``compiled_over_numpy`` their ratio; beside them the same plots tracked
+  one target at a time (``StreamTracker``, on a subsample of ``loop_targets`` targets),
+  ``batched_over_loop`` the ratio of plots per second. ``one_target_ns_per_step``: per
+  method, one target's long stream of plots (``one_target_plots``) as the track file's
+  blocks of arrays (``add_arrays``, 2 500 plots), ns per method-step, and
+  ``one_target_speedup_vs_filterpy`` = filterpy's ``filterpy_ns_per_step`` (measured above
+  in the same run, converted points given) / ours; ``one_target_plot_list_ns_per_step``: the
+  same plots as lists of ``Plot`` (``StreamTracker.add_block``, 1 024 at a time);
+  ``one_plot_per_call_ns_per_step``: one ``Plot`` per call (all methods).
+  ``file``: ``radarviz track`` end to end in its own process (read, all seven methods,
+  the tracks written) on the air-traffic file (``viz_app.bench.track_file``: 1000 targets,
+  two radars, 2D and 3D with Doppler, cv model) of ``--track-plots`` plots and of a tenth
+  of them: wall and CPU time, plots per second of each, peak resident memory (the same at
+  both lengths when memory does not grow with the file).
 * ``association``: unlabelled plots associated (``core.tracking.association``) against the
   same plots with their labels, ``viz_app.bench.association``.
 * ``asterix``: reading an ASTERIX CAT048 file of the fusion plots against reading the same
@@ -305,12 +318,35 @@ def bench_imm(runs: int, filterpy_runs: int, config: TrackingConfig) -> dict[str
     return out
 
 
-def bench_targets(targets: int, config: TrackingConfig, loop_targets: int = 20) -> dict[str, Any]:
+def _block_slice(block: Any, i: int, j: int) -> Any:
+    """Plots i … j − 1 of a ``PlotBlock``."""
+    cut = {
+        k: None if v is None else v[i:j]
+        for k, v in block._asdict().items()
+        if k not in ("radars", "labels")
+    }
+    return block._replace(**cut)
+
+
+def bench_targets(
+    targets: int,
+    config: TrackingConfig,
+    filterpy_ns: float,
+    loop_targets: int = 20,
+    track_plots: int = 1_000_000,
+) -> dict[str, Any]:
     """The ``targets`` figures (module docstring)."""
     import math
 
-    from radarviz.core.tracking.stream import ALL_METHODS, Plot, StreamOptions, StreamTracker
+    from radarviz.core.tracking.stream import (
+        ALL_METHODS,
+        Plot,
+        StreamOptions,
+        StreamTracker,
+        plot_block,
+    )
     from radarviz.core.tracking.targets import TargetTracker
+    from radarviz.viz_app.io.plots import READ_BLOCK
 
     steps = config.target.steps
     r_hat, b_hat = _measurements(targets, steps, config, seed=21)
@@ -323,27 +359,109 @@ def bench_targets(targets: int, config: TrackingConfig, loop_targets: int = 20) 
         for k in range(targets)
     ]
     plots = [by_target[k][n] for n in range(steps) for k in range(targets)]
+    block = plot_block(plots)
     options = StreamOptions(model="cv", sigma_a_mps2=1.0)
-    tracker = TargetTracker(ALL_METHODS, False, options)
-    t0 = time.perf_counter()
-    for i in range(0, len(plots), 8192):
-        tracker.add_block(plots[i : i + 8192])
-    batched = len(plots) / (time.perf_counter() - t0)
+    rate: dict[str, float] = {}
+    for engine in ("compiled", "numpy"):
+        tracker = TargetTracker(ALL_METHODS, False, replace(options, engine=engine))
+        t0 = time.perf_counter()
+        for i in range(0, len(plots), 8192):
+            if engine == "compiled":  # the array path, as the track file's blocks
+                tracker.add_arrays(_block_slice(block, i, i + 8192))
+            else:  # the reference engine, a Plot per row
+                tracker.add_block(plots[i : i + 8192])
+        rate[engine] = len(plots) / (time.perf_counter() - t0)
     loop_targets = min(loop_targets, targets)
     t0 = time.perf_counter()
     for own in by_target[:loop_targets]:
         StreamTracker(ALL_METHODS, False, options).add_block(own)
     loop = loop_targets * steps / (time.perf_counter() - t0)
-    assert math.isfinite(batched) and math.isfinite(loop)
+    # One target, one method, a long stream of plots in the file's blocks: ns per step.
+    runs = max(1, 20_000 // steps)
+    r1, b1 = _measurements(runs, steps, config, seed=22)
+    one = [
+        Plot((k * steps + n) * T, float(r1[k, n]), float(b1[k, n]), sr, sb)
+        for k in range(runs)
+        for n in range(steps)
+    ]
+    one_block = plot_block(one)
+    step = 2500  # plots per block of the track file's reader (~128 KB)
+    single: dict[str, float] = {}
+    listed: dict[str, float] = {}
+    for m in ALL_METHODS:
+        arrays = TargetTracker((m,), False, options)
+        t0 = time.perf_counter()
+        for i in range(0, len(one), step):
+            arrays.add_arrays(_block_slice(one_block, i, i + step))
+        single[m] = (time.perf_counter() - t0) / len(one) * 1e9
+        tracker = StreamTracker((m,), False, options)
+        t0 = time.perf_counter()
+        for i in range(0, len(one), READ_BLOCK):
+            tracker.add_block(one[i : i + READ_BLOCK])
+        listed[m] = (time.perf_counter() - t0) / len(one) * 1e9
+    # The same, one plot per call (a caller that has one plot at a time).
+    tracker = StreamTracker(ALL_METHODS, False, options)
+    t0 = time.perf_counter()
+    for p in one[:2000]:
+        tracker.add(p)
+    per_call = (time.perf_counter() - t0) / (2000 * len(ALL_METHODS)) * 1e9
+    figures = (*rate.values(), loop, per_call, *single.values(), *listed.values())
+    assert all(math.isfinite(v) for v in figures)
     return {
         "targets": targets,
         "scans": steps,
         "methods": len(ALL_METHODS),
-        "batched_plots_per_s": batched,
+        "batched_plots_per_s": rate["compiled"],
+        "numpy_plots_per_s": rate["numpy"],
+        "compiled_over_numpy": rate["compiled"] / rate["numpy"],
         "loop_targets": loop_targets,
         "loop_plots_per_s": loop,
-        "batched_over_loop": batched / loop,
+        "batched_over_loop": rate["compiled"] / loop,
+        "one_target_plots": len(one),
+        "one_target_ns_per_step": single,
+        "one_target_speedup_vs_filterpy": {m: filterpy_ns / v for m, v in single.items()},
+        "one_target_plot_list_ns_per_step": listed,
+        "one_plot_per_call_ns_per_step": per_call,
+        "file": bench_track_file(track_plots),
     }
+
+
+def bench_track_file(plots: int) -> dict[str, Any]:
+    """``radarviz track`` end to end on the air-traffic file (``viz_app.bench.track_file``),
+    1000 targets (fewer for a short file), 2D and 3D (Doppler), all seven methods, the cv
+    model: at ``plots`` plots and at a tenth of them (the memory must not grow with the
+    file). Each run is its own process, after an untimed warm-up run (numba's cache)."""
+    import tempfile
+    from pathlib import Path
+
+    from radarviz.viz_app.bench.track_file import air_traffic_file, time_track
+
+    out: dict[str, Any] = {}
+    targets = min(1000, max(1, plots // 100))
+    with tempfile.TemporaryDirectory(prefix="radarviz-bench-") as tmp:
+        d = Path(tmp)
+        for dims in (2, 3):
+            runs = {}
+            for warm_up, n in ((True, 200), (False, plots // 10), (False, plots)):
+                meas = d / "plots.csv"
+                written = air_traffic_file(meas, d / "radars.toml", targets, n, dims == 3)
+                run = time_track(meas, d / "radars.toml", d / "tracks.csv", CV_TRACK)
+                (d / "tracks.csv").unlink()
+                if not warm_up:
+                    runs[str(written)] = {
+                        "plots": written,
+                        "wall_s": run.wall_s,
+                        "cpu_s": run.cpu_s,
+                        "plots_per_s": written / run.wall_s,
+                        "plots_per_cpu_s": written / run.cpu_s,
+                        "peak_rss_mb": run.peak_rss_mb,
+                    }
+            out[f"{dims}d"] = runs
+    return out
+
+
+#: The track options of the file figure: the cv model with σa = 1 m/s² (all methods).
+CV_TRACK = ("--model", "cv", "--sigma-a", "1")
 
 
 def run_bench(
@@ -351,6 +469,7 @@ def run_bench(
     filterpy_runs: int = 200,
     targets: int = 1000,
     asterix_plots: int = 20_000,
+    track_plots: int = 1_000_000,
 ) -> dict[str, Any]:
     """All figures of ``radarviz bench`` as a JSON-ready dict."""
     from radarviz.viz_app.bench.asterix import bench_asterix
@@ -388,7 +507,7 @@ def run_bench(
         "gorshkov_s": gorshkov_s,
         "tune_median_ms": {scene: measure_tune_latency(scene) for scene in SCENES},
         "imm": bench_imm(runs[0], filterpy_runs, config),
-        "targets": bench_targets(targets, config),
+        "targets": bench_targets(targets, config, fp, track_plots=track_plots),
         "association": bench_association(targets),
         "asterix": bench_asterix(asterix_plots),
         "peak_rss_mb": peak_rss_mb(),
@@ -476,10 +595,28 @@ def format_bench(doc: dict[str, Any]) -> str:
     tg = doc["targets"]
     lines.append(
         f"tracker of many targets, {tg['targets']} targets × {tg['scans']} scans, "
-        f"{tg['methods']} methods: {tg['batched_plots_per_s']:.0f} plots/s; one target at a "
-        f"time ({tg['loop_targets']} targets): {tg['loop_plots_per_s']:.0f} plots/s "
-        f"(batched/loop {tg['batched_over_loop']:.1f}×)"
+        f"{tg['methods']} methods: compiled {tg['batched_plots_per_s']:.0f} plots/s, numpy "
+        f"engine {tg['numpy_plots_per_s']:.0f} plots/s ({tg['compiled_over_numpy']:.1f}×); "
+        f"one target at a time ({tg['loop_targets']} targets): {tg['loop_plots_per_s']:.0f} "
+        f"plots/s (batched/loop {tg['batched_over_loop']:.1f}×)"
     )
+    per = ", ".join(
+        f"{m} {v:.0f} ns ({tg['one_target_speedup_vs_filterpy'][m]:.0f}×)"
+        for m, v in tg["one_target_ns_per_step"].items()
+    )
+    listed = ", ".join(f"{m} {v:.0f} ns" for m, v in tg["one_target_plot_list_ns_per_step"].items())
+    lines.append(
+        f"one target, {tg['one_target_plots']} plots, per method-step, blocks of arrays (vs "
+        f"filterpy): {per}; lists of Plot: {listed}; one plot per call: "
+        f"{tg['one_plot_per_call_ns_per_step']:.0f} ns"
+    )
+    for dims, runs in tg["file"].items():
+        for r in runs.values():
+            lines.append(
+                f"radarviz track, {dims}, {r['plots']} plots, all methods: "
+                f"{r['plots_per_s']:.0f} plots/s wall ({r['wall_s']:.1f} s), "
+                f"{r['plots_per_cpu_s']:.0f} plots per CPU-s, peak RSS {r['peak_rss_mb']:.0f} MB"
+            )
     lines.append(format_association(doc["association"]))
     from radarviz.viz_app.bench.asterix import format_asterix
 

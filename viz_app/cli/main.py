@@ -250,6 +250,12 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help="run one section: asterix (ASTERIX CAT048 reading vs CSV); default all",
     )
+    bench.add_argument(
+        "--track-plots",
+        type=integer,
+        default=1_000_000,
+        help="plots of the radarviz track figure's air-traffic file (default 1000000)",
+    )
     return parser
 
 
@@ -483,6 +489,7 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         check_finite_document("bench", doc, nonnegative=True)
         print_report(doc, args.json, lambda d: format_asterix(d["asterix"]))
         return 0
+    check_int("--track-plots", args.track_plots, low=1000, high=10_000_000)
     if args.device == "gpu":
         from radarviz.viz_app.bench.device import NoGPUError, bench_gpu, format_gpu
 
@@ -502,6 +509,7 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         filterpy_runs=args.filterpy_runs,
         targets=args.targets,
         asterix_plots=args.asterix_plots,
+        track_plots=args.track_plots,
     )
     check_finite_document("bench", doc, nonnegative=True)  # times, rates and ratios
     print_report(doc, args.json, format_bench)

@@ -30,6 +30,7 @@ from radarviz.viz_app.cli.presets import (
     write_crossing_truth,
 )
 from radarviz.viz_app.io.atomic import atomic_write, check_outputs, commit_together
+from radarviz.viz_app.io.plot_blocks import run_track
 from radarviz.viz_app.io.plots import (
     DEFAULT_TRACKS,
     DOPPLER_MODES,
@@ -38,7 +39,6 @@ from radarviz.viz_app.io.plots import (
     Radar,
     RowObserver,
     input_format_of,
-    run_track,
     simulated_plots,
     write_measurements,
 )

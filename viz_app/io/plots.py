@@ -56,8 +56,11 @@ writer, a block of rows at a time; text cells quoted), so nothing is lost.
 the command, ``viz_app.cli.track``: this module never imports Rerun). Both commands
 write to a temporary file beside the target and rename it when complete, so a bad input (one line on
 standard error naming file, line and column; exit 2) or a crash leaves no output and an
-existing file untouched. The measurement file is read row by row and the tracks written row by
-row: memory does not grow with the file (the recording buffers at most ``RRD_CHUNK`` plots).
+existing file untouched. Here the measurement file is read row by row and the tracks written
+row by row (``run_track``: with a recording, or the finite-memory start or track); the command
+otherwise reads, tracks and writes blocks of columns (``viz_app.io.plot_blocks.run_track``,
+the same checks and messages). Either way memory does not grow with the file (the recording
+buffers at most ``RRD_CHUNK`` plots).
 """
 
 from __future__ import annotations
@@ -308,31 +311,45 @@ class PlotReader:
         #: The file labels its plots' targets (a ``target`` column): many targets.
         self.targets = "target" in header
 
+        #: Validation state carried from row to row (and block to block, ``PlotBlockReader``):
+        #: the previous time, of each target with a target column, and the plots so far.
+        self.last_t = -math.inf
+        self.last_of: dict[str, float] = {}
+        self.count = 0
+
     def __iter__(self) -> Iterator[tuple[int, Plot]]:
-        source, radars, reader, header = self.source, self.radars, self._reader, self.header
+        yield from self.plots(self._reader, 0)
+        if self.count == 0:
+            raise ParameterError(f"{self.source}: no plots after the header")
+
+    def plots(self, reader: Any, first_line: int) -> Iterator[tuple[int, Plot]]:
+        """The validated plots of the rows of a ``csv.reader`` whose line 1 is the file's
+        line ``first_line`` + 1 (0: the reader is the file's, header read)."""
+        source, radars, header = self.source, self.radars, self.header
         idx = {h: i for i, h in enumerate(header)}
         i_t, i_radar, i_r, i_az = (idx[h] for h in REQUIRED_COLUMNS)
         i_el = idx.get("elevation_deg")
         i_vr = idx.get("radial_velocity_mps")
         i_target = idx.get("target")
         width = len(header)
-        last_t = -math.inf
+        last_t = self.last_t
         # With a target column, times need only not decrease within each target.
-        last_of: dict[str, float] = {}
+        last_of = self.last_of
         target = ""
-        count = 0
         while True:
             try:
                 row = next(reader, None)
             except UnicodeDecodeError:
                 raise ParameterError(
-                    f"{source} line {reader.line_num + 1}: not UTF-8 text"
+                    f"{source} line {first_line + reader.line_num + 1}: not UTF-8 text"
                 ) from None
             except csv.Error as exc:
-                raise ParameterError(f"{source} line {reader.line_num}: {exc}") from None
+                raise ParameterError(
+                    f"{source} line {first_line + reader.line_num}: {exc}"
+                ) from None
             if row is None:
                 break
-            line = reader.line_num
+            line = first_line + reader.line_num
             if not row or (len(row) == 1 and not row[0].strip()):
                 continue  # blank line
             where = f"{source} line {line}"
@@ -407,10 +424,10 @@ class PlotReader:
                         f"radar {name!r} has no sigma_radial_velocity_mps in the radars file",
                         row[i_vr],
                     )
-            last_t = t
+            last_t = self.last_t = t
             if i_target is not None:
                 last_of[target] = t
-            count += 1
+            self.count += 1
             yield (
                 line,
                 Plot(
@@ -428,8 +445,6 @@ class PlotReader:
                     target,
                 ),
             )
-        if count == 0:
-            raise ParameterError(f"{source}: no plots after the header")
 
 
 def track_columns(targets: bool, status: bool = False) -> tuple[str, ...]:
@@ -829,7 +844,10 @@ def run_track(
     open_source: SourceFactory | None = None,
     association: AssociationOptions | None = None,
 ) -> TrackSummary:
-    """Track every plot of ``input_path`` into ``out_path``; ``observer`` also sees each plot.
+    """Track every plot of ``input_path`` into ``out_path``, a ``Plot`` at a time;
+    ``observer`` also sees each plot (``viz_app.io.plot_blocks.run_track`` is the command's
+    entry: this path for a recording, a finite-memory start, ASTERIX or the association;
+    blocks of columns otherwise).
 
     ``open_source`` reads the input's plots (``csv_source`` by default; the command hands in
     ``viz_app.io.asterix.asterix_source`` for an ASTERIX file, see ``input_format_of``).

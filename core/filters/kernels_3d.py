@@ -1,0 +1,502 @@
+"""The compiled (numba) 3D tracker kernel: the seven methods in 3D and the Doppler update as
+scalar loops, the 6 × 6 state (x, ẋ, y, ẏ, z, ż) in small arrays, one plot at a time.
+
+It mirrors the numpy engine's 3D route line by line:
+
+=========  =========================================================================
+kind       the lines it mirrors
+=========  =========================================================================
+predict    ``core.filters.predict.cv_predict`` in 3D (per axis [[1, T], [0, 1]], Q)
+converted  ``core.conversion.spatial`` (the five conversions: moments of each angle,
+           ``_combined_cov``, the per-axis scales) → ``core.filters.position``
+ekf        ``core.filters.polar_ekf.ekf_pseudo_measurement`` (ν' = J ν, R' = J R Jᵀ) →
+           the position update
+ukf        ``core.filters.polar_ukf.ukf_update`` (13 sigma points, bearing averaged
+           relative to the central point, Joseph form as a sum over the points)
+doppler    ``core.filters.doppler.doppler_update`` with the elevation terms
+=========  =========================================================================
+
+The numpy engine stays the reference (``tests/test_track_compiled.py`` holds every method, with
+and without Doppler, to it at 1e-9 relative). Imported on first use only.
+"""
+
+from __future__ import annotations
+
+import math
+from math import atan2, cos, exp, expm1, hypot, sin, sqrt
+
+import numpy as np
+
+from radarviz.core.filters.kernels_2d import _jit, wrap
+from radarviz.core.filters.polar_ukf import SEMIDEFINITE_RTOL
+
+
+@_jit
+def moments(c: float, sn: float, s: float, out):
+    # core.conversion.planar._angle_moments_cs, then spatial._given_truth: out = (ecc, ess,
+    # esc, vcc, vss, csc, mc, ms, mc²) of θ̂ ~ N(θ, s), (c, sn) = (cos θ, sin θ)
+    cc, ss, sc = c * c, sn * sn, sn * c
+    e_half, e1, e2 = exp(-s / 2.0), exp(-s), exp(-2.0 * s)
+    om1, om2 = -expm1(-s), -expm1(-2.0 * s)
+    out[0] = 0.5 * (cc * (1.0 + e2) + ss * om2)
+    out[1] = 0.5 * (ss * (1.0 + e2) + cc * om2)
+    out[2] = e2 * sc
+    out[3] = 0.5 * (cc * om1 * om1 + ss * om2)
+    out[4] = 0.5 * (ss * om1 * om1 + cc * om2)
+    out[5] = -e1 * om1 * sc
+    out[6] = e_half * c
+    out[7] = e_half * sn
+    out[8] = out[6] * out[6]
+
+
+@_jit
+def posterior_moments(c: float, sn: float, s: float, out, tmp):
+    # spatial._posterior_average: the moments averaged over the truth θ ~ N(θ̂, s)
+    moments(c, sn, 2.0 * s, out)  # ecc, ess, esc of variance 2s
+    moments(c, sn, s, tmp)
+    e1, om1, om2 = exp(-s), -expm1(-s), -expm1(-2.0 * s)
+    half1, half2 = 0.5 * om1 * om1, 0.5 * om2
+    out[3] = half1 * tmp[0] + half2 * tmp[1]
+    out[4] = half1 * tmp[1] + half2 * tmp[0]
+    out[5] = -e1 * om1 * tmp[2]
+    out[6] = e1 * c
+    out[7] = e1 * sn
+    out[8] = e1 * tmp[0]
+
+
+@_jit
+def combined_cov(range_sq: float, var_r: float, e, b, R):
+    # spatial._combined_cov: σr² E[u uᵀ] + range_sq Cov(u), from elevation moments e and
+    # azimuth moments b (indices as ``moments``)
+    xx = var_r * (e[0] * b[0]) + range_sq * (e[3] * b[0] + e[8] * b[3])
+    xy = var_r * (e[0] * b[2]) + range_sq * (e[3] * b[2] + e[8] * b[5])
+    yy = var_r * (e[0] * b[1]) + range_sq * (e[3] * b[1] + e[8] * b[4])
+    xz = var_r * (e[2] * b[6]) + range_sq * (e[5] * b[6])
+    yz = var_r * (e[2] * b[7]) + range_sq * (e[5] * b[7])
+    zz = var_r * e[1] + range_sq * e[4]
+    R[0, 0], R[0, 1], R[0, 2] = xx, xy, xz
+    R[1, 0], R[1, 1], R[1, 2] = xy, yy, yz
+    R[2, 0], R[2, 1], R[2, 2] = xz, yz, zz
+
+
+@_jit
+def given_truth_cov(r: float, b: float, el: float, sr2: float, sb2: float, se2: float, R, mb, me):
+    # spatial.naive_cov_given_truth_3d at (r, β, ε)
+    moments(cos(b), sin(b), sb2, mb)
+    moments(cos(el), sin(el), se2, me)
+    combined_cov(r * r, sr2, me, mb, R)
+
+
+@_jit
+def convert_3d(code, r, b, el, sr2, sb2, se2, px, py, pz, z, R, mb, me, tmp):
+    # spatial.convert_3d: the radar-centred point z (3,) and covariance R (3, 3) of
+    # (r̂, β̂, ε̂); (px, py, pz): the predicted position minus the site (ducm only)
+    cb, sb, ce, se = cos(b), sin(b), cos(el), sin(el)
+    u0, u1, u2 = ce * cb, ce * sb, se
+    s_xy, s_z = sb2 + se2, se2
+    if code == 0:  # naive: J diag(σr², sβ, sε) Jᵀ, J = [u, r ∂u/∂β, r ∂u/∂ε]
+        z[0], z[1], z[2] = r * u0, r * u1, r * u2
+        jb0, jb1 = r * (-ce * sb), r * (ce * cb)
+        je0, je1, je2 = r * (-se * cb), r * (-se * sb), r * ce
+        jb = (jb0, jb1, 0.0)
+        je = (je0, je1, je2)
+        uu = (u0, u1, u2)
+        for i in range(3):
+            for j in range(i, 3):
+                R[i, j] = sr2 * uu[i] * uu[j] + sb2 * jb[i] * jb[j] + se2 * je[i] * je[j]
+                R[j, i] = R[i, j]  # exactly symmetric (products in one order)
+        return
+    if code == 1 or code == 2:
+        if code == 1:  # seed: the naive point + Prosov's second-order term (eq. 10's sign)
+            k_xy, k_z = 1.0 - s_xy / 2.0, 1.0 - s_z / 2.0
+        else:  # cmkf_d: κ(s) = 1 − (e^(−s) − e^(−s/2)) per axis
+            k_xy = 1.0 - (exp(-s_xy) - exp(-s_xy / 2.0))
+            k_z = 1.0 - (exp(-s_z) - exp(-s_z / 2.0))
+        z[0], z[1], z[2] = k_xy * (r * u0), k_xy * (r * u1), k_z * (r * u2)
+        # averaged_cov_3d: the posterior-averaged moments, E[r²] = r̂² + σr²
+        posterior_moments(cb, sb, sb2, mb, tmp)
+        posterior_moments(ce, se, se2, me, tmp)
+        combined_cov(r * r + sr2, sr2, me, mb, R)
+        return
+    # ucm / ducm: κ = e^(s/2) per axis, covariance D C D with C the true-conditioned one,
+    # at the measurement (ucm) or at the prediction (ducm)
+    k_xy, k_z = exp(s_xy / 2.0), exp(s_z / 2.0)
+    z[0], z[1], z[2] = k_xy * (r * u0), k_xy * (r * u1), k_z * (r * u2)
+    if code == 3:
+        given_truth_cov(r, b, el, sr2, sb2, se2, R, mb, me)
+    else:
+        rho = hypot(px, py)
+        rp = sqrt(rho * rho + pz * pz)
+        given_truth_cov(rp, atan2(py, px), atan2(pz, rho), sr2, sb2, se2, R, mb, me)
+    kap = (k_xy, k_xy, k_z)
+    for i in range(3):
+        for j in range(i, 3):
+            R[i, j] = kap[i] * R[i, j] * kap[j]
+            R[j, i] = R[i, j]
+
+
+@_jit
+def start_3d(x, P, z, R, sx, sy, sz, v0):
+    # cv_init: position z + site with covariance R, velocity 0 with variance σv0²
+    for i in range(6):
+        x[i] = 0.0
+        for j in range(6):
+            P[i, j] = 0.0
+    x[0], x[2], x[4] = z[0] + sx, z[1] + sy, z[2] + sz
+    for a in range(3):
+        for b in range(3):
+            P[2 * a, 2 * b] = R[a, b]
+        P[2 * a + 1, 2 * a + 1] = v0 * v0
+
+
+@_jit
+def predict_3d(x, P, T: float, q: float):
+    # cv_predict in 3D: x⁻ = F x, P⁻ = F P Fᵀ + Q, F per axis [[1, T], [0, 1]]
+    for a in range(3):
+        p = 2 * a
+        x[p] += T * x[p + 1]
+        for j in range(6):
+            P[p, j] += T * P[p + 1, j]
+    for i in range(6):
+        for a in range(3):
+            p = 2 * a
+            P[i, p] += T * P[i, p + 1]
+    if q != 0.0:
+        T2 = T * T
+        for a in range(3):
+            p = 2 * a
+            P[p, p] += q * T2 * T2 / 4.0
+            P[p, p + 1] += q * T2 * T / 2.0
+            P[p + 1, p] += q * T2 * T / 2.0
+            P[p + 1, p + 1] += q * T2
+
+
+@_jit
+def inverse_3(S, Si) -> float:
+    # The inverse of a symmetric 3 × 3 by cofactors; returns the determinant
+    a, b, c = S[0, 0], S[0, 1], S[0, 2]
+    d, e, f = S[1, 1], S[1, 2], S[2, 2]
+    c00, c01, c02 = d * f - e * e, c * e - b * f, b * e - c * d
+    det = a * c00 + b * c01 + c * c02
+    Si[0, 0], Si[0, 1], Si[0, 2] = c00 / det, c01 / det, c02 / det
+    Si[1, 1], Si[1, 2] = (a * f - c * c) / det, (b * c - a * e) / det
+    Si[2, 2] = (a * d - b * b) / det
+    Si[1, 0], Si[2, 0], Si[2, 1] = Si[0, 1], Si[0, 2], Si[1, 2]
+    return det
+
+
+@_jit
+def nis_3(S, nu) -> float:
+    # νᵀ S⁻¹ ν by the Cholesky factor (core.filters.state.quad_form_inv): NaN unless S is
+    # positive definite
+    l00 = S[0, 0]
+    if not l00 > 0.0:
+        return np.nan
+    l00 = sqrt(l00)
+    l10, l20 = S[1, 0] / l00, S[2, 0] / l00
+    d1 = S[1, 1] - l10 * l10
+    if not d1 > 0.0:
+        return np.nan
+    l11 = sqrt(d1)
+    l21 = (S[2, 1] - l20 * l10) / l11
+    d2 = S[2, 2] - l20 * l20 - l21 * l21
+    if not d2 > 0.0:
+        return np.nan
+    l22 = sqrt(d2)
+    y0 = nu[0] / l00
+    y1 = (nu[1] - l10 * y0) / l11
+    y2 = (nu[2] - l20 * y0 - l21 * y1) / l22
+    return y0 * y0 + y1 * y1 + y2 * y2
+
+
+@_jit
+def position_update_3d(x, P, nu, R, S, Si, K, U):
+    # core.filters.position in 3D: S = H P Hᵀ + R, K = P Hᵀ S⁻¹, x⁺ = x + K ν,
+    # P⁺ = P − K Uᵀ + (K S − U) Kᵀ with U = P Hᵀ (Joseph form multiplied out), symmetric
+    for a in range(3):
+        for b in range(3):
+            S[a, b] = P[2 * a, 2 * b] + R[a, b]
+    inverse_3(S, Si)
+    for i in range(6):
+        for a in range(3):
+            U[i, a] = P[i, 2 * a]
+    for i in range(6):
+        for a in range(3):
+            acc = 0.0
+            for b in range(3):
+                acc += U[i, b] * Si[b, a]
+            K[i, a] = acc
+    for i in range(6):
+        for a in range(3):
+            x[i] += K[i, a] * nu[a]
+    for i in range(6):  # U's columns in K's spare columns: V = K S − U
+        for a in range(3):
+            acc = 0.0
+            for b in range(3):
+                acc += K[i, b] * S[b, a]
+            K[i, 3 + a] = acc - U[i, a]
+    for i in range(6):
+        for j in range(i, 6):
+            acc = P[i, j]
+            for a in range(3):
+                acc += -K[i, a] * U[j, a] + K[i, 3 + a] * K[j, a]
+            P[i, j] = acc
+    for i in range(6):
+        for j in range(i):
+            P[i, j] = P[j, i]
+
+
+@_jit
+def ekf_measurement_3d(x, r, b, el, sr2, sb2, se2, sx, sy, sz, nu, R):
+    # polar_ekf.ekf_pseudo_measurement in 3D: ν' = J ν, R' = J R Jᵀ at the prediction
+    dx, dy, dz = x[0] - sx, x[2] - sy, x[4] - sz
+    rho = hypot(dx, dy)
+    rp = sqrt(rho * rho + dz * dz)
+    bp, ep = atan2(dy, dx), atan2(dz, rho)
+    u = (dx / rp, dy / rp, dz / rp)
+    jb = (-dy, dx, 0.0)
+    je = (-dz * dx / rho, -dz * dy / rho, rho)
+    nr, nb, ne = r - rp, wrap(b - bp), el - ep
+    for i in range(3):
+        nu[i] = u[i] * nr + jb[i] * nb + je[i] * ne
+        for j in range(i, 3):
+            R[i, j] = u[i] * u[j] * sr2 + jb[i] * jb[j] * sb2 + je[i] * je[j] * se2
+            R[j, i] = R[i, j]
+
+
+@_jit
+def polar_3(qx: float, qy: float, qz: float, Z, p):
+    # core.geometry.polar_coordinates: (r, β, ε) of an offset into Z[p]
+    rho = hypot(qx, qy)
+    Z[p, 0] = sqrt(rho * rho + qz * qz)
+    Z[p, 1] = atan2(qy, qx)
+    Z[p, 2] = atan2(qz, rho)
+
+
+@_jit
+def ukf_update_3d(x, P, r, b, el, sr2, sb2, se2, sx, sy, sz, prm, L, Z, K, S, Si, E):
+    # core.filters.polar_ukf.ukf_update in 3D: 2n + 1 = 13 points of (x⁻, P⁻) through the
+    # polar map, unscented S and Pxz, K = Pxz S⁻¹, x⁺ = x + K ν, and P⁺ in Joseph form
+    # Σ_p Wc_p e_p e_pᵀ + K R Kᵀ with e_p = (χ_p − x⁻) − K d_p.
+    c, wm0, wc0, w = prm[0], prm[1], prm[2], prm[3]
+    for j in range(6):  # lower Cholesky factor of c·P, semi-definite (semidefinite_cholesky)
+        d = c * P[j, j]
+        for k in range(j):
+            d -= L[j, k] * L[j, k]
+        tol = SEMIDEFINITE_RTOL * c * P[j, j]
+        null = abs(d) <= tol
+        if null:
+            d = 0.0
+        elif d < -tol:
+            d = math.nan  # indefinite beyond rounding: this track becomes NaN
+        d = sqrt(d)
+        L[j, j] = d
+        for i in range(j + 1, 6):
+            e = c * P[i, j]
+            for k in range(j):
+                e -= L[i, k] * L[j, k]
+            L[i, j] = 0.0 if null else e / d
+        for i in range(j):
+            L[i, j] = 0.0
+    px, py, pz = x[0] - sx, x[2] - sy, x[4] - sz
+    polar_3(px, py, pz, Z, 0)
+    for k in range(6):  # Z[1 + 2k] = +column k, Z[2 + 2k] = −column k
+        for sgn in range(2):
+            f = 1.0 if sgn == 0 else -1.0
+            polar_3(px + f * L[0, k], py + f * L[2, k], pz + f * L[4, k], Z, 1 + 2 * k + sgn)
+    r0, b0, e0 = Z[0, 0], Z[0, 1], Z[0, 2]
+    zr, ze = wm0 * r0, wm0 * e0
+    acc = 0.0
+    for p in range(1, 13):
+        zr += w * Z[p, 0]
+        ze += w * Z[p, 2]
+        acc += wrap(Z[p, 1] - b0)
+    zb = wrap(b0 + w * acc)
+    for a in range(3):
+        for bb in range(3):
+            S[a, bb] = 0.0
+    S[0, 0], S[1, 1], S[2, 2] = sr2, sb2, se2
+    for p in range(13):
+        wp = wc0 if p == 0 else w
+        Z[p, 0] -= zr
+        Z[p, 1] = wrap(Z[p, 1] - zb)
+        Z[p, 2] -= ze
+        for a in range(3):
+            for bb in range(3):
+                S[a, bb] += wp * Z[p, a] * Z[p, bb]
+    inverse_3(S, Si)
+    nu0, nu1, nu2 = r - zr, wrap(b - zb), el - ze
+    for i in range(6):  # Pxz = W Σ_k L[:, k] (d_k+ − d_k−)ᵀ, then K = Pxz S⁻¹
+        a0, a1, a2 = 0.0, 0.0, 0.0
+        for k in range(6):
+            a0 += L[i, k] * (Z[1 + 2 * k, 0] - Z[2 + 2 * k, 0])
+            a1 += L[i, k] * (Z[1 + 2 * k, 1] - Z[2 + 2 * k, 1])
+            a2 += L[i, k] * (Z[1 + 2 * k, 2] - Z[2 + 2 * k, 2])
+        a0 *= w
+        a1 *= w
+        a2 *= w
+        for e in range(3):
+            K[i, e] = a0 * Si[0, e] + a1 * Si[1, e] + a2 * Si[2, e]
+    for i in range(6):
+        x[i] += K[i, 0] * nu0 + K[i, 1] * nu1 + K[i, 2] * nu2
+    for i in range(6):  # the central point (e = −K d₀) and K R Kᵀ
+        E[i] = K[i, 0] * Z[0, 0] + K[i, 1] * Z[0, 1] + K[i, 2] * Z[0, 2]
+    for i in range(6):
+        for j in range(i, 6):
+            P[i, j] = (
+                wc0 * E[i] * E[j]
+                + sr2 * K[i, 0] * K[j, 0]
+                + sb2 * K[i, 1] * K[j, 1]
+                + se2 * K[i, 2] * K[j, 2]
+            )
+    for k in range(6):  # the points ± column k: e = ±L[:, k] − K d
+        for sgn in range(2):
+            p, f = 1 + 2 * k + sgn, 1.0 if sgn == 0 else -1.0
+            for i in range(6):
+                E[i] = f * L[i, k] - (K[i, 0] * Z[p, 0] + K[i, 1] * Z[p, 1] + K[i, 2] * Z[p, 2])
+            for i in range(6):
+                for j in range(i, 6):
+                    P[i, j] += w * E[i] * E[j]
+    for i in range(6):
+        for j in range(i):
+            P[i, j] = P[j, i]
+
+
+@_jit
+def doppler_terms_3d(x, P, b: float, el: float, var_vr: float, sb2: float, se2: float, u):
+    # core.filters.doppler: û = u(β̂, ε̂) into u; returns var e = σVr² + σβ² ((g_β·v)² +
+    # g_βᵀ P_vv g_β) + σε² ((g_ε·v)² + g_εᵀ P_vv g_ε), g_β on the first two axes
+    ca, sa, ce, se = cos(b), sin(b), cos(el), sin(el)
+    u[0], u[1], u[2] = ce * ca, ce * sa, se
+    gb0, gb1 = -ce * sa, ce * ca
+    ge0, ge1, ge2 = -se * ca, -se * sa, ce
+    v0, v1, v2 = x[1], x[3], x[5]
+    gv = gb0 * v0 + gb1 * v1
+    gpg = gb0 * gb0 * P[1, 1] + gb1 * gb1 * P[3, 3] + 2.0 * gb1 * gb0 * P[3, 1]
+    r_e = var_vr + sb2 * (gv * gv + gpg)
+    gv = ge0 * v0 + ge1 * v1 + ge2 * v2
+    gpg = ge0 * ge0 * P[1, 1] + ge1 * ge1 * P[3, 3] + ge2 * ge2 * P[5, 5]
+    gpg += 2.0 * ge1 * ge0 * P[3, 1] + 2.0 * ge2 * ge0 * P[5, 1] + 2.0 * ge2 * ge1 * P[5, 3]
+    return r_e + se2 * (gv * gv + gpg)
+
+
+@_jit
+def doppler_nis_3d(x, P, vr_hat, b, el, var_vr, sb2, se2, u) -> float:
+    # ν² / S of the Doppler stage (doppler_terms, linear_innovation)
+    r_e = doppler_terms_3d(x, P, b, el, var_vr, sb2, se2, u)
+    S = r_e
+    for a in range(3):
+        for c in range(3):
+            S += u[a] * P[2 * a + 1, 2 * c + 1] * u[c]
+    if not S > 0.0:
+        return np.nan
+    nu = vr_hat - (u[0] * x[1] + u[1] * x[3] + u[2] * x[5])
+    return nu * nu / S
+
+
+@_jit
+def doppler_update_3d(x, P, vr_hat, b, el, var_vr, sb2, se2, u, U, K):
+    # core.filters.doppler.doppler_update in 3D: U = P hᵀ, S = h U + var e, K = U / S,
+    # x⁺ = x + K ν, P⁺ = P − K Uᵀ + (K S − U) Kᵀ, symmetrised
+    r_e = doppler_terms_3d(x, P, b, el, var_vr, sb2, se2, u)
+    for i in range(6):
+        U[i] = P[i, 1] * u[0] + P[i, 3] * u[1] + P[i, 5] * u[2]
+    S = u[0] * U[1] + u[1] * U[3] + u[2] * U[5] + r_e
+    nu = vr_hat - (u[0] * x[1] + u[1] * x[3] + u[2] * x[5])
+    inv_s = 1.0 / S
+    for i in range(6):
+        K[i] = U[i] * inv_s
+        x[i] += K[i] * nu
+    for i in range(6):
+        for j in range(i, 6):
+            a = P[i, j] - K[i] * U[j] + (K[i] * S - U[i]) * K[j]
+            if i != j:
+                a = 0.5 * (a + P[j, i] - K[j] * U[i] + (K[j] * S - U[j]) * K[i])
+            P[i, j] = a
+    for i in range(6):
+        for j in range(i):
+            P[i, j] = P[j, i]
+
+
+@_jit
+def track_plots_3d(
+    codes, start_codes, slot, time_s, r_m, az_rad, el_rad, vr_mps, has_vr, radar, site,
+    sigma_r, sigma_b, sigma_e, sigma_vr, sigma_a, v0, prm, xs, Ps, started, last_t, out_x,
+    out_P, out_nis,
+):  # fmt: skip
+    """``core.filters.kernels_track.track_plots_2d`` in 3D: plots with elevations el_rad
+    (B,), sites (R, 3), σε sigma_e (R,), states xs (K, M, 6), Ps (K, M, 6, 6), outputs
+    (B, M, 6), (B, M, 6, 6), (B, M); ``prm`` the UKF's weights for n = 6. Returns −1 or the
+    index of the first plot before its slot's previous one."""
+    n_m = codes.shape[0]
+    q = sigma_a * sigma_a
+    x, P = np.empty(6), np.empty((6, 6))
+    z, nu, u, E, Uv, Kv = (
+        np.empty(3),
+        np.empty(3),
+        np.empty(3),
+        np.empty(6),
+        np.empty(6),
+        np.empty(6),
+    )
+    R, S, Si = np.empty((3, 3)), np.empty((3, 3)), np.empty((3, 3))
+    K, U, L = np.empty((6, 6)), np.empty((6, 3)), np.empty((6, 6))
+    Z = np.empty((13, 3))
+    mb, me, tmp = np.empty(9), np.empty(9), np.empty(9)
+    for i in range(slot.shape[0]):
+        k, g = slot[i], radar[i]
+        r, b, el = r_m[i], az_rad[i], el_rad[i]
+        sx, sy, sz = site[g, 0], site[g, 1], site[g, 2]
+        sr2, sb2, se2 = sigma_r[g] ** 2, sigma_b[g] ** 2, sigma_e[g] ** 2
+        new = not started[k]
+        dt = 0.0
+        if not new:
+            dt = time_s[i] - last_t[k]
+            if dt < 0.0:
+                return i
+        for j in range(n_m):
+            code = codes[j]
+            nis = np.nan
+            if new:
+                convert_3d(
+                    start_codes[j], r, b, el, sr2, sb2, se2, 0.0, 0.0, 0.0, z, R, mb, me, tmp
+                )
+                start_3d(x, P, z, R, sx, sy, sz, v0)
+            else:
+                for a in range(6):
+                    x[a] = xs[k, j, a]
+                    for c in range(6):
+                        P[a, c] = Ps[k, j, a, c]
+                if dt > 0.0:
+                    predict_3d(x, P, dt, q)
+                if code >= 5:  # ekf, ukf: the EKF's position measurement (and statistics)
+                    ekf_measurement_3d(x, r, b, el, sr2, sb2, se2, sx, sy, sz, nu, R)
+                else:
+                    convert_3d(
+                        code, r, b, el, sr2, sb2, se2, x[0] - sx, x[2] - sy, x[4] - sz, z, R,
+                        mb, me, tmp,
+                    )  # fmt: skip
+                    nu[0], nu[1], nu[2] = z[0] + sx - x[0], z[1] + sy - x[2], z[2] + sz - x[4]
+                for a in range(3):
+                    for c in range(3):
+                        S[a, c] = P[2 * a, 2 * c] + R[a, c]
+                nis = nis_3(S, nu)
+                if code == 6:
+                    ukf_update_3d(x, P, r, b, el, sr2, sb2, se2, sx, sy, sz, prm, L, Z, K, S, Si, E)
+                else:
+                    position_update_3d(x, P, nu, R, S, Si, K, U)
+            if has_vr[i]:
+                var_vr = sigma_vr[g] * sigma_vr[g]
+                if not new:
+                    nis += doppler_nis_3d(x, P, vr_mps[i], b, el, var_vr, sb2, se2, u)
+                doppler_update_3d(x, P, vr_mps[i], b, el, var_vr, sb2, se2, u, Uv, Kv)
+            out_nis[i, j] = nis
+            for a in range(6):
+                xs[k, j, a] = x[a]
+                out_x[i, j, a] = x[a]
+                for c in range(6):
+                    Ps[k, j, a, c] = P[a, c]
+                    out_P[i, j, a, c] = P[a, c]
+        started[k] = True
+        last_t[k] = time_s[i]
+    return -1

@@ -1,0 +1,389 @@
+"""The tracker on the compiled engine: blocks of plots as arrays, every target's tracks in
+arrays, one compiled pass per block (``core.filters.kernels_track``).
+
+``core.tracking.targets.TargetTracker`` and ``core.tracking.stream.StreamTracker`` run here
+when their options ask for ``engine="compiled"`` (the default) and the track is one the
+kernels have: 2D (``core.filters.kernels_track``) or 3D (``core.filters.kernels_3d``), every
+method, Doppler, the constant-velocity model, the first-plot start, no finite-memory track.
+The rest (the IMM, the finite-memory start and track) stays on the numpy engine,
+which is also the reference these tracks are checked against (``tests/test_track_compiled.py``,
+to 1e-9 relative).
+
+A block is a ``PlotBlock``: per plot its target (an index into the block's labels), its radar
+(an index into a ``RadarTable``: site and noise std), time and polar measurement. The kernel
+walks the block in plot order, so a target's plots are filtered in its own order however the
+targets interleave (no waves, no per-target grouping).
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Callable
+from typing import Any, NamedTuple
+
+import numpy as np
+from numpy.typing import NDArray
+
+from radarviz.core.filters.compiled import METHOD_CODES, START_CODES
+from radarviz.core.filters.polar_ukf import UKFParams
+from radarviz.core.tracking.consistency import ConsistencyMonitor, nis_band
+
+#: The dimensions the compiled tracker has a kernel for.
+COMPILED_DIMS: tuple[int, ...] = (2, 3)
+
+
+class RadarTable(NamedTuple):
+    """The radars a block's plots refer to, R of them: site_m (R, 3) (m), and noise std
+    sigma_r_m, sigma_azimuth_rad, sigma_elevation_rad (R,) (m, rad) and
+    sigma_radial_velocity_mps (R,) (m/s; 0 where the radar has no Doppler)."""
+
+    site_m: NDArray[np.float64]
+    sigma_r_m: NDArray[np.float64]
+    sigma_azimuth_rad: NDArray[np.float64]
+    sigma_elevation_rad: NDArray[np.float64]
+    sigma_radial_velocity_mps: NDArray[np.float64]
+
+
+class PlotBlock(NamedTuple):
+    """B plots as arrays (the columnar form of a list of ``core.tracking.stream.Plot``).
+
+    Attributes:
+        time_s: (B,) s.  range_m, azimuth_rad: (B,) m, rad.
+        elevation_rad: (B,) rad, or None (2D).
+        radial_velocity_mps: (B,) m/s, NaN where a plot has no Doppler; or None (none has).
+        radar: (B,) indices into ``radars``.  radars: the ``RadarTable``.
+        target: (B,) indices into ``labels``; labels: the block's target labels ("" for a
+            file of one target).
+    """
+
+    time_s: NDArray[np.float64]
+    range_m: NDArray[np.float64]
+    azimuth_rad: NDArray[np.float64]
+    elevation_rad: NDArray[np.float64] | None
+    radial_velocity_mps: NDArray[np.float64] | None
+    radar: NDArray[np.intp]
+    radars: RadarTable
+    target: NDArray[np.intp]
+    labels: tuple[str, ...]
+
+    @property
+    def size(self) -> int:
+        """B, the plots of the block (``len`` is the tuple's, as for any NamedTuple)."""
+        return int(self.time_s.shape[0])
+
+
+class TrackBlock(NamedTuple):
+    """Every method's posterior after each plot of a block: x (B, M, n), P (B, M, n, n) in the
+    tracker's own dimensions (n = 2·dims, state (x, ẋ, y, ẏ[, z, ż])), and ``target`` (B,),
+    each plot's slot in the tracker's ``targets``."""
+
+    x: NDArray[np.float64]
+    P: NDArray[np.float64]
+    target: NDArray[np.intp]
+
+
+class OutOfOrderError(Exception):
+    """A plot earlier than its target's previous one: ``index`` in the block, the times."""
+
+    def __init__(self, index: int, time_s: float, previous_s: float):
+        super().__init__(index)
+        self.index, self.time_s, self.previous_s = index, time_s, previous_s
+
+
+class CompiledTracks:
+    """Every method's track of every target on the compiled engine (module docstring).
+
+    Args:
+        methods: from ``core.filters.compiled.COMPILED_METHODS`` (every method, 2D and 3D).
+        dims: 2 or 3 (``COMPILED_DIMS``).
+        sigma_a_mps2, sigma_v0_mps, use_doppler: as ``StreamOptions``.
+        monitor: fed every update's NIS (track names ``name(target, method)``), or None.
+        name: the monitor's track name of (target, method).
+    """
+
+    def __init__(
+        self,
+        methods: tuple[str, ...],
+        dims: int,
+        sigma_a_mps2: float,
+        sigma_v0_mps: float,
+        use_doppler: bool,
+        monitor: ConsistencyMonitor | None = None,
+        name: Callable[[str, str], str] | None = None,
+    ):
+        self.methods = tuple(methods)
+        self.codes = np.array([METHOD_CODES[m] for m in methods], dtype=np.int64)
+        self.start_codes = np.array([START_CODES[m] for m in methods], dtype=np.int64)
+        self.sigma_a, self.sigma_v0 = float(sigma_a_mps2), float(sigma_v0_mps)
+        self.use_doppler = bool(use_doppler)
+        self.dims = int(dims)
+        ns = 2 * self.dims  # the state size
+        self.prm = np.array(UKFParams().weights(ns), dtype=np.float64)
+        self.slots: dict[str, int] = {}
+        m = len(methods)
+        self.xs = np.zeros((0, m, ns))
+        self.Ps = np.zeros((0, m, ns, ns))
+        self.started = np.zeros(0, dtype=np.bool_)
+        self.last_t = np.zeros(0)
+        self.feed = None if monitor is None else MonitorFeed(monitor, len(methods))
+        self.name = name or (lambda target, method: method)
+        self._track_names: list[str] = []
+
+    @property
+    def targets(self) -> tuple[str, ...]:
+        return tuple(self.slots)
+
+    def _names(self) -> list[str]:
+        """The monitor's name of every track t·M + j (extended as targets come)."""
+        have = len(self._track_names) // max(1, len(self.methods))
+        for t in list(self.slots)[have:]:
+            self._track_names.extend(self.name(t, m) for m in self.methods)
+        return self._track_names
+
+    def _slots(self, labels: tuple[str, ...]) -> NDArray[np.intp]:
+        """Each label's slot, new targets added (the state arrays grow by doubling)."""
+        ids = np.array([self.slots.setdefault(t, len(self.slots)) for t in labels], np.intp)
+        need = len(self.slots)
+        have = self.started.shape[0]
+        if need > have:
+            cap = max(need, 2 * have, 16)
+            grow = cap - have
+            self.xs = np.concatenate([self.xs, np.zeros((grow, *self.xs.shape[1:]))])
+            self.Ps = np.concatenate([self.Ps, np.zeros((grow, *self.Ps.shape[1:]))])
+            self.started = np.concatenate([self.started, np.zeros(grow, dtype=np.bool_)])
+            self.last_t = np.concatenate([self.last_t, np.zeros(grow)])
+            if self.feed is not None:
+                self.feed.grow(cap)
+        return ids
+
+    def add(self, block: PlotBlock) -> TrackBlock:
+        """Filter a block in order; raises ``OutOfOrderError`` at a plot earlier than its
+        target's previous one (the plots before it are filtered, it and later ones not)."""
+        slot = self._slots(block.labels)[block.target]
+        n, m = block.size, len(self.methods)
+        vr = block.radial_velocity_mps
+        has_vr = np.zeros(n, dtype=np.bool_) if vr is None else ~np.isnan(vr)
+        if not self.use_doppler:
+            has_vr[:] = False
+        vr = np.zeros(n) if vr is None else vr
+        rd = block.radars
+        ns = 2 * self.dims
+        out_x = np.empty((n, m, ns))
+        out_P = np.empty((n, m, ns, ns))
+        out_nis = np.empty((n, m))
+        new = ~self.started[slot] if self.feed is not None else None
+        plot = [_f(block.time_s), _f(block.range_m), _f(block.azimuth_rad)]
+        noise = [_f(rd.sigma_r_m), _f(rd.sigma_azimuth_rad)]
+        if self.dims == 3:
+            assert block.elevation_rad is not None
+            plot.append(_f(block.elevation_rad))
+            noise.append(_f(rd.sigma_elevation_rad))
+        bad = _track_kernel(self.dims)(
+            self.codes,
+            self.start_codes,
+            slot,
+            *plot,
+            _f(vr),
+            has_vr,
+            np.ascontiguousarray(block.radar, dtype=np.intp),
+            np.ascontiguousarray(rd.site_m[:, : self.dims], dtype=np.float64),
+            *noise,
+            _f(rd.sigma_radial_velocity_mps),
+            self.sigma_a,
+            self.sigma_v0,
+            self.prm,
+            self.xs,
+            self.Ps,
+            self.started,
+            self.last_t,
+            out_x,
+            out_P,
+            out_nis,
+        )
+        done = n if bad < 0 else int(bad)
+        if self.feed is not None and new is not None:
+            # A slot's first plot in the block is its start only if it had none before and no
+            # earlier plot of the block started it.
+            first = np.zeros(n, dtype=np.bool_)
+            _, idx = np.unique(slot, return_index=True)
+            first[idx] = True
+            starts = new & first
+            self.feed.add(
+                slot[:done],
+                block.time_s[:done],
+                out_nis[:done],
+                self.dims + has_vr[:done].astype(np.int64),
+                ~starts[:done],
+                self._names(),
+            )
+        if bad >= 0:
+            k = slot[bad]
+            raise OutOfOrderError(int(bad), float(block.time_s[bad]), float(self.last_t[k]))
+        return TrackBlock(out_x, out_P, slot)
+
+
+def _f(a: NDArray[Any]) -> NDArray[np.float64]:
+    return np.ascontiguousarray(a, dtype=np.float64)
+
+
+class MonitorFeed:
+    """A ``ConsistencyMonitor`` fed by the compiled loop (``core.tracking.kernels_monitor``):
+    the monitor state of every (target, method) track in arrays, track t·M + j, written back
+    into the monitor's records after each block (so its results and events are the ones
+    ``ConsistencyMonitor.add`` would give, in the same order)."""
+
+    def __init__(self, monitor: ConsistencyMonitor, methods: int):
+        self.monitor = monitor
+        self.m = methods
+        w = monitor.window
+        self.w = w
+        # dof per update ≤ 4 (a 3D position and a Doppler): D ≤ 4 w.
+        bands = [nis_band(d, monitor.level) if d else (np.nan, np.nan) for d in range(4 * w + 1)]
+        self.lo = np.array([b[0] for b in bands])
+        self.hi = np.array([b[1] for b in bands])
+        self.arrays: dict[str, NDArray[Any]] = {}
+        self.order: list[int] = []
+        self.names: list[str] = []
+        self.dirty = False
+        self.grow(0)
+        monitor.feeds.append(self)
+
+    _FLOAT = ("nis_sum", "total_nis", "first_exit")
+    _INT = ("count", "dof_sum", "total_dof", "updates", "windows", "above", "below", "run_out")
+
+    def grow(self, targets: int) -> None:
+        t = targets * self.m
+        old = self.arrays
+        new: dict[str, NDArray[Any]] = {
+            "ring_nis": np.zeros((t, self.w)),
+            "ring_dof": np.zeros((t, self.w), dtype=np.int64),
+            "left": np.zeros(t, dtype=np.bool_),
+            "seen": np.zeros(t, dtype=np.bool_),
+            **{k: np.zeros(t) for k in self._FLOAT},
+            **{k: np.zeros(t, dtype=np.int64) for k in self._INT},
+        }
+        new["first_exit"][:] = np.nan
+        for k, a in old.items():
+            new[k][: a.shape[0]] = a
+        self.arrays = new
+
+    def add(
+        self,
+        slot: NDArray[np.intp],
+        time_s: NDArray[np.float64],
+        nis: NDArray[np.float64],
+        dof: NDArray[np.int64],
+        update: NDArray[np.bool_],
+        names: list[str],
+    ) -> None:
+        """The updates (plots where ``update``) of a block's (B, M) NIS, in plot then method
+        order; ``names`` the monitor's name of every track t·M + j. Events go to the monitor
+        at once; the tracks' records when it is next read (``store``)."""
+        from radarviz.core.tracking.kernels_monitor import monitor_updates
+
+        m = self.m
+        rows = np.flatnonzero(update)
+        track = (slot[rows, None] * m + np.arange(m)).ravel()
+        times = np.repeat(time_s[rows], m)
+        dofs = np.repeat(dof[rows], m)
+        vals = np.ascontiguousarray(nis[rows].ravel())
+        self.names = names
+        a = self.arrays
+        # Tracks new to this feed, in order of their first update (the monitor lists them so).
+        fresh = ~a["seen"][track]
+        if fresh.any():
+            uniq, first = np.unique(track[fresh], return_index=True)
+            new = uniq[np.argsort(first, kind="stable")]
+            a["seen"][new] = True
+            self._load(new, names)
+            self.order.extend(new.tolist())
+        u = track.size
+        ev = (np.empty(u, np.int64), np.empty(u), np.empty(u, np.int64), np.empty(u))
+        ev = (*ev, np.empty(u), np.empty(u))
+        n_ev = monitor_updates(
+            track, _f(times), vals, dofs, self.w, self.monitor.sustain, self.lo, self.hi,
+            a["ring_nis"], a["ring_dof"], a["count"], a["nis_sum"], a["dof_sum"],
+            a["total_nis"], a["total_dof"], a["updates"], a["windows"], a["above"], a["below"],
+            a["run_out"], a["left"], a["first_exit"], *ev,
+        )  # fmt: skip
+        self.dirty = True
+        if n_ev:
+            self._events(ev, n_ev)
+
+    def _load(self, tracks: NDArray[np.intp], names: list[str]) -> None:
+        """Tracks the monitor knows (from before this feed) start from its records."""
+        self.monitor._sync()
+        known = self.monitor._tracks
+        if not known:
+            return
+        a = self.arrays
+        for t in tracks.tolist():
+            rec = known.get(names[t])
+            if rec is None:
+                continue
+            win = list(rec.window)
+            a["count"][t] = len(win)
+            for i, (v, d) in enumerate(win):
+                a["ring_nis"][t, i], a["ring_dof"][t, i] = v, d
+            for k in ("nis_sum", "dof_sum", "total_nis", "total_dof", "updates", "windows"):
+                a[k][t] = getattr(rec, k)
+            for k in ("above", "below", "run_out", "left"):
+                a[k][t] = getattr(rec, k)
+            a["first_exit"][t] = np.nan if rec.first_exit_s is None else rec.first_exit_s
+
+    def _events(self, ev: tuple, n_ev: int) -> None:
+        from radarviz.core.tracking.consistency import ConsistencyEvent
+
+        mon = self.monitor
+        for e in range(n_ev):
+            kind = "leaves" if ev[2][e] else "returns"
+            event = ConsistencyEvent(
+                self.names[int(ev[0][e])],
+                float(ev[1][e]),
+                kind,
+                float(ev[3][e]),
+                float(ev[4][e]),
+                float(ev[5][e]),
+            )
+            mon.events.append(event)
+            if mon.on_event is not None:
+                mon.on_event(event)
+
+    def store(self) -> None:
+        """Write every track's state into the monitor's records (``ConsistencyMonitor``
+        calls this before it reads them)."""
+        from collections import deque
+
+        from radarviz.core.tracking.consistency import _Track
+
+        if not self.dirty:
+            return
+        self.dirty = False
+        mon, a, names = self.monitor, self.arrays, self.names
+        cols = {k: a[k][self.order].tolist() for k in self._FLOAT + self._INT + ("left",)}
+        for i, t in enumerate(self.order):
+            rec = mon._tracks.setdefault(names[t], _Track())
+            c = cols["count"][i]
+            rec.window = deque(
+                zip(a["ring_nis"][t, :c].tolist(), a["ring_dof"][t, :c].tolist(), strict=True)
+            )
+            for k in ("nis_sum", "total_nis", "dof_sum", "total_dof", "updates", "windows"):
+                setattr(rec, k, cols[k][i])
+            for k in ("above", "below", "run_out"):
+                setattr(rec, k, cols[k][i])
+            rec.left = bool(cols["left"][i])
+            fe = cols["first_exit"][i]
+            rec.first_exit_s = None if fe != fe else fe
+
+
+@functools.cache
+def _track_kernel(dims: int) -> Callable[..., int]:
+    """The compiled tracker kernel of ``dims`` (2 or 3), compiled (or loaded from numba's
+    cache) on first use."""
+    if dims == 3:
+        from radarviz.core.filters.kernels_3d import track_plots_3d
+
+        return track_plots_3d
+    from radarviz.core.filters.kernels_track import track_plots_2d
+
+    return track_plots_2d

@@ -1,0 +1,277 @@
+"""The tracker on the compiled engine (``core.tracking.compiled``, ``core.filters.kernels_track``,
+``core.filters.kernels_3d``) against the numpy engine, and the block-wise track file.
+
+* Engines: for every method, 2D and 3D, with Doppler on some plots and not on others, three
+  radars (sites and noise of their own), a time step per plot, the compiled tracks of many
+  interleaved targets equal the numpy engine's to 1e-9 relative (absolute floor 1e-9 in the
+  entry's unit), whatever the blocks; so does the consistency monitor's record of every
+  track (the same windows in and out of band, the same events, NIS means to 1e-9). The two
+  engines compute the same formulas in another order, so they agree to rounding.
+* Per target, as alone: on the compiled engine a target's tracks in a many-target file are
+  bit for bit those of its plots alone (the kernel walks the plots in order; nothing crosses
+  targets).
+* What the compiled engine has no kernel for (the IMM, the finite-memory start) runs on numpy.
+* The number text: the compiled formatter writes every double as pyarrow does, byte for byte.
+* The file path: ``radarviz track`` (columns read by pyarrow in blocks, tracked by arrays,
+  written a block at a time) gives the tracks of the plots read row by row and tracked one
+  ``Plot`` at a time, also when the blocks are cut small and the file has what the fast parser
+  leaves to the row reader (a quoted cell, blank lines); an error in a later block names its
+  own line.
+"""
+
+from __future__ import annotations
+
+import csv
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from radarviz.core.tracking.consistency import ConsistencyMonitor
+from radarviz.core.tracking.stream import (
+    ALL_METHODS,
+    METHODS_3D,
+    Plot,
+    StreamOptions,
+    StreamTracker,
+)
+from radarviz.core.tracking.targets import TargetTracker
+from radarviz.viz_app.cli.main import main
+from radarviz.viz_app.io import plot_blocks
+from radarviz.viz_app.io.plots import (
+    TRACK_COLUMNS,
+    fusion_plots,
+    prosov_plots,
+    state_from_row,
+    write_measurements,
+)
+
+TOL = 1e-9
+
+
+def close(a: np.ndarray, b: np.ndarray) -> bool:
+    """|a − b| ≤ 1e-9 (1 + |a|) entry by entry."""
+    return bool(np.all(np.abs(np.asarray(a) - np.asarray(b)) <= TOL * (1.0 + np.abs(a))))
+
+
+_SITES = ((0.0, 0.0, 0.0), (15_000.0, -8_000.0, 40.0), (-5_000.0, 12_000.0, 10.0))
+
+
+def scene(three_d: bool, targets: int = 5) -> list[Plot]:
+    """Interleaved plots of ``targets`` targets: the prosov run (2D) or the fusion run (3D,
+    Doppler) per target, each plot given to one of three radars (its site and noise), every
+    fourth without Doppler, a time offset per target."""
+    out = []
+    for k in range(targets):
+        plots, _ = fusion_plots(seed=k + 1, steps=12) if three_d else prosov_plots(seed=k + 1)
+        for j, p in enumerate(plots):
+            g = (j + k) % 3
+            vr = p.radial_velocity_mps if three_d else 30.0 * np.sin(0.3 * j + k)
+            out.append(
+                replace(
+                    p,
+                    time_s=p.time_s + 0.37 * k,
+                    target=f"T{k}",
+                    site=_SITES[g] if not three_d else p.site,
+                    sigma_r_m=p.sigma_r_m * (1.0 + 0.5 * g),
+                    sigma_azimuth_rad=p.sigma_azimuth_rad * (1.0 + 0.25 * g),
+                    radial_velocity_mps=None if (j + k) % 4 == 0 else float(vr),
+                    sigma_radial_velocity_mps=1.0 + g,
+                )
+            )
+    return sorted(out, key=lambda p: p.time_s)
+
+
+def tracked(plots: list[Plot], three_d: bool, engine: str, block: int, **kw):
+    monitor = ConsistencyMonitor(5)
+    options = StreamOptions(sigma_a_mps2=1.0, engine=engine, monitor=monitor, **kw)
+    tracker = TargetTracker(METHODS_3D if three_d else ALL_METHODS, three_d, options)
+    rows = []
+    for i in range(0, len(plots), block):
+        rows += tracker.add_block(plots[i : i + block])
+    return tracker, rows, monitor
+
+
+@pytest.mark.parametrize("three_d", [False, True], ids=["2d", "3d"])
+@pytest.mark.parametrize("block", [7, 4096])
+def test_the_compiled_tracker_equals_the_numpy_engine(three_d: bool, block: int) -> None:
+    plots = scene(three_d)
+    assert any(p.radial_velocity_mps is None for p in plots)
+    assert any(p.radial_velocity_mps is not None for p in plots)
+    ref, ref_rows, ref_mon = tracked(plots, three_d, "numpy", block)
+    fast, rows, mon = tracked(plots, three_d, "compiled", block)
+    assert (ref.engine, fast.engine) == ("numpy", "compiled")
+    assert fast.targets == ref.targets
+    for a, b in zip(ref_rows, rows, strict=True):
+        assert [m for m, _, _ in a] == [m for m, _, _ in b]
+        for (m, xa, Pa), (_, xb, Pb) in zip(a, b, strict=True):
+            assert close(xa, xb), m
+            assert close(Pa, Pb), m
+    want, got = ref_mon.results(), mon.results()
+    assert set(want) == set(got)
+    for name, w in want.items():
+        g = got[name]
+        assert (g.updates, g.windows, g.above, g.below) == (w.updates, w.windows, w.above, w.below)
+        assert g.first_exit_s == w.first_exit_s
+        assert abs(g.mean_nis_per_dof - w.mean_nis_per_dof) <= TOL * w.mean_nis_per_dof
+    # The numpy engine feeds the monitor wave by wave, the compiled one plot by plot: the
+    # same events, listed in another order.
+    key = sorted((e.track, e.time_s, e.kind) for e in ref_mon.events)
+    assert key == sorted((e.track, e.time_s, e.kind) for e in mon.events)
+
+
+@pytest.mark.parametrize("three_d", [False, True], ids=["2d", "3d"])
+def test_a_target_of_many_is_bit_for_bit_its_plots_alone(three_d: bool) -> None:
+    plots = scene(three_d, targets=3)
+    methods = METHODS_3D if three_d else ALL_METHODS
+    _, rows, _ = tracked(plots, three_d, "compiled", 50)
+    options = StreamOptions(sigma_a_mps2=1.0)
+    for name in ("T0", "T1", "T2"):
+        own = [p for p in plots if p.target == name]
+        alone = StreamTracker(methods, three_d, options).add_block(own)
+        mine = [r for p, r in zip(plots, rows, strict=True) if p.target == name]
+        for a, b in zip(alone, mine, strict=True):
+            for (_, xa, Pa), (_, xb, Pb) in zip(a, b, strict=True):
+                assert np.array_equal(xa, xb) and np.array_equal(Pa, Pb)
+
+
+def test_the_imm_stays_on_the_numpy_engine() -> None:
+    options = StreamOptions(model="imm", engine="compiled")
+    assert TargetTracker(ALL_METHODS, False, options).engine == "numpy"
+    assert TargetTracker(ALL_METHODS, False, replace(options, model="cv")).engine == "compiled"
+
+
+def _read_tracks(path: Path) -> list[tuple[str, str, np.ndarray, np.ndarray]]:
+    with open(path, newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    assert rows and tuple(k for k in rows[0] if k != "target") == TRACK_COLUMNS
+    return [(r["target"], r["method"], *state_from_row(r)) for r in rows]
+
+
+@pytest.mark.parametrize("three_d", [False, True], ids=["2d", "3d"])
+def test_the_block_file_path_equals_the_plots_tracked_one_by_one(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, three_d: bool
+) -> None:
+    plots = scene(three_d, targets=3)
+    if not three_d:  # the file's sites come from the radars file: one radar per site here
+        plots = [replace(p, radar=f"R{_SITES.index(p.site)}") for p in plots]
+    meas, radars, out = tmp_path / "m.csv", tmp_path / "r.toml", tmp_path / "t.csv"
+    _, radar_list = fusion_plots(steps=2) if three_d else prosov_plots()
+    if not three_d:
+        base = radar_list[0]
+        radar_list = [
+            replace(
+                base,
+                name=f"R{g}",
+                x_m=s[0],
+                y_m=s[1],
+                z_m=s[2],
+                sigma_range_m=base.sigma_range_m * (1.0 + 0.5 * g),
+                sigma_azimuth_deg=base.sigma_azimuth_deg * (1.0 + 0.25 * g),
+                sigma_radial_velocity_mps=1.0 + g,
+            )
+            for g, s in enumerate(_SITES)
+        ]
+    write_measurements(str(meas), str(radars), plots, radar_list)
+    text = meas.read_text().splitlines(keepends=True)
+    # A quoted label, blank lines: left to the row reader, in their blocks only.
+    text[5] = text[5].replace(",T", ',"T')[:-1].rstrip() + '"\n' if not three_d else text[5]
+    text.insert(9, "\n")
+    meas.write_text("".join(text))
+    monkeypatch.setattr(plot_blocks, "BLOCK_BYTES", 700)
+    args = ["track", "--input", str(meas), "--radars", str(radars), "--out", str(out)]
+    assert main([*args, "--model", "cv", "--sigma-a", "1"]) == 0
+    got = _read_tracks(out)
+    # The reference: the plots as the row reader gives them, one Plot at a time, on numpy.
+    from radarviz.viz_app.io.plots import PlotReader, load_radars
+
+    with open(meas, encoding="utf-8", newline="") as fh:
+        read = [p for _, p in PlotReader(fh, str(meas), load_radars(str(radars)))]
+    options = StreamOptions(sigma_a_mps2=1.0, engine="numpy")
+    tracker = TargetTracker(METHODS_3D if three_d else ALL_METHODS, three_d, options)
+    want = [
+        (p.target, row)
+        for p, rows in zip(read, tracker.add_block(read), strict=True)
+        for row in rows
+    ]
+    assert len(got) == len(want)
+    for (t, m, x, P), (tw, (mw, xw, Pw)) in zip(got, want, strict=True):
+        assert (t, m) == (tw, mw)
+        assert close(xw, x) and close(Pw, P)
+
+
+@pytest.mark.parametrize(
+    "bad, message",
+    [
+        ("range_m", "line 40, column range_m: must be a finite number in (0, "),
+        ("time", "line 40, column time_s: must not be before the previous time of target"),
+        ("radar", "line 40, column radar: unknown radar"),
+    ],
+)
+def test_an_error_in_a_later_block_names_its_line(
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+    bad: str,
+    message: str,
+) -> None:
+    plots = scene(False, targets=2)
+    plots = [replace(p, site=(0.0,) * 3, radar="radar", radial_velocity_mps=None) for p in plots]
+    meas, radars, out = tmp_path / "m.csv", tmp_path / "r.toml", tmp_path / "t.csv"
+    write_measurements(str(meas), str(radars), plots, prosov_plots()[1])
+    lines = meas.read_text().splitlines(keepends=True)
+    cells = lines[39].split(",")
+    if bad == "range_m":
+        cells[2] = "-5"
+    elif bad == "radar":
+        cells[1] = "nowhere"
+    else:  # before that target's previous plot
+        target = cells[-1].strip()
+        prev = next(ln for ln in reversed(lines[1:39]) if ln.strip().endswith(target))
+        cells[0] = repr(float(prev.split(",")[0]) - 1.0)
+    lines[39] = ",".join(cells)
+    meas.write_text("".join(lines))
+    monkeypatch.setattr(plot_blocks, "BLOCK_BYTES", 500)
+    args = ["track", "--input", str(meas), "--radars", str(radars), "--out", str(out)]
+    assert main([*args, "--model", "cv"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"{meas} {message}" in err[0], err
+    assert not out.exists()
+
+
+def test_the_compiled_number_text_is_pyarrows_byte_for_byte() -> None:
+    """``viz_app.io.csv_text`` against pyarrow's CSV writer on 10⁶ doubles: random bit
+    patterns (every exponent, subnormals), the magnitudes of tracks, integers, short
+    decimals, and the edges of the positional range (10⁻⁷ … 10¹⁰), ±0, the extremes."""
+    import io
+
+    import pyarrow as pa
+    import pyarrow.csv as pcsv
+
+    from radarviz.viz_app.io.csv_text import format_doubles
+
+    rng = np.random.default_rng(3)
+    edges = [10.0**k * f for k in range(-8, 12) for f in (1.0, 9.999999999999, 1.5)]
+    x = np.concatenate(
+        [
+            rng.integers(0, 2**64, 400_000, dtype=np.uint64).view(np.float64),
+            rng.normal(size=200_000) * 1e5,
+            np.exp(rng.uniform(-745, 709, 200_000)),
+            rng.integers(-(10**9), 10**9, 100_000).astype(np.float64),
+            np.round(rng.normal(size=100_000) * 1e4, 3),
+            np.array([0.0, -0.0, 5e-324, 2.2250738585072014e-308, 1.7976931348623157e308]),
+            np.array(edges + [-v for v in edges]),
+        ]
+    )
+    x = x[np.isfinite(x)]
+    buf = np.empty(26 * x.size + 64, dtype=np.uint8)
+    ours = bytes(buf[: format_doubles(x.view(np.uint64), buf)])
+    sink = io.BytesIO()
+    options = pcsv.WriteOptions(include_header=False)
+    pcsv.write_csv(pa.table({"v": x}), sink, write_options=options)
+    theirs = sink.getvalue()
+    if ours != theirs:  # name the first value that differs
+        for v, a, b in zip(x, ours.split(b"\n"), theirs.split(b"\n"), strict=False):
+            assert a == b, (v, a, b)
+    assert ours == theirs

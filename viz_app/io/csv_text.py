@@ -1,0 +1,322 @@
+"""The track file's rows as CSV text, compiled (numba): floats in their shortest round-trip
+form, formatted as pyarrow's CSV writer formats them, byte for byte.
+
+pyarrow's writer spends ~180 ns on each float (double-conversion's shortest form); a file of
+10⁶ plots × 7 methods has 1.1·10⁸ non-zero floats, so formatting was most of ``radarviz
+track``'s time. Here the shortest digits come from Ulf Adams' Ryū algorithm (PLDI 2018,
+"Ryū: fast float-to-string conversion"): the shortest decimal in the rounding interval of the
+double, from two 64 × 128-bit products with tabulated powers of five, exact, no big integers
+at run time. The tables are computed at import with Python's integers.
+
+Layout, as pyarrow's (``tests/test_track_compiled.py`` compares the bytes on millions of
+doubles): with the digits d₁…dₙ and the decimal exponent X of d₁.d₂…dₙ × 10^X,
+
+* −6 ≤ X ≤ 9: positional: "123.456", "100", "0.00001" (no trailing ".0");
+* otherwise scientific: "1.5e+10", "1e-7", "1.2345678901234568e+20";
+* "0" for 0.0, "-0" for −0.0, a "-" before negatives.
+
+Non-finite numbers are never written (the tracks are checked first); the kernel writes
+"nan" / "inf" only so that nothing is undefined.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+_jit = numba.njit(cache=True, nogil=True, error_model="numpy")
+
+_POW5_INV_BITCOUNT = 125
+_POW5_BITCOUNT = 125
+
+
+def _tables() -> tuple[np.ndarray, np.ndarray]:
+    """Ryū's DOUBLE_POW5_INV_SPLIT (342 × [lo, hi]) and DOUBLE_POW5_SPLIT (326 × [lo, hi])."""
+    mask = (1 << 64) - 1
+    inv = np.zeros((342, 2), dtype=np.uint64)
+    for i in range(342):
+        p = 5**i
+        j = p.bit_length() - 1 + _POW5_INV_BITCOUNT
+        v = (1 << j) // p + 1
+        inv[i] = (v & mask, v >> 64)
+    fwd = np.zeros((326, 2), dtype=np.uint64)
+    for i in range(326):
+        p = 5**i
+        shift = p.bit_length() - _POW5_BITCOUNT
+        v = p >> shift if shift > 0 else p << -shift
+        fwd[i] = (v & mask, v >> 64)
+    return inv, fwd
+
+
+POW5_INV_SPLIT, POW5_SPLIT = _tables()
+
+#: "00" "01" … "99" as bytes: two digits per division.
+_DIGITS = np.frombuffer("".join(f"{i:02d}" for i in range(100)).encode(), dtype=np.uint8).copy()
+_U32 = np.uint64(0xFFFFFFFF)
+_S32 = np.uint64(32)
+_S64 = np.uint64(64)
+
+
+@_jit
+def _umul128(a, b):
+    # (lo, hi) of the 128-bit product of two uint64
+    a_lo, a_hi = a & _U32, a >> _S32
+    b_lo, b_hi = b & _U32, b >> _S32
+    b00 = a_lo * b_lo
+    b01 = a_lo * b_hi
+    b10 = a_hi * b_lo
+    b11 = a_hi * b_hi
+    mid1 = b10 + (b00 >> _S32)
+    mid2 = b01 + (mid1 & _U32)
+    hi = b11 + (mid1 >> _S32) + (mid2 >> _S32)
+    lo = (mid2 << _S32) | (b00 & _U32)
+    return lo, hi
+
+
+@_jit
+def _mul_shift64(m, mul_lo, mul_hi, j):
+    # ((m × mul) >> j) for the 128-bit mul, j > 64
+    lo1, hi1 = _umul128(m, mul_hi)
+    _, hi0 = _umul128(m, mul_lo)
+    s = hi0 + lo1
+    if s < hi0:
+        hi1 += np.uint64(1)
+    dist = np.uint64(j - 64)
+    return (hi1 << (_S64 - dist)) | (s >> dist)
+
+
+@_jit
+def _pow5_factor(v) -> int:
+    count = 0
+    five = np.uint64(5)
+    while v % five == np.uint64(0):
+        v //= five
+        count += 1
+    return count
+
+
+@_jit
+def _shortest(mantissa, exponent):
+    # Ryū's d2d: the shortest decimal (digits as an integer, exponent e10) that rounds back
+    # to the double with IEEE mantissa bits ``mantissa`` and biased exponent ``exponent``
+    one, two, four, ten = np.uint64(1), np.uint64(2), np.uint64(4), np.uint64(10)
+    if exponent == 0:
+        e2 = 1 - 1023 - 52 - 2
+        m2 = mantissa
+    else:
+        e2 = exponent - 1023 - 52 - 2
+        m2 = (one << np.uint64(52)) | mantissa
+    accept_bounds = (m2 & one) == np.uint64(0)
+    mv = four * m2
+    mm_shift = np.uint64(1) if (mantissa != np.uint64(0) or exponent <= 1) else np.uint64(0)
+    vm_tz = False
+    vr_tz = False
+    if e2 >= 0:
+        q = ((e2 * 78913) >> 18) - (1 if e2 > 3 else 0)
+        e10 = q
+        k = _POW5_INV_BITCOUNT + (((q * 1217359) >> 19) + 1) - 1
+        i = -e2 + q + k
+        lo, hi = POW5_INV_SPLIT[q, 0], POW5_INV_SPLIT[q, 1]
+        vr = _mul_shift64(four * m2, lo, hi, i)
+        vp = _mul_shift64(four * m2 + two, lo, hi, i)
+        vm = _mul_shift64(four * m2 - one - mm_shift, lo, hi, i)
+        if q <= 21:
+            if mv % np.uint64(5) == np.uint64(0):
+                vr_tz = _pow5_factor(mv) >= q
+            elif accept_bounds:
+                vm_tz = _pow5_factor(mv - one - mm_shift) >= q
+            else:
+                vp -= np.uint64(1) if _pow5_factor(mv + two) >= q else np.uint64(0)
+    else:
+        q = ((-e2 * 732923) >> 20) - (1 if -e2 > 1 else 0)
+        e10 = q + e2
+        i = -e2 - q
+        k = (((i * 1217359) >> 19) + 1) - _POW5_BITCOUNT
+        j = q - k
+        lo, hi = POW5_SPLIT[i, 0], POW5_SPLIT[i, 1]
+        vr = _mul_shift64(four * m2, lo, hi, j)
+        vp = _mul_shift64(four * m2 + two, lo, hi, j)
+        vm = _mul_shift64(four * m2 - one - mm_shift, lo, hi, j)
+        if q <= 1:
+            vr_tz = True
+            if accept_bounds:
+                vm_tz = mm_shift == one
+            else:
+                vp -= one
+        elif q < 63:
+            vr_tz = (mv & ((one << np.uint64(q)) - one)) == np.uint64(0)
+    removed = 0
+    last = np.uint64(0)
+    if vm_tz or vr_tz:
+        while vp // ten > vm // ten:
+            vm_tz = vm_tz and vm % ten == np.uint64(0)
+            vr_tz = vr_tz and last == np.uint64(0)
+            last = vr % ten
+            vr //= ten
+            vp //= ten
+            vm //= ten
+            removed += 1
+        if vm_tz:
+            while vm % ten == np.uint64(0):
+                vr_tz = vr_tz and last == np.uint64(0)
+                last = vr % ten
+                vr //= ten
+                vp //= ten
+                vm //= ten
+                removed += 1
+        if vr_tz and last == np.uint64(5) and vr % two == np.uint64(0):
+            last = np.uint64(4)  # round half to even
+        up = (vr == vm and (not accept_bounds or not vm_tz)) or last >= np.uint64(5)
+        out = vr + (one if up else np.uint64(0))
+    else:
+        round_up = False
+        hundred = np.uint64(100)
+        if vp // hundred > vm // hundred:
+            round_up = vr % hundred >= np.uint64(50)
+            vr //= hundred
+            vp //= hundred
+            vm //= hundred
+            removed += 2
+        while vp // ten > vm // ten:
+            round_up = vr % ten >= np.uint64(5)
+            vr //= ten
+            vp //= ten
+            vm //= ten
+            removed += 1
+        out = vr + (one if (vr == vm or round_up) else np.uint64(0))
+    return out, e10 + removed
+
+
+@_jit
+def write_double(bits, buf, pos: int) -> int:
+    """Write the double whose IEEE bits are ``bits`` (uint64) at buf[pos:] (the module
+    docstring's layout); returns the new end. buf keeps its last 32 bytes as scratch."""
+    sign = (bits >> np.uint64(63)) != np.uint64(0)
+    mantissa = bits & ((np.uint64(1) << np.uint64(52)) - np.uint64(1))
+    exponent = int((bits >> np.uint64(52)) & np.uint64(0x7FF))
+    if exponent == 0x7FF and mantissa != np.uint64(0):
+        buf[pos], buf[pos + 1], buf[pos + 2] = 110, 97, 110  # "nan"
+        return pos + 3
+    if sign:
+        buf[pos] = 45  # "-"
+        pos += 1
+    if exponent == 0x7FF:
+        buf[pos], buf[pos + 1], buf[pos + 2] = 105, 110, 102  # "inf"
+        return pos + 3
+    if exponent == 0 and mantissa == np.uint64(0):
+        buf[pos] = 48
+        return pos + 1
+    digits, e10 = _shortest(mantissa, exponent)
+    n = _decimal_length(digits)
+    # The digits, two at a time from the least significant (Ryū's table), at buf[end − n:],
+    # end = the scratch at buf's end, then moved into the layout.
+    first = buf.shape[0] - 32
+    d = digits
+    at = first + n
+    hundred = np.uint64(100)
+    while d >= hundred:
+        c = int(d % hundred) * 2
+        d //= hundred
+        at -= 2
+        buf[at] = _DIGITS[c]
+        buf[at + 1] = _DIGITS[c + 1]
+    if d >= np.uint64(10):
+        c = int(d) * 2
+        buf[at - 2] = _DIGITS[c]
+        buf[at - 1] = _DIGITS[c + 1]
+    else:
+        buf[at - 1] = 48 + int(d)
+    x = e10 + n - 1  # exponent of d₁.d₂…dₙ
+    if -6 <= x <= 9:
+        if x < 0:
+            buf[pos] = 48
+            buf[pos + 1] = 46
+            pos += 2
+            for _ in range(-x - 1):
+                buf[pos] = 48
+                pos += 1
+            for a in range(n):
+                buf[pos + a] = buf[first + a]
+            return pos + n
+        if n <= x + 1:  # an integer: its digits, then zeros
+            for a in range(n):
+                buf[pos + a] = buf[first + a]
+            for a in range(n, x + 1):
+                buf[pos + a] = 48
+            return pos + x + 1
+        for a in range(x + 1):
+            buf[pos + a] = buf[first + a]
+        buf[pos + x + 1] = 46
+        for a in range(x + 1, n):
+            buf[pos + a + 1] = buf[first + a]
+        return pos + n + 1
+    buf[pos] = buf[first]
+    pos += 1
+    if n > 1:
+        buf[pos] = 46
+        for a in range(1, n):
+            buf[pos + a] = buf[first + a]
+        pos += n
+    buf[pos] = 101  # "e"
+    buf[pos + 1] = 43 if x >= 0 else 45
+    pos += 2
+    ax = x if x >= 0 else -x
+    if ax >= 100:
+        buf[pos] = 48 + ax // 100
+        pos += 1
+    if ax >= 10:
+        buf[pos] = 48 + (ax // 10) % 10
+        pos += 1
+    buf[pos] = 48 + ax % 10
+    return pos + 1
+
+
+@_jit
+def _decimal_length(v) -> int:
+    # Decimal digits of v (1 ≤ v < 10¹⁷)
+    n = 1
+    p = np.uint64(10)
+    while n < 17 and v >= p:
+        p *= np.uint64(10)
+        n += 1
+    return n
+
+
+@_jit
+def format_doubles(bits, buf) -> int:
+    """Every double of ``bits`` (N,) (the uint64 view of a float64 array) followed by a
+    newline into ``buf`` (for the tests)."""
+    pos = 0
+    for i in range(bits.shape[0]):
+        pos = write_double(bits[i], buf, pos)
+        buf[pos] = 10
+        pos += 1
+    return pos
+
+
+@_jit
+def format_rows(times, repeat, text, text_start, text_of, columns, buf) -> int:
+    """The CSV rows of a block into ``buf``; returns their length in bytes.
+
+    ``times`` (B,) and ``columns`` (C, N) are the uint64 views of float64 arrays. Row r:
+    times[r // repeat], then for each text column c the pre-quoted bytes
+    text[text_start[k] : text_start[k + 1]] with k = text_of[c, r], then columns[:, r] (one
+    float per column), separated by commas, ended by a newline."""
+    pos = 0
+    n_text = text_of.shape[0]
+    for r in range(columns.shape[1]):
+        pos = write_double(times[r // repeat], buf, pos)
+        for c in range(n_text):
+            buf[pos] = 44
+            pos += 1
+            k = text_of[c, r]
+            for a in range(text_start[k], text_start[k + 1]):
+                buf[pos] = text[a]
+                pos += 1
+        for c in range(columns.shape[0]):
+            buf[pos] = 44
+            pos += 1
+            pos = write_double(columns[c, r], buf, pos)
+        buf[pos] = 10
+        pos += 1
+    return pos

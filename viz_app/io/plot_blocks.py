@@ -1,0 +1,503 @@
+"""The measurement file read, tracked and written a block at a time, as columns.
+
+``viz_app.io.plots`` defines the files; this module is their fast path for ``radarviz
+track`` without a recording: the file is read in blocks of bytes (``BLOCK_BYTES``, cut at a
+line end), each block parsed by pyarrow's CSV reader into columns, validated with vector
+operations, handed to the tracker as a ``core.tracking.compiled.PlotBlock`` (no ``Plot`` per
+row) and the tracks written back as one pyarrow table per block. Memory holds one block of
+plots and its tracks, whatever the file's length.
+
+Every check of ``viz_app.io.plots.PlotReader`` holds here, with its messages: a block that
+pyarrow cannot parse, or in which any value fails a check (a number out of its range, an
+unknown radar, an empty target cell, a time before its target's previous one, a missing
+σε or σVr), or that the fast parser does not cover (quoted fields, blank lines, carriage
+returns), is read again row by row by ``PlotReader.plots``, which raises the error naming
+the file, line and column (or, for a block only the fast parser refused, yields its plots).
+The row-by-row reader carries its state (the previous times) from block to block, so the
+two paths check one file as one.
+"""
+
+from __future__ import annotations
+
+import csv
+import functools
+import io
+from collections.abc import Callable, Iterator
+from concurrent.futures import Future
+from typing import IO, NamedTuple
+
+import numpy as np
+from numpy.typing import NDArray
+
+from radarviz.core.params import ParameterError
+from radarviz.core.tracking.association import AssociationOptions
+from radarviz.core.tracking.compiled import PlotBlock, RadarTable, TrackBlock
+from radarviz.core.tracking.stream import Plot, StreamOptions, plot_block, state_rows
+from radarviz.core.tracking.targets import TargetTracker
+from radarviz.viz_app.io.plots import (
+    _COMPONENTS,
+    _PAIRS,
+    MAX_LINE_BYTES,
+    MAX_RADIAL_VELOCITY_MPS,
+    MAX_RANGE_M,
+    MAX_TIME_S,
+    ObserverFactory,
+    PlotReader,
+    Radar,
+    SourceFactory,
+    TrackSummary,
+    check_track_rows,
+    csv_source,
+    track_columns,
+)
+
+#: Bytes of the measurement file read and tracked at a time (≈ 2 500 plots of ~50 bytes: the
+#: block, its tracks and their text are most of the command's memory above its libraries).
+BLOCK_BYTES = 1 << 17
+#: Most threads that format the track file's numbers (the formatting is most of the time of
+#: ``radarviz track``).
+WRITE_THREADS = 4
+_NUMERIC = ("time_s", "range_m", "azimuth_deg", "elevation_deg", "radial_velocity_mps")
+
+
+class LinedBlock(NamedTuple):
+    """A block of plots and the file line of each (for the tracker's errors)."""
+
+    plots: PlotBlock
+    lines: NDArray[np.int64]
+
+
+def radar_table(radars: dict[str, Radar]) -> RadarTable:
+    """The radars file as a ``RadarTable`` (radians; 0 for an absent σε or σVr: a plot that
+    would need it is refused by the reader)."""
+    rs = list(radars.values())
+    return RadarTable(
+        np.array([(r.x_m, r.y_m, r.z_m) for r in rs], dtype=np.float64).reshape(-1, 3),
+        np.array([r.sigma_range_m for r in rs], dtype=np.float64),
+        np.radians([r.sigma_azimuth_deg for r in rs]),
+        np.radians([r.sigma_elevation_deg or 0.0 for r in rs]),
+        np.array([r.sigma_radial_velocity_mps or 0.0 for r in rs], dtype=np.float64),
+    )
+
+
+class PlotBlockReader:
+    """The plots of a measurement file (binary, opened by the caller) in blocks.
+
+    The header is read on construction (``reader`` is the ``PlotReader`` that checked it:
+    ``three_d``, ``doppler``, ``targets``); iterating yields ``LinedBlock`` s.
+    """
+
+    def __init__(self, fh: IO[bytes], source: str, radars: dict[str, Radar]):
+        self.fh, self.source, self.radars = fh, source, radars
+        head = fh.readline(MAX_LINE_BYTES + 1)
+        if len(head) > MAX_LINE_BYTES:
+            raise ParameterError(
+                f"{source} line 1: longer than {MAX_LINE_BYTES} bytes (not a plots file?)"
+            )
+        if head.startswith(b"\xef\xbb\xbf"):
+            head = head[3:]
+        try:
+            text = head.decode("utf-8")
+        except UnicodeDecodeError as exc:
+            raise ParameterError(
+                f"{source} line 1: not UTF-8 text (byte {head[exc.start]:#04x} at "
+                f"column {exc.start + 1})"
+            ) from None
+        self.reader = PlotReader([text] if text else [], source, radars)
+        self.names = list(radars)
+        self.table = radar_table(radars)
+        self._has_el = np.array([r.sigma_elevation_deg is not None for r in radars.values()])
+        self._has_vr = np.array([r.sigma_radial_velocity_mps is not None for r in radars.values()])
+
+    def __iter__(self) -> Iterator[LinedBlock]:
+        line = 1  # lines before the block
+        rest = b""
+        # A file: whole blocks. A pipe or FIFO fed live: what is there, at most a block (its
+        # plots are tracked as they come).
+        read = self.fh.read if self.fh.seekable() else self.fh.read1
+        while True:
+            data = read(BLOCK_BYTES)
+            buf = rest + data
+            if not data:
+                if buf:
+                    yield from self._block(buf, line)
+                break
+            cut = buf.rfind(b"\n")
+            if cut < 0:
+                if len(buf) > MAX_LINE_BYTES:
+                    raise ParameterError(
+                        f"{self.source} line {line + 1}: longer than {MAX_LINE_BYTES} bytes "
+                        "(not a plots file?)"
+                    )
+                rest = buf
+                continue
+            chunk, rest = buf[: cut + 1], buf[cut + 1 :]
+            yield from self._block(chunk, line)
+            line += chunk.count(b"\n")
+        if self.reader.count == 0:
+            raise ParameterError(f"{self.source}: no plots after the header")
+
+    def _block(self, chunk: bytes, line: int) -> Iterator[LinedBlock]:
+        fast = self._fast(chunk, line)
+        if fast is not None:
+            self.reader.count += fast.plots.size
+            yield fast
+            return
+        # Row by row, with ``bounded_lines``' checks on each line: the exact errors.
+        plots: list[Plot] = []
+        lines: list[int] = []
+        for number, plot in self.reader.plots(csv.reader(self._lines(chunk, line)), line):
+            plots.append(plot)
+            lines.append(number)
+        if plots:
+            yield LinedBlock(plot_block(plots), np.array(lines, dtype=np.int64))
+
+    def _lines(self, chunk: bytes, line: int) -> Iterator[str]:
+        for k, raw in enumerate(io.BytesIO(chunk)):
+            if len(raw) > MAX_LINE_BYTES:
+                raise ParameterError(
+                    f"{self.source} line {line + k + 1}: longer than {MAX_LINE_BYTES} bytes "
+                    "(not a plots file?)"
+                )
+            try:
+                yield raw.decode("utf-8")
+            except UnicodeDecodeError as exc:
+                raise ParameterError(
+                    f"{self.source} line {line + k + 1}: not UTF-8 text (byte "
+                    f"{raw[exc.start]:#04x} at column {exc.start + 1})"
+                ) from None
+
+    def _fast(self, chunk: bytes, line: int) -> LinedBlock | None:
+        """The block parsed and checked as columns, or None (the row-by-row path decides)."""
+        import pyarrow as pa
+        import pyarrow.compute as pc
+        import pyarrow.csv as pcsv
+
+        if b'"' in chunk or b"\r" in chunk or b"\n\n" in chunk or chunk.startswith(b"\n"):
+            return None
+        ends = np.flatnonzero(np.frombuffer(chunk, dtype=np.uint8) == 10)
+        if ends.size and np.diff(ends, prepend=-1).max() > MAX_LINE_BYTES:
+            return None
+        try:
+            chunk.decode("utf-8")
+        except UnicodeDecodeError:
+            return None
+        header = self.reader.header
+        types = {h: pa.float64() for h in header if h in _NUMERIC}
+        types.update({h: pa.string() for h in header if h not in _NUMERIC})
+        try:
+            table = pcsv.read_csv(
+                io.BytesIO(chunk),
+                read_options=pcsv.ReadOptions(column_names=header, use_threads=False),
+                parse_options=pcsv.ParseOptions(quote_char=False),
+                convert_options=pcsv.ConvertOptions(
+                    column_types=types, strings_can_be_null=False, quoted_strings_can_be_null=False
+                ),
+            )
+        except (pa.ArrowInvalid, pa.ArrowNotImplementedError):
+            return None
+        n = table.num_rows
+        if n != ends.size + (0 if chunk.endswith(b"\n") else 1):
+            return None
+
+        def col(name: str) -> NDArray[np.float64] | None:
+            c = table.column(name)
+            if c.null_count:
+                return None
+            return c.to_numpy()
+
+        t, r, az = col("time_s"), col("range_m"), col("azimuth_deg")
+        if t is None or r is None or az is None:
+            return None
+        ok = (np.abs(t) <= MAX_TIME_S).all() and (r > 0).all() and (r <= MAX_RANGE_M).all()
+        if not (ok and (np.abs(az) <= 360).all()):
+            return None  # NaN fails these too
+        names = pc.utf8_trim_whitespace(table.column("radar"))
+        radar = pc.index_in(names, value_set=pa.array(self.names, pa.string()))
+        if radar.null_count:
+            return None
+        radar_i = radar.to_numpy().astype(np.intp)
+        el = None
+        if self.reader.three_d:
+            el = col("elevation_deg")
+            if el is None or not (np.abs(el) <= 90).all() or not self._has_el[radar_i].all():
+                return None
+            el = np.radians(el)
+        vr = None
+        if self.reader.doppler:
+            vr = table.column("radial_velocity_mps").to_numpy(zero_copy_only=False)
+            given = ~np.isnan(vr) if table.column("radial_velocity_mps").null_count else None
+            v = vr if given is None else vr[given]
+            if np.isnan(v).any() or not (np.abs(v) <= MAX_RADIAL_VELOCITY_MPS).all():
+                return None
+            if not self._has_vr[radar_i if given is None else radar_i[given]].all():
+                return None
+        labels: tuple[str, ...] = ("",)
+        target = np.zeros(n, dtype=np.intp)
+        if self.reader.targets:
+            enc = pc.dictionary_encode(pc.utf8_trim_whitespace(table.column("target")))
+            enc = enc.combine_chunks() if hasattr(enc, "combine_chunks") else enc
+            labels = tuple(enc.dictionary.to_pylist())
+            if "" in labels:
+                return None
+            target = enc.indices.to_numpy().astype(np.intp)
+        if not self._in_order(t, target, labels):
+            return None
+        return LinedBlock(
+            PlotBlock(t, r, np.radians(az), el, vr, radar_i, self.table, target, labels),
+            line + 1 + np.arange(n, dtype=np.int64),
+        )
+
+    def _in_order(self, t: NDArray, target: NDArray[np.intp], labels: tuple[str, ...]) -> bool:
+        """Times do not decrease (within each target with a target column), from the
+        previous block on; the reader's state is moved past the block when they do not."""
+        rd = self.reader
+        if not rd.targets:
+            if t[0] < rd.last_t or (np.diff(t) < 0).any():
+                return False
+            rd.last_t = float(t[-1])
+            return True
+        order = np.argsort(target, kind="stable")
+        ts, gs = t[order], target[order]
+        same = gs[1:] == gs[:-1]
+        if (np.diff(ts)[same] < 0).any():
+            return False
+        first = np.flatnonzero(np.concatenate([[True], ~same]))
+        last = np.concatenate([first[1:] - 1, [gs.size - 1]])
+        prev = np.array([rd.last_of.get(labels[g], -np.inf) for g in gs[first]])
+        if (ts[first] < prev).any():
+            return False
+        for g, v in zip(gs[last].tolist(), ts[last].tolist(), strict=True):
+            rd.last_of[labels[g]] = v
+        return True
+
+
+# --------------------------------------------------------------------------------------------
+# Writing
+# --------------------------------------------------------------------------------------------
+
+_STATE_COLS = [k for _, k in _COMPONENTS]  # index into (x, ẋ, y, ẏ, z, ż) per column
+
+
+@functools.lru_cache(maxsize=65_536)
+def _quoted(text: str) -> bytes:
+    """A text cell as pyarrow's writer quotes it (always, inner quotes doubled)."""
+    return b'"' + text.replace('"', '""').encode("utf-8") + b'"'
+
+
+class BlockWriter:
+    """The track file written one block of plots at a time (the columns and the number
+    formatting of ``viz_app.io.plots.TrackWriter``, pyarrow's, byte for byte).
+
+    The rows are formatted by the compiled ``viz_app.io.csv_text.format_rows`` (Ryū's
+    shortest round-trip digits, in pyarrow's layout; 2× pyarrow's speed), a block's rows split
+    over ``WRITE_THREADS`` threads (the kernel releases the GIL) while the next block is read
+    and tracked, and written in order.
+
+    Args:
+        fh: the binary file (``atomic_write``'s).  targets: with a ``target`` column.
+        methods: the tracker's methods (rows: plot order, then this order).
+        where: the finite-result check's prefix ("track: FILE").
+    """
+
+    def __init__(self, fh: IO[bytes], targets: bool, methods: tuple[str, ...], where: str):
+        self.fh, self.targets, self.methods, self.where = fh, targets, methods, where
+        self.columns = track_columns(targets)
+        self.rows = 0
+        from concurrent.futures import ThreadPoolExecutor
+
+        from radarviz.core.experiments.prosov import available_cores
+
+        # One single-thread pool per slice: slice i always goes to pool i (order kept).
+        n = max(1, min(WRITE_THREADS, available_cores()))
+        self._workers = [ThreadPoolExecutor(1) for _ in range(n)]
+        self._pending: list[Future[bytes]] = []
+        self._methods = [_quoted(m) for m in methods]
+
+    def add(self, block: PlotBlock, tracks: TrackBlock) -> None:
+        """One block's plots and every method's posterior after each (B, M, n)."""
+        b, m, n = tracks.x.shape
+        rows = b * m
+        # Component-major: each output column one contiguous row of ``columns``.
+        xt = tracks.x.reshape(rows, n).T
+        Pt = tracks.P.reshape(rows, n * n).T
+        self._check(block, tracks, xt, Pt)
+        columns = np.zeros((len(_STATE_COLS) + len(_PAIRS), rows))
+        for c, k in enumerate(_STATE_COLS):
+            if k < n:
+                columns[c] = xt[k]
+        for c, (p, q) in enumerate(_PAIRS, start=len(_STATE_COLS)):
+            i, j = _COMPONENTS[p][1], _COMPONENTS[q][1]
+            if i < n and j < n:
+                columns[c] = Pt[i * n + j]
+        # The text cells: the block's labels, then the methods, each quoted once.
+        cells = ([_quoted(t) for t in block.labels] if self.targets else []) + self._methods
+        text = np.frombuffer(b"".join(cells), dtype=np.uint8)
+        start = np.zeros(len(cells) + 1, dtype=np.int64)
+        start[1:] = np.cumsum([len(c) for c in cells])
+        method_of = np.tile(np.arange(m, dtype=np.int64), b) + (len(cells) - m)
+        text_of = (
+            np.stack([np.repeat(block.target.astype(np.int64), m), method_of])
+            if self.targets
+            else method_of[None]
+        )
+        widest = max(len(c) for c in cells)
+        self._drain()
+        if self.rows == 0:
+            self.fh.write(b",".join(_quoted(c) for c in self.columns) + b"\n")
+        self.rows += rows
+        k = len(self._workers)
+        step = -(-rows // k)
+        step += (-step) % m  # slices of whole plots (a plot's rows share its time)
+        times = np.ascontiguousarray(block.time_s, dtype=np.float64)
+        self._pending = [
+            pool.submit(
+                _format,
+                times[i * step // m : (i + 1) * step // m],
+                m,
+                text,
+                start,
+                np.ascontiguousarray(text_of[:, i * step : (i + 1) * step]),
+                np.ascontiguousarray(columns[:, i * step : (i + 1) * step]),
+                widest,
+            )
+            for i, pool in enumerate(self._workers)
+            if i * step < rows
+        ]
+
+    def _drain(self) -> None:
+        for job in self._pending:
+            self.fh.write(job.result())
+        self._pending = []
+
+    def _check(self, block: PlotBlock, tracks: TrackBlock, xt: NDArray, Pt: NDArray) -> None:
+        """``check_track_rows`` on the whole block at once (every entry finite, variances
+        not negative); its message at the first bad plot."""
+        n = xt.shape[0]
+        diag = Pt[:: n + 1]
+        good = np.isfinite(xt).all(axis=0) & np.isfinite(Pt).all(axis=0) & (diag >= 0).all(axis=0)
+        if good.all():
+            return
+        i = int(np.flatnonzero(~good)[0]) // len(self.methods)
+        one = TrackBlock(tracks.x[i : i + 1], tracks.P[i : i + 1], tracks.target[i : i + 1])
+        (rows,) = state_rows(one, self.methods)
+        check_track_rows(f"{self.where} at time {float(block.time_s[i])!r} s", rows)
+
+    def close(self) -> None:
+        """Write what is being formatted and stop the threads."""
+        try:
+            self._drain()
+        finally:
+            for pool in self._workers:
+                pool.shutdown(wait=True, cancel_futures=True)
+
+
+#: Most bytes of one formatted float ("-1.2345678901234567e-308").
+_FLOAT_BYTES = 24
+
+
+def _format(
+    times: NDArray,
+    repeat: int,
+    text: NDArray,
+    start: NDArray,
+    text_of: NDArray,
+    columns: NDArray,
+    widest: int,
+) -> bytes:
+    """Rows as CSV bytes by ``csv_text.format_rows`` (a thread of the writer's pool)."""
+    from radarviz.viz_app.io.csv_text import format_rows
+
+    n_cols = 1 + text_of.shape[0] + columns.shape[0]
+    per_row = n_cols * (_FLOAT_BYTES + 1) + text_of.shape[0] * widest + 1
+    buf = np.empty(per_row * columns.shape[1] + 64, dtype=np.uint8)
+    size = format_rows(
+        times.view(np.uint64), repeat, text, start, text_of, columns.view(np.uint64), buf
+    )
+    return buf[:size].tobytes()
+
+
+def track_blocks(
+    reader: PlotBlockReader,
+    methods: tuple[str, ...],
+    options: StreamOptions,
+    on_block: Callable[[PlotBlock, TrackBlock], None],
+) -> tuple[int, tuple[str, ...]]:
+    """Track every block of ``reader`` with a ``TargetTracker`` (a file without a target
+    column: one target labelled ""); ``on_block(plots, tracks)`` after each. Returns (plots,
+    targets). Tracker errors come back as "SOURCE line L, column C: …"."""
+    from radarviz.core.tracking.stream import PlotError
+
+    try:
+        tracker = TargetTracker(methods, reader.reader.three_d, options)
+    except ParameterError as exc:  # errors about the options: the CLI names the flag
+        if exc.parameter:
+            raise
+        raise ParameterError(f"--{exc}") from None
+    plots = 0
+    for blk in reader:
+        try:
+            tracks = tracker.add_arrays(blk.plots)
+        except PlotError as exc:
+            line = int(blk.lines[exc.index])
+            raise ParameterError(
+                f"{reader.source} line {line}, column {exc.column}: {exc}"
+            ) from None
+        on_block(blk.plots, tracks)
+        plots += blk.plots.size
+    return plots, tracker.targets if reader.reader.targets else ()
+
+
+def run_track(
+    input_path: str,
+    radars_path: str,
+    out_path: str,
+    methods: tuple[str, ...] | None = None,
+    options: StreamOptions | None = None,
+    observer: ObserverFactory | None = None,
+    open_source: SourceFactory | None = None,
+    association: AssociationOptions | None = None,
+) -> TrackSummary:
+    """``radarviz track``: ``input_path`` tracked into ``out_path``. A CSV without a recording
+    (``observer``) or association, with the first-plot start and no finite-memory track, in
+    blocks of columns (this module; the tracks of ``viz_app.io.plots.run_track`` to rounding,
+    the same errors); otherwise (another ``open_source``, e.g. ASTERIX) by
+    ``viz_app.io.plots.run_track``, a ``Plot`` at a time."""
+    import time
+    from contextlib import ExitStack
+
+    from radarviz.core.experiments.prosov import ALL_METHODS
+    from radarviz.core.tracking.stream import METHODS_3D
+    from radarviz.viz_app.io.atomic import atomic_write
+    from radarviz.viz_app.io.plots import _open_input, load_radars
+    from radarviz.viz_app.io.plots import run_track as run_track_rows
+
+    options = options or StreamOptions()
+    rows_only = (
+        observer is not None
+        or options.init != "first-plot"
+        or options.finite_memory_k
+        or open_source not in (None, csv_source)
+        or association is not None
+    )
+    if rows_only:
+        return run_track_rows(
+            input_path, radars_path, out_path, methods, options, observer, open_source, association
+        )
+    radars = load_radars(radars_path)
+    start = time.perf_counter()
+    with ExitStack() as stack:
+        fh = stack.enter_context(_open_input(input_path))
+        reader = PlotBlockReader(fh, input_path, radars)
+        three_d = reader.reader.three_d
+        if methods is None:
+            methods = METHODS_3D if three_d else ALL_METHODS
+        out = stack.enter_context(atomic_write(out_path, "wb"))
+        writer = BlockWriter(out, reader.reader.targets, tuple(methods), f"track: {input_path}")
+        try:
+            plots, targets = track_blocks(reader, tuple(methods), options, writer.add)
+        finally:
+            writer.close()
+    return TrackSummary(
+        plots, writer.rows, three_d, tuple(methods), time.perf_counter() - start, targets
+    )
