@@ -322,7 +322,9 @@ class StreamOptions:
 
     def compiled(self, three_d: bool) -> bool:
         """Whether a track of many targets with these options runs on the compiled engine."""
-        history = self.monitor is not None and self.monitor.keep_history
+        # A monitor that is not a ConsistencyMonitor (no keep_history) wants every add call,
+        # which only the numpy engine makes.
+        history = self.monitor is not None and getattr(self.monitor, "keep_history", True)
         return (
             self.engine == "compiled"
             and self.model == "cv"
