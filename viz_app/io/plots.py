@@ -65,6 +65,7 @@ buffers at most ``RRD_CHUNK`` plots).
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import math
 import os
@@ -590,6 +591,13 @@ class TrackWriter:
         if self._writer is not None:
             self._writer.close()
 
+    def abandon(self) -> None:
+        """After an error (the staged file is then removed): release a Parquet writer, which
+        would otherwise finish the file when collected, after the file is closed. Quiet."""
+        if self.parquet and self._writer is not None:
+            with contextlib.suppress(Exception):
+                self._writer.close()
+
     def verify(self, path: str | os.PathLike) -> None:
         """``atomic_write``'s check of the staged file (Parquet: ``verify_track_parquet``;
         a CSV file is checked by its size alone)."""
@@ -932,6 +940,7 @@ def run_track(
             nonlocal writer
             status = association is not None
             writer = TrackWriter(out, targets, status, parquet=is_parquet(out_path))
+            stack.callback(writer.abandon)  # before the stage's end (a no-op once closed)
 
         def on_rows(plot: Plot, rows: list[StateRow], status: str = "") -> None:
             assert writer is not None
