@@ -19,6 +19,7 @@ two paths check one file as one.
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import functools
 import io
@@ -439,6 +440,16 @@ class BlockWriter:
         if self._parquet is not None:
             self._parquet.close()
 
+    def abandon(self) -> None:
+        """After an error (the staged file is then removed): stop the threads and release a
+        Parquet writer without reporting what fails meanwhile (the first error is the one
+        that matters)."""
+        for pool in self._workers:
+            pool.shutdown(wait=True, cancel_futures=True)
+        if self._parquet is not None:
+            with contextlib.suppress(Exception):
+                self._parquet.close()
+
     def verify(self, path: str | os.PathLike) -> None:
         """``atomic_write``'s check of the staged file (Parquet: ``verify_track_parquet``;
         a CSV file is checked by its size alone)."""
@@ -562,8 +573,10 @@ def run_track(
         )
         try:
             plots, targets = track_blocks(reader, tuple(methods), options, writer.add)
-        finally:
-            writer.close()
+        except BaseException:
+            writer.abandon()
+            raise
+        writer.close()
     return TrackSummary(
         plots, writer.rows, three_d, tuple(methods), time.perf_counter() - start, targets
     )
