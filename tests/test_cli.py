@@ -252,9 +252,15 @@ def test_bench_figures_are_consistent(capsys) -> None:
         # targets × whole scans, at least as many as asked.
         assert [r["plots"] for r in runs.values()] == [200, 2000]
         for r in runs.values():
-            assert r["plots_per_s"] == pytest.approx(r["plots"] / r["wall_s"], rel=1e-12)
-            assert r["plots_per_cpu_s"] == pytest.approx(r["plots"] / r["cpu_s"], rel=1e-12)
-            assert 0 < r["peak_rss_mb"] < physical_mib_of_machine()
+            # The same input tracked into a CSV and a Parquet track file.
+            for kind in ("csv", "parquet"):
+                k = r[kind]
+                assert k["plots_per_s"] == pytest.approx(r["plots"] / k["wall_s"], rel=1e-12)
+                assert k["plots_per_cpu_s"] == pytest.approx(r["plots"] / k["cpu_s"], rel=1e-12)
+                assert 0 < k["peak_rss_mb"] < physical_mib_of_machine()
+            assert r["parquet_over_csv_cpu"] == pytest.approx(
+                r["parquet"]["plots_per_cpu_s"] / r["csv"]["plots_per_cpu_s"], rel=1e-12
+            )
     # JSON keeps full precision: the ratio is exact to rounding.
     for ours, ratio in zip(kf, doc["speedup_vs_filterpy"], strict=True):
         assert ratio == pytest.approx(fp / ours, rel=1e-12)

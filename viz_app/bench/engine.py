@@ -430,7 +430,9 @@ def bench_track_file(plots: int) -> dict[str, Any]:
     """``radarviz track`` end to end on the air-traffic file (``viz_app.bench.track_file``),
     1000 targets (fewer for a short file), 2D and 3D (Doppler), all seven methods, the cv
     model: at ``plots`` plots and at a tenth of them (the memory must not grow with the
-    file). Each run is its own process, after an untimed warm-up run (numba's cache)."""
+    file), each writing the CSV track file and then the Parquet one (``--out X.parquet``) of
+    the same input, one after the other (their ratio is a same-run figure). Each run is its
+    own process, after untimed warm-up runs (numba's cache)."""
     import tempfile
     from pathlib import Path
 
@@ -445,21 +447,29 @@ def bench_track_file(plots: int) -> dict[str, Any]:
             for warm_up, n in ((True, 200), (False, plots // 10), (False, plots)):
                 meas = d / "plots.csv"
                 written = air_traffic_file(meas, d / "radars.toml", targets, n, dims == 3)
-                run = time_track(meas, d / "radars.toml", d / "tracks.csv", CV_TRACK)
-                (d / "tracks.csv").unlink()
-                if not warm_up:
-                    runs[str(written)] = {
-                        "plots": written,
+                figures: dict[str, Any] = {"plots": written}
+                for kind in TRACK_FILE_KINDS:
+                    tracks = d / f"tracks.{kind}"
+                    run = time_track(meas, d / "radars.toml", tracks, CV_TRACK)
+                    tracks.unlink()
+                    figures[kind] = {
                         "wall_s": run.wall_s,
                         "cpu_s": run.cpu_s,
                         "plots_per_s": written / run.wall_s,
                         "plots_per_cpu_s": written / run.cpu_s,
                         "peak_rss_mb": run.peak_rss_mb,
                     }
+                figures["parquet_over_csv_cpu"] = (
+                    figures["parquet"]["plots_per_cpu_s"] / figures["csv"]["plots_per_cpu_s"]
+                )
+                if not warm_up:
+                    runs[str(written)] = figures
             out[f"{dims}d"] = runs
     return out
 
 
+#: The track files of the file figure, by ``--out`` suffix.
+TRACK_FILE_KINDS = ("csv", "parquet")
 #: The track options of the file figure: the cv model with σa = 1 m/s² (all methods).
 CV_TRACK = ("--model", "cv", "--sigma-a", "1")
 
@@ -612,10 +622,15 @@ def format_bench(doc: dict[str, Any]) -> str:
     )
     for dims, runs in tg["file"].items():
         for r in runs.values():
+            each = "; ".join(
+                f"{kind} {r[kind]['plots_per_s']:.0f} plots/s wall ({r[kind]['wall_s']:.1f} s), "
+                f"{r[kind]['plots_per_cpu_s']:.0f} plots per CPU-s, "
+                f"peak RSS {r[kind]['peak_rss_mb']:.0f} MB"
+                for kind in TRACK_FILE_KINDS
+            )
             lines.append(
-                f"radarviz track, {dims}, {r['plots']} plots, all methods: "
-                f"{r['plots_per_s']:.0f} plots/s wall ({r['wall_s']:.1f} s), "
-                f"{r['plots_per_cpu_s']:.0f} plots per CPU-s, peak RSS {r['peak_rss_mb']:.0f} MB"
+                f"radarviz track, {dims}, {r['plots']} plots, all methods, into {each} "
+                f"(Parquet/CSV per CPU-s {r['parquet_over_csv_cpu']:.2f}×)"
             )
     lines.append(format_association(doc["association"]))
     from radarviz.viz_app.bench.asterix import format_asterix

@@ -79,7 +79,9 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     tr.add_argument(
         "--out",
         default=DEFAULT_TRACKS,
-        help=f"track CSV to write, replaced if it exists (default {DEFAULT_TRACKS})",
+        help="track file to write, replaced if it exists: Parquet if its name ends in "
+        f".parquet (the CSV's columns and float64 values, a row group per block), else CSV "
+        f"(default {DEFAULT_TRACKS})",
     )
     tr.add_argument(
         "--rrd",

@@ -19,11 +19,14 @@ two paths check one file as one.
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import functools
 import io
+import os
 from collections.abc import Callable, Iterator
 from concurrent.futures import Future
+from pathlib import Path
 from typing import IO, NamedTuple
 
 import numpy as np
@@ -48,7 +51,10 @@ from radarviz.viz_app.io.plots import (
     TrackSummary,
     check_track_rows,
     csv_source,
+    is_parquet,
+    parquet_writer,
     track_columns,
+    verify_track_parquet,
 )
 
 #: Bytes of the measurement file read and tracked at a time (≈ 2 500 plots of ~50 bytes: the
@@ -294,22 +300,35 @@ class BlockWriter:
     over ``WRITE_THREADS`` threads (the kernel releases the GIL) while the next block is read
     and tracked, and written in order.
 
+    With ``parquet`` the block's columns become one pyarrow table, written as one row group
+    of a Parquet file (``viz_app.io.plots.parquet_writer``: the same columns and float64
+    values, no text) by one thread while the next block is tracked.
+
     Args:
         fh: the binary file (``atomic_write``'s).  targets: with a ``target`` column.
         methods: the tracker's methods (rows: plot order, then this order).
         where: the finite-result check's prefix ("track: FILE").
+        parquet: write Parquet instead of CSV.
     """
 
-    def __init__(self, fh: IO[bytes], targets: bool, methods: tuple[str, ...], where: str):
+    def __init__(
+        self,
+        fh: IO[bytes],
+        targets: bool,
+        methods: tuple[str, ...],
+        where: str,
+        parquet: bool = False,
+    ):
         self.fh, self.targets, self.methods, self.where = fh, targets, methods, where
         self.columns = track_columns(targets)
         self.rows = 0
+        self._parquet = parquet_writer(fh, targets) if parquet else None
         from concurrent.futures import ThreadPoolExecutor
 
         from radarviz.core.experiments.prosov import available_cores
 
         # One single-thread pool per slice: slice i always goes to pool i (order kept).
-        n = max(1, min(WRITE_THREADS, available_cores()))
+        n = 1 if parquet else max(1, min(WRITE_THREADS, available_cores()))
         self._workers = [ThreadPoolExecutor(1) for _ in range(n)]
         self._pending: list[Future[bytes]] = []
         self._methods = [_quoted(m) for m in methods]
@@ -330,6 +349,9 @@ class BlockWriter:
             i, j = _COMPONENTS[p][1], _COMPONENTS[q][1]
             if i < n and j < n:
                 columns[c] = Pt[i * n + j]
+        if self._parquet is not None:
+            self._add_parquet(block, m, columns)
+            return
         # The text cells: the block's labels, then the methods, each quoted once.
         cells = ([_quoted(t) for t in block.labels] if self.targets else []) + self._methods
         text = np.frombuffer(b"".join(cells), dtype=np.uint8)
@@ -365,6 +387,31 @@ class BlockWriter:
             if i * step < rows
         ]
 
+    def _add_parquet(self, block: PlotBlock, m: int, columns: NDArray[np.float64]) -> None:
+        """The block's rows (B·M, plot order then method order) as one row group."""
+        import pyarrow as pa
+
+        b = block.size
+        methods = pa.DictionaryArray.from_arrays(
+            np.tile(np.arange(m, dtype=np.int32), b), pa.array(self.methods, pa.string())
+        )
+        text = [methods.cast(pa.string())]
+        if self.targets:
+            labels = pa.DictionaryArray.from_arrays(
+                np.repeat(block.target.astype(np.int32), m), pa.array(block.labels, pa.string())
+            )
+            text.insert(0, labels.cast(pa.string()))
+        arrays = [pa.array(np.repeat(np.asarray(block.time_s, dtype=np.float64), m)), *text]
+        arrays += [pa.array(c) for c in columns]
+        table = pa.Table.from_arrays(arrays, schema=self._parquet.schema)
+        self._drain()
+        self.rows += b * m
+        self._pending = [self._workers[0].submit(self._write_table, table)]
+
+    def _write_table(self, table: object) -> bytes:
+        self._parquet.write_table(table)
+        return b""
+
     def _drain(self) -> None:
         for job in self._pending:
             self.fh.write(job.result())
@@ -384,12 +431,30 @@ class BlockWriter:
         check_track_rows(f"{self.where} at time {float(block.time_s[i])!r} s", rows)
 
     def close(self) -> None:
-        """Write what is being formatted and stop the threads."""
+        """Write what is being formatted and stop the threads (and finish a Parquet file)."""
         try:
             self._drain()
         finally:
             for pool in self._workers:
                 pool.shutdown(wait=True, cancel_futures=True)
+        if self._parquet is not None:
+            self._parquet.close()
+
+    def abandon(self) -> None:
+        """After an error (the staged file is then removed): stop the threads and release a
+        Parquet writer without reporting what fails meanwhile (the first error is the one
+        that matters)."""
+        for pool in self._workers:
+            pool.shutdown(wait=True, cancel_futures=True)
+        if self._parquet is not None:
+            with contextlib.suppress(Exception):
+                self._parquet.close()
+
+    def verify(self, path: str | os.PathLike) -> None:
+        """``atomic_write``'s check of the staged file (Parquet: ``verify_track_parquet``;
+        a CSV file is checked by its size alone)."""
+        if self._parquet is not None:
+            verify_track_parquet(path, self.columns, self.rows)
 
 
 #: Most bytes of one formatted float ("-1.2345678901234567e-308").
@@ -492,12 +557,26 @@ def run_track(
         three_d = reader.reader.three_d
         if methods is None:
             methods = METHODS_3D if three_d else ALL_METHODS
-        out = stack.enter_context(atomic_write(out_path, "wb"))
-        writer = BlockWriter(out, reader.reader.targets, tuple(methods), f"track: {input_path}")
+        writer: BlockWriter | None = None
+
+        def verify(path: Path) -> None:
+            if writer is not None:
+                writer.verify(path)
+
+        out = stack.enter_context(atomic_write(out_path, "wb", verify=verify))
+        writer = BlockWriter(
+            out,
+            reader.reader.targets,
+            tuple(methods),
+            f"track: {input_path}",
+            parquet=is_parquet(out_path),
+        )
         try:
             plots, targets = track_blocks(reader, tuple(methods), options, writer.add)
-        finally:
-            writer.close()
+        except BaseException:
+            writer.abandon()
+            raise
+        writer.close()
     return TrackSummary(
         plots, writer.rows, three_d, tuple(methods), time.perf_counter() - start, targets
     )

@@ -65,6 +65,7 @@ buffers at most ``RRD_CHUNK`` plots).
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import math
 import os
@@ -73,6 +74,7 @@ import tomllib
 from collections.abc import Callable, Iterable, Iterator
 from contextlib import AbstractContextManager, ExitStack
 from dataclasses import dataclass, replace
+from pathlib import Path
 from typing import IO, Any, Protocol
 
 import numpy as np
@@ -458,10 +460,53 @@ def track_columns(targets: bool, status: bool = False) -> tuple[str, ...]:
 
 #: Track rows written to the track file at a time (one pyarrow table).
 WRITE_BLOCK = 8192
+#: The ``--out`` suffix (any case) of a Parquet track file; any other name is a CSV one.
+PARQUET_SUFFIX = ".parquet"
+
+
+def is_parquet(path: str | os.PathLike) -> bool:
+    """Whether the track file ``path`` is written as Parquet (its suffix is
+    ``PARQUET_SUFFIX``) rather than CSV."""
+    return Path(path).suffix.lower() == PARQUET_SUFFIX
+
+
+def track_schema(targets: bool, status: bool = False) -> Any:
+    """The Parquet track file's schema: the columns of ``track_columns``, in its order, the
+    text ones (``target``, ``status``, ``method``) strings, the others float64."""
+    import pyarrow as pa
+
+    text = {"target", "status", "method"}
+    return pa.schema(
+        [(c, pa.string() if c in text else pa.float64()) for c in track_columns(targets, status)]
+    )
+
+
+def parquet_writer(fh: IO[bytes], targets: bool, status: bool = False) -> Any:
+    """A ``pyarrow.parquet.ParquetWriter`` of the track file on ``fh`` (``atomic_write``'s
+    staged file; closing the writer leaves ``fh`` open). Each written table is one row
+    group."""
+    import pyarrow.parquet as pq
+
+    return pq.ParquetWriter(fh, track_schema(targets, status))
+
+
+def verify_track_parquet(path: str | os.PathLike, columns: tuple[str, ...], rows: int) -> None:
+    """The check of a staged Parquet track file before it is renamed (``atomic_write``'s
+    ``verify``): its footer reads back with the ``columns`` and the ``rows`` written."""
+    import pyarrow.parquet as pq
+
+    meta = pq.ParquetFile(path).metadata
+    names = tuple(meta.schema.to_arrow_schema().names)
+    if names != columns or meta.num_rows != rows:
+        raise ValueError(
+            f"the Parquet file reads back with {meta.num_rows} rows of {len(names)} columns, "
+            f"not {rows} of {len(columns)}"
+        )
 
 
 class TrackWriter:
-    """The track file written a block of rows at a time with pyarrow's CSV writer.
+    """The track file written a block of rows at a time with pyarrow's CSV writer (or, with
+    ``parquet``, its Parquet writer: a row group per block, the same columns and values).
 
     A row is (time_s, [target,] method, the six state components, the 21 covariance
     entries); a block's states x (N, 6) and P (N, 6, 6) become the columns through the index
@@ -473,10 +518,12 @@ class TrackWriter:
         fh: the binary file to write (``atomic_write``'s).
         targets: the file has a ``target`` column (``track_columns``).
         status: and a ``status`` column (associated tracks).
+        parquet: write Parquet (``parquet_writer``) instead of CSV.
     """
 
-    def __init__(self, fh: IO[bytes], targets: bool, status: bool = False):
+    def __init__(self, fh: IO[bytes], targets: bool, status: bool = False, parquet: bool = False):
         self.fh = fh
+        self.parquet = parquet
         self.targets = targets
         self.status = targets and status
         self.columns = track_columns(targets, self.status)
@@ -526,17 +573,36 @@ class TrackWriter:
         ]
         table = pa.Table.from_arrays(columns, names=list(self.columns))
         if self._writer is None:
-            options = pcsv.WriteOptions(quoting_style="needed")
-            self._writer = pcsv.CSVWriter(self.fh, table.schema, write_options=options)
+            if self.parquet:
+                self._writer = parquet_writer(self.fh, self.targets, self.status)
+            else:
+                options = pcsv.WriteOptions(quoting_style="needed")
+                self._writer = pcsv.CSVWriter(self.fh, table.schema, write_options=options)
         self._writer.write_table(table)
         for buf in (self._times, self._labels, self._statuses, self._methods, self._x, self._P):
             buf.clear()
 
     def close(self) -> None:
-        """Write what is buffered and finish the file."""
+        """Write what is buffered and finish the file (a Parquet file without rows still
+        gets its schema)."""
         self.flush()
+        if self._writer is None and self.parquet:
+            self._writer = parquet_writer(self.fh, self.targets, self.status)
         if self._writer is not None:
             self._writer.close()
+
+    def abandon(self) -> None:
+        """After an error (the staged file is then removed): release a Parquet writer, which
+        would otherwise finish the file when collected, after the file is closed. Quiet."""
+        if self.parquet and self._writer is not None:
+            with contextlib.suppress(Exception):
+                self._writer.close()
+
+    def verify(self, path: str | os.PathLike) -> None:
+        """``atomic_write``'s check of the staged file (Parquet: ``verify_track_parquet``;
+        a CSV file is checked by its size alone)."""
+        if self.parquet:
+            verify_track_parquet(path, self.columns, self.rows)
 
 
 #: The variances among the track columns: they must not be negative.
@@ -861,13 +927,20 @@ def run_track(
         stack.enter_context(commit_together())  # the tracks and the recording: both or neither
         fh = stack.enter_context(_open_input(input_path))
         reader, locate = open_source(fh, input_path, radars)
-        out = stack.enter_context(atomic_write(out_path, "wb"))
-        logger = None if observer is None else stack.enter_context(observer(radars.values()))
         writer: TrackWriter | None = None
+
+        def verify(path: Path) -> None:
+            if writer is not None:
+                writer.verify(path)
+
+        out = stack.enter_context(atomic_write(out_path, "wb", verify=verify))
+        logger = None if observer is None else stack.enter_context(observer(radars.values()))
 
         def on_start(targets: bool) -> None:
             nonlocal writer
-            writer = TrackWriter(out, targets, status=association is not None)
+            status = association is not None
+            writer = TrackWriter(out, targets, status, parquet=is_parquet(out_path))
+            stack.callback(writer.abandon)  # before the stage's end (a no-op once closed)
 
         def on_rows(plot: Plot, rows: list[StateRow], status: str = "") -> None:
             assert writer is not None
