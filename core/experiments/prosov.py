@@ -72,10 +72,12 @@ from radarviz.core.scenarios.spatial import (
     spherical_measurements,
 )
 
-#: Scans per pass of the compiled kernel when it sums the metric terms: a pass's per-group sums
-#: (BAND_GROUPS × scans × 10 doubles, 20 kB) stay in the nearest cache, and a run's plots of
-#: a pass are about one cache line.
-TERMS_SCANS = 8
+#: Scans per pass of the compiled kernel when it sums the metric terms: the prosov run's 60 scans
+#: in one pass, as the filter alone runs them. A pass's per-group sums (BAND_GROUPS × scans × 10
+#: doubles, 160 kB at 64 scans) stay in the second-level cache, and each run's state goes
+#: through memory once instead of once per few scans (eight passes of 8 scans cost ~4 % of the
+#: filter's time, ``radarviz bench``). Longer runs take several passes.
+TERMS_SCANS = 64
 #: Runs per block: large enough that vector operations dominate Python overhead, small enough
 #: that a block's working set stays in cache.
 BLOCK_RUNS = 16384

@@ -556,7 +556,7 @@ def format_bench(doc: dict[str, Any]) -> str:
     lines.append(
         f"engine vs compiled scalar reference vs filterpy, {pm['per_method_runs']} runs × "
         f"{doc['scans']} scans (filterpy {pm['filterpy_runs']} runs), ns per track-step, "
-        f"medians of {pm['per_method_repeats']} interleaved repeats:"
+        f"medians of {pm['per_method_repeats']} interleaved repeats ({pm['per_method_clock']}):"
     )
     lines.append(
         "   method   engine  reference  engine/ref   +metrics  metrics/ref   filterpy  "
@@ -575,7 +575,8 @@ def format_bench(doc: dict[str, Any]) -> str:
         f"whole Monte Carlo (all methods: measurements, filters, statistics), one thread: "
         f"{pm['whole_run_ns_per_method_step']:.1f} ns per method-track-step = "
         f"{pm['whole_run_over_filter']:.2f}× the filters alone "
-        f"({pm['filter_ns_per_method_step']:.1f})"
+        f"({pm['filter_ns_per_method_step']:.1f}; by wall time "
+        f"{pm['whole_run_over_filter_wall']:.2f}×)"
     )
     lines.append(
         f"Prosov Monte Carlo, {doc['parallel_runs']} runs, all methods (blocks of "
