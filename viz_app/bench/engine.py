@@ -549,8 +549,8 @@ def format_bench(doc: dict[str, Any]) -> str:
         c, ratio = doc["compiled_ns_per_step"][method], doc["compiled_speedup"][method]
         e, over = doc["experiment_ns_per_step"][method], doc["experiment_over_filter"][method]
         lines.append(
-            f"  {method:>7}: {v:6.1f} → {c:6.1f}  ({ratio:.1f}×);  whole Monte Carlo "
-            f"(measurements, filter, statistics) {e:6.1f} = {over:.2f}× the filter"
+            f"  {method:>7}: {v:6.1f} → {c:6.1f}  ({ratio:.1f}×);  this method's Monte Carlo "
+            f"alone (its own measurements, filter, statistics) {e:6.1f} = {over:.2f}× the filter"
         )
     pm = doc["per_method"]
     lines.append(
