@@ -349,3 +349,19 @@ def track_columns_into(x, P, state_of, cov_of, out) -> None:
         for c in range(cov_of.shape[0]):
             k = cov_of[c]
             out[ns + c, r] = P[r, k] if k >= 0 else 0.0
+
+
+@_jit
+def first_bad_row(x, P) -> int:
+    """The first row r of a block of tracks (``x`` (R, n), ``P`` (R, n·n) float64) with a
+    non-finite entry or a negative variance P[r, i·n + i], or −1 (the writer's check before
+    any number is written)."""
+    n = x.shape[1]
+    for r in range(x.shape[0]):
+        for i in range(n):
+            if not np.isfinite(x[r, i]) or not P[r, i * n + i] >= 0.0:
+                return r
+        for k in range(P.shape[1]):
+            if not np.isfinite(P[r, k]):
+                return r
+    return -1

@@ -344,7 +344,7 @@ class BlockWriter:
         rows = b * m
         x = tracks.x.reshape(rows, n)
         P = tracks.P.reshape(rows, n * n)
-        self._check(block, tracks, x.T, P.T)
+        self._check(block, tracks, x, P)
         state_of, cov_of = _column_index(n)
         times = np.ascontiguousarray(block.time_s, dtype=np.float64)
         if self._parquet is not None:
@@ -466,15 +466,15 @@ class BlockWriter:
             self.fh.write(job.result())
         self._pending = []
 
-    def _check(self, block: PlotBlock, tracks: TrackBlock, xt: NDArray, Pt: NDArray) -> None:
+    def _check(self, block: PlotBlock, tracks: TrackBlock, x: NDArray, P: NDArray) -> None:
         """``check_track_rows`` on the whole block at once (every entry finite, variances
-        not negative); its message at the first bad plot."""
-        n = xt.shape[0]
-        diag = Pt[:: n + 1]
-        good = np.isfinite(xt).all(axis=0) & np.isfinite(Pt).all(axis=0) & (diag >= 0).all(axis=0)
-        if good.all():
+        not negative; ``x`` (B·M, n), ``P`` (B·M, n·n)); its message at the first bad plot."""
+        from radarviz.viz_app.io.csv_text import first_bad_row
+
+        bad = first_bad_row(x, P)
+        if bad < 0:
             return
-        i = int(np.flatnonzero(~good)[0]) // len(self.methods)
+        i = bad // len(self.methods)
         one = TrackBlock(tracks.x[i : i + 1], tracks.P[i : i + 1], tracks.target[i : i + 1])
         (rows,) = state_rows(one, self.methods)
         check_track_rows(f"{self.where} at time {float(block.time_s[i])!r} s", rows)
