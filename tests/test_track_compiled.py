@@ -275,3 +275,34 @@ def test_the_compiled_number_text_is_pyarrows_byte_for_byte() -> None:
         for v, a, b in zip(x, ours.split(b"\n"), theirs.split(b"\n"), strict=False):
             assert a == b, (v, a, b)
     assert ours == theirs
+
+
+@pytest.mark.parametrize("n", [4, 6])
+def test_first_bad_row_is_the_first_non_finite_or_negative_variance_row(n: int) -> None:
+    """The writer's compiled check against the array route (isfinite over x and P, the
+    diagonal of P not negative): the same first row, on blocks with NaN, ±inf, negative
+    variances, negative off-diagonal entries (allowed) and clean blocks."""
+    from radarviz.viz_app.io.csv_text import first_bad_row
+
+    rng = np.random.default_rng(11)
+    for trial in range(200):
+        rows = int(rng.integers(1, 40))
+        x = rng.normal(size=(rows, n))
+        P = np.abs(rng.normal(size=(rows, n * n)))
+        P[:, 1] = -P[:, 1]  # an off-diagonal entry may be negative
+        for _ in range(int(rng.integers(0, 3))):
+            r = int(rng.integers(rows))
+            which = rng.integers(4)
+            if which == 0:
+                x[r, rng.integers(n)] = np.nan
+            elif which == 1:
+                P[r, rng.integers(n * n)] = np.inf
+            elif which == 2:
+                i = int(rng.integers(n))
+                P[r, i * n + i] = -1e-9
+            else:
+                x[r, rng.integers(n)] = -np.inf
+        diag = P[:, :: n + 1]
+        good = np.isfinite(x).all(axis=1) & np.isfinite(P).all(axis=1) & (diag >= 0).all(axis=1)
+        expected = -1 if good.all() else int(np.flatnonzero(~good)[0])
+        assert first_bad_row(x, P) == expected, trial

@@ -385,6 +385,11 @@ def cmd_track(args: argparse.Namespace) -> int:
     from radarviz.viz_app.io.asterix import source_for
 
     open_source = source_for(args.input, args.format)
+    import pyarrow as pa
+
+    # pyarrow's default pool (jemalloc or mimalloc) keeps what the blocks free, so the peak
+    # grew with the file's length; the system allocator hands it back.
+    pa.set_memory_pool(pa.system_memory_pool())
     s = run_track(
         args.input, args.radars, args.out, methods, options, observer, open_source, association
     )

@@ -295,28 +295,73 @@ def format_doubles(bits, buf) -> int:
 
 
 @_jit
-def format_rows(times, repeat, text, text_start, text_of, columns, buf) -> int:
-    """The CSV rows of a block into ``buf``; returns their length in bytes.
+def format_track_rows(times, target, label_cells, text, text_start, x, P, state_of, cov_of, buf):
+    """The CSV rows of a block of tracks into ``buf``, straight from the states; returns
+    their length in bytes.
 
-    ``times`` (B,) and ``columns`` (C, N) are the uint64 views of float64 arrays. Row r:
-    times[r // repeat], then for each text column c the pre-quoted bytes
-    text[text_start[k] : text_start[k + 1]] with k = text_of[c, r], then columns[:, r] (one
-    float per column), separated by commas, ended by a newline."""
+    ``times`` (B,), ``x`` (B·M, n) and ``P`` (B·M, n·n) are the uint64 views of float64
+    arrays (row r = plot r // M, method r % M, M = ``x.shape[0] // times.shape[0]``). Row r:
+    times[r // M]; with ``label_cells`` > 0 the pre-quoted cell k = target[r // M]
+    (text[text_start[k] : text_start[k + 1]]); the method's cell k = label_cells + r % M;
+    then x[r, state_of[c]] for each state column c and P[r, cov_of[c]] for each covariance
+    column (0 where the index is −1: a component the state does not have); separated by
+    commas, ended by a newline."""
     pos = 0
-    n_text = text_of.shape[0]
-    for r in range(columns.shape[1]):
-        pos = write_double(times[r // repeat], buf, pos)
-        for c in range(n_text):
+    rows = x.shape[0]
+    m = rows // times.shape[0]
+    zero = np.uint64(0)
+    for r in range(rows):
+        b = r // m
+        pos = write_double(times[b], buf, pos)
+        for c in range(2 if label_cells > 0 else 1):
             buf[pos] = 44
             pos += 1
-            k = text_of[c, r]
+            k = target[b] if c == 0 and label_cells > 0 else label_cells + r % m
             for a in range(text_start[k], text_start[k + 1]):
                 buf[pos] = text[a]
                 pos += 1
-        for c in range(columns.shape[0]):
+        for c in range(state_of.shape[0]):
             buf[pos] = 44
             pos += 1
-            pos = write_double(columns[c, r], buf, pos)
+            k = state_of[c]
+            pos = write_double(x[r, k] if k >= 0 else zero, buf, pos)
+        for c in range(cov_of.shape[0]):
+            buf[pos] = 44
+            pos += 1
+            k = cov_of[c]
+            pos = write_double(P[r, k] if k >= 0 else zero, buf, pos)
         buf[pos] = 10
         pos += 1
     return pos
+
+
+@_jit
+def track_columns_into(x, P, state_of, cov_of, out) -> None:
+    """The state and covariance columns of a block of tracks into ``out`` (C, R) float64:
+    out[c, r] = x[r, state_of[c]] for the state columns, then P[r, cov_of[c]] (0 where the
+    index is −1); ``x`` (R, n), ``P`` (R, n·n) float64 (``format_track_rows``' columns, for
+    the Parquet file)."""
+    ns = state_of.shape[0]
+    for r in range(x.shape[0]):
+        for c in range(ns):
+            k = state_of[c]
+            out[c, r] = x[r, k] if k >= 0 else 0.0
+        for c in range(cov_of.shape[0]):
+            k = cov_of[c]
+            out[ns + c, r] = P[r, k] if k >= 0 else 0.0
+
+
+@_jit
+def first_bad_row(x, P) -> int:
+    """The first row r of a block of tracks (``x`` (R, n), ``P`` (R, n·n) float64) with a
+    non-finite entry or a negative variance P[r, i·n + i], or −1 (the writer's check before
+    any number is written)."""
+    n = x.shape[1]
+    for r in range(x.shape[0]):
+        for i in range(n):
+            if not np.isfinite(x[r, i]) or not P[r, i * n + i] >= 0.0:
+                return r
+        for k in range(P.shape[1]):
+            if not np.isfinite(P[r, k]):
+                return r
+    return -1

@@ -332,84 +332,133 @@ class BlockWriter:
         self._workers = [ThreadPoolExecutor(1) for _ in range(n)]
         self._pending: list[Future[bytes]] = []
         self._methods = [_quoted(m) for m in methods]
+        self._buffers = [np.empty(0, dtype=np.uint8) for _ in self._workers]
+        if parquet:
+            import pyarrow as pa
+
+            self._method_names = pa.array(methods, pa.string())
 
     def add(self, block: PlotBlock, tracks: TrackBlock) -> None:
         """One block's plots and every method's posterior after each (B, M, n)."""
         b, m, n = tracks.x.shape
         rows = b * m
-        # Component-major: each output column one contiguous row of ``columns``.
-        xt = tracks.x.reshape(rows, n).T
-        Pt = tracks.P.reshape(rows, n * n).T
-        self._check(block, tracks, xt, Pt)
-        columns = np.zeros((len(_STATE_COLS) + len(_PAIRS), rows))
-        for c, k in enumerate(_STATE_COLS):
-            if k < n:
-                columns[c] = xt[k]
-        for c, (p, q) in enumerate(_PAIRS, start=len(_STATE_COLS)):
-            i, j = _COMPONENTS[p][1], _COMPONENTS[q][1]
-            if i < n and j < n:
-                columns[c] = Pt[i * n + j]
+        x = tracks.x.reshape(rows, n)
+        P = tracks.P.reshape(rows, n * n)
+        self._check(block, tracks, x, P)
+        state_of, cov_of = _column_index(n)
+        times = np.ascontiguousarray(block.time_s, dtype=np.float64)
         if self._parquet is not None:
-            self._add_parquet(block, m, columns)
+            self._drain()
+            self.rows += rows
+            target = block.target if self.targets else None
+            self._pending = [
+                self._workers[0].submit(
+                    self._write_table, times, target, block.labels, x, P, state_of, cov_of
+                )
+            ]
             return
         # The text cells: the block's labels, then the methods, each quoted once.
         cells = ([_quoted(t) for t in block.labels] if self.targets else []) + self._methods
         text = np.frombuffer(b"".join(cells), dtype=np.uint8)
         start = np.zeros(len(cells) + 1, dtype=np.int64)
         start[1:] = np.cumsum([len(c) for c in cells])
-        method_of = np.tile(np.arange(m, dtype=np.int64), b) + (len(cells) - m)
-        text_of = (
-            np.stack([np.repeat(block.target.astype(np.int64), m), method_of])
-            if self.targets
-            else method_of[None]
-        )
+        label_cells = len(cells) - m
+        target = block.target.astype(np.int64) if self.targets else np.zeros(b, np.int64)
         widest = max(len(c) for c in cells)
         self._drain()
         if self.rows == 0:
             self.fh.write(b",".join(_quoted(c) for c in self.columns) + b"\n")
         self.rows += rows
         k = len(self._workers)
-        step = -(-rows // k)
-        step += (-step) % m  # slices of whole plots (a plot's rows share its time)
-        times = np.ascontiguousarray(block.time_s, dtype=np.float64)
+        step = -(-b // k)  # plots per slice (a plot's rows share its time)
         self._pending = [
             pool.submit(
-                _format,
-                times[i * step // m : (i + 1) * step // m],
-                m,
+                self._format,
+                i,
+                times[i * step : (i + 1) * step],
+                target[i * step : (i + 1) * step],
+                label_cells,
                 text,
                 start,
-                np.ascontiguousarray(text_of[:, i * step : (i + 1) * step]),
-                np.ascontiguousarray(columns[:, i * step : (i + 1) * step]),
+                x[i * step * m : (i + 1) * step * m],
+                P[i * step * m : (i + 1) * step * m],
+                state_of,
+                cov_of,
                 widest,
             )
             for i, pool in enumerate(self._workers)
-            if i * step < rows
+            if i * step < b
         ]
 
-    def _add_parquet(self, block: PlotBlock, m: int, columns: NDArray[np.float64]) -> None:
-        """The block's rows (B·M, plot order then method order) as one row group."""
+    def _format(
+        self,
+        slot: int,
+        times: NDArray,
+        target: NDArray,
+        label_cells: int,
+        text: NDArray,
+        start: NDArray,
+        x: NDArray,
+        P: NDArray,
+        state_of: NDArray,
+        cov_of: NDArray,
+        widest: int,
+    ) -> memoryview:
+        """Rows as CSV bytes by ``csv_text.format_track_rows`` (thread ``slot`` of the pool),
+        into that thread's buffer (reused: a block's text is written before the next block
+        is formatted)."""
+        from radarviz.viz_app.io.csv_text import format_track_rows
+
+        n_cols = 1 + 1 + (label_cells > 0) + state_of.size + cov_of.size
+        need = (n_cols * (_FLOAT_BYTES + 1) + 2 * widest + 1) * x.shape[0] + 64
+        buf = self._buffers[slot]
+        if buf.size < need:
+            buf = self._buffers[slot] = np.empty(need + need // 4, dtype=np.uint8)
+        size = format_track_rows(
+            times.view(np.uint64),
+            target,
+            label_cells,
+            text,
+            start,
+            x.view(np.uint64),
+            P.view(np.uint64),
+            state_of,
+            cov_of,
+            buf,
+        )
+        return memoryview(buf)[:size]
+
+    def _write_table(
+        self,
+        times: NDArray,
+        target: NDArray | None,
+        labels: tuple[str, ...],
+        x: NDArray,
+        P: NDArray,
+        state_of: NDArray,
+        cov_of: NDArray,
+    ) -> bytes:
+        """The block's rows (B·M, plot order then method order) as one row group (the
+        writer's thread: the columns are gathered and the table built off the tracker's)."""
         import pyarrow as pa
 
-        b = block.size
+        from radarviz.viz_app.io.csv_text import track_columns_into
+
+        b, rows = times.size, x.shape[0]
+        m = rows // b
+        columns = np.empty((state_of.size + cov_of.size, rows))
+        track_columns_into(x, P, state_of, cov_of, columns)
         methods = pa.DictionaryArray.from_arrays(
-            np.tile(np.arange(m, dtype=np.int32), b), pa.array(self.methods, pa.string())
+            np.tile(np.arange(m, dtype=np.int32), b), self._method_names
         )
         text = [methods.cast(pa.string())]
-        if self.targets:
-            labels = pa.DictionaryArray.from_arrays(
-                np.repeat(block.target.astype(np.int32), m), pa.array(block.labels, pa.string())
+        if target is not None:
+            cells = pa.DictionaryArray.from_arrays(
+                np.repeat(target.astype(np.int32), m), pa.array(labels, pa.string())
             )
-            text.insert(0, labels.cast(pa.string()))
-        arrays = [pa.array(np.repeat(np.asarray(block.time_s, dtype=np.float64), m)), *text]
-        arrays += [pa.array(c) for c in columns]
-        table = pa.Table.from_arrays(arrays, schema=self._parquet.schema)
-        self._drain()
-        self.rows += b * m
-        self._pending = [self._workers[0].submit(self._write_table, table)]
-
-    def _write_table(self, table: object) -> bytes:
-        self._parquet.write_table(table)
+            text.insert(0, cells.cast(pa.string()))
+        arrays = [pa.array(np.repeat(times, m)), *text, *(pa.array(c) for c in columns)]
+        self._parquet.write_table(pa.Table.from_arrays(arrays, schema=self._parquet.schema))
         return b""
 
     def _drain(self) -> None:
@@ -417,15 +466,15 @@ class BlockWriter:
             self.fh.write(job.result())
         self._pending = []
 
-    def _check(self, block: PlotBlock, tracks: TrackBlock, xt: NDArray, Pt: NDArray) -> None:
+    def _check(self, block: PlotBlock, tracks: TrackBlock, x: NDArray, P: NDArray) -> None:
         """``check_track_rows`` on the whole block at once (every entry finite, variances
-        not negative); its message at the first bad plot."""
-        n = xt.shape[0]
-        diag = Pt[:: n + 1]
-        good = np.isfinite(xt).all(axis=0) & np.isfinite(Pt).all(axis=0) & (diag >= 0).all(axis=0)
-        if good.all():
+        not negative; ``x`` (B·M, n), ``P`` (B·M, n·n)); its message at the first bad plot."""
+        from radarviz.viz_app.io.csv_text import first_bad_row
+
+        bad = first_bad_row(x, P)
+        if bad < 0:
             return
-        i = int(np.flatnonzero(~good)[0]) // len(self.methods)
+        i = bad // len(self.methods)
         one = TrackBlock(tracks.x[i : i + 1], tracks.P[i : i + 1], tracks.target[i : i + 1])
         (rows,) = state_rows(one, self.methods)
         check_track_rows(f"{self.where} at time {float(block.time_s[i])!r} s", rows)
@@ -461,25 +510,17 @@ class BlockWriter:
 _FLOAT_BYTES = 24
 
 
-def _format(
-    times: NDArray,
-    repeat: int,
-    text: NDArray,
-    start: NDArray,
-    text_of: NDArray,
-    columns: NDArray,
-    widest: int,
-) -> bytes:
-    """Rows as CSV bytes by ``csv_text.format_rows`` (a thread of the writer's pool)."""
-    from radarviz.viz_app.io.csv_text import format_rows
-
-    n_cols = 1 + text_of.shape[0] + columns.shape[0]
-    per_row = n_cols * (_FLOAT_BYTES + 1) + text_of.shape[0] * widest + 1
-    buf = np.empty(per_row * columns.shape[1] + 64, dtype=np.uint8)
-    size = format_rows(
-        times.view(np.uint64), repeat, text, start, text_of, columns.view(np.uint64), buf
-    )
-    return buf[:size].tobytes()
+@functools.lru_cache(maxsize=8)
+def _column_index(n: int) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """For a state of ``n`` components: the index into x (n,) of each state column of the
+    track file and into P (n·n,) of each covariance column; −1 where the component is
+    absent (the column is 0)."""
+    state = np.array([k if k < n else -1 for k in _STATE_COLS], dtype=np.int64)
+    cov = []
+    for p, q in _PAIRS:
+        i, j = _COMPONENTS[p][1], _COMPONENTS[q][1]
+        cov.append(i * n + j if i < n and j < n else -1)
+    return state, np.array(cov, dtype=np.int64)
 
 
 def track_blocks(
