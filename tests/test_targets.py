@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from test_track_io import GOOD_RADARS  # the two radars a and b of the file-format tests
 
 from radarviz.core.filters.predict import cv_predict
 from radarviz.core.filters.state import CVBatch
@@ -191,21 +192,6 @@ def test_the_recording_has_one_entity_per_target_and_method(tmp_path: Path, rrd_
     assert not any(k.startswith("/world/tracks/ekf") for k in rows)
 
 
-TARGET_RADARS = """\
-[radars.a]
-x_m = 0.0
-y_m = 0.0
-z_m = 0.0
-sigma_range_m = 250.0
-sigma_azimuth_deg = 1.0
-
-[radars.b]
-x_m = 60000.0
-y_m = -20000.0
-z_m = 15.0
-sigma_range_m = 100.0
-sigma_azimuth_deg = 0.5
-"""
 HEADER = "time_s,radar,range_m,azimuth_deg,target\n"
 GOOD = ["0,a,150000,0.5,A\n", "5,b,94000,10.0,B\n", "10,b,95000,10.2,A\n", "8,a,152000,0.4,B\n"]
 
@@ -240,7 +226,7 @@ def test_bad_target_files_exit_2_one_line_no_output(
 ) -> None:
     text, extra, expected = BAD[case]
     (tmp_path / "m.csv").write_text(text)
-    (tmp_path / "r.toml").write_text(TARGET_RADARS)
+    (tmp_path / "r.toml").write_text(GOOD_RADARS)
     capsys.readouterr()
     status = _track(tmp_path / "m.csv", tmp_path / "r.toml", tmp_path / "t.csv", *extra)
     out, err = capsys.readouterr()
@@ -251,7 +237,7 @@ def test_bad_target_files_exit_2_one_line_no_output(
 
 def test_good_target_file_out_of_order_across_targets(tmp_path: Path) -> None:
     (tmp_path / "m.csv").write_text(HEADER + "".join(GOOD))
-    (tmp_path / "r.toml").write_text(TARGET_RADARS)
+    (tmp_path / "r.toml").write_text(GOOD_RADARS)
     assert _track(tmp_path / "m.csv", tmp_path / "r.toml", tmp_path / "t.csv") == 0
     rows = _read(tmp_path / "t.csv")
     assert [r["target"] for r in rows[:: len(ALL_METHODS)]] == ["A", "B", "A", "B"]

@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from test_targets import TOL, close  # |a − b| ≤ 1e-9 (1 + |a|), as the many-target tests
 
 from radarviz.core.tracking.consistency import ConsistencyMonitor
 from radarviz.core.tracking.stream import (
@@ -46,14 +47,6 @@ from radarviz.viz_app.io.plots import (
     state_from_row,
     write_measurements,
 )
-
-TOL = 1e-9
-
-
-def close(a: np.ndarray, b: np.ndarray) -> bool:
-    """|a − b| ≤ 1e-9 (1 + |a|) entry by entry."""
-    return bool(np.all(np.abs(np.asarray(a) - np.asarray(b)) <= TOL * (1.0 + np.abs(a))))
-
 
 _SITES = ((0.0, 0.0, 0.0), (15_000.0, -8_000.0, 40.0), (-5_000.0, 12_000.0, 10.0))
 
