@@ -393,9 +393,7 @@ class TrackRecorder:
         rec.send_columns(
             f"plots/sigma_pos_m/{name}",
             indexes=at,
-            columns=rr.Scalars.columns(
-                scalars=np.sqrt(np.trace(cov[sel], axis1=1, axis2=2))
-            ),
+            columns=rr.Scalars.columns(scalars=np.sqrt(np.trace(cov[sel], axis1=1, axis2=2))),
         )
         rec.send_columns(
             f"plots/speed_mps/{name}",
