@@ -492,9 +492,11 @@ def test_track_recording_draws_the_status(tmp_path: Path, rrd_contents) -> None:
     for t in confirmed:
         n_confirmed = sum(u == t and s == CONFIRMED for u, s in zip(ids, statuses, strict=True))
         assert rows[f"/plots/sigma_pos_m/{t}/ucm"] == n_confirmed
+    plot_colour = {CONFIRMED: rgb("measurement"), TENTATIVE: faint(rgb("measurement"))}
     for status in (CONFIRMED, TENTATIVE):
         c = cols[f"/world/measurements/radar/{status}"]
         assert [len(x) for x in c["Points3D:positions"]] == [s.count(status) for s in scans]
+        assert {x for row in c["Points3D:colors"] for x in row} == {_packed(plot_colour[status])}
     assert rows.get("/world/measurements/radar") is None  # plots are under their status only
 
 

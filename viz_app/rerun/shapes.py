@@ -52,19 +52,20 @@ def pale(rgb: tuple[int, int, int], amount: float = 0.6) -> tuple[int, int, int]
     return tuple(round(c + (255 - c) * amount) for c in rgb)  # type: ignore[return-value]
 
 
-#: The viewer's dark background, roughly: what ``faint`` mixes a colour towards.
-DARK = (40, 40, 40)
+#: The track recording's 3D background (a solid colour: faint drawing needs a known one; the
+#: viewer's own follows its theme, dark or light).
+LIGHT = (250, 250, 250)
 #: A faint (tentative) track's marker and path line.
 FAINT_MARKER = rr.Radius.ui_points(2.5)
 FAINT_LINE = rr.Radius.ui_points(0.5)
 
 
-def faint(rgb: tuple[int, int, int], amount: float = 0.6) -> tuple[int, int, int]:
-    """``rgb`` mixed with the viewer's dark background (``DARK``): the same hue, drawn faint.
+def faint(rgb: tuple[int, int, int], amount: float = 0.65) -> tuple[int, int, int]:
+    """``rgb`` mixed with the background ``LIGHT``: the same hue, drawn faint.
 
     Rerun ignores alpha on points and lines (it darkens a point without making it
     see-through), so faintness is a mix towards the background instead."""
-    mixed = (round(c + (d - c) * amount) for c, d in zip(rgb, DARK, strict=True))
+    mixed = (round(c + (d - c) * amount) for c, d in zip(rgb, LIGHT, strict=True))
     return tuple(mixed)  # type: ignore[return-value]
 
 

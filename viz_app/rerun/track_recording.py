@@ -20,8 +20,9 @@ With the association (``track --associate gnn``) ``{t}`` is the track id and the
 carries each track's status (``core.tracking.association``):
 
 * a row of a *tentative* track (not yet M of N hits) is drawn faint (``shapes.faint``: the
-  method's hue mixed with the dark background) with a smaller marker; a *confirmed* track's
-  rows as above. The status is per row, in the track's one entity: a track changes status once.
+  method's hue mixed with the 3D view's light background, set in the blueprint) with a
+  smaller marker; a *confirmed* track's rows as above. The status is per row, in the track's
+  one entity: a track changes status once.
 * a track's path is drawn once it is confirmed, its tentative start faint and thin; a track
   deleted while tentative has no path (dozens of clutter tracks live for a few scans).
 * a deleted track is cleared (a recursive ``rr.Clear`` of ``world/tracks/{t}``) at the scan
@@ -63,9 +64,9 @@ from radarviz.viz_app.io.plots import Radar
 from radarviz.viz_app.palette import radar_rgb
 from radarviz.viz_app.rerun.recording import colour, ellipsoid_axes, log_text, recording_file
 from radarviz.viz_app.rerun.shapes import (
-    CLOUD_MARKER,
     FAINT_LINE,
     FAINT_MARKER,
+    LIGHT,
     MARKER,
     SMALL_MARKER,
     THIN_LINE,
@@ -200,6 +201,9 @@ class TrackRecorder:
                         rrb.Spatial3DView(
                             origin="world",
                             name=title,
+                            background=rrb.Background(
+                                kind=rrb.BackgroundKind.SolidColor, color=LIGHT
+                            ),
                             eye_controls=rrb.EyeControls3D(
                                 position=tuple(eye),
                                 look_target=tuple(centre),
@@ -304,7 +308,7 @@ class TrackRecorder:
                 indexes=self.indexes(list(n), list(t)),
                 columns=rr.Points3D.columns(
                     positions=allpts,
-                    radii=[CLOUD_MARKER if dim else SMALL_MARKER] * m,
+                    radii=[FAINT_MARKER if dim else SMALL_MARKER] * m,
                     colors=[rgb] * m,
                 ).partition([len(p) for p in pts]),
             )
