@@ -64,6 +64,7 @@ from radarviz.viz_app.io.plots import Radar
 from radarviz.viz_app.palette import radar_rgb
 from radarviz.viz_app.rerun.recording import colour, ellipsoid_axes, log_text, recording_file
 from radarviz.viz_app.rerun.shapes import (
+    CLOUD_MARKER,
     FAINT_LINE,
     FAINT_MARKER,
     LIGHT,
@@ -308,7 +309,8 @@ class TrackRecorder:
                 indexes=self.indexes(list(n), list(t)),
                 columns=rr.Points3D.columns(
                     positions=allpts,
-                    radii=[FAINT_MARKER if dim else SMALL_MARKER] * m,
+                    # Under a tentative track's 2.5 pt marker, which starts on its plot.
+                    radii=[CLOUD_MARKER if dim else SMALL_MARKER] * m,
                     colors=[rgb] * m,
                 ).partition([len(p) for p in pts]),
             )
