@@ -441,11 +441,11 @@ def test_track_recording_draws_the_status(tmp_path: Path, rrd_contents) -> None:
     out, rrd = tmp_path / "t.csv", tmp_path / "t.rrd"
     argv = ["track", "--input", str(m), "--radars", str(r), "--out", str(out), "--rrd", str(rrd)]
     model = ["--model", "cv", "--sigma-a", "1"]
-    assert main([*argv, "--associate", "gnn", "--method", "ucm", *model]) == 0
+    assert main([*argv, "--associate", "gnn", "--method", "ucm", "ekf", *model]) == 0
 
     reader = PlotReader(m.read_text().splitlines(), str(m), load_radars(str(r)))
     gnn = GNNTracker(
-        ("ucm",), False, StreamOptions(model="cv", sigma_a_mps2=1.0), AssociationOptions()
+        ("ucm", "ekf"), False, StreamOptions(model="cv", sigma_a_mps2=1.0), AssociationOptions()
     )
     ids: list[str] = []
     statuses: list[str] = []
@@ -459,25 +459,24 @@ def test_track_recording_draws_the_status(tmp_path: Path, rrd_contents) -> None:
         deleted.update((t, len(ids)) for t in res.deleted)
     with out.open() as fh:
         file_rows = list(csv.DictReader(fh))
-    # The same run: one row per plot (one method), the same ids and statuses.
-    assert [(row["target"], row["status"]) for row in file_rows] == list(
-        zip(ids, statuses, strict=True)
-    )
+    # The same run: one row per plot and method, the same ids and statuses.
+    for method in ("ucm", "ekf"):
+        got = [(row["target"], row["status"]) for row in file_rows if row["method"] == method]
+        assert got == list(zip(ids, statuses, strict=True))
     confirmed = {t for t, s in zip(ids, statuses, strict=True) if s == CONFIRMED}
     never = set(ids) - confirmed
     assert len(confirmed) >= 2 and len(never) >= 5 and len(deleted) >= 5
 
     rows, cols = rrd_contents(rrd)
-    bright, dim = _packed(rgb("ucm")), _packed(faint(rgb("ucm")))
-    assert bright != dim
-    for t in set(ids):
-        c = cols[f"/world/tracks/{t}/ucm/position"]
+    for method, t in itertools.product(("ucm", "ekf"), set(ids)):
+        bright, dim = _packed(rgb(method)), _packed(faint(rgb(method)))
+        assert bright != dim
+        c = cols[f"/world/tracks/{t}/{method}/position"]
         want = [dim if statuses[n - 1] == TENTATIVE else bright for n in c["plot"]]
-        assert [x[0] for x in c["Points3D:colors"]] == want, t
+        assert [x[0] for x in c["Points3D:colors"]] == want, (t, method)
         assert c["plot"] == [n + 1 for n, u in enumerate(ids) if u == t]
-        assert [
-            x[0] for x in cols[f"/world/tracks/{t}/ucm/covariance"]["Ellipsoids3D:colors"]
-        ] == want
+        ellipsoids = cols[f"/world/tracks/{t}/{method}/covariance"]["Ellipsoids3D:colors"]
+        assert [x[0] for x in ellipsoids] == want
     clears = {
         p.split("/")[3]: c
         for p, c in cols.items()
@@ -485,13 +484,13 @@ def test_track_recording_draws_the_status(tmp_path: Path, rrd_contents) -> None:
     }
     assert {t: c["plot"] for t, c in clears.items()} == {t: [n] for t, n in deleted.items()}
     assert all(c["Clear:is_recursive"] == [[True]] for c in clears.values())
-    paths = {p.split("/")[3] for p in rows if "/path/" in p}
-    assert paths == confirmed
-    series = {p.split("/")[3] for p in rows if p.startswith("/plots/sigma_pos_m/")}
-    assert series == confirmed
+    paths = {tuple(p.split("/")[3:5]) for p in rows if "/path/" in p}
+    assert paths == set(itertools.product(confirmed, ("ucm", "ekf")))
+    series = {tuple(p.split("/")[3:5]) for p in rows if p.startswith("/plots/sigma_pos_m/")}
+    assert series == paths
     for t in confirmed:
         n_confirmed = sum(u == t and s == CONFIRMED for u, s in zip(ids, statuses, strict=True))
-        assert rows[f"/plots/sigma_pos_m/{t}/ucm"] == n_confirmed
+        assert rows[f"/plots/sigma_pos_m/{t}/ekf"] == n_confirmed
     plot_colour = {CONFIRMED: rgb("measurement"), TENTATIVE: faint(rgb("measurement"))}
     for status in (CONFIRMED, TENTATIVE):
         c = cols[f"/world/measurements/radar/{status}"]
