@@ -18,7 +18,8 @@
   middle scan at the angle asked.
 * End to end: ``simulate --preset crossing`` then ``track --associate gnn``: few confirmed
   tracks, each target's track id stable away from the crossing, every method's rows of a plot
-  under the same track id; the Rerun recording has every track.
+  under the same track id; the Rerun recording has every track, drawn by its status (tentative
+  rows faint, deleted tracks cleared at their scan), against the tracker's own account.
 * Bad input: one line naming the flag and its range, exit 2, nothing written.
 """
 
@@ -413,10 +414,89 @@ def test_track_recording_has_every_track(tmp_path: Path, rrd_contents) -> None:
     with out.open() as fh:
         ids = {row["target"] for row in csv.DictReader(fh)}
     rows, _ = rrd_contents(rrd)
-    # /world/tracks/{id}/{method}/position, one entity per track.
-    recorded = {p.split("/")[3] for p in rows if p.startswith("/world/tracks/")}
-    assert {p.split("/")[4] for p in rows if p.startswith("/world/tracks/")} == {"ucm"}
+    # /world/tracks/{id}/{method}/position, one entity per track (and /world/tracks/{id} the
+    # clear of a deleted one).
+    parts = [p.split("/") for p in rows if p.startswith("/world/tracks/")]
+    recorded = {q[3] for q in parts}
+    assert {q[4] for q in parts if len(q) > 4} == {"ucm"}
     assert len(ids) >= 2 and ids <= recorded, (ids, sorted(rows)[:20])
+
+
+def _packed(rgb: tuple[int, int, int]) -> int:
+    """Rerun's colour component: 0xRRGGBBAA."""
+    return (rgb[0] << 24) | (rgb[1] << 16) | (rgb[2] << 8) | 0xFF
+
+
+def test_track_recording_draws_the_status(tmp_path: Path, rrd_contents) -> None:
+    """The association's recording against the tracker's own account of the same plots
+    (``GNNTracker.add_scan`` scan by scan): every track row coloured by its status (faint while
+    tentative), a recursive clear of exactly the deleted tracks at the last plot of the scan
+    that deleted them, paths and time series for confirmed tracks only, and each scan's plots
+    as one row per status."""
+    from radarviz.viz_app.io.plots import PlotReader, load_radars
+    from radarviz.viz_app.palette import rgb
+    from radarviz.viz_app.rerun.shapes import faint
+
+    m, r, _ = simulate(tmp_path, "--clutter-per-scan", "2", "--scans", "12")
+    out, rrd = tmp_path / "t.csv", tmp_path / "t.rrd"
+    argv = ["track", "--input", str(m), "--radars", str(r), "--out", str(out), "--rrd", str(rrd)]
+    model = ["--model", "cv", "--sigma-a", "1"]
+    assert main([*argv, "--associate", "gnn", "--method", "ucm", "ekf", *model]) == 0
+
+    reader = PlotReader(m.read_text().splitlines(), str(m), load_radars(str(r)))
+    gnn = GNNTracker(
+        ("ucm", "ekf"), False, StreamOptions(model="cv", sigma_a_mps2=1.0), AssociationOptions()
+    )
+    ids: list[str] = []
+    statuses: list[str] = []
+    deleted: dict[str, int] = {}  # id → the plot (1, 2, …) ending the scan that deleted it
+    scans: list[list[str]] = []
+    for scan in scan_groups(reader, 0.0):
+        res = gnn.add_scan([p for _, p in scan])
+        ids += res.track_ids
+        statuses += res.statuses
+        scans.append(res.statuses)
+        deleted.update((t, len(ids)) for t in res.deleted)
+    with out.open() as fh:
+        file_rows = list(csv.DictReader(fh))
+    # The same run: one row per plot and method, the same ids and statuses.
+    for method in ("ucm", "ekf"):
+        got = [(row["target"], row["status"]) for row in file_rows if row["method"] == method]
+        assert got == list(zip(ids, statuses, strict=True))
+    confirmed = {t for t, s in zip(ids, statuses, strict=True) if s == CONFIRMED}
+    never = set(ids) - confirmed
+    assert len(confirmed) >= 2 and len(never) >= 5 and len(deleted) >= 5
+
+    rows, cols = rrd_contents(rrd)
+    for method, t in itertools.product(("ucm", "ekf"), set(ids)):
+        bright, dim = _packed(rgb(method)), _packed(faint(rgb(method)))
+        assert bright != dim
+        c = cols[f"/world/tracks/{t}/{method}/position"]
+        want = [dim if statuses[n - 1] == TENTATIVE else bright for n in c["plot"]]
+        assert [x[0] for x in c["Points3D:colors"]] == want, (t, method)
+        assert c["plot"] == [n + 1 for n, u in enumerate(ids) if u == t]
+        ellipsoids = cols[f"/world/tracks/{t}/{method}/covariance"]["Ellipsoids3D:colors"]
+        assert [x[0] for x in ellipsoids] == want
+    clears = {
+        p.split("/")[3]: c
+        for p, c in cols.items()
+        if p.count("/") == 3 and p.startswith("/world/tracks/")
+    }
+    assert {t: c["plot"] for t, c in clears.items()} == {t: [n] for t, n in deleted.items()}
+    assert all(c["Clear:is_recursive"] == [[True]] for c in clears.values())
+    paths = {tuple(p.split("/")[3:5]) for p in rows if "/path/" in p}
+    assert paths == set(itertools.product(confirmed, ("ucm", "ekf")))
+    series = {tuple(p.split("/")[3:5]) for p in rows if p.startswith("/plots/sigma_pos_m/")}
+    assert series == paths
+    for t in confirmed:
+        n_confirmed = sum(u == t and s == CONFIRMED for u, s in zip(ids, statuses, strict=True))
+        assert rows[f"/plots/sigma_pos_m/{t}/ekf"] == n_confirmed
+    plot_colour = {CONFIRMED: rgb("measurement"), TENTATIVE: faint(rgb("measurement"))}
+    for status in (CONFIRMED, TENTATIVE):
+        c = cols[f"/world/measurements/radar/{status}"]
+        assert [len(x) for x in c["Points3D:positions"]] == [s.count(status) for s in scans]
+        assert {x for row in c["Points3D:colors"] for x in row} == {_packed(plot_colour[status])}
+    assert rows.get("/world/measurements/radar") is None  # plots are under their status only
 
 
 # ------------------------------------------------------------------------------------------

@@ -780,6 +780,7 @@ def track_plots(
     on_start: Callable[[bool], None] | None = None,
     locate: Locate = _csv_locate,
     association: AssociationOptions | None = None,
+    on_scan: Callable[[list[str]], None] | None = None,
 ) -> tuple[int, bool, tuple[str, ...], tuple[str, ...]]:
     """Track a file's plots; ``on_rows(plot, rows)`` after every plot.
 
@@ -795,15 +796,17 @@ def track_plots(
 
     With ``association`` (``track --associate gnn``) a file without target labels is
     associated scan by scan (``core.tracking.association.GNNTracker``): ``on_rows(plot,
-    rows, status)`` then gets the plot labelled with its track id and the track's status, and
-    ``targets`` are the ids of the tracks ever confirmed. Memory holds one scan.
+    rows, status)`` then gets the plot labelled with its track id and the track's status
+    after the scan, ``on_scan(deleted)`` the ids of the tracks deleted at the scan after its
+    last plot's ``on_rows``, and ``targets`` are the ids of the tracks ever confirmed. Memory
+    holds one scan.
     """
     three_d, labelled = reader.three_d, reader.targets
     if methods is None:
         methods = METHODS_3D if three_d else ALL_METHODS
     if association is not None:
         return _associate_plots(
-            reader, source, methods, options, association, on_rows, on_start, locate
+            reader, source, methods, options, association, on_rows, on_start, locate, on_scan
         )
     tracker: StreamTracker | TargetTracker
     try:
@@ -859,6 +862,7 @@ def _associate_plots(
     on_rows: Callable[..., None],
     on_start: Callable[[bool], None] | None,
     locate: Locate,
+    on_scan: Callable[[list[str]], None] | None = None,
 ) -> tuple[int, bool, tuple[str, ...], tuple[str, ...]]:
     """``track_plots`` with the association (its docstring)."""
     if reader.targets:
@@ -885,14 +889,23 @@ def _associate_plots(
             scan, result.track_ids, result.statuses, result.rows, strict=True
         ):
             on_rows(replace(plot, target=track), rows, status)
+        if on_scan is not None:
+            on_scan(result.deleted)
         plots += len(scan)
     return plots, reader.three_d, methods, tuple(tracker.ever_confirmed)
 
 
 class RowObserver(Protocol):
-    """What ``run_track`` can hand every plot and its track rows to (e.g. a Rerun recorder)."""
+    """What ``run_track`` can hand every plot and its track rows to (e.g. a Rerun recorder).
 
-    def add(self, plot: Plot, rows: list[StateRow]) -> None: ...
+    With the association, ``add`` also gets the status of the plot's track after its scan
+    (``tentative`` or ``confirmed``; "" without the association) and ``end_scan`` the ids of
+    the tracks deleted at the scan, after the scan's last plot (``track_plots``'s
+    ``on_scan``)."""
+
+    def add(self, plot: Plot, rows: list[StateRow], status: str = "") -> None: ...
+
+    def end_scan(self, deleted: list[str]) -> None: ...
 
 
 #: Given the radars, a context manager yielding a :class:`RowObserver`; it is entered before the
@@ -947,10 +960,18 @@ def run_track(
             check_track_rows(f"track: {input_path} at time {plot.time_s!r} s", rows)
             writer.add(plot, rows, status)
             if logger is not None:
-                logger.add(plot, rows)
+                logger.add(plot, rows, status)
 
         plots, three_d, used, targets = track_plots(
-            reader, input_path, methods, options, on_rows, on_start, locate, association
+            reader,
+            input_path,
+            methods,
+            options,
+            on_rows,
+            on_start,
+            locate,
+            association,
+            None if logger is None else logger.end_scan,
         )
         assert writer is not None
         writer.close()

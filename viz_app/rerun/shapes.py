@@ -52,6 +52,23 @@ def pale(rgb: tuple[int, int, int], amount: float = 0.6) -> tuple[int, int, int]
     return tuple(round(c + (255 - c) * amount) for c in rgb)  # type: ignore[return-value]
 
 
+#: The track recording's 3D background (a solid colour: faint drawing needs a known one; the
+#: viewer's own follows its theme, dark or light).
+LIGHT = (250, 250, 250)
+#: A faint (tentative) track's marker and path line.
+FAINT_MARKER = rr.Radius.ui_points(2.5)
+FAINT_LINE = rr.Radius.ui_points(0.5)
+
+
+def faint(rgb: tuple[int, int, int], amount: float = 0.65) -> tuple[int, int, int]:
+    """``rgb`` mixed with the background ``LIGHT``: the same hue, drawn faint.
+
+    Rerun ignores alpha on points and lines (it darkens a point without making it
+    see-through), so faintness is a mix towards the background instead."""
+    mixed = (round(c + (d - c) * amount) for c, d in zip(rgb, LIGHT, strict=True))
+    return tuple(mixed)  # type: ignore[return-value]
+
+
 def colours(rgb: tuple[int, int, int], n: int) -> NDArray[np.uint8]:
     """``n`` copies of one colour as an (n, 3) array (Rerun converts arrays ~20× faster than
     lists of tuples, which matters for the panel's latency)."""

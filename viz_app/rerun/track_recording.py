@@ -16,6 +16,28 @@ In a file of many targets (a ``target`` column) every target and method is one e
 ``{m}`` above becomes ``{t}/{m}`` (``core.tracking.targets.track_name``; a label's characters
 that an entity path reserves are escaped), coloured by method.
 
+With the association (``track --associate gnn``) ``{t}`` is the track id and the recording
+carries each track's status (``core.tracking.association``):
+
+* a row of a *tentative* track (not yet M of N hits) is drawn faint (``shapes.faint``: the
+  method's hue mixed with the 3D view's light background, set in the blueprint) with a
+  smaller marker; a *confirmed* track's rows as above. The status is per row, in the track's
+  one entity: a track changes status once.
+* a track's path is drawn once it is confirmed, its tentative start faint and thin; a track
+  deleted while tentative has no path (dozens of clutter tracks live for a few scans).
+* a deleted track is cleared (a recursive ``rr.Clear`` of ``world/tracks/{t}``) at the scan
+  that deletes it, so its last position does not stay on screen; its path, static, stays.
+* the time series carry confirmed rows only.
+* plots are logged per scan, one row of all the scan's plots at its first plot, split by the
+  status of the track each went to::
+
+      world/measurements/{r}/confirmed   plots that updated (or confirmed) a confirmed track
+      world/measurements/{r}/tentative   plots of tentative tracks: those that started one
+                                         (no track took them) and their few followers
+
+  the latter faint and small. A status with no plot in a scan gets an empty row, so the
+  view shows the current scan only.
+
 Timelines: ``plot`` (sequence 1, 2, … over the file's plots) and ``time`` (the file's time_s,
 as a duration). Plots are buffered and sent column-wise (``send_columns``) every ``RRD_CHUNK``
 plots, so memory stays bounded however long the file is; a 2D track is drawn at z = 0.
@@ -34,18 +56,34 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from radarviz.core.filters.state import position_index, velocity_index
+from radarviz.core.tracking.association import CONFIRMED, TENTATIVE
 from radarviz.core.tracking.consistency import ConsistencyMonitor
 from radarviz.core.tracking.stream import Plot, StateRow
 from radarviz.core.tracking.targets import track_name
 from radarviz.viz_app.io.plots import Radar
 from radarviz.viz_app.palette import radar_rgb
 from radarviz.viz_app.rerun.recording import colour, ellipsoid_axes, log_text, recording_file
-from radarviz.viz_app.rerun.shapes import MARKER, SMALL_MARKER, THIN_LINE
+from radarviz.viz_app.rerun.shapes import (
+    CLOUD_MARKER,
+    FAINT_LINE,
+    FAINT_MARKER,
+    LIGHT,
+    MARKER,
+    SMALL_MARKER,
+    THIN_LINE,
+    faint,
+)
 
 #: Plots buffered before the recording is sent a chunk.
 RRD_CHUNK = 4096
 #: Velocity arrows show this many seconds of motion.
 ARROW_SECONDS = 10.0
+#: What the association's recording says about its drawing (the log's first line).
+STATUS_LEGEND = (
+    "faint, small: tentative tracks (fewer than M of N hits yet) and the plots that went to "
+    "them, which include every plot no track took; bright: confirmed tracks and their plots. "
+    "A deleted track is cleared at the scan that deletes it."
+)
 
 
 def _label(r: Radar) -> str:
@@ -60,6 +98,9 @@ def measured_point(p: Plot) -> tuple[float, float, float]:
     y = p.site[1] + p.range_m * ce * math.sin(p.azimuth_rad)
     z = p.site[2] + p.range_m * math.sin(el) if p.elevation_rad is not None else 0.0
     return x, y, z
+
+
+Row = tuple[int, float, np.ndarray, np.ndarray, str]
 
 
 class TrackRecorder:
@@ -93,16 +134,24 @@ class TrackRecorder:
         self._hi = np.full(3, -np.inf)
         for r in radars:
             self._extend(np.array([[r.x_m, r.y_m, r.z_m]]))
-        self._meas: dict[str, list[tuple[int, float, tuple[float, float, float]]]] = defaultdict(
-            list
-        )
-        # Per (target, method): the buffered states ("" the target of a file of one).
-        self._tracks: dict[tuple[str, str], list[tuple[int, float, np.ndarray, np.ndarray]]] = (
-            defaultdict(list)
-        )
-        # Each track's last drawn position: the next chunk's path strip starts there.
+        # Per measurement entity (below world/measurements): rows of (plot, time_s, points
+        # (k, 3)); one plot a row, or with the association one scan of one status a row.
+        self._meas: dict[str, list[tuple[int, float, np.ndarray]]] = defaultdict(list)
+        # The association's current scan: (plot, time_s, radar, status, point) per plot.
+        self._scan: list[tuple[int, float, str, str, tuple[float, float, float]]] = []
+        #: Whether the plots came with statuses (the association).
+        self.statuses = False
+        # Per (target, method): the buffered states and statuses ("" the target of a file of
+        # one; status "" without the association).
+        self._tracks: dict[tuple[str, str], list[Row]] = defaultdict(list)
+        # Each track's last drawn (confirmed) position: the next chunk's path strip starts there.
         self._last: dict[str, np.ndarray] = {}
+        # A tentative track's positions not drawn as a path yet (until it is confirmed).
+        self._pending: dict[str, np.ndarray] = {}
+        # Targets deleted since the last flush: a tentative one's path is never drawn.
+        self._deleted: set[str] = set()
         self._styled: set[str] = set()
+        self._time_s = 0.0
 
     def _extend(self, pts: np.ndarray) -> None:
         ok = np.all(np.isfinite(pts), axis=1)
@@ -113,6 +162,7 @@ class TrackRecorder:
     def close(self) -> None:
         """Send what is buffered, a summary line in the log and the blueprint: a 3D view
         framed on every radar and plot, the whole run in the time series."""
+        self.end_scan([])
         self.flush()
         log_text(
             self.rec,
@@ -129,10 +179,11 @@ class TrackRecorder:
         whole = rrb.VisibleTimeRange(
             "plot", start=rrb.TimeRangeBoundary.infinite(), end=rrb.TimeRangeBoundary.infinite()
         )
+        series = "confirmed tracks' " if self.statuses else ""
         plots = [
             rrb.TimeSeriesView(
                 origin=f"plots/{name}",
-                name=title,
+                name=series + title,
                 time_ranges=whole,
                 plot_legend=rrb.PlotLegend(corner="RightTop"),
             )
@@ -141,13 +192,19 @@ class TrackRecorder:
                 ("speed_mps", "track speed, m/s"),
             )
         ]
+        title = "radars, plots and tracks, m"
+        if self.statuses:
+            title += " (faint: tentative; deleted tracks cleared)"
         self.rec.send_blueprint(
             rrb.Blueprint(
                 rrb.Horizontal(
                     rrb.Vertical(
                         rrb.Spatial3DView(
                             origin="world",
-                            name="radars, plots and tracks, m",
+                            name=title,
+                            background=rrb.Background(
+                                kind=rrb.BackgroundKind.SolidColor, color=LIGHT
+                            ),
                             eye_controls=rrb.EyeControls3D(
                                 position=tuple(eye),
                                 look_target=tuple(centre),
@@ -180,8 +237,14 @@ class TrackRecorder:
             yield recorder
             recorder.close()
 
-    def add(self, plot: Plot, rows: list[StateRow]) -> None:
+    def add(self, plot: Plot, rows: list[StateRow], status: str = "") -> None:
+        """One plot and its tracks' rows; ``status`` (the association's): the status of the
+        plot's track after its scan, ``tentative`` or ``confirmed`` ("" without)."""
         self.count += 1
+        self._time_s = plot.time_s
+        if status and not self.statuses:
+            self.statuses = True
+            log_text(self.rec, STATUS_LEGEND, scan=self.count, timeline="plot")
         if self.monitor is not None:
             # The tracker runs ahead by a block of plots: log the events up to this plot's time.
             events = self.monitor.events
@@ -193,11 +256,35 @@ class TrackRecorder:
                 level = "WARN" if event.kind == "leaves" else "INFO"
                 log_text(self.rec, event.message(), level, scan=self.count, timeline="plot")
                 self._events_logged += 1
-        self._meas[plot.radar].append((self.count, plot.time_s, measured_point(plot)))
+        point = measured_point(plot)
+        if status:
+            self._scan.append((self.count, plot.time_s, plot.radar, status, point))
+        else:
+            self._meas[plot.radar].append((self.count, plot.time_s, np.array([point])))
         for method, x, P in rows:
-            self._tracks[(plot.target, method)].append((self.count, plot.time_s, x, P))
+            self._tracks[(plot.target, method)].append((self.count, plot.time_s, x, P, status))
         if self.count % RRD_CHUNK == 0:
             self.flush()
+
+    def end_scan(self, deleted: list[str]) -> None:
+        """The association's scan is complete: its plots become one row per status (at its
+        first plot), and the tracks ``deleted`` at it are cleared at its last plot."""
+        if self._scan:
+            n, t, radar = self._scan[0][0], self._scan[0][1], self._scan[0][2]
+            for status in (CONFIRMED, TENTATIVE):
+                pts = [p for *_, s, p in self._scan if s == status]
+                self._meas[f"{radar}/{status}"].append((n, t, np.array(pts).reshape(-1, 3)))
+            end_n, end_t = self._scan[-1][0], self._scan[-1][1]
+            self._scan.clear()
+        else:
+            end_n, end_t = self.count, self._time_s
+        for target in deleted:
+            self._deleted.add(target)
+            self.rec.send_columns(
+                f"world/tracks/{rr.escape_entity_path_part(target)}",
+                indexes=self.indexes([end_n], [end_t]),
+                columns=rr.Clear.columns(is_recursive=[True]),
+            )
 
     def indexes(self, n: list[int], t: list[float]) -> list[rr.TimeColumn]:
         return [
@@ -208,81 +295,114 @@ class TrackRecorder:
     def flush(self) -> None:
         """Send everything buffered (one ``send_columns`` per entity) and empty the buffers."""
         rec = self.rec
-        for radar, items in self._meas.items():
+        for entity, items in self._meas.items():
             if not items:
                 continue
             n, t, pts = zip(*items, strict=True)
-            self._extend(np.array(pts))
+            allpts = np.concatenate(pts)
+            self._extend(allpts)
+            m = len(allpts)
+            dim = entity.endswith(f"/{TENTATIVE}")
+            rgb = faint(colour("measurement")) if dim else colour("measurement")
             rec.send_columns(
-                f"world/measurements/{radar}",
+                f"world/measurements/{entity}",
                 indexes=self.indexes(list(n), list(t)),
                 columns=rr.Points3D.columns(
-                    positions=np.array(pts),
-                    radii=[SMALL_MARKER] * len(pts),
-                    colors=[colour("measurement")] * len(pts),
-                ),
+                    positions=allpts,
+                    # Under a tentative track's 2.5 pt marker, which starts on its plot.
+                    radii=[CLOUD_MARKER if dim else SMALL_MARKER] * m,
+                    colors=[rgb] * m,
+                ).partition([len(p) for p in pts]),
             )
         for (target, method), items in self._tracks.items():
-            if not items:
-                continue
-            name = track_name(rr.escape_entity_path_part(target), method) if target else method
-            n, t, xs, ps = zip(*items, strict=True)
-            x, P = np.array(xs), np.array(ps)
-            POS, VEL = list(position_index(3)), list(velocity_index(3))
-            pos, vel = x[:, POS], x[:, VEL]
-            cov = P[:, POS][:, :, POS]
-            rgb = colour(method)
-            k = len(pos)
-            idx = self.indexes(list(n), list(t))
-            base = f"world/tracks/{name}"
-            rec.send_columns(
-                f"{base}/position",
-                indexes=idx,
-                columns=rr.Points3D.columns(positions=pos, colors=[rgb] * k, radii=[MARKER] * k),
-            )
-            half, quat = ellipsoid_axes(cov)
-            rec.send_columns(
-                f"{base}/covariance",
-                indexes=idx,
-                columns=rr.Ellipsoids3D.columns(
-                    centers=pos,
-                    half_sizes=np.maximum(half, 1.0),
-                    quaternions=quat,
-                    colors=[rgb] * k,
-                ),
-            )
-            rec.send_columns(
-                f"{base}/velocity",
-                indexes=idx,
-                columns=rr.Arrows3D.columns(
-                    origins=pos, vectors=vel * ARROW_SECONDS, colors=[rgb] * k
-                ),
-            )
-            strip = pos if name not in self._last else np.vstack([self._last[name], pos])
-            self._last[name] = pos[-1]
-            rec.log(
-                f"{base}/path/{self.chunk:06d}",
-                rr.LineStrips3D([strip], colors=[rgb], radii=[THIN_LINE]),
-                static=True,
-            )
-            if name not in self._styled:  # a track's first chunk
-                self._styled.add(name)
-                for series in ("sigma_pos_m", "speed_mps"):
-                    rec.log(
-                        f"plots/{series}/{name}",
-                        rr.SeriesLines(colors=[rgb], names=[track_name(target, method)]),
-                        static=True,
-                    )
-            rec.send_columns(
-                f"plots/sigma_pos_m/{name}",
-                indexes=idx,
-                columns=rr.Scalars.columns(scalars=np.sqrt(np.trace(cov, axis1=1, axis2=2))),
-            )
-            rec.send_columns(
-                f"plots/speed_mps/{name}",
-                indexes=idx,
-                columns=rr.Scalars.columns(scalars=np.linalg.norm(vel, axis=1)),
-            )
+            if items:
+                self._send_track(target, method, items)
+        for target in self._deleted:  # no more rows: forget it (a tentative one has no path)
+            prefix = f"{rr.escape_entity_path_part(target)}/"
+            for book in (self._pending, self._last):
+                for name in [k for k in book if k.startswith(prefix)]:
+                    del book[name]
+        self._deleted.clear()
         self._meas.clear()
         self._tracks.clear()
         self.chunk += 1
+
+    def _send_track(self, target: str, method: str, items: list[Row]) -> None:
+        """One track's buffered rows: position, covariance, velocity (tentative rows faint),
+        its path strip(s) and its confirmed rows' time series."""
+        rec = self.rec
+        name = track_name(rr.escape_entity_path_part(target), method) if target else method
+        n, t, xs, ps, statuses = zip(*items, strict=True)
+        x, P = np.array(xs), np.array(ps)
+        POS, VEL = list(position_index(3)), list(velocity_index(3))
+        pos, vel = x[:, POS], x[:, VEL]
+        cov = P[:, POS][:, :, POS]
+        rgb, dim = colour(method), faint(colour(method))
+        tentative = np.array([s == TENTATIVE for s in statuses])
+        rgbs = [dim if s else rgb for s in tentative]
+        idx = self.indexes(list(n), list(t))
+        base = f"world/tracks/{name}"
+        rec.send_columns(
+            f"{base}/position",
+            indexes=idx,
+            columns=rr.Points3D.columns(
+                positions=pos,
+                colors=rgbs,
+                radii=[FAINT_MARKER if s else MARKER for s in tentative],
+            ),
+        )
+        half, quat = ellipsoid_axes(cov)
+        rec.send_columns(
+            f"{base}/covariance",
+            indexes=idx,
+            columns=rr.Ellipsoids3D.columns(
+                centers=pos, half_sizes=np.maximum(half, 1.0), quaternions=quat, colors=rgbs
+            ),
+        )
+        rec.send_columns(
+            f"{base}/velocity",
+            indexes=idx,
+            columns=rr.Arrows3D.columns(origins=pos, vectors=vel * ARROW_SECONDS, colors=rgbs),
+        )
+        # Statuses only go tentative → confirmed: the chunk's confirmed rows are a suffix.
+        first = int(np.argmin(tentative)) if not tentative.all() else len(pos)
+        start = self._pending.pop(name, np.zeros((0, 3)))
+        if first == len(pos):  # still tentative: its path waits for the confirmation
+            self._pending[name] = np.vstack([start, pos])
+            return
+        strips, colours_, radii = [], [], []
+        early = np.vstack([start, pos[:first]])
+        if len(early):  # the tentative start, faint, joined to the first confirmed row
+            strips.append(np.vstack([early, pos[first : first + 1]]))
+            colours_.append(dim)
+            radii.append(FAINT_LINE)
+        later = pos[first:] if name not in self._last else np.vstack([self._last[name], pos])
+        strips.append(later)
+        colours_.append(rgb)
+        radii.append(THIN_LINE)
+        self._last[name] = pos[-1]
+        rec.log(
+            f"{base}/path/{self.chunk:06d}",
+            rr.LineStrips3D(strips, colors=colours_, radii=radii),
+            static=True,
+        )
+        if name not in self._styled:  # a track's first confirmed chunk
+            self._styled.add(name)
+            for series in ("sigma_pos_m", "speed_mps"):
+                rec.log(
+                    f"plots/{series}/{name}",
+                    rr.SeriesLines(colors=[rgb], names=[track_name(target, method)]),
+                    static=True,
+                )
+        sel = slice(first, None)
+        at = self.indexes(list(n[sel]), list(t[sel]))
+        rec.send_columns(
+            f"plots/sigma_pos_m/{name}",
+            indexes=at,
+            columns=rr.Scalars.columns(scalars=np.sqrt(np.trace(cov[sel], axis1=1, axis2=2))),
+        )
+        rec.send_columns(
+            f"plots/speed_mps/{name}",
+            indexes=at,
+            columns=rr.Scalars.columns(scalars=np.linalg.norm(vel[sel], axis=1)),
+        )
