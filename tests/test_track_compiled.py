@@ -10,7 +10,10 @@
 * Per target, as alone: on the compiled engine a target's tracks in a many-target file are
   bit for bit those of its plots alone (the kernel walks the plots in order; nothing crosses
   targets).
-* What the compiled engine has no kernel for (the IMM, the finite-memory start) runs on numpy.
+* The IMM (``core.filters.kernels_imm``): the same, for x, for P to 1e-9 of its scale
+  (``close_cov``), for μ and for the monitor's NIS of the combined prediction, whatever the
+  blocks; a target of many is bit for bit its plots alone; ``radarviz track`` (the IMM by
+  default) writes the numpy engine's tracks.
 * The number text: the compiled formatter writes every double as pyarrow does, byte for byte.
 * The file path: ``radarviz track`` (columns read by pyarrow in blocks, tracked by arrays,
   written a block at a time) gives the tracks of the plots read row by row and tracked one
@@ -129,10 +132,78 @@ def test_a_target_of_many_is_bit_for_bit_its_plots_alone(three_d: bool) -> None:
                 assert np.array_equal(xa, xb) and np.array_equal(Pa, Pb)
 
 
-def test_the_imm_stays_on_the_numpy_engine() -> None:
-    options = StreamOptions(model="imm", engine="compiled")
-    assert TargetTracker(ALL_METHODS, False, options).engine == "numpy"
-    assert TargetTracker(ALL_METHODS, False, replace(options, model="cv")).engine == "compiled"
+def close_cov(a: np.ndarray, b: np.ndarray) -> bool:
+    """|Aᵢⱼ − Bᵢⱼ| ≤ 1e-9 (1 + √(Aᵢᵢ Aⱼⱼ)): a covariance to 1e-9 of its own scale.
+
+    The IMM's combined P is a mixture whose cross terms can cancel to 10⁻⁵ of √(Pᵢᵢ Pⱼⱼ)
+    (18.8 m²/s against 82 m/s × 3370 m); two routes through the same formulas then differ by
+    rounding of the scale, 10⁻¹⁴ of it, which is 10⁻⁹ of such an entry (the numpy engine
+    against itself, one target alone against many: 1.7e-10 entry by entry)."""
+    a, b = np.asarray(a), np.asarray(b)
+    d = np.sqrt(np.abs(np.diagonal(a, axis1=-2, axis2=-1)))
+    scale = d[..., :, None] * d[..., None, :]
+    return bool(np.all(np.abs(a - b) <= TOL * (1.0 + scale)))
+
+
+def _mu(tracker: TargetTracker, method: str, target: str) -> np.ndarray:
+    """The IMM's model probabilities μ (r,) of ``target``'s ``method`` track, either engine."""
+    j = tracker.methods.index(method)
+    if tracker._compiled is not None:
+        return tracker._compiled.mus[tracker._compiled.slots[target], j]
+    b, row = tracker._where[method]
+    bank = tracker._banks[b]
+    mu = bank.arrays[2][row] if bank.axis else bank.arrays[2]
+    return mu[tracker._slot[target]]
+
+
+@pytest.mark.parametrize("three_d", [False, True], ids=["2d", "3d"])
+@pytest.mark.parametrize("block", [1, 7, 4096])
+def test_the_compiled_imm_equals_the_numpy_engine(three_d: bool, block: int) -> None:
+    plots = scene(three_d)
+    ref, ref_rows, ref_mon = tracked(plots, three_d, "numpy", block, model="imm")
+    fast, rows, mon = tracked(plots, three_d, "compiled", block, model="imm")
+    assert (ref.engine, fast.engine) == ("numpy", "compiled")
+    assert fast.targets == ref.targets
+    for a, b in zip(ref_rows, rows, strict=True):
+        assert [m for m, _, _ in a] == [m for m, _, _ in b]
+        for (m, xa, Pa), (_, xb, Pb) in zip(a, b, strict=True):
+            assert close(xa, xb), m
+            assert close_cov(Pa, Pb), m
+    # μ, what the combined estimates are weighted by (moved well away from its start).
+    mus = []
+    for t in ref.targets:
+        for m in ref.methods:
+            want, got = _mu(ref, m, t), _mu(fast, m, t)
+            assert np.all(np.abs(want - got) <= TOL), (t, m)
+            mus.append(want)
+    start = StreamOptions(model="imm").motion().initial_probabilities()
+    assert np.max(np.abs(np.array(mus) - start)) > 0.05
+    want, got = ref_mon.results(), mon.results()
+    assert set(want) == set(got)
+    for name, w in want.items():
+        g = got[name]
+        assert (g.updates, g.windows, g.above, g.below) == (w.updates, w.windows, w.above, w.below)
+        assert g.first_exit_s == w.first_exit_s
+        assert abs(g.mean_nis_per_dof - w.mean_nis_per_dof) <= TOL * w.mean_nis_per_dof
+    key = sorted((e.track, e.time_s, e.kind) for e in ref_mon.events)
+    assert key == sorted((e.track, e.time_s, e.kind) for e in mon.events)
+
+
+@pytest.mark.parametrize("three_d", [False, True], ids=["2d", "3d"])
+def test_a_target_of_many_is_bit_for_bit_its_plots_alone_with_the_imm(three_d: bool) -> None:
+    plots = scene(three_d, targets=3)
+    methods = METHODS_3D if three_d else ALL_METHODS
+    _, rows, _ = tracked(plots, three_d, "compiled", 50, model="imm")
+    options = StreamOptions(model="imm")
+    for name in ("T0", "T1", "T2"):
+        own = [p for p in plots if p.target == name]
+        tracker = StreamTracker(methods, three_d, options)
+        alone = tracker.add_block(own)
+        assert tracker._compiled is not None  # the IMM on the compiled engine, one target
+        mine = [r for p, r in zip(plots, rows, strict=True) if p.target == name]
+        for a, b in zip(alone, mine, strict=True):
+            for (_, xa, Pa), (_, xb, Pb) in zip(a, b, strict=True):
+                assert np.array_equal(xa, xb) and np.array_equal(Pa, Pb)
 
 
 def _read_tracks(path: Path) -> list[tuple[str, str, np.ndarray, np.ndarray]]:

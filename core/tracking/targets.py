@@ -217,6 +217,7 @@ class TargetTracker:
                 options.use_doppler,
                 options.monitor,
                 track_name,
+                imm=motion if isinstance(motion, IMMModel) else None,
             )
 
     @property
