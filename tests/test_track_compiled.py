@@ -32,6 +32,7 @@ import numpy as np
 import pytest
 from test_targets import TOL, close  # |a − b| ≤ 1e-9 (1 + |a|), as the many-target tests
 
+from radarviz.core.tracking.compiled import CompiledTracks, PlotBlock, TrackBlock
 from radarviz.core.tracking.consistency import ConsistencyMonitor
 from radarviz.core.tracking.stream import (
     ALL_METHODS,
@@ -213,9 +214,10 @@ def _read_tracks(path: Path) -> list[tuple[str, str, np.ndarray, np.ndarray]]:
     return [(r["target"], r["method"], *state_from_row(r)) for r in rows]
 
 
+@pytest.mark.parametrize("model", ["cv", "imm"])
 @pytest.mark.parametrize("three_d", [False, True], ids=["2d", "3d"])
 def test_the_block_file_path_equals_the_plots_tracked_one_by_one(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, three_d: bool
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, three_d: bool, model: str
 ) -> None:
     plots = scene(three_d, targets=3)
     if not three_d:  # the file's sites come from the radars file: one radar per site here
@@ -245,14 +247,26 @@ def test_the_block_file_path_equals_the_plots_tracked_one_by_one(
     meas.write_text("".join(text))
     monkeypatch.setattr(plot_blocks, "BLOCK_BYTES", 700)
     args = ["track", "--input", str(meas), "--radars", str(radars), "--out", str(out)]
-    assert main([*args, "--model", "cv", "--sigma-a", "1"]) == 0
+    # cv with σa = 1 m/s², or the command's default: the IMM (``DEFAULT_IMM``); either on the
+    # compiled engine (every block through CompiledTracks, of the model asked for).
+    flags = ["--model", "cv", "--sigma-a", "1"] if model == "cv" else []
+    blocks: list[bool] = []
+    add = CompiledTracks.add
+
+    def spy(self: CompiledTracks, block: PlotBlock) -> TrackBlock:
+        blocks.append(self.imm is not None)
+        return add(self, block)
+
+    monkeypatch.setattr(CompiledTracks, "add", spy)
+    assert main([*args, *flags]) == 0
+    assert len(blocks) > 1 and set(blocks) == {model == "imm"}
     got = _read_tracks(out)
     # The reference: the plots as the row reader gives them, one Plot at a time, on numpy.
     from radarviz.viz_app.io.plots import PlotReader, load_radars
 
     with open(meas, encoding="utf-8", newline="") as fh:
         read = [p for _, p in PlotReader(fh, str(meas), load_radars(str(radars)))]
-    options = StreamOptions(sigma_a_mps2=1.0, engine="numpy")
+    options = StreamOptions(sigma_a_mps2=1.0, engine="numpy", model=model)
     tracker = TargetTracker(METHODS_3D if three_d else ALL_METHODS, three_d, options)
     want = [
         (p.target, row)
@@ -262,7 +276,7 @@ def test_the_block_file_path_equals_the_plots_tracked_one_by_one(
     assert len(got) == len(want)
     for (t, m, x, P), (tw, (mw, xw, Pw)) in zip(got, want, strict=True):
         assert (t, m) == (tw, mw)
-        assert close(xw, x) and close(Pw, P)
+        assert close(xw, x) and (close(Pw, P) if model == "cv" else close_cov(Pw, P))
 
 
 @pytest.mark.parametrize(
