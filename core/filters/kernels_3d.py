@@ -401,19 +401,22 @@ def doppler_nis_3d(x, P, vr_hat, b, el, var_vr, sb2, se2, u) -> float:
 
 
 @_jit
-def position_measurement_3d(code, x, r, b, el, sr2, sb2, se2, sx, sy, sz, nu, R, z, conv):
+def position_measurement_3d(
+    code, x, r, b, el, sr2, sb2, se2, sx, sy, sz, nu, R, z, conv, converted=False
+):
     """The position stage of method ``code`` on the prediction x (6,) as a position
     measurement (``MethodGroup.measurement``) into nu (3,) (m) and R (3, 3) (m²): converted
-    methods ν = z + site − H x⁻ with the conversion's R; ``ekf`` and ``ukf`` the EKF's
-    ν' = J ν, R' = J R Jᵀ at the prediction. z (3,) and ``conv`` (mb, me, tmp: (9,) each)
-    are scratch."""
+    methods ν = z + site − H x⁻ with the conversion's z (3,) and R; ``ekf`` and ``ukf`` the
+    EKF's ν' = J ν, R' = J R Jᵀ at the prediction. ``conv`` (mb, me, tmp: (9,) each) is
+    scratch. ``converted``: z and R hold this plot's conversion already (a conversion that
+    does not read the prediction, ``code`` < 4, made for another state of the same track)."""
     mb, me, tmp = conv
     if code >= 5:
         ekf_measurement_3d(x, r, b, el, sr2, sb2, se2, sx, sy, sz, nu, R)
     else:
-        convert_3d(
-            code, r, b, el, sr2, sb2, se2, x[0] - sx, x[2] - sy, x[4] - sz, z, R, mb, me, tmp
-        )
+        if not (converted and code < 4):
+            px, py, pz = x[0] - sx, x[2] - sy, x[4] - sz
+            convert_3d(code, r, b, el, sr2, sb2, se2, px, py, pz, z, R, mb, me, tmp)
         nu[0], nu[1], nu[2] = z[0] + sx - x[0], z[1] + sy - x[2], z[2] + sz - x[4]
 
 

@@ -368,11 +368,15 @@ def track_plots_imm_3d(
                         code, x, rr, b, el, sr2, sb2, se2, sx, sy, sz, nu, R, z, conv
                     )
                     nis = position_stats_3d(P, nu, R, bufs[0], bufs[1])[0]
+                # From the first conversion on, z and R hold this plot's (for codes < 4: one
+                # that does not read the prediction, so every model's is the same).
+                converted = with_stats
                 for m in range(r):
                     xj, Pj = x0[m], P0[m]
                     position_measurement_3d(
-                        code, xj, rr, b, el, sr2, sb2, se2, sx, sy, sz, nu, R, z, conv
+                        code, xj, rr, b, el, sr2, sb2, se2, sx, sy, sz, nu, R, z, conv, converted
                     )
+                    converted = True
                     st = position_stats_3d(Pj, nu, R, bufs[0], bufs[1])
                     ll[m] = log_likelihood(st[0], st[1], 3)
                     position_stage_3d(
