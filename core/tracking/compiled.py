@@ -4,8 +4,9 @@ arrays, one compiled pass per block (``core.filters.kernels_track``).
 ``core.tracking.targets.TargetTracker`` and ``core.tracking.stream.StreamTracker`` run here
 when their options ask for ``engine="compiled"`` (the default) and the track is one the
 kernels have: 2D (``core.filters.kernels_track``) or 3D (``core.filters.kernels_3d``), every
-method, Doppler, the constant-velocity model, the first-plot start, no finite-memory track.
-The rest (the IMM, the finite-memory start and track) stays on the numpy engine,
+method, the line-of-sight Doppler update, the constant-velocity model or the IMM
+(``core.filters.kernels_imm``), the first-plot start, no finite-memory track. The rest (the
+finite-memory start and track, the converted Doppler update) stays on the numpy engine,
 which is also the reference these tracks are checked against (``tests/test_track_compiled.py``,
 to 1e-9 relative).
 

@@ -290,8 +290,9 @@ class StreamOptions:
         monitor: a consistency monitor fed every update's NIS, track name = method
             (``core.tracking.consistency``), or None.
         engine: ``"compiled"`` (``core.tracking.compiled``: one compiled pass per block of
-            plots, for the tracks it has a kernel for: 2D or 3D, ``cv``, the line-of-sight Doppler
-            update, the first-plot start, no finite-memory track; the others run on numpy) or
+            plots, for the tracks it has a kernel for: 2D or 3D, ``cv`` or ``imm``, the
+            line-of-sight Doppler update, the first-plot start, no finite-memory track; the
+            others run on numpy) or
             ``"numpy"`` (the reference).
     """
 
