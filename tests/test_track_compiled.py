@@ -157,6 +157,45 @@ def _mu(tracker: TargetTracker, method: str, target: str) -> np.ndarray:
     return mu[tracker._slot[target]]
 
 
+@pytest.mark.parametrize("n", [4, 6])
+@pytest.mark.parametrize("r", [2, 3])
+def test_the_compiled_imm_steps_are_the_numpy_ones(r: int, n: int) -> None:
+    """Mixing, combination and mode probabilities (``core.filters.kernels_imm``) against
+    ``core.filters.imm`` on random tracks, with likelihoods that are not finite."""
+    from radarviz.core.filters import kernels_imm as k
+    from radarviz.core.filters.imm import IMMState, imm_combine, imm_mix, mode_probabilities
+    from radarviz.core.filters.state import CVBatch
+
+    rng = np.random.default_rng(r * 10 + n)
+    for _ in range(20):
+        x = rng.normal(0.0, 1e4, (r, n))
+        A = rng.normal(0.0, 30.0, (r, n, n))
+        P = A @ A.mT + np.eye(n)
+        mu = rng.dirichlet(np.ones(r))
+        Pi = rng.dirichlet(np.ones(r), size=r)
+        mixed, c = imm_mix(IMMState(CVBatch(x, P), mu), Pi)
+        x0, P0, cc, w = np.empty((r, n)), np.empty((r, n, n)), np.empty(r), np.empty((r, r))
+        forms = [(k.mix, k.combine)] + ([(k.mix_2d, k.combine_2d)] if n == 4 else [])
+        for mix, combine in forms:
+            mix(x, P, mu, Pi, x0, P0, cc, w)
+            assert close(c, cc) and close(mixed.x, x0) and close_cov(mixed.P, P0)
+            assert np.array_equal(P0, P0.mT)
+            xc, Pc = np.empty(n), np.empty((n, n))
+            combine(x, P, mu, xc, Pc)
+            want = imm_combine(CVBatch(x, P), mu)
+            assert close(want.x, xc) and close_cov(want.P, Pc) and np.array_equal(Pc, Pc.T)
+    for ll in (
+        [-3.0, -900.0, -4.5][:r],
+        [np.nan, -2.0, -1.0][:r],
+        [-np.inf, np.inf, -7.0][:r],
+        [np.nan] * r,
+    ):
+        prior = rng.dirichlet(np.ones(r))
+        got = np.empty(r)
+        k.mode_probabilities(prior, np.array(ll), got)
+        assert np.all(np.abs(got - mode_probabilities(prior, np.array(ll))) <= TOL), ll
+
+
 @pytest.mark.parametrize("three_d", [False, True], ids=["2d", "3d"])
 @pytest.mark.parametrize("block", [1, 7, 4096])
 def test_the_compiled_imm_equals_the_numpy_engine(three_d: bool, block: int) -> None:
