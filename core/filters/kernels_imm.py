@@ -119,8 +119,8 @@ def combine(xm, Pm, mu, x, P):
 
 # The 2D forms of ``mix`` and ``combine``: each model's (x, p) read once into scalars (the
 # Monte Carlo kernel's tuples, ``core.filters.kernels_2d.load``) and the sums carried in
-# registers, a sixth of the time of the array loops above, whose stores into P0 make every
-# later load wait (measured: 100 against 600 ns a mixing of two models).
+# registers instead of going through memory: a quarter of the array loops' time (measured on
+# two models: 114 against 453 ns a mixing, 44 against 116 ns a combination).
 
 
 @_inline
