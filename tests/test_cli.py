@@ -242,6 +242,22 @@ def test_bench_figures_are_consistent(capsys) -> None:
     assert tg["compiled_over_numpy"] == pytest.approx(
         tg["batched_plots_per_s"] / tg["numpy_plots_per_s"], rel=1e-12
     )
+    assert set(tg["models"]) == {"cv", "imm"}
+    for f in tg["models"].values():
+        for k in ("compiled", "numpy"):
+            assert math.isfinite(f[f"{k}_plots_per_cpu_s"]) and f[f"{k}_plots_per_cpu_s"] > 0
+        assert f["compiled_over_numpy_cpu"] == pytest.approx(
+            f["compiled_plots_per_cpu_s"] / f["numpy_plots_per_cpu_s"], rel=1e-12
+        )
+    cv_rates = tg["models"]["cv"]
+    assert (cv_rates["compiled_plots_per_s"], cv_rates["numpy_plots_per_s"]) == (
+        tg["batched_plots_per_s"],
+        tg["numpy_plots_per_s"],
+    )
+    assert tg["imm_over_cv_compiled_cpu"] == pytest.approx(
+        tg["models"]["imm"]["compiled_plots_per_cpu_s"] / cv_rates["compiled_plots_per_cpu_s"],
+        rel=1e-12,
+    )
     assert set(tg["one_target_ns_per_step"]) == set(ALL_METHODS)
     assert set(tg["one_target_plot_list_ns_per_step"]) == set(ALL_METHODS)
     for m, v in tg["one_target_ns_per_step"].items():
@@ -260,6 +276,11 @@ def test_bench_figures_are_consistent(capsys) -> None:
                 assert 0 < k["peak_rss_mb"] < physical_mib_of_machine()
             assert r["parquet_over_csv_cpu"] == pytest.approx(
                 r["parquet"]["plots_per_cpu_s"] / r["csv"]["plots_per_cpu_s"], rel=1e-12
+            )
+            k = r["imm_csv"]  # the IMM (the command's default) into the CSV track file
+            assert k["plots_per_cpu_s"] == pytest.approx(r["plots"] / k["cpu_s"], rel=1e-12)
+            assert r["imm_over_cv_cpu"] == pytest.approx(
+                k["plots_per_cpu_s"] / r["csv"]["plots_per_cpu_s"], rel=1e-12
             )
     # JSON keeps full precision: the ratio is exact to rounding.
     for ours, ratio in zip(kf, doc["speedup_vs_filterpy"], strict=True):

@@ -10,7 +10,10 @@
 * Per target, as alone: on the compiled engine a target's tracks in a many-target file are
   bit for bit those of its plots alone (the kernel walks the plots in order; nothing crosses
   targets).
-* What the compiled engine has no kernel for (the IMM, the finite-memory start) runs on numpy.
+* The IMM (``core.filters.kernels_imm``): the same, for x, for P to 1e-9 of its scale
+  (``close_cov``), for μ and for the monitor's NIS of the combined prediction, whatever the
+  blocks; a target of many is bit for bit its plots alone; ``radarviz track`` (the IMM by
+  default) writes the numpy engine's tracks.
 * The number text: the compiled formatter writes every double as pyarrow does, byte for byte.
 * The file path: ``radarviz track`` (columns read by pyarrow in blocks, tracked by arrays,
   written a block at a time) gives the tracks of the plots read row by row and tracked one
@@ -29,6 +32,7 @@ import numpy as np
 import pytest
 from test_targets import TOL, close  # |a − b| ≤ 1e-9 (1 + |a|), as the many-target tests
 
+from radarviz.core.tracking.compiled import CompiledTracks, PlotBlock, TrackBlock
 from radarviz.core.tracking.consistency import ConsistencyMonitor
 from radarviz.core.tracking.stream import (
     ALL_METHODS,
@@ -129,10 +133,117 @@ def test_a_target_of_many_is_bit_for_bit_its_plots_alone(three_d: bool) -> None:
                 assert np.array_equal(xa, xb) and np.array_equal(Pa, Pb)
 
 
-def test_the_imm_stays_on_the_numpy_engine() -> None:
-    options = StreamOptions(model="imm", engine="compiled")
-    assert TargetTracker(ALL_METHODS, False, options).engine == "numpy"
-    assert TargetTracker(ALL_METHODS, False, replace(options, model="cv")).engine == "compiled"
+def close_cov(a: np.ndarray, b: np.ndarray) -> bool:
+    """|Aᵢⱼ − Bᵢⱼ| ≤ 1e-9 (1 + √(Aᵢᵢ Aⱼⱼ)): a covariance to 1e-9 of its own scale.
+
+    The IMM's combined P is a mixture whose cross terms can cancel to 10⁻⁵ of √(Pᵢᵢ Pⱼⱼ)
+    (18.8 m²/s against 82 m/s × 3370 m); two routes through the same formulas then differ by
+    rounding of the scale, 10⁻¹⁴ of it, which is 10⁻⁹ of such an entry (the numpy engine
+    against itself, one target alone against many: 1.7e-10 entry by entry)."""
+    a, b = np.asarray(a), np.asarray(b)
+    d = np.sqrt(np.abs(np.diagonal(a, axis1=-2, axis2=-1)))
+    scale = d[..., :, None] * d[..., None, :]
+    return bool(np.all(np.abs(a - b) <= TOL * (1.0 + scale)))
+
+
+def _mu(tracker: TargetTracker, method: str, target: str) -> np.ndarray:
+    """The IMM's model probabilities μ (r,) of ``target``'s ``method`` track, either engine."""
+    j = tracker.methods.index(method)
+    if tracker._compiled is not None:
+        return tracker._compiled.mus[tracker._compiled.slots[target], j]
+    b, row = tracker._where[method]
+    bank = tracker._banks[b]
+    mu = bank.arrays[2][row] if bank.axis else bank.arrays[2]
+    return mu[tracker._slot[target]]
+
+
+@pytest.mark.parametrize("n", [4, 6])
+@pytest.mark.parametrize("r", [2, 3])
+def test_the_compiled_imm_steps_are_the_numpy_ones(r: int, n: int) -> None:
+    """Mixing, combination and mode probabilities (``core.filters.kernels_imm``) against
+    ``core.filters.imm`` on random tracks, with likelihoods that are not finite."""
+    from radarviz.core.filters import kernels_imm as k
+    from radarviz.core.filters.imm import IMMState, imm_combine, imm_mix, mode_probabilities
+    from radarviz.core.filters.state import CVBatch
+
+    rng = np.random.default_rng(r * 10 + n)
+    for _ in range(20):
+        x = rng.normal(0.0, 1e4, (r, n))
+        A = rng.normal(0.0, 30.0, (r, n, n))
+        P = A @ A.mT + np.eye(n)
+        mu = rng.dirichlet(np.ones(r))
+        Pi = rng.dirichlet(np.ones(r), size=r)
+        mixed, c = imm_mix(IMMState(CVBatch(x, P), mu), Pi)
+        x0, P0, cc, w = np.empty((r, n)), np.empty((r, n, n)), np.empty(r), np.empty((r, r))
+        forms = [(k.mix, k.combine)] + ([(k.mix_2d, k.combine_2d)] if n == 4 else [])
+        for mix, combine in forms:
+            mix(x, P, mu, Pi, x0, P0, cc, w)
+            assert close(c, cc) and close(mixed.x, x0) and close_cov(mixed.P, P0)
+            assert np.array_equal(P0, P0.mT)
+            xc, Pc = np.empty(n), np.empty((n, n))
+            combine(x, P, mu, xc, Pc)
+            want = imm_combine(CVBatch(x, P), mu)
+            assert close(want.x, xc) and close_cov(want.P, Pc) and np.array_equal(Pc, Pc.T)
+    for ll in (
+        [-3.0, -900.0, -4.5][:r],
+        [np.nan, -2.0, -1.0][:r],
+        [-np.inf, np.inf, -7.0][:r],
+        [np.nan] * r,
+    ):
+        prior = rng.dirichlet(np.ones(r))
+        got = np.empty(r)
+        k.mode_probabilities(prior, np.array(ll), got)
+        assert np.all(np.abs(got - mode_probabilities(prior, np.array(ll))) <= TOL), ll
+
+
+@pytest.mark.parametrize("three_d", [False, True], ids=["2d", "3d"])
+@pytest.mark.parametrize("block", [1, 7, 4096])
+def test_the_compiled_imm_equals_the_numpy_engine(three_d: bool, block: int) -> None:
+    plots = scene(three_d)
+    ref, ref_rows, ref_mon = tracked(plots, three_d, "numpy", block, model="imm")
+    fast, rows, mon = tracked(plots, three_d, "compiled", block, model="imm")
+    assert (ref.engine, fast.engine) == ("numpy", "compiled")
+    assert fast.targets == ref.targets
+    for a, b in zip(ref_rows, rows, strict=True):
+        assert [m for m, _, _ in a] == [m for m, _, _ in b]
+        for (m, xa, Pa), (_, xb, Pb) in zip(a, b, strict=True):
+            assert close(xa, xb), m
+            assert close_cov(Pa, Pb), m
+    # μ, what the combined estimates are weighted by (moved well away from its start).
+    mus = []
+    for t in ref.targets:
+        for m in ref.methods:
+            want, got = _mu(ref, m, t), _mu(fast, m, t)
+            assert np.all(np.abs(want - got) <= TOL), (t, m)
+            mus.append(want)
+    start = StreamOptions(model="imm").motion().initial_probabilities()
+    assert np.max(np.abs(np.array(mus) - start)) > 0.05
+    want, got = ref_mon.results(), mon.results()
+    assert set(want) == set(got)
+    for name, w in want.items():
+        g = got[name]
+        assert (g.updates, g.windows, g.above, g.below) == (w.updates, w.windows, w.above, w.below)
+        assert g.first_exit_s == w.first_exit_s
+        assert abs(g.mean_nis_per_dof - w.mean_nis_per_dof) <= TOL * w.mean_nis_per_dof
+    key = sorted((e.track, e.time_s, e.kind) for e in ref_mon.events)
+    assert key == sorted((e.track, e.time_s, e.kind) for e in mon.events)
+
+
+@pytest.mark.parametrize("three_d", [False, True], ids=["2d", "3d"])
+def test_a_target_of_many_is_bit_for_bit_its_plots_alone_with_the_imm(three_d: bool) -> None:
+    plots = scene(three_d, targets=3)
+    methods = METHODS_3D if three_d else ALL_METHODS
+    _, rows, _ = tracked(plots, three_d, "compiled", 50, model="imm")
+    options = StreamOptions(model="imm")
+    for name in ("T0", "T1", "T2"):
+        own = [p for p in plots if p.target == name]
+        tracker = StreamTracker(methods, three_d, options)
+        alone = tracker.add_block(own)
+        assert tracker._compiled is not None  # the IMM on the compiled engine, one target
+        mine = [r for p, r in zip(plots, rows, strict=True) if p.target == name]
+        for a, b in zip(alone, mine, strict=True):
+            for (_, xa, Pa), (_, xb, Pb) in zip(a, b, strict=True):
+                assert np.array_equal(xa, xb) and np.array_equal(Pa, Pb)
 
 
 def _read_tracks(path: Path) -> list[tuple[str, str, np.ndarray, np.ndarray]]:
@@ -142,9 +253,10 @@ def _read_tracks(path: Path) -> list[tuple[str, str, np.ndarray, np.ndarray]]:
     return [(r["target"], r["method"], *state_from_row(r)) for r in rows]
 
 
+@pytest.mark.parametrize("model", ["cv", "imm"])
 @pytest.mark.parametrize("three_d", [False, True], ids=["2d", "3d"])
 def test_the_block_file_path_equals_the_plots_tracked_one_by_one(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, three_d: bool
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, three_d: bool, model: str
 ) -> None:
     plots = scene(three_d, targets=3)
     if not three_d:  # the file's sites come from the radars file: one radar per site here
@@ -174,14 +286,26 @@ def test_the_block_file_path_equals_the_plots_tracked_one_by_one(
     meas.write_text("".join(text))
     monkeypatch.setattr(plot_blocks, "BLOCK_BYTES", 700)
     args = ["track", "--input", str(meas), "--radars", str(radars), "--out", str(out)]
-    assert main([*args, "--model", "cv", "--sigma-a", "1"]) == 0
+    # cv with σa = 1 m/s², or the command's default: the IMM (``DEFAULT_IMM``); either on the
+    # compiled engine (every block through CompiledTracks, of the model asked for).
+    flags = ["--model", "cv", "--sigma-a", "1"] if model == "cv" else []
+    blocks: list[bool] = []
+    add = CompiledTracks.add
+
+    def spy(self: CompiledTracks, block: PlotBlock) -> TrackBlock:
+        blocks.append(self.imm is not None)
+        return add(self, block)
+
+    monkeypatch.setattr(CompiledTracks, "add", spy)
+    assert main([*args, *flags]) == 0
+    assert len(blocks) > 1 and set(blocks) == {model == "imm"}
     got = _read_tracks(out)
     # The reference: the plots as the row reader gives them, one Plot at a time, on numpy.
     from radarviz.viz_app.io.plots import PlotReader, load_radars
 
     with open(meas, encoding="utf-8", newline="") as fh:
         read = [p for _, p in PlotReader(fh, str(meas), load_radars(str(radars)))]
-    options = StreamOptions(sigma_a_mps2=1.0, engine="numpy")
+    options = StreamOptions(sigma_a_mps2=1.0, engine="numpy", model=model)
     tracker = TargetTracker(METHODS_3D if three_d else ALL_METHODS, three_d, options)
     want = [
         (p.target, row)
@@ -191,7 +315,7 @@ def test_the_block_file_path_equals_the_plots_tracked_one_by_one(
     assert len(got) == len(want)
     for (t, m, x, P), (tw, (mw, xw, Pw)) in zip(got, want, strict=True):
         assert (t, m) == (tw, mw)
-        assert close(xw, x) and close(Pw, P)
+        assert close(xw, x) and (close(Pw, P) if model == "cv" else close_cov(Pw, P))
 
 
 @pytest.mark.parametrize(

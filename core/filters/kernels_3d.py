@@ -23,7 +23,7 @@ and without Doppler, to it at 1e-9 relative). Imported on first use only.
 from __future__ import annotations
 
 import math
-from math import atan2, cos, exp, expm1, hypot, sin, sqrt
+from math import atan2, cos, exp, expm1, hypot, log, sin, sqrt
 
 import numpy as np
 
@@ -381,17 +381,93 @@ def doppler_terms_3d(x, P, b: float, el: float, var_vr: float, sb2: float, se2: 
 
 
 @_jit
-def doppler_nis_3d(x, P, vr_hat, b, el, var_vr, sb2, se2, u) -> float:
-    # ν² / S of the Doppler stage (doppler_terms, linear_innovation)
+def doppler_stats_3d(x, P, vr_hat, b, el, var_vr, sb2, se2, u):
+    # (ν² / S, log S) of the Doppler stage (doppler_terms, linear_innovation); NaN unless S > 0
     r_e = doppler_terms_3d(x, P, b, el, var_vr, sb2, se2, u)
     S = r_e
     for a in range(3):
         for c in range(3):
             S += u[a] * P[2 * a + 1, 2 * c + 1] * u[c]
     if not S > 0.0:
-        return np.nan
+        return np.nan, np.nan
     nu = vr_hat - (u[0] * x[1] + u[1] * x[3] + u[2] * x[5])
-    return nu * nu / S
+    return nu * nu / S, log(S)
+
+
+@_jit
+def doppler_nis_3d(x, P, vr_hat, b, el, var_vr, sb2, se2, u) -> float:
+    # ν² / S of ``doppler_stats_3d``
+    return doppler_stats_3d(x, P, vr_hat, b, el, var_vr, sb2, se2, u)[0]
+
+
+@_jit
+def position_measurement_3d(
+    code, x, r, b, el, sr2, sb2, se2, sx, sy, sz, nu, R, z, conv, converted=False
+):
+    """The position stage of method ``code`` on the prediction x (6,) as a position
+    measurement (``MethodGroup.measurement``) into nu (3,) (m) and R (3, 3) (m²): converted
+    methods ν = z + site − H x⁻ with the conversion's z (3,) and R; ``ekf`` and ``ukf`` the
+    EKF's ν' = J ν, R' = J R Jᵀ at the prediction. ``conv`` (mb, me, tmp: (9,) each) is
+    scratch. ``converted``: z and R hold this plot's conversion already (a conversion that
+    does not read the prediction, ``code`` < 4, made for another state of the same track)."""
+    mb, me, tmp = conv
+    if code >= 5:
+        ekf_measurement_3d(x, r, b, el, sr2, sb2, se2, sx, sy, sz, nu, R)
+    else:
+        if not (converted and code < 4):
+            px, py, pz = x[0] - sx, x[2] - sy, x[4] - sz
+            convert_3d(code, r, b, el, sr2, sb2, se2, px, py, pz, z, R, mb, me, tmp)
+        nu[0], nu[1], nu[2] = z[0] + sx - x[0], z[1] + sy - x[2], z[2] + sz - x[4]
+
+
+@_jit
+def start_track_3d(start_code, x, P, r, b, el, sr2, sb2, se2, sx, sy, sz, v0, z, R, conv):
+    """A track started at its first plot into x (6,), P (6, 6): the method's start conversion
+    about no prediction, velocity 0 with std ``v0`` (``Method.start``); z (3,), R (3, 3),
+    ``conv``: scratch."""
+    mb, me, tmp = conv
+    convert_3d(start_code, r, b, el, sr2, sb2, se2, 0.0, 0.0, 0.0, z, R, mb, me, tmp)
+    start_3d(x, P, z, R, sx, sy, sz, v0)
+
+
+@_jit
+def position_stats_3d(P, nu, R, S, Si):
+    """(νᵀ S⁻¹ ν, log det S) of ``position_measurement_3d``'s (ν, R) on P (6, 6), S = H P Hᵀ + R
+    into S (3, 3) (Si: scratch); both NaN unless S is positive definite."""
+    for a in range(3):
+        for c in range(3):
+            S[a, c] = P[2 * a, 2 * c] + R[a, c]
+    nis = nis_3(S, nu)
+    det = inverse_3(S, Si)
+    if not (nis == nis and det > 0.0):
+        return np.nan, np.nan
+    return nis, log(det)
+
+
+@_jit
+def position_stage_3d(code, x, P, r, b, el, sr2, sb2, se2, sx, sy, sz, nu, R, prm, bufs):
+    """The method's update of x (6,), P (6, 6) in place: the UKF (``code`` 6) or the position
+    update by (ν, R); ``bufs`` the scratch (S, Si, K, U, L, Z, E) of ``scratch_3d``."""
+    S, Si, K, U, L, Z, E = bufs
+    if code == 6:
+        ukf_update_3d(x, P, r, b, el, sr2, sb2, se2, sx, sy, sz, prm, L, Z, K, S, Si, E)
+    else:
+        position_update_3d(x, P, nu, R, S, Si, K, U)
+
+
+@_jit
+def scratch_3d():
+    """The scratch arrays of ``position_stage_3d``: S, Si (3, 3), K (6, 6), U (6, 3),
+    L (6, 6), Z (13, 3), E (6,)."""
+    return (
+        np.empty((3, 3)),
+        np.empty((3, 3)),
+        np.empty((6, 6)),
+        np.empty((6, 3)),
+        np.empty((6, 6)),
+        np.empty((13, 3)),
+        np.empty(6),
+    )
 
 
 @_jit
@@ -431,18 +507,10 @@ def track_plots_3d(
     n_m = codes.shape[0]
     q = sigma_a * sigma_a
     x, P = np.empty(6), np.empty((6, 6))
-    z, nu, u, E, Uv, Kv = (
-        np.empty(3),
-        np.empty(3),
-        np.empty(3),
-        np.empty(6),
-        np.empty(6),
-        np.empty(6),
-    )
-    R, S, Si = np.empty((3, 3)), np.empty((3, 3)), np.empty((3, 3))
-    K, U, L = np.empty((6, 6)), np.empty((6, 3)), np.empty((6, 6))
-    Z = np.empty((13, 3))
-    mb, me, tmp = np.empty(9), np.empty(9), np.empty(9)
+    z, nu, u, Uv, Kv = np.empty(3), np.empty(3), np.empty(3), np.empty(6), np.empty(6)
+    R = np.empty((3, 3))
+    bufs = scratch_3d()
+    conv = np.empty(9), np.empty(9), np.empty(9)
     for i in range(slot.shape[0]):
         k, g = slot[i], radar[i]
         r, b, el = r_m[i], az_rad[i], el_rad[i]
@@ -458,10 +526,9 @@ def track_plots_3d(
             code = codes[j]
             nis = np.nan
             if new:
-                convert_3d(
-                    start_codes[j], r, b, el, sr2, sb2, se2, 0.0, 0.0, 0.0, z, R, mb, me, tmp
+                start_track_3d(
+                    start_codes[j], x, P, r, b, el, sr2, sb2, se2, sx, sy, sz, v0, z, R, conv
                 )
-                start_3d(x, P, z, R, sx, sy, sz, v0)
             else:
                 for a in range(6):
                     x[a] = xs[k, j, a]
@@ -469,22 +536,11 @@ def track_plots_3d(
                         P[a, c] = Ps[k, j, a, c]
                 if dt > 0.0:
                     predict_3d(x, P, dt, q)
-                if code >= 5:  # ekf, ukf: the EKF's position measurement (and statistics)
-                    ekf_measurement_3d(x, r, b, el, sr2, sb2, se2, sx, sy, sz, nu, R)
-                else:
-                    convert_3d(
-                        code, r, b, el, sr2, sb2, se2, x[0] - sx, x[2] - sy, x[4] - sz, z, R,
-                        mb, me, tmp,
-                    )  # fmt: skip
-                    nu[0], nu[1], nu[2] = z[0] + sx - x[0], z[1] + sy - x[2], z[2] + sz - x[4]
-                for a in range(3):
-                    for c in range(3):
-                        S[a, c] = P[2 * a, 2 * c] + R[a, c]
-                nis = nis_3(S, nu)
-                if code == 6:
-                    ukf_update_3d(x, P, r, b, el, sr2, sb2, se2, sx, sy, sz, prm, L, Z, K, S, Si, E)
-                else:
-                    position_update_3d(x, P, nu, R, S, Si, K, U)
+                position_measurement_3d(
+                    code, x, r, b, el, sr2, sb2, se2, sx, sy, sz, nu, R, z, conv
+                )
+                nis = position_stats_3d(P, nu, R, bufs[0], bufs[1])[0]
+                position_stage_3d(code, x, P, r, b, el, sr2, sb2, se2, sx, sy, sz, nu, R, prm, bufs)
             if has_vr[i]:
                 var_vr = sigma_vr[g] * sigma_vr[g]
                 if not new:

@@ -17,11 +17,12 @@ Imported on first use only (numba and the cached machine code load then).
 
 from __future__ import annotations
 
-from math import atan2, cos, hypot, sin
+from math import atan2, cos, hypot, log, sin
 
 import numpy as np
 
 from radarviz.core.filters.kernels_2d import (
+    _inline,
     _jit,
     coefficients,
     convert,
@@ -35,20 +36,27 @@ from radarviz.core.filters.kernels_2d import (
 
 
 @_jit
-def position_nis(P, nx: float, ny: float, r00: float, r01: float, r11: float) -> float:
-    # νᵀ S⁻¹ ν, S = H P⁻ Hᵀ + R (core.filters.innovation.position_innovation); NaN unless S
-    # is positive definite, as the numpy engine's Cholesky gives
+def position_stats(P, nx: float, ny: float, r00: float, r01: float, r11: float):
+    # (νᵀ S⁻¹ ν, log det S), S = H P⁻ Hᵀ + R (core.filters.innovation.position_innovation);
+    # both NaN unless S is positive definite, as the numpy engine's Cholesky and slogdet give
     s00, s01, s11 = P[0, 0] + r00, P[0, 2] + r01, P[2, 2] + r11
     det = s00 * s11 - s01 * s01
     if not (s00 > 0.0 and det > 0.0):
-        return np.nan
-    return (s11 * nx * nx - 2.0 * s01 * nx * ny + s00 * ny * ny) / det
+        return np.nan, np.nan
+    return (s11 * nx * nx - 2.0 * s01 * nx * ny + s00 * ny * ny) / det, log(det)
 
 
 @_jit
-def doppler_nis(x, P, vr_hat: float, b: float, var_vr: float, vb: float) -> float:
-    # ν² / S of the Doppler stage on the state it updates (core.filters.doppler.doppler_terms,
-    # linear_innovation): ν = V̂r − û·v, S = û P_vv ûᵀ + var e
+def position_nis(P, nx: float, ny: float, r00: float, r01: float, r11: float) -> float:
+    # νᵀ S⁻¹ ν of ``position_stats``
+    return position_stats(P, nx, ny, r00, r01, r11)[0]
+
+
+@_jit
+def doppler_stats(x, P, vr_hat: float, b: float, var_vr: float, vb: float):
+    # (ν² / S, log S) of the Doppler stage on the state it updates
+    # (core.filters.doppler.doppler_terms, linear_innovation): ν = V̂r − û·v,
+    # S = û P_vv ûᵀ + var e; both NaN unless S > 0
     u0, u1 = cos(b), sin(b)
     g0, g1 = -u1, u0
     gv = g0 * x[1] + g1 * x[3]
@@ -56,9 +64,79 @@ def doppler_nis(x, P, vr_hat: float, b: float, var_vr: float, vb: float) -> floa
     S = u0 * u0 * P[1, 1] + 2.0 * u0 * u1 * P[1, 3] + u1 * u1 * P[3, 3]
     S += var_vr + vb * (gv * gv + gpg)
     if not S > 0.0:
-        return np.nan
+        return np.nan, np.nan
     nu = vr_hat - (u0 * x[1] + u1 * x[3])
-    return nu * nu / S
+    return nu * nu / S, log(S)
+
+
+@_jit
+def doppler_nis(x, P, vr_hat: float, b: float, var_vr: float, vb: float) -> float:
+    # ν² / S of ``doppler_stats``
+    return doppler_stats(x, P, vr_hat, b, var_vr, vb)[0]
+
+
+@_inline
+def position_measurement(code, x, r, b, sr2, s, sx, sy, co):
+    """The position stage of method ``code`` on the prediction x (4,) as a position
+    measurement (``MethodGroup.measurement``): (νx, νy, R00, R01, R11) in m, m². Converted
+    methods: ν = z + site − H x⁻ with the conversion's R (``co``: its coefficients); ``ekf``
+    and ``ukf``: ν' = J ν and R' = J R Jᵀ at the prediction (the UKF's statistics are the
+    EKF's, as the numpy engine's)."""
+    px, py = x[0] - sx, x[2] - sy
+    if code >= 5:
+        rp = hypot(px, py)
+        cb, sb_ = px / rp, py / rp
+        nr, nb = r - rp, wrap(b - atan2(py, px))
+        return (
+            cb * nr - py * nb,
+            sb_ * nr + px * nb,
+            cb * cb * sr2 + py * py * s,
+            cb * sb_ * sr2 - px * py * s,
+            sb_ * sb_ * sr2 + px * px * s,
+        )
+    zx, zy, r00, r01, r11 = convert(code, r, b, sr2, s, px, py, co)
+    return zx + sx - x[0], zy + sy - x[2], r00, r01, r11
+
+
+@_inline
+def position_stage(code, x, P, r, b, sr2, s, sx, sy, prm, meas, bufs):
+    """The method's update of x (4,), P (4, 4) in place: the UKF's sigma points (``code`` 6)
+    or the position update by ``meas``, ``position_measurement``'s (νx, νy, R00, R01, R11);
+    ``bufs`` the scratch of ``scratch_2d``."""
+    K, L, Z, E = bufs
+    if code == 6:
+        ukf_update(x, P, r, b, sr2, s, sx, sy, prm, L, Z, K, E)
+    else:
+        position_update(x, P, meas[0], meas[1], meas[2], meas[3], meas[4], K, L)
+
+
+@_inline
+def start_track(start_code, x, P, r, b, sr2, s, sx, sy, co, v0):
+    """A track started at its first plot into x (4,), P (4, 4): the method's start conversion
+    (``co`` its coefficients), velocity 0 with std ``v0`` (``Method.start``)."""
+    zx, zy, r00, r01, r11 = convert(start_code, r, b, sr2, s, 0.0, 0.0, co)
+    start(x, P, zx + sx, zy + sy, r00, r01, r11, v0)
+
+
+@_jit
+def scratch_2d():
+    """The scratch arrays of ``position_stage``: K, L (4, 4), Z (9, 2), E (4,)."""
+    return np.empty((4, 4)), np.empty((4, 4)), np.empty((9, 2)), np.empty(4)
+
+
+@_jit
+def conversion_tables(codes, start_codes, sigma_r, sigma_b):
+    """The conversions' noise-only scalars (``coefficients``), once per radar and method, not
+    per plot: (R, M, 8) for the methods' updates and for their starts."""
+    n_m, n_r = codes.shape[0], sigma_r.shape[0]
+    co = np.empty((n_r, n_m, 8))
+    co_s = np.empty((n_r, n_m, 8))
+    for g in range(n_r):
+        s, sr2 = sigma_b[g] * sigma_b[g], sigma_r[g] * sigma_r[g]
+        for j in range(n_m):
+            co[g, j, :] = coefficients(codes[j], s, sr2)
+            co_s[g, j, :] = coefficients(start_codes[j], s, sr2)
+    return co, co_s
 
 
 @_jit
@@ -85,20 +163,10 @@ def track_plots_2d(
             linearised statistics, as the numpy engine); NaN at a start (no prediction).
     """
     n_m = codes.shape[0]
-    n_r = sigma_r.shape[0]
-    # The conversions' noise-only scalars, once per radar and method (not per plot).
-    co = np.empty((n_r, n_m, 8))
-    co_s = np.empty((n_r, n_m, 8))
-    for g in range(n_r):
-        s, sr2 = sigma_b[g] * sigma_b[g], sigma_r[g] * sigma_r[g]
-        for j in range(n_m):
-            co[g, j, :] = coefficients(codes[j], s, sr2)
-            co_s[g, j, :] = coefficients(start_codes[j], s, sr2)
+    co, co_s = conversion_tables(codes, start_codes, sigma_r, sigma_b)
     q = sigma_a * sigma_a
-    K = np.empty((4, 4))
-    L = np.empty((4, 4))
-    Z = np.empty((9, 2))
-    E = np.empty(4)
+    bufs = scratch_2d()
+    K = bufs[0]
     x, P = np.empty(4), np.empty((4, 4))
     for i in range(slot.shape[0]):
         k, g = slot[i], radar[i]
@@ -115,8 +183,7 @@ def track_plots_2d(
             code = codes[j]
             nis = np.nan
             if new:
-                zx, zy, r00, r01, r11 = convert(start_codes[j], r, b, sr2, s, 0.0, 0.0, co_s[g, j])
-                start(x, P, zx + sx, zy + sy, r00, r01, r11, v0)
+                start_track(start_codes[j], x, P, r, b, sr2, s, sx, sy, co_s[g, j], v0)
             else:
                 for a in range(4):
                     x[a] = xs[k, j, a]
@@ -124,23 +191,9 @@ def track_plots_2d(
                         P[a, c] = Ps[k, j, a, c]
                 if dt > 0.0:
                     predict(x, P, dt, q)
-                px, py = x[0] - sx, x[2] - sy
-                if code >= 5:  # ekf, ukf: ν' = J ν and R' = J R Jᵀ at the prediction
-                    rp = hypot(px, py)
-                    cb, sb_ = px / rp, py / rp
-                    nr, nb = r - rp, wrap(b - atan2(py, px))
-                    nx, ny = cb * nr - py * nb, sb_ * nr + px * nb
-                    r00 = cb * cb * sr2 + py * py * s
-                    r01 = cb * sb_ * sr2 - px * py * s
-                    r11 = sb_ * sb_ * sr2 + px * px * s
-                else:
-                    zx, zy, r00, r01, r11 = convert(code, r, b, sr2, s, px, py, co[g, j])
-                    nx, ny = zx + sx - x[0], zy + sy - x[2]
-                nis = position_nis(P, nx, ny, r00, r01, r11)
-                if code == 6:
-                    ukf_update(x, P, r, b, sr2, s, sx, sy, prm, L, Z, K, E)
-                else:
-                    position_update(x, P, nx, ny, r00, r01, r11, K, L)
+                meas = position_measurement(code, x, r, b, sr2, s, sx, sy, co[g, j])
+                nis = position_nis(P, *meas)
+                position_stage(code, x, P, r, b, sr2, s, sx, sy, prm, meas, bufs)
             if has_vr[i]:
                 var_vr = sigma_vr[g] * sigma_vr[g]
                 if not new:

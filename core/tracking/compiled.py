@@ -4,8 +4,9 @@ arrays, one compiled pass per block (``core.filters.kernels_track``).
 ``core.tracking.targets.TargetTracker`` and ``core.tracking.stream.StreamTracker`` run here
 when their options ask for ``engine="compiled"`` (the default) and the track is one the
 kernels have: 2D (``core.filters.kernels_track``) or 3D (``core.filters.kernels_3d``), every
-method, Doppler, the constant-velocity model, the first-plot start, no finite-memory track.
-The rest (the IMM, the finite-memory start and track) stays on the numpy engine,
+method, the line-of-sight Doppler update, the constant-velocity model or the IMM
+(``core.filters.kernels_imm``), the first-plot start, no finite-memory track. The rest (the
+finite-memory start and track, the converted Doppler update) stays on the numpy engine,
 which is also the reference these tracks are checked against (``tests/test_track_compiled.py``,
 to 1e-9 relative).
 
@@ -25,6 +26,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from radarviz.core.filters.compiled import METHOD_CODES, START_CODES
+from radarviz.core.filters.models import IMMModel
 from radarviz.core.filters.polar_ukf import UKFParams
 from radarviz.core.tracking.consistency import ConsistencyMonitor, nis_band
 
@@ -99,6 +101,9 @@ class CompiledTracks:
         sigma_a_mps2, sigma_v0_mps, use_doppler: as ``StreamOptions``.
         monitor: fed every update's NIS (track names ``name(target, method)``), or None.
         name: the monitor's track name of (target, method).
+        imm: the IMM (``core.filters.models.IMMModel``) instead of the cv model of
+            ``sigma_a_mps2``, or None: each (target, method) then holds its r models' x, P and
+            μ (``core.filters.kernels_imm``) and the output is their combined estimate.
     """
 
     def __init__(
@@ -110,6 +115,7 @@ class CompiledTracks:
         use_doppler: bool,
         monitor: ConsistencyMonitor | None = None,
         name: Callable[[str, str], str] | None = None,
+        imm: IMMModel | None = None,
     ):
         self.methods = tuple(methods)
         self.codes = np.array([METHOD_CODES[m] for m in methods], dtype=np.int64)
@@ -121,8 +127,16 @@ class CompiledTracks:
         self.prm = np.array(UKFParams().weights(ns), dtype=np.float64)
         self.slots: dict[str, int] = {}
         m = len(methods)
-        self.xs = np.zeros((0, m, ns))
-        self.Ps = np.zeros((0, m, ns, ns))
+        self.imm = imm
+        # The IMM's models on an axis after the method's (``_slots`` grows any trailing shape).
+        models = () if imm is None else (imm.models,)
+        self.xs = np.zeros((0, m, *models, ns))
+        self.Ps = np.zeros((0, m, *models, ns, ns))
+        self.mus = np.zeros((0, m, *models))
+        if imm is not None:
+            self.sigma_a_models = np.array(imm.sigma_a_mps2, dtype=np.float64)
+            self.transition = imm.transition_matrix()
+            self.mu0 = imm.initial_probabilities()
         self.started = np.zeros(0, dtype=np.bool_)
         self.last_t = np.zeros(0)
         self.feed = None if monitor is None else MonitorFeed(monitor, len(methods))
@@ -160,6 +174,9 @@ class CompiledTracks:
         """Filter a block in order; raises ``OutOfOrderError`` at a plot earlier than its
         target's previous one (the plots before it are filtered, it and later ones not)."""
         slot = self._slots(block.labels)[block.target]
+        if self.imm is not None and self.mus.shape[0] < self.started.shape[0]:
+            grow = self.started.shape[0] - self.mus.shape[0]
+            self.mus = np.concatenate([self.mus, np.zeros((grow, *self.mus.shape[1:]))])
         n, m = block.size, len(self.methods)
         vr = block.radial_velocity_mps
         has_vr = np.zeros(n, dtype=np.bool_) if vr is None else ~np.isnan(vr)
@@ -178,7 +195,7 @@ class CompiledTracks:
             assert block.elevation_rad is not None
             plot.append(_f(block.elevation_rad))
             noise.append(_f(rd.sigma_elevation_rad))
-        bad = _track_kernel(self.dims)(
+        head = (
             self.codes,
             self.start_codes,
             slot,
@@ -189,17 +206,14 @@ class CompiledTracks:
             np.ascontiguousarray(rd.site_m[:, : self.dims], dtype=np.float64),
             *noise,
             _f(rd.sigma_radial_velocity_mps),
-            self.sigma_a,
-            self.sigma_v0,
-            self.prm,
-            self.xs,
-            self.Ps,
-            self.started,
-            self.last_t,
-            out_x,
-            out_P,
-            out_nis,
         )
+        if self.imm is None:
+            model = (self.sigma_a, self.sigma_v0, self.prm, self.xs, self.Ps)
+        else:
+            model = (self.sigma_a_models, self.transition, self.mu0, self.sigma_v0, self.prm)
+            model = (*model, self.feed is not None, self.xs, self.Ps, self.mus)
+        tail = (self.started, self.last_t, out_x, out_P, out_nis)
+        bad = _track_kernel(self.dims, self.imm is not None)(*head, *model, *tail)
         done = n if bad < 0 else int(bad)
         if self.feed is not None and new is not None:
             # A slot's first plot in the block is its start only if it had none before and no
@@ -377,9 +391,13 @@ class MonitorFeed:
 
 
 @functools.cache
-def _track_kernel(dims: int) -> Callable[..., int]:
-    """The compiled tracker kernel of ``dims`` (2 or 3), compiled (or loaded from numba's
-    cache) on first use."""
+def _track_kernel(dims: int, imm: bool = False) -> Callable[..., int]:
+    """The compiled tracker kernel of ``dims`` (2 or 3), of the cv model or (``imm``) the IMM,
+    compiled (or loaded from numba's cache) on first use."""
+    if imm:
+        from radarviz.core.filters.kernels_imm import track_plots_imm_2d, track_plots_imm_3d
+
+        return track_plots_imm_3d if dims == 3 else track_plots_imm_2d
     if dims == 3:
         from radarviz.core.filters.kernels_3d import track_plots_3d
 

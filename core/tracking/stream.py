@@ -290,8 +290,9 @@ class StreamOptions:
         monitor: a consistency monitor fed every update's NIS, track name = method
             (``core.tracking.consistency``), or None.
         engine: ``"compiled"`` (``core.tracking.compiled``: one compiled pass per block of
-            plots, for the tracks it has a kernel for: 2D or 3D, ``cv``, the line-of-sight Doppler
-            update, the first-plot start, no finite-memory track; the others run on numpy) or
+            plots, for the tracks it has a kernel for: 2D or 3D, ``cv`` or ``imm``, the
+            line-of-sight Doppler update, the first-plot start, no finite-memory track; the
+            others run on numpy) or
             ``"numpy"`` (the reference).
     """
 
@@ -327,7 +328,6 @@ class StreamOptions:
         history = self.monitor is not None and getattr(self.monitor, "keep_history", True)
         return (
             self.engine == "compiled"
-            and self.model == "cv"
             and self.doppler_update == "line_of_sight"
             and (3 if three_d else 2) in COMPILED_DIMS
             and not history
@@ -376,8 +376,15 @@ class StreamTracker:
         self._window: list[Plot] | None = [] if o.init == "finite-memory" else None
         self._compiled = None
         if o.compiled(three_d) and o.init == "first-plot" and not o.finite_memory_k:
+            motion = o.motion()
             self._compiled = CompiledTracks(
-                self.methods, dims, o.sigma_a_mps2, o.sigma_v0_mps, o.use_doppler, o.monitor
+                self.methods,
+                dims,
+                o.sigma_a_mps2,
+                o.sigma_v0_mps,
+                o.use_doppler,
+                o.monitor,
+                imm=motion if isinstance(motion, IMMModel) else None,
             )
         self._started = False
         self._fm_window: list[Plot] = []

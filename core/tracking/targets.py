@@ -24,8 +24,9 @@ IMM each has its trailing model axis too (``core.filters.imm``).
 
 * **Engines.** The above is the numpy engine (``StreamOptions.engine="numpy"``, the
   reference). On the compiled engine (the default) a block goes through one compiled pass in
-  plot order instead (``core.tracking.compiled``; no waves), for the cv model; the IMM runs
-  on numpy whatever the option (``engine`` tells which ran). ``add_arrays`` takes a block as
+  plot order instead (``core.tracking.compiled``; no waves), for the cv model and the IMM;
+  the converted Doppler update runs on numpy whatever the option (``engine`` tells which
+  ran). ``add_arrays`` takes a block as
   arrays (``PlotBlock``) and returns the states as arrays (``TrackBlock``), beside
   ``add_block``'s lists of ``Plot`` and rows.
 
@@ -217,6 +218,7 @@ class TargetTracker:
                 options.use_doppler,
                 options.monitor,
                 track_name,
+                imm=motion if isinstance(motion, IMMModel) else None,
             )
 
     @property

@@ -34,7 +34,11 @@ Figures (ns per track-step = wall time / (runs × scans), one core):
   target, all seven 2D methods, the cv model with σa = 1 m/s²), plots per second over the
   whole file (the plots made beforehand, not timed): ``batched_plots_per_s`` on the compiled
   engine (``TargetTracker.add_arrays``), ``numpy_plots_per_s`` on the numpy engine
-  (``add_block``), ``compiled_over_numpy`` their ratio; beside them the same plots tracked
+  (``add_block``), ``compiled_over_numpy`` their ratio; ``models``: per motion model, the cv
+  one above and the default IMM (``DEFAULT_IMM``), one after the other in the same run, plots
+  per second of wall and of CPU time on each engine and ``compiled_over_numpy_cpu``, and
+  ``imm_over_cv_compiled_cpu`` the IMM's rate over cv's on the compiled engine (per CPU-s);
+  beside them the same plots tracked
   one target at a time (``StreamTracker``, on a subsample of ``loop_targets`` targets),
   ``batched_over_loop`` the ratio of plots per second. ``one_target_ns_per_step``: per
   method, one target's long stream of plots (``one_target_plots``) as the track file's
@@ -47,7 +51,9 @@ Figures (ns per track-step = wall time / (runs × scans), one core):
   the tracks written) on the air-traffic file (``viz_app.bench.track_file``: 1000 targets,
   two radars, 2D and 3D with Doppler, cv model) of ``--track-plots`` plots and of a tenth
   of them: wall and CPU time, plots per second of each, peak resident memory (the same at
-  both lengths when memory does not grow with the file).
+  both lengths when memory does not grow with the file); ``imm_csv``: the same file tracked
+  with the IMM (the command's default model) into CSV, and ``imm_over_cv_cpu`` its plots per
+  CPU-s over cv's.
 * ``association``: unlabelled plots associated (``core.tracking.association``) against the
   same plots with their labels, ``viz_app.bench.association``.
 * ``asterix``: reading an ASTERIX CAT048 file of the fusion plots against reading the same
@@ -361,16 +367,28 @@ def bench_targets(
     plots = [by_target[k][n] for n in range(steps) for k in range(targets)]
     block = plot_block(plots)
     options = StreamOptions(model="cv", sigma_a_mps2=1.0)
-    rate: dict[str, float] = {}
-    for engine in ("compiled", "numpy"):
-        tracker = TargetTracker(ALL_METHODS, False, replace(options, engine=engine))
-        t0 = time.perf_counter()
-        for i in range(0, len(plots), 8192):
-            if engine == "compiled":  # the array path, as the track file's blocks
-                tracker.add_arrays(_block_slice(block, i, i + 8192))
-            else:  # the reference engine, a Plot per row
-                tracker.add_block(plots[i : i + 8192])
-        rate[engine] = len(plots) / (time.perf_counter() - t0)
+    # cv then the IMM (``DEFAULT_IMM``), each on both engines, one after the other in this
+    # run: wall and CPU time of each.
+    models: dict[str, dict[str, float]] = {}
+    for model, opts in (("cv", options), ("imm", StreamOptions(model="imm"))):
+        figures: dict[str, float] = {}
+        # Untimed: the compiled kernel loaded from numba's cache (or compiled).
+        TargetTracker(ALL_METHODS, False, opts).add_arrays(_block_slice(block, 0, 16))
+        for engine in ("compiled", "numpy"):
+            tracker = TargetTracker(ALL_METHODS, False, replace(opts, engine=engine))
+            t0, c0 = time.perf_counter(), time.process_time()
+            for i in range(0, len(plots), 8192):
+                if engine == "compiled":  # the array path, as the track file's blocks
+                    tracker.add_arrays(_block_slice(block, i, i + 8192))
+                else:  # the reference engine, a Plot per row
+                    tracker.add_block(plots[i : i + 8192])
+            figures[f"{engine}_plots_per_s"] = len(plots) / (time.perf_counter() - t0)
+            figures[f"{engine}_plots_per_cpu_s"] = len(plots) / (time.process_time() - c0)
+        figures["compiled_over_numpy_cpu"] = (
+            figures["compiled_plots_per_cpu_s"] / figures["numpy_plots_per_cpu_s"]
+        )
+        models[model] = figures
+    rate = {e: models["cv"][f"{e}_plots_per_s"] for e in ("compiled", "numpy")}
     loop_targets = min(loop_targets, targets)
     t0 = time.perf_counter()
     for own in by_target[:loop_targets]:
@@ -405,8 +423,9 @@ def bench_targets(
     for p in one[:2000]:
         tracker.add(p)
     per_call = (time.perf_counter() - t0) / (2000 * len(ALL_METHODS)) * 1e9
-    figures = (*rate.values(), loop, per_call, *single.values(), *listed.values())
-    assert all(math.isfinite(v) for v in figures)
+    measured = (*rate.values(), loop, per_call, *single.values(), *listed.values())
+    measured = (*measured, *(v for f in models.values() for v in f.values()))
+    assert all(math.isfinite(v) for v in measured)
     return {
         "targets": targets,
         "scans": steps,
@@ -414,6 +433,9 @@ def bench_targets(
         "batched_plots_per_s": rate["compiled"],
         "numpy_plots_per_s": rate["numpy"],
         "compiled_over_numpy": rate["compiled"] / rate["numpy"],
+        "models": models,
+        "imm_over_cv_compiled_cpu": models["imm"]["compiled_plots_per_cpu_s"]
+        / models["cv"]["compiled_plots_per_cpu_s"],
         "loop_targets": loop_targets,
         "loop_plots_per_s": loop,
         "batched_over_loop": rate["compiled"] / loop,
@@ -428,11 +450,12 @@ def bench_targets(
 
 def bench_track_file(plots: int) -> dict[str, Any]:
     """``radarviz track`` end to end on the air-traffic file (``viz_app.bench.track_file``),
-    1000 targets (fewer for a short file), 2D and 3D (Doppler), all seven methods, the cv
-    model: at ``plots`` plots and at a tenth of them (the memory must not grow with the
-    file), each writing the CSV track file and then the Parquet one (``--out X.parquet``) of
-    the same input, one after the other (their ratio is a same-run figure). Each run is its
-    own process, after untimed warm-up runs (numba's cache)."""
+        1000 targets (fewer for a short file), 2D and 3D (Doppler), all seven methods, the cv
+        model: at ``plots`` plots and at a tenth of them (the memory must not grow with the
+        file), each writing the CSV track file and then the Parquet one (``--out X.parquet``) of
+        the same input, one after the other (their ratio is a same-run figure), then the IMM into
+    CSV (its ratio to cv's CSV run likewise). Each run is its
+        own process, after untimed warm-up runs (numba's cache)."""
     import tempfile
     from pathlib import Path
 
@@ -462,6 +485,20 @@ def bench_track_file(plots: int) -> dict[str, Any]:
                 figures["parquet_over_csv_cpu"] = (
                     figures["parquet"]["plots_per_cpu_s"] / figures["csv"]["plots_per_cpu_s"]
                 )
+                # The command's default model, the IMM, into the CSV track file.
+                tracks = d / "tracks.csv"
+                run = time_track(meas, d / "radars.toml", tracks, IMM_TRACK)
+                tracks.unlink()
+                figures["imm_csv"] = {
+                    "wall_s": run.wall_s,
+                    "cpu_s": run.cpu_s,
+                    "plots_per_s": written / run.wall_s,
+                    "plots_per_cpu_s": written / run.cpu_s,
+                    "peak_rss_mb": run.peak_rss_mb,
+                }
+                figures["imm_over_cv_cpu"] = (
+                    figures["imm_csv"]["plots_per_cpu_s"] / figures["csv"]["plots_per_cpu_s"]
+                )
                 if not warm_up:
                     runs[str(written)] = figures
             out[f"{dims}d"] = runs
@@ -472,6 +509,8 @@ def bench_track_file(plots: int) -> dict[str, Any]:
 TRACK_FILE_KINDS = ("csv", "parquet")
 #: The track options of the file figure: the cv model with σa = 1 m/s² (all methods).
 CV_TRACK = ("--model", "cv", "--sigma-a", "1")
+#: ... and the IMM beside it (``DEFAULT_IMM``, the command's default model).
+IMM_TRACK = ("--model", "imm")
 
 
 def run_bench(
@@ -611,6 +650,16 @@ def format_bench(doc: dict[str, Any]) -> str:
         f"one target at a time ({tg['loop_targets']} targets): {tg['loop_plots_per_s']:.0f} "
         f"plots/s (batched/loop {tg['batched_over_loop']:.1f}×)"
     )
+    for model, what in (("cv", "cv, σa = 1 m/s²"), ("imm", "IMM (default)")):
+        f = tg["models"][model]
+        lines.append(
+            f"  {what}: compiled {f['compiled_plots_per_cpu_s']:.0f}, numpy engine "
+            f"{f['numpy_plots_per_cpu_s']:.0f} plots per CPU-s "
+            f"(compiled/numpy {f['compiled_over_numpy_cpu']:.1f}×)"
+        )
+    lines.append(
+        f"  IMM/cv on the compiled engine, per CPU-s: {tg['imm_over_cv_compiled_cpu']:.2f}×"
+    )
     per = ", ".join(
         f"{m} {v:.0f} ns ({tg['one_target_speedup_vs_filterpy'][m]:.0f}×)"
         for m, v in tg["one_target_ns_per_step"].items()
@@ -632,6 +681,12 @@ def format_bench(doc: dict[str, Any]) -> str:
             lines.append(
                 f"radarviz track, {dims}, {r['plots']} plots, all methods, into {each} "
                 f"(Parquet/CSV per CPU-s {r['parquet_over_csv_cpu']:.2f}×)"
+            )
+            k = r["imm_csv"]
+            lines.append(
+                f"  the IMM into csv: {k['plots_per_s']:.0f} plots/s wall ({k['wall_s']:.1f} s), "
+                f"{k['plots_per_cpu_s']:.0f} plots per CPU-s, peak RSS {k['peak_rss_mb']:.0f} MB "
+                f"(IMM/cv per CPU-s {r['imm_over_cv_cpu']:.2f}×)"
             )
     lines.append(format_association(doc["association"]))
     from radarviz.viz_app.bench.asterix import format_asterix
