@@ -63,6 +63,9 @@ BLOCK_BYTES = 1 << 17
 #: Most threads that format the track file's numbers (the formatting is most of the time of
 #: ``radarviz track``).
 WRITE_THREADS = 4
+#: Blocks formatted or being written at a time, while the next is tracked (two: one block's
+#: text goes to the disk while the next is formatted).
+IN_FLIGHT = 2
 _NUMERIC = ("time_s", "range_m", "azimuth_deg", "elevation_deg", "radial_velocity_mps")
 
 
@@ -327,12 +330,19 @@ class BlockWriter:
 
         from radarviz.core.experiments.prosov import available_cores
 
-        # One single-thread pool per slice: slice i always goes to pool i (order kept).
+        # One single-thread pool per slice: slice i always goes to pool i; one more thread
+        # writes the slices' text in order, so the tracker never waits for the disk.
         n = 1 if parquet else max(1, min(WRITE_THREADS, available_cores()))
         self._workers = [ThreadPoolExecutor(1) for _ in range(n)]
-        self._pending: list[Future[bytes]] = []
+        self._output = ThreadPoolExecutor(1)
+        # The written blocks' futures, oldest first: at most IN_FLIGHT blocks are formatted
+        # or written at a time (the memory bound), each with its own set of buffers.
+        self._pending: list[list[Future[None]]] = []
         self._methods = [_quoted(m) for m in methods]
-        self._buffers = [np.empty(0, dtype=np.uint8) for _ in self._workers]
+        self._buffers = [
+            [np.empty(0, dtype=np.uint8) for _ in self._workers] for _ in range(IN_FLIGHT)
+        ]
+        self._blocks = 0
         if parquet:
             import pyarrow as pa
 
@@ -348,14 +358,13 @@ class BlockWriter:
         state_of, cov_of = _column_index(n)
         times = np.ascontiguousarray(block.time_s, dtype=np.float64)
         if self._parquet is not None:
-            self._drain()
+            self._drain(1)
             self.rows += rows
             target = block.target if self.targets else None
-            self._pending = [
-                self._workers[0].submit(
-                    self._write_table, times, target, block.labels, x, P, state_of, cov_of
-                )
-            ]
+            job = self._workers[0].submit(
+                self._write_table, times, target, block.labels, x, P, state_of, cov_of
+            )
+            self._pending.append([job])
             return
         # The text cells: the block's labels, then the methods, each quoted once.
         cells = ([_quoted(t) for t in block.labels] if self.targets else []) + self._methods
@@ -365,15 +374,18 @@ class BlockWriter:
         label_cells = len(cells) - m
         target = block.target.astype(np.int64) if self.targets else np.zeros(b, np.int64)
         widest = max(len(c) for c in cells)
-        self._drain()
+        self._drain(IN_FLIGHT)
         if self.rows == 0:
             self.fh.write(b",".join(_quoted(c) for c in self.columns) + b"\n")
         self.rows += rows
+        buffers = self._buffers[self._blocks % IN_FLIGHT]
+        self._blocks += 1
         k = len(self._workers)
         step = -(-b // k)  # plots per slice (a plot's rows share its time)
-        self._pending = [
+        jobs = [
             pool.submit(
                 self._format,
+                buffers,
                 i,
                 times[i * step : (i + 1) * step],
                 target[i * step : (i + 1) * step],
@@ -389,9 +401,16 @@ class BlockWriter:
             for i, pool in enumerate(self._workers)
             if i * step < b
         ]
+        self._pending.append([self._output.submit(self._write, job) for job in jobs])
+
+    def _write(self, job: Future[memoryview]) -> None:
+        """The output thread: a slice's text, once formatted, to the file (in submission
+        order: one thread)."""
+        self.fh.write(job.result())
 
     def _format(
         self,
+        buffers: list[NDArray[np.uint8]],
         slot: int,
         times: NDArray,
         target: NDArray,
@@ -405,15 +424,15 @@ class BlockWriter:
         widest: int,
     ) -> memoryview:
         """Rows as CSV bytes by ``csv_text.format_track_rows`` (thread ``slot`` of the pool),
-        into that thread's buffer (reused: a block's text is written before the next block
-        is formatted)."""
+        into that thread's buffer of the block's set ``buffers`` (reused: a set's text is
+        written before the set is taken again, ``IN_FLIGHT`` blocks later)."""
         from radarviz.viz_app.io.csv_text import format_track_rows
 
         n_cols = 1 + 1 + (label_cells > 0) + state_of.size + cov_of.size
         need = (n_cols * (_FLOAT_BYTES + 1) + 2 * widest + 1) * x.shape[0] + 64
-        buf = self._buffers[slot]
+        buf = buffers[slot]
         if buf.size < need:
-            buf = self._buffers[slot] = np.empty(need + need // 4, dtype=np.uint8)
+            buf = buffers[slot] = np.empty(need + need // 4, dtype=np.uint8)
         size = format_track_rows(
             times.view(np.uint64),
             target,
@@ -461,10 +480,12 @@ class BlockWriter:
         self._parquet.write_table(pa.Table.from_arrays(arrays, schema=self._parquet.schema))
         return b""
 
-    def _drain(self) -> None:
-        for job in self._pending:
-            self.fh.write(job.result())
-        self._pending = []
+    def _drain(self, keep: int = 0) -> None:
+        """Wait until fewer than ``keep`` blocks are in flight (0: none); a failed format or
+        write raises here."""
+        while len(self._pending) >= max(keep, 1):
+            for job in self._pending.pop(0):
+                job.result()
 
     def _check(self, block: PlotBlock, tracks: TrackBlock, x: NDArray, P: NDArray) -> None:
         """``check_track_rows`` on the whole block at once (every entry finite, variances
@@ -484,7 +505,7 @@ class BlockWriter:
         try:
             self._drain()
         finally:
-            for pool in self._workers:
+            for pool in (*self._workers, self._output):
                 pool.shutdown(wait=True, cancel_futures=True)
         if self._parquet is not None:
             self._parquet.close()
@@ -493,7 +514,7 @@ class BlockWriter:
         """After an error (the staged file is then removed): stop the threads and release a
         Parquet writer without reporting what fails meanwhile (the first error is the one
         that matters)."""
-        for pool in self._workers:
+        for pool in (*self._workers, self._output):
             pool.shutdown(wait=True, cancel_futures=True)
         if self._parquet is not None:
             with contextlib.suppress(Exception):
@@ -506,8 +527,8 @@ class BlockWriter:
             verify_track_parquet(path, self.columns, self.rows)
 
 
-#: Most bytes of one formatted float ("-1.2345678901234567e-308").
-_FLOAT_BYTES = 24
+#: Most bytes of one formatted float ("-0.0000012345678901234567"; a scientific one has 24).
+_FLOAT_BYTES = 25
 
 
 @functools.lru_cache(maxsize=8)
