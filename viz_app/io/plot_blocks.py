@@ -37,6 +37,7 @@ from radarviz.core.tracking.association import AssociationOptions
 from radarviz.core.tracking.compiled import PlotBlock, RadarTable, TrackBlock
 from radarviz.core.tracking.stream import Plot, StreamOptions, plot_block, state_rows
 from radarviz.core.tracking.targets import TargetTracker
+from radarviz.viz_app.io.arrow_numpy import from_numpy, strings, to_numpy
 from radarviz.viz_app.io.plots import (
     _COMPONENTS,
     _PAIRS,
@@ -114,6 +115,7 @@ class PlotBlockReader:
             ) from None
         self.reader = PlotReader([text] if text else [], source, radars)
         self.names = list(radars)
+        self._names = strings(self.names)
         self.table = radar_table(radars)
         self._has_el = np.array([r.sigma_elevation_deg is not None for r in radars.values()])
         self._has_vr = np.array([r.sigma_radial_velocity_mps is not None for r in radars.values()])
@@ -213,7 +215,7 @@ class PlotBlockReader:
             c = table.column(name)
             if c.null_count:
                 return None
-            return c.to_numpy()
+            return to_numpy(c)
 
         t, r, az = col("time_s"), col("range_m"), col("azimuth_deg")
         if t is None or r is None or az is None:
@@ -222,10 +224,10 @@ class PlotBlockReader:
         if not (ok and (np.abs(az) <= 360).all()):
             return None  # NaN fails these too
         names = pc.utf8_trim_whitespace(table.column("radar"))
-        radar = pc.index_in(names, value_set=pa.array(self.names, pa.string()))
+        radar = pc.index_in(names, value_set=self._names)
         if radar.null_count:
             return None
-        radar_i = radar.to_numpy().astype(np.intp)
+        radar_i = to_numpy(radar).astype(np.intp)
         el = None
         if self.reader.three_d:
             el = col("elevation_deg")
@@ -234,7 +236,7 @@ class PlotBlockReader:
             el = np.radians(el)
         vr = None
         if self.reader.doppler:
-            vr = table.column("radial_velocity_mps").to_numpy(zero_copy_only=False)
+            vr = to_numpy(table.column("radial_velocity_mps"))
             given = ~np.isnan(vr) if table.column("radial_velocity_mps").null_count else None
             v = vr if given is None else vr[given]
             if np.isnan(v).any() or not (np.abs(v) <= MAX_RADIAL_VELOCITY_MPS).all():
@@ -249,7 +251,7 @@ class PlotBlockReader:
             labels = tuple(enc.dictionary.to_pylist())
             if "" in labels:
                 return None
-            target = enc.indices.to_numpy().astype(np.intp)
+            target = to_numpy(enc.indices).astype(np.intp)
         if not self._in_order(t, target, labels):
             return None
         return LinedBlock(
@@ -344,9 +346,7 @@ class BlockWriter:
         ]
         self._blocks = 0
         if parquet:
-            import pyarrow as pa
-
-            self._method_names = pa.array(methods, pa.string())
+            self._method_names = strings(methods)
 
     def add(self, block: PlotBlock, tracks: TrackBlock) -> None:
         """One block's plots and every method's posterior after each (B, M, n)."""
@@ -468,15 +468,15 @@ class BlockWriter:
         columns = np.empty((state_of.size + cov_of.size, rows))
         track_columns_into(x, P, state_of, cov_of, columns)
         methods = pa.DictionaryArray.from_arrays(
-            np.tile(np.arange(m, dtype=np.int32), b), self._method_names
+            from_numpy(np.tile(np.arange(m, dtype=np.int32), b)), self._method_names
         )
         text = [methods.cast(pa.string())]
         if target is not None:
             cells = pa.DictionaryArray.from_arrays(
-                np.repeat(target.astype(np.int32), m), pa.array(labels, pa.string())
+                from_numpy(np.repeat(target.astype(np.int32), m)), strings(labels)
             )
             text.insert(0, cells.cast(pa.string()))
-        arrays = [pa.array(np.repeat(times, m)), *text, *(pa.array(c) for c in columns)]
+        arrays = [from_numpy(np.repeat(times, m)), *text, *(from_numpy(c) for c in columns)]
         self._parquet.write_table(pa.Table.from_arrays(arrays, schema=self._parquet.schema))
         return b""
 
