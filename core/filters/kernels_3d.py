@@ -293,8 +293,10 @@ def ekf_measurement_3d(x, r, b, el, sr2, sb2, se2, sx, sy, sz, nu, R):
 
 @_jit
 def polar_3(qx: float, qy: float, qz: float, Z, p):
-    # core.geometry.polar_coordinates: (r, β, ε) of an offset into Z[p]
-    rho = hypot(qx, qy)
+    # core.geometry.polar_coordinates: (r, β, ε) of an offset into Z[p] (ρ by sqrt, not
+    # hypot: the guard against overflow costs 13 points × every plot, and a radar's offsets
+    # are far from 1e154 m; the two differ in the last bit at most)
+    rho = sqrt(qx * qx + qy * qy)
     Z[p, 0] = sqrt(rho * rho + qz * qz)
     Z[p, 1] = atan2(qy, qx)
     Z[p, 2] = atan2(qz, rho)
