@@ -323,9 +323,17 @@ def format_track_rows(times, target, label_cells, text, text_start, x, P, state_
     rows = x.shape[0]
     m = rows // times.shape[0]
     zero = np.uint64(0)
+    t_at, t_len = 0, 0
     for r in range(rows):
         b = r // m
-        pos = write_double(times[b], buf, pos)
+        if r % m == 0:  # a plot's first row: its time formatted, the other rows copy it
+            t_at = pos
+            pos = write_double(times[b], buf, pos)
+            t_len = pos - t_at
+        else:
+            for a in range(t_len):
+                buf[pos + a] = buf[t_at + a]
+            pos += t_len
         for c in range(2 if label_cells > 0 else 1):
             buf[pos] = 44
             pos += 1
