@@ -32,12 +32,60 @@ from radarviz.core.filters.polar_ukf import SEMIDEFINITE_RTOL
 
 
 @_jit
-def moments(c: float, sn: float, s: float, out):
+def exponentials(s: float, out):
+    # The noise-only factors of ``moments`` for an angle variance s: out = (e^(−s/2), e^(−s),
+    # e^(−2s), 1 − e^(−s), 1 − e^(−2s)) (once per radar, not per plot, method and model)
+    out[0], out[1], out[2] = exp(-s / 2.0), exp(-s), exp(-2.0 * s)
+    out[3], out[4] = -expm1(-s), -expm1(-2.0 * s)
+
+
+@_jit
+def noise_table(sb2: float, se2: float, out):
+    # A radar's noise-only factors of the conversions, out (5, 5): rows 0–3 the
+    # ``exponentials`` of σβ², σε², 2σβ², 2σε²; row 4 the scales (cmkf_d's κ_xy, κ_z, then
+    # ucm's and ducm's κ_xy, κ_z, 0) of ``convert_3d`` with s_xy = σβ² + σε², s_z = σε²
+    exponentials(sb2, out[0])
+    exponentials(se2, out[1])
+    exponentials(2.0 * sb2, out[2])
+    exponentials(2.0 * se2, out[3])
+    s_xy, s_z = sb2 + se2, se2
+    out[4, 0] = 1.0 - (exp(-s_xy) - exp(-s_xy / 2.0))
+    out[4, 1] = 1.0 - (exp(-s_z) - exp(-s_z / 2.0))
+    out[4, 2], out[4, 3], out[4, 4] = exp(s_xy / 2.0), exp(s_z / 2.0), 0.0
+
+
+@_jit
+def conversion_scratch(radars: int):
+    # The conversions' per-kernel arrays: the noise table of every radar (radars, 5, 5) and
+    # ``conv`` = (mb, me, tmp (9,) scratch, trig (4,), ex (5, 5)) that ``plot_factors`` fills
+    # per plot
+    return np.empty((radars, 5, 5)), (
+        np.empty(9),
+        np.empty(9),
+        np.empty(9),
+        np.empty(4),
+        np.empty((5, 5)),
+    )
+
+
+@_jit
+def plot_factors(b: float, el: float, ex_g, conv):
+    # A plot's factors of the conversions and the Doppler stage, once per plot for every
+    # method and model: trig = (cos β̂, sin β̂, cos ε̂, sin ε̂), and its radar's noise table
+    trig, ex = conv[3], conv[4]
+    trig[0], trig[1], trig[2], trig[3] = cos(b), sin(b), cos(el), sin(el)
+    for a in range(5):
+        for c in range(5):
+            ex[a, c] = ex_g[a, c]
+
+
+@_jit
+def moments(c: float, sn: float, ex, out):
     # core.conversion.planar._angle_moments_cs, then spatial._given_truth: out = (ecc, ess,
-    # esc, vcc, vss, csc, mc, ms, mc²) of θ̂ ~ N(θ, s), (c, sn) = (cos θ, sin θ)
+    # esc, vcc, vss, csc, mc, ms, mc²) of θ̂ ~ N(θ, s), (c, sn) = (cos θ, sin θ), ex the
+    # ``exponentials`` of s
     cc, ss, sc = c * c, sn * sn, sn * c
-    e_half, e1, e2 = exp(-s / 2.0), exp(-s), exp(-2.0 * s)
-    om1, om2 = -expm1(-s), -expm1(-2.0 * s)
+    e_half, e1, e2, om1, om2 = ex[0], ex[1], ex[2], ex[3], ex[4]
     out[0] = 0.5 * (cc * (1.0 + e2) + ss * om2)
     out[1] = 0.5 * (ss * (1.0 + e2) + cc * om2)
     out[2] = e2 * sc
@@ -50,11 +98,12 @@ def moments(c: float, sn: float, s: float, out):
 
 
 @_jit
-def posterior_moments(c: float, sn: float, s: float, out, tmp):
-    # spatial._posterior_average: the moments averaged over the truth θ ~ N(θ̂, s)
-    moments(c, sn, 2.0 * s, out)  # ecc, ess, esc of variance 2s
-    moments(c, sn, s, tmp)
-    e1, om1, om2 = exp(-s), -expm1(-s), -expm1(-2.0 * s)
+def posterior_moments(c: float, sn: float, ex, ex2, out, tmp):
+    # spatial._posterior_average: the moments averaged over the truth θ ~ N(θ̂, s); ex, ex2
+    # the ``exponentials`` of s and 2s
+    moments(c, sn, ex2, out)  # ecc, ess, esc of variance 2s
+    moments(c, sn, ex, tmp)
+    e1, om1, om2 = ex[1], ex[3], ex[4]
     half1, half2 = 0.5 * om1 * om1, 0.5 * om2
     out[3] = half1 * tmp[0] + half2 * tmp[1]
     out[4] = half1 * tmp[1] + half2 * tmp[0]
@@ -80,18 +129,21 @@ def combined_cov(range_sq: float, var_r: float, e, b, R):
 
 
 @_jit
-def given_truth_cov(r: float, b: float, el: float, sr2: float, sb2: float, se2: float, R, mb, me):
-    # spatial.naive_cov_given_truth_3d at (r, β, ε)
-    moments(cos(b), sin(b), sb2, mb)
-    moments(cos(el), sin(el), se2, me)
+def given_truth_cov(r, cb, sb, ce, se, sr2: float, ex, R, mb, me):
+    # spatial.naive_cov_given_truth_3d at (r, β, ε), (cb, sb, ce, se) = (cos β, sin β, cos ε,
+    # sin ε); ex the radar's ``noise_table``
+    moments(cb, sb, ex[0], mb)
+    moments(ce, se, ex[1], me)
     combined_cov(r * r, sr2, me, mb, R)
 
 
 @_jit
-def convert_3d(code, r, b, el, sr2, sb2, se2, px, py, pz, z, R, mb, me, tmp):
+def convert_3d(code, r, sr2, sb2, se2, px, py, pz, z, R, conv):
     # spatial.convert_3d: the radar-centred point z (3,) and covariance R (3, 3) of
-    # (r̂, β̂, ε̂); (px, py, pz): the predicted position minus the site (ducm only)
-    cb, sb, ce, se = cos(b), sin(b), cos(el), sin(el)
+    # (r̂, β̂, ε̂), whose cosines, sines and radar's noise table ``plot_factors`` put in
+    # ``conv``; (px, py, pz): the predicted position minus the site (ducm only)
+    mb, me, tmp, trig, ex = conv
+    cb, sb, ce, se = trig[0], trig[1], trig[2], trig[3]
     u0, u1, u2 = ce * cb, ce * sb, se
     s_xy, s_z = sb2 + se2, se2
     if code == 0:  # naive: J diag(σr², sβ, sε) Jᵀ, J = [u, r ∂u/∂β, r ∂u/∂ε]
@@ -109,25 +161,25 @@ def convert_3d(code, r, b, el, sr2, sb2, se2, px, py, pz, z, R, mb, me, tmp):
     if code == 1 or code == 2:
         if code == 1:  # seed: the naive point + Prosov's second-order term (eq. 10's sign)
             k_xy, k_z = 1.0 - s_xy / 2.0, 1.0 - s_z / 2.0
-        else:  # cmkf_d: κ(s) = 1 − (e^(−s) − e^(−s/2)) per axis
-            k_xy = 1.0 - (exp(-s_xy) - exp(-s_xy / 2.0))
-            k_z = 1.0 - (exp(-s_z) - exp(-s_z / 2.0))
+        else:  # cmkf_d: κ(s) = 1 − (e^(−s) − e^(−s/2)) per axis (``noise_table``)
+            k_xy, k_z = ex[4, 0], ex[4, 1]
         z[0], z[1], z[2] = k_xy * (r * u0), k_xy * (r * u1), k_z * (r * u2)
         # averaged_cov_3d: the posterior-averaged moments, E[r²] = r̂² + σr²
-        posterior_moments(cb, sb, sb2, mb, tmp)
-        posterior_moments(ce, se, se2, me, tmp)
+        posterior_moments(cb, sb, ex[0], ex[2], mb, tmp)
+        posterior_moments(ce, se, ex[1], ex[3], me, tmp)
         combined_cov(r * r + sr2, sr2, me, mb, R)
         return
     # ucm / ducm: κ = e^(s/2) per axis, covariance D C D with C the true-conditioned one,
     # at the measurement (ucm) or at the prediction (ducm)
-    k_xy, k_z = exp(s_xy / 2.0), exp(s_z / 2.0)
+    k_xy, k_z = ex[4, 2], ex[4, 3]  # e^(s/2) (``noise_table``)
     z[0], z[1], z[2] = k_xy * (r * u0), k_xy * (r * u1), k_z * (r * u2)
     if code == 3:
-        given_truth_cov(r, b, el, sr2, sb2, se2, R, mb, me)
+        given_truth_cov(r, cb, sb, ce, se, sr2, ex, R, mb, me)
     else:
         rho = hypot(px, py)
         rp = sqrt(rho * rho + pz * pz)
-        given_truth_cov(rp, atan2(py, px), atan2(pz, rho), sr2, sb2, se2, R, mb, me)
+        bp, ep = atan2(py, px), atan2(pz, rho)
+        given_truth_cov(rp, cos(bp), sin(bp), cos(ep), sin(ep), sr2, ex, R, mb, me)
     kap = (k_xy, k_xy, k_z)
     for i in range(3):
         for j in range(i, 3):
@@ -266,8 +318,10 @@ def ekf_measurement_3d(x, r, b, el, sr2, sb2, se2, sx, sy, sz, nu, R):
 
 @_jit
 def polar_3(qx: float, qy: float, qz: float, Z, p):
-    # core.geometry.polar_coordinates: (r, β, ε) of an offset into Z[p]
-    rho = hypot(qx, qy)
+    # core.geometry.polar_coordinates: (r, β, ε) of an offset into Z[p] (ρ by sqrt, not
+    # hypot: its guard against overflow costs 13 points × every plot, and a radar's offsets
+    # are far from 1e154 m; the two differ in the last bit at most)
+    rho = sqrt(qx * qx + qy * qy)
     Z[p, 0] = sqrt(rho * rho + qz * qz)
     Z[p, 1] = atan2(qy, qx)
     Z[p, 2] = atan2(qz, rho)
@@ -363,10 +417,10 @@ def ukf_update_3d(x, P, r, b, el, sr2, sb2, se2, sx, sy, sz, prm, L, Z, K, S, Si
 
 
 @_jit
-def doppler_terms_3d(x, P, b: float, el: float, var_vr: float, sb2: float, se2: float, u):
+def doppler_terms_3d(x, P, trig, var_vr: float, sb2: float, se2: float, u):
     # core.filters.doppler: û = u(β̂, ε̂) into u; returns var e = σVr² + σβ² ((g_β·v)² +
     # g_βᵀ P_vv g_β) + σε² ((g_ε·v)² + g_εᵀ P_vv g_ε), g_β on the first two axes
-    ca, sa, ce, se = cos(b), sin(b), cos(el), sin(el)
+    ca, sa, ce, se = trig[0], trig[1], trig[2], trig[3]  # ``plot_factors``
     u[0], u[1], u[2] = ce * ca, ce * sa, se
     gb0, gb1 = -ce * sa, ce * ca
     ge0, ge1, ge2 = -se * ca, -se * sa, ce
@@ -381,9 +435,9 @@ def doppler_terms_3d(x, P, b: float, el: float, var_vr: float, sb2: float, se2: 
 
 
 @_jit
-def doppler_stats_3d(x, P, vr_hat, b, el, var_vr, sb2, se2, u):
+def doppler_stats_3d(x, P, vr_hat, trig, var_vr, sb2, se2, u):
     # (ν² / S, log S) of the Doppler stage (doppler_terms, linear_innovation); NaN unless S > 0
-    r_e = doppler_terms_3d(x, P, b, el, var_vr, sb2, se2, u)
+    r_e = doppler_terms_3d(x, P, trig, var_vr, sb2, se2, u)
     S = r_e
     for a in range(3):
         for c in range(3):
@@ -395,9 +449,9 @@ def doppler_stats_3d(x, P, vr_hat, b, el, var_vr, sb2, se2, u):
 
 
 @_jit
-def doppler_nis_3d(x, P, vr_hat, b, el, var_vr, sb2, se2, u) -> float:
+def doppler_nis_3d(x, P, vr_hat, trig, var_vr, sb2, se2, u) -> float:
     # ν² / S of ``doppler_stats_3d``
-    return doppler_stats_3d(x, P, vr_hat, b, el, var_vr, sb2, se2, u)[0]
+    return doppler_stats_3d(x, P, vr_hat, trig, var_vr, sb2, se2, u)[0]
 
 
 @_jit
@@ -407,16 +461,16 @@ def position_measurement_3d(
     """The position stage of method ``code`` on the prediction x (6,) as a position
     measurement (``MethodGroup.measurement``) into nu (3,) (m) and R (3, 3) (m²): converted
     methods ν = z + site − H x⁻ with the conversion's z (3,) and R; ``ekf`` and ``ukf`` the
-    EKF's ν' = J ν, R' = J R Jᵀ at the prediction. ``conv`` (mb, me, tmp: (9,) each) is
+    EKF's ν' = J ν, R' = J R Jᵀ at the prediction. ``conv`` (``conversion_scratch``, the
+    plot's ``plot_factors`` in it) is
     scratch. ``converted``: z and R hold this plot's conversion already (a conversion that
     does not read the prediction, ``code`` < 4, made for another state of the same track)."""
-    mb, me, tmp = conv
     if code >= 5:
         ekf_measurement_3d(x, r, b, el, sr2, sb2, se2, sx, sy, sz, nu, R)
     else:
         if not (converted and code < 4):
             px, py, pz = x[0] - sx, x[2] - sy, x[4] - sz
-            convert_3d(code, r, b, el, sr2, sb2, se2, px, py, pz, z, R, mb, me, tmp)
+            convert_3d(code, r, sr2, sb2, se2, px, py, pz, z, R, conv)
         nu[0], nu[1], nu[2] = z[0] + sx - x[0], z[1] + sy - x[2], z[2] + sz - x[4]
 
 
@@ -425,8 +479,7 @@ def start_track_3d(start_code, x, P, r, b, el, sr2, sb2, se2, sx, sy, sz, v0, z,
     """A track started at its first plot into x (6,), P (6, 6): the method's start conversion
     about no prediction, velocity 0 with std ``v0`` (``Method.start``); z (3,), R (3, 3),
     ``conv``: scratch."""
-    mb, me, tmp = conv
-    convert_3d(start_code, r, b, el, sr2, sb2, se2, 0.0, 0.0, 0.0, z, R, mb, me, tmp)
+    convert_3d(start_code, r, sr2, sb2, se2, 0.0, 0.0, 0.0, z, R, conv)
     start_3d(x, P, z, R, sx, sy, sz, v0)
 
 
@@ -471,10 +524,10 @@ def scratch_3d():
 
 
 @_jit
-def doppler_update_3d(x, P, vr_hat, b, el, var_vr, sb2, se2, u, U, K):
+def doppler_update_3d(x, P, vr_hat, trig, var_vr, sb2, se2, u, U, K):
     # core.filters.doppler.doppler_update in 3D: U = P hᵀ, S = h U + var e, K = U / S,
     # x⁺ = x + K ν, P⁺ = P − K Uᵀ + (K S − U) Kᵀ, symmetrised
-    r_e = doppler_terms_3d(x, P, b, el, var_vr, sb2, se2, u)
+    r_e = doppler_terms_3d(x, P, trig, var_vr, sb2, se2, u)
     for i in range(6):
         U[i] = P[i, 1] * u[0] + P[i, 3] * u[1] + P[i, 5] * u[2]
     S = u[0] * U[1] + u[1] * U[3] + u[2] * U[5] + r_e
@@ -510,10 +563,14 @@ def track_plots_3d(
     z, nu, u, Uv, Kv = np.empty(3), np.empty(3), np.empty(3), np.empty(6), np.empty(6)
     R = np.empty((3, 3))
     bufs = scratch_3d()
-    conv = np.empty(9), np.empty(9), np.empty(9)
+    ex, conv = conversion_scratch(sigma_r.shape[0])
+    for g in range(sigma_r.shape[0]):
+        noise_table(sigma_b[g] ** 2, sigma_e[g] ** 2, ex[g])
+    trig = conv[3]
     for i in range(slot.shape[0]):
         k, g = slot[i], radar[i]
         r, b, el = r_m[i], az_rad[i], el_rad[i]
+        plot_factors(b, el, ex[g], conv)
         sx, sy, sz = site[g, 0], site[g, 1], site[g, 2]
         sr2, sb2, se2 = sigma_r[g] ** 2, sigma_b[g] ** 2, sigma_e[g] ** 2
         new = not started[k]
@@ -544,8 +601,8 @@ def track_plots_3d(
             if has_vr[i]:
                 var_vr = sigma_vr[g] * sigma_vr[g]
                 if not new:
-                    nis += doppler_nis_3d(x, P, vr_mps[i], b, el, var_vr, sb2, se2, u)
-                doppler_update_3d(x, P, vr_mps[i], b, el, var_vr, sb2, se2, u, Uv, Kv)
+                    nis += doppler_nis_3d(x, P, vr_mps[i], trig, var_vr, sb2, se2, u)
+                doppler_update_3d(x, P, vr_mps[i], trig, var_vr, sb2, se2, u, Uv, Kv)
             out_nis[i, j] = nis
             for a in range(6):
                 xs[k, j, a] = x[a]

@@ -44,8 +44,11 @@ from radarviz.core.filters.kernels_2d import (
     store,
 )
 from radarviz.core.filters.kernels_3d import (
+    conversion_scratch,
     doppler_stats_3d,
     doppler_update_3d,
+    noise_table,
+    plot_factors,
     position_measurement_3d,
     position_stage_3d,
     position_stats_3d,
@@ -331,10 +334,14 @@ def track_plots_imm_3d(
     z, nu, u, Uv, Kv = np.empty(3), np.empty(3), np.empty(3), np.empty(6), np.empty(6)
     R = np.empty((3, 3))
     bufs = scratch_3d()
-    conv = np.empty(9), np.empty(9), np.empty(9)
+    ex, conv = conversion_scratch(sigma_r.shape[0])
+    for g in range(sigma_r.shape[0]):
+        noise_table(sigma_b[g] ** 2, sigma_e[g] ** 2, ex[g])
+    trig = conv[3]
     for i in range(slot.shape[0]):
         k, g = slot[i], radar[i]
         rr, b, el = r_m[i], az_rad[i], el_rad[i]
+        plot_factors(b, el, ex[g], conv)
         sx, sy, sz = site[g, 0], site[g, 1], site[g, 2]
         sr2, sb2, se2 = sigma_r[g] ** 2, sigma_b[g] ** 2, sigma_e[g] ** 2
         var_vr = sigma_vr[g] * sigma_vr[g]
@@ -353,7 +360,7 @@ def track_plots_imm_3d(
                     start_codes[j], x, P, rr, b, el, sr2, sb2, se2, sx, sy, sz, v0, z, R, conv
                 )
                 if has_vr[i]:
-                    doppler_update_3d(x, P, vr, b, el, var_vr, sb2, se2, u, Uv, Kv)
+                    doppler_update_3d(x, P, vr, trig, var_vr, sb2, se2, u, Uv, Kv)
                 _started(x, P, mu0, x0, P0, mu)
             else:
                 mu[:] = mus[k, j]
@@ -386,12 +393,12 @@ def track_plots_imm_3d(
                 if has_vr[i]:
                     if with_stats:
                         combine(x0, P0, mu, x, P)
-                        nis += doppler_stats_3d(x, P, vr, b, el, var_vr, sb2, se2, u)[0]
+                        nis += doppler_stats_3d(x, P, vr, trig, var_vr, sb2, se2, u)[0]
                     for m in range(r):
                         xj, Pj = x0[m], P0[m]
-                        st = doppler_stats_3d(xj, Pj, vr, b, el, var_vr, sb2, se2, u)
+                        st = doppler_stats_3d(xj, Pj, vr, trig, var_vr, sb2, se2, u)
                         ll[m] = log_likelihood(st[0], st[1], 1)
-                        doppler_update_3d(xj, Pj, vr, b, el, var_vr, sb2, se2, u, Uv, Kv)
+                        doppler_update_3d(xj, Pj, vr, trig, var_vr, sb2, se2, u, Uv, Kv)
                     mode_probabilities(mu, ll, mu)
                 combine(x0, P0, mu, x, P)
             out_nis[i, j] = nis

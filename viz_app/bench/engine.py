@@ -403,7 +403,7 @@ def bench_targets(
         for n in range(steps)
     ]
     one_block = plot_block(one)
-    step = 2500  # plots per block of the track file's reader (~128 KB)
+    step = 5000  # plots per block of the track file's reader (~256 KB)
     single: dict[str, float] = {}
     listed: dict[str, float] = {}
     for m in ALL_METHODS:

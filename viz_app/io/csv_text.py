@@ -23,8 +23,14 @@ from __future__ import annotations
 
 import numba
 import numpy as np
+from llvmlite import ir
+from numba import types
+from numba.extending import intrinsic
 
 _jit = numba.njit(cache=True, nogil=True, error_model="numpy")
+#: The per-number helpers, inlined into their callers by numba itself (a call per number
+#: otherwise costs as much as the digits).
+_inline = numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
 
 _POW5_INV_BITCOUNT = 125
 _POW5_BITCOUNT = 125
@@ -57,23 +63,23 @@ _S32 = np.uint64(32)
 _S64 = np.uint64(64)
 
 
-@_jit
-def _umul128(a, b):
-    # (lo, hi) of the 128-bit product of two uint64
-    a_lo, a_hi = a & _U32, a >> _S32
-    b_lo, b_hi = b & _U32, b >> _S32
-    b00 = a_lo * b_lo
-    b01 = a_lo * b_hi
-    b10 = a_hi * b_lo
-    b11 = a_hi * b_hi
-    mid1 = b10 + (b00 >> _S32)
-    mid2 = b01 + (mid1 & _U32)
-    hi = b11 + (mid1 >> _S32) + (mid2 >> _S32)
-    lo = (mid2 << _S32) | (b00 & _U32)
-    return lo, hi
+@intrinsic
+def _umul128(typingctx, a, b):
+    # (lo, hi) of the 128-bit product of two uint64: LLVM's i128 multiply, one machine
+    # instruction on 64-bit targets (numba has no 128-bit integer type of its own)
+    sig = types.UniTuple(types.uint64, 2)(types.uint64, types.uint64)
+
+    def codegen(context, builder, signature, args):
+        i128 = ir.IntType(128)
+        p = builder.mul(builder.zext(args[0], i128), builder.zext(args[1], i128))
+        lo = builder.trunc(p, ir.IntType(64))
+        hi = builder.trunc(builder.lshr(p, ir.Constant(i128, 64)), ir.IntType(64))
+        return context.make_tuple(builder, signature.return_type, (lo, hi))
+
+    return sig, codegen
 
 
-@_jit
+@_inline
 def _mul_shift64(m, mul_lo, mul_hi, j):
     # ((m × mul) >> j) for the 128-bit mul, j > 64
     lo1, hi1 = _umul128(m, mul_hi)
@@ -85,7 +91,7 @@ def _mul_shift64(m, mul_lo, mul_hi, j):
     return (hi1 << (_S64 - dist)) | (s >> dist)
 
 
-@_jit
+@_inline
 def _pow5_factor(v) -> int:
     count = 0
     five = np.uint64(5)
@@ -95,7 +101,7 @@ def _pow5_factor(v) -> int:
     return count
 
 
-@_jit
+@_inline
 def _shortest(mantissa, exponent):
     # Ryū's d2d: the shortest decimal (digits as an integer, exponent e10) that rounds back
     # to the double with IEEE mantissa bits ``mantissa`` and biased exponent ``exponent``
@@ -187,10 +193,10 @@ def _shortest(mantissa, exponent):
     return out, e10 + removed
 
 
-@_jit
+@_inline
 def write_double(bits, buf, pos: int) -> int:
     """Write the double whose IEEE bits are ``bits`` (uint64) at buf[pos:] (the module
-    docstring's layout); returns the new end. buf keeps its last 32 bytes as scratch."""
+    docstring's layout); returns the new end."""
     sign = (bits >> np.uint64(63)) != np.uint64(0)
     mantissa = bits & ((np.uint64(1) << np.uint64(52)) - np.uint64(1))
     exponent = int((bits >> np.uint64(52)) & np.uint64(0x7FF))
@@ -208,55 +214,36 @@ def write_double(bits, buf, pos: int) -> int:
         return pos + 1
     digits, e10 = _shortest(mantissa, exponent)
     n = _decimal_length(digits)
-    # The digits, two at a time from the least significant (Ryū's table), at buf[end − n:],
-    # end = the scratch at buf's end, then moved into the layout.
-    first = buf.shape[0] - 32
-    d = digits
-    at = first + n
-    hundred = np.uint64(100)
-    while d >= hundred:
-        c = int(d % hundred) * 2
-        d //= hundred
-        at -= 2
-        buf[at] = _DIGITS[c]
-        buf[at + 1] = _DIGITS[c + 1]
-    if d >= np.uint64(10):
-        c = int(d) * 2
-        buf[at - 2] = _DIGITS[c]
-        buf[at - 1] = _DIGITS[c + 1]
-    else:
-        buf[at - 1] = 48 + int(d)
     x = e10 + n - 1  # exponent of d₁.d₂…dₙ
     if -6 <= x <= 9:
-        if x < 0:
+        if x < 0:  # "0.00d₁…dₙ"
             buf[pos] = 48
             buf[pos + 1] = 46
             pos += 2
             for _ in range(-x - 1):
                 buf[pos] = 48
                 pos += 1
-            for a in range(n):
-                buf[pos + a] = buf[first + a]
+            _write_digits(digits, n, buf, pos)
             return pos + n
         if n <= x + 1:  # an integer: its digits, then zeros
-            for a in range(n):
-                buf[pos + a] = buf[first + a]
+            _write_digits(digits, n, buf, pos)
             for a in range(n, x + 1):
                 buf[pos + a] = 48
             return pos + x + 1
+        # d₁…d_{x+1} "." …dₙ: the digits written one place on, the integer part moved back
+        _write_digits(digits, n, buf, pos + 1)
         for a in range(x + 1):
-            buf[pos + a] = buf[first + a]
+            buf[pos + a] = buf[pos + a + 1]
         buf[pos + x + 1] = 46
-        for a in range(x + 1, n):
-            buf[pos + a + 1] = buf[first + a]
         return pos + n + 1
-    buf[pos] = buf[first]
-    pos += 1
+    # d₁ "." d₂…dₙ "e±X": likewise, d₁ moved back over the point's place
+    _write_digits(digits, n, buf, pos + 1)
+    buf[pos] = buf[pos + 1]
     if n > 1:
-        buf[pos] = 46
-        for a in range(1, n):
-            buf[pos + a] = buf[first + a]
-        pos += n
+        buf[pos + 1] = 46
+        pos += n + 1
+    else:
+        pos += 1
     buf[pos] = 101  # "e"
     buf[pos + 1] = 43 if x >= 0 else 45
     pos += 2
@@ -271,12 +258,38 @@ def write_double(bits, buf, pos: int) -> int:
     return pos + 1
 
 
-@_jit
+@_inline
+def _write_digits(v, n: int, buf, pos: int) -> None:
+    # The n decimal digits of v at buf[pos : pos + n], two at a time from the least
+    # significant (Ryū's table)
+    at = pos + n
+    hundred = np.uint64(100)
+    while v >= hundred:
+        c = int(v % hundred) * 2
+        v //= hundred
+        at -= 2
+        buf[at] = _DIGITS[c]
+        buf[at + 1] = _DIGITS[c + 1]
+    if v >= np.uint64(10):
+        c = int(v) * 2
+        buf[at - 2] = _DIGITS[c]
+        buf[at - 1] = _DIGITS[c + 1]
+    else:
+        buf[at - 1] = 48 + int(v)
+
+
+@_inline
 def _decimal_length(v) -> int:
-    # Decimal digits of v (1 ≤ v < 10¹⁷)
+    # Decimal digits of v (1 ≤ v < 10¹⁷): most shortest forms have 15–17, tested first
+    if v >= np.uint64(10_000_000_000_000_000):
+        return 17
+    if v >= np.uint64(1_000_000_000_000_000):
+        return 16
+    if v >= np.uint64(100_000_000_000_000):
+        return 15
     n = 1
     p = np.uint64(10)
-    while n < 17 and v >= p:
+    while v >= p:
         p *= np.uint64(10)
         n += 1
     return n
@@ -310,9 +323,17 @@ def format_track_rows(times, target, label_cells, text, text_start, x, P, state_
     rows = x.shape[0]
     m = rows // times.shape[0]
     zero = np.uint64(0)
+    t_at, t_len = 0, 0
     for r in range(rows):
         b = r // m
-        pos = write_double(times[b], buf, pos)
+        if r % m == 0:  # a plot's first row: its time formatted, the other rows copy it
+            t_at = pos
+            pos = write_double(times[b], buf, pos)
+            t_len = pos - t_at
+        else:
+            for a in range(t_len):
+                buf[pos + a] = buf[t_at + a]
+            pos += t_len
         for c in range(2 if label_cells > 0 else 1):
             buf[pos] = 44
             pos += 1

@@ -37,6 +37,7 @@ from radarviz.core.tracking.association import AssociationOptions
 from radarviz.core.tracking.compiled import PlotBlock, RadarTable, TrackBlock
 from radarviz.core.tracking.stream import Plot, StreamOptions, plot_block, state_rows
 from radarviz.core.tracking.targets import TargetTracker
+from radarviz.viz_app.io.arrow_numpy import from_numpy, strings, to_numpy
 from radarviz.viz_app.io.plots import (
     _COMPONENTS,
     _PAIRS,
@@ -57,12 +58,16 @@ from radarviz.viz_app.io.plots import (
     verify_track_parquet,
 )
 
-#: Bytes of the measurement file read and tracked at a time (≈ 2 500 plots of ~50 bytes: the
-#: block, its tracks and their text are most of the command's memory above its libraries).
-BLOCK_BYTES = 1 << 17
+#: Bytes of the measurement file read and tracked at a time (≈ 5 000 plots of ~50 bytes: the
+#: block, its tracks and their text are most of the command's memory above its libraries;
+#: 128 KB blocks spent 40% more on reading, in the per-block calls; 512 KB added 50 MB).
+BLOCK_BYTES = 1 << 18
 #: Most threads that format the track file's numbers (the formatting is most of the time of
 #: ``radarviz track``).
 WRITE_THREADS = 4
+#: Blocks formatted or being written at a time, while the next is tracked (two: one block's
+#: text goes to the disk while the next is formatted).
+IN_FLIGHT = 2
 _NUMERIC = ("time_s", "range_m", "azimuth_deg", "elevation_deg", "radial_velocity_mps")
 
 
@@ -111,6 +116,7 @@ class PlotBlockReader:
             ) from None
         self.reader = PlotReader([text] if text else [], source, radars)
         self.names = list(radars)
+        self._names = strings(self.names)
         self.table = radar_table(radars)
         self._has_el = np.array([r.sigma_elevation_deg is not None for r in radars.values()])
         self._has_vr = np.array([r.sigma_radial_velocity_mps is not None for r in radars.values()])
@@ -210,7 +216,7 @@ class PlotBlockReader:
             c = table.column(name)
             if c.null_count:
                 return None
-            return c.to_numpy()
+            return to_numpy(c)
 
         t, r, az = col("time_s"), col("range_m"), col("azimuth_deg")
         if t is None or r is None or az is None:
@@ -219,10 +225,10 @@ class PlotBlockReader:
         if not (ok and (np.abs(az) <= 360).all()):
             return None  # NaN fails these too
         names = pc.utf8_trim_whitespace(table.column("radar"))
-        radar = pc.index_in(names, value_set=pa.array(self.names, pa.string()))
+        radar = pc.index_in(names, value_set=self._names)
         if radar.null_count:
             return None
-        radar_i = radar.to_numpy().astype(np.intp)
+        radar_i = to_numpy(radar).astype(np.intp)
         el = None
         if self.reader.three_d:
             el = col("elevation_deg")
@@ -231,7 +237,7 @@ class PlotBlockReader:
             el = np.radians(el)
         vr = None
         if self.reader.doppler:
-            vr = table.column("radial_velocity_mps").to_numpy(zero_copy_only=False)
+            vr = to_numpy(table.column("radial_velocity_mps"))
             given = ~np.isnan(vr) if table.column("radial_velocity_mps").null_count else None
             v = vr if given is None else vr[given]
             if np.isnan(v).any() or not (np.abs(v) <= MAX_RADIAL_VELOCITY_MPS).all():
@@ -246,7 +252,7 @@ class PlotBlockReader:
             labels = tuple(enc.dictionary.to_pylist())
             if "" in labels:
                 return None
-            target = enc.indices.to_numpy().astype(np.intp)
+            target = to_numpy(enc.indices).astype(np.intp)
         if not self._in_order(t, target, labels):
             return None
         return LinedBlock(
@@ -327,16 +333,21 @@ class BlockWriter:
 
         from radarviz.core.experiments.prosov import available_cores
 
-        # One single-thread pool per slice: slice i always goes to pool i (order kept).
+        # One single-thread pool per slice: slice i always goes to pool i; one more thread
+        # writes the slices' text in order, so the tracker never waits for the disk.
         n = 1 if parquet else max(1, min(WRITE_THREADS, available_cores()))
         self._workers = [ThreadPoolExecutor(1) for _ in range(n)]
-        self._pending: list[Future[bytes]] = []
+        self._output = ThreadPoolExecutor(1)
+        # The written blocks' futures, oldest first: at most IN_FLIGHT blocks are formatted
+        # or written at a time (the memory bound), each with its own set of buffers.
+        self._pending: list[list[Future[None]]] = []
         self._methods = [_quoted(m) for m in methods]
-        self._buffers = [np.empty(0, dtype=np.uint8) for _ in self._workers]
+        self._buffers = [
+            [np.empty(0, dtype=np.uint8) for _ in self._workers] for _ in range(IN_FLIGHT)
+        ]
+        self._blocks = 0
         if parquet:
-            import pyarrow as pa
-
-            self._method_names = pa.array(methods, pa.string())
+            self._method_names = strings(methods)
 
     def add(self, block: PlotBlock, tracks: TrackBlock) -> None:
         """One block's plots and every method's posterior after each (B, M, n)."""
@@ -348,14 +359,13 @@ class BlockWriter:
         state_of, cov_of = _column_index(n)
         times = np.ascontiguousarray(block.time_s, dtype=np.float64)
         if self._parquet is not None:
-            self._drain()
+            self._drain(1)
             self.rows += rows
             target = block.target if self.targets else None
-            self._pending = [
-                self._workers[0].submit(
-                    self._write_table, times, target, block.labels, x, P, state_of, cov_of
-                )
-            ]
+            job = self._workers[0].submit(
+                self._write_table, times, target, block.labels, x, P, state_of, cov_of
+            )
+            self._pending.append([job])
             return
         # The text cells: the block's labels, then the methods, each quoted once.
         cells = ([_quoted(t) for t in block.labels] if self.targets else []) + self._methods
@@ -365,15 +375,18 @@ class BlockWriter:
         label_cells = len(cells) - m
         target = block.target.astype(np.int64) if self.targets else np.zeros(b, np.int64)
         widest = max(len(c) for c in cells)
-        self._drain()
+        self._drain(IN_FLIGHT)
         if self.rows == 0:
             self.fh.write(b",".join(_quoted(c) for c in self.columns) + b"\n")
         self.rows += rows
+        buffers = self._buffers[self._blocks % IN_FLIGHT]
+        self._blocks += 1
         k = len(self._workers)
         step = -(-b // k)  # plots per slice (a plot's rows share its time)
-        self._pending = [
+        jobs = [
             pool.submit(
                 self._format,
+                buffers,
                 i,
                 times[i * step : (i + 1) * step],
                 target[i * step : (i + 1) * step],
@@ -389,9 +402,16 @@ class BlockWriter:
             for i, pool in enumerate(self._workers)
             if i * step < b
         ]
+        self._pending.append([self._output.submit(self._write, job) for job in jobs])
+
+    def _write(self, job: Future[memoryview]) -> None:
+        """The output thread: a slice's text, once formatted, to the file (in submission
+        order: one thread)."""
+        self.fh.write(job.result())
 
     def _format(
         self,
+        buffers: list[NDArray[np.uint8]],
         slot: int,
         times: NDArray,
         target: NDArray,
@@ -405,15 +425,15 @@ class BlockWriter:
         widest: int,
     ) -> memoryview:
         """Rows as CSV bytes by ``csv_text.format_track_rows`` (thread ``slot`` of the pool),
-        into that thread's buffer (reused: a block's text is written before the next block
-        is formatted)."""
+        into that thread's buffer of the block's set ``buffers`` (reused: a set's text is
+        written before the set is taken again, ``IN_FLIGHT`` blocks later)."""
         from radarviz.viz_app.io.csv_text import format_track_rows
 
         n_cols = 1 + 1 + (label_cells > 0) + state_of.size + cov_of.size
         need = (n_cols * (_FLOAT_BYTES + 1) + 2 * widest + 1) * x.shape[0] + 64
-        buf = self._buffers[slot]
+        buf = buffers[slot]
         if buf.size < need:
-            buf = self._buffers[slot] = np.empty(need + need // 4, dtype=np.uint8)
+            buf = buffers[slot] = np.empty(need + need // 4, dtype=np.uint8)
         size = format_track_rows(
             times.view(np.uint64),
             target,
@@ -449,22 +469,24 @@ class BlockWriter:
         columns = np.empty((state_of.size + cov_of.size, rows))
         track_columns_into(x, P, state_of, cov_of, columns)
         methods = pa.DictionaryArray.from_arrays(
-            np.tile(np.arange(m, dtype=np.int32), b), self._method_names
+            from_numpy(np.tile(np.arange(m, dtype=np.int32), b)), self._method_names
         )
         text = [methods.cast(pa.string())]
         if target is not None:
             cells = pa.DictionaryArray.from_arrays(
-                np.repeat(target.astype(np.int32), m), pa.array(labels, pa.string())
+                from_numpy(np.repeat(target.astype(np.int32), m)), strings(labels)
             )
             text.insert(0, cells.cast(pa.string()))
-        arrays = [pa.array(np.repeat(times, m)), *text, *(pa.array(c) for c in columns)]
+        arrays = [from_numpy(np.repeat(times, m)), *text, *(from_numpy(c) for c in columns)]
         self._parquet.write_table(pa.Table.from_arrays(arrays, schema=self._parquet.schema))
         return b""
 
-    def _drain(self) -> None:
-        for job in self._pending:
-            self.fh.write(job.result())
-        self._pending = []
+    def _drain(self, keep: int = 0) -> None:
+        """Wait until fewer than ``keep`` blocks are in flight (0: none); a failed format or
+        write raises here."""
+        while len(self._pending) >= max(keep, 1):
+            for job in self._pending.pop(0):
+                job.result()
 
     def _check(self, block: PlotBlock, tracks: TrackBlock, x: NDArray, P: NDArray) -> None:
         """``check_track_rows`` on the whole block at once (every entry finite, variances
@@ -484,7 +506,7 @@ class BlockWriter:
         try:
             self._drain()
         finally:
-            for pool in self._workers:
+            for pool in (*self._workers, self._output):
                 pool.shutdown(wait=True, cancel_futures=True)
         if self._parquet is not None:
             self._parquet.close()
@@ -493,7 +515,7 @@ class BlockWriter:
         """After an error (the staged file is then removed): stop the threads and release a
         Parquet writer without reporting what fails meanwhile (the first error is the one
         that matters)."""
-        for pool in self._workers:
+        for pool in (*self._workers, self._output):
             pool.shutdown(wait=True, cancel_futures=True)
         if self._parquet is not None:
             with contextlib.suppress(Exception):
@@ -506,8 +528,8 @@ class BlockWriter:
             verify_track_parquet(path, self.columns, self.rows)
 
 
-#: Most bytes of one formatted float ("-1.2345678901234567e-308").
-_FLOAT_BYTES = 24
+#: Most bytes of one formatted float ("-0.0000012345678901234567"; a scientific one has 24).
+_FLOAT_BYTES = 25
 
 
 @functools.lru_cache(maxsize=8)
