@@ -23,6 +23,11 @@ if __name__ != "radarviz":
     # a second time as a separate copy (two Tracks classes, patches that miss the CLI's calls).
     raise ImportError(f"{__name__} is the top-level package: import radarviz instead")
 
+# First, before any kernel module: numba picks a function's cache locator when it is decorated
+# (viz_app/numba_cache.py; importing it installs the locators).
+from radarviz.viz_app.numba_cache import INSTALLED as _NUMBA_CACHE  # noqa: F401
+
+# isort: split
 from radarviz.core.params import ParameterError
 from radarviz.core.tracking.association import AssociationOptions
 from radarviz.core.tracking.stream import Plot
