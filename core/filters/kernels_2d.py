@@ -441,14 +441,14 @@ def terms_s(xt, p, t, c: float, s: float):
 # (the scalar forms above need none).
 
 
-@_jit
+@_inline
 def start(x, P, zx: float, zy: float, r00: float, r01: float, r11: float, v0: float):
     # cv_init: position z with covariance R, velocity 0 with variance σv0²
     xt, p = start_s(zx, zy, r00, r01, r11, v0)
     store(xt, p, x, P)
 
 
-@_jit
+@_inline
 def predict(x, P, T: float, q: float):
     # cv_predict: x⁻ = F x, P⁻ = F P Fᵀ + Q
     xt, p = load(x, P)
@@ -456,7 +456,7 @@ def predict(x, P, T: float, q: float):
     store(xt, p, x, P)
 
 
-@_jit
+@_inline
 def position_update(x, P, nx: float, ny: float, r00: float, r01: float, r11: float, K, V):
     # core.filters.position: the Joseph-form update by the innovation ν = (nx, ny), R
     xt, p = load(x, P)
@@ -464,7 +464,7 @@ def position_update(x, P, nx: float, ny: float, r00: float, r01: float, r11: flo
     store(xt, p, x, P)
 
 
-@_jit
+@_inline
 def ukf_update(x, P, r, b, vr, vb, sx, sy, prm, L, Z, K, E):
     # core.filters.polar_ukf with prm = (c, Wm0, Wc0, W) (``UKFParams.weights``)
     xt, p = load(x, P)
@@ -472,7 +472,7 @@ def ukf_update(x, P, r, b, vr, vb, sx, sy, prm, L, Z, K, E):
     store(xt, p, x, P)
 
 
-@_jit
+@_inline
 def doppler_update(x, P, vr_hat: float, b: float, var_vr: float, vb: float, K):
     # core.filters.doppler: the update by V̂r along the measured line of sight
     xt, p = load(x, P)

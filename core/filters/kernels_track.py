@@ -52,7 +52,7 @@ def position_nis(P, nx: float, ny: float, r00: float, r01: float, r11: float) ->
     return position_stats(P, nx, ny, r00, r01, r11)[0]
 
 
-@_jit
+@_inline
 def doppler_stats(x, P, vr_hat: float, b: float, var_vr: float, vb: float):
     # (ν² / S, log S) of the Doppler stage on the state it updates
     # (core.filters.doppler.doppler_terms, linear_innovation): ν = V̂r − û·v,
@@ -69,7 +69,7 @@ def doppler_stats(x, P, vr_hat: float, b: float, var_vr: float, vb: float):
     return nu * nu / S, log(S)
 
 
-@_jit
+@_inline
 def doppler_nis(x, P, vr_hat: float, b: float, var_vr: float, vb: float) -> float:
     # ν² / S of ``doppler_stats``
     return doppler_stats(x, P, vr_hat, b, var_vr, vb)[0]
