@@ -621,7 +621,8 @@ def test_bench_section_figures_are_consistent(capsys) -> None:
     measured by running the benchmark, never asserted here)."""
     import json
 
-    assert main(["bench", "--only", "asterix", "--asterix-plots", "300", "--json"]) == 0
+    argv = ["bench", "--only", "asterix", "--asterix-plots", "300", "--asterix-targets", "7"]
+    assert main([*argv, "--json"]) == 0
     doc = json.loads(capsys.readouterr().out)["asterix"]
     assert doc["plots"] == 300 and doc["repeats"] == 3
     assert doc["asterix_over_csv"] == pytest.approx(
@@ -629,8 +630,16 @@ def test_bench_section_figures_are_consistent(capsys) -> None:
     )
     assert doc["bytes_per_plot"]["asterix"] * 300 == pytest.approx(doc["file_kib"] * 1024)
     assert 0 < doc["read_peak_kib"]
-    assert main(["bench", "--only", "asterix", "--asterix-plots", "300"]) == 0
-    assert capsys.readouterr().out.startswith("ASTERIX CAT048 reading, 300 fusion plots")
+    track = doc["track"]
+    # The air-traffic file: whole scans of two radars seeing all 7 targets (≥ 300 plots).
+    assert track["targets"] == 7 and track["plots"] == 7 * 2 * -(-300 // 14)
+    rate = {k: track[k]["plots_per_s"] for k in ("block", "row", "decoder")}
+    assert track["block_over_row"] == pytest.approx(rate["block"] / rate["row"], rel=1e-12)
+    assert track["block_over_decoder"] == pytest.approx(rate["block"] / rate["decoder"], rel=1e-12)
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    assert out.startswith("ASTERIX CAT048 reading, 300 fusion plots"), out
+    assert "ASTERIX track end to end, 308 plots of 7 targets" in out, out
 
 
 def test_simulate_writes_nothing_for_a_nan(tmp_path: Path) -> None:
