@@ -633,7 +633,8 @@ def test_bench_section_figures_are_consistent(capsys) -> None:
     track = doc["track"]
     # The air-traffic file: whole scans of two radars seeing all 7 targets (≥ 300 plots).
     assert track["targets"] == 7 and track["plots"] == 7 * 2 * -(-300 // 14)
-    rate = {k: track[k]["plots_per_s"] for k in ("block", "row", "decoder")}
+    rate = {k: track[k]["plots_per_s"] for k in ("block", "row", "decoder", "csv")}
+    assert track["block_over_csv"] == pytest.approx(rate["block"] / rate["csv"], rel=1e-12)
     assert track["block_over_row"] == pytest.approx(rate["block"] / rate["row"], rel=1e-12)
     assert track["block_over_decoder"] == pytest.approx(rate["block"] / rate["decoder"], rel=1e-12)
     assert main(argv) == 0

@@ -27,8 +27,11 @@ file's formatting threads count):
 * ``row``: ``viz_app.io.plots.run_track``, the row path (a ``Plot`` at a time), which the
   command took for ASTERIX before and still takes for a recording or the association;
 * ``decoder``: pyobelix alone on the file's bytes, the floor of both;
-* ``block_over_row`` (the same-run speed-up) and ``block_over_decoder`` (the end-to-end
-  rate over decoding alone: 1 would be a route limited by the decoder alone), wall time.
+* ``csv``: the same plots from the scene's CSV (full precision, not the items' rounding)
+  through the block path, the tracking and writing without ASTERIX;
+* ``block_over_row`` (the same-run speed-up), ``block_over_decoder`` (the end-to-end rate
+  over decoding alone: 1 would be a route limited by the decoder alone) and
+  ``block_over_csv``, wall time.
 """
 
 from __future__ import annotations
@@ -137,7 +140,7 @@ def bench_asterix_track(plots: int, repeats: int, targets: int) -> dict[str, Any
         del sim  # not held while timing (the collector would walk its objects)
         data = Path(ast).read_bytes()
         routes = {"block": plot_blocks.run_track, "row": plots_io.run_track}
-        best = {k: (math.inf, math.inf) for k in ("decoder", *routes)}
+        best = {k: (math.inf, math.inf) for k in ("decoder", *routes, "csv")}
         outputs = {}
         for _ in range(repeats):
             for what in best:
@@ -145,13 +148,16 @@ def bench_asterix_track(plots: int, repeats: int, targets: int) -> dict[str, Any
                 wall, cpu = time.perf_counter(), time.process_time()
                 if what == "decoder":
                     got = sum(1 for _ in pyobelix.iter_records(data))
+                elif what == "csv":
+                    csv_toml = str(d / "r_csv.toml")
+                    got = plot_blocks.run_track(str(csv_path), csv_toml, out, None, options).plots
                 else:
                     run = routes[what](ast, toml, out, None, options, open_source=asterix_source)
                     got = run.plots
                 wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
                 best[what] = (min(best[what][0], wall), min(best[what][1], cpu))
                 assert got == n, (what, got)
-                if what != "decoder":
+                if what in routes:
                     outputs[what] = os.path.getsize(out)
         # The routes' track files, the same bytes (``tests/test_asterix.py``): the same size.
         assert outputs["block"] == outputs["row"], outputs
@@ -160,6 +166,7 @@ def bench_asterix_track(plots: int, repeats: int, targets: int) -> dict[str, Any
         figures[what] = {"plots_per_s": n / wall, "plots_per_cpu_s": n / cpu}
     figures["block_over_row"] = best["row"][0] / best["block"][0]
     figures["block_over_decoder"] = best["decoder"][0] / best["block"][0]
+    figures["block_over_csv"] = best["csv"][0] / best["block"][0]
     return figures
 
 
@@ -174,7 +181,8 @@ def format_asterix(doc: dict[str, Any]) -> str:
         f"CPU-s), row path {t['row']['plots_per_s']:.0f} plots/s "
         f"({t['row']['plots_per_cpu_s']:.0f} per CPU-s): block/row {t['block_over_row']:.2f}×; "
         f"decoder alone {t['decoder']['plots_per_s']:.0f} plots/s, block/decoder "
-        f"{t['block_over_decoder']:.2f}× (same run)"
+        f"{t['block_over_decoder']:.2f}×; the CSV of the plots {t['csv']['plots_per_s']:.0f} "
+        f"plots/s, block/CSV {t['block_over_csv']:.2f}× (same run)"
     )
     return (
         f"ASTERIX CAT048 reading, {doc['plots']} fusion plots (3D, Doppler), best of "

@@ -49,6 +49,13 @@ range (these by the block's offset and the record's index in it). The file is re
 ``READ_BYTES`` at a time, one data block (≤ 64 KiB) decoded at a time: memory does not grow
 with the file.
 
+**Two consumers, one reader.** ``AsterixReader`` yields (position, ``Plot``) for the row path
+(``viz_app.io.plots.run_track``: a recording, the association, a finite-memory start) and, by
+``blocks``, the same plots as the columns of a ``core.tracking.compiled.PlotBlock``,
+``BLOCK_PLOTS`` at a time, with each plot's position (``PlacedBlock``), for the compiled block
+path of ``viz_app.io.plot_blocks.run_track`` (``track`` otherwise). Both come from one pass of
+decoding and checks (``_checked``), so the two give the same plots and the same errors.
+
 ``write_asterix`` is ``simulate --format asterix``: each plot as a record with I048/010, /140,
 /040, /161 (for labelled plots), /110 (3D plots: the height ``height_from_elevation`` gives,
 the inverse of the reader's elevation) and /120 CAL (plots with Doppler), ``BLOCK_RECORDS``

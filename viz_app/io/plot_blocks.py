@@ -15,6 +15,12 @@ returns), is read again row by row by ``PlotReader.plots``, which raises the err
 the file, line and column (or, for a block only the fast parser refused, yields its plots).
 The row-by-row reader carries its state (the previous times) from block to block, so the
 two paths check one file as one.
+
+An ASTERIX CAT048 file takes the same path from its reader's blocks
+(``viz_app.io.asterix.AsterixReader.blocks``: decoded and checked record by record, handed
+over as columns); ``track_blocks`` reads either through ``BlockSource``, and names a plot
+the tracker refuses by the source's own words (a CSV's line, ASTERIX's byte offset and
+record).
 """
 
 from __future__ import annotations
