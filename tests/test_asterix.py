@@ -76,8 +76,38 @@ def radars() -> dict[str, Radar]:
 
 
 def read(data: bytes, rad: dict[str, Radar] | None = None) -> tuple[ax.AsterixReader, list]:
-    reader = ax.AsterixReader(io.BytesIO(data), "f.ast", rad or radars())
-    return reader, [p for _, p in reader]
+    """The reader's plots; its blocks (the compiled path's columns) checked to be the same
+    plots at the same positions on the way."""
+    rad = rad or radars()
+    reader = ax.AsterixReader(io.BytesIO(data), "f.ast", rad)
+    placed = list(reader)
+    assert block_rows(ax.AsterixReader(io.BytesIO(data), "f.ast", rad), rad) == [
+        (pos, p.time_s, p.range_m, p.azimuth_rad, p.elevation_rad, p.radial_velocity_mps,
+         p.radar, p.target)
+        for pos, p in placed
+    ]  # fmt: skip
+    return reader, [p for _, p in placed]
+
+
+def block_rows(reader: ax.AsterixReader, rad: dict[str, Radar]) -> list[tuple]:
+    """``reader.blocks()`` as one row per plot: (position, t, r, β, ε or None, Vr or None,
+    radar name, target label), the radar's noise checked against the radars file."""
+    from radarviz.viz_app.io.plot_blocks import radar_table
+
+    names, table, rows = list(rad), radar_table(rad), []
+    for blk, positions in reader.blocks():
+        assert all(np.array_equal(a, b) for a, b in zip(blk.radars, table, strict=True))
+        assert positions.shape == (blk.size,) and len(set(blk.labels)) == len(blk.labels)
+        for i in range(blk.size):
+            el = None if blk.elevation_rad is None else float(blk.elevation_rad[i])
+            vr = blk.radial_velocity_mps
+            v = None if vr is None or np.isnan(vr[i]) else float(vr[i])
+            rows.append(
+                (int(positions[i]), float(blk.time_s[i]), float(blk.range_m[i]),
+                 float(blk.azimuth_rad[i]), el, v, names[blk.radar[i]],
+                 blk.labels[blk.target[i]])
+            )  # fmt: skip
+    return rows
 
 
 def block(*records: dict) -> bytes:
@@ -271,6 +301,100 @@ def test_labelled_plots_round_trip_with_their_track_numbers(tmp_path: Path) -> N
     assert {row["target"] for row in csv.DictReader(io.StringIO(a.decode()))} == {"7", "1"}
 
 
+def many_targets(preset: str, n: int, steps: int) -> tuple[list[Plot], list[Radar]]:
+    """``n`` runs of a preset (seeds 1…n) as ``n`` labelled targets, in time order (run k
+    shifted by k/n of a second); with Doppler, every 7th plot without it."""
+    plots, radar_list = [], []
+    for k in range(n):
+        run, radar_list = simulated_plots(preset, k + 1, 1.0, steps)
+        plots += [replace(p, target=f"{k + 1}", time_s=p.time_s + k / n) for p in run]
+    plots.sort(key=lambda p: p.time_s)
+    return [
+        replace(p, radial_velocity_mps=None) if p.radial_velocity_mps is not None and i % 7 == 3
+        else p
+        for i, p in enumerate(plots)
+    ], radar_list  # fmt: skip
+
+
+SCENES = {
+    "one target, 2D": lambda: simulated_plots("prosov", 2, 1.0, 60),
+    "one target, 3D with Doppler": lambda: simulated_plots("fusion", 2, 1.0, 30),
+    "five targets, 2D": lambda: many_targets("prosov", 5, 60),
+    "four targets, 3D with Doppler": lambda: many_targets("fusion", 4, 25),
+}
+
+
+@pytest.mark.parametrize("scene", sorted(SCENES))
+def test_the_block_route_writes_the_row_routes_track_file(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, scene: str
+) -> None:
+    """``track`` of an ASTERIX file through the compiled block path (``plot_blocks.run_track``)
+    gives the track file of the row path (``plots.run_track``, a ``Plot`` at a time on the
+    numpy engine), byte for byte; blocks of 37 plots, so blocks cut the data blocks and the
+    targets' runs."""
+    from radarviz.viz_app.io import plot_blocks
+    from radarviz.viz_app.io import plots as plots_io
+
+    plots, radar_list = SCENES[scene]()
+    ast, toml = tmp_path / "m.ast", tmp_path / "r.toml"
+    ax.write_asterix(str(ast), str(toml), plots, radar_list)
+    three_d = plots[0].elevation_rad is not None
+    methods = ("ucm", "ekf") if three_d else ("naive", "ucm", "ukf")
+    rows, blocks = tmp_path / "rows.csv", tmp_path / "blocks.csv"
+    row = plots_io.run_track(str(ast), str(toml), str(rows), methods, open_source=ax.asterix_source)
+
+    def not_here(*args: object, **kwargs: object) -> None:
+        raise AssertionError("the row path")
+
+    monkeypatch.setattr(ax, "BLOCK_PLOTS", 37)
+    monkeypatch.setattr(plots_io, "run_track", not_here)
+    monkeypatch.setattr(ax.AsterixReader, "__iter__", not_here)
+    blk = plot_blocks.run_track(
+        str(ast), str(toml), str(blocks), methods, open_source=ax.asterix_source
+    )
+    assert blocks.read_bytes() == rows.read_bytes()
+    assert len(rows.read_bytes().splitlines()) == 1 + len(plots) * len(methods)
+    assert (blk.plots, blk.rows, blk.three_d, blk.methods) == (
+        row.plots, row.rows, row.three_d, row.methods
+    )  # fmt: skip
+    assert blk.targets == row.targets and len(blk.targets) == (
+        0 if "one" in scene else len(set(p.target for p in plots))
+    )
+
+
+def test_the_trackers_error_names_the_plots_byte_and_record(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A plot the compiled tracker refuses (here a time made to go back on the way in, past
+    the reader's check) is named by its data block's byte offset and its record."""
+    from radarviz.core.tracking.compiled import PlotBlock, TrackBlock
+    from radarviz.core.tracking.targets import TargetTracker
+
+    data = b"".join(block(*(rec(128 * (8 * j + k + 1)) for k in range(8))) for j in range(3))
+    (tmp_path / "m.ast").write_bytes(data)
+    (tmp_path / "r.toml").write_text(RADARS)
+    add_arrays, calls = TargetTracker.add_arrays, []
+
+    def back_in_time(self: TargetTracker, blk: PlotBlock) -> TrackBlock:
+        calls.append(blk.size)
+        if len(calls) == 2:  # plot 10 of the file: the second data block's record 2
+            t = blk.time_s.copy()
+            t[4] = t[3] - 1.0
+            blk = blk._replace(time_s=t)
+        return add_arrays(self, blk)
+
+    monkeypatch.setattr(ax, "BLOCK_PLOTS", 5)
+    monkeypatch.setattr(TargetTracker, "add_arrays", back_in_time)
+    argv = ["track", "--input", str(tmp_path / "m.ast"), "--radars", str(tmp_path / "r.toml")]
+    capsys.readouterr()
+    assert main([*argv, "--out", str(tmp_path / "t.csv"), "--method", "ucm"]) == 2
+    out, err = capsys.readouterr()
+    where = f"m.ast byte {len(data) // 3}, record 2, item I048/140: "
+    assert out == "" and err.count("\n") == 1 and where in err, err
+    assert "times must not decrease within a target (got 8.0 after 9.0)" in err, err
+    assert calls == [5, 5] and sorted(p.name for p in tmp_path.iterdir()) == ["m.ast", "r.toml"]
+
+
 # --------------------------------------------------------------------------------------------
 # Midnight, heights, Doppler
 # --------------------------------------------------------------------------------------------
@@ -331,6 +455,7 @@ def test_other_categories_are_skipped_and_blocks_span_reads(monkeypatch) -> None
     data = north_marker + block(*(rec(128 * k, 2560 + k) for k in range(1, 40))) + north_marker
     _, whole = read(data)
     monkeypatch.setattr(ax, "READ_BYTES", 7)  # blocks cut across many reads
+    monkeypatch.setattr(ax, "BLOCK_PLOTS", 5)  # and the compiled path's blocks in pieces
     _, pieces = read(data)
     assert pieces == whole and len(whole) == 39
 
@@ -406,6 +531,14 @@ def test_bad_files_exit_2_one_line_nothing_written(
     assert status == 2 and out == ""
     assert err.count("\n") == 1 and err.startswith("radarviz: error: "), err
     assert expected in err, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["m.ast", "r.toml"]
+    # The row path (a recording's, the association's) says the same.
+    from radarviz.viz_app.io.plots import run_track
+
+    with pytest.raises(ParameterError) as info:
+        args = (str(tmp_path / "m.ast"), str(tmp_path / "r.toml"), str(out_path), ("ucm",))
+        run_track(*args, open_source=ax.asterix_source)
+    assert err == f"radarviz: error: {info.value}\n"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["m.ast", "r.toml"]
 
 
@@ -488,7 +621,8 @@ def test_bench_section_figures_are_consistent(capsys) -> None:
     measured by running the benchmark, never asserted here)."""
     import json
 
-    assert main(["bench", "--only", "asterix", "--asterix-plots", "300", "--json"]) == 0
+    argv = ["bench", "--only", "asterix", "--asterix-plots", "300", "--asterix-targets", "7"]
+    assert main([*argv, "--json"]) == 0
     doc = json.loads(capsys.readouterr().out)["asterix"]
     assert doc["plots"] == 300 and doc["repeats"] == 3
     assert doc["asterix_over_csv"] == pytest.approx(
@@ -496,8 +630,17 @@ def test_bench_section_figures_are_consistent(capsys) -> None:
     )
     assert doc["bytes_per_plot"]["asterix"] * 300 == pytest.approx(doc["file_kib"] * 1024)
     assert 0 < doc["read_peak_kib"]
-    assert main(["bench", "--only", "asterix", "--asterix-plots", "300"]) == 0
-    assert capsys.readouterr().out.startswith("ASTERIX CAT048 reading, 300 fusion plots")
+    track = doc["track"]
+    # The air-traffic file: whole scans of two radars seeing all 7 targets (≥ 300 plots).
+    assert track["targets"] == 7 and track["plots"] == 7 * 2 * -(-300 // 14)
+    rate = {k: track[k]["plots_per_s"] for k in ("block", "row", "decoder", "csv")}
+    assert track["block_over_csv"] == pytest.approx(rate["block"] / rate["csv"], rel=1e-12)
+    assert track["block_over_row"] == pytest.approx(rate["block"] / rate["row"], rel=1e-12)
+    assert track["block_over_decoder"] == pytest.approx(rate["block"] / rate["decoder"], rel=1e-12)
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    assert out.startswith("ASTERIX CAT048 reading, 300 fusion plots"), out
+    assert "ASTERIX track end to end, 308 plots of 7 targets" in out, out
 
 
 def test_simulate_writes_nothing_for_a_nan(tmp_path: Path) -> None:

@@ -57,8 +57,9 @@ Figures (ns per track-step = wall time / (runs × scans), one core):
 * ``association``: unlabelled plots associated (``core.tracking.association``) against the
   same plots with their labels, ``viz_app.bench.association``.
 * ``asterix``: reading an ASTERIX CAT048 file of the fusion plots against reading the same
-  plots from CSV, plots per second and their same-run ratio (``viz_app.bench.asterix``; alone:
-  ``radarviz bench --only asterix``).
+  plots from CSV, plots per second and their same-run ratio, and ``track`` of an ASTERIX file
+  of many targets end to end, the compiled block path against the row path and the decoder
+  alone (``viz_app.bench.asterix``; alone: ``radarviz bench --only asterix``).
 * ``peak_rss_mb``: peak resident memory of the process.
 """
 
@@ -518,6 +519,7 @@ def run_bench(
     filterpy_runs: int = 200,
     targets: int = 1000,
     asterix_plots: int = 20_000,
+    asterix_targets: int = 200,
     track_plots: int = 1_000_000,
 ) -> dict[str, Any]:
     """All figures of ``radarviz bench`` as a JSON-ready dict."""
@@ -558,7 +560,7 @@ def run_bench(
         "imm": bench_imm(runs[0], filterpy_runs, config),
         "targets": bench_targets(targets, config, fp, track_plots=track_plots),
         "association": bench_association(targets),
-        "asterix": bench_asterix(asterix_plots),
+        "asterix": bench_asterix(asterix_plots, targets=asterix_targets),
         "peak_rss_mb": peak_rss_mb(),
     }
 

@@ -242,13 +242,20 @@ def build_parser() -> argparse.ArgumentParser:
         "--asterix-plots",
         type=integer,
         default=20_000,
-        help="plots of the ASTERIX reading figure (default 20000)",
+        help="plots of the ASTERIX reading and track figures (default 20000)",
+    )
+    bench.add_argument(
+        "--asterix-targets",
+        type=integer,
+        default=200,
+        help="targets of the ASTERIX track figure (default 200; I048/161 holds up to 4095)",
     )
     bench.add_argument(
         "--only",
         choices=("asterix",),
         default=None,
-        help="run one section: asterix (ASTERIX CAT048 reading vs CSV); default all",
+        help="run one section: asterix (ASTERIX CAT048 reading vs CSV, track end to end); "
+        "default all",
     )
     bench.add_argument(
         "--track-plots",
@@ -482,10 +489,11 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     check_int("--filterpy-runs", args.filterpy_runs, low=1, high=100_000)
     check_int("--targets", args.targets, low=1, high=100_000)
     check_int("--asterix-plots", args.asterix_plots, low=100, high=10_000_000)
+    check_int("--asterix-targets", args.asterix_targets, low=1, high=4095)
     if args.only == "asterix":
         from radarviz.viz_app.bench.asterix import bench_asterix, format_asterix
 
-        doc = {"asterix": bench_asterix(args.asterix_plots)}
+        doc = {"asterix": bench_asterix(args.asterix_plots, targets=args.asterix_targets)}
         check_finite_document("bench", doc, nonnegative=True)
         print_report(doc, args.json, lambda d: format_asterix(d["asterix"]))
         return 0
@@ -509,6 +517,7 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         filterpy_runs=args.filterpy_runs,
         targets=args.targets,
         asterix_plots=args.asterix_plots,
+        asterix_targets=args.asterix_targets,
         track_plots=args.track_plots,
     )
     check_finite_document("bench", doc, nonnegative=True)  # times, rates and ratios

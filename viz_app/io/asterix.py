@@ -49,6 +49,13 @@ range (these by the block's offset and the record's index in it). The file is re
 ``READ_BYTES`` at a time, one data block (≤ 64 KiB) decoded at a time: memory does not grow
 with the file.
 
+**Two consumers, one reader.** ``AsterixReader`` yields (position, ``Plot``) for the row path
+(``viz_app.io.plots.run_track``: a recording, the association, a finite-memory start) and, by
+``blocks``, the same plots as the columns of a ``core.tracking.compiled.PlotBlock``,
+``BLOCK_PLOTS`` at a time, with each plot's position (``PlacedBlock``), for the compiled block
+path of ``viz_app.io.plot_blocks.run_track`` (``track`` otherwise). Both come from one pass of
+decoding and checks (``_checked``), so the two give the same plots and the same errors.
+
 ``write_asterix`` is ``simulate --format asterix``: each plot as a record with I048/010, /140,
 /040, /161 (for labelled plots), /110 (3D plots: the height ``height_from_elevation`` gives,
 the inverse of the reader's elevation) and /120 CAL (plots with Doppler), ``BLOCK_RECORDS``
@@ -61,9 +68,13 @@ from __future__ import annotations
 import itertools
 import math
 from collections.abc import Iterable, Iterator
-from typing import IO, Any
+from typing import IO, Any, NamedTuple
+
+import numpy as np
+from numpy.typing import NDArray
 
 from radarviz.core.params import ParameterError
+from radarviz.core.tracking.compiled import PlotBlock, RadarTable
 from radarviz.core.tracking.stream import Plot
 from radarviz.viz_app.io.atomic import commit_together
 from radarviz.viz_app.io.plots import (
@@ -102,6 +113,8 @@ MAX_CAL_LSB = 2**9 - 1
 BLOCK_RECORDS = 128
 #: Bytes read from the file at a time.
 READ_BYTES = 1 << 18
+#: Plots of one ``PlacedBlock`` (``AsterixReader.blocks``: a block is tracked at a time).
+BLOCK_PLOTS = 4096
 #: The input columns' items (the tracker's errors name a column).
 ITEM_OF_COLUMN = {
     "time_s": "I048/140",
@@ -230,13 +243,36 @@ def data_blocks(fh: IO[bytes], source: str) -> Iterator[tuple[int, int, bytes]]:
         )
 
 
+class _Source(NamedTuple):
+    """A data source's radar and what its plots take from it, computed once: the radar's
+    ``index`` in the radars file, σr (m), σβ and σε (rad, 0 without), the site (m), σVr
+    (m/s, 0 without)."""
+
+    radar: Radar
+    index: int
+    sigma_r: float
+    sigma_az: float
+    site: tuple[float, float, float]
+    sigma_el: float
+    sigma_vr: float
+
+
+class PlacedBlock(NamedTuple):
+    """A block of plots and each plot's position (data block byte offset × 2¹⁶ + record
+    index, ``AsterixReader.locate``'s), for the tracker's errors."""
+
+    plots: PlotBlock
+    positions: NDArray[np.int64]
+
+
 class AsterixReader:
     """Validated plots of an ASTERIX CAT048 file, one data block at a time (module docstring).
 
     The first CAT048 record is read on construction (``three_d``, ``targets`` tell the file's
     kind); iterating yields (position, ``Plot``), position = data block offset × 2¹⁶ + record
-    index, which ``locate`` names. Errors: ``ParameterError`` "SOURCE byte N, record K, item
-    I048/xxx: …".
+    index, which ``locate`` names; ``blocks`` yields the same plots as columns (the compiled
+    path of ``viz_app.io.plot_blocks.run_track``). Errors: ``ParameterError`` "SOURCE byte N,
+    record K, item I048/xxx: …".
     """
 
     def __init__(self, fh: IO[bytes], source: str, radars: dict[str, Radar]):
@@ -299,30 +335,37 @@ class AsterixReader:
             )
         return radar
 
-    def __iter__(self) -> Iterator[tuple[int, Plot]]:
+    def _checked(
+        self,
+    ) -> Iterator[tuple[int, float, float, float, float | None, float | None, _Source, str]]:
+        """Every record decoded and checked (the one home of the checks of the module
+        docstring): (position, time_s, range_m, azimuth_rad, elevation_rad or None,
+        radial_velocity_mps or None, the data source's ``_Source``, target label). ``__iter__``
+        makes plots of them, ``blocks`` columns."""
         three_d, labelled = self.three_d, self.targets
         last_t = -math.inf
         last_of: dict[str, float] = {}
         day_s = 0.0
         previous: float | None = None
         target = ""
-        # Per data source: (radar, σr, σβ rad, site, σε rad, σVr), computed once.
-        consts: dict[tuple[int, int], tuple[Radar, float, float, Any, float, float]] = {}
+        sources: dict[tuple[int, int], _Source] = {}  # per data source, computed once
+        index = {name: i for i, name in enumerate(self._radars)}
 
         radians = math.radians
         for position, rec in itertools.chain((self._first,), self._records):
-            c = consts.get((rec.get("sac"), rec.get("sic")))  # type: ignore[arg-type]
+            c = sources.get((rec.get("sac"), rec.get("sic")))  # type: ignore[arg-type]
             if c is None:
                 radar = self._radar(position, rec)
-                c = consts[rec["sac"], rec["sic"]] = (
+                c = sources[rec["sac"], rec["sic"]] = _Source(
                     radar,
+                    index[radar.name],
                     radar.sigma_range_m,
                     math.radians(radar.sigma_azimuth_deg),
                     (radar.x_m, radar.y_m, radar.z_m),
                     math.radians(radar.sigma_elevation_deg or 0.0),
                     radar.sigma_radial_velocity_mps or 0.0,
                 )
-            radar, sigma_r, sigma_az, site, sigma_el, sigma_vr = c
+            radar = c.radar
             if "time_of_day" not in rec:
                 raise self._bad(position, "I048/140", "missing (every plot needs a time)")
             if "rho" not in rec:
@@ -390,25 +433,68 @@ class AsterixReader:
                     )  # fmt: skip
                 el = radians(elevation_deg_of_sin(s))
             vr = None
-            if sigma_vr > 0 and rec.get("cal_valid"):
+            if c.sigma_vr > 0 and rec.get("cal_valid"):
                 vr = rec["cal_doppler_m_per_s"]
+            yield position, t, r, radians(beta_deg), el, vr, c, target
+
+    def __iter__(self) -> Iterator[tuple[int, Plot]]:
+        three_d = self.three_d
+        for position, t, r, az, el, vr, c, target in self._checked():
             yield (
                 position,
                 Plot(
                     t,
                     r,
-                    radians(beta_deg),
-                    sigma_r,
-                    sigma_az,
-                    site,
-                    radar.name,
+                    az,
+                    c.sigma_r,
+                    c.sigma_az,
+                    c.site,
+                    c.radar.name,
                     el,
-                    sigma_el if three_d else 0.0,
+                    c.sigma_el if three_d else 0.0,
                     vr,
-                    sigma_vr if vr is not None else 0.0,
+                    c.sigma_vr if vr is not None else 0.0,
                     target,
                 ),
             )
+
+    def blocks(self) -> Iterator[PlacedBlock]:
+        """The plots as ``PlacedBlock`` s of ``BLOCK_PLOTS`` (the last fewer): the columns of
+        ``core.tracking.compiled.PlotBlock`` (radars indexed into
+        ``viz_app.io.plot_blocks.radar_table`` of the radars file, in its order; NaN for a
+        plot without Doppler, None when no plot of the block has one) and each plot's
+        position, checked as ``__iter__``'s plots are (``_checked``)."""
+        from radarviz.viz_app.io.plot_blocks import radar_table
+
+        table = radar_table(self._radars)
+        rows: list[tuple] = []
+        for row in self._checked():
+            rows.append(row)
+            if len(rows) == BLOCK_PLOTS:
+                yield self._placed(rows, table)
+                rows = []
+        if rows:
+            yield self._placed(rows, table)
+
+    def _placed(self, rows: list[tuple], table: RadarTable) -> PlacedBlock:
+        """``_checked``'s rows as one ``PlacedBlock``."""
+        position, t, r, az, el, vr, c, target = zip(*rows, strict=True)
+        labels: dict[str, int] = {}
+        doppler = any(v is not None for v in vr)
+        block = PlotBlock(
+            np.array(t, dtype=np.float64),
+            np.array(r, dtype=np.float64),
+            np.array(az, dtype=np.float64),
+            np.array(el, dtype=np.float64) if self.three_d else None,
+            np.array([np.nan if v is None else v for v in vr], dtype=np.float64)
+            if doppler
+            else None,
+            np.array([s.index for s in c], dtype=np.intp),
+            table,
+            np.array([labels.setdefault(g, len(labels)) for g in target], dtype=np.intp),
+            tuple(labels),
+        )
+        return PlacedBlock(block, np.array(position, dtype=np.int64))
 
     def _bad(self, position: int, item: str, what: str) -> ParameterError:
         return ParameterError(f"{self.source} {self._where(position)}, item {item}: {what}")

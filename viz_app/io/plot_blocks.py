@@ -15,6 +15,12 @@ returns), is read again row by row by ``PlotReader.plots``, which raises the err
 the file, line and column (or, for a block only the fast parser refused, yields its plots).
 The row-by-row reader carries its state (the previous times) from block to block, so the
 two paths check one file as one.
+
+An ASTERIX CAT048 file takes the same path from its reader's blocks
+(``viz_app.io.asterix.AsterixReader.blocks``: decoded and checked record by record, handed
+over as columns); ``track_blocks`` reads either through ``BlockSource``, and names a plot
+the tracker refuses by the source's own words (a CSV's line, ASTERIX's byte offset and
+record).
 """
 
 from __future__ import annotations
@@ -27,7 +33,7 @@ import os
 from collections.abc import Callable, Iterator
 from concurrent.futures import Future
 from pathlib import Path
-from typing import IO, NamedTuple
+from typing import IO, NamedTuple, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -50,6 +56,7 @@ from radarviz.viz_app.io.plots import (
     Radar,
     SourceFactory,
     TrackSummary,
+    _csv_locate,
     check_track_rows,
     csv_source,
     is_parquet,
@@ -76,6 +83,26 @@ class LinedBlock(NamedTuple):
 
     plots: PlotBlock
     lines: NDArray[np.int64]
+
+
+class BlockSource(Protocol):
+    """What ``track_blocks`` reads: a measurement file's plots in blocks of columns, with what
+    its start told (``three_d``, ``targets``). ``PlotBlockReader`` (CSV) and
+    ``viz_app.io.asterix.AsterixReader`` (ASTERIX CAT048) are the two; ``blocks`` yields
+    (``PlotBlock``, each plot's position (B,)), the position being what ``locate`` turns into
+    words with an input column (a line number; a byte offset and record)."""
+
+    source: str
+
+    @property
+    def three_d(self) -> bool: ...
+
+    @property
+    def targets(self) -> bool: ...
+
+    def blocks(self) -> Iterator[tuple[PlotBlock, NDArray[np.int64]]]: ...
+
+    def locate(self, position: int, column: str) -> str: ...
 
 
 def radar_table(radars: dict[str, Radar]) -> RadarTable:
@@ -120,6 +147,24 @@ class PlotBlockReader:
         self.table = radar_table(radars)
         self._has_el = np.array([r.sigma_elevation_deg is not None for r in radars.values()])
         self._has_vr = np.array([r.sigma_radial_velocity_mps is not None for r in radars.values()])
+
+    @property
+    def three_d(self) -> bool:
+        """The header has ``elevation_deg`` (``PlotReader``'s)."""
+        return self.reader.three_d
+
+    @property
+    def targets(self) -> bool:
+        """The header has ``target``."""
+        return self.reader.targets
+
+    def locate(self, line: int, column: str) -> str:
+        """ "line L, column C" (``BlockSource``)."""
+        return _csv_locate(line, column)
+
+    def blocks(self) -> Iterator[LinedBlock]:
+        """``iter(self)``: the file's ``LinedBlock`` s."""
+        return iter(self)
 
     def __iter__(self) -> Iterator[LinedBlock]:
         line = 1  # lines before the block
@@ -546,34 +591,46 @@ def _column_index(n: int) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
 
 
 def track_blocks(
-    reader: PlotBlockReader,
+    reader: BlockSource,
     methods: tuple[str, ...],
     options: StreamOptions,
     on_block: Callable[[PlotBlock, TrackBlock], None],
 ) -> tuple[int, tuple[str, ...]]:
-    """Track every block of ``reader`` with a ``TargetTracker`` (a file without a target
-    column: one target labelled ""); ``on_block(plots, tracks)`` after each. Returns (plots,
-    targets). Tracker errors come back as "SOURCE line L, column C: …"."""
+    """Track every block of ``reader`` with a ``TargetTracker`` (a file without target
+    labels: one target labelled ""); ``on_block(plots, tracks)`` after each. Returns (plots,
+    targets). Tracker errors come back as "SOURCE " + ``reader.locate(position, column)`` +
+    ": …" of the plot they are about (a CSV's "line L, column C", ASTERIX's "byte N, record
+    K, item I048/xxx")."""
     from radarviz.core.tracking.stream import PlotError
 
     try:
-        tracker = TargetTracker(methods, reader.reader.three_d, options)
+        tracker = TargetTracker(methods, reader.three_d, options)
     except ParameterError as exc:  # errors about the options: the CLI names the flag
         if exc.parameter:
             raise
         raise ParameterError(f"--{exc}") from None
     plots = 0
-    for blk in reader:
+    for block, positions in reader.blocks():
         try:
-            tracks = tracker.add_arrays(blk.plots)
+            tracks = tracker.add_arrays(block)
         except PlotError as exc:
-            line = int(blk.lines[exc.index])
-            raise ParameterError(
-                f"{reader.source} line {line}, column {exc.column}: {exc}"
-            ) from None
-        on_block(blk.plots, tracks)
-        plots += blk.plots.size
-    return plots, tracker.targets if reader.reader.targets else ()
+            where = reader.locate(int(positions[exc.index]), exc.column)
+            raise ParameterError(f"{reader.source} {where}: {exc}") from None
+        on_block(block, tracks)
+        plots += block.size
+    return plots, tracker.targets if reader.targets else ()
+
+
+def block_source(
+    open_source: SourceFactory | None,
+) -> Callable[[IO[bytes], str, dict[str, Radar]], BlockSource] | None:
+    """The ``BlockSource`` of the input a ``SourceFactory`` reads plot by plot: CSV's
+    ``PlotBlockReader``, ASTERIX's ``AsterixReader``; None for another (the row path)."""
+    if open_source in (None, csv_source):
+        return PlotBlockReader
+    from radarviz.viz_app.io.asterix import AsterixReader, asterix_source
+
+    return AsterixReader if open_source is asterix_source else None
 
 
 def run_track(
@@ -586,10 +643,10 @@ def run_track(
     open_source: SourceFactory | None = None,
     association: AssociationOptions | None = None,
 ) -> TrackSummary:
-    """``radarviz track``: ``input_path`` tracked into ``out_path``. A CSV without a recording
-    (``observer``) or association, with the first-plot start and no finite-memory track, in
-    blocks of columns (this module; the tracks of ``viz_app.io.plots.run_track`` to rounding,
-    the same errors); otherwise (another ``open_source``, e.g. ASTERIX) by
+    """``radarviz track``: ``input_path`` tracked into ``out_path``. A CSV or ASTERIX file
+    (``open_source``: ``block_source``) without a recording (``observer``) or association,
+    with the first-plot start and no finite-memory track, in blocks of columns (this module;
+    the tracks of ``viz_app.io.plots.run_track`` to rounding, the same errors); otherwise by
     ``viz_app.io.plots.run_track``, a ``Plot`` at a time."""
     import time
     from contextlib import ExitStack
@@ -601,14 +658,15 @@ def run_track(
     from radarviz.viz_app.io.plots import run_track as run_track_rows
 
     options = options or StreamOptions()
+    open_blocks = block_source(open_source)
     rows_only = (
         observer is not None
         or options.init != "first-plot"
         or options.finite_memory_k
-        or open_source not in (None, csv_source)
+        or open_blocks is None
         or association is not None
     )
-    if rows_only:
+    if rows_only or open_blocks is None:  # (the type checker's narrowing)
         return run_track_rows(
             input_path, radars_path, out_path, methods, options, observer, open_source, association
         )
@@ -616,8 +674,8 @@ def run_track(
     start = time.perf_counter()
     with ExitStack() as stack:
         fh = stack.enter_context(_open_input(input_path))
-        reader = PlotBlockReader(fh, input_path, radars)
-        three_d = reader.reader.three_d
+        reader = open_blocks(fh, input_path, radars)
+        three_d = reader.three_d
         if methods is None:
             methods = METHODS_3D if three_d else ALL_METHODS
         writer: BlockWriter | None = None
@@ -629,7 +687,7 @@ def run_track(
         out = stack.enter_context(atomic_write(out_path, "wb", verify=verify))
         writer = BlockWriter(
             out,
-            reader.reader.targets,
+            reader.targets,
             tuple(methods),
             f"track: {input_path}",
             parquet=is_parquet(out_path),

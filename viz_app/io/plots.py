@@ -925,8 +925,8 @@ def run_track(
 ) -> TrackSummary:
     """Track every plot of ``input_path`` into ``out_path``, a ``Plot`` at a time;
     ``observer`` also sees each plot (``viz_app.io.plot_blocks.run_track`` is the command's
-    entry: this path for a recording, a finite-memory start, ASTERIX or the association;
-    blocks of columns otherwise).
+    entry: this path for a recording, a finite-memory start or the association; blocks of
+    columns otherwise, CSV or ASTERIX).
 
     ``open_source`` reads the input's plots (``csv_source`` by default; the command hands in
     ``viz_app.io.asterix.asterix_source`` for an ASTERIX file, see ``input_format_of``).
