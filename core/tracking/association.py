@@ -68,7 +68,7 @@ from radarviz.core.filters.methods import (
     PolarPlot,
     stack_parts,
 )
-from radarviz.core.filters.state import CVBatch, quad_form_inv
+from radarviz.core.filters.state import CVBatch, position_index, quad_form_inv
 from radarviz.core.params import ParameterError, check, check_choice, default
 from radarviz.core.tracking.stream import (
     ALL_METHODS,
@@ -159,29 +159,136 @@ def mahalanobis_matrix(
         site: (P, d) each plot's radar.
 
     The K × P pairs are one batch of shape (K, P): each track's prediction broadcast along
-    the plots, each plot along the tracks; ν and R are the method's measurement
-    (``MethodGroup.measurement``, what its update and ``PlotMeasurement.innovation`` use), S
-    that of ``core.filters.innovation.position_terms`` (the NIS without log det S, which the
-    gate does not need). A broken track's d² (NaN) is outside every gate.
+    the plots, each plot along the tracks (``_mahalanobis``). A broken track's d² (NaN) is
+    outside every gate.
     """
-    group = MethodGroup((method,))
     k, n = predicted.x.shape
     p = np.size(plot.range_m)
     x = np.broadcast_to(predicted.x[:, None, :], (k, p, n))
     P = np.broadcast_to(predicted.P[:, None, :, :], (k, p, n, n))
+    return _mahalanobis(method, CVBatch(x, P), plot, noise, site)
+
+
+def mahalanobis_pairs(
+    method: str,
+    predicted: CVBatch,
+    plot: PolarPlot,
+    noise: PolarNoise,
+    site: NDArray[np.float64],
+) -> NDArray[np.float64]:
+    """d² = νᵀ S⁻¹ ν of N (track, plot) pairs, pair i the i-th prediction and the i-th plot:
+    (N,) (the statistic of ``mahalanobis_matrix``, elementwise the same numbers).
+
+    Args:
+        method: the gating method.
+        predicted: the pairs' tracks predicted to their plots' times, x (N, n), P (N, n, n).
+        plot, noise: the pairs' plots, (N,) arrays.
+        site: (N, d) each pair's radar.
+    """
+    return _mahalanobis(method, predicted, plot, noise, site)
+
+
+def _mahalanobis(
+    method: str,
+    state: CVBatch,
+    plot: PolarPlot,
+    noise: PolarNoise,
+    site: NDArray[np.float64],
+) -> NDArray[np.float64]:
+    """d² of a batch of predictions, x (*B, n), against plots broadcastable to B.
+
+    ν and R are the method's measurement (``MethodGroup.measurement``, what its update and
+    ``PlotMeasurement.innovation`` use), S that of ``core.filters.innovation.position_terms``
+    (the NIS without log det S, which the gate does not need); d² ≥ γ, or NaN → ∞, for an S
+    not positive definite.
+    """
+    group = MethodGroup((method,))
+    shape = state.x.shape[:-1]
     parts = None
+    x, P = state.x, state.P
     if group.converted:
         x, P = x[None], P[None]  # the group's method axis
         if not METHODS[method].about_prediction:
             # One conversion per plot, broadcast over the tracks (``ducm`` converts per pair).
             parts = stack_parts([group.kinds[0].convert(plot, noise)])
     if parts is None:
-        plot = PolarPlot(*(None if v is None else np.broadcast_to(v, (k, p)) for v in plot))
-    state = CVBatch(x, P)
-    nu, S = position_terms(state, *group.measurement(state, plot, noise, site=site, parts=parts))
+        plot = PolarPlot(*(None if v is None else np.broadcast_to(v, shape) for v in plot))
+    batch = CVBatch(x, P)
+    nu, S = position_terms(batch, *group.measurement(batch, plot, noise, site=site, parts=parts))
     with np.errstate(invalid="ignore", divide="ignore"):
-        d2 = quad_form_inv(S, nu).reshape(k, p)  # a NaN for an S not positive definite
+        d2 = quad_form_inv(S, nu).reshape(shape)  # a NaN for an S not positive definite
     return np.where(np.isfinite(d2), d2, np.inf)
+
+
+def boxed(method: str) -> bool:
+    """Whether the gating method's gate has an exact coarse box (``gate_box_pairs``): a
+    converted method whose conversion is of the plot alone, so that ν = z + s − H x⁻ with z
+    and R the plot's own (``ducm``'s R and the polar methods' ν', R' depend on the pair)."""
+    m = METHODS[method]
+    return m.kind == "converted" and not m.about_prediction
+
+
+#: Relative widening of the coarse box: d² is computed in floating point, the box's bound
+#: d² ≥ ν_i² / S_ii holds for exact numbers; 1e-6 covers rounding many times over.
+BOX_MARGIN = 1e-6
+
+
+def gate_box_pairs(
+    method: str,
+    predicted: CVBatch,
+    plot: PolarPlot,
+    noise: PolarNoise,
+    site: NDArray[np.float64],
+    gate: float,
+) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """The (track, plot) pairs (rows into ``predicted``, columns into ``plot``) that can pass
+    the gate d² < γ: every pair that does, and usually few more.
+
+    Args:
+        method: a gating method with ``boxed(method)``.
+        predicted: K tracks predicted to the plots' time, x (K, n), P (K, n, n).
+        plot, noise: P plots' polar values and noise std, (P,) arrays.
+        site: (P, d) each plot's radar.
+        gate: γ.
+
+    For any symmetric positive definite S and any axis i, νᵀ S⁻¹ ν ≥ ν_i² / S_ii (the
+    minimum of νᵀ S⁻¹ ν over ν with a given ν_i), so d² < γ implies |ν_i| < √(γ S_ii) on every
+    axis. With ν = z + s − H x⁻ (the plot's converted point z at its site s, ``boxed``) and
+    S_ii = P_ii + R_ii, the pair is inside the box |z_i + s_i − x_i| < √(γ (P_ii + R_ii)):
+    exact, no pair the dense ``mahalanobis_matrix`` would accept is lost. The pairs are found
+    by a ``scipy.spatial.cKDTree`` of the plots' points queried per track with the box's
+    largest half-width (Chebyshev norm) over the largest R_ii of the plots, then the box
+    itself with each plot's own R_ii. Cost O((K + P) log P + candidates).
+    """
+    from scipy.spatial import cKDTree
+
+    empty = np.zeros(0, dtype=np.intp)
+    k = predicted.x.shape[0]
+    if not k or not np.size(plot.range_m):
+        return empty, empty
+    z, R = METHODS[method].convert(plot, noise)
+    dims = len(z)
+    pos = position_index(dims)
+    points = np.stack([np.asarray(z[i]) + site[..., i] for i in range(dims)], -1)  # (P, d)
+    r_ii = np.stack([np.broadcast_to(R[i, i], points.shape[:1]) for i in range(dims)], -1)
+    centre = predicted.x[:, pos]  # (K, d)
+    p_ii = predicted.P[:, pos, pos]  # (K, d)
+    scale = gate * (1.0 + BOX_MARGIN) ** 2
+    with np.errstate(invalid="ignore"):
+        reach = np.sqrt(scale * (p_ii + r_ii.max(axis=0))).max(axis=1)  # (K,)
+    ok = np.flatnonzero(np.isfinite(reach) & np.all(np.isfinite(centre), axis=1))
+    good = np.flatnonzero(np.all(np.isfinite(points), axis=1))
+    if not ok.size or not good.size:
+        return empty, empty
+    found = cKDTree(points[good]).query_ball_point(centre[ok], reach[ok], p=np.inf)
+    counts = np.fromiter((len(f) for f in found), dtype=np.intp, count=ok.size)
+    rows = np.repeat(ok, counts)
+    if not rows.size:
+        return empty, empty
+    cols = good[np.concatenate([np.asarray(f, dtype=np.intp) for f in found])]
+    nu = points[cols] - centre[rows]
+    inside = np.all(nu * nu < scale * (p_ii[rows] + r_ii[cols]), axis=1)
+    return rows[inside], cols[inside]
 
 
 def gnn_assign(d2: NDArray[np.float64], gate: float) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
@@ -200,6 +307,64 @@ def gnn_assign(d2: NDArray[np.float64], gate: float) -> tuple[NDArray[np.intp], 
     rows, cols = linear_sum_assignment(cost)
     keep = cost[rows, cols] < 0.0
     return rows[keep], cols[keep]
+
+
+def sparse_gnn_assign(
+    rows: NDArray[np.intp],
+    cols: NDArray[np.intp],
+    d2: NDArray[np.float64],
+    gate: float,
+    shape: tuple[int, int],
+) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """``gnn_assign`` of a sparse d² matrix: (track rows, plot columns) of the assignment.
+
+    Args:
+        rows, cols, d2: (N,) the scored pairs, each (track, plot) at most once; a pair not
+            listed is outside the gate (d² = ∞).
+        gate: γ.
+        shape: (K, P), the dense matrix's shape.
+
+    The pairs inside the gate are the edges of a bipartite graph of K tracks and P plots.
+    The objective Σ (γ − d²) over the assigned pairs is a sum over the graph's connected
+    components (``scipy.sparse.csgraph.connected_components``), and an assignment is
+    feasible if and only if it is feasible within each component (no edge joins two), so the
+    global optimum is the union of each component's own optimum: one
+    ``linear_sum_assignment`` on each component's small dense matrix (a missing pair
+    costs 0, as in ``gnn_assign``), and none for a component of one edge (its pair is
+    assigned). The optimum is ``gnn_assign``'s; where the optimum is not unique (ties) the
+    two may pick different optimal assignments.
+    """
+    from scipy.optimize import linear_sum_assignment
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    inside = d2 < gate
+    rows, cols, cost = rows[inside], cols[inside], d2[inside] - gate
+    if not rows.size:
+        empty = np.zeros(0, dtype=np.intp)
+        return empty, empty
+    k, p = shape
+    graph = coo_matrix((np.ones(rows.size), (rows, k + cols)), shape=(k + p, k + p))
+    _, label = connected_components(graph, directed=False)
+    comp = label[rows]
+    order = np.argsort(comp, kind="stable")
+    rows, cols, cost, comp = rows[order], cols[order], cost[order], comp[order]
+    starts = np.flatnonzero(np.r_[True, comp[1:] != comp[:-1]])
+    ends = np.r_[starts[1:], comp.size]
+    single = ends - starts == 1
+    out_r, out_c = [rows[starts[single]]], [cols[starts[single]]]
+    for s, e in zip(starts[~single].tolist(), ends[~single].tolist(), strict=True):
+        r_u, r_i = np.unique(rows[s:e], return_inverse=True)
+        c_u, c_i = np.unique(cols[s:e], return_inverse=True)
+        m = np.zeros((r_u.size, c_u.size))
+        m[r_i, c_i] = cost[s:e]
+        a, b = linear_sum_assignment(m)
+        keep = m[a, b] < 0.0
+        out_r.append(r_u[a[keep]])
+        out_c.append(c_u[b[keep]])
+    r, c = np.concatenate(out_r), np.concatenate(out_c)
+    order = np.argsort(r, kind="stable")
+    return r[order].astype(np.intp), c[order].astype(np.intp)
 
 
 @dataclass
@@ -247,6 +412,10 @@ class GNNTracker:
         options: the filters' ``StreamOptions`` (first-plot start; the monitor sees the
             requested methods' tracks, named ``track_name(id, method)``).
         association: ``AssociationOptions``.
+        dense: score every track against every plot and assign on the whole matrix
+            (``distances``, ``gnn_assign``: the reference route, the same assignment) instead
+            of the coarse box and the per-component assignment (``pairs``,
+            ``sparse_gnn_assign``).
     """
 
     def __init__(
@@ -255,8 +424,10 @@ class GNNTracker:
         three_d: bool,
         options: StreamOptions,
         association: AssociationOptions,
+        dense: bool = False,
     ):
         self.methods = tuple(methods)
+        self.dense = dense
         self.association = a = association
         # The gate reads predictions and deletes tracks (TargetTracker.predicted, forget),
         # which the numpy engine's banks hold; the compiled engine keeps no such banks.
@@ -300,6 +471,45 @@ class GNNTracker:
             out[:, cols] = mahalanobis_matrix(g.method, pred, plot, noise, site)
         return out
 
+    def pairs(
+        self, ids: list[str], plots: list[Plot]
+    ) -> tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.float64]]:
+        """The gate's candidate pairs of ``plots`` and tracks ``ids``: (rows into ids, columns
+        into plots, d²), (N,) each, every pair inside the gate among them.
+
+        Each track is predicted to each distinct plot time (one batch per time, as in
+        ``distances``); for a ``boxed`` gating method only the pairs in the coarse box
+        (``gate_box_pairs``) are scored (``mahalanobis_pairs``), for the others every pair.
+        """
+        g = self._gate
+        found: list[tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.float64]]] = []
+        times = np.array([p.time_s for p in plots])
+        for t in np.unique(times):
+            cols = np.flatnonzero(times == t)
+            sub = [plots[j] for j in cols]
+            plot, noise = polar_arrays(sub, self.dims)
+            site = np.array([p.site for p in sub], dtype=np.float64)[:, : self.dims]
+            pred = g.tracker.predicted(g.method, ids, float(t))
+            if boxed(g.method):
+                r, c = gate_box_pairs(g.method, pred, plot, noise, site, g.threshold)
+                d2 = mahalanobis_pairs(
+                    g.method,
+                    CVBatch(pred.x[r], pred.P[r]),
+                    PolarPlot(*(None if v is None else v[c] for v in plot)),
+                    PolarNoise(*(np.broadcast_to(v, cols.shape)[c] for v in noise)),
+                    site[c],
+                )
+            else:
+                d2_all = mahalanobis_matrix(g.method, pred, plot, noise, site)
+                r, c = np.nonzero(d2_all < g.threshold)
+                d2 = d2_all[r, c]
+            found.append((r, cols[c], d2))
+        if not found:
+            empty = np.zeros(0, dtype=np.intp)
+            return empty, empty, np.zeros(0)
+        rows, cols_all, d2s = (np.concatenate(v) for v in zip(*found, strict=True))
+        return rows.astype(np.intp), cols_all.astype(np.intp), d2s
+
     def add_scan(self, plots: list[Plot]) -> ScanResult:
         """Associate and filter one scan's plots (``scan_groups``); a ``PlotError`` carries
         ``index``, the plot's position in the scan."""
@@ -314,8 +524,13 @@ class GNNTracker:
             ids = self.live(status)
             if not ids or not free.size:
                 continue
-            d2 = self.distances(ids, [plots[j] for j in free])
-            rows, cols = gnn_assign(d2, self._gate.threshold)
+            scan = [plots[j] for j in free]
+            if self.dense:
+                rows, cols = gnn_assign(self.distances(ids, scan), self._gate.threshold)
+            else:
+                r, c, d2 = self.pairs(ids, scan)
+                shape = (len(ids), len(scan))
+                rows, cols = sparse_gnn_assign(r, c, d2, self._gate.threshold, shape)
             for r, c in zip(rows.tolist(), cols.tolist(), strict=True):
                 owner[int(free[c])] = ids[r]
             free = np.delete(free, cols)
