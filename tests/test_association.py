@@ -777,7 +777,12 @@ def test_bench_association_figures_are_consistent() -> None:
     assert doc["association_over_labelled"] == pytest.approx(
         doc["labelled_plots_per_s"] / doc["associated_plots_per_s"], rel=1e-12
     )
+    assert doc["dense_over_sparse"] == pytest.approx(
+        doc["associated_plots_per_s"] / doc["dense_plots_per_s"], rel=1e-12
+    )
+    assert doc["same_as_dense"]
     assert "every track on one target" in format_association(doc)
+    assert "the same track ids" in format_association(doc)
 
 
 def test_reproduction_without_clutter_or_misses() -> None:
@@ -951,3 +956,12 @@ def test_sparse_route_equals_the_dense_route(gating: str, model: str, jitter_s: 
             for (ma, xa, Pa), (mb, xb, Pb) in zip(rows_a, rows_b, strict=True):
                 assert ma == mb and np.array_equal(xa, xb) and np.array_equal(Pa, Pb)
     assert dense.ever_confirmed == sparse.ever_confirmed
+
+
+def test_bench_only_association(capsys: pytest.CaptureFixture[str]) -> None:
+    """``bench --only association``: the association figures alone, at ``--targets``."""
+    assert main(["bench", "--only", "association", "--targets", "20", "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)["association"]
+    assert (doc["targets"], doc["correct"], doc["same_as_dense"]) == (20, True, True)
+    assert main(["bench", "--only", "association", "--targets", "0"]) == 2
+    assert "--targets" in capsys.readouterr().err
