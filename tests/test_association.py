@@ -36,6 +36,7 @@ import numpy as np
 import pytest
 
 from radarviz.core.filters.methods import PolarNoise, PolarPlot
+from radarviz.core.filters.predict import cv_predict
 from radarviz.core.filters.state import CVBatch
 from radarviz.core.params import ParameterError
 from radarviz.core.scenarios.crossing import CLUTTER, CrossingScene, crossing_scans
@@ -874,38 +875,61 @@ def test_sparse_assignment_takes_components_apart() -> None:
     assert sparse_gnn_assign(empty, empty, np.zeros(0), 9.0, (3, 0))[0].size == 0
 
 
-@pytest.mark.parametrize(("method", "dims"), [("ucm", 2), ("naive", 2), ("cmkf_d", 3)])
-def test_gate_box_keeps_every_pair_inside_the_gate(method: str, dims: int) -> None:
+@pytest.mark.parametrize(
+    ("method", "dims", "span_s"),
+    [("ucm", 2, 0.0), ("naive", 2, 0.0), ("cmkf_d", 3, 0.0), ("ucm", 2, 3.0), ("seed", 3, 3.0)],
+)
+def test_gate_box_keeps_every_pair_inside_the_gate(method: str, dims: int, span_s: float) -> None:
+    """Every pair the dense d² puts inside the gate, each track predicted (cv, σa 5 m/s²) to
+    its plot's own time in [0, span] s, is in the box built from the two end times."""
     rng = np.random.default_rng(11)
     k, p, n = 60, 80, 2 * dims
     gate = gate_threshold(0.999, dims)
     x = np.zeros((k, n))
     x[:, 0], x[:, 2] = rng.uniform(2e4, 3e4, k), rng.uniform(-3e3, 3e3, k)
+    x[:, 1], x[:, 3] = rng.normal(0, 200, k), rng.normal(0, 200, k)
     if dims == 3:
         x[:, 4] = rng.uniform(1e3, 3e3, k)
     A = rng.normal(size=(k, n, n))
     P = A @ A.mT * rng.uniform(1e2, 3e4, (k, 1, 1)) + np.eye(n) * 1e2
+    v = np.tile([1.0, 0.1], dims)  # velocity std a tenth of the position's (per second)
+    P = P * v[:, None] * v[None, :]
+    state = CVBatch(x, P)
+    times = span_s * rng.uniform(size=p)
     r = rng.uniform(1.95e4, 3.05e4, p)
     b = rng.uniform(-0.12, 0.12, p)
     el = rng.uniform(0.03, 0.15, p) if dims == 3 else None
     site = rng.uniform(-300, 300, (p, dims))
     noise = PolarNoise(rng.uniform(20, 80, p), np.radians(rng.uniform(0.05, 0.3, p)), 2e-3)
-    plot = PolarPlot(r, b, el)
-    d2 = mahalanobis_matrix(method, CVBatch(x, P), plot, noise, site)
-    rows, cols = gate_box_pairs(method, CVBatch(x, P), plot, noise, site, gate)
+    d2 = np.empty((k, p))
+    for j in range(p):  # each plot against every track at its own time
+        one = PolarPlot(r[j : j + 1], b[j : j + 1], None if el is None else el[j : j + 1])
+        d2[:, j] = mahalanobis_matrix(
+            method,
+            cv_predict(state, times[j], 5.0),
+            one,
+            PolarNoise(noise.sigma_r_m[j : j + 1], noise.sigma_azimuth_rad[j : j + 1], 2e-3),
+            site[j : j + 1],
+        )[:, 0]
+    early = cv_predict(state, float(times.min()), 5.0)
+    late = cv_predict(state, float(times.max()), 5.0)
+    rows, cols = gate_box_pairs(method, early, late, PolarPlot(r, b, el), noise, site, gate)
     inside = set(zip(*np.nonzero(d2 < gate), strict=True))
     boxed_pairs = set(zip(rows.tolist(), cols.tolist(), strict=True))
     assert len(inside) > 20  # the instance has pairs in the gate, and the box ...
     assert inside <= boxed_pairs  # ... keeps them all
     assert len(boxed_pairs) < 0.2 * k * p  # and drops most of the others
+    pred = cv_predict(CVBatch(x[rows], P[rows]), times[cols], 5.0)
     pairs = mahalanobis_pairs(
         method,
-        CVBatch(x[rows], P[rows]),
+        pred,
         PolarPlot(r[cols], b[cols], None if el is None else el[cols]),
         PolarNoise(noise.sigma_r_m[cols], noise.sigma_azimuth_rad[cols], 2e-3),
         site[cols],
     )
-    assert np.array_equal(pairs, d2[rows, cols])  # the same numbers, elementwise
+    assert np.allclose(pairs, d2[rows, cols], rtol=1e-9, atol=0)  # the same statistic
+    if span_s == 0.0:
+        assert np.array_equal(pairs, d2[rows, cols])  # the same numbers, elementwise
 
 
 def run_both(

@@ -235,35 +235,46 @@ BOX_MARGIN = 1e-6
 
 def gate_box_pairs(
     method: str,
-    predicted: CVBatch,
+    early: CVBatch,
+    late: CVBatch,
     plot: PolarPlot,
     noise: PolarNoise,
     site: NDArray[np.float64],
     gate: float,
 ) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
-    """The (track, plot) pairs (rows into ``predicted``, columns into ``plot``) that can pass
-    the gate d² < γ: every pair that does, and usually few more.
+    """The (track, plot) pairs (rows into the tracks, columns into ``plot``) that can pass
+    the gate d² < γ, each track predicted to its plot's time: every pair that does, and
+    usually few more.
 
     Args:
         method: a gating method with ``boxed(method)``.
-        predicted: K tracks predicted to the plots' time, x (K, n), P (K, n, n).
+        early, late: K tracks predicted to the first and the last of the plots' times
+            (the same batch when the plots share one time), x (K, n), P (K, n, n).
         plot, noise: P plots' polar values and noise std, (P,) arrays.
         site: (P, d) each plot's radar.
         gate: γ.
 
     For any symmetric positive definite S and any axis i, νᵀ S⁻¹ ν ≥ ν_i² / S_ii (the
     minimum of νᵀ S⁻¹ ν over ν with a given ν_i), so d² < γ implies |ν_i| < √(γ S_ii) on every
-    axis. With ν = z + s − H x⁻ (the plot's converted point z at its site s, ``boxed``) and
-    S_ii = P_ii + R_ii, the pair is inside the box |z_i + s_i − x_i| < √(γ (P_ii + R_ii)):
-    exact, no pair the dense ``mahalanobis_matrix`` would accept is lost. The pairs are found
-    by a ``scipy.spatial.cKDTree`` of the plots' points queried per track with the box's
-    largest half-width (Chebyshev norm) over the largest R_ii of the plots, then the box
-    itself with each plot's own R_ii. Cost O((K + P) log P + candidates).
+    axis. With ν = z + s − H x⁻(t) (the plot's converted point z at its site s, ``boxed``) and
+    S_ii = P⁻_ii(t) + R_ii, the pair is inside the box |z_i + s_i − x⁻_i(t)| < √(γ (P⁻_ii(t)
+    + R_ii)). Between the first and the last plot time the prediction of the engine's motion
+    models (constant velocity, and the IMM's combination of constant-velocity models,
+    ``core.filters.models``) has a mean affine in the time and a P⁻_ii convex in it (T ≥ 0:
+    P_pp + 2T P_pv + T² P_vv + q T⁴/4, and the IMM's spread of means, squares of affine
+    functions), so over the scan x⁻_i(t) lies between its two end values and P⁻_ii(t) is at
+    most the larger of its two: the box around the segment between the two predicted
+    positions, of half-width √(γ (max P⁻_ii + R_ii)), holds every pair inside the gate at
+    its own time. Exact: no pair the dense ``mahalanobis_matrix`` would accept is lost.
+
+    The pairs are found by a ``scipy.spatial.cKDTree`` of the plots' points queried per track
+    (Chebyshev norm) with the box's largest half-reach over the largest R_ii of the plots,
+    then the box itself with each plot's own R_ii. Cost O((K + P) log P + candidates).
     """
     from scipy.spatial import cKDTree
 
     empty = np.zeros(0, dtype=np.intp)
-    k = predicted.x.shape[0]
+    k = early.x.shape[0]
     if not k or not np.size(plot.range_m):
         return empty, empty
     z, R = METHODS[method].convert(plot, noise)
@@ -271,11 +282,13 @@ def gate_box_pairs(
     pos = position_index(dims)
     points = np.stack([np.asarray(z[i]) + site[..., i] for i in range(dims)], -1)  # (P, d)
     r_ii = np.stack([np.broadcast_to(R[i, i], points.shape[:1]) for i in range(dims)], -1)
-    centre = predicted.x[:, pos]  # (K, d)
-    p_ii = predicted.P[:, pos, pos]  # (K, d)
+    lo = np.minimum(early.x[:, pos], late.x[:, pos])  # (K, d)
+    hi = np.maximum(early.x[:, pos], late.x[:, pos])
+    p_ii = np.maximum(early.P[:, pos, pos], late.P[:, pos, pos])  # (K, d)
     scale = gate * (1.0 + BOX_MARGIN) ** 2
+    centre = 0.5 * (lo + hi)
     with np.errstate(invalid="ignore"):
-        reach = np.sqrt(scale * (p_ii + r_ii.max(axis=0))).max(axis=1)  # (K,)
+        reach = (0.5 * (hi - lo) + np.sqrt(scale * (p_ii + r_ii.max(axis=0)))).max(axis=1)
     ok = np.flatnonzero(np.isfinite(reach) & np.all(np.isfinite(centre), axis=1))
     good = np.flatnonzero(np.all(np.isfinite(points), axis=1))
     if not ok.size or not good.size:
@@ -286,8 +299,9 @@ def gate_box_pairs(
     if not rows.size:
         return empty, empty
     cols = good[np.concatenate([np.asarray(f, dtype=np.intp) for f in found])]
-    nu = points[cols] - centre[rows]
-    inside = np.all(nu * nu < scale * (p_ii[rows] + r_ii[cols]), axis=1)
+    zc = points[cols]
+    outside = np.maximum(np.maximum(lo[rows] - zc, zc - hi[rows]), 0.0)  # beyond the segment
+    inside = np.all(outside * outside < scale * (p_ii[rows] + r_ii[cols]), axis=1)
     return rows[inside], cols[inside]
 
 
@@ -477,38 +491,41 @@ class GNNTracker:
         """The gate's candidate pairs of ``plots`` and tracks ``ids``: (rows into ids, columns
         into plots, d²), (N,) each, every pair inside the gate among them.
 
-        Each track is predicted to each distinct plot time (one batch per time, as in
-        ``distances``); for a ``boxed`` gating method only the pairs in the coarse box
-        (``gate_box_pairs``) are scored (``mahalanobis_pairs``), for the others every pair.
+        For a ``boxed`` gating method, every track is predicted to the first and the last plot
+        time, the pairs in the coarse box (``gate_box_pairs``) are found, and each of them is
+        predicted to its plot's own time and scored (``mahalanobis_pairs``): the cost follows
+        the candidates, not K × P. For the others, as ``distances``: every pair, each track
+        predicted to each distinct plot time.
         """
         g = self._gate
-        found: list[tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.float64]]] = []
         times = np.array([p.time_s for p in plots])
-        for t in np.unique(times):
-            cols = np.flatnonzero(times == t)
-            sub = [plots[j] for j in cols]
-            plot, noise = polar_arrays(sub, self.dims)
-            site = np.array([p.site for p in sub], dtype=np.float64)[:, : self.dims]
-            pred = g.tracker.predicted(g.method, ids, float(t))
-            if boxed(g.method):
-                r, c = gate_box_pairs(g.method, pred, plot, noise, site, g.threshold)
-                d2 = mahalanobis_pairs(
-                    g.method,
-                    CVBatch(pred.x[r], pred.P[r]),
-                    PolarPlot(*(None if v is None else v[c] for v in plot)),
-                    PolarNoise(*(np.broadcast_to(v, cols.shape)[c] for v in noise)),
-                    site[c],
-                )
-            else:
-                d2_all = mahalanobis_matrix(g.method, pred, plot, noise, site)
+        if not boxed(g.method):
+            found = []
+            for t in np.unique(times):
+                cols = np.flatnonzero(times == t)
+                d2_all = self.distances(ids, [plots[j] for j in cols])
                 r, c = np.nonzero(d2_all < g.threshold)
-                d2 = d2_all[r, c]
-            found.append((r, cols[c], d2))
-        if not found:
-            empty = np.zeros(0, dtype=np.intp)
-            return empty, empty, np.zeros(0)
-        rows, cols_all, d2s = (np.concatenate(v) for v in zip(*found, strict=True))
-        return rows.astype(np.intp), cols_all.astype(np.intp), d2s
+                found.append((r, cols[c], d2_all[r, c]))
+            rows, cols_all, d2s = (np.concatenate(v) for v in zip(*found, strict=True))
+            return rows.astype(np.intp), cols_all.astype(np.intp), d2s
+        plot, noise = polar_arrays(plots, self.dims)
+        site = np.array([p.site for p in plots], dtype=np.float64)[:, : self.dims]
+        first, last = float(times.min()), float(times.max())
+        early = g.tracker.predicted(g.method, ids, first)
+        late = early if last == first else g.tracker.predicted(g.method, ids, last)
+        r, c = gate_box_pairs(g.method, early, late, plot, noise, site, g.threshold)
+        if last == first:
+            pred = CVBatch(early.x[r], early.P[r])
+        else:  # each pair's track at its plot's own time
+            pred = g.tracker.predicted(g.method, [ids[i] for i in r.tolist()], times[c])
+        d2 = mahalanobis_pairs(
+            g.method,
+            pred,
+            PolarPlot(*(None if v is None else v[c] for v in plot)),
+            PolarNoise(*(np.broadcast_to(v, times.shape)[c] for v in noise)),
+            site[c],
+        )
+        return r.astype(np.intp), c.astype(np.intp), d2
 
     def add_scan(self, plots: list[Plot]) -> ScanResult:
         """Associate and filter one scan's plots (``scan_groups``); a ``PlotError`` carries
