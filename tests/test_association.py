@@ -781,7 +781,10 @@ def test_bench_association_figures_are_consistent() -> None:
     assert doc["dense_over_sparse"] == pytest.approx(
         doc["associated_plots_per_s"] / doc["dense_plots_per_s"], rel=1e-12
     )
-    assert doc["same_as_dense"]
+    assert doc["same_as_dense"] and doc["stamped_correct"]
+    assert doc["stamped_over_labelled"] == pytest.approx(
+        doc["stamped_labelled_plots_per_s"] / doc["stamped_plots_per_s"], rel=1e-12
+    )
     assert "every track on one target" in format_association(doc)
     assert "the same track ids" in format_association(doc)
 
@@ -933,27 +936,36 @@ def test_gate_box_keeps_every_pair_inside_the_gate(method: str, dims: int, span_
 
 
 def run_both(
-    scans: list[list[Plot]], methods: tuple[str, ...], model: str, **assoc: object
+    scans: list[list[Plot]],
+    methods: tuple[str, ...],
+    model: str,
+    interval: bool = True,
+    **assoc: object,
 ) -> list[tuple[GNNTracker, list]]:
     options = StreamOptions(model=model, sigma_a_mps2=1.0, sigma_v0_mps=300.0)
     out = []
     for dense in (True, False):
         gnn = GNNTracker(methods, False, options, AssociationOptions(**assoc), dense=dense)
+        gnn._interval = interval  # False: the per-time boxes of a model without a time bound
         out.append((gnn, [gnn.add_scan(list(plots)) for plots in scans]))
     return out
 
 
 @pytest.mark.parametrize(
-    ("gating", "model", "jitter_s"),
+    ("gating", "model", "jitter_s", "interval"),
     [
-        ("ucm", "cv", 0.0),
-        ("ucm", "imm", 0.0),
-        ("ucm", "cv", 0.4),
-        ("ducm", "cv", 0.0),
-        ("ekf", "cv", 0.0),
+        ("ucm", "cv", 0.0, True),
+        ("ucm", "imm", 0.0, True),
+        ("ucm", "cv", 0.4, True),
+        ("ucm", "imm", 0.4, True),
+        ("ucm", "cv", 0.4, False),
+        ("ducm", "cv", 0.0, True),
+        ("ekf", "cv", 0.4, True),
     ],
 )
-def test_sparse_route_equals_the_dense_route(gating: str, model: str, jitter_s: float) -> None:
+def test_sparse_route_equals_the_dense_route(
+    gating: str, model: str, jitter_s: float, interval: bool
+) -> None:
     from radarviz.core.experiments.association import scan_plots
 
     scene = CrossingScene(
@@ -970,7 +982,7 @@ def test_sparse_route_equals_the_dense_route(gating: str, model: str, jitter_s: 
             for s in scans
         ]
     methods = ("ucm", "ekf")
-    (dense, a), (sparse, b) = run_both(scans, methods, model, method=gating)
+    (dense, a), (sparse, b) = run_both(scans, methods, model, interval, method=gating)
     assert sum(len(r.track_ids) for r in a) > 300
     assert sum(len(r.confirmed) for r in a) >= 3 and sum(len(r.deleted) for r in a) > 20
     for ra, rb in zip(a, b, strict=True):

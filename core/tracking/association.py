@@ -228,6 +228,11 @@ def boxed(method: str) -> bool:
     return m.kind == "converted" and not m.about_prediction
 
 
+#: Motion models (``StreamOptions.model``) whose prediction has a mean affine and a P⁻_ii
+#: convex in the time (``gate_box_pairs``): one box per scan, from its first and last time.
+#: Any other model is boxed at each distinct plot time (``GNNTracker.pairs``).
+INTERVAL_MODELS: tuple[str, ...] = ("cv", "imm")
+
 #: Relative widening of the coarse box: d² is computed in floating point, the box's bound
 #: d² ≥ ν_i² / S_ii holds for exact numbers; 1e-6 covers rounding many times over.
 BOX_MARGIN = 1e-6
@@ -442,6 +447,7 @@ class GNNTracker:
     ):
         self.methods = tuple(methods)
         self.dense = dense
+        self._interval = options.model in INTERVAL_MODELS
         self.association = a = association
         # The gate reads predictions and deletes tracks (TargetTracker.predicted, forget),
         # which the numpy engine's banks hold; the compiled engine keeps no such banks.
@@ -494,7 +500,8 @@ class GNNTracker:
         For a ``boxed`` gating method, every track is predicted to the first and the last plot
         time, the pairs in the coarse box (``gate_box_pairs``) are found, and each of them is
         predicted to its plot's own time and scored (``mahalanobis_pairs``): the cost follows
-        the candidates, not K × P. For the others, as ``distances``: every pair, each track
+        the candidates, not K × P (a motion model not in ``INTERVAL_MODELS``: one box per
+        distinct plot time). For the others, as ``distances``: every pair, each track
         predicted to each distinct plot time.
         """
         g = self._gate
@@ -510,22 +517,31 @@ class GNNTracker:
             return rows.astype(np.intp), cols_all.astype(np.intp), d2s
         plot, noise = polar_arrays(plots, self.dims)
         site = np.array([p.site for p in plots], dtype=np.float64)[:, : self.dims]
-        first, last = float(times.min()), float(times.max())
-        early = g.tracker.predicted(g.method, ids, first)
-        late = early if last == first else g.tracker.predicted(g.method, ids, last)
-        r, c = gate_box_pairs(g.method, early, late, plot, noise, site, g.threshold)
-        if last == first:
-            pred = CVBatch(early.x[r], early.P[r])
-        else:  # each pair's track at its plot's own time
-            pred = g.tracker.predicted(g.method, [ids[i] for i in r.tolist()], times[c])
-        d2 = mahalanobis_pairs(
-            g.method,
-            pred,
-            PolarPlot(*(None if v is None else v[c] for v in plot)),
-            PolarNoise(*(np.broadcast_to(v, times.shape)[c] for v in noise)),
-            site[c],
-        )
-        return r.astype(np.intp), c.astype(np.intp), d2
+        spans = [(float(times.min()), float(times.max()))]
+        if not self._interval:  # no bound between two times: one box per distinct time
+            spans = [(float(t), float(t)) for t in np.unique(times)]
+        found = []
+        for first, last in spans:
+            cols = np.flatnonzero((times >= first) & (times <= last))
+            early = g.tracker.predicted(g.method, ids, first)
+            late = early if last == first else g.tracker.predicted(g.method, ids, last)
+            sub = PolarPlot(*(None if v is None else v[cols] for v in plot))
+            sub_noise = PolarNoise(*(np.broadcast_to(v, times.shape)[cols] for v in noise))
+            r, c = gate_box_pairs(g.method, early, late, sub, sub_noise, site[cols], g.threshold)
+            if last == first:
+                pred = CVBatch(early.x[r], early.P[r])
+            else:  # each pair's track at its plot's own time
+                pred = g.tracker.predicted(g.method, [ids[i] for i in r.tolist()], times[cols[c]])
+            d2 = mahalanobis_pairs(
+                g.method,
+                pred,
+                PolarPlot(*(None if v is None else v[c] for v in sub)),
+                PolarNoise(*(v[c] for v in sub_noise)),
+                site[cols[c]],
+            )
+            found.append((r, cols[c], d2))
+        rows, cols_all, d2s = (np.concatenate(v) for v in zip(*found, strict=True))
+        return rows.astype(np.intp), cols_all.astype(np.intp), d2s
 
     def add_scan(self, plots: list[Plot]) -> ScanResult:
         """Associate and filter one scan's plots (``scan_groups``); a ``PlotError`` carries
