@@ -34,6 +34,18 @@ the engine's own (prediction, update, IMM), nothing is filtered here.
   assigned first, then tentative tracks on the plots left: a fresh track's wide gate (its
   velocity is still ±σv0) would otherwise take a confirmed track's plot whenever its d² is
   the smaller one, since d² does not penalise a wide S.
+* **Sparse route** (the default; ``GNNTracker(dense=True)`` is the dense one, the same
+  assignment). Only pairs that can pass the gate are scored: d² ≥ ν_i² / S_ii on every
+  axis, so a coarse box around each track's predicted position, ν_i² < γ S_ii, holds
+  every pair inside the gate (``gate_box_pairs``, exact for the converted methods whose
+  conversion is of the plot alone; ``ducm``, ``ekf`` and ``ukf`` score every pair). One box
+  per scan covers all its plot times (the cv models' prediction is affine in the mean and
+  convex in P_ii over time), the pairs are found with a k-d tree of the plots, and each
+  candidate is predicted to its plot's own time (``TargetTracker.predicted``) and scored
+  (``mahalanobis_pairs``). The pairs inside the gate form a bipartite graph; Σ (γ − d²) is a
+  sum over its connected components and no feasible assignment links two of them, so the
+  global optimum is each component's own: one ``linear_sum_assignment`` per component
+  (``sparse_gnn_assign``), the same optimum as the dense matrix's.
 * **Initiation.** Every plot left unassigned starts a tentative track (the first-plot start).
 * **Confirmation, M of N.** A tentative track is confirmed at the scan of its M-th hit if
   that comes within its first N scans (the initiating scan counts as the first, and a hit);
@@ -46,9 +58,17 @@ methods are compared on identical plot-to-track data; the gating method's own tr
 beside them (in a tracker of their own, unmonitored, when it is not among the methods).
 Track ids are "1", "2", … in order of initiation, never reused.
 
-Cost: per scan one K × P matrix of d² for K live tracks and P plots, computed as one
-broadcast batch per distinct plot time (no loop over pairs), and one assignment, O((K + P)³)
-at worst; at 10³ tracks and plots a scan is a few 10⁶-element arrays.
+Cost: the dense route scores K × P pairs per scan for K live tracks and P plots (one
+broadcast batch per distinct plot time, each track predicted to each time) and runs one
+assignment, O((K + P)³) at worst. The sparse route predicts every track twice per scan,
+builds the boxes and one k-d tree (O((K + P) log P)), then scores and predicts only the
+candidates, a few per track when the targets are apart, and assigns the small components.
+``radarviz bench --only association`` (a grid of targets, one radar, no clutter, ``ucm``,
+measured on a shared 2-core machine, the routes interleaved scan by scan): at 10³ targets
+56 000–62 000 plots/s, the dense route 7.7–9.0× the time; at 4 000 targets 69 000 plots/s,
+the dense route 49× the time (1 400 plots/s); with each plot its own time stamp (scans of
+1 s) 29 000–38 000 plots/s at 10³ targets and 62 000 at 4 000, 2.6–8.6× the labelled
+filtering of the same plots.
 """
 
 from __future__ import annotations
@@ -260,10 +280,10 @@ def gate_box_pairs(
         gate: γ.
 
     For any symmetric positive definite S and any axis i, νᵀ S⁻¹ ν ≥ ν_i² / S_ii (the
-    minimum of νᵀ S⁻¹ ν over ν with a given ν_i), so d² < γ implies |ν_i| < √(γ S_ii) on every
+    minimum of νᵀ S⁻¹ ν over ν with a given ν_i), so d² < γ implies ν_i² < γ S_ii on every
     axis. With ν = z + s − H x⁻(t) (the plot's converted point z at its site s, ``boxed``) and
-    S_ii = P⁻_ii(t) + R_ii, the pair is inside the box |z_i + s_i − x⁻_i(t)| < √(γ (P⁻_ii(t)
-    + R_ii)). Between the first and the last plot time the prediction of the engine's motion
+    S_ii = P⁻_ii(t) + R_ii, the pair is inside the box (z_i + s_i − x⁻_i(t))² < γ (P⁻_ii(t)
+    + R_ii). Between the first and the last plot time the prediction of the engine's motion
     models (constant velocity, and the IMM's combination of constant-velocity models,
     ``core.filters.models``) has a mean affine in the time and a P⁻_ii convex in it (T ≥ 0:
     P_pp + 2T P_pv + T² P_vv + q T⁴/4, and the IMM's spread of means, squares of affine
