@@ -36,6 +36,7 @@ import numpy as np
 import pytest
 
 from radarviz.core.filters.methods import PolarNoise, PolarPlot
+from radarviz.core.filters.predict import cv_predict
 from radarviz.core.filters.state import CVBatch
 from radarviz.core.params import ParameterError
 from radarviz.core.scenarios.crossing import CLUTTER, CrossingScene, crossing_scans
@@ -44,10 +45,13 @@ from radarviz.core.tracking.association import (
     TENTATIVE,
     AssociationOptions,
     GNNTracker,
+    gate_box_pairs,
     gate_threshold,
     gnn_assign,
     mahalanobis_matrix,
+    mahalanobis_pairs,
     scan_groups,
+    sparse_gnn_assign,
 )
 from radarviz.core.tracking.gospa import TrackCounter, gospa
 from radarviz.core.tracking.stream import Plot, StreamOptions
@@ -774,7 +778,15 @@ def test_bench_association_figures_are_consistent() -> None:
     assert doc["association_over_labelled"] == pytest.approx(
         doc["labelled_plots_per_s"] / doc["associated_plots_per_s"], rel=1e-12
     )
+    assert doc["dense_over_sparse"] == pytest.approx(
+        doc["associated_plots_per_s"] / doc["dense_plots_per_s"], rel=1e-12
+    )
+    assert doc["same_as_dense"] and doc["stamped_correct"]
+    assert doc["stamped_over_labelled"] == pytest.approx(
+        doc["stamped_labelled_plots_per_s"] / doc["stamped_plots_per_s"], rel=1e-12
+    )
     assert "every track on one target" in format_association(doc)
+    assert "the same track ids" in format_association(doc)
 
 
 def test_reproduction_without_clutter_or_misses() -> None:
@@ -817,3 +829,175 @@ def test_simulate_crossing_writes_its_three_files_together(
     assert main([*argv, "--truth-out", str(t)]) == 1
     assert f"cannot write {t}" in capsys.readouterr().err
     assert sorted(p.name for p in tmp_path.iterdir()) == []
+
+
+# ------------------------------------------------------------------------------------------
+# The sparse route: coarse box, per-component assignment
+# ------------------------------------------------------------------------------------------
+
+
+def sparse_instance(rng: np.random.Generator, k: int, p: int, density: float) -> np.ndarray:
+    """A random d² matrix, most pairs outside the gate (∞), the rest uniform on [0, 12):
+    continuous values, so the optimum is unique with probability 1 (no ties)."""
+    d2 = rng.uniform(0.0, 12.0, (k, p))
+    d2[rng.uniform(size=(k, p)) > density] = np.inf
+    return d2
+
+
+def as_pairs(d2: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    r, c = np.nonzero(np.isfinite(d2))
+    return r, c, d2[r, c]
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_sparse_assignment_is_the_global_optimum(seed: int) -> None:
+    rng = np.random.default_rng(100 + seed)
+    gate = 9.21
+    k, p = rng.integers(1, 6, size=2)
+    d2 = sparse_instance(rng, int(k), int(p), 0.4)
+    rows, cols = sparse_gnn_assign(*as_pairs(d2), gate, d2.shape)
+    assert len(set(rows.tolist())) == len(rows) and len(set(cols.tolist())) == len(cols)
+    assert np.all(d2[rows, cols] < gate)
+    assert float((gate - d2[rows, cols]).sum()) == pytest.approx(brute_assign(d2, gate))
+    # Larger instances, many components: exactly the dense assignment (checked above).
+    d2 = sparse_instance(rng, 60, 70, 0.03)
+    rows, cols = sparse_gnn_assign(*as_pairs(d2), gate, d2.shape)
+    dense_rows, dense_cols = gnn_assign(d2, gate)
+    assert rows.tolist() == dense_rows.tolist() and cols.tolist() == dense_cols.tolist()
+
+
+def test_sparse_assignment_takes_components_apart() -> None:
+    # Component {0, 1} × {0, 1} is the greedy trap of test_gnn_is_global_not_greedy; track 2
+    # and plot 2 are a component of one edge; track 3 has nothing in its gate.
+    d2 = np.full((4, 3), np.inf)
+    d2[:2, :2] = [[1.0, 2.0], [1.5, np.inf]]
+    d2[2, 2] = 8.0
+    rows, cols = sparse_gnn_assign(*as_pairs(d2), 9.0, d2.shape)
+    assert list(zip(rows.tolist(), cols.tolist(), strict=True)) == [(0, 1), (1, 0), (2, 2)]
+    empty = np.zeros(0, dtype=np.intp)
+    assert sparse_gnn_assign(empty, empty, np.zeros(0), 9.0, (3, 0))[0].size == 0
+
+
+@pytest.mark.parametrize(
+    ("method", "dims", "span_s"),
+    [("ucm", 2, 0.0), ("naive", 2, 0.0), ("cmkf_d", 3, 0.0), ("ucm", 2, 3.0), ("seed", 3, 3.0)],
+)
+def test_gate_box_keeps_every_pair_inside_the_gate(method: str, dims: int, span_s: float) -> None:
+    """Every pair the dense d² puts inside the gate, each track predicted (cv, σa 5 m/s²) to
+    its plot's own time in [0, span] s, is in the box built from the two end times."""
+    rng = np.random.default_rng(11)
+    k, p, n = 60, 80, 2 * dims
+    gate = gate_threshold(0.999, dims)
+    x = np.zeros((k, n))
+    x[:, 0], x[:, 2] = rng.uniform(2e4, 3e4, k), rng.uniform(-3e3, 3e3, k)
+    x[:, 1], x[:, 3] = rng.normal(0, 200, k), rng.normal(0, 200, k)
+    if dims == 3:
+        x[:, 4] = rng.uniform(1e3, 3e3, k)
+    A = rng.normal(size=(k, n, n))
+    P = A @ A.mT * rng.uniform(1e2, 3e4, (k, 1, 1)) + np.eye(n) * 1e2
+    v = np.tile([1.0, 0.1], dims)  # velocity std a tenth of the position's (per second)
+    P = P * v[:, None] * v[None, :]
+    state = CVBatch(x, P)
+    times = span_s * rng.uniform(size=p)
+    r = rng.uniform(1.95e4, 3.05e4, p)
+    b = rng.uniform(-0.12, 0.12, p)
+    el = rng.uniform(0.03, 0.15, p) if dims == 3 else None
+    site = rng.uniform(-300, 300, (p, dims))
+    noise = PolarNoise(rng.uniform(20, 80, p), np.radians(rng.uniform(0.05, 0.3, p)), 2e-3)
+    d2 = np.empty((k, p))
+    for j in range(p):  # each plot against every track at its own time
+        one = PolarPlot(r[j : j + 1], b[j : j + 1], None if el is None else el[j : j + 1])
+        d2[:, j] = mahalanobis_matrix(
+            method,
+            cv_predict(state, times[j], 5.0),
+            one,
+            PolarNoise(noise.sigma_r_m[j : j + 1], noise.sigma_azimuth_rad[j : j + 1], 2e-3),
+            site[j : j + 1],
+        )[:, 0]
+    early = cv_predict(state, float(times.min()), 5.0)
+    late = cv_predict(state, float(times.max()), 5.0)
+    rows, cols = gate_box_pairs(method, early, late, PolarPlot(r, b, el), noise, site, gate)
+    inside = set(zip(*np.nonzero(d2 < gate), strict=True))
+    boxed_pairs = set(zip(rows.tolist(), cols.tolist(), strict=True))
+    assert len(inside) > 20  # the instance has pairs in the gate, and the box ...
+    assert inside <= boxed_pairs  # ... keeps them all
+    assert len(boxed_pairs) < 0.2 * k * p  # and drops most of the others
+    pred = cv_predict(CVBatch(x[rows], P[rows]), times[cols], 5.0)
+    pairs = mahalanobis_pairs(
+        method,
+        pred,
+        PolarPlot(r[cols], b[cols], None if el is None else el[cols]),
+        PolarNoise(noise.sigma_r_m[cols], noise.sigma_azimuth_rad[cols], 2e-3),
+        site[cols],
+    )
+    assert np.allclose(pairs, d2[rows, cols], rtol=1e-9, atol=0)  # the same statistic
+    if span_s == 0.0:
+        assert np.array_equal(pairs, d2[rows, cols])  # the same numbers, elementwise
+
+
+def run_both(
+    scans: list[list[Plot]],
+    methods: tuple[str, ...],
+    model: str,
+    interval: bool = True,
+    **assoc: object,
+) -> list[tuple[GNNTracker, list]]:
+    options = StreamOptions(model=model, sigma_a_mps2=1.0, sigma_v0_mps=300.0)
+    out = []
+    for dense in (True, False):
+        gnn = GNNTracker(methods, False, options, AssociationOptions(**assoc), dense=dense)
+        gnn._interval = interval  # False: the per-time boxes of a model without a time bound
+        out.append((gnn, [gnn.add_scan(list(plots)) for plots in scans]))
+    return out
+
+
+@pytest.mark.parametrize(
+    ("gating", "model", "jitter_s", "interval"),
+    [
+        ("ucm", "cv", 0.0, True),
+        ("ucm", "imm", 0.0, True),
+        ("ucm", "cv", 0.4, True),
+        ("ucm", "imm", 0.4, True),
+        ("ucm", "cv", 0.4, False),
+        ("ducm", "cv", 0.0, True),
+        ("ekf", "cv", 0.4, True),
+    ],
+)
+def test_sparse_route_equals_the_dense_route(
+    gating: str, model: str, jitter_s: float, interval: bool
+) -> None:
+    from radarviz.core.experiments.association import scan_plots
+
+    scene = CrossingScene(
+        targets=3, crossing_angle_deg=10.0, detection_prob=0.9, clutter_per_scan=10.0, scans=25
+    )
+    rng = np.random.default_rng(7)
+    scans = scan_plots(scene, rng)
+    if jitter_s:  # each plot its own time within the scan (a rotating radar's time stamps)
+        scans = [
+            sorted(
+                (replace(p, time_s=p.time_s + jitter_s * rng.uniform()) for p in s),
+                key=lambda p: p.time_s,
+            )
+            for s in scans
+        ]
+    methods = ("ucm", "ekf")
+    (dense, a), (sparse, b) = run_both(scans, methods, model, interval, method=gating)
+    assert sum(len(r.track_ids) for r in a) > 300
+    assert sum(len(r.confirmed) for r in a) >= 3 and sum(len(r.deleted) for r in a) > 20
+    for ra, rb in zip(a, b, strict=True):
+        assert ra.track_ids == rb.track_ids and ra.statuses == rb.statuses
+        assert ra.confirmed == rb.confirmed and ra.deleted == rb.deleted
+        for rows_a, rows_b in zip(ra.rows, rb.rows, strict=True):
+            for (ma, xa, Pa), (mb, xb, Pb) in zip(rows_a, rows_b, strict=True):
+                assert ma == mb and np.array_equal(xa, xb) and np.array_equal(Pa, Pb)
+    assert dense.ever_confirmed == sparse.ever_confirmed
+
+
+def test_bench_only_association(capsys: pytest.CaptureFixture[str]) -> None:
+    """``bench --only association``: the association figures alone, at ``--targets``."""
+    assert main(["bench", "--only", "association", "--targets", "20", "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)["association"]
+    assert (doc["targets"], doc["correct"], doc["same_as_dense"]) == (20, True, True)
+    assert main(["bench", "--only", "association", "--targets", "0"]) == 2
+    assert "--targets" in capsys.readouterr().err

@@ -370,8 +370,11 @@ class TargetTracker:
                 for p, v in zip(sub, nis.tolist(), strict=True):
                     monitor.add(track_name(p.target, m), p.time_s, v, stats.dof)
 
-    def predicted(self, method: str, targets: list[str], time_s: float) -> CVBatch:
-        """``method``'s tracks of ``targets`` (K,) predicted to ``time_s``, the tracks left as
+    def predicted(
+        self, method: str, targets: list[str], time_s: float | NDArray[np.float64]
+    ) -> CVBatch:
+        """``method``'s tracks of ``targets`` (K,) predicted to ``time_s`` (one time, or one
+        per target (K,); a target may be listed more than once), the tracks left as
         they are: x (K, n), P (K, n, n) (the IMM's moment-matched combined prediction, the one
         its consistency statistics use). A track last updated at ``time_s`` is returned as it
         is (dt = 0). Every target's last plot must be at or before ``time_s``."""

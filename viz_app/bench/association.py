@@ -5,16 +5,28 @@ straight at 150 m/s along x plus its own velocity (normal, 20 m/s per axis: no t
 cross), seen by one 2D radar (σr = 50 m, σβ = 0.1°, T = 5 s), every target detected every
 scan and no clutter, ``scans`` scans; the tracks start with σv0 = 200 m/s, so that neighbours
 are never in each other's first gate and the association is unambiguous. The same plots
-are tracked twice in one run, method ``ucm`` with the cv model:
+are tracked three times in one run, method ``ucm`` with the cv model, the three interleaved
+scan by scan (so that a shared machine's load falls on all three alike):
 
 * ``associated_plots_per_s``: without labels, by ``core.tracking.association.GNNTracker``
-  (the d² matrix of every live track against every plot, the assignment, M-of-N);
+  (the coarse gate box, d² of the candidate pairs, the per-component assignment, M-of-N);
+* ``dense_plots_per_s``: the same by ``GNNTracker(dense=True)`` (the d² matrix of every
+  live track against every plot, one assignment on it), and ``dense_over_sparse``, the
+  ratio of their times (the sparse route's speed-up); ``same_as_dense``: whether the two
+  gave every plot the same track id;
 * ``labelled_plots_per_s``: with each plot's true target label, by
   ``core.tracking.targets.TargetTracker`` (the filtering alone);
-* ``association_over_labelled``: the ratio of their times per plot (the association's
-  overhead; the filtering is the same), and ``correct``: whether every confirmed track
-  followed one target (the association made no error, so the two runs filtered the same
-  plots per track).
+* ``association_over_labelled`` (and ``dense_over_labelled``): the ratio of the times per
+  plot (the association's overhead; the filtering is the same), and ``correct``: whether
+  every confirmed track followed one target (the association made no error, so the runs
+  filtered the same plots per track).
+
+* ``stamped_*``: the same scene with each plot at its own time, uniform within
+  ``STAMP_WINDOW_S`` of its scan's start (a rotating radar's time stamps; scans of that
+  window), associated by the sparse route against the labelled filtering, interleaved the
+  same way (``stamped_correct``: every track on one target).
+
+``dense=False`` leaves the dense route out (its K × P matrix is the cost it measures).
 """
 
 from __future__ import annotations
@@ -25,12 +37,17 @@ from dataclasses import replace
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 GRID_M = 8e3
 SIGMA_R_M, SIGMA_BETA_DEG, PERIOD_S = 50.0, 0.1, 5.0
+#: The stamped pass: each plot's own time within this much of its scan's start (s).
+STAMP_WINDOW_S = 1.0
 
 
-def bench_association(targets: int, scans: int = 8, seed: int = 3) -> dict[str, Any]:
+def bench_association(
+    targets: int, scans: int = 8, seed: int = 3, dense: bool = True
+) -> dict[str, Any]:
     """The ``association`` figures (module docstring)."""
     from radarviz.core.tracking.association import AssociationOptions, GNNTracker
     from radarviz.core.tracking.stream import Plot, StreamOptions
@@ -42,50 +59,120 @@ def bench_association(targets: int, scans: int = 8, seed: int = 3) -> dict[str, 
     x0, y0 = 5e4 + GRID_M * (k % cols), GRID_M * (k // cols - (targets // cols) / 2)
     v = np.array([150.0, 0.0]) + rng.normal(0.0, 20.0, (targets, 2))
     sb = math.radians(SIGMA_BETA_DEG)
-    scan_plots = []
-    for n in range(scans):
-        t = n * PERIOD_S
+
+    def scan(t: NDArray[np.float64]) -> list[Plot]:
+        """Every target's plot, target i's at time t[i], in time order."""
         x, y = x0 + v[:, 0] * t, y0 + v[:, 1] * t
         r = np.hypot(x, y) + SIGMA_R_M * rng.standard_normal(targets)
         b = np.arctan2(y, x) + sb * rng.standard_normal(targets)
-        scan_plots.append(
-            [
-                Plot(t, float(ri), float(bi), SIGMA_R_M, sb, radar="radar", target=str(i))
-                for i, (ri, bi) in enumerate(zip(r, b, strict=True))
-            ]
-        )
+        return [
+            Plot(float(t[i]), float(r[i]), float(b[i]), SIGMA_R_M, sb, radar="radar", target=str(i))
+            for i in np.argsort(t, kind="stable").tolist()
+        ]
+
+    scan_plots = [scan(np.full(targets, n * PERIOD_S)) for n in range(scans)]
+    stamped = [
+        scan(n * PERIOD_S + STAMP_WINDOW_S * rng.uniform(size=targets)) for n in range(scans)
+    ]
     options = StreamOptions(model="cv", sigma_a_mps2=1.0, sigma_v0_mps=200.0)
+    # A throw-away pass over two scans of a few targets first: lazy imports and first-call
+    # costs (half a second) would otherwise fall on whichever route runs first.
+    warm = [[p for p in plots if int(p.target) < 5] for plots in scan_plots[:2]]
+    for dense_route in (False, True):
+        warm_gnn = GNNTracker(("ucm",), False, options, AssociationOptions(), dense=dense_route)
+        for plots in warm:
+            warm_gnn.add_scan([replace(p, target="") for p in plots])
+    warm_labelled = TargetTracker(("ucm",), False, options)
+    for plots in warm:
+        warm_labelled.add_block(plots)
     labelled = TargetTracker(("ucm",), False, options)
-    t0 = time.perf_counter()
-    for plots in scan_plots:
-        labelled.add_block(plots)
-    t_labelled = time.perf_counter() - t0
-    gnn = GNNTracker(("ucm",), False, options, AssociationOptions())
+    sparse = GNNTracker(("ucm",), False, options, AssociationOptions())
+    reference = GNNTracker(("ucm",), False, options, AssociationOptions(), dense=True)
     truth_of: dict[str, set[str]] = {}
-    t0 = time.perf_counter()
+    same = True
+    t_labelled = t_gnn = t_dense = 0.0
     for plots in scan_plots:
-        res = gnn.add_scan([replace(p, target="") for p in plots])
+        bare = [replace(p, target="") for p in plots]
+        t0 = time.perf_counter()
+        labelled.add_block(plots)
+        t1 = time.perf_counter()
+        res = sparse.add_scan(bare)
+        t2 = time.perf_counter()
+        t_labelled += t1 - t0
+        t_gnn += t2 - t1
+        if dense:
+            t2 = time.perf_counter()
+            ref = reference.add_scan(bare)
+            t_dense += time.perf_counter() - t2
+            same = same and ref.track_ids == res.track_ids
         for p, track in zip(plots, res.track_ids, strict=True):
             truth_of.setdefault(track, set()).add(p.target)
-    t_gnn = time.perf_counter() - t0
+    # The stamped pass: the same scene, each plot at its own time (a rotating radar's time
+    # stamps), scans of STAMP_WINDOW_S; the sparse route against the labelled filtering.
+    stamped_gnn = GNNTracker(
+        ("ucm",), False, options, AssociationOptions(scan_window_s=STAMP_WINDOW_S)
+    )
+    stamped_labelled = TargetTracker(("ucm",), False, options)
+    t_stamped = t_stamped_labelled = 0.0
+    stamped_confirmed: set[str] = set()
+    for plots in stamped:
+        bare = [replace(p, target="") for p in plots]
+        t0 = time.perf_counter()
+        stamped_labelled.add_block(plots)
+        t1 = time.perf_counter()
+        res = stamped_gnn.add_scan(bare)
+        t2 = time.perf_counter()
+        t_stamped_labelled += t1 - t0
+        t_stamped += t2 - t1
+        for p, track in zip(plots, res.track_ids, strict=True):
+            stamped_confirmed.add(f"{track}:{p.target}")
     n = targets * scans
-    return {
+    doc: dict[str, Any] = {
         "targets": targets,
         "scans": scans,
         "associated_plots_per_s": n / t_gnn,
         "labelled_plots_per_s": n / t_labelled,
         "association_over_labelled": t_gnn / t_labelled,
-        "correct": len(gnn.ever_confirmed) == targets
-        and all(len(truth_of[t]) == 1 for t in gnn.ever_confirmed),
+        "correct": len(sparse.ever_confirmed) == targets
+        and all(len(truth_of[t]) == 1 for t in sparse.ever_confirmed),
+        "stamped_window_s": STAMP_WINDOW_S,
+        "stamped_plots_per_s": n / t_stamped,
+        "stamped_labelled_plots_per_s": n / t_stamped_labelled,
+        "stamped_over_labelled": t_stamped / t_stamped_labelled,
+        "stamped_correct": len(stamped_gnn.ever_confirmed) == targets
+        and len(stamped_confirmed) == len({c.split(":")[0] for c in stamped_confirmed}),
     }
+    if dense:
+        doc |= {
+            "dense_plots_per_s": n / t_dense,
+            "dense_over_sparse": t_dense / t_gnn,
+            "dense_over_labelled": t_dense / t_labelled,
+            "same_as_dense": same,
+        }
+    return doc
 
 
 def format_association(doc: dict[str, Any]) -> str:
     """One line of ``format_bench``."""
-    return (
+    line = (
         f"association (GNN, ucm), {doc['targets']} targets × {doc['scans']} scans, no "
         f"clutter: {doc['associated_plots_per_s']:.0f} plots/s against "
         f"{doc['labelled_plots_per_s']:.0f} plots/s with the true labels "
         f"(association/labelled {doc['association_over_labelled']:.1f}× the time; "
         f"{'every track on one target' if doc['correct'] else 'ASSOCIATION ERRORS'})"
     )
+    if "dense_plots_per_s" in doc:
+        line += (
+            f"; the dense d² matrix {doc['dense_plots_per_s']:.0f} plots/s, "
+            f"{doc['dense_over_sparse']:.1f}× the sparse route's time "
+            f"({doc['dense_over_labelled']:.1f}× labelled; "
+            f"{'the same track ids' if doc['same_as_dense'] else 'OTHER TRACK IDS'})"
+        )
+    line += (
+        f"; each plot its own time stamp (scans of {doc['stamped_window_s']:g} s): "
+        f"{doc['stamped_plots_per_s']:.0f} plots/s against "
+        f"{doc['stamped_labelled_plots_per_s']:.0f} labelled "
+        f"({doc['stamped_over_labelled']:.1f}× the time; "
+        f"{'every track on one target' if doc['stamped_correct'] else 'ASSOCIATION ERRORS'})"
+    )
+    return line

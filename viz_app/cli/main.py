@@ -252,10 +252,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     bench.add_argument(
         "--only",
-        choices=("asterix",),
+        choices=("asterix", "association"),
         default=None,
-        help="run one section: asterix (ASTERIX CAT048 reading vs CSV, track end to end); "
-        "default all",
+        help="run one section: asterix (ASTERIX CAT048 reading vs CSV, track end to end) or "
+        "association (GNN at --targets targets, sparse vs dense route); default all",
     )
     bench.add_argument(
         "--track-plots",
@@ -496,6 +496,13 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         doc = {"asterix": bench_asterix(args.asterix_plots, targets=args.asterix_targets)}
         check_finite_document("bench", doc, nonnegative=True)
         print_report(doc, args.json, lambda d: format_asterix(d["asterix"]))
+        return 0
+    if args.only == "association":
+        from radarviz.viz_app.bench.association import bench_association, format_association
+
+        doc = {"association": bench_association(args.targets)}
+        check_finite_document("bench", doc, nonnegative=True)
+        print_report(doc, args.json, lambda d: format_association(d["association"]))
         return 0
     check_int("--track-plots", args.track_plots, low=1000, high=10_000_000)
     if args.device == "gpu":
