@@ -127,6 +127,24 @@ def combine(xm, Pm, mu, x, P):
 
 
 @_inline
+def _predicted(mu, Pi, c):
+    # the predicted model probabilities c̄ⱼ = Σᵢ πᵢⱼ μᵢ into c (r,)
+    r = mu.shape[0]
+    for j in range(r):
+        acc = 0.0
+        for i in range(r):
+            acc += mu[i] * Pi[i, j]
+        c[j] = acc
+
+
+@_inline
+def _weights(mu, Pi, c, j, wj):
+    # the mixing weights μᵢ|ⱼ = πᵢⱼ μᵢ / c̄ⱼ of model j into wj (r,)
+    for i in range(mu.shape[0]):
+        wj[i] = Pi[i, j] * mu[i] / c[j]
+
+
+@_inline
 def _add_scaled(p, w: float, q):
     # p + w q on the ten upper entries
     return (
@@ -164,16 +182,10 @@ def _spread_2d(xm, Pm, mu, xa):
 @_jit
 def mix_2d(xm, Pm, mu, Pi, x0, P0, c, w):
     """``mix`` for the 2D state (n = 4), P read and written as its upper triangle."""
-    r = xm.shape[0]
-    for j in range(r):
-        acc = 0.0
-        for i in range(r):
-            acc += mu[i] * Pi[i, j]
-        c[j] = acc
+    _predicted(mu, Pi, c)
     wj = w[0]  # μᵢ|ⱼ of one j at a time
-    for j in range(r):
-        for i in range(r):
-            wj[i] = Pi[i, j] * mu[i] / c[j]
+    for j in range(xm.shape[0]):
+        _weights(mu, Pi, c, j, wj)
         xa = _mean_2d(xm, wj)
         store(xa, _spread_2d(xm, Pm, wj, xa), x0[j], P0[j])
 
@@ -183,6 +195,102 @@ def combine_2d(xm, Pm, mu, x, P):
     """``combine`` for the 2D state (n = 4)."""
     xa = _mean_2d(xm, mu)
     store(xa, _spread_2d(xm, Pm, mu, xa), x, P)
+
+
+# The 3D forms (n = 6): the same in registers, P as its 21 upper entries (row by row). The
+# models share the state layout, so one model's (x, p) and a weight are all a term needs.
+
+
+@_inline
+def load_3d(x, P):
+    """(x, p) of the arrays x (6,), P (6, 6) (P's 21 upper entries, row by row)."""
+    return (x[0], x[1], x[2], x[3], x[4], x[5]), (
+        P[0, 0], P[0, 1], P[0, 2], P[0, 3], P[0, 4], P[0, 5],
+        P[1, 1], P[1, 2], P[1, 3], P[1, 4], P[1, 5],
+        P[2, 2], P[2, 3], P[2, 4], P[2, 5],
+        P[3, 3], P[3, 4], P[3, 5],
+        P[4, 4], P[4, 5],
+        P[5, 5],
+    )  # fmt: skip
+
+
+@_inline
+def store_3d(xt, p, x, P):
+    """Write (x, p) into x (6,) and the symmetric P (6, 6): the upper entries, mirrored."""
+    for a in range(6):
+        x[a] = xt[a]
+    k = 0
+    for a in range(6):
+        for b in range(a, 6):
+            P[a, b] = p[k]
+            P[b, a] = p[k]
+            k += 1
+
+
+@_inline
+def _add_term_3d(p, w: float, q, e):
+    # p + w (q + e eᵀ) on the 21 upper entries
+    e0, e1, e2, e3, e4, e5 = e
+    return (
+        p[0] + w * (q[0] + e0 * e0), p[1] + w * (q[1] + e0 * e1), p[2] + w * (q[2] + e0 * e2),
+        p[3] + w * (q[3] + e0 * e3), p[4] + w * (q[4] + e0 * e4), p[5] + w * (q[5] + e0 * e5),
+        p[6] + w * (q[6] + e1 * e1), p[7] + w * (q[7] + e1 * e2), p[8] + w * (q[8] + e1 * e3),
+        p[9] + w * (q[9] + e1 * e4), p[10] + w * (q[10] + e1 * e5), p[11] + w * (q[11] + e2 * e2),
+        p[12] + w * (q[12] + e2 * e3), p[13] + w * (q[13] + e2 * e4),
+        p[14] + w * (q[14] + e2 * e5), p[15] + w * (q[15] + e3 * e3),
+        p[16] + w * (q[16] + e3 * e4), p[17] + w * (q[17] + e3 * e5),
+        p[18] + w * (q[18] + e4 * e4), p[19] + w * (q[19] + e4 * e5),
+        p[20] + w * (q[20] + e5 * e5),
+    )  # fmt: skip
+
+
+@_inline
+def _mean_3d(xm, mu):
+    # Σᵢ μᵢ xᵢ over the rows of xm (r, 6)
+    xa = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    for i in range(xm.shape[0]):
+        m = mu[i]
+        xa = (
+            xa[0] + m * xm[i, 0], xa[1] + m * xm[i, 1], xa[2] + m * xm[i, 2],
+            xa[3] + m * xm[i, 3], xa[4] + m * xm[i, 4], xa[5] + m * xm[i, 5],
+        )  # fmt: skip
+    return xa
+
+
+@_inline
+def _spread_3d(xm, Pm, mu, xa):
+    # Σᵢ μᵢ (Pᵢ + (xᵢ − x̄)(xᵢ − x̄)ᵀ), upper entries
+    pa = (0.0,) * 21
+    for i in range(xm.shape[0]):
+        xi, pi = load_3d(xm[i], Pm[i])
+        d = (
+            xi[0] - xa[0],
+            xi[1] - xa[1],
+            xi[2] - xa[2],
+            xi[3] - xa[3],
+            xi[4] - xa[4],
+            xi[5] - xa[5],
+        )
+        pa = _add_term_3d(pa, mu[i], pi, d)
+    return pa
+
+
+@_jit
+def mix_3d(xm, Pm, mu, Pi, x0, P0, c, w):
+    """``mix`` for the 3D state (n = 6), P read and written as its upper triangle."""
+    _predicted(mu, Pi, c)
+    wj = w[0]  # μᵢ|ⱼ of one j at a time
+    for j in range(xm.shape[0]):
+        _weights(mu, Pi, c, j, wj)
+        xa = _mean_3d(xm, wj)
+        store_3d(xa, _spread_3d(xm, Pm, wj, xa), x0[j], P0[j])
+
+
+@_jit
+def combine_3d(xm, Pm, mu, x, P):
+    """``combine`` for the 3D state (n = 6)."""
+    xa = _mean_3d(xm, mu)
+    store_3d(xa, _spread_3d(xm, Pm, mu, xa), x, P)
 
 
 @_jit
@@ -364,13 +472,13 @@ def track_plots_imm_3d(
                 _started(x, P, mu0, x0, P0, mu)
             else:
                 mu[:] = mus[k, j]
-                mix(xs[k, j], Ps[k, j], mu, Pi, x0, P0, c, w)
+                mix_3d(xs[k, j], Ps[k, j], mu, Pi, x0, P0, c, w)
                 if dt > 0.0:
                     for m in range(r):
                         xj, Pj = x0[m], P0[m]
                         predict_3d(xj, Pj, dt, sigma_a[m] * sigma_a[m])
                 if with_stats:
-                    combine(x0, P0, c, x, P)
+                    combine_3d(x0, P0, c, x, P)
                     position_measurement_3d(
                         code, x, rr, b, el, sr2, sb2, se2, sx, sy, sz, nu, R, z, conv
                     )
@@ -392,7 +500,7 @@ def track_plots_imm_3d(
                 mode_probabilities(c, ll, mu)
                 if has_vr[i]:
                     if with_stats:
-                        combine(x0, P0, mu, x, P)
+                        combine_3d(x0, P0, mu, x, P)
                         nis += doppler_stats_3d(x, P, vr, trig, var_vr, sb2, se2, u)[0]
                     for m in range(r):
                         xj, Pj = x0[m], P0[m]
@@ -400,7 +508,7 @@ def track_plots_imm_3d(
                         ll[m] = log_likelihood(st[0], st[1], 1)
                         doppler_update_3d(xj, Pj, vr, trig, var_vr, sb2, se2, u, Uv, Kv)
                     mode_probabilities(mu, ll, mu)
-                combine(x0, P0, mu, x, P)
+                combine_3d(x0, P0, mu, x, P)
             out_nis[i, j] = nis
             _store(xs, Ps, mus, k, j, x0, P0, mu, x, P, out_x, out_P, i)
         started[k] = True
