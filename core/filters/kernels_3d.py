@@ -27,7 +27,7 @@ from math import atan2, cos, exp, expm1, hypot, log, sin, sqrt
 
 import numpy as np
 
-from radarviz.core.filters.kernels_2d import _jit, wrap
+from radarviz.core.filters.kernels_2d import _inline, _jit, wrap
 from radarviz.core.filters.polar_ukf import SEMIDEFINITE_RTOL
 
 
@@ -68,7 +68,7 @@ def conversion_scratch(radars: int):
     )
 
 
-@_jit
+@_inline
 def plot_factors(b: float, el: float, ex_g, conv):
     # A plot's factors of the conversions and the Doppler stage, once per plot for every
     # method and model: trig = (cos β̂, sin β̂, cos ε̂, sin ε̂), and its radar's noise table
@@ -79,7 +79,7 @@ def plot_factors(b: float, el: float, ex_g, conv):
             ex[a, c] = ex_g[a, c]
 
 
-@_jit
+@_inline
 def moments(c: float, sn: float, ex, out):
     # core.conversion.planar._angle_moments_cs, then spatial._given_truth: out = (ecc, ess,
     # esc, vcc, vss, csc, mc, ms, mc²) of θ̂ ~ N(θ, s), (c, sn) = (cos θ, sin θ), ex the
@@ -97,7 +97,7 @@ def moments(c: float, sn: float, ex, out):
     out[8] = out[6] * out[6]
 
 
-@_jit
+@_inline
 def posterior_moments(c: float, sn: float, ex, ex2, out, tmp):
     # spatial._posterior_average: the moments averaged over the truth θ ~ N(θ̂, s); ex, ex2
     # the ``exponentials`` of s and 2s
@@ -113,7 +113,7 @@ def posterior_moments(c: float, sn: float, ex, ex2, out, tmp):
     out[8] = e1 * tmp[0]
 
 
-@_jit
+@_inline
 def combined_cov(range_sq: float, var_r: float, e, b, R):
     # spatial._combined_cov: σr² E[u uᵀ] + range_sq Cov(u), from elevation moments e and
     # azimuth moments b (indices as ``moments``)
@@ -128,7 +128,7 @@ def combined_cov(range_sq: float, var_r: float, e, b, R):
     R[2, 0], R[2, 1], R[2, 2] = xz, yz, zz
 
 
-@_jit
+@_inline
 def given_truth_cov(r, cb, sb, ce, se, sr2: float, ex, R, mb, me):
     # spatial.naive_cov_given_truth_3d at (r, β, ε), (cb, sb, ce, se) = (cos β, sin β, cos ε,
     # sin ε); ex the radar's ``noise_table``
@@ -137,7 +137,7 @@ def given_truth_cov(r, cb, sb, ce, se, sr2: float, ex, R, mb, me):
     combined_cov(r * r, sr2, me, mb, R)
 
 
-@_jit
+@_inline
 def convert_3d(code, r, sr2, sb2, se2, px, py, pz, z, R, conv):
     # spatial.convert_3d: the radar-centred point z (3,) and covariance R (3, 3) of
     # (r̂, β̂, ε̂), whose cosines, sines and radar's noise table ``plot_factors`` put in
@@ -187,7 +187,7 @@ def convert_3d(code, r, sr2, sb2, se2, px, py, pz, z, R, conv):
             R[j, i] = R[i, j]
 
 
-@_jit
+@_inline
 def start_3d(x, P, z, R, sx, sy, sz, v0):
     # cv_init: position z + site with covariance R, velocity 0 with variance σv0²
     for i in range(6):
@@ -201,7 +201,7 @@ def start_3d(x, P, z, R, sx, sy, sz, v0):
         P[2 * a + 1, 2 * a + 1] = v0 * v0
 
 
-@_jit
+@_inline
 def predict_3d(x, P, T: float, q: float):
     # cv_predict in 3D: x⁻ = F x, P⁻ = F P Fᵀ + Q, F per axis [[1, T], [0, 1]]
     for a in range(3):
@@ -223,7 +223,7 @@ def predict_3d(x, P, T: float, q: float):
             P[p + 1, p + 1] += q * T2
 
 
-@_jit
+@_inline
 def inverse_3(S, Si) -> float:
     # The inverse of a symmetric 3 × 3 by cofactors; returns the determinant
     a, b, c = S[0, 0], S[0, 1], S[0, 2]
@@ -237,7 +237,7 @@ def inverse_3(S, Si) -> float:
     return det
 
 
-@_jit
+@_inline
 def nis_3(S, nu) -> float:
     # νᵀ S⁻¹ ν by the Cholesky factor (core.filters.state.quad_form_inv): NaN unless S is
     # positive definite
@@ -261,7 +261,7 @@ def nis_3(S, nu) -> float:
     return y0 * y0 + y1 * y1 + y2 * y2
 
 
-@_jit
+@_inline
 def position_update_3d(x, P, nu, R, S, Si, K, U):
     # core.filters.position in 3D: S = H P Hᵀ + R, K = P Hᵀ S⁻¹, x⁺ = x + K ν,
     # P⁺ = P − K Uᵀ + (K S − U) Kᵀ with U = P Hᵀ (Joseph form multiplied out), symmetric
@@ -298,7 +298,7 @@ def position_update_3d(x, P, nu, R, S, Si, K, U):
             P[i, j] = P[j, i]
 
 
-@_jit
+@_inline
 def ekf_measurement_3d(x, r, b, el, sr2, sb2, se2, sx, sy, sz, nu, R):
     # polar_ekf.ekf_pseudo_measurement in 3D: ν' = J ν, R' = J R Jᵀ at the prediction
     dx, dy, dz = x[0] - sx, x[2] - sy, x[4] - sz
@@ -316,7 +316,7 @@ def ekf_measurement_3d(x, r, b, el, sr2, sb2, se2, sx, sy, sz, nu, R):
             R[j, i] = R[i, j]
 
 
-@_jit
+@_inline
 def polar_3(qx: float, qy: float, qz: float, Z, p):
     # core.geometry.polar_coordinates: (r, β, ε) of an offset into Z[p] (ρ by sqrt, not
     # hypot: its guard against overflow costs 13 points × every plot, and a radar's offsets
@@ -416,7 +416,7 @@ def ukf_update_3d(x, P, r, b, el, sr2, sb2, se2, sx, sy, sz, prm, L, Z, K, S, Si
             P[i, j] = P[j, i]
 
 
-@_jit
+@_inline
 def doppler_terms_3d(x, P, trig, var_vr: float, sb2: float, se2: float, u):
     # core.filters.doppler: û = u(β̂, ε̂) into u; returns var e = σVr² + σβ² ((g_β·v)² +
     # g_βᵀ P_vv g_β) + σε² ((g_ε·v)² + g_εᵀ P_vv g_ε), g_β on the first two axes
@@ -434,7 +434,7 @@ def doppler_terms_3d(x, P, trig, var_vr: float, sb2: float, se2: float, u):
     return r_e + se2 * (gv * gv + gpg)
 
 
-@_jit
+@_inline
 def doppler_stats_3d(x, P, vr_hat, trig, var_vr, sb2, se2, u):
     # (ν² / S, log S) of the Doppler stage (doppler_terms, linear_innovation); NaN unless S > 0
     r_e = doppler_terms_3d(x, P, trig, var_vr, sb2, se2, u)
@@ -448,13 +448,13 @@ def doppler_stats_3d(x, P, vr_hat, trig, var_vr, sb2, se2, u):
     return nu * nu / S, log(S)
 
 
-@_jit
+@_inline
 def doppler_nis_3d(x, P, vr_hat, trig, var_vr, sb2, se2, u) -> float:
     # ν² / S of ``doppler_stats_3d``
     return doppler_stats_3d(x, P, vr_hat, trig, var_vr, sb2, se2, u)[0]
 
 
-@_jit
+@_inline
 def position_measurement_3d(
     code, x, r, b, el, sr2, sb2, se2, sx, sy, sz, nu, R, z, conv, converted=False
 ):
@@ -474,7 +474,7 @@ def position_measurement_3d(
         nu[0], nu[1], nu[2] = z[0] + sx - x[0], z[1] + sy - x[2], z[2] + sz - x[4]
 
 
-@_jit
+@_inline
 def start_track_3d(start_code, x, P, r, b, el, sr2, sb2, se2, sx, sy, sz, v0, z, R, conv):
     """A track started at its first plot into x (6,), P (6, 6): the method's start conversion
     about no prediction, velocity 0 with std ``v0`` (``Method.start``); z (3,), R (3, 3),
@@ -483,7 +483,7 @@ def start_track_3d(start_code, x, P, r, b, el, sr2, sb2, se2, sx, sy, sz, v0, z,
     start_3d(x, P, z, R, sx, sy, sz, v0)
 
 
-@_jit
+@_inline
 def position_stats_3d(P, nu, R, S, Si):
     """(νᵀ S⁻¹ ν, log det S) of ``position_measurement_3d``'s (ν, R) on P (6, 6), S = H P Hᵀ + R
     into S (3, 3) (Si: scratch); both NaN unless S is positive definite."""
@@ -497,7 +497,7 @@ def position_stats_3d(P, nu, R, S, Si):
     return nis, log(det)
 
 
-@_jit
+@_inline
 def position_stage_3d(code, x, P, r, b, el, sr2, sb2, se2, sx, sy, sz, nu, R, prm, bufs):
     """The method's update of x (6,), P (6, 6) in place: the UKF (``code`` 6) or the position
     update by (ν, R); ``bufs`` the scratch (S, Si, K, U, L, Z, E) of ``scratch_3d``."""
@@ -523,7 +523,7 @@ def scratch_3d():
     )
 
 
-@_jit
+@_inline
 def doppler_update_3d(x, P, vr_hat, trig, var_vr, sb2, se2, u, U, K):
     # core.filters.doppler.doppler_update in 3D: U = P hᵀ, S = h U + var e, K = U / S,
     # x⁺ = x + K ν, P⁺ = P − K Uᵀ + (K S − U) Kᵀ, symmetrised

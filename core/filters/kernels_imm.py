@@ -69,7 +69,7 @@ from radarviz.core.filters.kernels_track import (
 _LOG_2PI = math.log(2.0 * math.pi)
 
 
-@_jit
+@_inline
 def log_likelihood(nis: float, log_det: float, dof: int) -> float:
     # log N(ν; 0, S) = −½ (NIS + log det S + m log 2π) (core.filters.innovation)
     return -0.5 * (nis + log_det + dof * _LOG_2PI)
@@ -179,7 +179,7 @@ def _spread_2d(xm, Pm, mu, xa):
     return pa
 
 
-@_jit
+@_inline
 def mix_2d(xm, Pm, mu, Pi, x0, P0, c, w):
     """``mix`` for the 2D state (n = 4), P read and written as its upper triangle."""
     _predicted(mu, Pi, c)
@@ -190,7 +190,7 @@ def mix_2d(xm, Pm, mu, Pi, x0, P0, c, w):
         store(xa, _spread_2d(xm, Pm, wj, xa), x0[j], P0[j])
 
 
-@_jit
+@_inline
 def combine_2d(xm, Pm, mu, x, P):
     """``combine`` for the 2D state (n = 4)."""
     xa = _mean_2d(xm, mu)
@@ -275,7 +275,7 @@ def _spread_3d(xm, Pm, mu, xa):
     return pa
 
 
-@_jit
+@_inline
 def mix_3d(xm, Pm, mu, Pi, x0, P0, c, w):
     """``mix`` for the 3D state (n = 6), P read and written as its upper triangle."""
     _predicted(mu, Pi, c)
@@ -286,14 +286,14 @@ def mix_3d(xm, Pm, mu, Pi, x0, P0, c, w):
         store_3d(xa, _spread_3d(xm, Pm, wj, xa), x0[j], P0[j])
 
 
-@_jit
+@_inline
 def combine_3d(xm, Pm, mu, x, P):
     """``combine`` for the 3D state (n = 6)."""
     xa = _mean_3d(xm, mu)
     store_3d(xa, _spread_3d(xm, Pm, mu, xa), x, P)
 
 
-@_jit
+@_inline
 def mode_probabilities(prior, ll, mu):
     """μⱼ ∝ Λⱼ c̄ⱼ (``core.filters.imm.mode_probabilities``) into mu (r,) (may be ``prior``):
     log-likelihoods ll (r,) shifted by their maximum; a model whose likelihood is not finite
@@ -316,7 +316,7 @@ def mode_probabilities(prior, ll, mu):
         mu[j] /= total
 
 
-@_jit
+@_inline
 def _store(xs, Ps, mus, k, j, xm, Pm, mu, x, P, out_x, out_P, i):
     """The models and μ into slot k, method j; the combined (or start) x, P into plot i."""
     r, n = xm.shape
@@ -332,7 +332,7 @@ def _store(xs, Ps, mus, k, j, xm, Pm, mu, x, P, out_x, out_P, i):
             out_P[i, j, a, c] = P[a, c]
 
 
-@_jit
+@_inline
 def _started(x, P, mu0, xm, Pm, mu):
     # imm_start: every model at the track's start, μ = the initial probabilities
     r, n = xm.shape
