@@ -69,7 +69,7 @@ from radarviz.core.filters.kernels_track import (
 _LOG_2PI = math.log(2.0 * math.pi)
 
 
-@_inline
+@_jit
 def log_likelihood(nis: float, log_det: float, dof: int) -> float:
     # log N(ν; 0, S) = −½ (NIS + log det S + m log 2π) (core.filters.innovation)
     return -0.5 * (nis + log_det + dof * _LOG_2PI)
