@@ -335,7 +335,7 @@ def polar_3(qx: float, qy: float, qz: float, Z, p):
     Z[p, 2] = atan2(qz, rho)
 
 
-@_jit
+@_inline
 def ukf_update_3d(x, P, r, b, el, sr2, sb2, se2, sx, sy, sz, prm, L, Z, K, S, Si, E):
     # core.filters.polar_ukf.ukf_update in 3D: 2n + 1 = 13 points of (x⁻, P⁻) through the
     # polar map, unscented S and Pxz, K = Pxz S⁻¹, x⁺ = x + K ν, and P⁺ in Joseph form
