@@ -175,7 +175,8 @@ def test_the_compiled_imm_steps_are_the_numpy_ones(r: int, n: int) -> None:
         Pi = rng.dirichlet(np.ones(r), size=r)
         mixed, c = imm_mix(IMMState(CVBatch(x, P), mu), Pi)
         x0, P0, cc, w = np.empty((r, n)), np.empty((r, n, n)), np.empty(r), np.empty((r, r))
-        forms = [(k.mix, k.combine)] + ([(k.mix_2d, k.combine_2d)] if n == 4 else [])
+        # The 2D and 3D forms (P read as its upper triangle: every stage leaves it symmetric)
+        forms = [(k.mix_2d, k.combine_2d) if n == 4 else (k.mix_3d, k.combine_3d)]
         for mix, combine in forms:
             mix(x, P, mu, Pi, x0, P0, cc, w)
             assert close(c, cc) and close(mixed.x, x0) and close_cov(mixed.P, P0)
