@@ -92,7 +92,7 @@ def read(data: bytes, rad: dict[str, Radar] | None = None) -> tuple[ax.AsterixRe
 def block_rows(reader: ax.AsterixReader, rad: dict[str, Radar]) -> list[tuple]:
     """``reader.blocks()`` as one row per plot: (position, t, r, β, ε or None, Vr or None,
     radar name, target label), the radar's noise checked against the radars file."""
-    from radarviz.viz_app.io.plot_blocks import radar_table
+    from radarviz.viz_app.io.plots import radar_table
 
     names, table, rows = list(rad), radar_table(rad), []
     for blk, positions in reader.blocks():

@@ -80,6 +80,7 @@ from typing import NamedTuple, TypeVar
 import numpy as np
 from numpy.typing import NDArray
 
+from radarviz.core.chi2 import chi2_quantile
 from radarviz.core.filters.innovation import position_terms
 from radarviz.core.filters.methods import (
     METHODS,
@@ -144,9 +145,7 @@ class AssociationOptions:
 
 def gate_threshold(gate_probability: float, dof: int) -> float:
     """γ with P(χ²(dof) < γ) = P_G: the gate of a d-dimensional position innovation."""
-    from scipy.stats import chi2  # lazily: scipy.stats costs a command's start-up
-
-    return float(chi2.ppf(gate_probability, dof))
+    return chi2_quantile(gate_probability, dof)
 
 
 def scan_groups(items: Iterable[tuple[T, Plot]], window_s: float) -> Iterator[list[tuple[T, Plot]]]:

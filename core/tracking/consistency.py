@@ -32,6 +32,7 @@ from typing import Any, Literal, NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
+from radarviz.core.chi2 import chi2_quantile
 from radarviz.core.params import check, check_real
 
 #: Two-sided probability of the band.
@@ -45,15 +46,11 @@ INCONSISTENT_FRACTION = 0.2
 def nis_band(dof: int, level: float = NIS_BAND_LEVEL) -> tuple[float, float]:
     """The band (lo, hi) of the normalised windowed NIS q = Σ NIS / D for D = ``dof``.
 
-    The χ²_D quantile is 2 P⁻¹(D/2, p) (the inverse regularised lower incomplete gamma
-    function), which is what ``scipy.stats.chi2.ppf`` evaluates, bit for bit; taken from
-    ``scipy.special`` because ``scipy.stats`` is half the memory of a ``track`` run.
+    The χ²_D quantiles at (1 − level)/2 and (1 + level)/2, by ``core.chi2.chi2_quantile``
+    (no scipy: it would be a quarter of a ``track`` run's start-up).
     """
-    from scipy import special
-
     tail = (1.0 - level) / 2.0
-    lo, hi = 2.0 * special.gammaincinv(dof / 2.0, np.array([tail, 1.0 - tail])) / dof
-    return float(lo), float(hi)
+    return chi2_quantile(tail, dof) / dof, chi2_quantile(1.0 - tail, dof) / dof
 
 
 class ConsistencyEvent(NamedTuple):

@@ -88,6 +88,7 @@ from radarviz.viz_app.io.plots import (
     check_plots_finite,
     csv_source,
     input_format_of,
+    radar_table,
 )
 
 CATEGORY = 48
@@ -461,11 +462,9 @@ class AsterixReader:
     def blocks(self) -> Iterator[PlacedBlock]:
         """The plots as ``PlacedBlock`` s of ``BLOCK_PLOTS`` (the last fewer): the columns of
         ``core.tracking.compiled.PlotBlock`` (radars indexed into
-        ``viz_app.io.plot_blocks.radar_table`` of the radars file, in its order; NaN for a
+        ``viz_app.io.plots.radar_table`` of the radars file, in its order; NaN for a
         plot without Doppler, None when no plot of the block has one) and each plot's
         position, checked as ``__iter__``'s plots are (``_checked``)."""
-        from radarviz.viz_app.io.plot_blocks import radar_table
-
         table = radar_table(self._radars)
         rows: list[tuple] = []
         for row in self._checked():

@@ -40,7 +40,7 @@ from numpy.typing import NDArray
 
 from radarviz.core.params import ParameterError
 from radarviz.core.tracking.association import AssociationOptions
-from radarviz.core.tracking.compiled import PlotBlock, RadarTable, TrackBlock
+from radarviz.core.tracking.compiled import PlotBlock, TrackBlock
 from radarviz.core.tracking.stream import Plot, StreamOptions, plot_block, state_rows
 from radarviz.core.tracking.targets import TargetTracker
 from radarviz.viz_app.io.arrow_numpy import from_numpy, strings, to_numpy
@@ -61,6 +61,7 @@ from radarviz.viz_app.io.plots import (
     csv_source,
     is_parquet,
     parquet_writer,
+    radar_table,
     track_columns,
     verify_track_parquet,
 )
@@ -103,19 +104,6 @@ class BlockSource(Protocol):
     def blocks(self) -> Iterator[tuple[PlotBlock, NDArray[np.int64]]]: ...
 
     def locate(self, position: int, column: str) -> str: ...
-
-
-def radar_table(radars: dict[str, Radar]) -> RadarTable:
-    """The radars file as a ``RadarTable`` (radians; 0 for an absent σε or σVr: a plot that
-    would need it is refused by the reader)."""
-    rs = list(radars.values())
-    return RadarTable(
-        np.array([(r.x_m, r.y_m, r.z_m) for r in rs], dtype=np.float64).reshape(-1, 3),
-        np.array([r.sigma_range_m for r in rs], dtype=np.float64),
-        np.radians([r.sigma_azimuth_deg for r in rs]),
-        np.radians([r.sigma_elevation_deg or 0.0 for r in rs]),
-        np.array([r.sigma_radial_velocity_mps or 0.0 for r in rs], dtype=np.float64),
-    )
 
 
 class PlotBlockReader:

@@ -91,6 +91,7 @@ from radarviz.core.scenarios.multi_radar import (
     generate_measurements,
 )
 from radarviz.core.tracking.association import AssociationOptions, GNNTracker, scan_groups
+from radarviz.core.tracking.compiled import RadarTable
 from radarviz.core.tracking.stream import (
     METHODS_3D,
     Plot,
@@ -662,6 +663,19 @@ def load_radars(path: str) -> dict[str, Radar]:
         line = raw[: exc.start].count(b"\n") + 1
         raise ParameterError(f"{path} line {line}: not UTF-8 text") from None
     return parse_radars(text, path)
+
+
+def radar_table(radars: dict[str, Radar]) -> RadarTable:
+    """The radars file as a ``RadarTable`` (radians; 0 for an absent σε or σVr: a plot that
+    would need it is refused by the reader)."""
+    rs = list(radars.values())
+    return RadarTable(
+        np.array([(r.x_m, r.y_m, r.z_m) for r in rs], dtype=np.float64).reshape(-1, 3),
+        np.array([r.sigma_range_m for r in rs], dtype=np.float64),
+        np.radians([r.sigma_azimuth_deg for r in rs]),
+        np.radians([r.sigma_elevation_deg or 0.0 for r in rs]),
+        np.array([r.sigma_radial_velocity_mps or 0.0 for r in rs], dtype=np.float64),
+    )
 
 
 def _open_input(path: str) -> Any:
