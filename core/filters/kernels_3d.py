@@ -28,6 +28,7 @@ from math import atan2, cos, exp, expm1, hypot, log, sin, sqrt
 import numpy as np
 
 from radarviz.core.filters.kernels_2d import _inline, _jit, wrap
+from radarviz.core.filters.kernels_track import time_step
 from radarviz.core.filters.polar_ukf import SEMIDEFINITE_RTOL
 
 
@@ -582,11 +583,9 @@ def track_plots_3d(
         sx, sy, sz = site[g, 0], site[g, 1], site[g, 2]
         sr2, sb2, se2 = sigma_r[g] ** 2, sigma_b[g] ** 2, sigma_e[g] ** 2
         new = not started[k]
-        dt = 0.0
-        if not new:
-            dt = time_s[i] - last_t[k]
-            if dt < 0.0:
-                return i
+        dt = time_step(started, last_t, k, time_s[i])
+        if dt < 0.0:
+            return i
         for j in range(n_m):
             code = codes[j]
             nis = np.nan

@@ -64,6 +64,7 @@ from radarviz.core.filters.kernels_track import (
     position_stats,
     scratch_2d,
     start_track,
+    time_step,
 )
 
 _LOG_2PI = math.log(2.0 * math.pi)
@@ -339,11 +340,9 @@ def track_plots_imm_2d(
         sr2, s = sigma_r[g] * sigma_r[g], sigma_b[g] * sigma_b[g]
         var_vr = sigma_vr[g] * sigma_vr[g]
         new = not started[k]
-        dt = 0.0
-        if not new:
-            dt = time_s[i] - last_t[k]
-            if dt < 0.0:
-                return i
+        dt = time_step(started, last_t, k, time_s[i])
+        if dt < 0.0:
+            return i
         for j in range(n_m):
             code = codes[j]
             nis = np.nan
@@ -417,11 +416,9 @@ def track_plots_imm_3d(
         var_vr = sigma_vr[g] * sigma_vr[g]
         vr = vr_mps[i]
         new = not started[k]
-        dt = 0.0
-        if not new:
-            dt = time_s[i] - last_t[k]
-            if dt < 0.0:
-                return i
+        dt = time_step(started, last_t, k, time_s[i])
+        if dt < 0.0:
+            return i
         for j in range(n_m):
             code = codes[j]
             nis = np.nan

@@ -76,6 +76,13 @@ def doppler_nis(x, P, vr_hat: float, b: float, var_vr: float, vb: float) -> floa
 
 
 @_inline
+def time_step(started, last_t, k: int, t: float) -> float:
+    """The time since slot k's previous plot (0 at its first plot); negative when t is before
+    it, a plot out of order (every tracker kernel returns its index then)."""
+    return t - last_t[k] if started[k] else 0.0
+
+
+@_inline
 def position_measurement(code, x, r, b, sr2, s, sx, sy, co):
     """The position stage of method ``code`` on the prediction x (4,) as a position
     measurement (``MethodGroup.measurement``): (νx, νy, R00, R01, R11) in m, m². Converted
@@ -174,11 +181,9 @@ def track_plots_2d(
         sx, sy = site[g, 0], site[g, 1]
         sr2, s = sigma_r[g] * sigma_r[g], sigma_b[g] * sigma_b[g]
         new = not started[k]
-        dt = 0.0
-        if not new:
-            dt = time_s[i] - last_t[k]
-            if dt < 0.0:
-                return i
+        dt = time_step(started, last_t, k, time_s[i])
+        if dt < 0.0:
+            return i
         for j in range(n_m):
             code = codes[j]
             nis = np.nan
