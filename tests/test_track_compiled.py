@@ -90,6 +90,21 @@ def tracked(plots: list[Plot], three_d: bool, engine: str, block: int, **kw):
     return tracker, rows, monitor
 
 
+def assert_same_monitor(ref_mon: ConsistencyMonitor, mon: ConsistencyMonitor) -> None:
+    """The two monitors' figures per track (mean NIS to ``TOL``) and events are the same."""
+    want, got = ref_mon.results(), mon.results()
+    assert set(want) == set(got)
+    for name, w in want.items():
+        g = got[name]
+        assert (g.updates, g.windows, g.above, g.below) == (w.updates, w.windows, w.above, w.below)
+        assert g.first_exit_s == w.first_exit_s
+        assert abs(g.mean_nis_per_dof - w.mean_nis_per_dof) <= TOL * w.mean_nis_per_dof
+    # The numpy engine feeds the monitor wave by wave, the compiled one plot by plot: the
+    # same events, listed in another order.
+    key = sorted((e.track, e.time_s, e.kind) for e in ref_mon.events)
+    assert key == sorted((e.track, e.time_s, e.kind) for e in mon.events)
+
+
 @pytest.mark.parametrize("three_d", [False, True], ids=["2d", "3d"])
 @pytest.mark.parametrize("block", [7, 4096])
 def test_the_compiled_tracker_equals_the_numpy_engine(three_d: bool, block: int) -> None:
@@ -105,17 +120,7 @@ def test_the_compiled_tracker_equals_the_numpy_engine(three_d: bool, block: int)
         for (m, xa, Pa), (_, xb, Pb) in zip(a, b, strict=True):
             assert close(xa, xb), m
             assert close(Pa, Pb), m
-    want, got = ref_mon.results(), mon.results()
-    assert set(want) == set(got)
-    for name, w in want.items():
-        g = got[name]
-        assert (g.updates, g.windows, g.above, g.below) == (w.updates, w.windows, w.above, w.below)
-        assert g.first_exit_s == w.first_exit_s
-        assert abs(g.mean_nis_per_dof - w.mean_nis_per_dof) <= TOL * w.mean_nis_per_dof
-    # The numpy engine feeds the monitor wave by wave, the compiled one plot by plot: the
-    # same events, listed in another order.
-    key = sorted((e.track, e.time_s, e.kind) for e in ref_mon.events)
-    assert key == sorted((e.track, e.time_s, e.kind) for e in mon.events)
+    assert_same_monitor(ref_mon, mon)
 
 
 @pytest.mark.parametrize("three_d", [False, True], ids=["2d", "3d"])
@@ -219,15 +224,7 @@ def test_the_compiled_imm_equals_the_numpy_engine(three_d: bool, block: int) -> 
             mus.append(want)
     start = StreamOptions(model="imm").motion().initial_probabilities()
     assert np.max(np.abs(np.array(mus) - start)) > 0.05
-    want, got = ref_mon.results(), mon.results()
-    assert set(want) == set(got)
-    for name, w in want.items():
-        g = got[name]
-        assert (g.updates, g.windows, g.above, g.below) == (w.updates, w.windows, w.above, w.below)
-        assert g.first_exit_s == w.first_exit_s
-        assert abs(g.mean_nis_per_dof - w.mean_nis_per_dof) <= TOL * w.mean_nis_per_dof
-    key = sorted((e.track, e.time_s, e.kind) for e in ref_mon.events)
-    assert key == sorted((e.track, e.time_s, e.kind) for e in mon.events)
+    assert_same_monitor(ref_mon, mon)
 
 
 @pytest.mark.parametrize("three_d", [False, True], ids=["2d", "3d"])
