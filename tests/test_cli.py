@@ -293,7 +293,11 @@ def test_bench_figures_are_consistent(capsys) -> None:
     # The table prints fp to 1 ns, ours to 0.1 ns and the speed-up to 1: its speed-up must be
     # its own fp / ours within what that rounding allows.
     table = format_bench(doc).splitlines()
-    fp_printed = float(table[0].split("filterpy KalmanFilter:")[1].split("ns")[0])
+    # the machine first: the throughput figures mean nothing without it
+    host = doc["machine"]
+    assert host["cores"] >= 1 and host["cpu"] and host["load_avg_1min_after"] >= 0
+    assert table[0].startswith(f"machine: {host['cpu']}, {host['cores']} cores")
+    fp_printed = float(table[1].split("filterpy KalmanFilter:")[1].split("ns")[0])
     assert fp_printed == round(fp)
     rows = [line for line in table if line.startswith("batched ucm filter")]
     assert len(rows) == 2

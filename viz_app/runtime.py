@@ -4,8 +4,11 @@ from __future__ import annotations
 
 import ctypes
 import ctypes.util
+import os
+import platform
 import resource
 import sys
+from typing import Any
 
 # glibc mallopt parameters (malloc.h).
 _M_TRIM_THRESHOLD = -1
@@ -42,3 +45,30 @@ def tune_allocator() -> bool:
 def peak_rss_mb() -> float:
     """Peak resident set size of this process so far, in MiB (Linux reports KiB)."""
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+def machine() -> dict[str, Any]:
+    """The machine a benchmark ran on: processor model, cores usable by this process, total
+    memory in GiB and the 1-minute load average now (Linux's ``/proc``; elsewhere what the
+    standard library knows). Throughput figures are only comparable with this beside them."""
+    model = platform.processor() or platform.machine()
+    mem_gib = float("nan")
+    try:
+        with open("/proc/cpuinfo") as fh:
+            model = next(
+                (ln.split(":", 1)[1].strip() for ln in fh if ln.startswith("model name")), model
+            )
+        with open("/proc/meminfo") as fh:
+            kib = next(int(ln.split()[1]) for ln in fh if ln.startswith("MemTotal"))
+        mem_gib = kib / 2**20
+    except (OSError, StopIteration, ValueError):
+        pass
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else None
+    return {
+        "cpu": model,
+        "cores": cores,
+        "memory_gib": round(mem_gib, 1) if mem_gib == mem_gib else None,
+        "load_avg_1min": round(load, 2) if load is not None else None,
+        "python": platform.python_version(),
+    }

@@ -89,7 +89,7 @@ from radarviz.core.filters.state import cv_init
 from radarviz.core.scenarios.planar import polar_measurements, prosov_target
 from radarviz.viz_app.bench.association import bench_association, format_association
 from radarviz.viz_app.bench.per_method import bench_filterpy_per_method, bench_per_method
-from radarviz.viz_app.runtime import peak_rss_mb
+from radarviz.viz_app.runtime import machine, peak_rss_mb
 from radarviz.viz_app.tune.params import SCENES
 from radarviz.viz_app.tune.serve import measure_tune_latency
 
@@ -525,6 +525,7 @@ def run_bench(
     """All figures of ``radarviz bench`` as a JSON-ready dict."""
     from radarviz.viz_app.bench.asterix import bench_asterix
 
+    host = machine()
     config = TrackingConfig(runs=2, target=prosov_target())
     gorshkov_s = bench_gorshkov()
     fp = bench_filterpy(filterpy_runs, config)
@@ -562,12 +563,18 @@ def run_bench(
         "association": bench_association(targets),
         "asterix": bench_asterix(asterix_plots, targets=asterix_targets),
         "peak_rss_mb": peak_rss_mb(),
+        # the load at the start and at the end: a shared machine's figures read with it
+        "machine": {**host, "load_avg_1min_after": machine()["load_avg_1min"]},
     }
 
 
 def format_bench(doc: dict[str, Any]) -> str:
     """Readable report of ``run_bench``."""
+    host = doc["machine"]
     lines = [
+        f"machine: {host['cpu']}, {host['cores']} cores, {host['memory_gib']} GiB, Python "
+        f"{host['python']}; load average (1 min) {host['load_avg_1min']} at the start, "
+        f"{host['load_avg_1min_after']} at the end",
         f"filterpy KalmanFilter: {doc['filterpy_ns_per_step']:.0f} ns per step "
         f"({doc['filterpy_runs']} runs × {doc['scans']} scans)",
     ]
