@@ -4,6 +4,7 @@ the same computation."""
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import json
 from pathlib import Path
@@ -21,6 +22,7 @@ from radarviz.core.experiments.prosov import (
 )
 from radarviz.core.finite_memory.fit import finite_memory_fit, preset
 from radarviz.core.params import ParameterError
+from radarviz.core.tracking.stream import StreamOptions
 from radarviz.viz_app.cli.main import main
 from radarviz.viz_app.io.plots import run_track, simulated_plots, state_from_row, write_measurements
 
@@ -185,12 +187,47 @@ def test_track_file_associates_as_the_cli_does(tmp_path: Path) -> None:
         np.testing.assert_allclose(s.x, state_from_row(row)[0], rtol=1e-12, atol=1e-9)
     assert {"target", "status"} <= set(radarviz.to_table(tracks).columns)
 
+    # What a recording is made of: the replay hands an observer the calls ``run_track`` hands
+    # the command's recorder, in the same order (each scan's deleted tracks after its plots).
+    streamed, replayed = CallLog(), CallLog()
+    run_track(
+        str(m),
+        str(r),
+        str(tmp_path / "again.csv"),
+        ("ucm", "ekf"),
+        StreamOptions(model="cv"),
+        lambda _radars: contextlib.nullcontext(streamed),
+        association=options,
+    )
+    tracks.replay(replayed)
+    assert replayed.calls == streamed.calls
+    assert sum(c[0] == "end_scan" for c in streamed.calls) == len(tracks.scans) > 0
+    assert any(c[0] == "end_scan" and c[1] for c in streamed.calls)  # some tracks deleted
+
+
+class CallLog:
+    """A ``RowObserver`` that notes its calls: (add, plot, methods, status), (end_scan, ids)."""
+
+    def __init__(self) -> None:
+        self.calls: list[tuple] = []
+
+    def add(self, plot: radarviz.Plot, rows: list, status: str = "") -> None:
+        self.calls.append(("add", plot, [m for m, _, _ in rows], status))
+
+    def end_scan(self, deleted: list[str]) -> None:
+        self.calls.append(("end_scan", list(deleted)))
+
 
 def test_record_tracks_and_refuse_to_overwrite(tmp_path: Path) -> None:
     from radarviz.viz_app.rerun.recording import verify_recording
 
     plots, radars = simulated_plots("prosov", 1, 1.0, 60)
     tracks = radarviz.track(plots, ("naive", "ekf"), radars=radars)
+    # Without the association: no scans, so the recorder gets each plot with no status.
+    calls = CallLog()
+    tracks.replay(calls)
+    assert tracks.scans == () and len(calls.calls) == len(plots)
+    assert all(c[0] == "add" and c[3] == "" for c in calls.calls)
     path = radarviz.record(tracks, tmp_path / "t.rrd")
     verify_recording(path)
     before = path.read_bytes()

@@ -503,6 +503,46 @@ def test_track_recording_draws_the_status(tmp_path: Path, rrd_contents) -> None:
     assert rows.get("/world/measurements/radar") is None  # plots are under their status only
 
 
+def test_api_recording_of_associated_tracks_is_the_commands(tmp_path: Path, rrd_contents) -> None:
+    """``radarviz.record(track_file(..., association=...))`` writes the recording of ``track
+    --associate gnn --rrd`` on the same file: the same entities, every row's time, position,
+    colour and radius, and the same recursive clears (the row ids aside, which are unique
+    per write). The log may differ only by the command's NIS band exits (``record`` has no
+    monitor)."""
+    import radarviz
+    from radarviz.viz_app.rerun.track_recording import STATUS_LEGEND
+
+    m, r, _ = simulate(tmp_path, "--clutter-per-scan", "2")
+    out, cli_rrd = tmp_path / "t.csv", tmp_path / "cli.rrd"
+    argv = ["track", "--input", str(m), "--radars", str(r), "--out", str(out)]
+    flags = ["--associate", "gnn", "--method", "ucm", "ekf", "--model", "cv", "--sigma-a", "1"]
+    assert main([*argv, "--rrd", str(cli_rrd), *flags]) == 0
+    tracks = radarviz.track_file(
+        str(m), str(r), ["ucm", "ekf"], sigma_a_mps2=1.0, association=AssociationOptions()
+    )
+    assert tracks.scans[-1].plots == len(tracks.plots)
+    api_rrd = radarviz.record(tracks, tmp_path / "api.rrd")
+
+    cli_rows, cli_cols = rrd_contents(cli_rrd)
+    api_rows, api_cols = rrd_contents(api_rrd)
+    # Not a vacuous equality: the scene has deleted tracks, their clears and faint rows.
+    clears = [p for p in cli_rows if p.count("/") == 3 and p.startswith("/world/tracks/")]
+    deleted = {t for s in tracks.scans for t in s.deleted}
+    assert len(deleted) >= 5 and {p.split("/")[3] for p in clears} == deleted
+    assert "/world/measurements/radar/tentative" in cli_rows
+    assert set(api_rows) == set(cli_rows)
+    for entity in cli_rows:
+        if entity == "/log":
+            continue
+        assert api_rows[entity] == cli_rows[entity], entity
+        want = {k: v for k, v in cli_cols[entity].items() if not k.endswith("RowId")}
+        got = {k: v for k, v in api_cols[entity].items() if not k.endswith("RowId")}
+        assert got == want, entity
+    cli_log, api_log = cli_cols["/log"]["TextLog:text"], api_cols["/log"]["TextLog:text"]
+    assert api_log[0] == [STATUS_LEGEND] and api_log[0] == cli_log[0]
+    assert api_log[-1] == cli_log[-1]  # the summary line
+
+
 # ------------------------------------------------------------------------------------------
 # The crossing scene
 # ------------------------------------------------------------------------------------------

@@ -41,7 +41,7 @@ from radarviz.experiments import (
     run_velocity,
 )
 from radarviz.tables import to_arrow, to_columns, to_table
-from radarviz.tracking import Tracks, TrackStep, track, track_file
+from radarviz.tracking import ScanEnd, Tracks, TrackStep, track, track_file
 from radarviz.viewer import PRESETS, record, show, use_offline_assets
 
 __version__ = "0.1.0"
@@ -52,6 +52,7 @@ __all__ = [
     "GorshkovRun",
     "ParameterError",
     "Plot",
+    "ScanEnd",
     "TrackStep",
     "Tracks",
     "convert",

@@ -12,7 +12,13 @@ from radarviz.core.filters.state import position_index
 from radarviz.core.params import ParameterError
 from radarviz.core.tracking.association import AssociationOptions
 from radarviz.core.tracking.stream import Plot, PlotError, StateRow, StreamOptions
-from radarviz.viz_app.io.plots import Radar, _open_input, load_radars, track_plots
+from radarviz.viz_app.io.plots import (
+    Radar,
+    RowObserver,
+    _open_input,
+    load_radars,
+    track_plots,
+)
 
 
 @dataclass(frozen=True)
@@ -41,6 +47,25 @@ class TrackStep:
 
 
 @dataclass(frozen=True)
+class ScanEnd:
+    """The end of one scan of the association (``track_file(..., association=...)``).
+
+    The association takes a scan's plots together and only then knows which tracks it has
+    deleted (a track is deleted at a scan it misses); ``Tracks.scans`` keeps that account,
+    which no ``TrackStep`` holds, so that ``Tracks.replay`` (and with it ``record``) can hand
+    it on where ``radarviz track --associate gnn`` does.
+
+    Attributes:
+        plots: how many plots of ``Tracks.plots`` there are up to and including the scan's
+            last (the scan's plots are ``plots[previous.plots : plots]``).
+        deleted: ids of the tracks deleted at the scan.
+    """
+
+    plots: int
+    deleted: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
 class Tracks:
     """What ``track`` returns: the plots it was given and every method's states.
 
@@ -50,6 +75,8 @@ class Tracks:
         methods: the filters run.
         three_d: the plots carry elevations.
         radars: the radar sites (for a recording), empty when plots came without them.
+        scans: with the association, one ``ScanEnd`` per scan in order (the tracks it
+            deleted); empty without.
     """
 
     plots: tuple[Plot, ...]
@@ -57,6 +84,7 @@ class Tracks:
     methods: tuple[str, ...]
     three_d: bool
     radars: tuple[Radar, ...] = ()
+    scans: tuple[ScanEnd, ...] = ()
 
     def positions_m(self, method: str) -> NDArray[np.float64]:
         """The method's estimated positions, shape (K, 3), m (one row per tracked plot)."""
@@ -70,6 +98,35 @@ class Tracks:
         for s in self.steps:
             out[s.plot].append((s.method, s.x, s.P))
         return out
+
+    def statuses_by_plot(self) -> list[str]:
+        """For each plot, the status of its track after its scan (``TrackStep.status``: every
+        method's step of a plot has the same); "" without the association."""
+        out = [""] * len(self.plots)
+        for s in self.steps:
+            out[s.plot] = s.status
+        return out
+
+    def replay(self, observer: RowObserver) -> None:
+        """Hand every plot to ``observer`` as ``radarviz track`` hands its recorder the plots
+        it tracks (``viz_app.io.plots.run_track``): ``add(plot, rows, status)`` per plot in
+        order and, with the association, ``end_scan(deleted)`` after each scan's last plot.
+
+        ``record`` and ``show`` replay into the recorder of ``radarviz track --rrd``
+        (``viz_app.rerun.track_recording.TrackRecorder``), so the recording of the same plots
+        is the command's: with the association, tentative tracks faint, deleted tracks
+        cleared, paths and time series for confirmed tracks only.
+        """
+        ends = iter(self.scans)
+        end = next(ends, None)
+        rows, statuses = self.rows_by_plot(), self.statuses_by_plot()
+        for n, (plot, plot_rows, status) in enumerate(
+            zip(self.plots, rows, statuses, strict=True), start=1
+        ):
+            observer.add(plot, plot_rows, status)
+            while end is not None and end.plots == n:
+                observer.end_scan(list(end.deleted))
+                end = next(ends, None)
 
 
 def _options(**kwargs: object) -> StreamOptions:
@@ -180,7 +237,9 @@ def track_file(
         association: for a file of many targets without a ``target`` column: the
             global-nearest-neighbour association of ``radarviz track --associate gnn``
             (``AssociationOptions``: gating method, gate probability, M of N, misses to
-            delete, scan window). Each step's ``target`` is then its track id.
+            delete, scan window). Each step's ``target`` is then its track id, its
+            ``status`` the track's status, and ``Tracks.scans`` tells where each scan ends
+            and which tracks it deleted.
         input_format: "csv", "asterix" or "auto" (by the suffix: ``.ast``, ``.asterix`` are
             ASTERIX), as ``radarviz track --format``.
 
@@ -197,15 +256,7 @@ def track_file(
         init_k=init_k,
     )
     sites = load_radars(radars)
-    plots: list[Plot] = []
-    steps: list[TrackStep] = []
-
-    def on_rows(plot: Plot, rows: list[StateRow], status: str = "") -> None:
-        steps.extend(
-            TrackStep(len(plots), plot.time_s, m, x.copy(), P.copy(), plot.target, status)
-            for m, x, P in rows
-        )
-        plots.append(plot)
+    kept = _Collector()
 
     from radarviz.viz_app.io.asterix import source_for
 
@@ -214,6 +265,42 @@ def track_file(
         reader, locate = open_source(fh, measurements, sites)
         used_methods = None if methods is None else tuple(methods)
         _, three_d, used, _ = track_plots(
-            reader, measurements, used_methods, options, on_rows, None, locate, association
+            reader,
+            measurements,
+            used_methods,
+            options,
+            kept.add,
+            None,
+            locate,
+            association,
+            kept.end_scan,
         )
-    return Tracks(tuple(plots), tuple(steps), tuple(used), three_d, tuple(sites.values()))
+    return Tracks(
+        tuple(kept.plots),
+        tuple(kept.steps),
+        tuple(used),
+        three_d,
+        tuple(sites.values()),
+        tuple(kept.scans),
+    )
+
+
+class _Collector:
+    """The ``RowObserver`` that ``track_file`` hands ``track_plots``'s calls to: it keeps the
+    plots, their rows as ``TrackStep`` and the scans' ends, for ``Tracks``."""
+
+    def __init__(self) -> None:
+        self.plots: list[Plot] = []
+        self.steps: list[TrackStep] = []
+        self.scans: list[ScanEnd] = []
+
+    def add(self, plot: Plot, rows: list[StateRow], status: str = "") -> None:
+        n = len(self.plots)
+        self.steps.extend(
+            TrackStep(n, plot.time_s, m, x.copy(), P.copy(), plot.target, status)
+            for m, x, P in rows
+        )
+        self.plots.append(plot)
+
+    def end_scan(self, deleted: list[str]) -> None:
+        self.scans.append(ScanEnd(len(self.plots), tuple(deleted)))

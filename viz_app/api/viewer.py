@@ -40,8 +40,7 @@ def _log(rec: rr.RecordingStream, what: Recordable, seed: int) -> None:
                 "tracks",
             )
         recorder = TrackRecorder(rec, what.radars)
-        for plot, rows in zip(what.plots, what.rows_by_plot(), strict=True):
-            recorder.add(plot, rows)
+        what.replay(recorder)
         recorder.close()
         return
     if not isinstance(what, str):
@@ -65,6 +64,15 @@ def record(
 
     The file is written whole or not at all (``radarviz.viz_app.io.atomic``); open it with
     ``radarviz view PATH`` or ``show``.
+
+    A ``Tracks`` result is recorded as ``radarviz track --rrd`` records the same plots: its
+    plots and rows go to the command's recorder in the command's order (``Tracks.replay``).
+    Tracks of the association (``track_file(..., association=...)``) carry each plot's
+    status and each scan's deleted tracks, so the recording is the one of ``track
+    --associate gnn --rrd``: tentative tracks and their plots faint, a deleted track cleared
+    at the scan that deleted it, paths and time series for confirmed tracks only. (The
+    command's log also lists the NIS band exits of its consistency monitor; ``record`` has
+    no monitor.)
 
     Args:
         what: a preset name (``demo``, ``prosov``, ``prosov3d``, ``gorshkov``, ``velocity``,

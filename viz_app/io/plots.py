@@ -928,7 +928,7 @@ class RowObserver(Protocol):
     With the association, ``add`` also gets the status of the plot's track after its scan
     (``tentative`` or ``confirmed``; "" without the association) and ``end_scan`` the ids of
     the tracks deleted at the scan, after the scan's last plot (``track_plots``'s
-    ``on_scan``)."""
+    ``on_scan``). ``radarviz.Tracks.replay`` hands one the same calls from a kept result."""
 
     def add(self, plot: Plot, rows: list[StateRow], status: str = "") -> None: ...
 
