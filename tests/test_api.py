@@ -99,6 +99,14 @@ def test_estimate_velocity_recovers_the_true_velocity_without_noise() -> None:
     assert table.shape[0] == 1 and table.geometry_m.iloc[0] == pytest.approx(0.053, abs=5e-4)
 
 
+def _plots(target: str = "") -> list[radarviz.Plot]:
+    """A few plots of one target, labelled ``target``."""
+    from dataclasses import replace
+
+    plots, _ = simulated_plots("prosov", 1, 1.0, 5)
+    return [replace(p, target=target) for p in plots]
+
+
 @pytest.mark.parametrize(
     ("call", "start"),
     [
@@ -112,6 +120,20 @@ def test_estimate_velocity_recovers_the_true_velocity_without_noise() -> None:
         (lambda: radarviz.track([], init="later"), "init must be one of"),
         (lambda: radarviz.to_table(42), "result must be"),
         (lambda: radarviz.record("nope", "x.rrd"), "preset must be one of"),
+        (
+            lambda: radarviz.track(_plots("a"), association=radarviz.AssociationOptions()),
+            "association is for plots without target labels (plots[0].target is 'a'",
+        ),
+        (
+            lambda: radarviz.track(
+                _plots(), association=radarviz.AssociationOptions(), init="finite-memory"
+            ),
+            "init must be first-plot",
+        ),
+        (
+            lambda: radarviz.track(_plots()[::-1], association=radarviz.AssociationOptions()),
+            "plots[1].time_s: must not be before the previous time",
+        ),
     ],
 )
 def test_bad_input_is_one_line_naming_the_parameter(call, start: str) -> None:
@@ -203,6 +225,55 @@ def test_track_file_associates_as_the_cli_does(tmp_path: Path) -> None:
     assert replayed.calls == streamed.calls
     assert sum(c[0] == "end_scan" for c in streamed.calls) == len(tracks.scans) > 0
     assert any(c[0] == "end_scan" and c[1] for c in streamed.calls)  # some tracks deleted
+
+
+def test_track_associates_plots_in_memory_as_track_file(tmp_path: Path) -> None:
+    """``track(plots, association=...)`` of a file's plots read into memory is
+    ``track_file(file, association=...)``: the same route, so the same numbers to the bit,
+    the same track ids, statuses and scans, and so the same recording."""
+    from radarviz.viz_app.io.plots import csv_source, load_radars
+    from radarviz.viz_app.rerun.recording import verify_recording
+
+    m, r = tmp_path / "m.csv", tmp_path / "r.toml"
+    argv = ["simulate", "--preset", "crossing", "--out", str(m), "--radars-out", str(r)]
+    assert main([*argv, "--scans", "12", "--clutter-per-scan", "2"]) == 0
+    sites = load_radars(str(r))
+    with m.open("rb") as fh:
+        reader, _ = csv_source(fh, str(m), sites)
+        plots = [plot for _, plot in reader]
+    assert plots and not any(p.target for p in plots)
+    options = radarviz.AssociationOptions(confirm_m=2)
+    from_file = radarviz.track_file(str(m), str(r), ["ucm", "ekf"], association=options)
+    tracks = radarviz.track(plots, ["ucm", "ekf"], association=options, radars=sites.values())
+
+    assert len(tracks.steps) == len(from_file.steps) == 2 * len(plots)
+    for s, t in zip(tracks.steps, from_file.steps, strict=True):
+        assert (s.plot, s.time_s, s.method, s.target, s.status) == (
+            t.plot,
+            t.time_s,
+            t.method,
+            t.target,
+            t.status,
+        )
+        np.testing.assert_array_equal(s.x, t.x)
+        np.testing.assert_array_equal(s.P, t.P)
+    assert tracks.scans == from_file.scans and tracks.plots == from_file.plots
+    assert (tracks.methods, tracks.three_d, tracks.radars) == (
+        from_file.methods,
+        from_file.three_d,
+        from_file.radars,
+    )
+    # Not a vacuous equality: the clutter starts tentative tracks that are deleted, the
+    # targets' tracks are confirmed, and a plot is labelled with its track id.
+    assert {"tentative", "confirmed"} <= {s.status for s in tracks.steps}
+    assert any(end.deleted for end in tracks.scans)
+    assert all(p.target for p in tracks.plots)
+
+    in_memory, of_file = CallLog(), CallLog()
+    tracks.replay(in_memory)
+    from_file.replay(of_file)
+    assert in_memory.calls == of_file.calls
+    verify_recording(radarviz.record(tracks, tmp_path / "t.rrd"))
 
 
 class CallLog:

@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Sequence
+import math
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -16,6 +17,7 @@ from radarviz.viz_app.io.plots import (
     Radar,
     RowObserver,
     _open_input,
+    labels_refused,
     load_radars,
     track_plots,
 )
@@ -145,16 +147,23 @@ def track(
     init: str = "first-plot",
     init_k: int = 3,
     radars: Iterable[Radar] = (),
+    association: AssociationOptions | None = None,
 ) -> Tracks:
-    """Track plots with every requested filter: one target, or many by their labels.
+    """Track plots with every requested filter: one target, many by their labels, or many
+    unlabelled by the association.
 
     The plots go to the trackers of ``radarviz track`` in blocks: ``StreamTracker`` when no
     plot has a ``target`` label, else ``TargetTracker`` (one track per target and method, all
-    targets on the batch axis; it needs the first-plot start).
+    targets on the batch axis; it needs the first-plot start). With ``association`` they go
+    scan by scan to the association of ``radarviz track --associate gnn``, by the very route
+    ``track_file(..., association=...)`` takes (``viz_app.io.plots.track_plots`` reading the
+    plots from memory instead of a file), so the same plots give the same tracks, step for
+    step, and the same ``Tracks.scans``.
 
     Args:
         plots: ``Plot`` records in time order (2D, or all with elevations for 3D); for many
-            targets, each with its ``target`` label and in time order within its target.
+            targets, each with its ``target`` label and in time order within its target, or
+            none labelled with ``association``.
         methods: filters (default every one of the plots' kind).
         model: ``cv`` (constant velocity with ``sigma_a_mps2``; the default here, the papers'
             filter) or ``imm`` (the IMM of a quiet and a manoeuvre model, the default of
@@ -168,6 +177,15 @@ def track(
         init: ``first-plot`` or ``finite-memory`` (Gorshkov and Zavizhenets' window fit).
         init_k: plots in the finite-memory start window.
         radars: the sites, kept for ``record`` and ``show``.
+        association: for plots of many targets without ``target`` labels: the
+            global-nearest-neighbour association of ``radarviz track --associate gnn``
+            (``AssociationOptions``: gating method, gate probability, M of N, misses to
+            delete, scan window; a scan is a run of one radar's plots within the window).
+            Each step's ``target`` is then its track id, its ``status`` the track's status
+            after the scan, ``Tracks.plots`` are the plots labelled with their track ids, and
+            ``Tracks.scans`` tells where each scan ends and which tracks it deleted. It takes
+            the first-plot start only, and refuses labelled plots (their targets are known:
+            track them without it).
 
     Returns:
         ``Tracks`` (``to_table`` gives one row per plot and method).
@@ -188,6 +206,8 @@ def track(
     plots = tuple(plots)
     three_d = bool(plots) and plots[0].elevation_rad is not None
     used = tuple(methods) if methods is not None else (METHODS_3D if three_d else ALL_METHODS)
+    if association is not None:
+        return _associate(plots, used, three_d, options, association, tuple(radars))
     many = any(p.target for p in plots)
     tracker = (TargetTracker if many else StreamTracker)(used, three_d, options)
     steps: list[TrackStep] = []
@@ -197,12 +217,72 @@ def track(
         try:
             rows_of = tracker.add_block(chunk)
         except PlotError as exc:
-            raise ParameterError(f"plots[{i + exc.index}].{exc.column}: {exc}", "plots") from None
+            raise ParameterError(f"{_index(i + exc.index, exc.column)}: {exc}", "plots") from None
         for j, (p, rows) in enumerate(zip(chunk, rows_of, strict=True)):
             steps += [
                 TrackStep(i + j, p.time_s, m, x.copy(), P.copy(), p.target) for m, x, P in rows
             ]
     return Tracks(plots, tuple(steps), used, three_d, tuple(radars))
+
+
+def _associate(
+    plots: tuple[Plot, ...],
+    methods: tuple[str, ...],
+    three_d: bool,
+    options: StreamOptions,
+    association: AssociationOptions,
+    radars: tuple[Radar, ...],
+) -> Tracks:
+    """``track`` with the association: ``track_plots`` of the plots in memory."""
+    from radarviz.core.tracking.stream import check_methods
+
+    labelled = next((i for i, p in enumerate(plots) if p.target), None)
+    if labelled is not None:
+        where = f"plots[{labelled}].target is {plots[labelled].target!r}"
+        raise ParameterError(labels_refused("association", where), "association")
+    # Checked here as ``track`` checks it without the association: ``track_plots`` would name
+    # the command's flag (--method) for this one error about no single parameter.
+    check_methods(methods, three_d)
+    kept = _Collector()
+    track_plots(
+        _PlotList(plots, three_d),
+        "",
+        methods,
+        options,
+        kept.add,
+        None,
+        _index,
+        association,
+        kept.end_scan,
+    )
+    return Tracks(tuple(kept.plots), tuple(kept.steps), methods, three_d, radars, tuple(kept.scans))
+
+
+class _PlotList:
+    """Plots in memory as a ``viz_app.io.plots.PlotSource`` (position: the index), checked
+    for time order as ``PlotReader`` checks a file's: the association cuts scans in order."""
+
+    targets = False  # the association takes only unlabelled plots (``_associate`` checks)
+
+    def __init__(self, plots: tuple[Plot, ...], three_d: bool) -> None:
+        self.plots, self.three_d = plots, three_d
+
+    def __iter__(self) -> Iterator[tuple[int, Plot]]:
+        last = -math.inf
+        for i, p in enumerate(self.plots):
+            if p.time_s < last:
+                raise ParameterError(
+                    f"plots[{i}].time_s: must not be before the previous time {last!r} "
+                    f"(got {p.time_s!r})",
+                    "plots",
+                )
+            last = p.time_s
+            yield i, p
+
+
+def _index(i: int, column: str) -> str:
+    """Where a plot's value is: ``plots[i].column`` (``track``'s words for its errors)."""
+    return f"plots[{i}].{column}"
 
 
 def track_file(
@@ -286,8 +366,9 @@ def track_file(
 
 
 class _Collector:
-    """The ``RowObserver`` that ``track_file`` hands ``track_plots``'s calls to: it keeps the
-    plots, their rows as ``TrackStep`` and the scans' ends, for ``Tracks``."""
+    """The ``RowObserver`` that ``track_file`` (and ``track`` with the association) hands
+    ``track_plots``'s calls to: it keeps the plots, their rows as ``TrackStep`` and the
+    scans' ends, for ``Tracks``."""
 
     def __init__(self) -> None:
         self.plots: list[Plot] = []

@@ -753,8 +753,9 @@ class PlotSource(Protocol):
     """What ``track_plots`` reads: a measurement file's plots, with what its start told.
 
     ``PlotReader`` (CSV) and ``viz_app.io.asterix.AsterixReader`` (ASTERIX CAT048) are the
-    two; iterating yields (position, ``Plot``), the position being what ``track_plots``'s
-    ``locate`` turns into words (a line number; a byte offset).
+    files'; ``radarviz.track`` hands its plots in memory as one (the association's route).
+    Iterating yields (position, ``Plot``), the position being what ``track_plots``'s
+    ``locate`` turns into words (a line number; a byte offset; an index).
     """
 
     #: Plots carry elevations (3D).
@@ -819,7 +820,7 @@ def track_plots(
 
     ``methods`` None: every method of the file's kind (``ALL_METHODS`` in 2D, ``METHODS_3D``
     in 3D). Returns (plots, three_d, methods, targets). Tracker errors come back as
-    "SOURCE " + ``locate(position, column)`` + ": …".
+    "SOURCE " + ``locate(position, column)`` + ": …" (without "SOURCE " for ``source`` "").
 
     With ``association`` (``track --associate gnn``) a file without target labels is
     associated scan by scan (``core.tracking.association.GNNTracker``): ``on_rows(plot,
@@ -854,8 +855,8 @@ def track_plots(
         try:
             rows = tracker.add_block([plot for _, plot in block])
         except PlotError as exc:
-            where = locate(block[exc.index][0], exc.column)
-            raise ParameterError(f"{source} {where}: {exc}") from None
+            where = _place(source, locate(block[exc.index][0], exc.column))
+            raise ParameterError(f"{where}: {exc}") from None
         for (_, plot), plot_rows in zip(block, rows, strict=True):
             on_rows(plot, plot_rows)
         block.clear()
@@ -880,6 +881,20 @@ def input_format_of(path: str, file_format: str = "auto") -> str:
     return "asterix" if path.lower().endswith(ASTERIX_SUFFIXES) else "csv"
 
 
+def labels_refused(name: str, labelled: str) -> str:
+    """Why the association (``name``: ``--associate``, or the API's ``association``) refuses
+    plots with target labels, in words: it is what decides which plots are one target's, so
+    plots whose targets are already known are tracked without it (one track per label).
+    ``labelled`` says where the labels are ("this file labels them")."""
+    return f"{name} is for plots without target labels ({labelled}: track them without {name})"
+
+
+def _place(source: str, where: str) -> str:
+    """``where`` (a ``Locate``'s words) in ``source``; a source without a name (the API's
+    plots in memory) is located by ``where`` alone."""
+    return f"{source} {where}" if source else where
+
+
 def _associate_plots(
     reader: PlotSource,
     source: str,
@@ -893,10 +908,8 @@ def _associate_plots(
 ) -> tuple[int, bool, tuple[str, ...], tuple[str, ...]]:
     """``track_plots`` with the association (its docstring)."""
     if reader.targets:
-        raise ParameterError(
-            f"{source} {locate(1, 'target')}: --associate is for plots without target labels "
-            "(this file labels its targets: track it without --associate)"
-        )
+        where = _place(source, locate(1, "target"))
+        raise ParameterError(f"{where}: {labels_refused('--associate', 'this file labels them')}")
     try:
         tracker = GNNTracker(methods, reader.three_d, options, association)
     except ParameterError as exc:
@@ -910,8 +923,8 @@ def _associate_plots(
         try:
             result = tracker.add_scan([plot for _, plot in scan])
         except PlotError as exc:
-            where = locate(scan[exc.index][0], exc.column)
-            raise ParameterError(f"{source} {where}: {exc}") from None
+            where = _place(source, locate(scan[exc.index][0], exc.column))
+            raise ParameterError(f"{where}: {exc}") from None
         for (_, plot), track, status, rows in zip(
             scan, result.track_ids, result.statuses, result.rows, strict=True
         ):
