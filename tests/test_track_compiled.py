@@ -14,7 +14,8 @@
   (``close_cov``), for μ and for the monitor's NIS of the combined prediction, whatever the
   blocks; a target of many is bit for bit its plots alone; ``radarviz track`` (the IMM by
   default) writes the numpy engine's tracks.
-* The number text: the compiled formatter writes every double as pyarrow does, byte for byte.
+* The number text: the compiled formatter writes every double as pyarrow does, byte for byte,
+  on 1.1·10⁷ doubles chosen where a shortest-digits formatter errs.
 * The file path: ``radarviz track`` (columns read by pyarrow in blocks, tracked by arrays,
   written a block at a time) gives the tracks of the plots read row by row and tracked one
   ``Plot`` at a time, also when the blocks are cut small and the file has what the fast parser
@@ -355,10 +356,9 @@ def test_an_error_in_a_later_block_names_its_line(
     assert not out.exists()
 
 
-def test_the_compiled_number_text_is_pyarrows_byte_for_byte() -> None:
-    """``viz_app.io.csv_text`` against pyarrow's CSV writer on 10⁶ doubles: random bit
-    patterns (every exponent, subnormals), the magnitudes of tracks, integers, short
-    decimals, and the edges of the positional range (10⁻⁷ … 10¹⁰), ±0, the extremes."""
+def assert_pyarrows_text(x: np.ndarray) -> None:
+    """The compiled formatter's text of the finite doubles ``x`` is pyarrow's CSV writer's,
+    byte for byte (the first value that differs named)."""
     import io
 
     import pyarrow as pa
@@ -366,6 +366,23 @@ def test_the_compiled_number_text_is_pyarrows_byte_for_byte() -> None:
 
     from radarviz.viz_app.io.csv_text import format_doubles
 
+    x = np.ascontiguousarray(x[np.isfinite(x)], dtype=np.float64)
+    buf = np.empty(26 * x.size + 64, dtype=np.uint8)
+    ours = bytes(buf[: format_doubles(x.view(np.uint64), buf)])
+    sink = io.BytesIO()
+    options = pcsv.WriteOptions(include_header=False)
+    pcsv.write_csv(pa.table({"v": x}), sink, write_options=options)
+    theirs = sink.getvalue()
+    if ours != theirs:  # name the first value that differs
+        for v, a, b in zip(x, ours.split(b"\n"), theirs.split(b"\n"), strict=False):
+            assert a == b, (v, a, b)
+    assert ours == theirs
+
+
+def test_the_compiled_number_text_is_pyarrows_byte_for_byte() -> None:
+    """``viz_app.io.csv_text`` against pyarrow's CSV writer on 10⁶ doubles: random bit
+    patterns (every exponent, subnormals), the magnitudes of tracks, integers, short
+    decimals, and the edges of the positional range (10⁻⁷ … 10¹⁰), ±0, the extremes."""
     rng = np.random.default_rng(3)
     edges = [10.0**k * f for k in range(-8, 12) for f in (1.0, 9.999999999999, 1.5)]
     x = np.concatenate(
@@ -379,17 +396,56 @@ def test_the_compiled_number_text_is_pyarrows_byte_for_byte() -> None:
             np.array(edges + [-v for v in edges]),
         ]
     )
-    x = x[np.isfinite(x)]
-    buf = np.empty(26 * x.size + 64, dtype=np.uint8)
-    ours = bytes(buf[: format_doubles(x.view(np.uint64), buf)])
-    sink = io.BytesIO()
-    options = pcsv.WriteOptions(include_header=False)
-    pcsv.write_csv(pa.table({"v": x}), sink, write_options=options)
-    theirs = sink.getvalue()
-    if ours != theirs:  # name the first value that differs
-        for v, a, b in zip(x, ours.split(b"\n"), theirs.split(b"\n"), strict=False):
-            assert a == b, (v, a, b)
-    assert ours == theirs
+    assert_pyarrows_text(x)
+
+
+def _neighbours(v: np.ndarray, ulps: int) -> np.ndarray:
+    """v and the doubles up to ``ulps`` steps below and above each (the finite ones)."""
+    bits = v[np.isfinite(v) & (v > 0)].view(np.int64)
+    steps = np.arange(-ulps, ulps + 1, dtype=np.int64)
+    out = (bits[:, None] + steps[None, :]).ravel()
+    return out[out > 0].view(np.float64)
+
+
+def _short_decimals(rng: np.random.Generator, count: int) -> np.ndarray:
+    """The doubles nearest to ``count`` decimals of 1 … 17 random digits, the first digit's
+    place 10^X for X = −9 … 12 (Python's float of the text: correctly rounded)."""
+    n = rng.integers(1, 18, count)
+    first = rng.integers(-9, 13, count)
+    m = rng.integers(10 ** (n - 1), 10**n)
+    places = (first - n + 1).tolist()
+    return np.array([float(f"{a}e{b}") for a, b in zip(m.tolist(), places, strict=True)])
+
+
+def test_the_number_text_is_pyarrows_on_ten_million_doubles() -> None:
+    """The same on 1.1·10⁷ doubles, a block of 10⁶ at a time, chosen where a formatter errs:
+    random bit patterns; subnormals (random, and the 10⁴ smallest, whose digits are few);
+    powers of ten and of two (where the spacing of doubles changes) with 3 doubles either
+    side; integers up to 2⁵³ (uniform in their logarithm) and next to 2⁵³; numbers of every
+    digit count 1 … 17 at every exponent −9 … 12 and their neighbours (the positional range
+    −6 ≤ X ≤ 9 and past it either side); the magnitudes of tracks and short decimals; each
+    also negated in part. Every case of the layout and of the digit search is met many
+    times over: the distinct cases (X, digit count, sign) number about 20·17·2."""
+    rng = np.random.default_rng(17)
+    e10 = np.arange(-323, 309)
+    powers = np.concatenate([10.0 ** e10.astype(np.float64), np.ldexp(1.0, np.arange(-1074, 1024))])
+    blocks = [
+        rng.integers(0, 2**64, 3_000_000, dtype=np.uint64).view(np.float64),
+        rng.integers(1, 2**52, 500_000, dtype=np.uint64).view(np.float64),  # subnormals
+        np.arange(1, 10_001, dtype=np.uint64).view(np.float64),
+        _neighbours(powers, 3),
+        np.floor(2.0 ** rng.uniform(0, 53, 1_000_000)),
+        2.0**53 - np.arange(0, 100_000, dtype=np.float64),
+        _neighbours(_short_decimals(rng, 500_000), 1),
+        rng.normal(0, 3e4, 1_500_000),
+        rng.lognormal(3, 4, 1_500_000),
+        np.round(rng.normal(size=1_000_000) * 1e4, 3),
+    ]
+    x = np.concatenate(blocks)
+    x.view(np.uint64)[rng.random(x.size) < 0.3] ^= np.uint64(1 << 63)  # the sign bit
+    assert x.size >= 10_000_000
+    for start in range(0, x.size, 1_000_000):
+        assert_pyarrows_text(x[start : start + 1_000_000])
 
 
 @pytest.mark.parametrize("n", [4, 6])

@@ -336,10 +336,10 @@ class BlockWriter:
     """The track file written one block of plots at a time (the columns and the number
     formatting of ``viz_app.io.plots.TrackWriter``, pyarrow's, byte for byte).
 
-    The rows are formatted by the compiled ``viz_app.io.csv_text.format_rows`` (Ryū's
-    shortest round-trip digits, in pyarrow's layout; 2× pyarrow's speed), a block's rows split
-    over ``WRITE_THREADS`` threads (the kernel releases the GIL) while the next block is read
-    and tracked, and written in order.
+    The rows are formatted by the compiled ``viz_app.io.csv_text.format_track_rows``
+    (Schubfach's shortest round-trip digits, in pyarrow's layout; about 5× pyarrow's speed), a
+    block's rows split over ``WRITE_THREADS`` threads (the kernel releases the GIL) while the
+    next block is read and tracked, and written in order.
 
     With ``parquet`` the block's columns become one pyarrow table, written as one row group
     of a Parquet file (``viz_app.io.plots.parquet_writer``: the same columns and float64
