@@ -5,6 +5,7 @@ The browser test is required in CI (``CI=true``): a missing browser is a failure
 
 from __future__ import annotations
 
+import itertools
 import os
 import queue
 import re
@@ -177,25 +178,48 @@ def test_bad_value_shows_error_and_keeps_last_good() -> None:
 
 
 def test_stress_rapid_changes_coalesce() -> None:
-    """100 changes in 2 s: a few runs, the last with the final values, no thread growth."""
+    """100 changes in 2 s: the runs are one at a time, each on the newest change at its start
+    (the ones in between skipped), the last with the final values, no thread growth.
+
+    How many runs that is depends on the machine (about 2 s over one run's time), so it is
+    bounded by the runs' own measured times, not by a fixed count."""
     s = TuneSession(None)
-    w = Coalescer(s.run, s.done, s.error)
+    spans: list[tuple[float, float, int]] = []  # each run's start, end, change index
+
+    def run(params: TuneParams) -> object:
+        start = time.perf_counter()
+        out = s.run(params)
+        spans.append((start, time.perf_counter(), round((params.sigma_beta_deg - 1.0) / 0.05)))
+        return out
+
+    w = Coalescer(run, s.done, s.error)
     base = TuneParams(runs=200, steps=60)
+    submitted: list[float] = []
     try:
-        w.submit(base)
+        w.submit(replace(base, sigma_beta_deg=0.5))
         assert w.wait_idle(60)
         threads0 = _os_threads()
-        runs0 = w.completed
+        spans.clear()
         t0 = time.monotonic()
         for i in range(100):
+            submitted.append(time.perf_counter())
             w.submit(replace(base, sigma_beta_deg=round(1.0 + 0.05 * i, 2)))
             time.sleep(max(0.0, t0 + 0.02 * (i + 1) - time.monotonic()))
         assert w.wait_idle(60)
-        runs = w.completed - runs0
         threads1 = _os_threads()
     finally:
         w.stop()
-    assert 1 <= runs <= 30, runs
+    runs = len(spans)
+    assert 1 <= runs < 100, runs  # a run takes longer than the 20 ms between changes
+    for (_, end, a), (start, _, b) in itertools.pairwise(spans):
+        assert end <= start and a < b  # one at a time, in order
+        # the newest at its start: the change after it came later (the submit time is taken
+        # just before the worker can see the change, so it may precede the start only then)
+        assert b == 99 or submitted[b + 1] > start - 0.005, (a, b)
+    # back to back: no more runs than the burst's length holds of the shortest one
+    shortest = min(end - start for start, end, _ in spans)
+    assert runs <= (spans[-1][1] - submitted[0]) / shortest + 1, (runs, shortest)
+    assert spans[-1][2] == 99
     assert s.last_good is not None
     assert s.last_good.params.sigma_beta_deg == pytest.approx(1.0 + 0.05 * 99)
     assert threads1 <= threads0 + 2, (threads0, threads1)
