@@ -179,7 +179,9 @@ class CompiledTracks:
 
     def add(self, block: PlotBlock) -> TrackBlock:
         """Filter a block in order; raises ``OutOfOrderError`` at a plot earlier than its
-        target's previous one (the plots before it are filtered, it and later ones not)."""
+        target's previous one (the plots before it are filtered and fed to the monitor, it
+        and later ones not; in a block split between two threads the other half's later
+        plots may be in the tracks' state too, which no caller reads after the error)."""
         slot = self._slots(block.labels)[block.target]
         if self.imm is not None and self.mus.shape[0] < self.started.shape[0]:
             grow = self.started.shape[0] - self.mus.shape[0]
