@@ -26,6 +26,7 @@
 from __future__ import annotations
 
 import csv
+from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 
@@ -33,14 +34,17 @@ import numpy as np
 import pytest
 from test_targets import TOL, close  # |a − b| ≤ 1e-9 (1 + |a|), as the many-target tests
 
+from radarviz.core.tracking import compiled
 from radarviz.core.tracking.compiled import CompiledTracks, PlotBlock, TrackBlock
 from radarviz.core.tracking.consistency import ConsistencyMonitor
 from radarviz.core.tracking.stream import (
     ALL_METHODS,
     METHODS_3D,
     Plot,
+    PlotError,
     StreamOptions,
     StreamTracker,
+    plot_block,
 )
 from radarviz.core.tracking.targets import TargetTracker
 from radarviz.viz_app.cli.main import main
@@ -243,6 +247,114 @@ def test_a_target_of_many_is_bit_for_bit_its_plots_alone_with_the_imm(three_d: b
         for a, b in zip(alone, mine, strict=True):
             for (_, xa, Pa), (_, xb, Pb) in zip(a, b, strict=True):
                 assert np.array_equal(xa, xb) and np.array_equal(Pa, Pb)
+
+
+def uneven_scene(three_d: bool) -> list[Plot]:
+    """``scene`` of 12 targets with 9 of them cut to their first few plots (one to three):
+    most plots belong to three targets, so the split's groups are far from one target per
+    thread and a block holds slots of one plot next to slots of many."""
+    keep = {f"T{k}": 1 + k % 3 for k in range(3, 12)}
+    plots, seen = [], dict.fromkeys(keep, 0)
+    for p in scene(three_d, targets=12):
+        if p.target in keep:
+            seen[p.target] += 1
+            if seen[p.target] > keep[p.target]:
+                continue
+        plots.append(p)
+    return plots
+
+
+@pytest.fixture
+def split(monkeypatch: pytest.MonkeyPatch) -> Callable[[bool], list[int]]:
+    """``split(on)``: every block of two or more targets split between the threads (on), or
+    none (off), whatever the machine's cores; returns the list the split blocks' sizes are
+    appended to (a check that the route was taken)."""
+    sizes: list[int] = []
+    run_split = compiled._run_split
+
+    def spy(run, rows, halves, outs):  # type: ignore[no-untyped-def]
+        sizes.append(sum(h.size for h in halves))
+        return run_split(run, rows, halves, outs)
+
+    def set_split(on: bool) -> list[int]:
+        monkeypatch.setattr(compiled, "SPLIT_STEPS", 1 if on else 10**12)
+        monkeypatch.setattr(compiled, "_cores", lambda: 2)
+        monkeypatch.setattr(compiled, "_run_split", spy)
+        return sizes
+
+    return set_split
+
+
+def monitor_text(mon: ConsistencyMonitor) -> str:
+    """The monitor's records and events, exactly (``repr`` of the floats: every bit)."""
+    return repr((sorted(mon.results().items()), mon.events))
+
+
+@pytest.mark.parametrize("model", ["cv", "imm"])
+@pytest.mark.parametrize("three_d", [False, True], ids=["2d", "3d"])
+@pytest.mark.parametrize("uneven", [False, True], ids=["even", "uneven"])
+def test_a_split_block_is_the_one_thread_block_bit_for_bit(
+    split: Callable[[bool], list[int]], three_d: bool, model: str, uneven: bool
+) -> None:
+    plots = uneven_scene(three_d) if uneven else scene(three_d, targets=12)
+    split(False)
+    _, ref_rows, ref_mon = tracked(plots, three_d, "compiled", 40, model=model)
+    sizes = split(True)
+    _, rows, mon = tracked(plots, three_d, "compiled", 40, model=model)
+    assert len(sizes) == -(-len(plots) // 40)  # every block split
+    for a, b in zip(ref_rows, rows, strict=True):
+        for (m, xa, Pa), (_, xb, Pb) in zip(a, b, strict=True):
+            assert xa.tobytes() == xb.tobytes() and Pa.tobytes() == Pb.tobytes(), m
+    assert monitor_text(ref_mon) == monitor_text(mon)
+    assert sum(r.updates for r in ref_mon.results().values()) > 0
+
+
+@pytest.mark.parametrize("later_first", [False, True], ids=["bad-in-first", "bad-in-second"])
+def test_a_plot_out_of_order_in_a_split_block_is_named_as_in_one_thread(
+    split: Callable[[bool], list[int]], later_first: bool
+) -> None:
+    """A block with a plot out of order in each group: the error names the first in block
+    order (of the first group or of the second), and the monitor holds the updates of the
+    plots before it only, as on one thread."""
+    plots = scene(True, targets=12)[:120]
+    halves = compiled._halves(plot_block(plots).target)
+    assert halves is not None
+    # Two plots out of order, one in each group, the earlier one in the first group or in
+    # the second (``later_first``): the first group's kernel then runs past the second's.
+    early, late = (halves[1], halves[0]) if later_first else halves
+    first = int(early[early.size // 2])
+    second = int(late[np.searchsorted(late, first + 5)])
+    bads = (first, second)
+    for i in bads:
+        previous = max(j for j in range(i) if plots[j].target == plots[i].target)
+        plots[i] = replace(plots[i], time_s=plots[previous].time_s - 0.5)
+    errors, texts = [], []
+    for on in (False, True):
+        sizes = split(on)
+        monitor = ConsistencyMonitor(3)
+        options = StreamOptions(sigma_a_mps2=1.0, monitor=monitor)
+        tracker = TargetTracker(METHODS_3D, True, options)
+        with pytest.raises(PlotError) as exc:
+            tracker.add_block(plots)
+        errors.append((exc.value.index, str(exc.value)))
+        texts.append(monitor_text(monitor))
+        assert len(sizes) == int(on)
+    assert errors[0] == errors[1] and errors[0][0] == first != second
+    assert texts[0] == texts[1] and monitor.results()
+
+
+def test_the_halves_are_disjoint_balanced_and_in_order() -> None:
+    rng = np.random.default_rng(7)
+    slot = rng.choice(50, size=2000, p=rng.dirichlet(np.ones(50) * 0.3))
+    halves = compiled._halves(slot)
+    assert halves is not None
+    a, b = halves
+    assert np.array_equal(np.sort(np.concatenate(halves)), np.arange(slot.size))
+    assert np.all(np.diff(a) > 0) and np.all(np.diff(b) > 0)  # block order
+    assert not set(slot[a]) & set(slot[b])  # no target in both
+    # The groups differ by at most the plots of the target that straddles the middle.
+    assert abs(a.size - b.size) <= np.bincount(slot).max()
+    assert compiled._halves(np.zeros(10, dtype=np.intp)) is None  # one target
 
 
 def _read_tracks(path: Path) -> list[tuple[str, str, np.ndarray, np.ndarray]]:

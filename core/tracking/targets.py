@@ -24,7 +24,8 @@ IMM each has its trailing model axis too (``core.filters.imm``).
 
 * **Engines.** The above is the numpy engine (``StreamOptions.engine="numpy"``, the
   reference). On the compiled engine (the default) a block goes through one compiled pass in
-  plot order instead (``core.tracking.compiled``; no waves), for the cv model and the IMM;
+  plot order instead, or a large one through one per half of its targets on two threads
+  (``core.tracking.compiled``; no waves), for the cv model and the IMM;
   the converted Doppler update runs on numpy whatever the option (``engine`` tells which
   ran). ``add_arrays`` takes a block as
   arrays (``PlotBlock``) and returns the states as arrays (``TrackBlock``), beside
