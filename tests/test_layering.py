@@ -55,6 +55,7 @@ FORBIDDEN_IMPORTS: tuple[tuple[str, tuple[str, ...], str], ...] = (
     ),
     ("core/geometry.py", ("radarviz.core",), "geometry is a leaf of core"),
     ("core/params.py", ("radarviz.core",), "params is a leaf of core"),
+    ("core/cores.py", ("radarviz.core",), "cores is a leaf of core"),
     (
         "",
         ("core", "viz_app"),

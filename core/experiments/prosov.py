@@ -16,7 +16,6 @@ filtered states.
 
 from __future__ import annotations
 
-import os
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
@@ -28,6 +27,7 @@ from numpy.typing import NDArray
 from radarviz.core.confidence import Verdict, claim_verdict, jackknife_band
 from radarviz.core.conversion.planar import convert_parts
 from radarviz.core.conversion.spatial import convert_3d
+from radarviz.core.cores import available_cores
 from radarviz.core.filters.compiled import (
     COMPILED_METHODS,
     ENGINES,
@@ -539,14 +539,6 @@ def tracking_result(
             m: accumulators[m].leave_one_out() for m in config.methods if accumulators[m].has_groups
         },
     )
-
-
-def available_cores() -> int:
-    """The cores this process may run on (its CPU affinity where the system has one)."""
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:  # not on Linux
-        return os.cpu_count() or 1
 
 
 def _monte_carlo(

@@ -32,6 +32,7 @@ from typing import Any, NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
+from radarviz.core.cores import available_cores
 from radarviz.core.filters.compiled import METHOD_CODES, START_CODES
 from radarviz.core.filters.models import IMMModel
 from radarviz.core.filters.polar_ukf import UKFParams
@@ -269,10 +270,7 @@ _pool_lock = threading.Lock()
 
 @functools.cache
 def _cores() -> int:
-    """The cores this process may run on (imported on first use: the experiments module
-    is not otherwise needed to track a file)."""
-    from radarviz.core.experiments.prosov import available_cores
-
+    """``available_cores``, asked once (a system call)."""
     return available_cores()
 
 

@@ -74,10 +74,10 @@ import numpy as np
 from filterpy.kalman import KalmanFilter
 
 from radarviz.core.conversion.planar import convert
+from radarviz.core.cores import available_cores
 from radarviz.core.experiments.prosov import (
     BLOCK_RUNS,
     TrackingConfig,
-    available_cores,
     block_sizes,
     filter_block,
     run_tracking,

@@ -366,7 +366,7 @@ class BlockWriter:
         self._parquet = parquet_writer(fh, targets) if parquet else None
         from concurrent.futures import ThreadPoolExecutor
 
-        from radarviz.core.experiments.prosov import available_cores
+        from radarviz.core.cores import available_cores
 
         # One single-thread pool per slice: slice i always goes to pool i; one more thread
         # writes the slices' text in order, so the tracker never waits for the disk.
