@@ -10,6 +10,8 @@ import resource
 import sys
 from typing import Any
 
+from radarviz.core.cores import available_cores
+
 # glibc mallopt parameters (malloc.h).
 _M_TRIM_THRESHOLD = -1
 _M_TOP_PAD = -2
@@ -52,7 +54,7 @@ def machine() -> dict[str, Any]:
     memory in GiB and the 1-minute load average now (Linux's ``/proc``; elsewhere what the
     standard library knows). Throughput figures are only comparable with this beside them."""
     model = platform.processor() or platform.machine()
-    mem_gib = float("nan")
+    mem_gib: float | None = None
     try:
         with open("/proc/cpuinfo") as fh:
             model = next(
@@ -60,15 +62,14 @@ def machine() -> dict[str, Any]:
             )
         with open("/proc/meminfo") as fh:
             kib = next(int(ln.split()[1]) for ln in fh if ln.startswith("MemTotal"))
-        mem_gib = kib / 2**20
+        mem_gib = round(kib / 2**20, 1)
     except (OSError, StopIteration, ValueError):
         pass
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else None
     return {
         "cpu": model,
-        "cores": cores,
-        "memory_gib": round(mem_gib, 1) if mem_gib == mem_gib else None,
+        "cores": available_cores(),
+        "memory_gib": mem_gib,
         "load_avg_1min": round(load, 2) if load is not None else None,
         "python": platform.python_version(),
     }
