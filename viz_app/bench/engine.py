@@ -68,6 +68,7 @@ from __future__ import annotations
 import time
 from collections.abc import Sequence
 from dataclasses import replace
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -453,6 +454,25 @@ def bench_targets(
     }
 
 
+def _timed_track(
+    d: Path, meas: Path, kind: str, plots: int, model: tuple[str, ...]
+) -> dict[str, float]:
+    """One ``radarviz track`` run of ``meas`` (``plots`` plots, radars ``d/radars.toml``) into
+    a track file of ``kind`` in ``d`` (deleted after): its ``file`` figures."""
+    from radarviz.viz_app.bench.track_file import time_track
+
+    tracks = d / f"tracks.{kind}"
+    run = time_track(meas, d / "radars.toml", tracks, model)
+    tracks.unlink()
+    return {
+        "wall_s": run.wall_s,
+        "cpu_s": run.cpu_s,
+        "plots_per_s": plots / run.wall_s,
+        "plots_per_cpu_s": plots / run.cpu_s,
+        "peak_rss_mb": run.peak_rss_mb,
+    }
+
+
 def bench_track_file(plots: int) -> dict[str, Any]:
     """``radarviz track`` end to end on the air-traffic file (``viz_app.bench.track_file``),
         1000 targets (fewer for a short file), 2D and 3D (Doppler), all seven methods, the cv
@@ -462,9 +482,8 @@ def bench_track_file(plots: int) -> dict[str, Any]:
     CSV (its ratio to cv's CSV run likewise). Each run is its
         own process, after untimed warm-up runs (numba's cache)."""
     import tempfile
-    from pathlib import Path
 
-    from radarviz.viz_app.bench.track_file import air_traffic_file, time_track
+    from radarviz.viz_app.bench.track_file import air_traffic_file
 
     out: dict[str, Any] = {}
     targets = min(1000, max(1, plots // 100))
@@ -477,30 +496,12 @@ def bench_track_file(plots: int) -> dict[str, Any]:
                 written = air_traffic_file(meas, d / "radars.toml", targets, n, dims == 3)
                 figures: dict[str, Any] = {"plots": written}
                 for kind in TRACK_FILE_KINDS:
-                    tracks = d / f"tracks.{kind}"
-                    run = time_track(meas, d / "radars.toml", tracks, CV_TRACK)
-                    tracks.unlink()
-                    figures[kind] = {
-                        "wall_s": run.wall_s,
-                        "cpu_s": run.cpu_s,
-                        "plots_per_s": written / run.wall_s,
-                        "plots_per_cpu_s": written / run.cpu_s,
-                        "peak_rss_mb": run.peak_rss_mb,
-                    }
+                    figures[kind] = _timed_track(d, meas, kind, written, CV_TRACK)
                 figures["parquet_over_csv_cpu"] = (
                     figures["parquet"]["plots_per_cpu_s"] / figures["csv"]["plots_per_cpu_s"]
                 )
                 # The command's default model, the IMM, into the CSV track file.
-                tracks = d / "tracks.csv"
-                run = time_track(meas, d / "radars.toml", tracks, IMM_TRACK)
-                tracks.unlink()
-                figures["imm_csv"] = {
-                    "wall_s": run.wall_s,
-                    "cpu_s": run.cpu_s,
-                    "plots_per_s": written / run.wall_s,
-                    "plots_per_cpu_s": written / run.cpu_s,
-                    "peak_rss_mb": run.peak_rss_mb,
-                }
+                figures["imm_csv"] = _timed_track(d, meas, "csv", written, IMM_TRACK)
                 figures["imm_over_cv_cpu"] = (
                     figures["imm_csv"]["plots_per_cpu_s"] / figures["csv"]["plots_per_cpu_s"]
                 )
