@@ -42,6 +42,7 @@ from radarviz.core.tracking.stream import (
     METHODS_3D,
     Plot,
     PlotError,
+    StateRow,
     StreamOptions,
     StreamTracker,
     plot_block,
@@ -95,6 +96,19 @@ def tracked(plots: list[Plot], three_d: bool, engine: str, block: int, **kw):
     return tracker, rows, monitor
 
 
+def assert_same_rows(
+    ref_rows: list[list[StateRow]],
+    rows: list[list[StateRow]],
+    close_P: Callable[[np.ndarray, np.ndarray], bool],
+) -> None:
+    """Per plot the same methods in the same order, each x ``close`` and P ``close_P``."""
+    for a, b in zip(ref_rows, rows, strict=True):
+        assert [m for m, _, _ in a] == [m for m, _, _ in b]
+        for (m, xa, Pa), (_, xb, Pb) in zip(a, b, strict=True):
+            assert close(xa, xb), m
+            assert close_P(Pa, Pb), m
+
+
 def assert_same_monitor(ref_mon: ConsistencyMonitor, mon: ConsistencyMonitor) -> None:
     """The two monitors' figures per track (mean NIS to ``TOL``) and events are the same."""
     want, got = ref_mon.results(), mon.results()
@@ -120,11 +134,7 @@ def test_the_compiled_tracker_equals_the_numpy_engine(three_d: bool, block: int)
     fast, rows, mon = tracked(plots, three_d, "compiled", block)
     assert (ref.engine, fast.engine) == ("numpy", "compiled")
     assert fast.targets == ref.targets
-    for a, b in zip(ref_rows, rows, strict=True):
-        assert [m for m, _, _ in a] == [m for m, _, _ in b]
-        for (m, xa, Pa), (_, xb, Pb) in zip(a, b, strict=True):
-            assert close(xa, xb), m
-            assert close(Pa, Pb), m
+    assert_same_rows(ref_rows, rows, close)
     assert_same_monitor(ref_mon, mon)
 
 
@@ -215,11 +225,7 @@ def test_the_compiled_imm_equals_the_numpy_engine(three_d: bool, block: int) -> 
     fast, rows, mon = tracked(plots, three_d, "compiled", block, model="imm")
     assert (ref.engine, fast.engine) == ("numpy", "compiled")
     assert fast.targets == ref.targets
-    for a, b in zip(ref_rows, rows, strict=True):
-        assert [m for m, _, _ in a] == [m for m, _, _ in b]
-        for (m, xa, Pa), (_, xb, Pb) in zip(a, b, strict=True):
-            assert close(xa, xb), m
-            assert close_cov(Pa, Pb), m
+    assert_same_rows(ref_rows, rows, close_cov)
     # μ, what the combined estimates are weighted by (moved well away from its start).
     mus = []
     for t in ref.targets:
