@@ -288,6 +288,9 @@ class CallLog:
     def end_scan(self, deleted: list[str]) -> None:
         self.calls.append(("end_scan", list(deleted)))
 
+    def report(self, account: object) -> None:
+        self.calls.append(("report", account))
+
 
 def test_record_tracks_and_refuse_to_overwrite(tmp_path: Path) -> None:
     from radarviz.viz_app.rerun.recording import verify_recording

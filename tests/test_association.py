@@ -50,6 +50,7 @@ from radarviz.core.tracking.association import (
     gnn_assign,
     mahalanobis_matrix,
     mahalanobis_pairs,
+    plot_batches,
     scan_groups,
     sparse_gnn_assign,
 )
@@ -433,7 +434,7 @@ def _packed(rgb: tuple[int, int, int]) -> int:
 
 def test_track_recording_draws_the_status(tmp_path: Path, rrd_contents) -> None:
     """The association's recording against the tracker's own account of the same plots
-    (``GNNTracker.add_scan`` scan by scan): every track row coloured by its status (faint while
+    (``GNNTracker.add_batch`` batch by batch): every track row coloured by its status (faint while
     tentative), a recursive clear of exactly the deleted tracks at the last plot of the scan
     that deleted them, paths and time series for confirmed tracks only, and each scan's plots
     as one row per status."""
@@ -455,8 +456,8 @@ def test_track_recording_draws_the_status(tmp_path: Path, rrd_contents) -> None:
     statuses: list[str] = []
     deleted: dict[str, int] = {}  # id → the plot (1, 2, …) ending the scan that deleted it
     scans: list[list[str]] = []
-    for scan in scan_groups(reader, 0.0):
-        res = gnn.add_scan([p for _, p in scan])
+    for scan in plot_batches(reader, AssociationOptions().batch_sector_deg):
+        res = gnn.add_batch([p for _, p in scan])
         ids += res.track_ids
         statuses += res.statuses
         scans.append(res.statuses)

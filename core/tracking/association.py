@@ -73,7 +73,8 @@ filtering of the same plots.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Iterator
+import math
+from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass, field, replace
 from typing import NamedTuple, TypeVar
 
@@ -91,6 +92,14 @@ from radarviz.core.filters.methods import (
 )
 from radarviz.core.filters.state import CVBatch, position_index, quad_form_inv
 from radarviz.core.params import ParameterError, check, check_choice, default
+from radarviz.core.tracking.coverage import (
+    EDGE_FRACTION,
+    MAX_MARGIN_RAD,
+    MIN_MARGIN_RAD,
+    RadarBeam,
+    RadarCoverage,
+)
+from radarviz.core.tracking.management import CONFIRMED_CODE, TENTATIVE_CODE, TrackBook
 from radarviz.core.tracking.stream import (
     ALL_METHODS,
     Plot,
@@ -118,7 +127,9 @@ class AssociationOptions:
         gate_probability: P_G, in (0, 1).
         confirm_m, confirm_n: M of the first N scans confirm a tentative track (M ≤ N).
         delete_misses: consecutive misses that delete a confirmed track.
-        scan_window_s: plots of one radar within this time of a scan's first plot join it (s).
+        scan_window_s: plots of one radar within this time of a batch's first plot join it
+            (s); None: batches by radar and azimuth sector (``plot_batches``).
+        batch_sector_deg: the azimuth sector of a batch without ``scan_window_s`` (deg).
     """
 
     method: str = "ucm"
@@ -126,7 +137,8 @@ class AssociationOptions:
     confirm_m: int = default("confirm_m")
     confirm_n: int = default("confirm_n")
     delete_misses: int = default("delete_misses")
-    scan_window_s: float = default("scan_window_s")
+    scan_window_s: float | None = None
+    batch_sector_deg: float = default("batch_sector_deg")
 
     def __post_init__(self) -> None:
         check_choice("associate_method", self.method, ALL_METHODS)
@@ -134,7 +146,9 @@ class AssociationOptions:
         check("confirm_m", self.confirm_m)
         check("confirm_n", self.confirm_n)
         check("delete_misses", self.delete_misses)
-        check("scan_window_s", self.scan_window_s)
+        if self.scan_window_s is not None:
+            check("scan_window_s", self.scan_window_s)
+        check("batch_sector_deg", self.batch_sector_deg)
         if self.confirm_m > self.confirm_n:
             raise ParameterError(
                 f"confirm_m must be at most confirm_n = {self.confirm_n} (M of N scans; got "
@@ -160,6 +174,42 @@ def scan_groups(items: Iterable[tuple[T, Plot]], window_s: float) -> Iterator[li
         scan.append(item)
     if scan:
         yield scan
+
+
+#: Longest time span of a batch cut by sector (s): one radar's sector is swept in a fraction
+#: of a revolution, and a plot in the same sector a revolution later starts a new batch.
+MAX_BATCH_SPAN_S = 0.5
+
+
+def plot_batches(
+    items: Iterable[tuple[T, Plot]], sector_deg: float
+) -> Iterator[list[tuple[T, Plot]]]:
+    """Cut (key, plot) pairs, in time order, into the association's batches: runs of
+    consecutive plots of one radar in one azimuth sector of ``sector_deg`` (sectors counted
+    from azimuth 0) within ``MAX_BATCH_SPAN_S`` of the batch's first plot, or sharing its time
+    stamp (a scan-stamped radar's scan is one batch). Within a batch a track takes at most
+    one plot, and the assignment is optimal (module docstring)."""
+    width = math.radians(sector_deg)
+    batch: list[tuple[T, Plot]] = []
+    first: Plot | None = None
+    sector = 0
+    for item in items:
+        p = item[1]
+        s = int((p.azimuth_rad % (2 * math.pi)) // width)
+        if first is not None and (
+            p.radar != first.radar
+            or (
+                p.time_s != first.time_s
+                and (s != sector or p.time_s - first.time_s > MAX_BATCH_SPAN_S)
+            )
+        ):
+            yield batch
+            batch, first = [], None
+        if first is None:
+            first, sector = p, s
+        batch.append(item)
+    if batch:
+        yield batch
 
 
 def mahalanobis_matrix(
@@ -405,26 +455,15 @@ def sparse_gnn_assign(
     return r[order].astype(np.intp), c[order].astype(np.intp)
 
 
-@dataclass
-class TrackRecord:
-    """The association's book of one track: status, hits and scans since its start, and
-    the consecutive misses of a confirmed track."""
-
-    status: str = TENTATIVE
-    hits: int = 1
-    scans: int = 1
-    misses: int = 0
-
-
 class ScanResult(NamedTuple):
-    """What one scan did.
+    """What one batch (or scan) did.
 
     Attributes:
-        track_ids: (P,) per plot of the scan, the id of the track it went to.
-        statuses: (P,) that track's status after the scan.
+        track_ids: (P,) per plot of the batch, the id of the track it went to.
+        statuses: (P,) that track's status after the batch.
         rows: per plot, (method, x (6,), P (6, 6)) for every requested method.
-        confirmed: ids of the tracks confirmed at this scan.
-        deleted: ids of the tracks deleted at this scan.
+        confirmed: ids of the tracks confirmed at this batch.
+        deleted: ids of the tracks deleted at this batch.
     """
 
     track_ids: list[str]
@@ -432,6 +471,26 @@ class ScanResult(NamedTuple):
     rows: list[list[StateRow]]
     confirmed: list[str]
     deleted: list[str]
+
+
+class AssociationReport(NamedTuple):
+    """The association's account of a run.
+
+    Attributes:
+        plots: per radar (by name, in order of its first plot) its plots in tracks confirmed
+            (now or before their deletion), in tracks still tentative, and in tracks deleted
+            without ever being confirmed (keys ``confirmed``, ``tentative``, ``never``).
+        estimated: per radar, what the radars file did not give and was estimated from its
+            plots (``core.tracking.coverage.RadarBeam.estimated``; SI units).
+        scan_stamped: per radar, whether its plots of a scan share one time stamp.
+        started, confirmed: tracks started and confirmed in all.
+    """
+
+    plots: dict[str, dict[str, int]]
+    estimated: dict[str, dict[str, float | None]]
+    scan_stamped: dict[str, bool]
+    started: int
+    confirmed: int
 
 
 @dataclass
@@ -463,6 +522,7 @@ class GNNTracker:
         options: StreamOptions,
         association: AssociationOptions,
         dense: bool = False,
+        coverage: Mapping[str, RadarCoverage] | None = None,
     ):
         self.methods = tuple(methods)
         self.dense = dense
@@ -479,7 +539,12 @@ class GNNTracker:
         else:
             gate_tracker = TargetTracker((a.method,), three_d, _without_monitor(options))
         self._gate = _Gate(a.method, gate_threshold(a.gate_probability, dims), gate_tracker)
-        self.tracks: dict[str, TrackRecord] = {}
+        self.book = TrackBook(a.confirm_m, a.confirm_n, a.delete_misses, 2 * dims)
+        self._coverage = dict(coverage or {})
+        #: Each radar's beam and coverage (``core.tracking.coverage``), by name, in order of
+        #: first plot.
+        self.beams: dict[str, RadarBeam] = {}
+        self._sites: list[NDArray[np.float64]] = []
         self._started = 0
         #: Ids of every track confirmed so far, in order of confirmation.
         self.ever_confirmed: list[str] = []
@@ -491,7 +556,25 @@ class GNNTracker:
 
     def live(self, status: str | None = None) -> list[str]:
         """Ids of the live tracks (of one status, or all), in order of initiation."""
-        return [t for t, r in self.tracks.items() if status is None or r.status == status]
+        if status is None:
+            return list(self.book.slot)
+        code = CONFIRMED_CODE if status == CONFIRMED else TENTATIVE_CODE
+        st = self.book.status
+        return [t for t, s in self.book.slot.items() if st[s] == code]
+
+    def status(self, track: str) -> str:
+        """A live track's status."""
+        return CONFIRMED if self.book.status[self.book.slot[track]] == CONFIRMED_CODE else TENTATIVE
+
+    def plot_counts(self) -> dict[str, dict[str, int]]:
+        """Per radar, its plots so far: in tracks confirmed (now or before their deletion),
+        in tracks still tentative, in tracks deleted without ever being confirmed
+        (``TrackBook.plot_counts``)."""
+        counts = self.book.plot_counts()
+        return {
+            name: dict(zip(("confirmed", "tentative", "never"), map(int, counts[i]), strict=True))
+            for i, name in enumerate(self.beams)
+        }
 
     def distances(self, ids: list[str], plots: list[Plot]) -> NDArray[np.float64]:
         """d² (len(ids), len(plots)) of ``plots`` against tracks ``ids``, each track predicted
@@ -563,17 +646,67 @@ class GNNTracker:
         return rows.astype(np.intp), cols_all.astype(np.intp), d2s
 
     def add_scan(self, plots: list[Plot]) -> ScanResult:
-        """Associate and filter one scan's plots (``scan_groups``); a ``PlotError`` carries
-        ``index``, the plot's position in the scan."""
+        """Associate and filter one whole scan of one radar (its plots, or none): every live
+        track inside the radar's coverage without a plot in the scan has missed it (an
+        empty scan: every live track). A ``PlotError`` carries ``index``, the plot's position
+        in the scan."""
+        return self._add(plots, whole_scan=True)
+
+    def add_batch(self, plots: list[Plot]) -> ScanResult:
+        """Associate and filter a batch of one radar's plots as they come (``plot_batches``):
+        the tracks the radar's beam swept since its previous batch, inside its coverage,
+        without a plot are missed (``core.tracking.coverage``); a scan-stamped radar's batch
+        is a whole scan. A ``PlotError`` carries ``index``, the plot's position in the
+        batch."""
+        return self._add(plots, whole_scan=False)
+
+    def _radar(self, plots: list[Plot]) -> tuple[int, RadarBeam] | None:
+        """The batch's radar (index, beam), registered at its first plot; None for no plots."""
+        if not plots:
+            return None
+        name = plots[0].radar
+        for i, p in enumerate(plots):
+            if p.radar != name:
+                raise PlotError("radar", "a batch holds the plots of one radar", index=i)
+        if name not in self.beams:
+            self.beams[name] = RadarBeam(self._coverage.get(name))
+            self._sites.append(np.asarray(plots[0].site, dtype=np.float64)[: self.dims])
+            self.book.radars(len(self.beams))
+        return list(self.beams).index(name), self.beams[name]
+
+    def _add(self, plots: list[Plot], whole_scan: bool) -> ScanResult:
         for i, p in enumerate(plots):
             if (self.dims == 3) != (p.elevation_rad is not None):
                 raise PlotError(
                     "elevation_deg", "every plot of a 3D track needs an elevation", index=i
                 )
+        radar = self._radar(plots)
+        times = np.array([p.time_s for p in plots], dtype=np.float64)
+        period = None
+        if radar is not None:
+            beam = radar[1]
+            elev = (
+                np.array([p.elevation_rad for p in plots], dtype=np.float64)
+                if self.dims == 3
+                else None
+            )
+            beam.observe(
+                times,
+                np.array([p.azimuth_rad for p in plots], dtype=np.float64),
+                np.array([p.range_m for p in plots], dtype=np.float64),
+                elev,
+            )
+            period = beam.period_s
+        book = self.book
         owner: list[str | None] = [None] * len(plots)
         free = np.arange(len(plots))
         for status in (CONFIRMED, TENTATIVE):  # confirmed tracks choose first
             ids = self.live(status)
+            if radar is not None and period is not None and ids:
+                # A track takes at most one plot per sweep of a radar.
+                slots = np.array([book.slot[t] for t in ids], dtype=np.intp)
+                fresh = book.hit_s[slots, radar[0]] <= times[0] - period / 2
+                ids = [t for t, ok in zip(ids, fresh.tolist(), strict=True) if ok]
             if not ids or not free.size:
                 continue
             scan = [plots[j] for j in free]
@@ -586,53 +719,146 @@ class GNNTracker:
             for r, c in zip(rows.tolist(), cols.tolist(), strict=True):
                 owner[int(free[c])] = ids[r]
             free = np.delete(free, cols)
-        hit = {t for t in owner if t is not None}
+        hit = [j for j, t in enumerate(owner) if t is not None]
         for j in free.tolist():  # unassigned plots start tentative tracks
             self._started += 1
             owner[j] = str(self._started)
         labelled = [_label(p, t) for p, t in zip(plots, owner, strict=True)]
         rows_out = self.tracker.add_block(labelled)
+        gate_rows = rows_out
         if self._gate.tracker is not self.tracker:
-            self._gate.tracker.add_block(labelled)
-        confirmed, deleted = self._book(hit, [owner[j] for j in free.tolist()])
-        statuses = [self.tracks[t].status if t in self.tracks else TENTATIVE for t in owner]
-        # A track deleted at this scan cannot have a plot in it (it was missed): statuses hold.
+            gate_rows = self._gate.tracker.add_block(labelled)
+        confirmed, deleted = self._manage(
+            radar, times, owner, hit, free.tolist(), gate_rows, whole_scan
+        )
+        statuses = [self.status(t) if t in book.slot else TENTATIVE for t in owner]
+        # A track deleted at this batch cannot have a plot in it (it was missed): statuses hold.
         return ScanResult([str(t) for t in owner], statuses, rows_out, confirmed, deleted)
 
-    def _book(self, hit: set[str], started: list[str | None]) -> tuple[list[str], list[str]]:
-        """Hits, misses, confirmation and deletion after a scan (module docstring)."""
-        a = self.association
-        confirmed: list[str] = []
-        deleted: list[str] = []
-        for t, r in self.tracks.items():
-            got = t in hit
-            if r.status == TENTATIVE:
-                r.scans += 1
-                r.hits += got
-                if r.hits >= a.confirm_m:
-                    r.status = CONFIRMED
-                    confirmed.append(t)
-                elif r.hits + (a.confirm_n - r.scans) < a.confirm_m:
-                    deleted.append(t)
-            else:
-                r.misses = 0 if got else r.misses + 1
-                if r.misses >= a.delete_misses:
-                    deleted.append(t)
-        for t in started:
-            assert t is not None
-            r = TrackRecord()
-            self.tracks[t] = r
-            if a.confirm_m <= 1:  # 1 of N: the initiating plot confirms
-                r.status = CONFIRMED
-                confirmed.append(t)
+    def _manage(
+        self,
+        radar: tuple[int, RadarBeam] | None,
+        times: NDArray[np.float64],
+        owner: list[str | None],
+        hit: list[int],
+        started: list[int],
+        gate_rows: list[list[StateRow]],
+        whole_scan: bool,
+    ) -> tuple[list[str], list[str]]:
+        """Hits, starts, the sweep's misses, confirmation and deletion after a batch
+        (``core.tracking.management``)."""
+        book = self.book
+        gi = (
+            next(i for i, (m, _, _) in enumerate(gate_rows[0]) if m == self._gate.method)
+            if gate_rows
+            else 0
+        )
+        n = 2 * self.dims
+        before = book.live_slots()  # the tracks that existed before this batch
+        ri = radar[0] if radar is not None else 0
+        if hit:
+            slots = np.array([book.slot[str(owner[j])] for j in hit], dtype=np.intp)
+            book.hit(slots, times[hit], ri)
+        for j in started:
+            s = book.start(str(owner[j]), float(times[j]), ri)
+            if self.association.confirm_m <= 1:  # 1 of N: the initiating plot confirms
+                book.status[s] = CONFIRMED_CODE
+        for j, t in enumerate(owner):  # each track's latest state, for its sweeps
+            s = book.slot[str(t)]
+            _, x6, P6 = gate_rows[j][gi]
+            book.x[s] = x6[:n]
+            book.sigma_m[s] = math.sqrt(max(float(P6[k, k]) for k in range(0, n, 2)))
+        hit_slots = {book.slot[str(owner[j])] for j in hit}
+        judged = self._swept(radar, times, before, whole_scan)
+        missed = np.array([s for s in judged.tolist() if s not in hit_slots], dtype=np.intp)
+        book.miss(missed)
+        touched = np.unique(
+            np.r_[missed, list(hit_slots), [book.slot[str(owner[j])] for j in started]]
+        ).astype(np.intp)
+        confirm, delete = book.settle(touched)
+        delete = np.r_[delete, self._coasted(times)].astype(np.intp)
+        by_slot = {s: t for t, s in book.slot.items()}
+        confirmed = [by_slot[s] for s in sorted(confirm.tolist(), key=lambda s: int(by_slot[s]))]
+        if self.association.confirm_m <= 1:
+            confirmed += [str(owner[j]) for j in started]
+        deleted = sorted({by_slot[s] for s in delete.tolist()}, key=int)
         for t in deleted:
-            del self.tracks[t]
+            book.remove(t)
         if deleted:
             self.tracker.forget(deleted)
             if self._gate.tracker is not self.tracker:
                 self._gate.tracker.forget(deleted)
         self.ever_confirmed.extend(confirmed)
         return confirmed, deleted
+
+    def _swept(
+        self,
+        radar: tuple[int, RadarBeam] | None,
+        times: NDArray[np.float64],
+        slots: NDArray[np.intp],
+        whole_scan: bool,
+    ) -> NDArray[np.intp]:
+        """The slots among ``slots`` that this batch's sweep judges: passed by the beam inside
+        the radar's coverage, not judged by it in this sweep already
+        (``core.tracking.coverage``). An empty whole scan (no radar): every one."""
+        if not slots.size:
+            return slots
+        if radar is None:
+            return slots if whole_scan else slots[:0]
+        ri, beam = radar
+        book = self.book
+        end = float(times[-1])
+        whole = whole_scan or (beam.scan_stamped and times[0] == times[-1])
+        x = book.x[slots]
+        pos = x[:, 0::2] + x[:, 1::2] * (end - book.last_s[slots])[:, None]
+        rel = pos - self._sites[ri]
+        ground = np.hypot(rel[:, 0], rel[:, 1])
+        rng = np.sqrt(np.sum(rel**2, axis=1))
+        elev = np.arctan2(rel[:, 2], ground) if self.dims == 3 else None
+        az = np.arctan2(rel[:, 1], rel[:, 0])
+        margin = np.clip(
+            3.0 * book.sigma_m[slots] / np.maximum(ground, 1.0), MIN_MARGIN_RAD, MAX_MARGIN_RAD
+        )
+        passed_mask, passed_s = beam.swept(end, az, margin, whole)
+        sigma = book.sigma_m[slots]
+        edge = 3.0 * sigma + EDGE_FRACTION * rng
+        # Whole scans handed in by the caller are judged in the coverage given (the caller
+        # knows the scan saw all it covers); batches also in the coverage estimated.
+        covered = beam.inside(rng, elev, edge, estimated=not whole_scan)
+        ok = passed_mask & covered & (book.born_s[slots] < passed_s)
+        period = beam.period_s
+        if period is not None and not whole:
+            ok &= passed_s > book.judged_s[slots, ri] + period / 2
+            # A plot of this sweep already came (the beam passed it a little early).
+            ok &= book.hit_s[slots, ri] <= passed_s - period / 2
+        book.judged_s[slots[ok], ri] = passed_s[ok]
+        return slots[ok]
+
+    def report(self) -> AssociationReport:
+        """The account so far (``AssociationReport``)."""
+        return AssociationReport(
+            self.plot_counts(),
+            {n: b.estimated() for n, b in self.beams.items()},
+            {n: b.scan_stamped for n, b in self.beams.items()},
+            self._started,
+            len(self.ever_confirmed),
+        )
+
+    def coast_s(self) -> float | None:
+        """How long a track lives without a plot: ``delete_misses`` + 1 revolutions of the
+        slowest radar whose period is known (None: no radar's is)."""
+        periods = [b.period_s for b in self.beams.values() if b.period_s is not None]
+        if not periods:
+            return None
+        return (self.association.delete_misses + 1) * max(periods)
+
+    def _coasted(self, times: NDArray[np.float64]) -> NDArray[np.intp]:
+        """Live slots without a plot for longer than ``coast_s`` at the batch's end."""
+        coast = self.coast_s()
+        slots = self.book.live_slots()
+        if coast is None or not times.size or not slots.size:
+            return slots[:0]
+        return slots[self.book.last_s[slots] < float(times[-1]) - coast]
 
     def states(
         self, method: str, time_s: float, status: str = CONFIRMED

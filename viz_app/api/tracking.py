@@ -11,7 +11,7 @@ from numpy.typing import NDArray
 
 from radarviz.core.filters.state import position_index
 from radarviz.core.params import ParameterError
-from radarviz.core.tracking.association import AssociationOptions
+from radarviz.core.tracking.association import AssociationOptions, AssociationReport
 from radarviz.core.tracking.stream import Plot, PlotError, StateRow, StreamOptions
 from radarviz.viz_app.io.plots import (
     Radar,
@@ -19,6 +19,7 @@ from radarviz.viz_app.io.plots import (
     _open_input,
     labels_refused,
     load_radars,
+    radar_coverage,
     track_plots,
 )
 
@@ -77,8 +78,10 @@ class Tracks:
         methods: the filters run.
         three_d: the plots carry elevations.
         radars: the radar sites (for a recording), empty when plots came without them.
-        scans: with the association, one ``ScanEnd`` per scan in order (the tracks it
+        scans: with the association, one ``ScanEnd`` per batch in order (the tracks it
             deleted); empty without.
+        association: with the association, its account (where each radar's plots went,
+            what was estimated of each radar), else None.
     """
 
     plots: tuple[Plot, ...]
@@ -87,6 +90,7 @@ class Tracks:
     three_d: bool
     radars: tuple[Radar, ...] = ()
     scans: tuple[ScanEnd, ...] = ()
+    association: AssociationReport | None = None
 
     def positions_m(self, method: str) -> NDArray[np.float64]:
         """The method's estimated positions, shape (K, 3), m (one row per tracked plot)."""
@@ -112,7 +116,8 @@ class Tracks:
     def replay(self, observer: RowObserver) -> None:
         """Hand every plot to ``observer`` as ``radarviz track`` hands its recorder the plots
         it tracks (``viz_app.io.plots.run_track``): ``add(plot, rows, status)`` per plot in
-        order and, with the association, ``end_scan(deleted)`` after each scan's last plot.
+        order and, with the association, ``end_scan(deleted)`` after each batch's last plot
+        and ``report(account)`` after the last.
 
         ``record`` and ``show`` replay into the recorder of ``radarviz track --rrd``
         (``viz_app.rerun.track_recording.TrackRecorder``), so the recording of the same plots
@@ -129,6 +134,8 @@ class Tracks:
             while end is not None and end.plots == n:
                 observer.end_scan(list(end.deleted))
                 end = next(ends, None)
+        if self.association is not None:
+            observer.report(self.association)
 
 
 def _options(**kwargs: object) -> StreamOptions:
@@ -254,8 +261,18 @@ def _associate(
         _index,
         association,
         kept.end_scan,
+        {r.name: radar_coverage(r) for r in radars},
+        kept.report,
     )
-    return Tracks(tuple(kept.plots), tuple(kept.steps), methods, three_d, radars, tuple(kept.scans))
+    return Tracks(
+        tuple(kept.plots),
+        tuple(kept.steps),
+        methods,
+        three_d,
+        radars,
+        tuple(kept.scans),
+        kept.account,
+    )
 
 
 class _PlotList:
@@ -354,6 +371,8 @@ def track_file(
             locate,
             association,
             kept.end_scan,
+            {name: radar_coverage(r) for name, r in sites.items()},
+            kept.report,
         )
     return Tracks(
         tuple(kept.plots),
@@ -362,6 +381,7 @@ def track_file(
         three_d,
         tuple(sites.values()),
         tuple(kept.scans),
+        kept.account,
     )
 
 
@@ -374,6 +394,7 @@ class _Collector:
         self.plots: list[Plot] = []
         self.steps: list[TrackStep] = []
         self.scans: list[ScanEnd] = []
+        self.account: AssociationReport | None = None
 
     def add(self, plot: Plot, rows: list[StateRow], status: str = "") -> None:
         n = len(self.plots)
@@ -385,3 +406,6 @@ class _Collector:
 
     def end_scan(self, deleted: list[str]) -> None:
         self.scans.append(ScanEnd(len(self.plots), tuple(deleted)))
+
+    def report(self, account: AssociationReport) -> None:
+        self.account = account

@@ -15,7 +15,7 @@ from collections.abc import Callable, Iterable
 from contextlib import AbstractContextManager
 
 from radarviz.core.filters.models import DEFAULT_IMM
-from radarviz.core.params import ParameterError, check, check_choice, default
+from radarviz.core.params import ParameterError, check, check_choice, default, parameter
 from radarviz.core.scenarios.crossing import CrossingScene
 from radarviz.core.tracking.association import ASSOCIATE_MODES, AssociationOptions
 from radarviz.core.tracking.consistency import ConsistencyMonitor
@@ -46,6 +46,11 @@ from radarviz.viz_app.reports.consistency import (
     exit_warner,
     inconsistency_lines,
     track_summary_document,
+)
+from radarviz.viz_app.reports.plot_account import (
+    association_document,
+    association_lines,
+    untracked_warning,
 )
 from radarviz.viz_app.runtime import peak_rss_mb
 
@@ -264,6 +269,7 @@ ASSOCIATION_FLAGS: tuple[tuple[str, str], ...] = (
     ("confirm_n", "--confirm-n"),
     ("delete_misses", "--delete-misses"),
     ("scan_window_s", "--scan-window-s"),
+    ("batch_sector_deg", "--batch-sector-deg"),
 )
 
 
@@ -287,9 +293,8 @@ def _add_association_flags(tr: argparse.ArgumentParser) -> None:
     )
     map_flag(tr, "associate_method", "--associate-method")
     for name, flag in ASSOCIATION_FLAGS:
-        add_parameter(
-            tr, name, flag, default=None, shown_default=default(name), note="--associate gnn"
-        )
+        shown = parameter(name).default
+        add_parameter(tr, name, flag, default=None, shown_default=shown, note="--associate gnn")
 
 
 def association_options(args: argparse.Namespace) -> AssociationOptions | None:
@@ -403,6 +408,14 @@ def cmd_track(args: argparse.Namespace) -> int:
         methods=s.methods,
         targets=s.targets,
     )
+    untracked = None
+    if s.association is not None:
+        doc["association"] = association_document(s.association)
+        for line in association_lines(s.association):
+            print(f"radarviz: {line}", file=sys.stderr)
+        untracked = untracked_warning(s.association)
+        if untracked is not None:
+            _warn(untracked)
     if args.summary:
         with atomic_write(args.summary, "w", encoding="utf-8") as fh:
             json.dump(doc, fh, allow_nan=False, indent=1)
@@ -420,11 +433,17 @@ def cmd_track(args: argparse.Namespace) -> int:
     of = f" of {len(s.targets)} targets" if s.targets else ""
     if association is not None:
         of = f" into {len(s.targets)} confirmed tracks (gnn, gate {association.method})"
+    if bad:
+        verdict = _inconsistent(bad, len(doc["tracks"]))
+    elif untracked is not None:
+        # The NIS of the tracks that exist says nothing of the plots no track took.
+        verdict = "see the warning: too many plots outside confirmed tracks"
+    else:
+        verdict = "every track within its NIS band"
     print(
         f"tracked {s.plots} plots{of} ({'3D' if s.three_d else '2D'}) with {len(s.methods)} "
         f"method(s), model {options.model}, into {args.out}{extra}: {s.rows} rows, "
-        f"{s.seconds:.2f} s, {rate:.0f} plots/s, peak RSS {peak_rss_mb():.0f} MB; "
-        + (_inconsistent(bad, len(doc["tracks"])) if bad else "every track within its NIS band")
+        f"{s.seconds:.2f} s, {rate:.0f} plots/s, peak RSS {peak_rss_mb():.0f} MB; " + verdict
     )
     return 0
 

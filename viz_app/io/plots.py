@@ -71,7 +71,7 @@ import math
 import os
 import time
 import tomllib
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from contextlib import AbstractContextManager, ExitStack
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -90,8 +90,15 @@ from radarviz.core.scenarios.multi_radar import (
     fusion_scenario,
     generate_measurements,
 )
-from radarviz.core.tracking.association import AssociationOptions, GNNTracker, scan_groups
+from radarviz.core.tracking.association import (
+    AssociationOptions,
+    AssociationReport,
+    GNNTracker,
+    plot_batches,
+    scan_groups,
+)
 from radarviz.core.tracking.compiled import RadarTable
+from radarviz.core.tracking.coverage import RadarCoverage
 from radarviz.core.tracking.stream import (
     METHODS_3D,
     Plot,
@@ -107,7 +114,16 @@ from radarviz.viz_app.io.atomic import atomic_write, commit_together
 REQUIRED_COLUMNS = ("time_s", "radar", "range_m", "azimuth_deg")
 OPTIONAL_COLUMNS = ("elevation_deg", "radial_velocity_mps", "target")
 RADAR_KEYS = ("x_m", "y_m", "z_m", "sigma_range_m", "sigma_azimuth_deg")
-OPTIONAL_RADAR_KEYS = ("sigma_elevation_deg", "sigma_radial_velocity_mps")
+OPTIONAL_RADAR_KEYS = (
+    "sigma_elevation_deg",
+    "sigma_radial_velocity_mps",
+    # Coverage and rotation (``core.tracking.coverage``): estimated from the plots if absent.
+    "rotation_period_s",
+    "min_range_m",
+    "max_range_m",
+    "min_elevation_deg",
+    "max_elevation_deg",
+)
 #: The ASTERIX data source identifier of a radar (I048/010): integers in [0, 255], both or
 #: neither; no two radars may share a pair.
 SOURCE_KEYS = ("sac", "sic")
@@ -170,6 +186,13 @@ class Radar:
     sigma_azimuth_deg: float
     sigma_elevation_deg: float | None = None
     sigma_radial_velocity_mps: float | None = None
+    #: The antenna's revolution (s) and the coverage (m, degrees) the association's misses
+    #: count in (``core.tracking.coverage``); None: estimated from the radar's plots.
+    rotation_period_s: float | None = None
+    min_range_m: float | None = None
+    max_range_m: float | None = None
+    min_elevation_deg: float | None = None
+    max_elevation_deg: float | None = None
     #: The ASTERIX data source (I048/010 SAC, SIC) whose records are this radar's; None: the
     #: radar is not in ASTERIX files (``viz_app.io.asterix``).
     sac: int | None = None
@@ -191,7 +214,21 @@ RADAR_KEY_PARAMETERS: dict[str, str] = {
     "sigma_azimuth_deg": "sigma_beta_deg",
     "sigma_elevation_deg": "sigma_elevation_deg",
     "sigma_radial_velocity_mps": "sigma_vr_mps",
+    "rotation_period_s": "rotation_period_s",
+    "min_range_m": "min_range_m",
+    "max_range_m": "max_range_m",
+    "min_elevation_deg": "min_elevation_deg",
+    "max_elevation_deg": "max_elevation_deg",
 }
+
+
+def radar_coverage(radar: Radar) -> RadarCoverage:
+    """The radars file's coverage and rotation of ``radar`` (None where not given)."""
+    el = [
+        None if v is None else math.radians(v)
+        for v in (radar.min_elevation_deg, radar.max_elevation_deg)
+    ]
+    return RadarCoverage(radar.rotation_period_s, radar.min_range_m, radar.max_range_m, *el)
 
 
 def parse_radars(text: str, source: str) -> dict[str, Radar]:
@@ -236,6 +273,11 @@ def parse_radars(text: str, source: str) -> dict[str, Radar]:
                     f"{where}, key {key}: must be a finite number {rng}".rstrip() + f" (got {v!r})"
                 )
             vals[key] = float(v)
+        for lo, hi in (("min_range_m", "max_range_m"), ("min_elevation_deg", "max_elevation_deg")):
+            if lo in vals and hi in vals and vals[lo] >= vals[hi]:
+                raise ParameterError(
+                    f"{where}, key {hi}: must be above {lo} = {vals[lo]:g} (got {vals[hi]:g})"
+                )
         sac, sic = _source_id(where, table, radars.values())
         radars[name] = Radar(
             name, *(vals.get(k) for k in RADAR_KEYS + OPTIONAL_RADAR_KEYS), sac=sac, sic=sic
@@ -747,6 +789,8 @@ class TrackSummary:
     methods: tuple[str, ...]
     seconds: float
     targets: tuple[str, ...] = ()
+    #: The association's account (``track --associate``), or None.
+    association: AssociationReport | None = None
 
 
 class PlotSource(Protocol):
@@ -809,6 +853,8 @@ def track_plots(
     locate: Locate = _csv_locate,
     association: AssociationOptions | None = None,
     on_scan: Callable[[list[str]], None] | None = None,
+    coverage: Mapping[str, RadarCoverage] | None = None,
+    on_report: Callable[[AssociationReport], None] | None = None,
 ) -> tuple[int, bool, tuple[str, ...], tuple[str, ...]]:
     """Track a file's plots; ``on_rows(plot, rows)`` after every plot.
 
@@ -823,18 +869,31 @@ def track_plots(
     "SOURCE " + ``locate(position, column)`` + ": …" (without "SOURCE " for ``source`` "").
 
     With ``association`` (``track --associate gnn``) a file without target labels is
-    associated scan by scan (``core.tracking.association.GNNTracker``): ``on_rows(plot,
-    rows, status)`` then gets the plot labelled with its track id and the track's status
-    after the scan, ``on_scan(deleted)`` the ids of the tracks deleted at the scan after its
-    last plot's ``on_rows``, and ``targets`` are the ids of the tracks ever confirmed. Memory
-    holds one scan.
+    associated batch by batch (``core.tracking.association.GNNTracker``; batches by radar
+    and azimuth sector, ``plot_batches``, or with ``scan_window_s`` by time, ``scan_groups``),
+    each radar's misses counted in its ``coverage`` (by radar name; estimated from the plots
+    where absent): ``on_rows(plot, rows, status)`` then gets the plot labelled with its track
+    id and the track's status after the batch, ``on_scan(deleted)`` the ids of the tracks
+    deleted at the batch after its last plot's ``on_rows``, ``on_report`` the association's
+    account at the end, and ``targets`` are the ids of the tracks ever confirmed. Memory holds
+    one batch.
     """
     three_d, labelled = reader.three_d, reader.targets
     if methods is None:
         methods = METHODS_3D if three_d else ALL_METHODS
     if association is not None:
         return _associate_plots(
-            reader, source, methods, options, association, on_rows, on_start, locate, on_scan
+            reader,
+            source,
+            methods,
+            options,
+            association,
+            on_rows,
+            on_start,
+            locate,
+            on_scan,
+            coverage,
+            on_report,
         )
     tracker: StreamTracker | TargetTracker
     try:
@@ -905,13 +964,15 @@ def _associate_plots(
     on_start: Callable[[bool], None] | None,
     locate: Locate,
     on_scan: Callable[[list[str]], None] | None = None,
+    coverage: Mapping[str, RadarCoverage] | None = None,
+    on_report: Callable[[AssociationReport], None] | None = None,
 ) -> tuple[int, bool, tuple[str, ...], tuple[str, ...]]:
     """``track_plots`` with the association (its docstring)."""
     if reader.targets:
         where = _place(source, locate(1, "target"))
         raise ParameterError(f"{where}: {labels_refused('--associate', 'this file labels them')}")
     try:
-        tracker = GNNTracker(methods, reader.three_d, options, association)
+        tracker = GNNTracker(methods, reader.three_d, options, association, coverage=coverage)
     except ParameterError as exc:
         if exc.parameter:
             raise
@@ -919,9 +980,15 @@ def _associate_plots(
     if on_start is not None:
         on_start(True)
     plots = 0
-    for scan in scan_groups(reader, association.scan_window_s):
+    window = association.scan_window_s
+    batches = (
+        plot_batches(reader, association.batch_sector_deg)
+        if window is None
+        else scan_groups(reader, window)
+    )
+    for scan in batches:
         try:
-            result = tracker.add_scan([plot for _, plot in scan])
+            result = tracker.add_batch([plot for _, plot in scan])
         except PlotError as exc:
             where = _place(source, locate(scan[exc.index][0], exc.column))
             raise ParameterError(f"{where}: {exc}") from None
@@ -932,6 +999,8 @@ def _associate_plots(
         if on_scan is not None:
             on_scan(result.deleted)
         plots += len(scan)
+    if on_report is not None:
+        on_report(tracker.report())
     return plots, reader.three_d, methods, tuple(tracker.ever_confirmed)
 
 
@@ -941,11 +1010,14 @@ class RowObserver(Protocol):
     With the association, ``add`` also gets the status of the plot's track after its scan
     (``tentative`` or ``confirmed``; "" without the association) and ``end_scan`` the ids of
     the tracks deleted at the scan, after the scan's last plot (``track_plots``'s
-    ``on_scan``). ``radarviz.Tracks.replay`` hands one the same calls from a kept result."""
+    ``on_scan``), and ``report`` the association's account after the last plot.
+    ``radarviz.Tracks.replay`` hands one the same calls from a kept result."""
 
     def add(self, plot: Plot, rows: list[StateRow], status: str = "") -> None: ...
 
     def end_scan(self, deleted: list[str]) -> None: ...
+
+    def report(self, account: AssociationReport) -> None: ...
 
 
 #: Given the radars, a context manager yielding a :class:`RowObserver`; it is entered before the
@@ -1002,6 +1074,7 @@ def run_track(
             if logger is not None:
                 logger.add(plot, rows, status)
 
+        reports: list[AssociationReport] = []
         plots, three_d, used, targets = track_plots(
             reader,
             input_path,
@@ -1012,7 +1085,11 @@ def run_track(
             locate,
             association,
             None if logger is None else logger.end_scan,
+            {name: radar_coverage(r) for name, r in radars.items()},
+            reports.append,
         )
+        if reports and logger is not None:
+            logger.report(reports[0])
         assert writer is not None
         writer.close()
         written = writer.rows
@@ -1024,7 +1101,15 @@ def run_track(
                 "in all, so no track started (lower --init-k or use --init first-plot)",
                 "init_k",
             )
-    return TrackSummary(plots, written, three_d, tuple(used), time.perf_counter() - start, targets)
+    return TrackSummary(
+        plots,
+        written,
+        three_d,
+        tuple(used),
+        time.perf_counter() - start,
+        targets,
+        reports[0] if reports else None,
+    )
 
 
 # --------------------------------------------------------------------------------------------

@@ -56,7 +56,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from radarviz.core.filters.state import position_index, velocity_index
-from radarviz.core.tracking.association import CONFIRMED, TENTATIVE
+from radarviz.core.tracking.association import CONFIRMED, TENTATIVE, AssociationReport
 from radarviz.core.tracking.consistency import ConsistencyMonitor
 from radarviz.core.tracking.stream import Plot, StateRow
 from radarviz.core.tracking.targets import track_name
@@ -285,6 +285,18 @@ class TrackRecorder:
                 indexes=self.indexes([end_n], [end_t]),
                 columns=rr.Clear.columns(is_recursive=[True]),
             )
+
+    def report(self, account: AssociationReport) -> None:
+        """The association's account in the log: where each radar's plots went, and a warning
+        when too many never reached a confirmed track (``viz_app.reports.plot_account``)."""
+        from radarviz.viz_app.reports.plot_account import association_lines, untracked_warning
+
+        at = max(self.count, 1)
+        for line in association_lines(account):
+            log_text(self.rec, line, scan=at, timeline="plot")
+        warning = untracked_warning(account)
+        if warning is not None:
+            log_text(self.rec, warning, level="WARN", scan=at, timeline="plot")
 
     def indexes(self, n: list[int], t: list[float]) -> list[rr.TimeColumn]:
         return [
