@@ -205,7 +205,7 @@ def _no_duplicates(path: str, times: NDArray[np.float64], targets: NDArray[np.st
         rows = np.sort(order[1:][same])
         row = int(rows[0])
         raise ParameterError(
-            f"{path} row {row + 1}, column target: a second row of target {targets[row]!r} "
+            f"{path} row {row + 1}, column target: a second row of target {str(targets[row])!r} "
             f"at time {times[row]:g}"
         )
 
