@@ -274,7 +274,20 @@ def test_simulate_track_score_end_to_end(crossing: dict[str, Path], tmp_path: Pa
     text = capsys.readouterr().out
     doc = json.loads(text)
     assert json.loads(out.read_text()) == doc
-    assert set(doc) == {"tracks_file", "truth_file", "parameters", "truth", "methods"}
+    assert set(doc) == {
+        "tracks_file",
+        "truth_file",
+        "track_file_columns",
+        "parameters",
+        "truth",
+        "methods",
+    }
+    assert doc["track_file_columns"] == {
+        "rows": pq.ParquetFile(crossing["tracks"]).metadata.num_rows,
+        "status": True,
+        "velocity": True,
+        "covariance": True,
+    }
     assert set(doc["parameters"]) == {
         "gospa_cutoff_m",
         "gospa_order",

@@ -81,7 +81,13 @@ def cmd_score(args: argparse.Namespace) -> int:
     for m in methods:
         check_choice("method", m, tracks.methods)
     scores = {m: score_tracks(truth, tracks.rows[m], options) for m in methods}
-    doc = score_document(args.tracks, args.truth, options, len(truth.times_s), scores)
+    columns = {
+        "rows": tracks.n_rows,
+        "status": tracks.has_status,
+        "velocity": tracks.has_velocity,
+        "covariance": tracks.has_covariance,
+    }
+    doc = score_document(args.tracks, args.truth, options, len(truth.times_s), columns, scores)
     check_finite_document("score", doc, nonnegative=True)
     if args.out:
         with atomic_write(args.out, "w", encoding="utf-8") as fh:

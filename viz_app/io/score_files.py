@@ -214,6 +214,7 @@ class TrackFile:
     """A track file's rows per method (module docstring).
 
     Attributes:
+        n_rows: rows in the file.
         methods: the methods in order of first appearance.
         rows: method → its ``TrackRows``.
         has_status, has_covariance, has_velocity, has_target: which optional columns it has.
@@ -229,7 +230,7 @@ class TrackFile:
         self.has_status = "status" in names
         self.has_velocity = "vx_mps" in names and "vy_mps" in names
         self.has_covariance = all(c in names for c, _, _ in TRACK_COVARIANCE[:3])
-        n = table.num_rows
+        self.n_rows = n = table.num_rows
         times = _numbers(path, table, "time_s", bound=MAX_TIME_S)
         methods = _labels(path, table, "method")
         tracks = _labels(path, table, "target") if self.has_target else np.full(n, "track")

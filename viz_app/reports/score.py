@@ -78,13 +78,17 @@ def score_document(
     truth_path: str,
     options: ScoreOptions,
     truth_rows: int,
+    track_columns: dict[str, Any],
     scores: dict[str, MethodScore],
 ) -> dict[str, Any]:
-    """The whole report: inputs, parameters, the truth's size, and each method's scores."""
+    """The whole report: inputs, parameters, the truth's size, what the track file holds
+    (``track_columns``: rows, and whether it has status, velocity and covariance columns),
+    and each method's scores."""
     first = next(iter(scores.values()))
     return {
         "tracks_file": tracks_path,
         "truth_file": truth_path,
+        "track_file_columns": track_columns,
         "parameters": {
             "gospa_cutoff_m": options.gospa_cutoff_m,
             "gospa_order": options.gospa_order,
@@ -116,7 +120,10 @@ def _band_text(b: dict[str, Any], unit: str) -> str:
 def format_score_table(doc: dict[str, Any]) -> str:
     """The document as text: a header line, then a block per method."""
     p, t = doc["parameters"], doc["truth"]
-    which = "confirmed tracks only" if p["confirmed_only"] else "every track"
+    which = "every track"
+    if p["confirmed_only"]:
+        status = doc["track_file_columns"]["status"]
+        which = "confirmed tracks only" if status else "every track (the file has no status)"
     level = f"{100 * p['band_level']:g}%"
     lines = [
         f"score {doc['tracks_file']} against {doc['truth_file']}: {t['times']} truth times, "
