@@ -469,3 +469,18 @@ def test_help_shows_the_parameters_and_their_ranges(capsys) -> None:
     for flag in ("--gospa-cutoff-m", "--gospa-order", "--max-gap-s", "--all-tracks", "--out"):
         assert flag in text
     assert "Δt_max, longest time a track's last row is predicted over to a truth time (s)" in text
+
+
+def test_3d_truth_and_tracks_compare_in_3d_else_in_the_plane() -> None:
+    """A z error counts when both are 3D (NEES of 3 dof); a 2D track file is scored in the
+    x–y plane against a 3D truth."""
+    times = np.arange(4.0)
+    truth = Truth(times, np.array(["a"] * 4), np.tile([0.0, 0.0, 1000.0], (4, 1)))
+    cov = np.tile(np.eye(3), (4, 1, 1))
+    rows = TrackRows(times, np.array(["t"] * 4), np.tile([0.0, 0.0, 1003.0], (4, 1)), None, cov)
+    s = score_tracks(truth, rows, ScoreOptions())
+    assert s.dims == 3 and s.position_rmse.value == pytest.approx(3.0)
+    assert s.nees is not None and (s.nees.dof, s.nees.mean) == (3, pytest.approx(9.0))
+    flat = rows._replace(position_m=np.tile([0.0, 4.0, 0.0], (4, 1)), position_cov_m2=None)
+    s = score_tracks(truth, flat, ScoreOptions())
+    assert s.dims == 2 and s.position_rmse.value == pytest.approx(4.0)
