@@ -470,6 +470,17 @@ PARAMETERS: dict[str, Parameter] = {
         # GOSPA (``core.tracking.gospa``).
         _real("gospa_cutoff_m", "c", "GOSPA cut-off distance", "m", 0.0, 1e8, 2000.0),
         _real("gospa_order", "p", "GOSPA order", "", 1.0, 100.0, 2.0, low_open=False),
+        # Scoring a track file against the truth (``core.tracking.scoring``).
+        _real(
+            "score_max_gap_s",
+            "Δt_max",
+            "longest time a track's last row is predicted over to a truth time",
+            "s",
+            0.0,
+            1e6,
+            10.0,
+            low_open=False,
+        ),
     )
 }
 
