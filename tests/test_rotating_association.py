@@ -133,6 +133,7 @@ def test_beam_estimates_period_sense_and_coverage() -> None:
         assert beam.direction == -1.0  # clockwise seen from above: azimuth decreasing
         assert not beam.scan_stamped
         lo, hi = beam.range_limits()
+        assert lo < 2e3
         assert 0.95 * r.max_range_m < hi <= r.max_range_m + 5 * r.sigma_r_m
         est = beam.estimated()
         assert set(est) == {"rotation_period_s", "min_range_m", "max_range_m"}
