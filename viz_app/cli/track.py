@@ -57,14 +57,15 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
         "--input",
         required=True,
         metavar="MEAS",
-        help="measurement file: CSV, or ASTERIX CAT048 (.ast)",
+        help="measurement file: CSV, ASTERIX CAT048 (.ast), or a pcap/pcapng capture of it",
     )
     tr.add_argument(
         "--format",
         default="auto",
         metavar="FORMAT",
         help="the input's format: csv, asterix (CAT048 target reports; radars need sac and "
-        "sic) or auto (by suffix: .ast and .asterix are ASTERIX; the default)",
+        "sic), pcap (a pcap or pcapng capture of ASTERIX over UDP) or auto (the default: a "
+        "capture by its magic or .pcap/.pcapng; .ast and .asterix are ASTERIX; else CSV)",
     )
     map_flag(tr, "format", "--format")
     tr.add_argument("--radars", required=True, metavar="RADARS.toml", help="radar sites, σ")
@@ -402,7 +403,12 @@ def cmd_track(args: argparse.Namespace) -> int:
         three_d=s.three_d,
         methods=s.methods,
         targets=s.targets,
+        input_counts=s.input,
     )
+    if s.input is not None:
+        from radarviz.viz_app.io.asterix import input_line
+
+        print(f"radarviz: input: {input_line(args.input, s.input)}", file=sys.stderr)
     if args.summary:
         with atomic_write(args.summary, "w", encoding="utf-8") as fh:
             json.dump(doc, fh, allow_nan=False, indent=1)
