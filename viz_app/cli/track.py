@@ -38,7 +38,7 @@ from radarviz.viz_app.io.plots import (
     ObserverFactory,
     Radar,
     RowObserver,
-    input_format_of,
+    output_format_of,
     simulated_plots,
     write_measurements,
 )
@@ -454,7 +454,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         for flag, value in extra:
             if value is not None:
                 raise ParameterError(f"{flag} is the crossing preset's (--preset crossing)")
-    fmt = input_format_of(args.out, args.format)
+    fmt = output_format_of(args.out, args.format)
     check_outputs(
         [("--out", args.out), ("--radars-out", args.radars_out), ("--truth-out", args.truth_out)]
     )

@@ -165,9 +165,11 @@ NORTH_MARKER, SECTOR_CROSSING = 1, 2
 DUPLICATE_WINDOW_S = 10.0
 DUPLICATE_RECORDS = 1 << 16
 #: Data blocks of a capture whose packet ``AsterixReader`` remembers, to name it in errors.
-#: The tracker's errors are about a plot of the block of plots (``BLOCK_PLOTS``) or scan in
-#: hand, each plot from its own data block at worst; an older block is named by its byte.
-NAMED_BLOCKS = 2 * BLOCK_PLOTS
+#: The tracker's errors are about a plot of the plots in hand (a ``BLOCK_PLOTS`` block, a
+#: ``viz_app.io.plots.READ_BLOCK`` or a scan), and a feed's datagram carries tens of plots,
+#: so these span ~10⁴ plots; a block older than that is named by its byte offset alone (exact
+#: too), and memory stays bounded (~200 octets each).
+NAMED_BLOCKS = 1024
 #: A plot's position packs (data block byte offset, record index in the block).
 _RECORDS_PER_POSITION = 1 << 16
 
@@ -502,7 +504,9 @@ class AsterixReader:
         self._clock = _DayClock()
         self._recent = _RecentRecords()
         self._scans: dict[str, _ScanLog] = {}
-        self._packet_of: dict[int, tuple[int, int]] = {}  # block offset → packet, its offset
+        # (block offset, packet, packet offset) of the last NAMED_BLOCKS data blocks of a
+        # capture: a ring of constant size, searched only to word an error.
+        self._packet_of: deque[tuple[int, int, int]] = deque(maxlen=NAMED_BLOCKS)
         self._first_foreign: tuple[int, int] | None = None
         head = _head(fh, 12)
         self.capture = container == "pcap" or is_capture(head)
@@ -588,10 +592,10 @@ class AsterixReader:
 
     def _block_where(self, offset: int) -> str:
         """A data block's place: "byte N", in a capture with its packet first."""
-        packet = self._packet_of.get(offset)
-        if packet is None:
-            return f"byte {offset}"
-        return f"{packet_place(*packet)}, data block at byte {offset}"
+        for block_offset, packet, packet_offset in reversed(self._packet_of):
+            if block_offset == offset:
+                return f"{packet_place(packet, packet_offset)}, data block at byte {offset}"
+        return f"byte {offset}"
 
     def _where(self, position: int) -> str:
         offset, index = divmod(position, _RECORDS_PER_POSITION)
@@ -611,9 +615,7 @@ class AsterixReader:
                 continue
             for start, cat, block in blocks:
                 offset = dg.offset + start
-                named[offset] = (dg.packet, dg.packet_offset)
-                if len(named) > NAMED_BLOCKS:
-                    del named[next(iter(named))]  # the oldest (dicts keep insertion order)
+                named.append((offset, dg.packet, dg.packet_offset))
                 yield offset, cat, block
 
     def _split(self, offset: int, block: bytes, uap: Any, cat: int) -> list[tuple[Any, bytes]]:

@@ -930,6 +930,19 @@ def input_format_of(path: str, file_format: str = "auto") -> str:
     return "asterix" if path.lower().endswith(ASTERIX_SUFFIXES) else "csv"
 
 
+#: ``simulate --format``: what it writes (a capture is read, not written).
+OUTPUT_FORMATS = ("auto", "csv", "asterix")
+
+
+def output_format_of(path: str, file_format: str = "auto") -> str:
+    """``"csv"`` or ``"asterix"``, the format ``simulate`` writes ``path`` in: ``file_format``
+    itself, or with ``"auto"`` by the suffix (``ASTERIX_SUFFIXES``: ASTERIX; else CSV)."""
+    check_choice("format", file_format, OUTPUT_FORMATS)
+    if file_format != "auto":
+        return file_format
+    return "asterix" if path.lower().endswith(ASTERIX_SUFFIXES) else "csv"
+
+
 def _capture_magic(path: str) -> bool:
     """Whether the regular file ``path`` starts with a capture's magic (a FIFO is not opened
     here: its octets would be lost to the reader; a missing file is for the reader to name)."""
