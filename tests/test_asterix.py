@@ -9,6 +9,8 @@
   byte, as ``track`` of a CSV holding the simulated plots rounded to the items' resolution by
   this file's own rounding; the decoded plots are within half an LSB of the simulated ones.
 * Midnight, 3D from a height or a flight level, Doppler (valid, doubtful, radar without σVr).
+* Track-only records (no I048/040) skipped and byte-identical repeats dropped, both counted;
+  an error in a one-record block names record 1. (Captures: ``tests/test_pcap.py``.)
 * Bad input: exit 2, one line naming the byte offset (or the data source, or the radars
   file's key), nothing written.
 """

@@ -24,6 +24,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import asterix.generated as gen
+import pyarrow.parquet
 import pytest
 from test_asterix import RADARS, block, rec, rounded_csv
 
@@ -371,6 +372,23 @@ def test_a_datagram_of_several_blocks_and_one_that_is_not_asterix() -> None:
     assert ax.tiled_blocks(one[:-1]) is None
 
 
+def test_the_obsolete_packet_block_and_a_second_section() -> None:
+    """pcapng's Packet Block (type 2: interface id (2), drops (2), timestamp (8), captured
+    and original length, data), and a second section in the other byte order with its own
+    interfaces."""
+    payload = block(rec(128))
+    frame = ethernet(ipv4(udp(payload)))
+    pb = ng_block(2, struct.pack("<HHIIII", 0, 0, 0, 0, len(frame), len(frame)) + frame, "<")
+    first = pcapng_file([], [pcap.LINK_ETHERNET], "<") + pb
+    cooked = sll(ipv4(udp(payload)), 0x0800)
+    second = pcapng_file([(0, cooked)], [pcap.LINK_SLL], ">")
+    counts = pcap.CaptureCounts()
+    got = list(pcap.udp_datagrams(io.BytesIO(first + second), "c", counts))
+    assert [(d.packet, d.payload) for d in got] == [(1, payload), (2, payload)]
+    epb = ng_block(pcap.PCAPNG_EPB, bytes(20) + cooked, ">")  # the last block
+    assert got[1].packet_offset == len(first) + len(second) - len(epb)
+
+
 def test_link_types_and_skips() -> None:
     payload = block(rec(128))
     cases = [
@@ -437,6 +455,15 @@ def test_associate_takes_track_numbers_into_their_own_column(
         assert list(rows[0])[:4] == ["time_s", "target", "status", "radar_track_number"]
         assert [r.pop("radar_track_number") for r in rows] == [r["target"] for r in expected]
         assert rows == expected
+        # Parquet: the numbers as int64.
+        pq_out = tmp_path / "t.parquet"
+        status, _, err = track([*base, "--input", str(source), "--out", str(pq_out)], capsys)
+        assert status == 0, err
+        table = pyarrow.parquet.read_table(pq_out)
+        assert str(table.schema.field("radar_track_number").type) == "int64"
+        assert table.column("radar_track_number").to_pylist() == [
+            int(r["target"]) for r in expected
+        ]
         # Without --associate the numbers are the labels, as before.
         status, _, err = track([*base[:-2], "--input", str(source), "--out", str(out)], capsys)
         assert status == 0, err

@@ -399,7 +399,7 @@ class ScanTiming:
         radar: the radar's name in the radars file (its I034/010 SAC/SIC), or
             "SAC s SIC c" for a data source no radar has.
         rotation_period_s: the antenna's rotation period (s): the last I034/041 antenna
-            rotation speed (1/128 s) read, else the median interval between successive north
+            rotation period (1/128 s) read, else the median interval between successive north
             markers (a missed marker doubles one interval, which the median ignores), else
             None (fewer than two north markers and no I034/041).
         period_from: "I034/041", "north markers" or None: where ``rotation_period_s`` is from.

@@ -112,7 +112,8 @@ OPTIONAL_RADAR_KEYS = ("sigma_elevation_deg", "sigma_radial_velocity_mps")
 #: neither; no two radars may share a pair.
 SOURCE_KEYS = ("sac", "sic")
 DEFAULT_TRACKS = "tracks.csv"
-#: Measurement file formats (``track --format``, ``simulate --format``); "auto" picks by suffix.
+#: Measurement file formats of ``track --format`` ("auto" picks by a capture's magic, else by
+#: suffix; ``simulate --format`` writes ``OUTPUT_FORMATS``).
 FILE_FORMATS = ("auto", "csv", "asterix", "pcap")
 #: File name suffixes taken as ASTERIX by "auto" (any other: CSV).
 ASTERIX_SUFFIXES = (".ast", ".asterix")
