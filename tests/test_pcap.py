@@ -545,8 +545,18 @@ def test_bad_captures_exit_2_one_line_naming_the_packet(
 
 
 def test_format_pcap_refuses_a_file_that_is_not_a_capture(tmp_path: Path) -> None:
+    """``--format pcap`` reads captures only; ``--format asterix`` still knows one by its
+    magic (a capture is never read as data blocks)."""
+    rad = parse_radars(RADARS, "r.toml")
     with pytest.raises(ParameterError, match=r"f byte 0: not a pcap or pcapng capture"):
-        ax.capture_reader(io.BytesIO(block(rec(128))), "f", parse_radars(RADARS, "r.toml"))
+        ax.capture_reader(io.BytesIO(block(rec(128))), "f", rad)
+    (tmp_path / "m.bin").write_bytes(pcap_file([GOOD_FRAME]))
+    (tmp_path / "r.toml").write_text(RADARS)
+    argv = ["track", "--input", str(tmp_path / "m.bin"), "--radars", str(tmp_path / "r.toml")]
+    for fmt in ("asterix", "pcap", "auto"):
+        out = tmp_path / f"{fmt}.csv"
+        assert main([*argv, "--format", fmt, "--out", str(out), "--method", "ucm"]) == 0
+        assert len(out.read_text().splitlines()) == 3
 
 
 def test_reading_a_capture_holds_memory_flat(tmp_path: Path) -> None:

@@ -19,10 +19,11 @@ offset in the capture file, and errors name its packet too (number from 1, byte 
 * I048/010 data source, SAC/SIC: the radar whose ``sac`` and ``sic`` keys in the radars file
   match; a pair no radar has is an error naming it.
 * I048/140 time of day, 1/128 s, in [0, 86400): ``time_s`` is seconds since midnight (UTC) of
-  the first record's day. A file may cross midnight: each record's time is taken on the day
-  that puts it nearest the previous record's time (within 12 h), so 86399.5 followed by 0.25
-  is 86399.5, 86400.25, and a late record from before midnight stays before it. (Two records
-  more than 12 h apart are therefore ambiguous; recordings have no such gaps.)
+  the first record's day (a CAT048 or CAT034 record). A file may cross midnight: each
+  record's time is taken on the day that puts it nearest the previous record's time (within
+  12 h), so 86399.5 followed by 0.25 is 86399.5, 86400.25, and a late record from before
+  midnight stays before it. (Two records more than 12 h apart are therefore ambiguous;
+  recordings have no such gaps.)
 * I048/040 measured position: RHO (1/256 NM, 1 NM = 1852 m) is ``range_m``; THETA (360/2¹⁶°,
   clockwise from north) becomes the azimuth β = 90° − θ, counter-clockwise from the x axis,
   in (−180°, 180°]: x is east, y north, z up (the radars file's sites are in that frame). A
