@@ -9,6 +9,8 @@
   byte, as ``track`` of a CSV holding the simulated plots rounded to the items' resolution by
   this file's own rounding; the decoded plots are within half an LSB of the simulated ones.
 * Midnight, 3D from a height or a flight level, Doppler (valid, doubtful, radar without σVr).
+* Track-only records (no I048/040) skipped and byte-identical repeats dropped, both counted;
+  an error in a one-record block names record 1. (Captures: ``tests/test_pcap.py``.)
 * Bad input: exit 2, one line naming the byte offset (or the data source, or the radars
   file's key), nothing written.
 """
@@ -509,9 +511,12 @@ BAD_FILES = {
     "short header": (lambda: GOOD + b"\x30\x00", f"byte {len(GOOD)}: truncated"),
     "LEN under 3": (lambda: GOOD + b"\x30\x00\x01", f"byte {len(GOOD)}: data block LEN 1"),
     "overrun": (overrun, f"byte {len(GOOD)}: CAT048 data block (LEN 11) does not decode"),
-    "no 040": (without_040, f"byte {len(GOOD)}, record 1, item I048/040: missing"),
     "unknown SAC/SIC": (unknown_source, "unknown data source SAC 9 SIC 99"),
-    "empty": (lambda: b"", "no CAT048 records"),
+    "empty": (lambda: b"", "no CAT048 target reports (0 CAT048 records"),
+    "only track-only": (
+        lambda: without_040()[len(GOOD) :],
+        "no CAT048 target reports (1 CAT048 records, 1 of them track-only",
+    ),
     "time back": (lambda: GOOD + block(rec(200)), "item I048/140: time 1.5625 s is before"),
 }
 
@@ -673,3 +678,37 @@ def test_items_not_used_are_read_past() -> None:
     _, full = read(data)
     _, plain = read(block(bare))
     assert full == plain and full[0].target == "77"
+
+
+def test_track_only_records_and_duplicates_are_counted_not_tracked() -> None:
+    """A record without I048/040 (a track status) is skipped, a byte-identical repeat of a
+    recent record dropped (a redundant feed), each counted; the plots are the others."""
+    twice = block(rec(512), rec(640))
+    reader, plots = read(without_040() + twice + GOOD[:3] + GOOD[3:] + twice)
+    assert [p.time_s for p in plots] == [1.0, 2.0, 3.0, 4.0, 5.0]
+    c = reader.counts
+    assert (c.records, c.track_only_skipped, c.duplicates_dropped) == (11, 1, 5)
+    doc = reader.input_summary()
+    assert doc["container"] == "asterix" and "packets" not in doc
+    assert (doc["records"], doc["track_only_skipped"], doc["duplicates_dropped"]) == (11, 1, 5)
+
+
+def test_an_error_in_a_one_record_block_names_record_1(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Each record of a file of one-record blocks is "record 1" of its block, in the reader's
+    errors and with ``--associate``."""
+    r = rec(384)
+    r["010"] = (("SAC", 9), ("SIC", 99))
+    (tmp_path / "m.ast").write_bytes(block(rec(128, more={"161": (0, ("TRN", 4))})) + block(r))
+    (tmp_path / "r.toml").write_text(RADARS)
+    argv = ["track", "--input", str(tmp_path / "m.ast"), "--radars", str(tmp_path / "r.toml")]
+    for extra in ([], ["--associate", "gnn"]):
+        capsys.readouterr()
+        assert main([*argv, "--out", str(tmp_path / "t.csv"), "--method", "ucm", *extra]) == 2
+        err = capsys.readouterr().err
+        assert "m.ast byte 16, record 1, item I048/010: unknown data source SAC 9" in err, err
+    # A one-record file associates (its track number is the radar's, not a label).
+    (tmp_path / "m.ast").write_bytes(block(rec(128, more={"161": (0, ("TRN", 4))})))
+    assert main([*argv, "--out", str(tmp_path / "t.csv"), "--associate", "gnn"]) == 0
+    assert "radar_track_number" in (tmp_path / "t.csv").read_text().splitlines()[0]

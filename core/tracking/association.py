@@ -844,6 +844,12 @@ class GNNTracker:
             len(self.ever_confirmed),
         )
 
+    def measured_period(self, radar: str, period_s: float) -> None:
+        """``radar``'s antenna period as measured by the feed itself (its north markers or
+        service messages), replacing the estimate from its plots from now on."""
+        if radar in self.beams:
+            self.beams[radar].measured_period(period_s)
+
     def coast_s(self) -> float | None:
         """How long a track lives without a plot: ``delete_misses`` + 1 revolutions of the
         slowest radar whose period is known (None: no radar's is)."""

@@ -93,6 +93,7 @@ class RadarBeam:
         self._cells = np.full(AZIMUTH_CELLS, -np.inf)
         self._revisits: list[float] = []
         self._period: float | None = self.given.rotation_period_s
+        self._measured = False  # the period came from the feed (``measured_period``)
         self._same = self._other = 0
         self._turns = [0, 0]  # pairs turning negative, positive
         self._range = [math.inf, -math.inf]
@@ -143,7 +144,7 @@ class RadarBeam:
         """What was not given and has been estimated from the plots, by name (SI units)."""
         g = self.given
         out: dict[str, float | None] = {}
-        if g.rotation_period_s is None and not self.scan_stamped:
+        if g.rotation_period_s is None and not self._measured and not self.scan_stamped:
             out["rotation_period_s"] = self._period
         lo, hi = self.range_limits()
         if g.min_range_m is None and math.isfinite(lo):
@@ -186,7 +187,7 @@ class RadarBeam:
         turning = (dt > 0) & (dt < quarter) & (np.abs(daz) < math.pi / 3)
         self._turns[0] += int((turning & (daz < 0)).sum())
         self._turns[1] += int((turning & (daz > 0)).sum())
-        if self.given.rotation_period_s is None:
+        if self.given.rotation_period_s is None and not self._measured:
             self._learn_period(time_s, azimuth_rad)
         self.last_s, self.last_az = float(time_s[-1]), float(azimuth_rad[-1])
 
@@ -205,6 +206,13 @@ class RadarBeam:
             r = np.asarray(self._revisits)
             low = float(np.quantile(r, 0.1))
             self._period = float(np.median(r[(r >= 0.9 * low) & (r <= 1.1 * low)]))
+
+    def measured_period(self, period_s: float) -> None:
+        """The period measured by the feed (a radar's north markers or service messages):
+        used from now on instead of the estimate from the plots (a period in the radars file
+        still comes first)."""
+        if self.given.rotation_period_s is None:
+            self._period, self._measured = period_s, True
 
     # -- the sweep -------------------------------------------------------------------------
 

@@ -99,6 +99,8 @@ class Plot:
     Angles in rad, distances in m, speeds in m/s. ``elevation_rad`` is None for a 2D plot and
     ``radial_velocity_mps`` None for a plot without Doppler. ``target`` labels the target the
     plot belongs to in a file of many targets (``core.tracking.targets``); "" in a file of one.
+    ``radar_track`` is the radar's own track number (ASTERIX I048/161) or None: a label the
+    association (which sets ``target`` to its track id) keeps beside its own.
     """
 
     time_s: float
@@ -113,6 +115,7 @@ class Plot:
     radial_velocity_mps: float | None = None
     sigma_radial_velocity_mps: float = 0.0
     target: str = ""
+    radar_track: int | None = None
 
 
 class PlotError(ParameterError):

@@ -337,8 +337,9 @@ def track_file(
             delete, scan window). Each step's ``target`` is then its track id, its
             ``status`` the track's status, and ``Tracks.scans`` tells where each scan ends
             and which tracks it deleted.
-        input_format: "csv", "asterix" or "auto" (by the suffix: ``.ast``, ``.asterix`` are
-            ASTERIX), as ``radarviz track --format``.
+        input_format: "csv", "asterix", "pcap" (a pcap or pcapng capture of ASTERIX over
+            UDP) or "auto" (a capture by its magic, else by the suffix: ``.ast``,
+            ``.asterix`` are ASTERIX), as ``radarviz track --format``.
 
     Returns:
         ``Tracks``, with the file's radars.

@@ -38,7 +38,7 @@ from radarviz.viz_app.io.plots import (
     ObserverFactory,
     Radar,
     RowObserver,
-    input_format_of,
+    output_format_of,
     simulated_plots,
     write_measurements,
 )
@@ -62,14 +62,15 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
         "--input",
         required=True,
         metavar="MEAS",
-        help="measurement file: CSV, or ASTERIX CAT048 (.ast)",
+        help="measurement file: CSV, ASTERIX CAT048 (.ast), or a pcap/pcapng capture of it",
     )
     tr.add_argument(
         "--format",
         default="auto",
         metavar="FORMAT",
         help="the input's format: csv, asterix (CAT048 target reports; radars need sac and "
-        "sic) or auto (by suffix: .ast and .asterix are ASTERIX; the default)",
+        "sic), pcap (a pcap or pcapng capture of ASTERIX over UDP) or auto (the default: a "
+        "capture by its magic or .pcap/.pcapng; .ast and .asterix are ASTERIX; else CSV)",
     )
     map_flag(tr, "format", "--format")
     tr.add_argument("--radars", required=True, metavar="RADARS.toml", help="radar sites, σ")
@@ -407,7 +408,12 @@ def cmd_track(args: argparse.Namespace) -> int:
         three_d=s.three_d,
         methods=s.methods,
         targets=s.targets,
+        input_counts=s.input,
     )
+    if s.input is not None:
+        from radarviz.viz_app.io.asterix import input_line
+
+        print(f"radarviz: input: {input_line(args.input, s.input)}", file=sys.stderr)
     untracked = None
     if s.association is not None:
         doc["association"] = association_document(s.association)
@@ -467,7 +473,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         for flag, value in extra:
             if value is not None:
                 raise ParameterError(f"{flag} is the crossing preset's (--preset crossing)")
-    fmt = input_format_of(args.out, args.format)
+    fmt = output_format_of(args.out, args.format)
     check_outputs(
         [("--out", args.out), ("--radars-out", args.radars_out), ("--truth-out", args.truth_out)]
     )

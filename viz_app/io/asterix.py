@@ -1,29 +1,39 @@
-"""ASTERIX CAT048 monoradar target reports in (``track``) and out (``simulate``).
+"""ASTERIX CAT048 monoradar target reports in (``track``) and out (``simulate``), from a file
+of data blocks or a packet capture.
 
 An ASTERIX file is a sequence of data blocks, each ``CAT (1 octet) LEN (2 octets, the block's
 length with this header) records…``; a CAT048 record is an FSPEC (presence bits in the order
 of the category's user application profile, UAP) followed by the items it announces. The
-records are decoded by ``pyobelix`` (CAT048 edition 1.32) and written by ``libasterix``
-(``asterix.generated.Cat_048_1_32``); this module only frames the file into data blocks (to
-name byte offsets and to keep memory flat) and turns the decoded items into plots.
+records are decoded by ``pyobelix`` (CAT048 edition 1.32, CAT034 1.29) and written by
+``libasterix`` (``asterix.generated.Cat_048_1_32``); this module only frames the file into
+data blocks (to name byte offsets and to keep memory flat) and turns the decoded items into
+plots.
+
+**Captures.** A file starting with a pcap or pcapng magic (``viz_app.io.pcap``) is a capture:
+its UDP payloads are read a packet at a time, each one a run of data blocks that must tile it
+(else the datagram is not ASTERIX: skipped and counted). A block's byte offset is then its
+offset in the capture file, and errors name its packet too (number from 1, byte offset).
 
 **Items read** (a record's other items are decoded and not used):
 
 * I048/010 data source, SAC/SIC: the radar whose ``sac`` and ``sic`` keys in the radars file
   match; a pair no radar has is an error naming it.
 * I048/140 time of day, 1/128 s, in [0, 86400): ``time_s`` is seconds since midnight (UTC) of
-  the first record's day. A file may cross midnight: each record's time is taken on the day
-  that puts it nearest the previous record's time (within 12 h), so 86399.5 followed by 0.25
-  is 86399.5, 86400.25, and a late record from before midnight stays before it. (Two records
-  more than 12 h apart are therefore ambiguous; recordings have no such gaps.)
+  the first record's day (a CAT048 or CAT034 record). A file may cross midnight: each
+  record's time is taken on the day that puts it nearest the previous record's time (within
+  12 h), so 86399.5 followed by 0.25 is 86399.5, 86400.25, and a late record from before
+  midnight stays before it. (Two records more than 12 h apart are therefore ambiguous;
+  recordings have no such gaps.)
 * I048/040 measured position: RHO (1/256 NM, 1 NM = 1852 m) is ``range_m``; THETA (360/2¹⁶°,
   clockwise from north) becomes the azimuth β = 90° − θ, counter-clockwise from the x axis,
   in (−180°, 180°]: x is east, y north, z up (the radars file's sites are in that frame). A
-  record without I048/040 is refused (its byte offset named): a CAT048 target report without
-  a measured position cannot be tracked, and dropping it silently would hide it.
-* I048/161 track number: the plot's ``target`` label, as the number in decimal. The number is
-  the label across radars: records of two radars with the same number are one target (as
-  ``simulate`` writes a target seen by several radars).
+  record without I048/040 is a track-only record (a track status, a coasted track: no plot):
+  skipped and counted (``InputCounts.track_only_skipped``).
+* I048/161 track number: the plot's ``target`` label, as the number in decimal, and its
+  ``radar_track``. The number is the label across radars: records of two radars with the same
+  number are one target (as ``simulate`` writes a target seen by several radars). The
+  association (``track --associate``) sets the labels itself and keeps the number as
+  ``radar_track`` only (``radar_tracks``).
 * I048/110 height measured by a 3D radar (25 ft) or, without it, I048/090 flight level
   (1/4 FL, only when validated and not garbled; a flight level is a pressure altitude, taken
   as height above mean sea level: the standard atmosphere, no QNH correction) → elevation by
@@ -38,14 +48,26 @@ name byte offsets and to keep memory flat) and turns the decoded items into plot
 **The file's kind** is set by its first CAT048 record, as a CSV's is by its header: it is 3D
 when that record has a usable height, and of many targets when it has a track number; every
 later record must then have the same (one without is refused, byte offset named). Data blocks
-of other categories (e.g. CAT034 service messages) are skipped whole. Within a target (or the
-whole file, without track numbers) times must not decrease, as in a CSV.
+of other categories than CAT048 and CAT034 are skipped whole. Within a target (or the whole
+file, without track numbers) times must not decrease, as in a CSV.
 
-**Bad input** is one ``ParameterError`` line naming the file and the byte offset: a data block
+**Duplicates.** A redundant feed sends each record twice, maybe in other packets and blocks;
+applied twice, a plot would halve its track's covariance. A record whose octets equal a record
+read recently (``_RecentRecords``: ``DUPLICATE_WINDOW_S`` of time of day, at most
+``DUPLICATE_RECORDS`` records) is dropped and counted.
+
+**CAT034 scan timing.** I034/000 message type 1 (north marker) and 2 (sector crossing, with the
+sector's azimuth I034/020), of the data source I034/010 at I034/030 time of day (on the same
+running day as the CAT048 records), and the antenna rotation period I034/041 when present,
+make each radar's ``ScanTiming`` (``AsterixReader.scan_timing``: filled as the file is read).
+
+**Bad input** is one ``ParameterError`` line naming the file and the byte offset (in a capture
+the packet first): a data block
 whose LEN is under 3 or runs past the end of the file (truncated), a data block the decoder
 cannot parse (an item running past its end: the block's offset and the decoder's reason), a
 record announcing items beyond the UAP, an unknown SAC/SIC, a height impossible at the plot's
-range (these by the block's offset and the record's index in it). The file is read
+range (these by the block's offset and the record's number in it, from 1), a file or capture
+without any CAT048 target report (what was passed over, counted). The file is read
 ``READ_BYTES`` at a time, one data block (≤ 64 KiB) decoded at a time: memory does not grow
 with the file.
 
@@ -67,7 +89,10 @@ from __future__ import annotations
 
 import itertools
 import math
+import statistics
+from collections import deque
 from collections.abc import Iterable, Iterator
+from dataclasses import dataclass, field
 from typing import IO, Any, NamedTuple
 
 import numpy as np
@@ -77,6 +102,7 @@ from radarviz.core.params import ParameterError
 from radarviz.core.tracking.compiled import PlotBlock, RadarTable
 from radarviz.core.tracking.stream import Plot
 from radarviz.viz_app.io.atomic import commit_together
+from radarviz.viz_app.io.pcap import CaptureCounts, is_capture, packet_place, udp_datagrams
 from radarviz.viz_app.io.plots import (
     MAX_TIME_S,
     Locate,
@@ -126,6 +152,25 @@ ITEM_OF_COLUMN = {
     "radial_velocity_mps": "I048/120",
     "target": "I048/161",
 }
+CAT034 = 34
+#: I034/000 message types: the antenna crossed north; it crossed a sector's start (I034/020).
+NORTH_MARKER, SECTOR_CROSSING = 1, 2
+#: Duplicate records (``_RecentRecords``): a record is dropped when one of the same bytes was
+#: read among the records of the last ``DUPLICATE_WINDOW_S`` of time of day (I048/140),
+#: and at most ``DUPLICATE_RECORDS`` records are kept. A redundant feed's second copy comes
+#: within a second of the first (two network paths, a recorder's buffering); a later record
+#: of the same bytes would be the same radar at the same position at the same 1/128 s, which
+#: only the day's wrap (24 h on) can make honestly. So any window well under a day drops no
+#: real plot, and the window is set by memory: 10 s of 7 radars' ~1000 reports/s is ~10⁴
+#: records of ~30 octets. The count bound holds memory even where times do not advance.
+DUPLICATE_WINDOW_S = 10.0
+DUPLICATE_RECORDS = 1 << 16
+#: Data blocks of a capture whose packet ``AsterixReader`` remembers, to name it in errors.
+#: The tracker's errors are about a plot of the plots in hand (a ``BLOCK_PLOTS`` block, a
+#: ``viz_app.io.plots.READ_BLOCK`` or a scan), and a feed's datagram carries tens of plots,
+#: so these span ~10⁴ plots; a block older than that is named by its byte offset alone (exact
+#: too), and memory stays bounded (~200 octets each).
+NAMED_BLOCKS = 1024
 #: A plot's position packs (data block byte offset, record index in the block).
 _RECORDS_PER_POSITION = 1 << 16
 
@@ -199,19 +244,67 @@ def height_from_elevation(
 # --------------------------------------------------------------------------------------------
 
 
-def _decoder() -> Any:
+class _Parser(NamedTuple):
+    """pyobelix's record parser, its UAPs and its error class."""
+
+    parse_record: Any
+    uap48: Any
+    uap34: Any
+    malformed: type[Exception]
+
+
+def _decoder() -> _Parser:
+    """pyobelix's record parser. A data block is split into records here rather than by
+    ``pyobelix.iter_records``, which does the same loop but does not tell each record's octets,
+    and duplicates are found by their octets (``pyobelix.engine._parse_record``, the one call
+    of its block loop; the package is pinned below 0.2)."""
     try:
         import pyobelix
+        from pyobelix.engine import _parse_record
+        from pyobelix.specs import CATEGORIES
     except ImportError:
         raise ParameterError(_PYOBELIX_MISSING) from None
-    return pyobelix
+    return _Parser(_parse_record, CATEGORIES[CATEGORY], CATEGORIES[CAT034], pyobelix.AsterixError)
 
 
-def data_blocks(fh: IO[bytes], source: str) -> Iterator[tuple[int, int, bytes]]:
+def split_records(block: bytes, parser: _Parser, uap: Any) -> list[tuple[Any, bytes]]:
+    """The records of one data block (header included) as (decoded items, the record's
+    octets), in order. Raises the decoder's error for an item running past the block. A
+    record whose FSPEC announces items beyond the UAP ends the block (its length is unknown)
+    and is returned with ``_fspec_reserved`` set."""
+    out, pos, end = [], 3, len(block)
+    parse = parser.parse_record
+    while pos < end:
+        rec, consumed = parse(block, pos, uap=uap, block_end=end)
+        out.append((rec, block[pos : pos + consumed]))
+        pos += consumed
+        if rec.get("_fspec_reserved"):
+            break
+    return out
+
+
+def tiled_blocks(payload: bytes) -> list[tuple[int, int, bytes]] | None:
+    """A UDP payload as ASTERIX data blocks (offset in the payload, category, the block),
+    or None when it is not: its blocks must tile it exactly, each LEN at least 3 and the
+    last ending at the payload's end (a datagram may carry several blocks)."""
+    out, pos, end = [], 0, len(payload)
+    while pos < end:
+        if end - pos < 3:
+            return None
+        length = int.from_bytes(payload[pos + 1 : pos + 3], "big")
+        if length < 3 or pos + length > end:
+            return None
+        out.append((pos, payload[pos], payload[pos : pos + length]))
+        pos += length
+    return out or None
+
+
+def data_blocks(fh: IO[bytes], source: str, head: bytes = b"") -> Iterator[tuple[int, int, bytes]]:
     """The data blocks of a binary ASTERIX file as (byte offset, category, the block's bytes,
-    header included), reading ``READ_BYTES`` at a time. A LEN under 3 or past the end of the
-    file is a ParameterError naming the block's offset."""
-    buf = b""
+    header included), reading ``READ_BYTES`` at a time (``head``: the file's first octets,
+    already read). A LEN under 3 or past the end of the file is a ParameterError naming the
+    block's offset."""
+    buf = head
     base = 0  # file offset of buf[0]
     pos = 0
     eof = False
@@ -244,6 +337,124 @@ def data_blocks(fh: IO[bytes], source: str) -> Iterator[tuple[int, int, bytes]]:
         )
 
 
+class _DayClock:
+    """Times of day (s) onto one running day: each time is taken on the day that puts it
+    nearest the previous one (within 12 h), so 86399.5 then 0.25 is 86399.5, 86400.25 (the
+    module docstring). One clock serves a file's CAT048 and CAT034 records in file order."""
+
+    __slots__ = ("day_s", "previous")
+
+    def __init__(self) -> None:
+        self.day_s = 0.0
+        self.previous: float | None = None
+
+    def __call__(self, tod: float) -> float:
+        if self.previous is None:
+            t = tod
+        else:
+            t = tod + self.day_s
+            if t < self.previous - DAY_S / 2:
+                self.day_s += DAY_S
+                t += DAY_S
+            elif t > self.previous + DAY_S / 2:
+                self.day_s -= DAY_S
+                t -= DAY_S
+        self.previous = t
+        return t
+
+
+class _RecentRecords:
+    """The octets of the records read recently (``DUPLICATE_WINDOW_S``,
+    ``DUPLICATE_RECORDS``), in reading order, to drop a byte-identical repeat."""
+
+    def __init__(self, window_s: float = DUPLICATE_WINDOW_S, size: int = DUPLICATE_RECORDS):
+        self.window_s = window_s
+        self.size = size
+        self._seen: set[bytes] = set()
+        self._order: deque[tuple[float | None, bytes]] = deque()
+
+    def repeat(self, raw: bytes, tod: float | None) -> bool:
+        """Whether ``raw`` was read recently; if not, it is remembered (``tod``: its time of
+        day, None without one). Older records go first: those more than the window before
+        ``tod`` (the age taken modulo a day, so midnight does not age the whole window), and
+        any beyond the count bound."""
+        if raw in self._seen:
+            return True
+        order, seen = self._order, self._seen
+        while order:
+            t0 = order[0][0]
+            age = None if tod is None or t0 is None else (tod - t0) % DAY_S
+            if len(order) < self.size and (age is None or not self.window_s < age < DAY_S / 2):
+                break
+            seen.discard(order.popleft()[1])
+        order.append((tod, raw))
+        seen.add(raw)
+        return False
+
+
+@dataclass(frozen=True)
+class ScanTiming:
+    """One radar's antenna timing, from its CAT034 service messages.
+
+    Attributes:
+        radar: the radar's name in the radars file (its I034/010 SAC/SIC), or
+            "SAC s SIC c" for a data source no radar has.
+        rotation_period_s: the antenna's rotation period (s): the last I034/041 antenna
+            rotation period (1/128 s) read, else the median interval between successive north
+            markers (a missed marker doubles one interval, which the median ignores), else
+            None (fewer than two north markers and no I034/041).
+        period_from: "I034/041", "north markers" or None: where ``rotation_period_s`` is from.
+        north_times_s: the times (I034/030, on the CAT048 records' running day) of its north
+            markers (I034/000 message type 1), in file order: one per antenna turn.
+        sector_crossings: its sector-crossing messages (I034/000 type 2).
+        last_sector_deg: the azimuth (I034/020, 360/2⁸°, clockwise from north) of its last
+            sector crossing, or None.
+    """
+
+    radar: str
+    rotation_period_s: float | None
+    period_from: str | None
+    north_times_s: tuple[float, ...]
+    sector_crossings: int = 0
+    last_sector_deg: float | None = None
+
+
+@dataclass
+class _ScanLog:
+    """What ``ScanTiming`` is made of, gathered as the messages are read."""
+
+    period_041_s: float | None = None
+    north: list[float] = field(default_factory=list)
+    sectors: int = 0
+    last_sector_deg: float | None = None
+
+    def timing(self, radar: str) -> ScanTiming:
+        period, source = self.period_041_s, "I034/041" if self.period_041_s else None
+        if period is None and len(self.north) >= 2:
+            period = statistics.median(b - a for a, b in itertools.pairwise(self.north))
+            source = "north markers"
+        return ScanTiming(
+            radar, period, source, tuple(self.north), self.sectors, self.last_sector_deg
+        )
+
+
+@dataclass
+class InputCounts:
+    """What the reader passed over, counted as it reads: ``records`` (CAT048 records read),
+    of them ``track_only_skipped`` (without I048/040: a track status, no plot) and
+    ``duplicates_dropped`` (``_RecentRecords``); ``cat034_messages``, ``other_blocks`` (data
+    blocks of other categories); for a capture ``capture`` (``viz_app.io.pcap``'s counts)
+    and ``not_asterix`` (UDP datagrams that are not ASTERIX data blocks)."""
+
+    records: int = 0
+    track_only_skipped: int = 0
+    duplicates_dropped: int = 0
+    cat034_messages: int = 0
+    other_blocks: int = 0
+    capture: CaptureCounts | None = None
+    not_asterix: int = 0
+
+
 class _Source(NamedTuple):
     """A data source's radar and what its plots take from it, computed once: the radar's
     ``index`` in the radars file, σr (m), σβ and σε (rad, 0 without), the site (m), σVr
@@ -267,59 +478,208 @@ class PlacedBlock(NamedTuple):
 
 
 class AsterixReader:
-    """Validated plots of an ASTERIX CAT048 file, one data block at a time (module docstring).
+    """Validated plots of an ASTERIX CAT048 file or capture, one data block at a time (module
+    docstring).
 
-    The first CAT048 record is read on construction (``three_d``, ``targets`` tell the file's
-    kind); iterating yields (position, ``Plot``), position = data block offset × 2¹⁶ + record
-    index, which ``locate`` names; ``blocks`` yields the same plots as columns (the compiled
-    path of ``viz_app.io.plot_blocks.run_track``). Errors: ``ParameterError`` "SOURCE byte N,
-    record K, item I048/xxx: …".
+    The input is a capture (``viz_app.io.pcap``) when its first octets are a pcap or pcapng
+    magic, or ``container`` is "pcap"; otherwise a file of data blocks. The first CAT048
+    target report is read on construction (``three_d``, ``targets`` tell the file's kind);
+    iterating yields (position, ``Plot``), position = data block offset × 2¹⁶ + record index
+    in the block, which ``locate`` names; ``blocks`` yields the same plots as columns (the
+    compiled path of ``viz_app.io.plot_blocks.run_track``). Errors: ``ParameterError``
+    "SOURCE byte N, record K, item I048/xxx: …", in a capture "SOURCE packet P (byte B), data
+    block at byte N, record K, …".
+
+    While and after reading: ``counts`` (``InputCounts``), ``scan_timing`` (per radar, from
+    CAT034), ``input_summary()`` (both, as the summary's JSON).
     """
 
-    def __init__(self, fh: IO[bytes], source: str, radars: dict[str, Radar]):
+    def __init__(
+        self, fh: IO[bytes], source: str, radars: dict[str, Radar], container: str = "auto"
+    ):
         self.source = source
-        self._decode = _decoder().iter_records
-        self._malformed = _decoder().AsterixError
+        self._parser = _decoder()
         self._by_id = {(r.sac, r.sic): r for r in radars.values() if r.sac is not None}
         self._radars = radars
-        self._records = self._decoded(fh)
+        self.counts = InputCounts()
+        self._clock = _DayClock()
+        self._recent = _RecentRecords()
+        self._scans: dict[str, _ScanLog] = {}
+        # (block offset, packet, packet offset) of the last NAMED_BLOCKS data blocks of a
+        # capture: a ring of constant size, searched only to word an error.
+        self._packet_of: deque[tuple[int, int, int]] = deque(maxlen=NAMED_BLOCKS)
+        self._first_foreign: tuple[int, int] | None = None
+        head = _head(fh, 12)
+        self.capture = container == "pcap" or is_capture(head)
+        self.container = "asterix"
+        if self.capture:
+            self.container = "pcapng" if head[:1] == b"\x0a" else "pcap"
+        blocks = self._capture_blocks(fh, head) if self.capture else data_blocks(fh, source, head)
+        self._records = self._decoded(blocks)
         first = next(self._records, None)
         if first is None:
-            raise ParameterError(f"{source}: no CAT048 records (not an ASTERIX CAT048 file?)")
+            raise ParameterError(f"{source}: no CAT048 target reports ({self._nothing()})")
         self._first = first
         position, rec = first
         radar = self._radar(position, rec)
         self.three_d = radar.sigma_elevation_deg is not None and _height_m(rec) is not None
         self.targets = "track_number" in rec
+        #: The plots carry the radar's own track numbers (I048/161), as ``Plot.radar_track``
+        #: and as their ``target`` labels (``track --associate`` keeps the first only).
+        self.radar_tracks = self.targets
+
+    def _nothing(self) -> str:
+        """Why a file gave no plot, in words: what its reading passed over."""
+        c = self.counts
+        parts = [f"{c.records} CAT048 records, {c.track_only_skipped} of them track-only"]
+        if c.duplicates_dropped:
+            parts.append(f"{c.duplicates_dropped} duplicates")
+        if c.capture is not None:
+            k = c.capture
+            parts.append(
+                f"{k.packets} packets: {k.udp_datagrams} UDP datagrams, {c.not_asterix} of them "
+                f"not ASTERIX, {k.non_udp} not UDP, {k.fragments} IP fragments"
+            )
+            if self._first_foreign is not None:
+                n, off = self._first_foreign
+                parts.append(f"the first datagram not ASTERIX: {packet_place(n, off)}")
+        else:
+            parts.append("not an ASTERIX CAT048 file?")
+        return "; ".join(parts)
+
+    @property
+    def scan_timing(self) -> dict[str, ScanTiming]:
+        """Per radar (its name) the antenna timing its CAT034 messages read so far tell
+        (``ScanTiming``); complete once the plots are read. Radars without CAT034 messages
+        are absent."""
+        return {name: log.timing(name) for name, log in self._scans.items()}
+
+    def input_summary(self) -> dict[str, Any]:
+        """``counts`` and ``scan_timing`` as the ``track --summary`` document's
+        ``input_counts`` section (north times as their count, first and last)."""
+        c = self.counts
+        doc: dict[str, Any] = {
+            "container": self.container,
+            "records": c.records,
+            "track_only_skipped": c.track_only_skipped,
+            "duplicates_dropped": c.duplicates_dropped,
+            "cat034_messages": c.cat034_messages,
+            "other_category_blocks": c.other_blocks,
+        }
+        if c.capture is not None:
+            doc |= {
+                "packets": c.capture.packets,
+                "udp_datagrams": c.capture.udp_datagrams,
+                "packets_skipped_non_udp": c.capture.non_udp,
+                "packets_skipped_fragment": c.capture.fragments,
+                "datagrams_skipped_not_asterix": c.not_asterix,
+            }
+        doc["scan_timing"] = {
+            name: {
+                "rotation_period_s": s.rotation_period_s,
+                "period_from": s.period_from,
+                "north_crossings": len(s.north_times_s),
+                "first_north_s": s.north_times_s[0] if s.north_times_s else None,
+                "last_north_s": s.north_times_s[-1] if s.north_times_s else None,
+                "sector_crossings": s.sector_crossings,
+            }
+            for name, s in self.scan_timing.items()
+        }
+        return doc
 
     def locate(self, position: int, column: str) -> str:
         """ "byte N, record K, item I048/xxx" of a plot's position and input column."""
         return f"{self._where(position)}, item {ITEM_OF_COLUMN.get(column, column)}"
 
+    def _block_where(self, offset: int) -> str:
+        """A data block's place: "byte N", in a capture with its packet first."""
+        for block_offset, packet, packet_offset in reversed(self._packet_of):
+            if block_offset == offset:
+                return f"{packet_place(packet, packet_offset)}, data block at byte {offset}"
+        return f"byte {offset}"
+
     def _where(self, position: int) -> str:
         offset, index = divmod(position, _RECORDS_PER_POSITION)
-        return f"byte {offset}, record {index + 1}"
+        return f"{self._block_where(offset)}, record {index + 1}"
 
-    def _decoded(self, fh: IO[bytes]) -> Iterator[tuple[int, Any]]:
-        decode, malformed = self._decode, self._malformed
-        for offset, cat, block in data_blocks(fh, self.source):
+    def _capture_blocks(self, fh: IO[bytes], head: bytes) -> Iterator[tuple[int, int, bytes]]:
+        """The data blocks of a capture's UDP datagrams (``viz_app.io.pcap``), each with its
+        byte offset in the file; a datagram not tiled by data blocks is skipped and counted."""
+        counts = self.counts.capture = CaptureCounts()
+        named = self._packet_of
+        for dg in udp_datagrams(fh, self.source, counts, head):
+            blocks = tiled_blocks(dg.payload)
+            if blocks is None:
+                self.counts.not_asterix += 1
+                if self._first_foreign is None:
+                    self._first_foreign = (dg.packet, dg.packet_offset)
+                continue
+            for start, cat, block in blocks:
+                offset = dg.offset + start
+                named.append((offset, dg.packet, dg.packet_offset))
+                yield offset, cat, block
+
+    def _split(self, offset: int, block: bytes, uap: Any, cat: int) -> list[tuple[Any, bytes]]:
+        try:
+            return split_records(block, self._parser, uap)
+        except self._parser.malformed as exc:
+            raise ParameterError(
+                f"{self.source} {self._block_where(offset)}: CAT{cat:03d} data block (LEN "
+                f"{len(block)}) does not decode: {exc}"
+            ) from None
+
+    def _decoded(self, blocks: Iterable[tuple[int, int, bytes]]) -> Iterator[tuple[int, Any]]:
+        """The CAT048 target reports of the data blocks as (position, decoded items); track-only
+        records and duplicates are counted and passed over, CAT034 blocks read for the scan
+        timing, other categories' blocks skipped whole."""
+        uap, counts, recent = self._parser.uap48, self.counts, self._recent
+        for offset, cat, block in blocks:
             if cat != CATEGORY:
-                continue  # another category's block (service messages): not target reports
-            try:
-                records = list(decode(block, strict=True))
-            except malformed as exc:
-                raise ParameterError(
-                    f"{self.source} byte {offset}: CAT048 data block (LEN {len(block)}) does "
-                    f"not decode: {exc}"
-                ) from None
+                if cat == CAT034:
+                    self._service(offset, block)
+                else:
+                    counts.other_blocks += 1  # another category: not target reports
+                continue
             position = offset * _RECORDS_PER_POSITION
-            for index, rec in enumerate(records):
+            for index, (rec, raw) in enumerate(self._split(offset, block, uap, cat)):
                 if rec.get("_fspec_reserved"):
                     raise ParameterError(
                         f"{self.source} {self._where(position + index)}: the FSPEC announces "
                         "items beyond CAT048's UAP (another edition?)"
                     )
+                counts.records += 1
+                if "rho" not in rec:
+                    # No measured position: a track-only record (a track status, a coasted
+                    # track), nothing to track; counted, not refused.
+                    counts.track_only_skipped += 1
+                    continue
+                if recent.repeat(raw, rec.get("time_of_day")):
+                    counts.duplicates_dropped += 1  # a redundant feed's second copy
+                    continue
                 yield position + index, rec
+
+    def _service(self, offset: int, block: bytes) -> None:
+        """A CAT034 data block's north markers and sector crossings into ``scan_timing``."""
+        for rec, _ in self._split(offset, block, self._parser.uap34, CAT034):
+            self.counts.cat034_messages += 1
+            kind = rec.get("message_type")
+            if kind not in (NORTH_MARKER, SECTOR_CROSSING) or "sac" not in rec:
+                continue
+            radar = self._by_id.get((rec["sac"], rec["sic"]))
+            name = radar.name if radar is not None else f"SAC {rec['sac']} SIC {rec['sic']}"
+            log = self._scans.get(name)
+            if log is None:
+                log = self._scans[name] = _ScanLog()
+            period = rec.get("antenna_rotation_period_s")
+            if period:
+                log.period_041_s = period
+            tod = rec.get("time_of_day")
+            if kind == NORTH_MARKER:
+                if tod is not None:
+                    log.north.append(self._clock(tod))
+            else:
+                log.sectors += 1
+                log.last_sector_deg = rec.get("sector_number_deg")
 
     def _radar(self, position: int, rec: Any) -> Radar:
         if "sac" not in rec:
@@ -338,17 +698,19 @@ class AsterixReader:
 
     def _checked(
         self,
-    ) -> Iterator[tuple[int, float, float, float, float | None, float | None, _Source, str]]:
-        """Every record decoded and checked (the one home of the checks of the module
+    ) -> Iterator[
+        tuple[int, float, float, float, float | None, float | None, _Source, str, int | None]
+    ]:
+        """Every target report decoded and checked (the one home of the checks of the module
         docstring): (position, time_s, range_m, azimuth_rad, elevation_rad or None,
-        radial_velocity_mps or None, the data source's ``_Source``, target label). ``__iter__``
-        makes plots of them, ``blocks`` columns."""
+        radial_velocity_mps or None, the data source's ``_Source``, target label, I048/161
+        track number or None). ``__iter__`` makes plots of them, ``blocks`` columns."""
         three_d, labelled = self.three_d, self.targets
         last_t = -math.inf
         last_of: dict[str, float] = {}
-        day_s = 0.0
-        previous: float | None = None
+        clock = self._clock
         target = ""
+        track: int | None = None
         sources: dict[tuple[int, int], _Source] = {}  # per data source, computed once
         index = {name: i for i, name in enumerate(self._radars)}
 
@@ -369,24 +731,7 @@ class AsterixReader:
             radar = c.radar
             if "time_of_day" not in rec:
                 raise self._bad(position, "I048/140", "missing (every plot needs a time)")
-            if "rho" not in rec:
-                raise self._bad(
-                    position, "I048/040", "missing: a record without a measured position is "
-                    "refused (not a target report that can be tracked)"
-                )  # fmt: skip
-            tod = rec["time_of_day"]
-            if previous is None:
-                t = tod
-            else:
-                t = tod + day_s
-                # Midnight: take the day that puts t nearest the previous record's time.
-                if t < previous - DAY_S / 2:
-                    day_s += DAY_S
-                    t += DAY_S
-                elif t > previous + DAY_S / 2:
-                    day_s -= DAY_S
-                    t -= DAY_S
-            previous = t
+            t = clock(rec["time_of_day"])  # midnight: the day nearest the previous time
             if abs(t) > MAX_TIME_S:
                 raise self._bad(position, "I048/140", f"time {t!r} s is beyond {MAX_TIME_S:g} s")
             if labelled:
@@ -395,7 +740,8 @@ class AsterixReader:
                         position, "I048/161", "missing: the file's first record has a track "
                         "number, so every record needs one (the target's label)"
                     )  # fmt: skip
-                target = str(rec["track_number"])
+                track = rec["track_number"]
+                target = str(track)
                 last_t = last_of.get(target, -math.inf)
             if t < last_t:
                 of = f" of target {target}" if labelled else ""
@@ -436,11 +782,11 @@ class AsterixReader:
             vr = None
             if c.sigma_vr > 0 and rec.get("cal_valid"):
                 vr = rec["cal_doppler_m_per_s"]
-            yield position, t, r, radians(beta_deg), el, vr, c, target
+            yield position, t, r, radians(beta_deg), el, vr, c, target, track
 
     def __iter__(self) -> Iterator[tuple[int, Plot]]:
         three_d = self.three_d
-        for position, t, r, az, el, vr, c, target in self._checked():
+        for position, t, r, az, el, vr, c, target, track in self._checked():
             yield (
                 position,
                 Plot(
@@ -456,6 +802,7 @@ class AsterixReader:
                     vr,
                     c.sigma_vr if vr is not None else 0.0,
                     target,
+                    track,
                 ),
             )
 
@@ -477,7 +824,7 @@ class AsterixReader:
 
     def _placed(self, rows: list[tuple], table: RadarTable) -> PlacedBlock:
         """``_checked``'s rows as one ``PlacedBlock``."""
-        position, t, r, az, el, vr, c, target = zip(*rows, strict=True)
+        position, t, r, az, el, vr, c, target, _ = zip(*rows, strict=True)
         labels: dict[str, int] = {}
         doppler = any(v is not None for v in vr)
         block = PlotBlock(
@@ -502,16 +849,69 @@ class AsterixReader:
 def asterix_source(
     fh: IO[bytes], source: str, radars: dict[str, Radar]
 ) -> tuple[PlotSource, Locate]:
-    """``run_track``'s reader of an ASTERIX file (a ``viz_app.io.plots.SourceFactory``)."""
+    """``run_track``'s reader of an ASTERIX file or capture (a
+    ``viz_app.io.plots.SourceFactory``; a capture is told by its magic)."""
     reader = AsterixReader(fh, source, radars)
     return reader, reader.locate
 
 
+def capture_reader(fh: IO[bytes], source: str, radars: dict[str, Radar]) -> AsterixReader:
+    """An ``AsterixReader`` of a pcap or pcapng capture (``--format pcap``: a file of
+    another magic is refused, not read as data blocks)."""
+    return AsterixReader(fh, source, radars, container="pcap")
+
+
+def capture_source(
+    fh: IO[bytes], source: str, radars: dict[str, Radar]
+) -> tuple[PlotSource, Locate]:
+    """``run_track``'s reader of a capture (``capture_reader``)."""
+    reader = capture_reader(fh, source, radars)
+    return reader, reader.locate
+
+
 def source_for(path: str, file_format: str = "auto") -> SourceFactory:
-    """The reader of the measurement file ``path``: ``asterix_source`` or
+    """The reader of the measurement file ``path``: ``asterix_source``, ``capture_source`` or
     ``viz_app.io.plots.csv_source``, by ``file_format`` (``input_format_of``: "auto" goes by
-    the suffix). The one place the input format is chosen (``track``, ``radarviz.track_file``)."""
-    return asterix_source if input_format_of(path, file_format) == "asterix" else csv_source
+    the magic of a capture, else by the suffix). The one place the input format is chosen
+    (``track``, ``radarviz.track_file``)."""
+    fmt = input_format_of(path, file_format)
+    if fmt == "pcap":
+        return capture_source
+    return asterix_source if fmt == "asterix" else csv_source
+
+
+def input_line(source: str, doc: dict[str, Any]) -> str:
+    """``AsterixReader.input_summary``'s counts as one line of words (``track``'s stderr)."""
+    parts = []
+    if "packets" in doc:
+        parts.append(
+            f"{doc['packets']} packets ({doc['packets_skipped_non_udp']} not UDP, "
+            f"{doc['packets_skipped_fragment']} IP fragments and "
+            f"{doc['datagrams_skipped_not_asterix']} datagrams not ASTERIX skipped)"
+        )
+    parts.append(
+        f"{doc['records']} CAT048 records ({doc['track_only_skipped']} track-only skipped, "
+        f"{doc['duplicates_dropped']} duplicates dropped)"
+    )
+    scans = [
+        f"{name} {s['rotation_period_s']:.3f} s ({s['period_from']})"
+        for name, s in doc["scan_timing"].items()
+        if s["rotation_period_s"] is not None
+    ]
+    if scans:
+        parts.append("antenna rotation " + ", ".join(scans))
+    return f"{source}: " + ", ".join(parts)
+
+
+def _head(fh: IO[bytes], n: int) -> bytes:
+    """The first ``n`` octets of ``fh`` (fewer at its end), a pipe's short reads joined."""
+    head = b""
+    while len(head) < n:
+        chunk = fh.read(n - len(head))
+        if not chunk:
+            break
+        head += chunk
+    return head
 
 
 def _height_m(rec: Any) -> float | None:

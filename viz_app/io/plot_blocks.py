@@ -59,6 +59,7 @@ from radarviz.viz_app.io.plots import (
     _csv_locate,
     check_track_rows,
     csv_source,
+    input_summary,
     is_parquet,
     parquet_writer,
     radar_table,
@@ -644,8 +645,15 @@ def block_source(
     ``PlotBlockReader``, ASTERIX's ``AsterixReader``; None for another (the row path)."""
     if open_source in (None, csv_source):
         return PlotBlockReader
-    from radarviz.viz_app.io.asterix import AsterixReader, asterix_source
+    from radarviz.viz_app.io.asterix import (
+        AsterixReader,
+        asterix_source,
+        capture_reader,
+        capture_source,
+    )
 
+    if open_source is capture_source:
+        return capture_reader
     return AsterixReader if open_source is asterix_source else None
 
 
@@ -714,6 +722,7 @@ def run_track(
             writer.abandon()
             raise
         writer.close()
+    seconds = time.perf_counter() - start
     return TrackSummary(
-        plots, writer.rows, three_d, tuple(methods), time.perf_counter() - start, targets
+        plots, writer.rows, three_d, tuple(methods), seconds, targets, input_summary(reader)
     )

@@ -128,10 +128,14 @@ OPTIONAL_RADAR_KEYS = (
 #: neither; no two radars may share a pair.
 SOURCE_KEYS = ("sac", "sic")
 DEFAULT_TRACKS = "tracks.csv"
-#: Measurement file formats (``track --format``, ``simulate --format``); "auto" picks by suffix.
-FILE_FORMATS = ("auto", "csv", "asterix")
+#: Measurement file formats of ``track --format`` ("auto" picks by a capture's magic, else by
+#: suffix; ``simulate --format`` writes ``OUTPUT_FORMATS``).
+FILE_FORMATS = ("auto", "csv", "asterix", "pcap")
 #: File name suffixes taken as ASTERIX by "auto" (any other: CSV).
 ASTERIX_SUFFIXES = (".ast", ".asterix")
+#: Suffixes of a packet capture (pcap, pcapng) of ASTERIX datagrams; a capture of another
+#: name is told by its magic (``input_format_of``).
+CAPTURE_SUFFIXES = (".pcap", ".pcapng")
 SIM_PRESETS = ("prosov", "fusion")
 #: ``track --doppler``: the Doppler update each mode asks for
 #: (``core.tracking.stream.StreamOptions.doppler_update``), None for "ignore".
@@ -492,13 +496,23 @@ class PlotReader:
             )
 
 
-def track_columns(targets: bool, status: bool = False) -> tuple[str, ...]:
+def track_columns(
+    targets: bool, status: bool = False, radar_tracks: bool = False
+) -> tuple[str, ...]:
     """The track file's header: ``TRACK_COLUMNS``, with ``target`` after ``time_s`` for a
     measurement file of many targets, and ``status`` after it for associated tracks
-    (``track --associate``: the track's status after the plot, tentative or confirmed)."""
+    (``track --associate``: the track's status after the plot, tentative or confirmed), then
+    with ``radar_tracks`` ``RADAR_TRACK_COLUMN`` (associated plots of an ASTERIX input with
+    I048/161: the radar's own track number, kept beside the association's track id)."""
     if not targets:
         return TRACK_COLUMNS
-    return (TRACK_COLUMNS[0], "target", *(("status",) if status else ()), *TRACK_COLUMNS[1:])
+    extra = (("status",) if status else ()) + ((RADAR_TRACK_COLUMN,) if radar_tracks else ())
+    return (TRACK_COLUMNS[0], "target", *extra, *TRACK_COLUMNS[1:])
+
+
+#: The track file's column of the radar's own track number (an integer; empty when a plot
+#: has none).
+RADAR_TRACK_COLUMN = "radar_track_number"
 
 
 #: Track rows written to the track file at a time (one pyarrow table).
@@ -517,20 +531,20 @@ def is_parquet(path: str | os.PathLike) -> bool:
 TEXT_COLUMNS = ("target", "status", "method")
 
 
-def track_schema(targets: bool, status: bool = False) -> Any:
+def track_schema(targets: bool, status: bool = False, radar_tracks: bool = False) -> Any:
     """The Parquet track file's schema: the columns of ``track_columns``, in its order, the
-    text ones (``TEXT_COLUMNS``) strings, the others float64."""
+    text ones (``TEXT_COLUMNS``) strings, ``RADAR_TRACK_COLUMN`` int64, the others float64."""
     import pyarrow as pa
 
+    kind = {c: pa.string() for c in TEXT_COLUMNS} | {RADAR_TRACK_COLUMN: pa.int64()}
     return pa.schema(
-        [
-            (c, pa.string() if c in TEXT_COLUMNS else pa.float64())
-            for c in track_columns(targets, status)
-        ]
+        [(c, kind.get(c, pa.float64())) for c in track_columns(targets, status, radar_tracks)]
     )
 
 
-def parquet_writer(fh: IO[bytes], targets: bool, status: bool = False) -> Any:
+def parquet_writer(
+    fh: IO[bytes], targets: bool, status: bool = False, radar_tracks: bool = False
+) -> Any:
     """A ``pyarrow.parquet.ParquetWriter`` of the track file on ``fh`` (``atomic_write``'s
     staged file; closing the writer leaves ``fh`` open). Each written table is one row
     group.
@@ -541,7 +555,7 @@ def parquet_writer(fh: IO[bytes], targets: bool, status: bool = False) -> Any:
     2D air-traffic track file: 720 against 270 ns per row, 129 against 108 bytes)."""
     import pyarrow.parquet as pq
 
-    schema = track_schema(targets, status)
+    schema = track_schema(targets, status, radar_tracks)
     text = [c for c in schema.names if c in TEXT_COLUMNS]
     return pq.ParquetWriter(fh, schema, use_dictionary=text)
 
@@ -575,15 +589,25 @@ class TrackWriter:
         targets: the file has a ``target`` column (``track_columns``).
         status: and a ``status`` column (associated tracks).
         parquet: write Parquet (``parquet_writer``) instead of CSV.
+        radar_tracks: and a ``RADAR_TRACK_COLUMN`` (each plot's ``radar_track``).
     """
 
-    def __init__(self, fh: IO[bytes], targets: bool, status: bool = False, parquet: bool = False):
+    def __init__(
+        self,
+        fh: IO[bytes],
+        targets: bool,
+        status: bool = False,
+        parquet: bool = False,
+        radar_tracks: bool = False,
+    ):
         self.fh = fh
         self.parquet = parquet
         self.targets = targets
         self.status = targets and status
-        self.columns = track_columns(targets, self.status)
+        self.radar_tracks = self.status and radar_tracks
+        self.columns = track_columns(targets, self.status, self.radar_tracks)
         self._statuses: list[str] = []
+        self._radar_tracks: list[int | None] = []
         self.rows = 0
         self._writer: Any = None
         self._times: list[float] = []
@@ -604,6 +628,8 @@ class TrackWriter:
             self._labels.extend([plot.target] * len(rows))
         if self.status:
             self._statuses.extend([status] * len(rows))
+        if self.radar_tracks:
+            self._radar_tracks.extend([plot.radar_track] * len(rows))
         self.rows += len(rows)
         if len(self._times) >= WRITE_BLOCK:
             self.flush()
@@ -620,6 +646,8 @@ class TrackWriter:
         text = [pa.array(self._labels, pa.string())] if self.targets else []
         if self.status:
             text.append(pa.array(self._statuses, pa.string()))
+        if self.radar_tracks:
+            text.append(pa.array(self._radar_tracks, pa.int64()))
         columns = [
             pa.array(self._times, pa.float64()),
             *text,
@@ -630,12 +658,14 @@ class TrackWriter:
         table = pa.Table.from_arrays(columns, names=list(self.columns))
         if self._writer is None:
             if self.parquet:
-                self._writer = parquet_writer(self.fh, self.targets, self.status)
+                self._writer = parquet_writer(self.fh, self.targets, self.status, self.radar_tracks)
             else:
                 options = pcsv.WriteOptions(quoting_style="needed")
                 self._writer = pcsv.CSVWriter(self.fh, table.schema, write_options=options)
         self._writer.write_table(table)
-        for buf in (self._times, self._labels, self._statuses, self._methods, self._x, self._P):
+        for buf in (self._times, self._labels, self._statuses, self._radar_tracks):
+            buf.clear()
+        for buf in (self._methods, self._x, self._P):
             buf.clear()
 
     def close(self) -> None:
@@ -643,7 +673,7 @@ class TrackWriter:
         gets its schema)."""
         self.flush()
         if self._writer is None and self.parquet:
-            self._writer = parquet_writer(self.fh, self.targets, self.status)
+            self._writer = parquet_writer(self.fh, self.targets, self.status, self.radar_tracks)
         if self._writer is not None:
             self._writer.close()
 
@@ -781,7 +811,8 @@ def bounded_lines(fh: Any, source: str) -> Iterator[str]:
 @dataclass(frozen=True)
 class TrackSummary:
     """What ``run_track`` did: plots read, rows written, 2D/3D, methods, wall time (s), and
-    the targets in order of their first plot (() for a file without a target column)."""
+    the targets in order of their first plot (() for a file without a target column), and
+    what the reader counted on the way (``input_summary``; None for a CSV)."""
 
     plots: int
     rows: int
@@ -789,8 +820,23 @@ class TrackSummary:
     methods: tuple[str, ...]
     seconds: float
     targets: tuple[str, ...] = ()
+    input: dict[str, Any] | None = None
     #: The association's account (``track --associate``), or None.
     association: AssociationReport | None = None
+
+
+def input_summary(reader: object) -> dict[str, Any] | None:
+    """What a reader counted (ASTERIX's ``AsterixReader.input_summary``: records skipped or
+    dropped, a capture's packets, the scan timing), or None for one that counts nothing."""
+    summary = getattr(reader, "input_summary", None)
+    return None if summary is None else summary()
+
+
+def radar_track_numbers(reader: object) -> bool:
+    """Whether a reader's target labels are radars' own track numbers (ASTERIX I048/161,
+    ``AsterixReader.radar_tracks``): the association accepts them (each plot keeps its number
+    as ``Plot.radar_track``) where it refuses a CSV's target labels."""
+    return bool(getattr(reader, "radar_tracks", False))
 
 
 class PlotSource(Protocol):
@@ -932,12 +978,43 @@ def track_plots(
 
 
 def input_format_of(path: str, file_format: str = "auto") -> str:
-    """``"csv"`` or ``"asterix"``: ``file_format`` itself, or with ``"auto"`` by the suffix of
+    """``"csv"``, ``"asterix"`` or ``"pcap"`` (a pcap or pcapng capture of ASTERIX datagrams):
+    ``file_format`` itself, or with ``"auto"`` a capture by its magic (a regular file's first
+    octets; ``viz_app.io.pcap.is_capture``) or ``CAPTURE_SUFFIXES``, else by the suffix of
     ``path`` (``ASTERIX_SUFFIXES``: ASTERIX; anything else: CSV)."""
     check_choice("format", file_format, FILE_FORMATS)
     if file_format != "auto":
         return file_format
+    if path.lower().endswith(CAPTURE_SUFFIXES) or _capture_magic(path):
+        return "pcap"
     return "asterix" if path.lower().endswith(ASTERIX_SUFFIXES) else "csv"
+
+
+#: ``simulate --format``: what it writes (a capture is read, not written).
+OUTPUT_FORMATS = ("auto", "csv", "asterix")
+
+
+def output_format_of(path: str, file_format: str = "auto") -> str:
+    """``"csv"`` or ``"asterix"``, the format ``simulate`` writes ``path`` in: ``file_format``
+    itself, or with ``"auto"`` by the suffix (``ASTERIX_SUFFIXES``: ASTERIX; else CSV)."""
+    check_choice("format", file_format, OUTPUT_FORMATS)
+    if file_format != "auto":
+        return file_format
+    return "asterix" if path.lower().endswith(ASTERIX_SUFFIXES) else "csv"
+
+
+def _capture_magic(path: str) -> bool:
+    """Whether the regular file ``path`` starts with a capture's magic (a FIFO is not opened
+    here: its octets would be lost to the reader; a missing file is for the reader to name)."""
+    from radarviz.viz_app.io.pcap import is_capture
+
+    try:
+        if not os.path.isfile(path):
+            return False
+        with open(path, "rb") as fh:
+            return is_capture(fh.read(12))
+    except OSError:
+        return False
 
 
 def labels_refused(name: str, labelled: str) -> str:
@@ -968,7 +1045,7 @@ def _associate_plots(
     on_report: Callable[[AssociationReport], None] | None = None,
 ) -> tuple[int, bool, tuple[str, ...], tuple[str, ...]]:
     """``track_plots`` with the association (its docstring)."""
-    if reader.targets:
+    if reader.targets and not radar_track_numbers(reader):
         where = _place(source, locate(1, "target"))
         raise ParameterError(f"{where}: {labels_refused('--associate', 'this file labels them')}")
     try:
@@ -986,7 +1063,15 @@ def _associate_plots(
         if window is None
         else scan_groups(reader, window)
     )
+    # A capture's CAT034 messages time the antennas (``AsterixReader.scan_timing``): a period
+    # they give replaces the one estimated from the plots.
+    timing = getattr(reader, "scan_timing", None)
     for scan in batches:
+        if timing:
+            radar = scan[0][1].radar
+            period = getattr(timing.get(radar), "rotation_period_s", None)
+            if period is not None:
+                tracker.measured_period(radar, period)
         try:
             result = tracker.add_batch([plot for _, plot in scan])
         except PlotError as exc:
@@ -1064,7 +1149,8 @@ def run_track(
         def on_start(targets: bool) -> None:
             nonlocal writer
             status = association is not None
-            writer = TrackWriter(out, targets, status, parquet=is_parquet(out_path))
+            numbers = status and radar_track_numbers(reader)
+            writer = TrackWriter(out, targets, status, is_parquet(out_path), numbers)
             stack.callback(writer.abandon)  # before the stage's end (a no-op once closed)
 
         def on_rows(plot: Plot, rows: list[StateRow], status: str = "") -> None:
@@ -1101,13 +1187,15 @@ def run_track(
                 "in all, so no track started (lower --init-k or use --init first-plot)",
                 "init_k",
             )
+    seconds = time.perf_counter() - start
     return TrackSummary(
         plots,
         written,
         three_d,
         tuple(used),
-        time.perf_counter() - start,
+        seconds,
         targets,
+        input_summary(reader),
         reports[0] if reports else None,
     )
 

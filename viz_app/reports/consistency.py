@@ -50,9 +50,12 @@ def track_summary_document(
     three_d: bool,
     methods: tuple[str, ...],
     targets: tuple[str, ...] = (),
+    input_counts: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """The summary of one ``track`` run; ``targets``: a file of many targets' labels (its
-    tracks are named ``core.tracking.targets.track_name(target, method)``)."""
+    tracks are named ``core.tracking.targets.track_name(target, method)``); ``input_counts``:
+    what the reader counted (``viz_app.io.asterix.AsterixReader.input_summary``: records
+    skipped and dropped, a capture's packets, each radar's scan timing; None for a CSV)."""
     tracks = {}
     names = [track_name(t, m) for t in targets for m in methods] if targets else methods
     known = set(monitor.tracks)
@@ -75,6 +78,7 @@ def track_summary_document(
         }
     return {
         "input": input_path,
+        "input_counts": input_counts,
         "plots": plots,
         "rows": rows,
         "dims": 3 if three_d else 2,
