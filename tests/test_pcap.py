@@ -583,3 +583,27 @@ def test_reading_a_capture_holds_memory_flat(tmp_path: Path) -> None:
         assert n == 2 * (len(path.read_bytes()) - 24) // (16 + len(frames[0]))
     assert peaks[2] < peaks[1] + 4096, peaks
     assert peaks[2] < long.stat().st_size / 4, (peaks, long.stat().st_size)
+
+
+def test_association_takes_the_antenna_period_from_cat034(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """With ``--associate`` the CAT034 period of a radar (I034/041, or its north markers)
+    replaces the one the association would estimate from its plots: the summary's
+    ``association`` section lists no estimated period for the two radars CAT034 times, while
+    the third radar's is left to its plots (12 scans: too few revisits to tell, null)."""
+    scene = Scene(tmp_path)
+    cap = tmp_path / "m.pcapng"
+    cap.write_bytes(pcapng_file(framings(scene.payloads()), [1, 113, 276], "<", simple=1))
+    summary = tmp_path / "s.json"
+    argv = ["track", "--radars", str(scene.toml), "--method", "ucm", "--associate", "gnn"]
+    status, _, err = track(
+        [*argv, "--input", str(cap), "--out", str(tmp_path / "t.csv"), "--summary", str(summary)],
+        capsys,
+    )
+    assert status == 0, err
+    est = json.loads(summary.read_text())["association"]["radars"]
+    names = list(load_radars(str(scene.toml)))
+    for name in names[:2]:
+        assert "rotation_period_s" not in est[name]["estimated"], name
+    assert "rotation_period_s" in est[names[2]]["estimated"]
