@@ -250,7 +250,7 @@ def test_target_seen_by_one_radar_only_is_held() -> None:
 # ------------------------------------------------------------------------------------------
 
 
-def write_files(tmp: Path, sites: list[RotatingRadar], pl: RotatingPlots, shift_m: float = 0.0):
+def write_files(tmp: Path, sites: list[RotatingRadar], pl: RotatingPlots, sigma_scale: float = 1.0):
     m, r = tmp / "m.csv", tmp / "r.toml"
     lines = ["time_s,radar,range_m,azimuth_deg"]
     for t, j, rng, b in zip(pl.time_s, pl.radar, pl.range_m, pl.azimuth_rad, strict=True):
@@ -260,11 +260,11 @@ def write_files(tmp: Path, sites: list[RotatingRadar], pl: RotatingPlots, shift_
     for s in sites:
         toml += [
             f"[radars.{s.name}]",
-            f"x_m = {s.x_m + shift_m}",
+            f"x_m = {s.x_m}",
             f"y_m = {s.y_m}",
             "z_m = 0.0",
-            f"sigma_range_m = {s.sigma_r_m}",
-            f"sigma_azimuth_deg = {math.degrees(s.sigma_beta_rad)}",
+            f"sigma_range_m = {s.sigma_r_m * sigma_scale}",
+            f"sigma_azimuth_deg = {math.degrees(s.sigma_beta_rad) * sigma_scale}",
             "",
         ]
     r.write_text("\n".join(toml))
@@ -295,11 +295,11 @@ def test_track_associates_a_rotating_feed(tmp_path: Path, capsys: pytest.Capture
 def test_wrong_radars_file_warns_and_gives_no_all_clear(
     tmp_path: Path, capsys: pytest.CaptureFixture
 ) -> None:
-    """Sites 3 km off: plots of different radars no longer agree, tracks break, most plots
-    never reach a confirmed track, and the run says so."""
+    """Accuracies ten times too good in the radars file: the gates are too tight, tracks break
+    and a third of the plots never reach a confirmed track; the run says so."""
     sites = radars(clutter=0.0)
     pl = scene(7, sites, targets=10, duration_s=120.0)
-    m, r = write_files(tmp_path, sites, pl, shift_m=3e3)
+    m, r = write_files(tmp_path, sites, pl, sigma_scale=0.1)
     out = tmp_path / "t.csv"
     argv = ["track", "--input", str(m), "--radars", str(r), "--out", str(out), "--method", "ucm"]
     assert main([*argv, "--associate", "gnn"]) == 0
