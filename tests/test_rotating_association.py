@@ -306,3 +306,17 @@ def test_wrong_radars_file_warns_and_gives_no_all_clear(
     cap = capsys.readouterr()
     assert "outside confirmed tracks (more than 10%)" in cap.err
     assert "every track within its NIS band" not in cap.out
+
+
+def test_a_feed_a_little_out_of_order_is_put_back_in_order() -> None:
+    """Plots a second out of order (radars' packets interleaved by the network) come out in
+    time order; one more than ``REORDER_S`` late is refused, naming it."""
+    from radarviz.core.tracking.association import REORDER_S, LatePlotError, time_ordered
+
+    times = [0.0, 1.0, 0.5, 2.0, 1.5, 3.0, 8.0, 9.0, 2.5 + REORDER_S]
+    items = [(n, Plot(t, 1e4, 0.0, 50.0, 0.01)) for n, t in enumerate(times)]
+    assert [p.time_s for _, p in time_ordered(items)] == sorted(times)
+    late = [*items, (99, Plot(1.0, 1e4, 0.0, 50.0, 0.01))]
+    with pytest.raises(LatePlotError) as err:
+        list(time_ordered(late))
+    assert err.value.key == 99 and "out of time order" in str(err.value)

@@ -73,6 +73,7 @@ filtering of the same plots.
 
 from __future__ import annotations
 
+import heapq
 import math
 from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass, field, replace
@@ -174,6 +175,45 @@ def scan_groups(items: Iterable[tuple[T, Plot]], window_s: float) -> Iterator[li
         scan.append(item)
     if scan:
         yield scan
+
+
+#: How late a plot may come in a feed and still be put back in time order (s): a merged feed
+#: of several radars (packets of each radar in order, the radars interleaved as the network
+#: delivers them) is out of order by a packet or two, well under a second.
+REORDER_S = 5.0
+
+
+class LatePlotError(PlotError):
+    """A plot too late to be put back in time order (``time_ordered``); ``key`` is its
+    pair's key (the reader's position of the plot)."""
+
+    def __init__(self, key: object, message: str):
+        super().__init__("time_s", message)
+        self.key = key
+
+
+def time_ordered(
+    items: Iterable[tuple[T, Plot]], horizon_s: float = REORDER_S
+) -> Iterator[tuple[T, Plot]]:
+    """(key, plot) pairs put back in time order: each is held until a plot ``horizon_s``
+    later has come, then released earliest first (ties in arrival order). A plot earlier
+    than one already released is a ``LatePlotError``: it came more than ``horizon_s`` late."""
+    heap: list[tuple[float, int, tuple[T, Plot]]] = []
+    released = -math.inf
+    for n, item in enumerate(items):
+        t = item[1].time_s
+        if t < released:
+            raise LatePlotError(
+                item[0],
+                f"a plot {released - t:.3g} s earlier than one already tracked: more than "
+                f"{horizon_s:g} s out of time order",
+            )
+        heapq.heappush(heap, (t, n, item))
+        while heap and heap[0][0] <= t - horizon_s:
+            released, _, out = heapq.heappop(heap)
+            yield out
+    while heap:
+        yield heapq.heappop(heap)[2]
 
 
 #: Longest time span of a batch cut by sector (s): one radar's sector is swept in a fraction

@@ -94,8 +94,10 @@ from radarviz.core.tracking.association import (
     AssociationOptions,
     AssociationReport,
     GNNTracker,
+    LatePlotError,
     plot_batches,
     scan_groups,
+    time_ordered,
 )
 from radarviz.core.tracking.compiled import RadarTable
 from radarviz.core.tracking.coverage import RadarCoverage
@@ -1058,15 +1060,23 @@ def _associate_plots(
         on_start(True)
     plots = 0
     window = association.scan_window_s
+    # A file is in time order (the readers check it), a feed of several radars nearly so.
+    ordered = time_ordered(reader)
     batches = (
-        plot_batches(reader, association.batch_sector_deg)
+        plot_batches(ordered, association.batch_sector_deg)
         if window is None
-        else scan_groups(reader, window)
+        else scan_groups(ordered, window)
     )
     # A capture's CAT034 messages time the antennas (``AsterixReader.scan_timing``): a period
     # they give replaces the one estimated from the plots.
     timing = getattr(reader, "scan_timing", None)
-    for scan in batches:
+    while True:
+        try:
+            scan = next(batches)
+        except StopIteration:
+            break
+        except LatePlotError as exc:
+            raise ParameterError(f"{_place(source, locate(exc.key, exc.column))}: {exc}") from None
         if timing:
             radar = scan[0][1].radar
             period = getattr(timing.get(radar), "rotation_period_s", None)
