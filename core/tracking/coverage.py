@@ -20,7 +20,8 @@ association needs to tell that:
   T (1 − 3 · 360°/cells / 360°) at the least unless it is the same sweep (a few
   hundredths of a second, below ``MIN_REVISIT_S``), and a whole multiple of T after a missed
   detection. The shortest revisits are therefore the period: T̂ is the median of the
-  revisits within ±10% of their 10th percentile, once ``MIN_REVISITS`` have been seen.
+  revisits within ±10% of their 10th percentile, once ``MIN_REVISITS`` have been seen and
+  if a tenth of them (three at least) are that close (else the period stays unknown).
 * **Rotation direction** (the sign of dβ/dt) by the majority of consecutive plot pairs less
   than a quarter revolution apart.
 
@@ -204,8 +205,11 @@ class RadarBeam:
             del self._revisits[: len(self._revisits) - REVISITS_KEPT]
         if len(self._revisits) >= MIN_REVISITS:
             r = np.asarray(self._revisits)
-            low = float(np.quantile(r, 0.1))
-            self._period = float(np.median(r[(r >= 0.9 * low) & (r <= 1.1 * low)]))
+            low = float(np.quantile(r, 0.1, method="lower"))  # a revisit seen, not between two
+            near = r[(r >= 0.9 * low) & (r <= 1.1 * low)]
+            # The shortest revisits must be a cluster (a tenth of them at least), not a stray.
+            if near.size >= max(3, r.size // 10):
+                self._period = float(np.median(near))
 
     def measured_period(self, period_s: float) -> None:
         """The period measured by the feed (a radar's north markers or service messages):
