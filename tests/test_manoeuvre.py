@@ -290,12 +290,25 @@ def test_track_defaults_to_a_consistent_imm_and_writes_its_summary(
         (["--sigma-a", "-1"], "--sigma-a must be a finite number in [0, 1000] (got -1.0)"),
         (["--imm-sigma-a", "-0.5", "10"], "--imm-sigma-a must be a finite number in [0, 1000]"),
         (["--imm-sigma-a", "1"], "--imm-sigma-a must give at least 2 models (got 1)"),
-        (["--imm-transition", "0.9", "0.2", "0.1", "0.9"], "--imm-transition row 1 must sum to 1"),
         (
-            ["--imm-transition", "1", "0", "0.1", "0.9"],
+            ["--imm-sigma-a", "1", "10", "--imm-transition", "0.9", "0.2", "0.1", "0.9"],
+            "--imm-transition row 1 must sum to 1",
+        ),
+        (
+            ["--imm-sigma-a", "1", "10", "--imm-transition", "1", "0", "0.1", "0.9"],
             "--imm-transition must be a finite number in (0, 1)",
         ),
-        (["--imm-transition", "0.9", "0.1", "0.1"], "--imm-transition must give 4 probabilities"),
+        (
+            ["--imm-sigma-a", "1", "10", "--imm-transition", "0.9", "0.1", "0.1"],
+            "--imm-transition must give 4 probabilities",
+        ),
+        (["--imm-transition", "0.9", "0.1"], "--imm-transition must give 16 probabilities"),
+        (
+            ["--imm-turn-rate", "0", "30", "-2", "0"],
+            "--imm-turn-rate must be a finite number in [-20, 20] (got 30.0)",
+        ),
+        (["--imm-turn-rate", "0", "2"], "--imm-turn-rate must have one entry per model, 4 (got 2)"),
+        (["--model", "cv", "--imm-turn-rate", "0", "2"], "--imm-turn-rate is the imm model's"),
         (["--model", "ct"], "--model must be one of cv, imm (got 'ct')"),
         (["--nis-window", "0"], "--nis-window must be an integer in [1, 10000] (got 0)"),
         (["--finite-memory", "1"], "--finite-memory must be an integer in [2, 1000] (got 1)"),
