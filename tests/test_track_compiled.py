@@ -180,6 +180,14 @@ def _cov_change(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.max(np.abs(a - b) / (1.0 + d[:, None] * d[None, :])))
 
 
+#: How far beyond its ``rounding_spread`` a method may differ between the engines. The spread
+#: is a scale, not a bound: the engines round differently at every operation, the spread
+#: moves the inputs only (measured engine difference / spread in x: 1.9 for ``ducm``, 1.1
+#: for ``ekf``, 1.6 for ``ukf``). An error in a formula moves a track by the size of the term
+#: it gets wrong, 10⁻³ of its scale or more, far beyond ten times a spread of 10⁻⁸.
+SPREAD_FACTOR = 10.0
+
+
 def rounding_spread(
     plots: list[Plot], three_d: bool, rows: list[list[StateRow]], **kw
 ) -> dict[str, tuple[float, float]]:
@@ -189,9 +197,10 @@ def rounding_spread(
 
     The scene's 2D plots are not those of their radars' sites (``scene``), so some tracks
     diverge (velocities jumping by km/s from plot to plot) and amplify a rounding difference
-    by orders of magnitude: with the default IMM's turn models, the ``ekf`` track of ``T1``
-    moves by 1.6e-6 of its scale for one ulp of its ranges, and the two engines, which round
-    differently at every step, differ by 1.0e-6 there."""
+    by orders of magnitude: with the default IMM's turn models the ``ducm`` tracks move by
+    8.0e-9 of their scale for one ulp of the ranges, and the two engines, which round
+    differently at every step, differ by 1.5e-8 there (``ekf``: 3.0e-9 and 3.3e-9; with the
+    former two-model IMM every method stayed below 1e-9)."""
     out: dict[str, tuple[float, float]] = {}
     for way in (np.inf, -np.inf):
         moved = [replace(p, range_m=float(np.nextafter(p.range_m, way))) for p in plots]
@@ -209,11 +218,11 @@ def assert_rows_within_rounding(
     spread: dict[str, tuple[float, float]],
 ) -> None:
     """``assert_same_rows`` with ``close`` / ``close_cov``, each method's tolerance TOL or,
-    where the scene amplifies rounding more, twice its ``rounding_spread``."""
+    where the scene amplifies rounding more, ``SPREAD_FACTOR`` times its ``rounding_spread``."""
     for a, b in zip(ref_rows, rows, strict=True):
         assert [m for m, _, _ in a] == [m for m, _, _ in b]
         for (m, xa, Pa), (_, xb, Pb) in zip(a, b, strict=True):
-            tol_x, tol_P = (max(TOL, 2.0 * v) for v in spread[m])
+            tol_x, tol_P = (max(TOL, SPREAD_FACTOR * v) for v in spread[m])
             assert _x_change(xa, xb) <= tol_x, m
             assert _cov_change(Pa, Pb) <= tol_P, m
 
@@ -285,12 +294,14 @@ def test_the_compiled_imm_equals_the_numpy_engine(three_d: bool, block: int) -> 
     for t in ref.targets:
         for m in ref.methods:
             want, got = _mu(ref, m, t), _mu(fast, m, t)
-            tol = max(TOL, 2.0 * max(spread[m]))
+            tol = max(TOL, SPREAD_FACTOR * max(spread[m]))
             assert np.all(np.abs(want - got) <= tol), (t, m)
             mus.append(want)
     start = StreamOptions(model="imm").motion().initial_probabilities()
     assert np.max(np.abs(np.array(mus) - start)) > 0.05
-    assert_same_monitor(ref_mon, mon, max(TOL, 2.0 * max(max(v) for v in spread.values())))
+    assert_same_monitor(
+        ref_mon, mon, max(TOL, SPREAD_FACTOR * max(max(v) for v in spread.values()))
+    )
 
 
 @pytest.mark.parametrize("three_d", [False, True], ids=["2d", "3d"])
@@ -494,7 +505,7 @@ def test_the_block_file_path_equals_the_plots_tracked_one_by_one(
         if model == "cv":
             assert close(xw, x) and close(Pw, P)
         else:
-            tol_x, tol_P = (max(TOL, 2.0 * v) for v in spread[m])
+            tol_x, tol_P = (max(TOL, SPREAD_FACTOR * v) for v in spread[m])
             assert _x_change(xw, x) <= tol_x and _cov_change(Pw, P) <= tol_P, m
 
 
