@@ -1,10 +1,10 @@
 """Airliners seen by one rotating radar: straight legs joined by coordinated turns, the test
 scene of the IMM's consistency in turns (``core.experiments.turns``, ``docs/manoeuvre.md``).
 
-Four flight plans (:data:`AIRLINER_FLIGHTS`, 900 s each) at 150–250 m/s and 3–10 km altitude,
+Four flight plans (:data:`AIRLINER_FLIGHTS`, 900 s each) at 160–250 m/s and 3–10 km altitude,
 each a sequence of straight legs (some with a gentle climb, descent or speed change) and
 coordinated turns at 1.5–3°/s (``core.scenarios.manoeuvre.Leg``: constant speed and turn
-rate, a horizontal acceleration of v ω ≈ 3.9–13 m/s²) through 45–180°. They are flown by
+rate, a horizontal acceleration of v ω ≈ 5.5–13 m/s²) through 60–180°. They are flown by
 ``core.scenarios.manoeuvre.fly`` on its 0.1 s grid.
 
 One radar (:data:`AIRLINER_RADAR`) at the origin, 27–128 km from the flights: a rotating
