@@ -293,6 +293,16 @@ PARAMETERS: dict[str, Parameter] = {
             None,
             low_open=False,
         ),
+        _real(
+            "imm_turn_rate_degps",
+            "ωj",
+            "turn rate of each IMM model (0: constant velocity, else a coordinated turn)",
+            "deg/s",
+            -20.0,
+            20.0,
+            None,
+            low_open=False,
+        ),
         Parameter(
             "transition_prob",
             "πij",

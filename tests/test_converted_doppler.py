@@ -318,6 +318,8 @@ def test_converted_doppler_in_the_many_target_tracker_and_the_imm() -> None:
     imm = StreamOptions(
         model="imm",
         imm_sigma_a_mps2=(0.5, 0.5),
+        transition_prob=((0.995, 0.005), (0.05, 0.95)),
+        imm_turn_rate_degps=None,  # two constant-velocity models alike: the cv filter
         doppler_update="converted",
         monitor=monitor,
     )

@@ -290,12 +290,25 @@ def test_track_defaults_to_a_consistent_imm_and_writes_its_summary(
         (["--sigma-a", "-1"], "--sigma-a must be a finite number in [0, 1000] (got -1.0)"),
         (["--imm-sigma-a", "-0.5", "10"], "--imm-sigma-a must be a finite number in [0, 1000]"),
         (["--imm-sigma-a", "1"], "--imm-sigma-a must give at least 2 models (got 1)"),
-        (["--imm-transition", "0.9", "0.2", "0.1", "0.9"], "--imm-transition row 1 must sum to 1"),
         (
-            ["--imm-transition", "1", "0", "0.1", "0.9"],
+            ["--imm-sigma-a", "1", "10", "--imm-transition", "0.9", "0.2", "0.1", "0.9"],
+            "--imm-transition row 1 must sum to 1",
+        ),
+        (
+            ["--imm-sigma-a", "1", "10", "--imm-transition", "1", "0", "0.1", "0.9"],
             "--imm-transition must be a finite number in (0, 1)",
         ),
-        (["--imm-transition", "0.9", "0.1", "0.1"], "--imm-transition must give 4 probabilities"),
+        (
+            ["--imm-sigma-a", "1", "10", "--imm-transition", "0.9", "0.1", "0.1"],
+            "--imm-transition must give 4 probabilities",
+        ),
+        (["--imm-transition", "0.9", "0.1"], "--imm-transition must give 16 probabilities"),
+        (
+            ["--imm-turn-rate", "0", "30", "-2", "0"],
+            "--imm-turn-rate must be a finite number in [-20, 20] (got 30.0)",
+        ),
+        (["--imm-turn-rate", "0", "2"], "--imm-turn-rate must have one entry per model, 4 (got 2)"),
+        (["--model", "cv", "--imm-turn-rate", "0", "2"], "--imm-turn-rate is the imm model's"),
         (["--model", "ct"], "--model must be one of cv, imm (got 'ct')"),
         (["--nis-window", "0"], "--nis-window must be an integer in [1, 10000] (got 0)"),
         (["--finite-memory", "1"], "--finite-memory must be an integer in [2, 1000] (got 1)"),
@@ -401,3 +414,59 @@ def test_bad_manoeuvre_preset_input_writes_nothing(tmp_path: Path, capsys, args,
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and needle in err, err
     assert list(tmp_path.iterdir()) == []
+
+
+# --------------------------------------------------------------------------------------------
+# Consistency in turns (core.experiments.turns)
+# --------------------------------------------------------------------------------------------
+
+#: Standard errors a Monte Carlo figure may lie beyond its bound before a test fails: 3 is a
+#: one-sided false alarm of 0.13% per figure for a figure that meets it exactly.
+SE_MARGIN = 3.0
+#: Straight-leg RMSE the default IMM may add to the former default before it is "materially
+#: worse" (5%).
+MATERIAL = 0.05
+
+
+def test_airliner_scene_turns_are_inside_turn_legs_and_away_from_the_radar() -> None:
+    from radarviz.core.scenarios.airliner import AIRLINER_FLIGHTS, AIRLINER_RADAR, turn_mask
+
+    mp = manoeuvre_plots(2, 1, AIRLINER_FLIGHTS, (AIRLINER_RADAR,))
+    mask = turn_mask(mp.schedule, AIRLINER_FLIGHTS)
+    for f, flight in enumerate(AIRLINER_FLIGHTS):
+        turning = sum(leg.duration_s for leg in flight.legs if leg.turn_rate_radps)
+        # one plot every 4.5 s inside the turn legs
+        assert abs(mask[:, f].sum() - turning / AIRLINER_RADAR.period_s) <= len(flight.legs)
+        rates = [abs(math.degrees(leg.turn_rate_radps)) for leg in flight.legs]
+        assert all(w == 0.0 or 1.5 - 1e-9 <= w <= 3.0 + 1e-9 for w in rates)
+        speed = np.linalg.norm(mp.true_velocity_mps[:, f, :2], axis=-1)
+        assert 140.0 <= speed.min() and speed.max() <= 260.0
+        ground = np.linalg.norm(mp.true_position_m[:, f, :2], axis=-1)
+        assert ground.min() > 20e3  # outside the radar's blind cone
+
+
+@pytest.mark.parametrize(
+    ("scene", "dims"),
+    [("airliner", 2), ("airliner", 3), ("manoeuvre", 3)],
+    ids=["airliner-2d", "airliner-3d", "manoeuvre-3d"],
+)
+def test_the_default_imm_is_consistent_in_turns_and_no_worse_on_straight_legs(
+    scene: str, dims: int
+) -> None:
+    """The default IMM's mean position NEES in the turn segments lies in [d/2, 2d] (d the
+    position dof) within ``SE_MARGIN`` Monte Carlo standard errors; its straight-leg RMSE is
+    at most ``MATERIAL`` above the former two-CV default's on the same runs (paired standard
+    error), and its turn RMSE lower. Figures: ``docs/manoeuvre.md``, "Turn models"."""
+    from radarviz.core.experiments.turns import rmse_ratio, turn_figures
+    from radarviz.core.filters.models import CV_IMM
+
+    runs = 32 if scene == "airliner" else 16
+    new = turn_figures(DEFAULT_IMM, scene, dims, runs=runs)
+    old = turn_figures(CV_IMM, scene, dims, runs=runs)
+    d = dims
+    nees = new.nees_turn
+    assert d / 2.0 - SE_MARGIN * nees.se <= nees.value <= 2.0 * d + SE_MARGIN * nees.se, nees
+    ratio = rmse_ratio(new, old)
+    assert ratio.value <= 1.0 + MATERIAL + SE_MARGIN * ratio.se, ratio
+    a, b = new.rmse_turn_m, old.rmse_turn_m
+    assert a.value + SE_MARGIN * a.se < b.value - SE_MARGIN * b.se, (a, b)

@@ -109,15 +109,18 @@ def assert_same_rows(
             assert close_P(Pa, Pb), m
 
 
-def assert_same_monitor(ref_mon: ConsistencyMonitor, mon: ConsistencyMonitor) -> None:
-    """The two monitors' figures per track (mean NIS to ``TOL``) and events are the same."""
+def assert_same_monitor(
+    ref_mon: ConsistencyMonitor, mon: ConsistencyMonitor, tol: float = TOL
+) -> None:
+    """The two monitors' figures per track (mean NIS to ``tol``, relative) and events are the
+    same."""
     want, got = ref_mon.results(), mon.results()
     assert set(want) == set(got)
     for name, w in want.items():
         g = got[name]
         assert (g.updates, g.windows, g.above, g.below) == (w.updates, w.windows, w.above, w.below)
         assert g.first_exit_s == w.first_exit_s
-        assert abs(g.mean_nis_per_dof - w.mean_nis_per_dof) <= TOL * w.mean_nis_per_dof
+        assert abs(g.mean_nis_per_dof - w.mean_nis_per_dof) <= tol * w.mean_nis_per_dof
     # The numpy engine feeds the monitor wave by wave, the compiled one plot by plot: the
     # same events, listed in another order.
     key = sorted((e.track, e.time_s, e.kind) for e in ref_mon.events)
@@ -164,6 +167,64 @@ def close_cov(a: np.ndarray, b: np.ndarray) -> bool:
     d = np.sqrt(np.abs(np.diagonal(a, axis1=-2, axis2=-1)))
     scale = d[..., :, None] * d[..., None, :]
     return bool(np.all(np.abs(a - b) <= TOL * (1.0 + scale)))
+
+
+def _x_change(a: np.ndarray, b: np.ndarray) -> float:
+    """The largest |aᵢ − bᵢ| / (1 + |aᵢ|): what ``close`` holds to ``TOL``."""
+    return float(np.max(np.abs(a - b) / (1.0 + np.abs(a))))
+
+
+def _cov_change(a: np.ndarray, b: np.ndarray) -> float:
+    """The largest |Aᵢⱼ − Bᵢⱼ| / (1 + √(Aᵢᵢ Aⱼⱼ)): what ``close_cov`` holds to ``TOL``."""
+    d = np.sqrt(np.abs(np.diagonal(a, axis1=-2, axis2=-1)))
+    return float(np.max(np.abs(a - b) / (1.0 + d[:, None] * d[None, :])))
+
+
+#: How far beyond its ``rounding_spread`` a method may differ between the engines. The spread
+#: is a scale, not a bound: the engines round differently at every operation, the spread
+#: moves the inputs only (measured engine difference / spread in x: 1.9 for ``ducm``, 1.1
+#: for ``ekf``, 1.6 for ``ukf``). An error in a formula moves a track by the size of the term
+#: it gets wrong, 10⁻³ of its scale or more, far beyond ten times a spread of 10⁻⁸.
+SPREAD_FACTOR = 10.0
+
+
+def rounding_spread(
+    plots: list[Plot], three_d: bool, rows: list[list[StateRow]], **kw
+) -> dict[str, tuple[float, float]]:
+    """Per method, how far the numpy engine's own x and P (``_x_change``, ``_cov_change``) move
+    when every plot's range moves by one unit in the last place, up or down (the larger):
+    the rounding the scene amplifies. ``rows``: the engine's rows of ``plots``.
+
+    The scene's 2D plots are not those of their radars' sites (``scene``), so some tracks
+    diverge (velocities jumping by km/s from plot to plot) and amplify a rounding difference
+    by orders of magnitude: with the default IMM's turn models the ``ducm`` tracks move by
+    8.0e-9 of their scale for one ulp of the ranges, and the two engines, which round
+    differently at every step, differ by 1.5e-8 there (``ekf``: 3.0e-9 and 3.3e-9; with the
+    former two-model IMM every method stayed below 1e-9)."""
+    out: dict[str, tuple[float, float]] = {}
+    for way in (np.inf, -np.inf):
+        moved = [replace(p, range_m=float(np.nextafter(p.range_m, way))) for p in plots]
+        _, other, _ = tracked(moved, three_d, "numpy", 4096, **kw)
+        for a, b in zip(rows, other, strict=True):
+            for (m, xa, Pa), (_, xb, Pb) in zip(a, b, strict=True):
+                dx, dP = out.get(m, (0.0, 0.0))
+                out[m] = (max(dx, _x_change(xa, xb)), max(dP, _cov_change(Pa, Pb)))
+    return out
+
+
+def assert_rows_within_rounding(
+    ref_rows: list[list[StateRow]],
+    rows: list[list[StateRow]],
+    spread: dict[str, tuple[float, float]],
+) -> None:
+    """``assert_same_rows`` with ``close`` / ``close_cov``, each method's tolerance TOL or,
+    where the scene amplifies rounding more, ``SPREAD_FACTOR`` times its ``rounding_spread``."""
+    for a, b in zip(ref_rows, rows, strict=True):
+        assert [m for m, _, _ in a] == [m for m, _, _ in b]
+        for (m, xa, Pa), (_, xb, Pb) in zip(a, b, strict=True):
+            tol_x, tol_P = (max(TOL, SPREAD_FACTOR * v) for v in spread[m])
+            assert _x_change(xa, xb) <= tol_x, m
+            assert _cov_change(Pa, Pb) <= tol_P, m
 
 
 def _mu(tracker: TargetTracker, method: str, target: str) -> np.ndarray:
@@ -225,17 +286,22 @@ def test_the_compiled_imm_equals_the_numpy_engine(three_d: bool, block: int) -> 
     fast, rows, mon = tracked(plots, three_d, "compiled", block, model="imm")
     assert (ref.engine, fast.engine) == ("numpy", "compiled")
     assert fast.targets == ref.targets
-    assert_same_rows(ref_rows, rows, close_cov)
-    # μ, what the combined estimates are weighted by (moved well away from its start).
+    spread = rounding_spread(plots, three_d, ref_rows, model="imm")
+    assert_rows_within_rounding(ref_rows, rows, spread)
+    # μ, what the combined estimates are weighted by (moved well away from its start), to
+    # TOL where the scene keeps the rounding below it.
     mus = []
     for t in ref.targets:
         for m in ref.methods:
             want, got = _mu(ref, m, t), _mu(fast, m, t)
-            assert np.all(np.abs(want - got) <= TOL), (t, m)
+            tol = max(TOL, SPREAD_FACTOR * max(spread[m]))
+            assert np.all(np.abs(want - got) <= tol), (t, m)
             mus.append(want)
     start = StreamOptions(model="imm").motion().initial_probabilities()
     assert np.max(np.abs(np.array(mus) - start)) > 0.05
-    assert_same_monitor(ref_mon, mon)
+    assert_same_monitor(
+        ref_mon, mon, max(TOL, SPREAD_FACTOR * max(max(v) for v in spread.values()))
+    )
 
 
 @pytest.mark.parametrize("three_d", [False, True], ids=["2d", "3d"])
@@ -430,9 +496,17 @@ def test_the_block_file_path_equals_the_plots_tracked_one_by_one(
         for row in rows
     ]
     assert len(got) == len(want)
+    spread: dict[str, tuple[float, float]] = {}
+    if model == "imm":  # the IMM's 2D tracks of this scene amplify rounding (rounding_spread)
+        _, ref_rows, _ = tracked(read, three_d, "numpy", 4096, model=model)
+        spread = rounding_spread(read, three_d, ref_rows, model=model)
     for (t, m, x, P), (tw, (mw, xw, Pw)) in zip(got, want, strict=True):
         assert (t, m) == (tw, mw)
-        assert close(xw, x) and (close(Pw, P) if model == "cv" else close_cov(Pw, P))
+        if model == "cv":
+            assert close(xw, x) and close(Pw, P)
+        else:
+            tol_x, tol_P = (max(TOL, SPREAD_FACTOR * v) for v in spread[m])
+            assert _x_change(xw, x) <= tol_x and _cov_change(Pw, P) <= tol_P, m
 
 
 @pytest.mark.parametrize(

@@ -234,6 +234,7 @@ def _stream_options(motion: CVModel | IMMModel, monitor: ConsistencyMonitor) -> 
             model="imm",
             imm_sigma_a_mps2=motion.sigma_a_mps2,
             transition_prob=motion.transition,
+            imm_turn_rate_degps=motion.turn_rate_degps,
             monitor=monitor,
         )
     return StreamOptions(model="cv", sigma_a_mps2=motion.sigma_a_mps2, monitor=monitor)

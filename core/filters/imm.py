@@ -35,6 +35,7 @@ from radarviz.core.filters.models import IMMModel
 from radarviz.core.filters.predict import cv_predict
 from radarviz.core.filters.state import CVBatch
 from radarviz.core.filters.step import Stage, moves
+from radarviz.core.filters.turn import turn_factors, turn_predict
 
 
 class IMMState(NamedTuple):
@@ -81,11 +82,26 @@ def imm_mix(imm: IMMState, transition: NDArray[np.float64]) -> tuple[CVBatch, ND
 
 
 def imm_predict(mixed: CVBatch, dt_s: float | NDArray[np.float64], model: IMMModel) -> CVBatch:
-    """Model j's constant-velocity prediction (σa,j) of its mixed estimate, every j; ``dt_s``
-    one step or one per track (broadcasting against the batch without its model axis)."""
+    """Model j's prediction (σa,j) of its mixed estimate, every j: constant velocity, or for
+    a model with a turn rate ωj ≠ 0 the coordinated turn at ωj (``core.filters.turn``);
+    ``dt_s`` one step or one per track (broadcasting against the batch without its model
+    axis)."""
     xs, Ps = [], []
+    omegas = model.turn_rates_radps()
+    n = mixed.x.shape[-1]
     for j, sigma_a in enumerate(model.sigma_a_mps2):
-        pred = cv_predict(CVBatch(mixed.x[..., j, :], mixed.P[..., j, :, :]), dt_s, sigma_a)
+        one = CVBatch(mixed.x[..., j, :], mixed.P[..., j, :, :])
+        omega = float(omegas[j])
+        if omega == 0.0:
+            pred = cv_predict(one, dt_s, sigma_a)
+        else:
+            pred = CVBatch(one.x.copy(), one.P.copy())
+            T = np.asarray(dt_s, dtype=np.float64)
+            theta = omega * T
+            k = turn_factors(omega, np.sin(theta), np.sin(0.5 * theta))
+            x_c = np.moveaxis(pred.x, -1, 0)  # components first: x_c[i], P_c[i, j]
+            P_c = np.moveaxis(pred.P, (-2, -1), (0, 1))
+            turn_predict(x_c, P_c, n, T, k, float(sigma_a) ** 2)
         xs.append(pred.x)
         Ps.append(pred.P)
     return CVBatch(np.stack(xs, axis=-2), np.stack(Ps, axis=-3))

@@ -8,7 +8,8 @@ Per plot of a started track, with μ its model probabilities and Π the transiti
 
     mixing        c̄ⱼ = Σᵢ πᵢⱼ μᵢ,   μᵢ|ⱼ = πᵢⱼ μᵢ / c̄ⱼ
                   x⁰ⱼ = Σᵢ μᵢ|ⱼ xᵢ,   P⁰ⱼ = Σᵢ μᵢ|ⱼ (Pᵢ + (xᵢ − x⁰ⱼ)(xᵢ − x⁰ⱼ)ᵀ)
-    prediction    model j's constant-velocity prediction with σa,j
+    prediction    model j's prediction with σa,j: constant velocity, or the coordinated
+                  turn at its rate ωj ≠ 0 (``core.filters.turn``, the numpy engine's code)
     each stage    Λⱼ = N(νⱼ; 0, Sⱼ) on model j's state, μⱼ ∝ Λⱼ c̄ⱼ (``mode_probabilities``),
                   then the stage's update of every model
     combination   x = Σⱼ μⱼ xⱼ,   P = Σⱼ μⱼ (Pⱼ + (xⱼ − x)(xⱼ − x)ᵀ)
@@ -30,7 +31,7 @@ Imported on first use only.
 from __future__ import annotations
 
 import math
-from math import exp
+from math import exp, sin
 
 import numpy as np
 
@@ -66,8 +67,22 @@ from radarviz.core.filters.kernels_track import (
     start_track,
     time_step,
 )
+from radarviz.core.filters.turn import turn_factors, turn_predict
 
 _LOG_2PI = math.log(2.0 * math.pi)
+
+# The coordinated turn at a model's fixed rate: ``core.filters.turn``'s arithmetic, shared
+# with the numpy engine's ``core.filters.imm.imm_predict``, compiled here.
+_turn_factors = _inline(turn_factors)
+_turn_predict = _inline(turn_predict)
+
+
+@_inline
+def turn_model_predict(x, P, n: int, T: float, omega: float, q: float):
+    """The coordinated-turn prediction over T at ω ≠ 0 (rad/s) of one model's x (n,),
+    P (n, n) in place, σa² = q (``core.filters.turn.turn_predict``)."""
+    theta = omega * T
+    _turn_predict(x, P, n, T, _turn_factors(omega, sin(theta), sin(0.5 * theta)), q)
 
 
 @_jit
@@ -310,8 +325,8 @@ def _started(x, P, mu0, xm, Pm, mu):
 @_jit
 def track_plots_imm_2d(
     codes, start_codes, slot, time_s, r_m, az_rad, vr_mps, has_vr, radar, site, sigma_r,
-    sigma_b, sigma_vr, sigma_a, Pi, mu0, v0, prm, with_stats, xs, Ps, mus, started, last_t,
-    out_x, out_P, out_nis,
+    sigma_b, sigma_vr, sigma_a, omega, Pi, mu0, v0, prm, with_stats, xs, Ps, mus, started,
+    last_t, out_x, out_P, out_nis,
 ):  # fmt: skip
     """``core.filters.kernels_track.track_plots_2d`` with the IMM (module docstring): returns
     −1, or the index of the first plot before its slot's previous one (nothing from it on is
@@ -319,7 +334,8 @@ def track_plots_imm_2d(
 
     Args:
         codes … sigma_vr, v0, prm: as ``track_plots_2d``.
-        sigma_a: (r,) σa of each model (m/s²); Pi: (r, r) Π; mu0: (r,) a new track's μ.
+        sigma_a: (r,) σa of each model (m/s²); omega: (r,) its turn rate ω (rad/s, 0: constant
+            velocity); Pi: (r, r) Π; mu0: (r,) a new track's μ.
         with_stats: compute the monitor's NIS (else out_nis is NaN).
         xs (K, M, r, 4), Ps (K, M, r, 4, 4), mus (K, M, r), started (K,), last_t (K,): every
             slot's model-conditioned tracks, updated in place.
@@ -357,7 +373,11 @@ def track_plots_imm_2d(
                 if dt > 0.0:
                     for m in range(r):
                         xj, Pj = x0[m], P0[m]
-                        predict(xj, Pj, dt, sigma_a[m] * sigma_a[m])
+                        q = sigma_a[m] * sigma_a[m]
+                        if omega[m] == 0.0:
+                            predict(xj, Pj, dt, q)
+                        else:
+                            turn_model_predict(xj, Pj, 4, dt, omega[m], q)
                 if with_stats:
                     combine_2d(x0, P0, c, x, P)
                     meas = position_measurement(code, x, rr, b, sr2, s, sx, sy, co[g, j])
@@ -389,8 +409,8 @@ def track_plots_imm_2d(
 @_jit
 def track_plots_imm_3d(
     codes, start_codes, slot, time_s, r_m, az_rad, el_rad, vr_mps, has_vr, radar, site,
-    sigma_r, sigma_b, sigma_e, sigma_vr, sigma_a, Pi, mu0, v0, prm, with_stats, xs, Ps, mus,
-    started, last_t, out_x, out_P, out_nis,
+    sigma_r, sigma_b, sigma_e, sigma_vr, sigma_a, omega, Pi, mu0, v0, prm, with_stats, xs, Ps,
+    mus, started, last_t, out_x, out_P, out_nis,
 ):  # fmt: skip
     """``track_plots_imm_2d`` in 3D (``core.filters.kernels_3d.track_plots_3d``'s stages):
     elevations el_rad (B,), sites (R, 3), σε sigma_e (R,), models xs (K, M, r, 6),
@@ -435,7 +455,11 @@ def track_plots_imm_3d(
                 if dt > 0.0:
                     for m in range(r):
                         xj, Pj = x0[m], P0[m]
-                        predict_3d(xj, Pj, dt, sigma_a[m] * sigma_a[m])
+                        q = sigma_a[m] * sigma_a[m]
+                        if omega[m] == 0.0:
+                            predict_3d(xj, Pj, dt, q)
+                        else:
+                            turn_model_predict(xj, Pj, 6, dt, omega[m], q)
                 if with_stats:
                     combine_3d(x0, P0, c, x, P)
                     position_measurement_3d(

@@ -143,6 +143,7 @@ class CompiledTracks:
         self.mus = np.zeros((0, m, *models))
         if imm is not None:
             self.sigma_a_models = np.array(imm.sigma_a_mps2, dtype=np.float64)
+            self.turn_rates = imm.turn_rates_radps()
             self.transition = imm.transition_matrix()
             self.mu0 = imm.initial_probabilities()
         self.started = np.zeros(0, dtype=np.bool_)
@@ -215,7 +216,8 @@ class CompiledTracks:
         if self.imm is None:
             model = (self.sigma_a, self.sigma_v0, self.prm, self.xs, self.Ps)
         else:
-            model = (self.sigma_a_models, self.transition, self.mu0, self.sigma_v0, self.prm)
+            model = (self.sigma_a_models, self.turn_rates, self.transition, self.mu0)
+            model = (*model, self.sigma_v0, self.prm)
             model = (*model, self.feed is not None, self.xs, self.Ps, self.mus)
         kernel = _track_kernel(self.dims, self.imm is not None)
 

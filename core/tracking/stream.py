@@ -286,8 +286,10 @@ class StreamOptions:
             Zavizhenets' window fit, ``docs/finite_memory.md``).
         init_k: plots in the finite-memory window (≥ 2 with Doppler, ≥ 3 without).
         model: ``"cv"`` or ``"imm"`` (``core.filters.models``).
-        imm_sigma_a_mps2, transition_prob: the IMM's σa per model and its transition matrix
-            (rows), used with ``model="imm"`` and checked always.
+        imm_sigma_a_mps2, transition_prob, imm_turn_rate_degps: the IMM's σa per model, its
+            transition matrix (rows) and each model's turn rate (°/s, 0: constant velocity;
+            None: every model constant velocity), used with ``model="imm"`` and checked
+            always.
         finite_memory_k: 0, or the window k of a sliding-window finite-memory track kept
             beside the recursive ones (rows named ``FINITE_MEMORY_TRACK``).
         monitor: a consistency monitor fed every update's NIS, track name = method
@@ -308,6 +310,7 @@ class StreamOptions:
     model: str = "cv"
     imm_sigma_a_mps2: tuple[float, ...] = DEFAULT_IMM.sigma_a_mps2
     transition_prob: tuple[tuple[float, ...], ...] = DEFAULT_IMM.transition
+    imm_turn_rate_degps: tuple[float, ...] | None = DEFAULT_IMM.turn_rate_degps
     finite_memory_k: int = 0
     monitor: ConsistencyMonitor | None = field(default=None, compare=False)
     engine: str = "compiled"
@@ -338,10 +341,15 @@ class StreamOptions:
 
     def motion(self) -> CVModel | IMMModel:
         """The motion model these options ask for."""
+        turns = self.imm_turn_rate_degps
+        imm = IMMModel(
+            tuple(self.imm_sigma_a_mps2),
+            tuple(map(tuple, self.transition_prob)),
+            turn_rate_degps=None if turns is None else tuple(turns),
+        )
         if self.model == "imm":
-            return IMMModel(tuple(self.imm_sigma_a_mps2), tuple(map(tuple, self.transition_prob)))
+            return imm
         # The IMM's parameters are checked even for a cv run: a bad value is an error either way.
-        IMMModel(tuple(self.imm_sigma_a_mps2), tuple(map(tuple, self.transition_prob)))
         return CVModel(self.sigma_a_mps2)
 
 

@@ -291,6 +291,7 @@ def bench_imm(runs: int, filterpy_runs: int, config: TrackingConfig) -> dict[str
 
     from radarviz.core.filters.models import DEFAULT_IMM, CVModel
     from radarviz.core.filters.predict import process_noise
+    from radarviz.core.filters.turn import turn_transition_matrix
 
     steps = config.target.steps
     out: dict[str, Any] = {"runs": runs}
@@ -306,9 +307,12 @@ def bench_imm(runs: int, filterpy_runs: int, config: TrackingConfig) -> dict[str
     for m in range(filterpy_runs):
         init = cv_init(c.z[m, :1], c.R[m, :1])
         filters = []
-        for sigma_a in DEFAULT_IMM.sigma_a_mps2:
+        for sigma_a, omega in zip(
+            DEFAULT_IMM.sigma_a_mps2, DEFAULT_IMM.turn_rates_radps(), strict=True
+        ):
             kf = KalmanFilter(dim_x=4, dim_z=2)
-            kf.F, kf.H, kf.Q = transition_matrix(T), _H2, process_noise(T, sigma_a)
+            F = transition_matrix(T) if omega == 0.0 else turn_transition_matrix(omega, T)
+            kf.F, kf.H, kf.Q = F, _H2, process_noise(T, sigma_a)
             kf.x, kf.P = init.x[0].copy(), init.P[0].copy()
             filters.append(kf)
         bank = IMMEstimator(

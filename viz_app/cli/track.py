@@ -155,6 +155,15 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
         + ")",
     )
     map_flag(tr, "transition_prob", "--imm-transition")
+    add_parameter(
+        tr,
+        "imm_turn_rate_degps",
+        "--imm-turn-rate",
+        nargs="+",
+        default=None,
+        shown_default=list(DEFAULT_IMM.turn_rate_degps or ()),
+        note="one per IMM model, 0 constant velocity; all 0 when --imm-sigma-a is given alone",
+    )
     add_parameter(tr, "nis_window", "--nis-window")
     tr.add_argument(
         "--finite-memory",
@@ -344,6 +353,7 @@ def _motion_options(args: argparse.Namespace) -> dict:
         for flag, value in (
             ("--imm-sigma-a", args.imm_sigma_a_mps2),
             ("--imm-transition", args.imm_transition),
+            ("--imm-turn-rate", args.imm_turn_rate_degps),
         ):
             if value is not None:
                 raise ParameterError(f"{flag} is the imm model's; it needs --model imm")
@@ -360,11 +370,17 @@ def _motion_options(args: argparse.Namespace) -> dict:
             )
         values = tuple(args.imm_transition)
         transition = tuple(values[i * r : (i + 1) * r] for i in range(r))
+    # The default models' turn rates go with the default σa; models given by --imm-sigma-a
+    # are constant velocity unless --imm-turn-rate says otherwise.
+    turns = DEFAULT_IMM.turn_rate_degps if args.imm_sigma_a_mps2 is None else None
+    if args.imm_turn_rate_degps is not None:
+        turns = tuple(args.imm_turn_rate_degps)
     return {
         "model": model,
         "sigma_a_mps2": 0.0 if args.sigma_a_mps2 is None else args.sigma_a_mps2,
         "imm_sigma_a_mps2": sigmas,
         "transition_prob": transition,
+        "imm_turn_rate_degps": turns,
     }
 
 

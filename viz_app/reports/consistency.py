@@ -36,6 +36,9 @@ def motion_document(options: StreamOptions) -> dict[str, Any]:
             "kind": "imm",
             "sigma_a_mps2": list(options.imm_sigma_a_mps2),
             "transition_prob": [list(r) for r in options.transition_prob],
+            "turn_rate_degps": list(
+                options.imm_turn_rate_degps or [0.0] * len(options.imm_sigma_a_mps2)
+            ),
         }
     return {"kind": "cv", "sigma_a_mps2": options.sigma_a_mps2}
 

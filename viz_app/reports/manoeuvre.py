@@ -37,6 +37,7 @@ def _model_document(m: CVModel | IMMModel) -> dict[str, Any]:
             "kind": "imm",
             "sigma_a_mps2": list(m.sigma_a_mps2),
             "transition_prob": [list(r) for r in m.transition],
+            "turn_rate_degps": list(m.turn_rate_degps or [0.0] * m.models),
         }
     return {"kind": "cv", "sigma_a_mps2": m.sigma_a_mps2}
 
