@@ -337,7 +337,8 @@ def boxed(method: str) -> bool:
     return m.kind == "converted" and not m.about_prediction
 
 
-#: Motion models (``StreamOptions.model``) whose prediction has a mean affine and a P⁻_ii
+#: Motion models (``StreamOptions.model``; the IMM when its models are all constant-velocity
+#: ones, no turn rate) whose prediction has a mean affine and a P⁻_ii
 #: convex in the time (``gate_box_pairs``): one box per scan, from its first and last time.
 #: Any other model is boxed at each distinct plot time (``GNNTracker.pairs``).
 INTERVAL_MODELS: tuple[str, ...] = ("cv", "imm")
@@ -566,7 +567,9 @@ class GNNTracker:
     ):
         self.methods = tuple(methods)
         self.dense = dense
-        self._interval = options.model in INTERVAL_MODELS
+        # A turn model's predicted mean follows an arc, not a segment: no box between times.
+        turns = options.model == "imm" and any(options.imm_turn_rate_degps or ())
+        self._interval = options.model in INTERVAL_MODELS and not turns
         self.association = a = association
         # The gate reads predictions and deletes tracks (TargetTracker.predicted, forget),
         # which the numpy engine's banks hold; the compiled engine keeps no such banks.
