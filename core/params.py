@@ -417,6 +417,15 @@ PARAMETERS: dict[str, Parameter] = {
             360.0,
             22.5,
         ),
+        _real(
+            "max_speed_mps",
+            "vmax",
+            "fastest target: a track of one plot takes no plot it could only reach faster",
+            "m/s",
+            0.0,
+            1e5,
+            600.0,
+        ),
         # A radar's coverage and rotation (radars file; estimated from its plots if absent).
         _real("rotation_period_s", "Trot", "antenna revolution period", "s", 0.0, 3600.0, None),
         _real(

@@ -59,10 +59,15 @@ def radars(coverage_m: float = 80e3, pd: float = 0.9, clutter: float = 5.0) -> l
 
 
 def scene(
-    seed: int, sites: list[RotatingRadar], targets: int = 30, duration_s: float = 400.0
+    seed: int,
+    sites: list[RotatingRadar],
+    targets: int = 30,
+    duration_s: float = 400.0,
+    turn_deg: float = 60.0,
 ) -> RotatingPlots:
+    """Airliners at 150–250 m/s, each with one turn of ``turn_deg`` at 1.5°/s."""
     rng = np.random.default_rng(seed)
-    traffic = air_traffic(rng, targets, duration_s, turn_rate_dps=1.0)
+    traffic = air_traffic(rng, targets, duration_s, turn_deg=turn_deg, turn_rate_dps=1.5)
     return rotating_plots(rng, sites, traffic, duration_s)
 
 
@@ -222,10 +227,11 @@ def test_rotating_radars_with_partial_coverage_are_tracked(seed: int) -> None:
 
 def test_target_seen_by_one_radar_only_is_held() -> None:
     """Coverage of 60 km (the centre 57 km from every radar): much of each flight is seen by
-    one radar at a time; the plots a
-    single radar saw still reach confirmed tracks."""
+    one radar at a time; the plots a single radar saw still reach confirmed tracks. Straight
+    flights: what is tested is the misses counted per radar and coverage (a turn entered with
+    one radar's 4–5 s revisit can break a track, ``docs/manoeuvre.md``)."""
     sites = radars(coverage_m=60e3)
-    pl = scene(5, sites, targets=20, duration_s=300.0)
+    pl = scene(5, sites, targets=20, duration_s=300.0, turn_deg=0.0)
     gnn, ids = associate(as_plots(sites, pl))
     conf = set(gnn.ever_confirmed)
     s = plot_scores(pl.origin, ids, conf)

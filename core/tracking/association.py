@@ -131,6 +131,8 @@ class AssociationOptions:
         scan_window_s: plots of one radar within this time of a batch's first plot join it
             (s); None: batches by radar and azimuth sector (``plot_batches``).
         batch_sector_deg: the azimuth sector of a batch without ``scan_window_s`` (deg).
+        max_speed_mps: the fastest target: a track of one plot takes no plot it could only
+            reach faster (``GNNTracker._too_fast``), m/s.
     """
 
     method: str = "ucm"
@@ -140,6 +142,7 @@ class AssociationOptions:
     delete_misses: int = default("delete_misses")
     scan_window_s: float | None = None
     batch_sector_deg: float = default("batch_sector_deg")
+    max_speed_mps: float = default("max_speed_mps")
 
     def __post_init__(self) -> None:
         check_choice("associate_method", self.method, ALL_METHODS)
@@ -150,6 +153,7 @@ class AssociationOptions:
         if self.scan_window_s is not None:
             check("scan_window_s", self.scan_window_s)
         check("batch_sector_deg", self.batch_sector_deg)
+        check("max_speed_mps", self.max_speed_mps)
         if self.confirm_m > self.confirm_n:
             raise ParameterError(
                 f"confirm_m must be at most confirm_n = {self.confirm_n} (M of N scans; got "
@@ -703,6 +707,36 @@ class GNNTracker:
         batch."""
         return self._add(plots, whole_scan=False)
 
+    def _too_fast(
+        self,
+        ids: list[str],
+        plots: list[Plot],
+        rows: NDArray[np.intp],
+        cols: NDArray[np.intp],
+    ) -> NDArray[np.bool_]:
+        """Which (track, plot) pairs, rows into ``ids`` and columns into ``plots``, pair a
+        track of a single plot with a plot it could only reach faster than
+        ``AssociationOptions.max_speed_mps`` (the speed gate of two-plot initiation): its
+        velocity is still 0 ± σv0, so the χ² gate alone admits any plot within a few σv0 Δt,
+        and a first plot joined to a far one starts a track at an impossible speed."""
+        book = self.book
+        slots = np.array([book.slot[t] for t in ids], dtype=np.intp)[rows]
+        single = book.hits[slots] == 1
+        if not single.any():
+            return single
+        sub = [plots[j] for j in cols.tolist()]
+        r = np.array([p.range_m for p in sub])
+        b = np.array([p.azimuth_rad for p in sub])
+        e = np.array([p.elevation_rad or 0.0 for p in sub])
+        site = np.array([p.site for p in sub], dtype=np.float64)
+        ground = r * np.cos(e)
+        xyz = site + np.stack([ground * np.cos(b), ground * np.sin(b), r * np.sin(e)], -1)
+        gap = np.linalg.norm(xyz[:, : self.dims] - book.x[slots][:, 0::2], axis=1)
+        dt = np.array([p.time_s for p in sub]) - book.last_s[slots]
+        sigma = np.array([p.sigma_r_m + p.range_m * p.sigma_azimuth_rad for p in sub])
+        reach = self.association.max_speed_mps * dt + 3.0 * (sigma + book.sigma_m[slots])
+        return single & (gap > reach)
+
     def _radar(self, plots: list[Plot]) -> tuple[int, RadarBeam] | None:
         """The batch's radar (index, beam), registered at its first plot; None for no plots."""
         if not plots:
@@ -754,9 +788,15 @@ class GNNTracker:
                 continue
             scan = [plots[j] for j in free]
             if self.dense:
-                rows, cols = gnn_assign(self.distances(ids, scan), self._gate.threshold)
+                d2_all = self.distances(ids, scan)
+                if status == TENTATIVE:
+                    r, c = np.indices(d2_all.shape).reshape(2, -1)
+                    d2_all[r, c] = np.where(self._too_fast(ids, scan, r, c), np.inf, d2_all[r, c])
+                rows, cols = gnn_assign(d2_all, self._gate.threshold)
             else:
                 r, c, d2 = self.pairs(ids, scan)
+                if status == TENTATIVE:
+                    d2 = np.where(self._too_fast(ids, scan, r, c), np.inf, d2)
                 shape = (len(ids), len(scan))
                 rows, cols = sparse_gnn_assign(r, c, d2, self._gate.threshold, shape)
             for r, c in zip(rows.tolist(), cols.tolist(), strict=True):
@@ -811,6 +851,7 @@ class GNNTracker:
             _, x6, P6 = gate_rows[j][gi]
             book.x[s] = x6[:n]
             book.sigma_m[s] = math.sqrt(max(float(P6[k, k]) for k in range(0, n, 2)))
+            book.sigma_v[s] = math.sqrt(max(float(P6[k, k]) for k in range(1, n, 2)))
         hit_slots = {book.slot[str(owner[j])] for j in hit}
         judged = self._swept(radar, times, before, whole_scan)
         missed = np.array([s for s in judged.tolist() if s not in hit_slots], dtype=np.intp)
@@ -853,18 +894,21 @@ class GNNTracker:
         end = float(times[-1])
         whole = whole_scan or (beam.scan_stamped and times[0] == times[-1])
         x = book.x[slots]
-        pos = x[:, 0::2] + x[:, 1::2] * (end - book.last_s[slots])[:, None]
+        ahead = end - book.last_s[slots]
+        pos = x[:, 0::2] + x[:, 1::2] * ahead[:, None]
+        # The predicted position's σ (the velocity's σ carried over the time since the last
+        # plot): a fresh track, its velocity still ±σv0, may be anywhere in a wide arc.
+        sigma = np.hypot(book.sigma_m[slots], book.sigma_v[slots] * ahead)
         rel = pos - self._sites[ri]
         ground = np.hypot(rel[:, 0], rel[:, 1])
         rng = np.sqrt(np.sum(rel**2, axis=1))
         elev = np.arctan2(rel[:, 2], ground) if self.dims == 3 else None
         az = np.arctan2(rel[:, 1], rel[:, 0])
-        margin = np.clip(
-            3.0 * book.sigma_m[slots] / np.maximum(ground, 1.0), MIN_MARGIN_RAD, MAX_MARGIN_RAD
-        )
+        margin = np.clip(3.0 * sigma / np.maximum(ground, 1.0), MIN_MARGIN_RAD, MAX_MARGIN_RAD)
         passed_mask, passed_s = beam.swept(end, az, margin, whole)
-        sigma = book.sigma_m[slots]
-        edge = 3.0 * sigma + EDGE_FRACTION * rng
+        # The edge by the σ of the last estimate: by the predicted σ, a fresh track (a false
+        # plot's among them) would be too uncertain ever to be expected, and never missed.
+        edge = 3.0 * book.sigma_m[slots] + EDGE_FRACTION * rng
         # Whole scans handed in by the caller are judged in the coverage given (the caller
         # knows the scan saw all it covers); batches also in the coverage estimated.
         covered = beam.inside(rng, elev, edge, estimated=not whole_scan)

@@ -22,6 +22,14 @@ association needs to tell that:
   detection. The shortest revisits are therefore the period: T̂ is the median of the
   revisits within ±10% of their 10th percentile, once ``MIN_REVISITS`` have been seen and
   if a tenth of them (three at least) are that close (else the period stays unknown).
+* **Until then, the beam's rate.** Two consecutive plots of a rotating radar less than
+  ``MAX_RATE_PAIR_S`` apart lie on the beam at their two times, so wrap(β₂ − β₁)/(t₂ − t₁) is
+  its angular rate ω (plus the azimuth noise over the interval); after ``MIN_REVISITS`` such
+  pairs T = 2π / |median ω| serves while the revisits accumulate (a fraction of a revolution
+  of plots instead of one or two revolutions: the tracks of a recording's first seconds are
+  judged too), if at least half the rates are within 10% of their median (plots stamped
+  otherwise than by a beam do not agree). A radar with one plot per revolution gives no such
+  pairs.
 * **Rotation direction** (the sign of dβ/dt) by the majority of consecutive plot pairs less
   than a quarter revolution apart.
 
@@ -52,6 +60,9 @@ MIN_REVISIT_S = 0.3
 MIN_REVISITS = 16
 #: Revisits kept for the estimate (the most recent ones).
 REVISITS_KEPT = 512
+#: Longest interval of two consecutive plots that measures the beam's rate (s): well under a
+#: revolution of any surveillance radar (1 s for the fastest, 4–12 s for most).
+MAX_RATE_PAIR_S = 0.5
 #: Smallest angle the beam must be past a track before it is judged (rad): plot azimuth
 #: noise and the beam's own width.
 MIN_MARGIN_RAD = math.radians(2.0)
@@ -93,8 +104,10 @@ class RadarBeam:
         self.given = given or RadarCoverage()
         self._cells = np.full(AZIMUTH_CELLS, -np.inf)
         self._revisits: list[float] = []
+        self._rates: list[float] = []
         self._period: float | None = self.given.rotation_period_s
         self._measured = False  # the period came from the feed (``measured_period``)
+        self._from_revisits = False  # the estimate is the revisits' (else the rate's, or none)
         self._same = self._other = 0
         self._turns = [0, 0]  # pairs turning negative, positive
         self._range = [math.inf, -math.inf]
@@ -190,6 +203,16 @@ class RadarBeam:
         self._turns[1] += int((turning & (daz > 0)).sum())
         if self.given.rotation_period_s is None and not self._measured:
             self._learn_period(time_s, azimuth_rad)
+            if not self._from_revisits and len(self._rates) < REVISITS_KEPT:
+                pair = (dt > 0) & (dt <= MAX_RATE_PAIR_S) & (daz != 0)
+                self._rates.extend((daz[pair] / dt[pair]).tolist())
+                if len(self._rates) >= MIN_REVISITS:
+                    rates = np.asarray(self._rates)
+                    w = float(np.median(rates))
+                    # Plots on a beam agree on its rate; plots stamped otherwise (a scan's
+                    # plots at random times) do not, and tell nothing of a period.
+                    if np.mean(np.abs(rates - w) <= 0.1 * abs(w)) >= 0.5:
+                        self._period = TWO_PI / abs(w)
         self.last_s, self.last_az = float(time_s[-1]), float(azimuth_rad[-1])
 
     def _learn_period(self, time_s: NDArray[np.float64], azimuth_rad: NDArray[np.float64]) -> None:
@@ -210,6 +233,7 @@ class RadarBeam:
             # The shortest revisits must be a cluster (a tenth of them at least), not a stray.
             if near.size >= max(3, r.size // 10):
                 self._period = float(np.median(near))
+                self._from_revisits = True
 
     def measured_period(self, period_s: float) -> None:
         """The period measured by the feed (a radar's north markers or service messages):

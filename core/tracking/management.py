@@ -55,6 +55,7 @@ class TrackBook:
         self.last_s = np.zeros(0)
         self.x = np.zeros((0, state_size))
         self.sigma_m = np.zeros(0)
+        self.sigma_v = np.zeros(0)
         self.hit_s = np.zeros((0, 0))
         self.judged_s = np.zeros((0, 0))
         self.plots = np.zeros((0, 0), np.int64)
@@ -81,8 +82,8 @@ class TrackBook:
         self.hits, self.expected, self.misses = (
             rows(a, 0) for a in (self.hits, self.expected, self.misses)
         )
-        self.born_s, self.last_s, self.sigma_m = (
-            rows(a, 0.0) for a in (self.born_s, self.last_s, self.sigma_m)
+        self.born_s, self.last_s, self.sigma_m, self.sigma_v = (
+            rows(a, 0.0) for a in (self.born_s, self.last_s, self.sigma_m, self.sigma_v)
         )
         self.x = rows(self.x, 0.0)
         self.hit_s = table(self.hit_s, -np.inf)

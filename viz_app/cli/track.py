@@ -280,6 +280,7 @@ ASSOCIATION_FLAGS: tuple[tuple[str, str], ...] = (
     ("delete_misses", "--delete-misses"),
     ("scan_window_s", "--scan-window-s"),
     ("batch_sector_deg", "--batch-sector-deg"),
+    ("max_speed_mps", "--max-speed"),
 )
 
 
