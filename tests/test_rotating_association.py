@@ -326,3 +326,15 @@ def test_a_feed_a_little_out_of_order_is_put_back_in_order() -> None:
     with pytest.raises(LatePlotError) as err:
         list(time_ordered(late))
     assert err.value.key == 99 and "out of time order" in str(err.value)
+
+
+def test_a_track_of_one_plot_takes_no_plot_it_could_only_reach_too_fast() -> None:
+    """σv0 = 1000 m/s lets a fresh track's χ² gate reach 20 km in 5 s; the speed gate of
+    two-plot initiation (``max_speed_mps``, 600 m/s) keeps it to what a target can fly: a
+    plot 5 km off after 5 s starts a track of its own, one 2 km off joins."""
+    options = StreamOptions(model="cv", sigma_v0_mps=1000.0)
+    for offset_m, joined in ((5e3, False), (2e3, True)):
+        gnn = GNNTracker(("ucm",), False, options, AssociationOptions())
+        gnn.add_scan([Plot(0.0, 30e3, 0.0, 50.0, 0.002, radar="a")])
+        res = gnn.add_scan([Plot(5.0, 30e3 + offset_m, 0.0, 50.0, 0.002, radar="a")])
+        assert (res.track_ids == ["1"]) is joined, offset_m
