@@ -473,3 +473,34 @@ def track_plots_imm_3d(
         started[k] = True
         last_t[k] = time_s[i]
     return -1
+
+
+@_jit
+def predicted_imm(xs, Ps, mus, slot, j: int, dt, sigma_a, Pi, out_x, out_P):
+    """Method j's IMM tracks of slots ``slot`` (N,) predicted over ``dt`` (N,) (s, ≥ 0), the
+    stored tracks left as they are (the association's gate, ``CompiledTracks.predicted``):
+    the tracker kernels' own mixing, each model's prediction and the combination with the
+    predicted probabilities c̄ — the combined prediction their monitor's NIS is taken of
+    (``core.tracking.targets.TargetTracker.predicted`` on the numpy engine). 2D (n = 4) or 3D
+    (n = 6) by the state size: xs (K, M, r, n), Ps (K, M, r, n, n), mus (K, M, r) into
+    out_x (N, n), out_P (N, n, n)."""
+    r, n = sigma_a.shape[0], xs.shape[3]
+    x0, P0 = np.empty((r, n)), np.empty((r, n, n))
+    mu, c, w = np.empty(r), np.empty(r), np.empty((r, r))
+    for i in range(slot.shape[0]):
+        k = slot[i]
+        mu[:] = mus[k, j]
+        if n == 4:
+            mix_2d(xs[k, j], Ps[k, j], mu, Pi, x0, P0, c, w)
+        else:
+            mix_3d(xs[k, j], Ps[k, j], mu, Pi, x0, P0, c, w)
+        if dt[i] > 0.0:
+            for m in range(r):
+                if n == 4:
+                    predict(x0[m], P0[m], dt[i], sigma_a[m] * sigma_a[m])
+                else:
+                    predict_3d(x0[m], P0[m], dt[i], sigma_a[m] * sigma_a[m])
+        if n == 4:
+            combine_2d(x0, P0, c, out_x[i], out_P[i])
+        else:
+            combine_3d(x0, P0, c, out_x[i], out_P[i])

@@ -214,3 +214,20 @@ def track_plots_2d(
         started[k] = True
         last_t[k] = time_s[i]
     return -1
+
+
+@_jit
+def predicted_2d(xs, Ps, slot, j: int, dt, q: float, out_x, out_P):
+    """Method j's tracks of slots ``slot`` (N,) predicted over ``dt`` (N,) (s, ≥ 0), the
+    stored tracks left as they are (the association's gate, ``CompiledTracks.predicted``):
+    ``predict``, the tracker kernel's own step, into out_x (N, 4), out_P (N, 4, 4); dt = 0
+    copies the track. xs (K, M, 4), Ps (K, M, 4, 4) as ``track_plots_2d``."""
+    x, P = np.empty(4), np.empty((4, 4))
+    for i in range(slot.shape[0]):
+        k = slot[i]
+        x[:] = xs[k, j]
+        P[:, :] = Ps[k, j]
+        if dt[i] > 0.0:
+            predict(x, P, dt[i], q)
+        out_x[i] = x
+        out_P[i] = P

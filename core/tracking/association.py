@@ -528,9 +528,9 @@ class GNNTracker:
         self.dense = dense
         self._interval = options.model in INTERVAL_MODELS
         self.association = a = association
-        # The gate reads predictions and deletes tracks (TargetTracker.predicted, forget),
-        # which the numpy engine's banks hold; the compiled engine keeps no such banks.
-        options = replace(options, engine="numpy")
+        # The gate reads predictions and deletes tracks (TargetTracker.predicted, forget) on
+        # either engine: the compiled one (the default) runs the kernels' own prediction,
+        # ``engine="numpy"`` the reference.
         self.tracker = TargetTracker(self.methods, three_d, options)
         dims = 3 if three_d else 2
         self.dims = dims

@@ -378,9 +378,11 @@ class TargetTracker:
         per target (K,); a target may be listed more than once), the tracks left as
         they are: x (K, n), P (K, n, n) (the IMM's moment-matched combined prediction, the one
         its consistency statistics use). A track last updated at ``time_s`` is returned as it
-        is (dt = 0). Every target's last plot must be at or before ``time_s``."""
+        is (dt = 0). Every target's last plot must be at or before ``time_s``. On the compiled
+        engine the same steps run compiled (``core.tracking.compiled.CompiledTracks.predicted``;
+        the same numbers to rounding)."""
         if self._compiled is not None:
-            raise ValueError("predicted needs the numpy engine (StreamOptions.engine='numpy')")
+            return CVBatch(*self._compiled.predicted(method, targets, time_s))
         b, row = self._where[method]
         bank = self._banks[b]
         ids = np.array([self._slot[t] for t in targets], dtype=np.intp)
@@ -402,7 +404,8 @@ class TargetTracker:
         memory follows the live tracks, not every track ever started. A label forgotten and
         seen again starts a new track."""
         if self._compiled is not None:
-            raise ValueError("forget needs the numpy engine (StreamOptions.engine='numpy')")
+            self._compiled.forget(targets)
+            return
         for t in targets:
             self._free.append(self._slot.pop(t))
 
