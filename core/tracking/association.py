@@ -302,6 +302,11 @@ def boxed(method: str) -> bool:
 #: Any other model is boxed at each distinct plot time (``GNNTracker.pairs``).
 INTERVAL_MODELS: tuple[str, ...] = ("cv", "imm")
 
+#: Relative widening of ``GNNTracker.near``'s bound on the gate's box (on γ): its bound
+#: takes another route through the arithmetic than the prediction (and the IMM's is not
+#: tight), so it is widened well beyond rounding; the exact box follows it.
+PREFILTER_MARGIN = 1.01
+
 #: Relative widening of the coarse box: d² is computed in floating point, the box's bound
 #: d² ≥ ν_i² / S_ii holds for exact numbers; 1e-6 covers rounding many times over.
 BOX_MARGIN = 1e-6
@@ -431,10 +436,13 @@ def sparse_gnn_assign(
     if not rows.size:
         empty = np.zeros(0, dtype=np.intp)
         return empty, empty
-    k, p = shape
-    graph = coo_matrix((np.ones(rows.size), (rows, k + cols)), shape=(k + p, k + p))
-    _, label = connected_components(graph, directed=False)
-    comp = label[rows]
+    if rows.size <= SMALL_GRAPH_EDGES:
+        comp = _components(rows.tolist(), cols.tolist())
+    else:
+        k, p = shape
+        graph = coo_matrix((np.ones(rows.size), (rows, k + cols)), shape=(k + p, k + p))
+        _, label = connected_components(graph, directed=False)
+        comp = label[rows]
     order = np.argsort(comp, kind="stable")
     rows, cols, cost, comp = rows[order], cols[order], cost[order], comp[order]
     starts = np.flatnonzero(np.r_[True, comp[1:] != comp[:-1]])
@@ -453,6 +461,34 @@ def sparse_gnn_assign(
     r, c = np.concatenate(out_r), np.concatenate(out_c)
     order = np.argsort(r, kind="stable")
     return r[order].astype(np.intp), c[order].astype(np.intp)
+
+
+#: Edges up to which ``sparse_gnn_assign`` finds the components by a union-find in Python
+#: (a few microseconds an edge) instead of building a scipy sparse graph (about half a
+#: millisecond a call, whatever its size): a batch of a few plots has a few edges.
+SMALL_GRAPH_EDGES = 64
+
+
+def _components(rows: list[int], cols: list[int]) -> NDArray[np.intp]:
+    """Each edge's connected component, (N,) labels, of the bipartite graph of tracks
+    ``rows`` and plots ``cols`` (N,) each: a union-find of the nodes (a track r is node
+    (0, r), a plot c node (1, c)), the label of an edge its root's first edge. Only the
+    partition matters to ``sparse_gnn_assign`` (each component is sorted out by its label,
+    its assignment solved on its own), not the labels' values."""
+    parent: dict[tuple[int, int], tuple[int, int]] = {}
+
+    def root(a: tuple[int, int]) -> tuple[int, int]:
+        while parent.setdefault(a, a) != a:
+            parent[a] = parent[parent[a]]  # path halving
+            a = parent[a]
+        return a
+
+    for r, c in zip(rows, cols, strict=True):
+        a, b = root((0, r)), root((1, c))
+        if a != b:
+            parent[a] = b
+    first: dict[tuple[int, int], int] = {}
+    return np.array([first.setdefault(root((0, r)), i) for i, r in enumerate(rows)], dtype=np.intp)
 
 
 class ScanResult(NamedTuple):
@@ -527,6 +563,9 @@ class GNNTracker:
         self.methods = tuple(methods)
         self.dense = dense
         self._interval = options.model in INTERVAL_MODELS
+        motion = options.motion()
+        # q̄ of ``near``: the largest σa² of the motion model('s models).
+        self._q_max = float(np.max(np.square(motion.sigma_a_mps2)))
         self.association = a = association
         # The gate reads predictions and deletes tracks (TargetTracker.predicted, forget) on
         # either engine: the compiled one (the default) runs the kernels' own prediction,
@@ -559,8 +598,50 @@ class GNNTracker:
         if status is None:
             return list(self.book.slot)
         code = CONFIRMED_CODE if status == CONFIRMED else TENTATIVE_CODE
-        st = self.book.status
-        return [t for t, s in self.book.slot.items() if st[s] == code]
+        label = self.book.label
+        return [label[s] for s in self.book.live_slots(code).tolist()]
+
+    def near(self, slots: NDArray[np.intp], plots: list[Plot]) -> NDArray[np.intp]:
+        """The tracks among ``slots`` (in their order) that may pass the gate of some plot
+        of ``plots``: a conservative prefilter of ``pairs``, from the book's state alone
+        (each track's gating posterior x, P at its last plot, ``TrackBook``), without
+        predicting a track. Every track with a pair inside ``gate_box_pairs``' box is kept,
+        so the pairs, and the assignment, are those of all of ``slots``; a gating method
+        without a box (``boxed``), or a model not in ``INTERVAL_MODELS``, keeps every track.
+
+        Between the track's last plot and a time T later its prediction has the mean
+        x⁻ = x_p + T x_v on each position axis and the variance
+        P⁻_ii(T) = P_pp + 2T P_pv + T² P_vv + q̄ T⁴/4: exact for the cv model; for the IMM
+        the combined prediction is F P Fᵀ + Σⱼ c̄ⱼ Qⱼ (the mixing preserves the mixture, whose
+        prediction is its combined posterior's), so with q̄ the largest model's σa² it is a
+        bound. Over the batch's times both are bounded by their values at the first and the
+        last time (affine, and convex for T ≥ 0), so the box of ``gate_box_pairs`` with
+        P⁻_ii at most the larger of these and the segment between the two means contains
+        the exact box of every pair; ``PREFILTER_MARGIN`` covers rounding. One compiled
+        pass over the K tracks (``core.tracking.kernels_gate.near_tracks``), O(K P) at worst
+        for P plots, no Python loop over the tracks.
+        """
+        g = self._gate
+        if not slots.size or not boxed(g.method) or not self._interval:
+            return slots
+        d = self.dims
+        plot, noise = polar_arrays(plots, d)
+        site = np.array([p.site for p in plots], dtype=np.float64)[:, :d]
+        z, R = METHODS[g.method].convert(plot, noise)
+        n_p = site.shape[0]
+        points = np.stack([np.asarray(z[i]) + site[:, i] for i in range(d)], -1)  # (P, d)
+        r_ii = np.stack([np.broadcast_to(R[i, i], (n_p,)) for i in range(d)], -1)  # (P, d)
+        points, r_ii = np.ascontiguousarray(points), np.ascontiguousarray(r_ii)
+        times = np.array([p.time_s for p in plots], dtype=np.float64)
+        from radarviz.core.tracking.kernels_gate import near_tracks
+
+        book = self.book
+        keep = np.empty(slots.size, dtype=np.bool_)
+        near_tracks(
+            slots, book.x, book.P, book.last_s, float(times.min()), float(times.max()),
+            self._q_max, points, r_ii, g.threshold * PREFILTER_MARGIN, keep,
+        )  # fmt: skip
+        return slots[keep]
 
     def status(self, track: str) -> str:
         """A live track's status."""
@@ -700,16 +781,19 @@ class GNNTracker:
         book = self.book
         owner: list[str | None] = [None] * len(plots)
         free = np.arange(len(plots))
-        for status in (CONFIRMED, TENTATIVE):  # confirmed tracks choose first
-            ids = self.live(status)
-            if radar is not None and period is not None and ids:
+        for code in (CONFIRMED_CODE, TENTATIVE_CODE):  # confirmed tracks choose first
+            slots = book.live_slots(code)
+            if radar is not None and period is not None and slots.size:
                 # A track takes at most one plot per sweep of a radar.
-                slots = np.array([book.slot[t] for t in ids], dtype=np.intp)
-                fresh = book.hit_s[slots, radar[0]] <= times[0] - period / 2
-                ids = [t for t, ok in zip(ids, fresh.tolist(), strict=True) if ok]
-            if not ids or not free.size:
+                slots = slots[book.hit_s[slots, radar[0]] <= times[0] - period / 2]
+            if not slots.size or not free.size:
                 continue
             scan = [plots[j] for j in free]
+            if not self.dense:  # the tracks that cannot gate any plot of the batch dropped
+                slots = self.near(slots, scan)
+                if not slots.size:
+                    continue
+            ids = [book.label[s] for s in slots.tolist()]
             if self.dense:
                 rows, cols = gnn_assign(self.distances(ids, scan), self._gate.threshold)
             else:
@@ -767,6 +851,7 @@ class GNNTracker:
             s = book.slot[str(t)]
             _, x6, P6 = gate_rows[j][gi]
             book.x[s] = x6[:n]
+            book.P[s] = P6[:n, :n]
             book.sigma_m[s] = math.sqrt(max(float(P6[k, k]) for k in range(0, n, 2)))
         hit_slots = {book.slot[str(owner[j])] for j in hit}
         judged = self._swept(radar, times, before, whole_scan)
@@ -777,11 +862,11 @@ class GNNTracker:
         ).astype(np.intp)
         confirm, delete = book.settle(touched)
         delete = np.r_[delete, self._coasted(times)].astype(np.intp)
-        by_slot = {s: t for t, s in book.slot.items()}
-        confirmed = [by_slot[s] for s in sorted(confirm.tolist(), key=lambda s: int(by_slot[s]))]
+        label = book.label
+        confirmed = [label[s] for s in sorted(confirm.tolist(), key=lambda s: int(label[s]))]
         if self.association.confirm_m <= 1:
             confirmed += [str(owner[j]) for j in started]
-        deleted = sorted({by_slot[s] for s in delete.tolist()}, key=int)
+        deleted = sorted({label[s] for s in delete.tolist()}, key=int)
         for t in deleted:
             book.remove(t)
         if deleted:
