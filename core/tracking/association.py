@@ -601,29 +601,30 @@ class GNNTracker:
         label = self.book.label
         return [label[s] for s in self.book.live_slots(code).tolist()]
 
-    def near(self, slots: NDArray[np.intp], plots: list[Plot]) -> NDArray[np.intp]:
-        """The tracks among ``slots`` (in their order) that may pass the gate of some plot
-        of ``plots``: a conservative prefilter of ``pairs``, from the book's state alone
-        (each track's gating posterior x, P at its last plot, ``TrackBook``), without
-        predicting a track. Every track with a pair inside ``gate_box_pairs``' box is kept,
-        so the pairs, and the assignment, are those of all of ``slots``; a gating method
-        without a box (``boxed``), or a model not in ``INTERVAL_MODELS``, keeps every track.
+    def near(
+        self, slots: NDArray[np.intp], plots: list[Plot]
+    ) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+        """The (track, plot) pairs, rows into ``slots``, columns into ``plots``, (N,) each in
+        row then column order, that may pass the gate: a conservative prefilter of the
+        gate, from the book's state alone (each track's gating posterior x, P at its last
+        plot, ``TrackBook``), without predicting a track. Every pair inside the gate is among
+        them (``pairs`` returns no other pair inside it), and usually little else. For a
+        gating method with ``boxed`` and a model in ``INTERVAL_MODELS`` (``prefiltered``).
 
-        Between the track's last plot and a time T later its prediction has the mean
-        x⁻ = x_p + T x_v on each position axis and the variance
-        P⁻_ii(T) = P_pp + 2T P_pv + T² P_vv + q̄ T⁴/4: exact for the cv model; for the IMM
-        the combined prediction is F P Fᵀ + Σⱼ c̄ⱼ Qⱼ (the mixing preserves the mixture, whose
-        prediction is its combined posterior's), so with q̄ the largest model's σa² it is a
-        bound. Over the batch's times both are bounded by their values at the first and the
-        last time (affine, and convex for T ≥ 0), so the box of ``gate_box_pairs`` with
-        P⁻_ii at most the larger of these and the segment between the two means contains
-        the exact box of every pair; ``PREFILTER_MARGIN`` covers rounding. One compiled
-        pass over the K tracks (``core.tracking.kernels_gate.near_tracks``), O(K P) at worst
-        for P plots, no Python loop over the tracks.
+        For a track predicted T after its last plot, on each position axis i the mean is
+        x⁻_i = x_i + T ẋ_i and the variance P⁻_ii(T) = P_pp + 2T P_pv + T² P_vv + q T⁴/4:
+        exact for the cv model; for the IMM the combined prediction is F P Fᵀ + Σⱼ c̄ⱼ Qⱼ
+        (the mixing preserves the mixture, whose prediction is its combined posterior's), at
+        most that with q̄ the largest model's σa². As d² ≥ ν_i² / S_ii on every axis
+        (``gate_box_pairs``), with ν = z + s − H x⁻ (``boxed``) and S_ii = P⁻_ii + R_ii, a pair
+        inside the gate has (z_i + s_i − x⁻_i)² < γ (P⁻_ii + R_ii) ≤ γ (V_i(T) + R_ii) on
+        every axis, at its plot's own time; ``PREFILTER_MARGIN`` widens γ well past rounding.
+        One compiled pass (``core.tracking.kernels_gate.near_pairs``), O(K P) for K tracks
+        and P plots, no Python loop over the tracks.
         """
+        from radarviz.core.tracking.kernels_gate import near_pairs
+
         g = self._gate
-        if not slots.size or not boxed(g.method) or not self._interval:
-            return slots
         d = self.dims
         plot, noise = polar_arrays(plots, d)
         site = np.array([p.site for p in plots], dtype=np.float64)[:, :d]
@@ -631,17 +632,40 @@ class GNNTracker:
         n_p = site.shape[0]
         points = np.stack([np.asarray(z[i]) + site[:, i] for i in range(d)], -1)  # (P, d)
         r_ii = np.stack([np.broadcast_to(R[i, i], (n_p,)) for i in range(d)], -1)  # (P, d)
-        points, r_ii = np.ascontiguousarray(points), np.ascontiguousarray(r_ii)
         times = np.array([p.time_s for p in plots], dtype=np.float64)
-        from radarviz.core.tracking.kernels_gate import near_tracks
-
         book = self.book
-        keep = np.empty(slots.size, dtype=np.bool_)
-        near_tracks(
-            slots, book.x, book.P, book.last_s, float(times.min()), float(times.max()),
-            self._q_max, points, r_ii, g.threshold * PREFILTER_MARGIN, keep,
+        rows = np.empty(slots.size * n_p, dtype=np.intp)
+        cols = np.empty(slots.size * n_p, dtype=np.intp)
+        found = near_pairs(
+            slots, book.x, book.P, book.last_s, times, self._q_max, np.ascontiguousarray(points),
+            np.ascontiguousarray(r_ii), g.threshold * PREFILTER_MARGIN, rows, cols,
         )  # fmt: skip
-        return slots[keep]
+        return rows[:found], cols[:found]
+
+    @property
+    def prefiltered(self) -> bool:
+        """Whether the sparse route's candidates come from ``near`` (a boxed gating method,
+        a model in ``INTERVAL_MODELS``) rather than ``pairs``' coarse box of every track."""
+        return boxed(self._gate.method) and self._interval
+
+    def scored(
+        self, slots: NDArray[np.intp], plots: list[Plot]
+    ) -> tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.float64]]:
+        """``pairs`` of the tracks in the book's ``slots`` by way of ``near``: the same pairs
+        inside the gate, each pair's track predicted to its plot's own time
+        (``TargetTracker.predicted``) and scored (``mahalanobis_pairs``), the same numbers.
+        (rows into slots, columns into plots, d²), (N,) each."""
+        g = self._gate
+        r, c = self.near(slots, plots)
+        if not r.size:
+            return r, c, np.zeros(0)
+        sub = [plots[j] for j in c.tolist()]
+        plot, noise = polar_arrays(sub, self.dims)
+        site = np.array([p.site for p in sub], dtype=np.float64)[:, : self.dims]
+        times = np.array([p.time_s for p in sub], dtype=np.float64)
+        label = self.book.label
+        pred = g.tracker.predicted(g.method, [label[s] for s in slots[r].tolist()], times)
+        return r, c, mahalanobis_pairs(g.method, pred, plot, noise, site)
 
     def status(self, track: str) -> str:
         """A live track's status."""
@@ -789,19 +813,18 @@ class GNNTracker:
             if not slots.size or not free.size:
                 continue
             scan = [plots[j] for j in free]
-            if not self.dense:  # the tracks that cannot gate any plot of the batch dropped
-                slots = self.near(slots, scan)
-                if not slots.size:
-                    continue
-            ids = [book.label[s] for s in slots.tolist()]
+            shape = (slots.size, len(scan))
             if self.dense:
+                ids = [book.label[s] for s in slots.tolist()]
                 rows, cols = gnn_assign(self.distances(ids, scan), self._gate.threshold)
             else:
-                r, c, d2 = self.pairs(ids, scan)
-                shape = (len(ids), len(scan))
+                if self.prefiltered:  # no Python loop over the live tracks
+                    r, c, d2 = self.scored(slots, scan)
+                else:
+                    r, c, d2 = self.pairs([book.label[s] for s in slots.tolist()], scan)
                 rows, cols = sparse_gnn_assign(r, c, d2, self._gate.threshold, shape)
-            for r, c in zip(rows.tolist(), cols.tolist(), strict=True):
-                owner[int(free[c])] = ids[r]
+            for r, c in zip(slots[rows].tolist(), cols.tolist(), strict=True):
+                owner[int(free[c])] = book.label[r]
             free = np.delete(free, cols)
         hit = [j for j, t in enumerate(owner) if t is not None]
         for j in free.tolist():  # unassigned plots start tentative tracks
