@@ -150,3 +150,17 @@ def test_crossing_scene_same_on_both_engines(model: str) -> None:
             gnn = GNNTracker(("ucm", "ekf"), False, options, AssociationOptions(method=gate))
             results[engine] = [gnn.add_scan(s) for s in scans]
         assert_same_results(results["numpy"], results["compiled"])
+
+
+def test_bench_rotating_figures_are_consistent() -> None:
+    """``radarviz bench``'s rotating-radar association figures (speed is not asserted): the
+    plots counted, the ratio equal to its two rates, the numpy engine's track ids the same."""
+    from radarviz.viz_app.bench.association import bench_rotating
+
+    doc = bench_rotating(12, duration_s=30.0, reference=True)
+    assert (doc["rotating_targets"], doc["rotating_radars"]) == (12, 4)
+    assert doc["rotating_plots"] > 12 * 4 and 1.0 <= doc["rotating_plots_per_batch"] < 4.0
+    assert doc["rotating_over_labelled"] == pytest.approx(
+        doc["rotating_labelled_plots_per_cpu_s"] / doc["rotating_plots_per_cpu_s"], rel=1e-12
+    )
+    assert doc["rotating_same_as_numpy"] and doc["rotating_purity"] > 0.9

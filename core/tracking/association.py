@@ -585,6 +585,8 @@ class GNNTracker:
         self.beams: dict[str, RadarBeam] = {}
         self._sites: list[NDArray[np.float64]] = []
         self._started = 0
+        #: Batches (and scans) associated so far.
+        self.batches = 0
         #: Ids of every track confirmed so far, in order of confirmation.
         self.ever_confirmed: list[str] = []
 
@@ -786,6 +788,7 @@ class GNNTracker:
                     "elevation_deg", "every plot of a 3D track needs an elevation", index=i
                 )
         radar = self._radar(plots)
+        self.batches += 1
         times = np.array([p.time_s for p in plots], dtype=np.float64)
         period = None
         if radar is not None:
