@@ -437,7 +437,13 @@ def sparse_gnn_assign(
         empty = np.zeros(0, dtype=np.intp)
         return empty, empty
     if rows.size <= SMALL_GRAPH_EDGES:
-        comp = _components(rows.tolist(), cols.tolist())
+        r_l, c_l = rows.tolist(), cols.tolist()
+        if len(set(r_l)) == len(r_l) and len(set(c_l)) == len(c_l):
+            # Every track and every plot on one edge at most: each edge is a component of
+            # its own, and assigned (the usual batch of a few plots among separated tracks).
+            order = np.argsort(rows, kind="stable")
+            return rows[order].astype(np.intp), cols[order].astype(np.intp)
+        comp = _components(r_l, c_l)
     else:
         k, p = shape
         graph = coo_matrix((np.ones(rows.size), (rows, k + cols)), shape=(k + p, k + p))
