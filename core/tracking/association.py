@@ -609,8 +609,26 @@ class GNNTracker:
         label = self.book.label
         return [label[s] for s in self.book.live_slots(code).tolist()]
 
+    def gate_points(
+        self, plots: list[Plot]
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+        """The gating method's conversion of ``plots`` for ``near``: each plot's point
+        z + s (P, d), its R_ii (P, d) and its time (P,) (C-contiguous)."""
+        d = self.dims
+        plot, noise = polar_arrays(plots, d)
+        site = np.array([p.site for p in plots], dtype=np.float64)[:, :d]
+        z, R = METHODS[self._gate.method].convert(plot, noise)
+        n_p = site.shape[0]
+        points = np.stack([np.asarray(z[i]) + site[:, i] for i in range(d)], -1)
+        r_ii = np.stack([np.broadcast_to(R[i, i], (n_p,)) for i in range(d)], -1)
+        times = np.array([p.time_s for p in plots], dtype=np.float64)
+        return np.ascontiguousarray(points), np.ascontiguousarray(r_ii), times
+
     def near(
-        self, slots: NDArray[np.intp], plots: list[Plot]
+        self,
+        slots: NDArray[np.intp],
+        plots: list[Plot],
+        points: tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]] | None = None,
     ) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
         """The (track, plot) pairs, rows into ``slots``, columns into ``plots``, (N,) each in
         row then column order, that may pass the gate: a conservative prefilter of the
@@ -628,25 +646,20 @@ class GNNTracker:
         inside the gate has (z_i + s_i − x⁻_i)² < γ (P⁻_ii + R_ii) ≤ γ (V_i(T) + R_ii) on
         every axis, at its plot's own time; ``PREFILTER_MARGIN`` widens γ well past rounding.
         One compiled pass (``core.tracking.kernels_gate.near_pairs``), O(K P) for K tracks
-        and P plots, no Python loop over the tracks.
+        and P plots, no Python loop over the tracks. ``points``: ``gate_points(plots)``,
+        when the caller has it.
         """
         from radarviz.core.tracking.kernels_gate import near_pairs
 
         g = self._gate
-        d = self.dims
-        plot, noise = polar_arrays(plots, d)
-        site = np.array([p.site for p in plots], dtype=np.float64)[:, :d]
-        z, R = METHODS[g.method].convert(plot, noise)
-        n_p = site.shape[0]
-        points = np.stack([np.asarray(z[i]) + site[:, i] for i in range(d)], -1)  # (P, d)
-        r_ii = np.stack([np.broadcast_to(R[i, i], (n_p,)) for i in range(d)], -1)  # (P, d)
-        times = np.array([p.time_s for p in plots], dtype=np.float64)
+        points, r_ii, times = self.gate_points(plots) if points is None else points
+        n_p = times.size
         book = self.book
         rows = np.empty(slots.size * n_p, dtype=np.intp)
         cols = np.empty(slots.size * n_p, dtype=np.intp)
         found = near_pairs(
-            slots, book.x, book.P, book.last_s, times, self._q_max, np.ascontiguousarray(points),
-            np.ascontiguousarray(r_ii), g.threshold * PREFILTER_MARGIN, rows, cols,
+            slots, book.x, book.P, book.last_s, times, self._q_max, points, r_ii,
+            g.threshold * PREFILTER_MARGIN, rows, cols,
         )  # fmt: skip
         return rows[:found], cols[:found]
 
@@ -657,14 +670,17 @@ class GNNTracker:
         return boxed(self._gate.method) and self._interval
 
     def scored(
-        self, slots: NDArray[np.intp], plots: list[Plot]
+        self,
+        slots: NDArray[np.intp],
+        plots: list[Plot],
+        points: tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]] | None = None,
     ) -> tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.float64]]:
         """``pairs`` of the tracks in the book's ``slots`` by way of ``near``: the same pairs
         inside the gate, each pair's track predicted to its plot's own time
         (``TargetTracker.predicted``) and scored (``mahalanobis_pairs``), the same numbers.
         (rows into slots, columns into plots, d²), (N,) each."""
         g = self._gate
-        r, c = self.near(slots, plots)
+        r, c = self.near(slots, plots, points)
         if not r.size:
             return r, c, np.zeros(0)
         sub = [plots[j] for j in c.tolist()]
@@ -814,8 +830,10 @@ class GNNTracker:
         book = self.book
         owner: list[str | None] = [None] * len(plots)
         free = np.arange(len(plots))
+        live = book.live_slots()
+        points = None  # the gate's conversion of the batch, made once (``gate_points``)
         for code in (CONFIRMED_CODE, TENTATIVE_CODE):  # confirmed tracks choose first
-            slots = book.live_slots(code)
+            slots = live[book.status[live] == code]
             if radar is not None and period is not None and slots.size:
                 # A track takes at most one plot per sweep of a radar.
                 slots = slots[book.hit_s[slots, radar[0]] <= times[0] - period / 2]
@@ -828,7 +846,11 @@ class GNNTracker:
                 rows, cols = gnn_assign(self.distances(ids, scan), self._gate.threshold)
             else:
                 if self.prefiltered:  # no Python loop over the live tracks
-                    r, c, d2 = self.scored(slots, scan)
+                    if points is None:
+                        points = self.gate_points(plots)
+                    pts, r_ii, t_s = points
+                    sub = (np.ascontiguousarray(pts[free]), np.ascontiguousarray(r_ii[free]))
+                    r, c, d2 = self.scored(slots, scan, (*sub, t_s[free]))
                 else:
                     r, c, d2 = self.pairs([book.label[s] for s in slots.tolist()], scan)
                 rows, cols = sparse_gnn_assign(r, c, d2, self._gate.threshold, shape)
@@ -845,7 +867,7 @@ class GNNTracker:
         if self._gate.tracker is not self.tracker:
             gate_rows = self._gate.tracker.add_block(labelled)
         confirmed, deleted = self._manage(
-            radar, times, owner, hit, free.tolist(), gate_rows, whole_scan
+            radar, times, owner, hit, free.tolist(), gate_rows, whole_scan, live
         )
         statuses = [self.status(t) if t in book.slot else TENTATIVE for t in owner]
         # A track deleted at this batch cannot have a plot in it (it was missed): statuses hold.
@@ -860,9 +882,10 @@ class GNNTracker:
         started: list[int],
         gate_rows: list[list[StateRow]],
         whole_scan: bool,
+        live: NDArray[np.intp],
     ) -> tuple[list[str], list[str]]:
         """Hits, starts, the sweep's misses, confirmation and deletion after a batch
-        (``core.tracking.management``)."""
+        (``core.tracking.management``); ``live`` the slots live before it."""
         book = self.book
         gi = (
             next(i for i, (m, _, _) in enumerate(gate_rows[0]) if m == self._gate.method)
@@ -870,7 +893,7 @@ class GNNTracker:
             else 0
         )
         n = 2 * self.dims
-        before = book.live_slots()  # the tracks that existed before this batch
+        before = live  # the tracks that existed before this batch
         ri = radar[0] if radar is not None else 0
         if hit:
             slots = np.array([book.slot[str(owner[j])] for j in hit], dtype=np.intp)
@@ -889,11 +912,13 @@ class GNNTracker:
         judged = self._swept(radar, times, before, whole_scan)
         missed = np.array([s for s in judged.tolist() if s not in hit_slots], dtype=np.intp)
         book.miss(missed)
+        started_slots = [book.slot[str(owner[j])] for j in started]
         touched = np.unique(
-            np.r_[missed, list(hit_slots), [book.slot[str(owner[j])] for j in started]]
-        ).astype(np.intp)
+            np.concatenate([missed, np.array([*hit_slots, *started_slots], dtype=np.intp)])
+        )
         confirm, delete = book.settle(touched)
-        delete = np.r_[delete, self._coasted(times)].astype(np.intp)
+        # A track started in this batch has not coasted: the tracks from before suffice.
+        delete = np.concatenate([delete, self._coasted(times, before)]).astype(np.intp)
         label = book.label
         confirmed = [label[s] for s in sorted(confirm.tolist(), key=lambda s: int(label[s]))]
         if self.association.confirm_m <= 1:
@@ -969,10 +994,12 @@ class GNNTracker:
             return None
         return (self.association.delete_misses + 1) * max(periods)
 
-    def _coasted(self, times: NDArray[np.float64]) -> NDArray[np.intp]:
+    def _coasted(
+        self, times: NDArray[np.float64], slots: NDArray[np.intp] | None = None
+    ) -> NDArray[np.intp]:
         """Live slots without a plot for longer than ``coast_s`` at the batch's end."""
         coast = self.coast_s()
-        slots = self.book.live_slots()
+        slots = self.book.live_slots() if slots is None else slots
         if coast is None or not times.size or not slots.size:
             return slots[:0]
         return slots[self.book.last_s[slots] < float(times[-1]) - coast]
