@@ -37,15 +37,27 @@ the engine's own (prediction, update, IMM), nothing is filtered here.
 * **Sparse route** (the default; ``GNNTracker(dense=True)`` is the dense one, the same
   assignment). Only pairs that can pass the gate are scored: d² ≥ ν_i² / S_ii on every
   axis, so a coarse box around each track's predicted position, ν_i² < γ S_ii, holds
-  every pair inside the gate (``gate_box_pairs``, exact for the converted methods whose
-  conversion is of the plot alone; ``ducm``, ``ekf`` and ``ukf`` score every pair). One box
-  per scan covers all its plot times (the cv models' prediction is affine in the mean and
-  convex in P_ii over time), the pairs are found with a k-d tree of the plots, and each
-  candidate is predicted to its plot's own time (``TargetTracker.predicted``) and scored
-  (``mahalanobis_pairs``). The pairs inside the gate form a bipartite graph; Σ (γ − d²) is a
-  sum over its connected components and no feasible assignment links two of them, so the
-  global optimum is each component's own: one ``linear_sum_assignment`` per component
-  (``sparse_gnn_assign``), the same optimum as the dense matrix's.
+  every pair inside the gate (exact for the converted methods whose conversion is of the
+  plot alone, ``boxed``; ``ducm``, ``ekf`` and ``ukf`` score every pair). A batch of a few
+  plots (``NEAR_MAX_PAIRS``) tests each (track, plot) pair against a bound of that box taken
+  from the track's posterior at its last plot, without predicting it (``GNNTracker.near``,
+  one compiled pass: the mean x + T ẋ and P_pp + 2T P_pv + T² P_vv + q̄ T⁴/4 ≥ P⁻_ii, T the
+  time to the plot), so that a batch's cost follows its candidates, not the live tracks. A
+  whole scan of many targets instead boxes every track between its predictions to the
+  scan's first and last times (the prediction is affine in the mean and convex in P_ii over
+  time) and finds the pairs in the boxes with a k-d tree of the plots (``gate_box_pairs``).
+  Either way each candidate is predicted to its plot's own time (``TargetTracker.predicted``)
+  and scored (``mahalanobis_pairs``). The pairs inside the gate form a bipartite graph;
+  Σ (γ − d²) is a sum over its connected components and no feasible assignment links two of
+  them, so the global optimum is each component's own: one ``linear_sum_assignment`` per
+  component, none for a pair that shares no track and no plot (``sparse_gnn_assign``), the
+  same optimum as the dense matrix's.
+* **Engines.** The filters and the gate's predictions run on the engine the options ask
+  for (``StreamOptions.engine``): the compiled one by default, whose
+  ``core.tracking.compiled.CompiledTracks`` predicts a list of tracks with the tracker
+  kernels' own steps (``predicted``) and drops deleted ones (``forget``), or
+  ``engine="numpy"``, the reference; the two make the same association
+  (``tests/test_association_engines.py``).
 * **Initiation.** Every plot left unassigned starts a tentative track (the first-plot start).
 * **Confirmation, M of N.** A tentative track is confirmed at the scan of its M-th hit if
   that comes within its first N scans (the initiating scan counts as the first, and a hit);
@@ -60,14 +72,16 @@ Track ids are "1", "2", … in order of initiation, never reused.
 
 Cost: the dense route scores K × P pairs per scan for K live tracks and P plots (one
 broadcast batch per distinct plot time, each track predicted to each time) and runs one
-assignment, O((K + P)³) at worst. The sparse route predicts every track twice per scan,
-builds the boxes and one k-d tree (O((K + P) log P)), then scores and predicts only the
-candidates, a few per track when the targets are apart, and assigns the small components.
-``radarviz bench --only association`` (a grid of targets, one radar, no clutter, ``ucm``,
-measured on a shared 2-core machine, the routes interleaved scan by scan): at 10³ targets
-56 000–62 000 plots/s, the dense route 7.7–9.0× the time; at 4 000 targets 69 000 plots/s,
-the dense route 49× the time (1 400 plots/s); with each plot its own time stamp (scans of
-1 s) 29 000–38 000 plots/s at 10³ targets and 62 000 at 4 000, 2.6–8.6× the labelled
+assignment, O((K + P)³) at worst. The sparse route tests K × P pairs in compiled code for a
+small batch (a few nanoseconds each), or predicts every track twice and builds one k-d tree
+(O((K + P) log P)) for a whole scan, then scores and predicts only the candidates, a few
+per track when the targets are apart, and assigns the small components; the per-batch
+bookkeeping (the sweep, M of N) is numpy over the live tracks, no Python loop over them.
+``radarviz bench --only association`` measures both layouts: the grid of targets seen by
+one radar in whole scans (``viz_app.bench.association``), and four rotating radars whose
+plots come a few at a time (the ``rotating_*`` figures, plots per CPU-second). On the
+rotating layout a batch costs a few hundred microseconds of Python and numpy, whatever the
+number of live tracks: thousands of plots per CPU-second, against some 10⁵ for the labelled
 filtering of the same plots.
 """
 
@@ -301,6 +315,11 @@ def boxed(method: str) -> bool:
 #: convex in the time (``gate_box_pairs``): one box per scan, from its first and last time.
 #: Any other model is boxed at each distinct plot time (``GNNTracker.pairs``).
 INTERVAL_MODELS: tuple[str, ...] = ("cv", "imm")
+
+#: Track × plot pairs up to which a batch's candidates come from ``GNNTracker.near`` (one
+#: compiled test per pair, a few ns each); a larger batch (a whole scan of 10³ targets)
+#: takes ``GNNTracker.pairs``' k-d tree, O((K + P) log P). The same pairs inside the gate.
+NEAR_MAX_PAIRS = 1 << 18
 
 #: Relative widening of ``GNNTracker.near``'s bound on the gate's box (on γ): its bound
 #: takes another route through the arithmetic than the prediction (and the IMM's is not
@@ -845,7 +864,8 @@ class GNNTracker:
                 ids = [book.label[s] for s in slots.tolist()]
                 rows, cols = gnn_assign(self.distances(ids, scan), self._gate.threshold)
             else:
-                if self.prefiltered:  # no Python loop over the live tracks
+                if self.prefiltered and slots.size * len(scan) <= NEAR_MAX_PAIRS:
+                    # No Python loop over the live tracks, no prediction of every one.
                     if points is None:
                         points = self.gate_points(plots)
                     pts, r_ii, t_s = points
