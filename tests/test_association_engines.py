@@ -6,7 +6,8 @@ the compiled one by default (``core.tracking.compiled.CompiledTracks.predicted``
 ``engine="numpy"``. The two must make the same association, plot for plot:
 
 * ``CompiledTracks.predicted`` equals ``TargetTracker.predicted`` of the numpy engine (cv and
-  IMM, 2D and 3D), to 1e-9 relative, one time or one per track; ``forget`` frees the rows.
+  IMM, 2D and 3D), to 1e-9 relative, one time or one per track, and the compiled gate's d²
+  (``TargetTracker.gate_distances``) ``mahalanobis_pairs`` of it; ``forget`` frees the rows.
 * On the rotating-radar scene (the association's batches as they come) and on the crossing
   scene (whole scans, clutter, confirmed tracks crossing): the same track ids, statuses,
   confirmations and deletions per batch, and every row to 1e-9 relative.
@@ -27,9 +28,10 @@ from radarviz.core.tracking.association import (
     AssociationOptions,
     GNNTracker,
     ScanResult,
+    mahalanobis_pairs,
     plot_batches,
 )
-from radarviz.core.tracking.stream import Plot, StreamOptions
+from radarviz.core.tracking.stream import Plot, StreamOptions, polar_arrays
 from radarviz.core.tracking.targets import TargetTracker
 
 TOL = 1e-9
@@ -88,6 +90,34 @@ def test_compiled_prediction_is_the_numpy_engines(three_d: bool, model: str) -> 
             assert close(ref.x, got.x) and close(ref.P, got.P), (method, when)
     with pytest.raises(ValueError, match="before a track's last plot"):
         trackers[1].predicted("ucm", ["T0"], 0.0)
+
+
+@pytest.mark.parametrize("model", ["cv", "imm"])
+def test_compiled_gate_distances_are_the_numpy_engines(model: str) -> None:
+    """``TargetTracker.gate_distances`` (one compiled pass: prediction and d²) against the
+    numpy engine's ``predicted`` scored by ``mahalanobis_pairs``, every method that converts
+    the plot alone; None where it has no compiled form (numpy engine, a polar method)."""
+    methods = ("naive", "seed", "cmkf_d", "ucm", "ekf")
+    ref, fast = (
+        TargetTracker(methods, False, StreamOptions(model=model, engine=e))
+        for e in ("numpy", "compiled")
+    )
+    plots = labelled_plots(False)
+    ref.add_block(plots)
+    fast.add_block(plots)
+    ids = ["T2", "T0", "T1", "T0", "T1"]
+    times = np.array([15.1, 15.0, 21.0, 30.0, 14.6])
+    probe = [
+        replace(plots[i], time_s=float(t)) for i, t in zip((1, 4, 7, 9, 12), times, strict=True)
+    ]
+    plot, noise = polar_arrays(probe, 2)
+    site = np.array([p.site for p in probe])[:, :2]
+    for method in methods[:4]:
+        want = mahalanobis_pairs(method, ref.predicted(method, ids, times), plot, noise, site)
+        got = fast.gate_distances(method, ids, times, plot, noise, site)
+        assert got is not None and np.all(np.abs(got - want) <= TOL * np.maximum(want, 1.0))
+        assert ref.gate_distances(method, ids, times, plot, noise, site) is None
+    assert fast.gate_distances("ekf", ids, times, plot, noise, site) is None
 
 
 def test_compiled_forget_reuses_rows() -> None:

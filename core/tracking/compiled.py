@@ -297,6 +297,45 @@ class CompiledTracks:
             )
         return out_x, out_P
 
+    def gate_nis(
+        self,
+        method: str,
+        labels: list[str],
+        time_s: NDArray[np.float64],
+        range_m: NDArray[np.float64],
+        azimuth_rad: NDArray[np.float64],
+        sigma_r_m: NDArray[np.float64],
+        sigma_azimuth_rad: NDArray[np.float64],
+        site: NDArray[np.float64],
+    ) -> NDArray[np.float64]:
+        """d² = νᵀ S⁻¹ ν of N (track, plot) pairs in 2D: ``method``'s track of labels[i]
+        predicted to time_s[i] (as ``predicted``) against plot i (range, azimuth, their noise
+        std, site (N, 2)), by the method's position measurement (``position_measurement``,
+        ``position_nis``: the statistic of the kernels' monitor; for the converted methods
+        ν = z + s − H x⁻, S = H P⁻ Hᵀ + R). (N,); NaN where S is not positive definite.
+        Raises ``ValueError`` for a time before a track's last plot."""
+        if self.dims != 2:
+            raise ValueError("gate_nis: 2D tracks only")
+        j = self.methods.index(method)
+        slot = np.array([self.slots[t] for t in labels], dtype=np.intp)
+        dt = _f(time_s - self.last_t[slot])
+        if dt.size and (dt.min() < 0 or not self.started[slot].all()):
+            raise ValueError("gate_nis: a time before a track's last plot")
+        out = np.empty(slot.size)
+        plot = (_f(range_m), _f(azimuth_rad), _f(sigma_r_m), _f(sigma_azimuth_rad), _f(site))
+        code = int(self.codes[j])
+        if self.imm is not None:
+            from radarviz.core.filters.kernels_imm import gate_nis_imm_2d
+
+            model = (self.sigma_a_models, self.transition)
+            gate_nis_imm_2d(self.xs, self.Ps, self.mus, slot, j, dt, *model, code, *plot, out)
+        else:
+            from radarviz.core.filters.kernels_track import gate_nis_2d
+
+            q = self.sigma_a * self.sigma_a
+            gate_nis_2d(self.xs, self.Ps, slot, j, dt, q, code, *plot, out)
+        return out
+
     def forget(self, labels: list[str]) -> None:
         """Drop the tracks of ``labels``: a label seen again starts a new track, and (without
         a monitor, which keeps its records by row) the rows go to new labels, so memory

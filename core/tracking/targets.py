@@ -399,6 +399,30 @@ class TargetTracker:
         state = CVBatch(arrays[0], arrays[1])
         return cv_predict(state, dt, bank.motion.sigma_a_mps2) if moves(dt) else state
 
+    def gate_distances(
+        self,
+        method: str,
+        targets: list[str],
+        time_s: NDArray[np.float64],
+        plot: PolarPlot,
+        noise: PolarNoise,
+        site: NDArray[np.float64],
+    ) -> NDArray[np.float64] | None:
+        """d² = νᵀ S⁻¹ ν of N (track, plot) pairs, ``method``'s track of targets[i]
+        predicted to time_s[i] against plot i (plot, noise (N,) arrays, site (N, d)), in one
+        compiled pass (``CompiledTracks.gate_nis``; NaN → ∞, outside every gate): on the
+        compiled engine in 2D for a converted method that converts the plot alone (naive,
+        seed, cmkf_d, ucm), the numbers of ``core.tracking.association.mahalanobis_pairs``
+        to rounding. None elsewhere (the caller predicts and scores on numpy)."""
+        if self._compiled is None or self.three_d or method not in _PLOT_CONVERSIONS:
+            return None
+        d2 = self._compiled.gate_nis(
+            method, targets, time_s, plot.range_m, plot.azimuth_rad,
+            np.broadcast_to(noise.sigma_r_m, time_s.shape),
+            np.broadcast_to(noise.sigma_azimuth_rad, time_s.shape), site,
+        )  # fmt: skip
+        return np.where(np.isfinite(d2), d2, np.inf)
+
     def forget(self, targets: list[str]) -> None:
         """Drop the tracks of ``targets`` (a deleted track): their rows go to new targets, so
         memory follows the live tracks, not every track ever started. A label forgotten and
@@ -408,6 +432,10 @@ class TargetTracker:
             return
         for t in targets:
             self._free.append(self._slot.pop(t))
+
+
+#: The methods whose position measurement converts the plot alone (``gate_distances``).
+_PLOT_CONVERSIONS = ("naive", "seed", "cmkf_d", "ucm")
 
 
 def _stacked(rows: list[list[StateRow]], n: int) -> TrackBlock:
