@@ -632,15 +632,26 @@ class GNNTracker:
         self, plots: list[Plot]
     ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
         """The gating method's conversion of ``plots`` for ``near``: each plot's point
-        z + s (P, d), its R_ii (P, d) and its time (P,) (C-contiguous)."""
+        z + s (P, d), its R_ii (P, d) and its time (P,) (C-contiguous); in 2D by the
+        tracker kernels' conversion in one compiled pass (``plot_points_2d``), in 3D by
+        ``Method.convert`` (the prefilter's margin covers the two routes' rounding)."""
         d = self.dims
         plot, noise = polar_arrays(plots, d)
         site = np.array([p.site for p in plots], dtype=np.float64)[:, :d]
-        z, R = METHODS[self._gate.method].convert(plot, noise)
+        times = np.array([p.time_s for p in plots], dtype=np.float64)
         n_p = site.shape[0]
+        if d == 2:  # one compiled pass, the tracker kernels' conversion
+            from radarviz.core.filters.compiled import METHOD_CODES
+            from radarviz.core.tracking.kernels_gate import plot_points_2d
+
+            points, r_ii = np.empty((n_p, 2)), np.empty((n_p, 2))
+            sr, sb = (np.ascontiguousarray(np.broadcast_to(v, (n_p,))) for v in noise[:2])
+            code = METHOD_CODES[self._gate.method]
+            plot_points_2d(code, plot.range_m, plot.azimuth_rad, sr, sb, site, points, r_ii)
+            return points, r_ii, times
+        z, R = METHODS[self._gate.method].convert(plot, noise)
         points = np.stack([np.asarray(z[i]) + site[:, i] for i in range(d)], -1)
         r_ii = np.stack([np.broadcast_to(R[i, i], (n_p,)) for i in range(d)], -1)
-        times = np.array([p.time_s for p in plots], dtype=np.float64)
         return np.ascontiguousarray(points), np.ascontiguousarray(r_ii), times
 
     def near(
