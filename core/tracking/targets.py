@@ -426,7 +426,8 @@ class TargetTracker:
     def forget(self, targets: list[str]) -> None:
         """Drop the tracks of ``targets`` (a deleted track): their rows go to new targets, so
         memory follows the live tracks, not every track ever started. A label forgotten and
-        seen again starts a new track."""
+        seen again starts a new track. (On the compiled engine with a consistency monitor,
+        whose records are per row, a forgotten row is not reused: ``CompiledTracks.forget``.)"""
         if self._compiled is not None:
             self._compiled.forget(targets)
             return
