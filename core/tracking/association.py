@@ -987,6 +987,16 @@ class GNNTracker:
         book = self.book
         end = float(times[-1])
         whole = whole_scan or (beam.scan_stamped and times[0] == times[-1])
+        period = beam.period_s
+        if period is not None and not whole:
+            # A pass is at most ``end`` (passed_s = end − δT/2π, δ ≥ 0), so a track judged
+            # or hit by this radar within half a period of ``end`` fails the two tests at
+            # the end whatever its pass time: dropped before its geometry (the sweep below
+            # is still taken, with no track if none is left: it moves the beam's start).
+            half = period / 2
+            slots = slots[
+                (book.judged_s[slots, ri] + half < end) & (book.hit_s[slots, ri] <= end - half)
+            ]
         x = book.x[slots]
         pos = x[:, 0::2] + x[:, 1::2] * (end - book.last_s[slots])[:, None]
         rel = pos - self._sites[ri]
@@ -1004,7 +1014,6 @@ class GNNTracker:
         # knows the scan saw all it covers); batches also in the coverage estimated.
         covered = beam.inside(rng, elev, edge, estimated=not whole_scan)
         ok = passed_mask & covered & (book.born_s[slots] < passed_s)
-        period = beam.period_s
         if period is not None and not whole:
             ok &= passed_s > book.judged_s[slots, ri] + period / 2
             # A plot of this sweep already came (the beam passed it a little early).
