@@ -620,3 +620,18 @@ def track_plots_3d(
         started[k] = True
         last_t[k] = time_s[i]
     return -1
+
+
+@_jit
+def predicted_3d(xs, Ps, slot, j: int, dt, q: float, out_x, out_P):
+    """``core.filters.kernels_track.predicted_2d`` in 3D (``predict_3d``): xs (K, M, 6),
+    Ps (K, M, 6, 6) into out_x (N, 6), out_P (N, 6, 6)."""
+    x, P = np.empty(6), np.empty((6, 6))
+    for i in range(slot.shape[0]):
+        k = slot[i]
+        x[:] = xs[k, j]
+        P[:, :] = Ps[k, j]
+        if dt[i] > 0.0:
+            predict_3d(x, P, dt[i], q)
+        out_x[i] = x
+        out_P[i] = P

@@ -39,6 +39,7 @@ from radarviz.core.filters.kernels_2d import (
     _add_outer,
     _inline,
     _jit,
+    coefficients,
     doppler_update,
     load,
     predict,
@@ -61,6 +62,7 @@ from radarviz.core.filters.kernels_track import (
     conversion_tables,
     doppler_stats,
     position_measurement,
+    position_nis,
     position_stage,
     position_stats,
     scratch_2d,
@@ -83,6 +85,22 @@ def turn_model_predict(x, P, n: int, T: float, omega: float, q: float):
     P (n, n) in place, σa² = q (``core.filters.turn.turn_predict``)."""
     theta = omega * T
     _turn_predict(x, P, n, T, _turn_factors(omega, sin(theta), sin(0.5 * theta)), q)
+
+
+@_inline
+def predict_models(x0, P0, n: int, dt: float, sigma_a, omega):
+    """Each model's prediction over dt (> 0) of its x0[m] (n,), P0[m] (n, n) in place: the
+    constant-velocity one of σa = sigma_a[m] where omega[m] is 0, else the coordinated turn
+    at ω = omega[m] (rad/s): the one prediction step of the tracker kernels and of the
+    association's gate (``combined_prediction``)."""
+    for m in range(sigma_a.shape[0]):
+        q = sigma_a[m] * sigma_a[m]
+        if omega[m] != 0.0:
+            turn_model_predict(x0[m], P0[m], n, dt, omega[m], q)
+        elif n == 4:
+            predict(x0[m], P0[m], dt, q)
+        else:
+            predict_3d(x0[m], P0[m], dt, q)
 
 
 @_jit
@@ -371,13 +389,7 @@ def track_plots_imm_2d(
                 mu[:] = mus[k, j]
                 mix_2d(xs[k, j], Ps[k, j], mu, Pi, x0, P0, c, w)
                 if dt > 0.0:
-                    for m in range(r):
-                        xj, Pj = x0[m], P0[m]
-                        q = sigma_a[m] * sigma_a[m]
-                        if omega[m] == 0.0:
-                            predict(xj, Pj, dt, q)
-                        else:
-                            turn_model_predict(xj, Pj, 4, dt, omega[m], q)
+                    predict_models(x0, P0, 4, dt, sigma_a, omega)
                 if with_stats:
                     combine_2d(x0, P0, c, x, P)
                     meas = position_measurement(code, x, rr, b, sr2, s, sx, sy, co[g, j])
@@ -453,13 +465,7 @@ def track_plots_imm_3d(
                 mu[:] = mus[k, j]
                 mix_3d(xs[k, j], Ps[k, j], mu, Pi, x0, P0, c, w)
                 if dt > 0.0:
-                    for m in range(r):
-                        xj, Pj = x0[m], P0[m]
-                        q = sigma_a[m] * sigma_a[m]
-                        if omega[m] == 0.0:
-                            predict_3d(xj, Pj, dt, q)
-                        else:
-                            turn_model_predict(xj, Pj, 6, dt, omega[m], q)
+                    predict_models(x0, P0, 6, dt, sigma_a, omega)
                 if with_stats:
                     combine_3d(x0, P0, c, x, P)
                     position_measurement_3d(
@@ -497,3 +503,68 @@ def track_plots_imm_3d(
         started[k] = True
         last_t[k] = time_s[i]
     return -1
+
+
+@_inline
+def combined_prediction(xm, Pm, mu_k, dt: float, sigma_a, omega, Pi, x0, P0, mu, c, w, x, P):
+    """One track's IMM prediction over dt (≥ 0) into x (n,), P (n, n), the track's models
+    xm (r, n), Pm (r, n, n) and μ mu_k (r,) left as they are: the tracker kernels' mixing,
+    each model's prediction, and the combination with the predicted probabilities c̄ (the
+    combined prediction their monitor's NIS is taken of). 2D (n = 4) or 3D (n = 6) by the
+    state size; x0 (r, n), P0 (r, n, n), mu, c (r,), w (r, r) scratch."""
+    n = xm.shape[1]
+    mu[:] = mu_k
+    if n == 4:
+        mix_2d(xm, Pm, mu, Pi, x0, P0, c, w)
+    else:
+        mix_3d(xm, Pm, mu, Pi, x0, P0, c, w)
+    if dt > 0.0:
+        predict_models(x0, P0, n, dt, sigma_a, omega)
+    if n == 4:
+        combine_2d(x0, P0, c, x, P)
+    else:
+        combine_3d(x0, P0, c, x, P)
+
+
+@_jit
+def predicted_imm(xs, Ps, mus, slot, j: int, dt, sigma_a, omega, Pi, out_x, out_P):
+    """Method j's IMM tracks of slots ``slot`` (N,) predicted over ``dt`` (N,) (s, ≥ 0), the
+    stored tracks left as they are (the association's gate, ``CompiledTracks.predicted``):
+    ``combined_prediction`` of each, as ``core.tracking.targets.TargetTracker.predicted``
+    on the numpy engine. 2D or 3D: xs (K, M, r, n), Ps (K, M, r, n, n), mus (K, M, r) into
+    out_x (N, n), out_P (N, n, n)."""
+    r, n = sigma_a.shape[0], xs.shape[3]
+    x0, P0 = np.empty((r, n)), np.empty((r, n, n))
+    mu, c, w = np.empty(r), np.empty(r), np.empty((r, r))
+    for i in range(slot.shape[0]):
+        k = slot[i]
+        combined_prediction(
+            xs[k, j], Ps[k, j], mus[k, j], dt[i], sigma_a, omega, Pi, x0, P0, mu, c, w,
+            out_x[i], out_P[i],
+        )  # fmt: skip
+
+
+@_jit
+def gate_nis_imm_2d(
+    xs, Ps, mus, slot, j: int, dt, sigma_a, omega, Pi, code: int, r_m, az_rad, sigma_r,
+    sigma_b, site, out,
+):  # fmt: skip
+    """d² = νᵀ S⁻¹ ν of N (track, plot) pairs, 2D: pair i's track (slot[i], method j, of
+    ``code``) predicted over dt[i] (``combined_prediction``) against its plot r_m[i],
+    az_rad[i] with noise std sigma_r[i], sigma_b[i] at site[i] (N, 2): the method's
+    position measurement and its NIS (``position_measurement``, ``position_nis``), the
+    statistic of the tracker kernels' monitor, into out (N,) (NaN where S is not positive
+    definite)."""
+    r = sigma_a.shape[0]
+    x0, P0 = np.empty((r, 4)), np.empty((r, 4, 4))
+    mu, c, w = np.empty(r), np.empty(r), np.empty((r, r))
+    x, P = np.empty(4), np.empty((4, 4))
+    for i in range(slot.shape[0]):
+        k = slot[i]
+        combined_prediction(
+            xs[k, j], Ps[k, j], mus[k, j], dt[i], sigma_a, omega, Pi, x0, P0, mu, c, w, x, P
+        )
+        sr2, s = sigma_r[i] * sigma_r[i], sigma_b[i] * sigma_b[i]
+        co = coefficients(code, s, sr2)
+        meas = position_measurement(code, x, r_m[i], az_rad[i], sr2, s, site[i, 0], site[i, 1], co)
+        out[i] = position_nis(P, *meas)

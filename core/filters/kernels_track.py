@@ -214,3 +214,40 @@ def track_plots_2d(
         started[k] = True
         last_t[k] = time_s[i]
     return -1
+
+
+@_jit
+def predicted_2d(xs, Ps, slot, j: int, dt, q: float, out_x, out_P):
+    """Method j's tracks of slots ``slot`` (N,) predicted over ``dt`` (N,) (s, ≥ 0), the
+    stored tracks left as they are (the association's gate, ``CompiledTracks.predicted``):
+    ``predict``, the tracker kernel's own step, into out_x (N, 4), out_P (N, 4, 4); dt = 0
+    copies the track. xs (K, M, 4), Ps (K, M, 4, 4) as ``track_plots_2d``."""
+    x, P = np.empty(4), np.empty((4, 4))
+    for i in range(slot.shape[0]):
+        k = slot[i]
+        x[:] = xs[k, j]
+        P[:, :] = Ps[k, j]
+        if dt[i] > 0.0:
+            predict(x, P, dt[i], q)
+        out_x[i] = x
+        out_P[i] = P
+
+
+@_jit
+def gate_nis_2d(
+    xs, Ps, slot, j: int, dt, q: float, code: int, r_m, az_rad, sigma_r, sigma_b, site, out
+):
+    """``core.filters.kernels_imm.gate_nis_imm_2d`` for the cv model: pair i's track
+    predicted over dt[i] by ``predict`` (σa² = q), then the method's position measurement
+    and its NIS against its plot, into out (N,)."""
+    x, P = np.empty(4), np.empty((4, 4))
+    for i in range(slot.shape[0]):
+        k = slot[i]
+        x[:] = xs[k, j]
+        P[:, :] = Ps[k, j]
+        if dt[i] > 0.0:
+            predict(x, P, dt[i], q)
+        sr2, s = sigma_r[i] * sigma_r[i], sigma_b[i] * sigma_b[i]
+        co = coefficients(code, s, sr2)
+        meas = position_measurement(code, x, r_m[i], az_rad[i], sr2, s, site[i, 0], site[i, 1], co)
+        out[i] = position_nis(P, *meas)

@@ -37,15 +37,27 @@ the engine's own (prediction, update, IMM), nothing is filtered here.
 * **Sparse route** (the default; ``GNNTracker(dense=True)`` is the dense one, the same
   assignment). Only pairs that can pass the gate are scored: d² ≥ ν_i² / S_ii on every
   axis, so a coarse box around each track's predicted position, ν_i² < γ S_ii, holds
-  every pair inside the gate (``gate_box_pairs``, exact for the converted methods whose
-  conversion is of the plot alone; ``ducm``, ``ekf`` and ``ukf`` score every pair). One box
-  per scan covers all its plot times (the cv models' prediction is affine in the mean and
-  convex in P_ii over time), the pairs are found with a k-d tree of the plots, and each
-  candidate is predicted to its plot's own time (``TargetTracker.predicted``) and scored
-  (``mahalanobis_pairs``). The pairs inside the gate form a bipartite graph; Σ (γ − d²) is a
-  sum over its connected components and no feasible assignment links two of them, so the
-  global optimum is each component's own: one ``linear_sum_assignment`` per component
-  (``sparse_gnn_assign``), the same optimum as the dense matrix's.
+  every pair inside the gate (exact for the converted methods whose conversion is of the
+  plot alone, ``boxed``; ``ducm``, ``ekf`` and ``ukf`` score every pair). A batch of a few
+  plots (``NEAR_MAX_PAIRS``) tests each (track, plot) pair against a bound of that box taken
+  from the track's posterior at its last plot, without predicting it (``GNNTracker.near``,
+  one compiled pass: the mean x + T ẋ and P_pp + 2T P_pv + T² P_vv + q̄ T⁴/4 ≥ P⁻_ii, T the
+  time to the plot), so that a batch's cost follows its candidates, not the live tracks. A
+  whole scan of many targets instead boxes every track between its predictions to the
+  scan's first and last times (the prediction is affine in the mean and convex in P_ii over
+  time) and finds the pairs in the boxes with a k-d tree of the plots (``gate_box_pairs``).
+  Either way each candidate is predicted to its plot's own time (``TargetTracker.predicted``)
+  and scored (``mahalanobis_pairs``). The pairs inside the gate form a bipartite graph;
+  Σ (γ − d²) is a sum over its connected components and no feasible assignment links two of
+  them, so the global optimum is each component's own: one ``linear_sum_assignment`` per
+  component, none for a pair that shares no track and no plot (``sparse_gnn_assign``), the
+  same optimum as the dense matrix's.
+* **Engines.** The filters and the gate's predictions run on the engine the options ask
+  for (``StreamOptions.engine``): the compiled one by default, whose
+  ``core.tracking.compiled.CompiledTracks`` predicts a list of tracks with the tracker
+  kernels' own steps (``predicted``) and drops deleted ones (``forget``), or
+  ``engine="numpy"``, the reference; the two make the same association
+  (``tests/test_association_engines.py``).
 * **Initiation.** Every plot left unassigned starts a tentative track (the first-plot start).
 * **Confirmation, M of N.** A tentative track is confirmed at the scan of its M-th hit if
   that comes within its first N scans (the initiating scan counts as the first, and a hit);
@@ -60,14 +72,16 @@ Track ids are "1", "2", … in order of initiation, never reused.
 
 Cost: the dense route scores K × P pairs per scan for K live tracks and P plots (one
 broadcast batch per distinct plot time, each track predicted to each time) and runs one
-assignment, O((K + P)³) at worst. The sparse route predicts every track twice per scan,
-builds the boxes and one k-d tree (O((K + P) log P)), then scores and predicts only the
-candidates, a few per track when the targets are apart, and assigns the small components.
-``radarviz bench --only association`` (a grid of targets, one radar, no clutter, ``ucm``,
-measured on a shared 2-core machine, the routes interleaved scan by scan): at 10³ targets
-56 000–62 000 plots/s, the dense route 7.7–9.0× the time; at 4 000 targets 69 000 plots/s,
-the dense route 49× the time (1 400 plots/s); with each plot its own time stamp (scans of
-1 s) 29 000–38 000 plots/s at 10³ targets and 62 000 at 4 000, 2.6–8.6× the labelled
+assignment, O((K + P)³) at worst. The sparse route tests K × P pairs in compiled code for a
+small batch (a few nanoseconds each), or predicts every track twice and builds one k-d tree
+(O((K + P) log P)) for a whole scan, then scores and predicts only the candidates, a few
+per track when the targets are apart, and assigns the small components; the per-batch
+bookkeeping (the sweep, M of N) is numpy over the live tracks, no Python loop over them.
+``radarviz bench --only association`` measures both layouts: the grid of targets seen by
+one radar in whole scans (``viz_app.bench.association``), and four rotating radars whose
+plots come a few at a time (the ``rotating_*`` figures, plots per CPU-second). On the
+rotating layout a batch costs a few hundred microseconds of Python and numpy, whatever the
+number of live tracks: thousands of plots per CPU-second, against some 10⁵ for the labelled
 filtering of the same plots.
 """
 
@@ -347,6 +361,16 @@ def boxed(method: str) -> bool:
 #: Any other model is boxed at each distinct plot time (``GNNTracker.pairs``).
 INTERVAL_MODELS: tuple[str, ...] = ("cv", "imm")
 
+#: Track × plot pairs up to which a batch's candidates come from ``GNNTracker.near`` (one
+#: compiled test per pair, a few ns each); a larger batch (a whole scan of 10³ targets)
+#: takes ``GNNTracker.pairs``' k-d tree, O((K + P) log P). The same pairs inside the gate.
+NEAR_MAX_PAIRS = 1 << 18
+
+#: Relative widening of ``GNNTracker.near``'s bound on the gate's box (on γ): its bound
+#: takes another route through the arithmetic than the prediction (and the IMM's is not
+#: tight), so it is widened well beyond rounding; the exact box follows it.
+PREFILTER_MARGIN = 1.01
+
 #: Relative widening of the coarse box: d² is computed in floating point, the box's bound
 #: d² ≥ ν_i² / S_ii holds for exact numbers; 1e-6 covers rounding many times over.
 BOX_MARGIN = 1e-6
@@ -476,10 +500,19 @@ def sparse_gnn_assign(
     if not rows.size:
         empty = np.zeros(0, dtype=np.intp)
         return empty, empty
-    k, p = shape
-    graph = coo_matrix((np.ones(rows.size), (rows, k + cols)), shape=(k + p, k + p))
-    _, label = connected_components(graph, directed=False)
-    comp = label[rows]
+    if rows.size <= SMALL_GRAPH_EDGES:
+        r_l, c_l = rows.tolist(), cols.tolist()
+        if len(set(r_l)) == len(r_l) and len(set(c_l)) == len(c_l):
+            # Every track and every plot on one edge at most: each edge is a component of
+            # its own, and assigned (the usual batch of a few plots among separated tracks).
+            order = np.argsort(rows, kind="stable")
+            return rows[order].astype(np.intp), cols[order].astype(np.intp)
+        comp = _components(r_l, c_l)
+    else:
+        k, p = shape
+        graph = coo_matrix((np.ones(rows.size), (rows, k + cols)), shape=(k + p, k + p))
+        _, label = connected_components(graph, directed=False)
+        comp = label[rows]
     order = np.argsort(comp, kind="stable")
     rows, cols, cost, comp = rows[order], cols[order], cost[order], comp[order]
     starts = np.flatnonzero(np.r_[True, comp[1:] != comp[:-1]])
@@ -498,6 +531,34 @@ def sparse_gnn_assign(
     r, c = np.concatenate(out_r), np.concatenate(out_c)
     order = np.argsort(r, kind="stable")
     return r[order].astype(np.intp), c[order].astype(np.intp)
+
+
+#: Edges up to which ``sparse_gnn_assign`` finds the components by a union-find in Python
+#: (a few microseconds an edge) instead of building a scipy sparse graph (about half a
+#: millisecond a call, whatever its size): a batch of a few plots has a few edges.
+SMALL_GRAPH_EDGES = 64
+
+
+def _components(rows: list[int], cols: list[int]) -> NDArray[np.intp]:
+    """Each edge's connected component, (N,) labels, of the bipartite graph of tracks
+    ``rows`` and plots ``cols`` (N,) each: a union-find of the nodes (a track r is node
+    (0, r), a plot c node (1, c)), the label of an edge its root's first edge. Only the
+    partition matters to ``sparse_gnn_assign`` (each component is sorted out by its label,
+    its assignment solved on its own), not the labels' values."""
+    parent: dict[tuple[int, int], tuple[int, int]] = {}
+
+    def root(a: tuple[int, int]) -> tuple[int, int]:
+        while parent.setdefault(a, a) != a:
+            parent[a] = parent[parent[a]]  # path halving
+            a = parent[a]
+        return a
+
+    for r, c in zip(rows, cols, strict=True):
+        a, b = root((0, r)), root((1, c))
+        if a != b:
+            parent[a] = b
+    first: dict[tuple[int, int], int] = {}
+    return np.array([first.setdefault(root((0, r)), i) for i, r in enumerate(rows)], dtype=np.intp)
 
 
 class ScanResult(NamedTuple):
@@ -574,10 +635,13 @@ class GNNTracker:
         # A turn model's predicted mean follows an arc, not a segment: no box between times.
         turns = options.model == "imm" and any(options.imm_turn_rate_degps or ())
         self._interval = options.model in INTERVAL_MODELS and not turns
+        motion = options.motion()
+        # q̄ of ``near``: the largest σa² of the motion model('s models).
+        self._q_max = float(np.max(np.square(motion.sigma_a_mps2)))
         self.association = a = association
-        # The gate reads predictions and deletes tracks (TargetTracker.predicted, forget),
-        # which the numpy engine's banks hold; the compiled engine keeps no such banks.
-        options = replace(options, engine="numpy")
+        # The gate reads predictions and deletes tracks (TargetTracker.predicted, forget) on
+        # either engine: the compiled one (the default) runs the kernels' own prediction,
+        # ``engine="numpy"`` the reference.
         self.tracker = TargetTracker(self.methods, three_d, options)
         dims = 3 if three_d else 2
         self.dims = dims
@@ -593,6 +657,8 @@ class GNNTracker:
         self.beams: dict[str, RadarBeam] = {}
         self._sites: list[NDArray[np.float64]] = []
         self._started = 0
+        #: Batches (and scans) associated so far.
+        self.batches = 0
         #: Ids of every track confirmed so far, in order of confirmation.
         self.ever_confirmed: list[str] = []
 
@@ -606,8 +672,106 @@ class GNNTracker:
         if status is None:
             return list(self.book.slot)
         code = CONFIRMED_CODE if status == CONFIRMED else TENTATIVE_CODE
-        st = self.book.status
-        return [t for t, s in self.book.slot.items() if st[s] == code]
+        label = self.book.label
+        return [label[s] for s in self.book.live_slots(code).tolist()]
+
+    def gate_points(
+        self, plots: list[Plot]
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+        """The gating method's conversion of ``plots`` for ``near``: each plot's point
+        z + s (P, d), its R_ii (P, d) and its time (P,) (C-contiguous); in 2D by the
+        tracker kernels' conversion in one compiled pass (``plot_points_2d``), in 3D by
+        ``Method.convert`` (the prefilter's margin covers the two routes' rounding)."""
+        d = self.dims
+        plot, noise = polar_arrays(plots, d)
+        site = np.array([p.site for p in plots], dtype=np.float64)[:, :d]
+        times = np.array([p.time_s for p in plots], dtype=np.float64)
+        n_p = site.shape[0]
+        if d == 2:  # one compiled pass, the tracker kernels' conversion
+            from radarviz.core.filters.compiled import METHOD_CODES
+            from radarviz.core.tracking.kernels_gate import plot_points_2d
+
+            points, r_ii = np.empty((n_p, 2)), np.empty((n_p, 2))
+            sr, sb = (np.ascontiguousarray(np.broadcast_to(v, (n_p,))) for v in noise[:2])
+            code = METHOD_CODES[self._gate.method]
+            plot_points_2d(code, plot.range_m, plot.azimuth_rad, sr, sb, site, points, r_ii)
+            return points, r_ii, times
+        z, R = METHODS[self._gate.method].convert(plot, noise)
+        points = np.stack([np.asarray(z[i]) + site[:, i] for i in range(d)], -1)
+        r_ii = np.stack([np.broadcast_to(R[i, i], (n_p,)) for i in range(d)], -1)
+        return np.ascontiguousarray(points), np.ascontiguousarray(r_ii), times
+
+    def near(
+        self,
+        slots: NDArray[np.intp],
+        plots: list[Plot],
+        points: tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]] | None = None,
+    ) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+        """The (track, plot) pairs, rows into ``slots``, columns into ``plots``, (N,) each in
+        row then column order, that may pass the gate: a conservative prefilter of the
+        gate, from the book's state alone (each track's gating posterior x, P at its last
+        plot, ``TrackBook``), without predicting a track. Every pair inside the gate is among
+        them (``pairs`` returns no other pair inside it), and usually little else. For a
+        gating method with ``boxed`` and a model in ``INTERVAL_MODELS`` (``prefiltered``).
+
+        For a track predicted T after its last plot, on each position axis i the mean is
+        x⁻_i = x_i + T ẋ_i and the variance P⁻_ii(T) = P_pp + 2T P_pv + T² P_vv + q T⁴/4:
+        exact for the cv model; for the IMM the combined prediction is F P Fᵀ + Σⱼ c̄ⱼ Qⱼ
+        (the mixing preserves the mixture, whose prediction is its combined posterior's), at
+        most that with q̄ the largest model's σa². As d² ≥ ν_i² / S_ii on every axis
+        (``gate_box_pairs``), with ν = z + s − H x⁻ (``boxed``) and S_ii = P⁻_ii + R_ii, a pair
+        inside the gate has (z_i + s_i − x⁻_i)² < γ (P⁻_ii + R_ii) ≤ γ (V_i(T) + R_ii) on
+        every axis, at its plot's own time; ``PREFILTER_MARGIN`` widens γ well past rounding.
+        One compiled pass (``core.tracking.kernels_gate.near_pairs``), O(K P) for K tracks
+        and P plots, no Python loop over the tracks. ``points``: ``gate_points(plots)``,
+        when the caller has it.
+        """
+        from radarviz.core.tracking.kernels_gate import near_pairs
+
+        g = self._gate
+        points, r_ii, times = self.gate_points(plots) if points is None else points
+        n_p = times.size
+        book = self.book
+        rows = np.empty(slots.size * n_p, dtype=np.intp)
+        cols = np.empty(slots.size * n_p, dtype=np.intp)
+        found = near_pairs(
+            slots, book.x, book.P, book.last_s, times, self._q_max, points, r_ii,
+            g.threshold * PREFILTER_MARGIN, rows, cols,
+        )  # fmt: skip
+        return rows[:found], cols[:found]
+
+    @property
+    def prefiltered(self) -> bool:
+        """Whether the sparse route's candidates come from ``near`` (a boxed gating method,
+        a model in ``INTERVAL_MODELS``) rather than ``pairs``' coarse box of every track."""
+        return boxed(self._gate.method) and self._interval
+
+    def scored(
+        self,
+        slots: NDArray[np.intp],
+        plots: list[Plot],
+        points: tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]] | None = None,
+    ) -> tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.float64]]:
+        """``pairs`` of the tracks in the book's ``slots`` by way of ``near``: the same pairs
+        inside the gate, each pair's track predicted to its plot's own time
+        (``TargetTracker.predicted``) and scored (``mahalanobis_pairs``), the same numbers.
+        (rows into slots, columns into plots, d²), (N,) each."""
+        g = self._gate
+        r, c = self.near(slots, plots, points)
+        if not r.size:
+            return r, c, np.zeros(0)
+        sub = [plots[j] for j in c.tolist()]
+        plot, noise = polar_arrays(sub, self.dims)
+        site = np.array([p.site for p in sub], dtype=np.float64)[:, : self.dims]
+        times = np.array([p.time_s for p in sub], dtype=np.float64)
+        label = self.book.label
+        ids = [label[s] for s in slots[r].tolist()]
+        # The compiled engine predicts and scores in one pass (the same numbers to rounding).
+        d2 = g.tracker.gate_distances(g.method, ids, times, plot, noise, site)
+        if d2 is None:
+            pred = g.tracker.predicted(g.method, ids, times)
+            d2 = mahalanobis_pairs(g.method, pred, plot, noise, site)
+        return r, c, d2
 
     def status(self, track: str) -> str:
         """A live track's status."""
@@ -709,18 +873,19 @@ class GNNTracker:
 
     def _too_fast(
         self,
-        ids: list[str],
+        track_slots: NDArray[np.intp],
         plots: list[Plot],
         rows: NDArray[np.intp],
         cols: NDArray[np.intp],
     ) -> NDArray[np.bool_]:
-        """Which (track, plot) pairs, rows into ``ids`` and columns into ``plots``, pair a
+        """Which (track, plot) pairs, rows into ``track_slots`` (the book's) and columns into
+        ``plots``, pair a
         track of a single plot with a plot it could only reach faster than
         ``AssociationOptions.max_speed_mps`` (the speed gate of two-plot initiation): its
         velocity is still 0 ± σv0, so the χ² gate alone admits any plot within a few σv0 Δt,
         and a first plot joined to a far one starts a track at an impossible speed."""
         book = self.book
-        slots = np.array([book.slot[t] for t in ids], dtype=np.intp)[rows]
+        slots = track_slots[rows]
         single = book.hits[slots] == 1
         if not single.any():
             return single
@@ -758,6 +923,7 @@ class GNNTracker:
                     "elevation_deg", "every plot of a 3D track needs an elevation", index=i
                 )
         radar = self._radar(plots)
+        self.batches += 1
         times = np.array([p.time_s for p in plots], dtype=np.float64)
         period = None
         if radar is not None:
@@ -777,30 +943,40 @@ class GNNTracker:
         book = self.book
         owner: list[str | None] = [None] * len(plots)
         free = np.arange(len(plots))
-        for status in (CONFIRMED, TENTATIVE):  # confirmed tracks choose first
-            ids = self.live(status)
-            if radar is not None and period is not None and ids:
+        live = book.live_slots()
+        points = None  # the gate's conversion of the batch, made once (``gate_points``)
+        for code in (CONFIRMED_CODE, TENTATIVE_CODE):  # confirmed tracks choose first
+            slots = live[book.status[live] == code]
+            if radar is not None and period is not None and slots.size:
                 # A track takes at most one plot per sweep of a radar.
-                slots = np.array([book.slot[t] for t in ids], dtype=np.intp)
-                fresh = book.hit_s[slots, radar[0]] <= times[0] - period / 2
-                ids = [t for t, ok in zip(ids, fresh.tolist(), strict=True) if ok]
-            if not ids or not free.size:
+                slots = slots[book.hit_s[slots, radar[0]] <= times[0] - period / 2]
+            if not slots.size or not free.size:
                 continue
             scan = [plots[j] for j in free]
+            shape = (slots.size, len(scan))
             if self.dense:
+                ids = [book.label[s] for s in slots.tolist()]
                 d2_all = self.distances(ids, scan)
-                if status == TENTATIVE:
+                if code == TENTATIVE_CODE:
                     r, c = np.indices(d2_all.shape).reshape(2, -1)
-                    d2_all[r, c] = np.where(self._too_fast(ids, scan, r, c), np.inf, d2_all[r, c])
+                    too_fast = self._too_fast(slots, scan, r, c)
+                    d2_all[r, c] = np.where(too_fast, np.inf, d2_all[r, c])
                 rows, cols = gnn_assign(d2_all, self._gate.threshold)
             else:
-                r, c, d2 = self.pairs(ids, scan)
-                if status == TENTATIVE:
-                    d2 = np.where(self._too_fast(ids, scan, r, c), np.inf, d2)
-                shape = (len(ids), len(scan))
+                if self.prefiltered and slots.size * len(scan) <= NEAR_MAX_PAIRS:
+                    # No Python loop over the live tracks, no prediction of every one.
+                    if points is None:
+                        points = self.gate_points(plots)
+                    pts, r_ii, t_s = points
+                    sub = (np.ascontiguousarray(pts[free]), np.ascontiguousarray(r_ii[free]))
+                    r, c, d2 = self.scored(slots, scan, (*sub, t_s[free]))
+                else:
+                    r, c, d2 = self.pairs([book.label[s] for s in slots.tolist()], scan)
+                if code == TENTATIVE_CODE:
+                    d2 = np.where(self._too_fast(slots, scan, r, c), np.inf, d2)
                 rows, cols = sparse_gnn_assign(r, c, d2, self._gate.threshold, shape)
-            for r, c in zip(rows.tolist(), cols.tolist(), strict=True):
-                owner[int(free[c])] = ids[r]
+            for r, c in zip(slots[rows].tolist(), cols.tolist(), strict=True):
+                owner[int(free[c])] = book.label[r]
             free = np.delete(free, cols)
         hit = [j for j, t in enumerate(owner) if t is not None]
         for j in free.tolist():  # unassigned plots start tentative tracks
@@ -812,7 +988,7 @@ class GNNTracker:
         if self._gate.tracker is not self.tracker:
             gate_rows = self._gate.tracker.add_block(labelled)
         confirmed, deleted = self._manage(
-            radar, times, owner, hit, free.tolist(), gate_rows, whole_scan
+            radar, times, owner, hit, free.tolist(), gate_rows, whole_scan, live
         )
         statuses = [self.status(t) if t in book.slot else TENTATIVE for t in owner]
         # A track deleted at this batch cannot have a plot in it (it was missed): statuses hold.
@@ -827,9 +1003,10 @@ class GNNTracker:
         started: list[int],
         gate_rows: list[list[StateRow]],
         whole_scan: bool,
+        live: NDArray[np.intp],
     ) -> tuple[list[str], list[str]]:
         """Hits, starts, the sweep's misses, confirmation and deletion after a batch
-        (``core.tracking.management``)."""
+        (``core.tracking.management``); ``live`` the slots live before it."""
         book = self.book
         gi = (
             next(i for i, (m, _, _) in enumerate(gate_rows[0]) if m == self._gate.method)
@@ -837,7 +1014,7 @@ class GNNTracker:
             else 0
         )
         n = 2 * self.dims
-        before = book.live_slots()  # the tracks that existed before this batch
+        before = live  # the tracks that existed before this batch
         ri = radar[0] if radar is not None else 0
         if hit:
             slots = np.array([book.slot[str(owner[j])] for j in hit], dtype=np.intp)
@@ -850,22 +1027,25 @@ class GNNTracker:
             s = book.slot[str(t)]
             _, x6, P6 = gate_rows[j][gi]
             book.x[s] = x6[:n]
+            book.P[s] = P6[:n, :n]
             book.sigma_m[s] = math.sqrt(max(float(P6[k, k]) for k in range(0, n, 2)))
             book.sigma_v[s] = math.sqrt(max(float(P6[k, k]) for k in range(1, n, 2)))
         hit_slots = {book.slot[str(owner[j])] for j in hit}
         judged = self._swept(radar, times, before, whole_scan)
         missed = np.array([s for s in judged.tolist() if s not in hit_slots], dtype=np.intp)
         book.miss(missed)
+        started_slots = [book.slot[str(owner[j])] for j in started]
         touched = np.unique(
-            np.r_[missed, list(hit_slots), [book.slot[str(owner[j])] for j in started]]
-        ).astype(np.intp)
+            np.concatenate([missed, np.array([*hit_slots, *started_slots], dtype=np.intp)])
+        )
         confirm, delete = book.settle(touched)
-        delete = np.r_[delete, self._coasted(times)].astype(np.intp)
-        by_slot = {s: t for t, s in book.slot.items()}
-        confirmed = [by_slot[s] for s in sorted(confirm.tolist(), key=lambda s: int(by_slot[s]))]
+        # A track started in this batch has not coasted: the tracks from before suffice.
+        delete = np.concatenate([delete, self._coasted(times, before)]).astype(np.intp)
+        label = book.label
+        confirmed = [label[s] for s in sorted(confirm.tolist(), key=lambda s: int(label[s]))]
         if self.association.confirm_m <= 1:
             confirmed += [str(owner[j]) for j in started]
-        deleted = sorted({by_slot[s] for s in delete.tolist()}, key=int)
+        deleted = sorted({label[s] for s in delete.tolist()}, key=int)
         for t in deleted:
             book.remove(t)
         if deleted:
@@ -893,6 +1073,16 @@ class GNNTracker:
         book = self.book
         end = float(times[-1])
         whole = whole_scan or (beam.scan_stamped and times[0] == times[-1])
+        period = beam.period_s
+        if period is not None and not whole:
+            # A pass is at most ``end`` (passed_s = end − δT/2π, δ ≥ 0), so a track judged
+            # or hit by this radar within half a period of ``end`` fails the two tests at
+            # the end whatever its pass time: dropped before its geometry (the sweep below
+            # is still taken, with no track if none is left: it moves the beam's start).
+            half = period / 2
+            slots = slots[
+                (book.judged_s[slots, ri] + half < end) & (book.hit_s[slots, ri] <= end - half)
+            ]
         x = book.x[slots]
         ahead = end - book.last_s[slots]
         pos = x[:, 0::2] + x[:, 1::2] * ahead[:, None]
@@ -913,7 +1103,6 @@ class GNNTracker:
         # knows the scan saw all it covers); batches also in the coverage estimated.
         covered = beam.inside(rng, elev, edge, estimated=not whole_scan)
         ok = passed_mask & covered & (book.born_s[slots] < passed_s)
-        period = beam.period_s
         if period is not None and not whole:
             ok &= passed_s > book.judged_s[slots, ri] + period / 2
             # A plot of this sweep already came (the beam passed it a little early).
@@ -945,10 +1134,12 @@ class GNNTracker:
             return None
         return (self.association.delete_misses + 1) * max(periods)
 
-    def _coasted(self, times: NDArray[np.float64]) -> NDArray[np.intp]:
+    def _coasted(
+        self, times: NDArray[np.float64], slots: NDArray[np.intp] | None = None
+    ) -> NDArray[np.intp]:
         """Live slots without a plot for longer than ``coast_s`` at the batch's end."""
         coast = self.coast_s()
-        slots = self.book.live_slots()
+        slots = self.book.live_slots() if slots is None else slots
         if coast is None or not times.size or not slots.size:
             return slots[:0]
         return slots[self.book.last_s[slots] < float(times[-1]) - coast]

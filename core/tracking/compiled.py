@@ -134,6 +134,10 @@ class CompiledTracks:
         ns = 2 * self.dims  # the state size
         self.prm = np.array(UKFParams().weights(ns), dtype=np.float64)
         self.slots: dict[str, int] = {}
+        #: Each row's label, in order of the rows (a row freed by ``forget`` keeps its old
+        #: label here until it is reused); rows given back by ``forget``, reused by new labels.
+        self._labels: list[str] = []
+        self._free: list[int] = []
         m = len(methods)
         self.imm = imm
         # The IMM's models on an axis after the method's (``_slots`` grows any trailing shape).
@@ -159,14 +163,25 @@ class CompiledTracks:
     def _names(self) -> list[str]:
         """The monitor's name of every track t·M + j (extended as targets come)."""
         have = len(self._track_names) // max(1, len(self.methods))
-        for t in list(self.slots)[have:]:
+        for t in self._labels[have:]:
             self._track_names.extend(self.name(t, m) for m in self.methods)
         return self._track_names
 
     def _slots(self, labels: tuple[str, ...]) -> NDArray[np.intp]:
         """Each label's slot, new targets added (the state arrays grow by doubling)."""
-        ids = np.array([self.slots.setdefault(t, len(self.slots)) for t in labels], np.intp)
-        need = len(self.slots)
+        slots = self.slots
+        for t in labels:
+            if t not in slots:
+                # The monitor keeps its records by row (track t·M + j), so with a monitor a
+                # freed row is never handed to another label.
+                if self._free and self.feed is None:
+                    slots[t] = self._free.pop()
+                    self._labels[slots[t]] = t
+                else:
+                    slots[t] = len(self._labels)
+                    self._labels.append(t)
+        ids = np.array([slots[t] for t in labels], np.intp)
+        need = len(self._labels)
         have = self.started.shape[0]
         if need > have:
             cap = max(need, 2 * have, 16)
@@ -251,6 +266,98 @@ class CompiledTracks:
             k = slot[bad]
             raise OutOfOrderError(int(bad), float(block.time_s[bad]), float(self.last_t[k]))
         return TrackBlock(out_x, out_P, slot)
+
+    def predicted(
+        self, method: str, labels: list[str], time_s: float | NDArray[np.float64]
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """``method``'s tracks of ``labels`` (N,) (each started, a label may repeat)
+        predicted to ``time_s`` (one time, or (N,)), the stored tracks left as they are:
+        x (N, n), P (N, n, n), n = 2·dims; with the IMM the combined prediction (mixing, each
+        model's prediction, the combination with the predicted probabilities c̄). The steps
+        are the tracker kernels' own (``predicted_2d`` / ``predicted_3d``,
+        ``core.filters.kernels_imm.predicted_imm``), so a gate scored on these predictions
+        sees what the next update will predict. Raises ``ValueError`` for a time before a
+        track's last plot."""
+        j = self.methods.index(method)
+        slot = np.array([self.slots[t] for t in labels], dtype=np.intp)
+        dt = np.asarray(time_s, dtype=np.float64) - self.last_t[slot]
+        dt = np.ascontiguousarray(np.broadcast_to(dt, slot.shape))
+        if dt.size and (dt.min() < 0 or not self.started[slot].all()):
+            raise ValueError(f"predicted: time {time_s!r} is before a track's last plot")
+        ns = 2 * self.dims
+        out_x, out_P = np.empty((slot.size, ns)), np.empty((slot.size, ns, ns))
+        if self.imm is not None:
+            from radarviz.core.filters.kernels_imm import predicted_imm
+
+            predicted_imm(
+                self.xs, self.Ps, self.mus, slot, j, dt, self.sigma_a_models, self.turn_rates,
+                self.transition, out_x, out_P,
+            )  # fmt: skip
+        else:
+            _predicted_kernel(self.dims)(
+                self.xs, self.Ps, slot, j, dt, self.sigma_a * self.sigma_a, out_x, out_P
+            )
+        return out_x, out_P
+
+    def gate_nis(
+        self,
+        method: str,
+        labels: list[str],
+        time_s: NDArray[np.float64],
+        range_m: NDArray[np.float64],
+        azimuth_rad: NDArray[np.float64],
+        sigma_r_m: NDArray[np.float64],
+        sigma_azimuth_rad: NDArray[np.float64],
+        site: NDArray[np.float64],
+    ) -> NDArray[np.float64]:
+        """d² = νᵀ S⁻¹ ν of N (track, plot) pairs in 2D: ``method``'s track of labels[i]
+        predicted to time_s[i] (as ``predicted``) against plot i (range, azimuth, their noise
+        std, site (N, 2)), by the method's position measurement (``position_measurement``,
+        ``position_nis``: the statistic of the kernels' monitor; for the converted methods
+        ν = z + s − H x⁻, S = H P⁻ Hᵀ + R). (N,); NaN where S is not positive definite.
+        Raises ``ValueError`` for a time before a track's last plot."""
+        if self.dims != 2:
+            raise ValueError("gate_nis: 2D tracks only")
+        j = self.methods.index(method)
+        slot = np.array([self.slots[t] for t in labels], dtype=np.intp)
+        dt = _f(time_s - self.last_t[slot])
+        if dt.size and (dt.min() < 0 or not self.started[slot].all()):
+            raise ValueError("gate_nis: a time before a track's last plot")
+        out = np.empty(slot.size)
+        plot = (_f(range_m), _f(azimuth_rad), _f(sigma_r_m), _f(sigma_azimuth_rad), _f(site))
+        code = int(self.codes[j])
+        if self.imm is not None:
+            from radarviz.core.filters.kernels_imm import gate_nis_imm_2d
+
+            model = (self.sigma_a_models, self.turn_rates, self.transition)
+            gate_nis_imm_2d(self.xs, self.Ps, self.mus, slot, j, dt, *model, code, *plot, out)
+        else:
+            from radarviz.core.filters.kernels_track import gate_nis_2d
+
+            q = self.sigma_a * self.sigma_a
+            gate_nis_2d(self.xs, self.Ps, slot, j, dt, q, code, *plot, out)
+        return out
+
+    def forget(self, labels: list[str]) -> None:
+        """Drop the tracks of ``labels``: a label seen again starts a new track, and (without
+        a monitor, which keeps its records by row) the rows go to new labels, so memory
+        follows the live tracks."""
+        for t in labels:
+            k = self.slots.pop(t)
+            self.started[k] = False
+            self._free.append(k)
+
+
+@functools.cache
+def _predicted_kernel(dims: int) -> Callable[..., None]:
+    """The cv model's ``predicted`` kernel of ``dims``, compiled on first use."""
+    if dims == 3:
+        from radarviz.core.filters.kernels_3d import predicted_3d
+
+        return predicted_3d
+    from radarviz.core.filters.kernels_track import predicted_2d
+
+    return predicted_2d
 
 
 def _f(a: NDArray[Any]) -> NDArray[np.float64]:

@@ -191,8 +191,10 @@ class RadarBeam:
                 min(self._elevation[0], float(elevation_rad.min())),
                 max(self._elevation[1], float(elevation_rad.max())),
             ]
-        t = time_s if self.last_s is None else np.r_[self.last_s, time_s]
-        az = azimuth_rad if self.last_s is None else np.r_[self.last_az, azimuth_rad]
+        # np.concatenate, not np.r_: a batch is a few plots, and np.r_'s parsing of its
+        # arguments cost more than the rest of this method.
+        t = time_s if self.last_s is None else np.concatenate(([self.last_s], time_s))
+        az = azimuth_rad if self.last_s is None else np.concatenate(([self.last_az], azimuth_rad))
         dt, daz = np.diff(t), _wrap(np.diff(az))
         same = dt == 0.0
         self._same += int(same.sum())

@@ -54,8 +54,17 @@ class TrackBook:
         self.born_s = np.zeros(0)
         self.last_s = np.zeros(0)
         self.x = np.zeros((0, state_size))
+        #: (K, n, n) the gating method's latest posterior covariance (the gate's prefilter
+        #: bounds each track's predicted position from x and P, ``GNNTracker.near``).
+        self.P = np.zeros((0, state_size, state_size))
         self.sigma_m = np.zeros(0)
         self.sigma_v = np.zeros(0)
+        #: Per slot: live, the track's id, and its rank in order of initiation (the live
+        #: tracks without a Python loop over ``slot``).
+        self.alive = np.zeros(0, np.bool_)
+        self.label: list[str] = []
+        self.rank = np.zeros(0, np.int64)
+        self._started = 0
         self.hit_s = np.zeros((0, 0))
         self.judged_s = np.zeros((0, 0))
         self.plots = np.zeros((0, 0), np.int64)
@@ -86,6 +95,10 @@ class TrackBook:
             rows(a, 0.0) for a in (self.born_s, self.last_s, self.sigma_m, self.sigma_v)
         )
         self.x = rows(self.x, 0.0)
+        self.P = rows(self.P, 0.0)
+        self.alive = rows(self.alive, False)
+        self.rank = rows(self.rank, 0)
+        self.label.extend([""] * grow)
         self.hit_s = table(self.hit_s, -np.inf)
         self.judged_s = table(self.judged_s, -np.inf)
         self.plots = table(self.plots, 0)
@@ -99,9 +112,11 @@ class TrackBook:
         """Make room for ``count`` radars."""
         self._grow(self._cap, count)
 
-    def live_slots(self) -> NDArray[np.intp]:
-        """The live tracks' slots, in order of initiation."""
-        return np.fromiter(self.slot.values(), np.intp, len(self.slot))
+    def live_slots(self, status: int | None = None) -> NDArray[np.intp]:
+        """The live tracks' slots (of one status code, or all), in order of initiation."""
+        mask = self.alive if status is None else self.alive & (self.status == status)
+        slots = np.flatnonzero(mask)
+        return slots[np.argsort(self.rank[slots], kind="stable")]
 
     # -- events ----------------------------------------------------------------------------
 
@@ -111,6 +126,8 @@ class TrackBook:
             self._grow(max(16, 2 * self._cap), self._radars)
         s = self._free.pop()
         self.slot[track] = s
+        self.alive[s], self.label[s], self.rank[s] = True, track, self._started
+        self._started += 1
         self.status[s], self.hits[s], self.expected[s], self.misses[s] = TENTATIVE_CODE, 1, 1, 0
         self.born_s[s] = self.last_s[s] = time_s
         self.hit_s[s] = self.judged_s[s] = -np.inf
@@ -147,6 +164,7 @@ class TrackBook:
     def remove(self, track: str) -> None:
         """Delete a track: its plots folded into the per-radar counts, its slot freed."""
         s = self.slot.pop(track)
+        self.alive[s] = False
         self.folded[: self._radars, int(self.status[s])] += self.plots[s, : self._radars]
         self._free.append(s)
 

@@ -378,9 +378,11 @@ class TargetTracker:
         per target (K,); a target may be listed more than once), the tracks left as
         they are: x (K, n), P (K, n, n) (the IMM's moment-matched combined prediction, the one
         its consistency statistics use). A track last updated at ``time_s`` is returned as it
-        is (dt = 0). Every target's last plot must be at or before ``time_s``."""
+        is (dt = 0). Every target's last plot must be at or before ``time_s``. On the compiled
+        engine the same steps run compiled (``core.tracking.compiled.CompiledTracks.predicted``;
+        the same numbers to rounding)."""
         if self._compiled is not None:
-            raise ValueError("predicted needs the numpy engine (StreamOptions.engine='numpy')")
+            return CVBatch(*self._compiled.predicted(method, targets, time_s))
         b, row = self._where[method]
         bank = self._banks[b]
         ids = np.array([self._slot[t] for t in targets], dtype=np.intp)
@@ -397,14 +399,44 @@ class TargetTracker:
         state = CVBatch(arrays[0], arrays[1])
         return cv_predict(state, dt, bank.motion.sigma_a_mps2) if moves(dt) else state
 
+    def gate_distances(
+        self,
+        method: str,
+        targets: list[str],
+        time_s: NDArray[np.float64],
+        plot: PolarPlot,
+        noise: PolarNoise,
+        site: NDArray[np.float64],
+    ) -> NDArray[np.float64] | None:
+        """d² = νᵀ S⁻¹ ν of N (track, plot) pairs, ``method``'s track of targets[i]
+        predicted to time_s[i] against plot i (plot, noise (N,) arrays, site (N, d)), in one
+        compiled pass (``CompiledTracks.gate_nis``; NaN → ∞, outside every gate): on the
+        compiled engine in 2D for a converted method that converts the plot alone (naive,
+        seed, cmkf_d, ucm), the numbers of ``core.tracking.association.mahalanobis_pairs``
+        to rounding. None elsewhere (the caller predicts and scores on numpy)."""
+        if self._compiled is None or self.three_d or method not in _PLOT_CONVERSIONS:
+            return None
+        d2 = self._compiled.gate_nis(
+            method, targets, time_s, plot.range_m, plot.azimuth_rad,
+            np.broadcast_to(noise.sigma_r_m, time_s.shape),
+            np.broadcast_to(noise.sigma_azimuth_rad, time_s.shape), site,
+        )  # fmt: skip
+        return np.where(np.isfinite(d2), d2, np.inf)
+
     def forget(self, targets: list[str]) -> None:
         """Drop the tracks of ``targets`` (a deleted track): their rows go to new targets, so
         memory follows the live tracks, not every track ever started. A label forgotten and
-        seen again starts a new track."""
+        seen again starts a new track. (On the compiled engine with a consistency monitor,
+        whose records are per row, a forgotten row is not reused: ``CompiledTracks.forget``.)"""
         if self._compiled is not None:
-            raise ValueError("forget needs the numpy engine (StreamOptions.engine='numpy')")
+            self._compiled.forget(targets)
+            return
         for t in targets:
             self._free.append(self._slot.pop(t))
+
+
+#: The methods whose position measurement converts the plot alone (``gate_distances``).
+_PLOT_CONVERSIONS = ("naive", "seed", "cmkf_d", "ucm")
 
 
 def _stacked(rows: list[list[StateRow]], n: int) -> TrackBlock:
