@@ -694,7 +694,9 @@ class GNNTracker:
             points, r_ii = np.empty((n_p, 2)), np.empty((n_p, 2))
             sr, sb = (np.ascontiguousarray(np.broadcast_to(v, (n_p,))) for v in noise[:2])
             code = METHOD_CODES[self._gate.method]
-            plot_points_2d(code, plot.range_m, plot.azimuth_rad, sr, sb, site, points, r_ii)
+            # Contiguous arrays throughout: one compiled specialisation of the kernel.
+            site_c = np.ascontiguousarray(site)
+            plot_points_2d(code, plot.range_m, plot.azimuth_rad, sr, sb, site_c, points, r_ii)
             return points, r_ii, times
         z, R = METHODS[self._gate.method].convert(plot, noise)
         points = np.stack([np.asarray(z[i]) + site[:, i] for i in range(d)], -1)

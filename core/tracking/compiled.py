@@ -19,6 +19,14 @@ large block (``SPLIT_STEPS``) is split into two groups of disjoint targets, each
 order and filtered by the same kernel on its own thread (the kernels release the GIL); as a
 target's track depends on its own plots alone, the outputs are the one-thread ones bit for
 bit (``tests/test_track_compiled.py``).
+
+For the association of unlabelled plots (``core.tracking.association``) the tracks are also
+read without being changed: ``predicted`` (a list of tracks, each to its own time: the
+kernels' prediction, and for the IMM their mixing and combination) and ``gate_nis`` (those
+predictions scored against plots by the method's position measurement and its NIS), and
+deleted tracks are dropped (``forget``, their rows reused). Each calls the step functions the
+tracker kernels use, so a gate sees what the next update will predict
+(``tests/test_association_engines.py`` against the numpy engine).
 """
 
 from __future__ import annotations
