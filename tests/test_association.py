@@ -392,7 +392,7 @@ def test_forgotten_rows_are_reused_by_fresh_tracks() -> None:
     other targets' tracks are untouched (equal to a tracker that never forgot)."""
     from radarviz.core.tracking.targets import TargetTracker
 
-    # forget reads the numpy engine's banks (the association runs on that engine).
+    # The numpy engine's banks (the compiled engine's forget: tests/test_association_engines.py).
     options = StreamOptions(model="cv", sigma_a_mps2=1.0, engine="numpy")
     a, b = TargetTracker(("ucm", "ekf"), False, options), TargetTracker(("ucm",), False, options)
     c = TargetTracker(("ucm", "ekf"), False, options)
