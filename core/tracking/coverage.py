@@ -27,8 +27,9 @@ association needs to tell that:
   its angular rate ω (plus the azimuth noise over the interval); after ``MIN_REVISITS`` such
   pairs T = 2π / |median ω| serves while the revisits accumulate (a fraction of a revolution
   of plots instead of one or two revolutions: the tracks of a recording's first seconds are
-  judged too), if at least half the rates are within 10% of their median (plots stamped
-  otherwise than by a beam do not agree). A radar with one plot per revolution gives no such
+  judged too). If fewer than half the rates are within 10% of their median, the plots are
+  not stamped by a beam (a scan's plots at random times) and the radar's period stays
+  unknown, whatever the revisits say. A radar with one plot per revolution gives no such
   pairs.
 * **Rotation direction** (the sign of dβ/dt) by the majority of consecutive plot pairs less
   than a quarter revolution apart.
@@ -107,7 +108,7 @@ class RadarBeam:
         self._rates: list[float] = []
         self._period: float | None = self.given.rotation_period_s
         self._measured = False  # the period came from the feed (``measured_period``)
-        self._from_revisits = False  # the estimate is the revisits' (else the rate's, or none)
+        self._revisit_period: float | None = None  # the revisits' estimate, once known
         self._same = self._other = 0
         self._turns = [0, 0]  # pairs turning negative, positive
         self._range = [math.inf, -math.inf]
@@ -204,17 +205,11 @@ class RadarBeam:
         self._turns[0] += int((turning & (daz < 0)).sum())
         self._turns[1] += int((turning & (daz > 0)).sum())
         if self.given.rotation_period_s is None and not self._measured:
-            self._learn_period(time_s, azimuth_rad)
-            if not self._from_revisits and len(self._rates) < REVISITS_KEPT:
+            if len(self._rates) < REVISITS_KEPT:
                 pair = (dt > 0) & (dt <= MAX_RATE_PAIR_S) & (daz != 0)
                 self._rates.extend((daz[pair] / dt[pair]).tolist())
-                if len(self._rates) >= MIN_REVISITS:
-                    rates = np.asarray(self._rates)
-                    w = float(np.median(rates))
-                    # Plots on a beam agree on its rate; plots stamped otherwise (a scan's
-                    # plots at random times) do not, and tell nothing of a period.
-                    if np.mean(np.abs(rates - w) <= 0.1 * abs(w)) >= 0.5:
-                        self._period = TWO_PI / abs(w)
+            self._learn_period(time_s, azimuth_rad)
+            self._period = self._estimate()
         self.last_s, self.last_az = float(time_s[-1]), float(azimuth_rad[-1])
 
     def _learn_period(self, time_s: NDArray[np.float64], azimuth_rad: NDArray[np.float64]) -> None:
@@ -234,8 +229,21 @@ class RadarBeam:
             near = r[(r >= 0.9 * low) & (r <= 1.1 * low)]
             # The shortest revisits must be a cluster (a tenth of them at least), not a stray.
             if near.size >= max(3, r.size // 10):
-                self._period = float(np.median(near))
-                self._from_revisits = True
+                self._revisit_period = float(np.median(near))
+
+    def _estimate(self) -> float | None:
+        """The period from the plots (module docstring): the revisits', else the beam
+        rate's; None while neither is known, or when the rates of close plots disagree (their
+        stamps are not a beam's, e.g. a scan's plots at random times, whose same-sweep
+        neighbours look like short revisits)."""
+        rate_period = None
+        if len(self._rates) >= MIN_REVISITS:
+            rates = np.asarray(self._rates)
+            w = float(np.median(rates))
+            if np.mean(np.abs(rates - w) <= 0.1 * abs(w)) < 0.5:
+                return None
+            rate_period = TWO_PI / abs(w)
+        return self._revisit_period if self._revisit_period is not None else rate_period
 
     def measured_period(self, period_s: float) -> None:
         """The period measured by the feed (a radar's north markers or service messages):
