@@ -371,6 +371,10 @@ NEAR_MAX_PAIRS = 1 << 18
 #: tight), so it is widened well beyond rounding; the exact box follows it.
 PREFILTER_MARGIN = 1.01
 
+#: Plots below which ``gate_box_pairs`` tests every pair's box at once instead of querying a
+#: k-d tree once per track (a small batch against many tracks).
+TREE_MIN_PLOTS = 64
+
 #: Relative widening of the coarse box: d² is computed in floating point, the box's bound
 #: d² ≥ ν_i² / S_ii holds for exact numbers; 1e-6 covers rounding many times over.
 BOX_MARGIN = 1e-6
@@ -436,12 +440,21 @@ def gate_box_pairs(
     good = np.flatnonzero(np.all(np.isfinite(points), axis=1))
     if not ok.size or not good.size:
         return empty, empty
-    found = cKDTree(points[good]).query_ball_point(centre[ok], reach[ok], p=np.inf)
-    counts = np.fromiter((len(f) for f in found), dtype=np.intp, count=ok.size)
-    rows = np.repeat(ok, counts)
+    if good.size <= TREE_MIN_PLOTS:
+        # A few plots against many tracks: every pair's Chebyshev distance at once (the
+        # pairs the tree would find, without a query per track).
+        far = np.abs(points[good][None, :, :] - centre[ok][:, None, :]).max(axis=2)
+        r_i, c_i = np.nonzero(far <= reach[ok][:, None])
+        rows, cols = ok[r_i], good[c_i]
+    else:
+        found = cKDTree(points[good]).query_ball_point(centre[ok], reach[ok], p=np.inf)
+        counts = np.fromiter((len(f) for f in found), dtype=np.intp, count=ok.size)
+        rows = np.repeat(ok, counts)
+        if not rows.size:
+            return empty, empty
+        cols = good[np.concatenate([np.asarray(f, dtype=np.intp) for f in found])]
     if not rows.size:
         return empty, empty
-    cols = good[np.concatenate([np.asarray(f, dtype=np.intp) for f in found])]
     zc = points[cols]
     outside = np.maximum(np.maximum(lo[rows] - zc, zc - hi[rows]), 0.0)  # beyond the segment
     inside = np.all(outside * outside < scale * (p_ii[rows] + r_ii[cols]), axis=1)

@@ -22,14 +22,17 @@ association needs to tell that:
   detection. The shortest revisits are therefore the period: T̂ is the median of the
   revisits within ±10% of their 10th percentile, once ``MIN_REVISITS`` have been seen and
   if a tenth of them (three at least) are that close (else the period stays unknown).
-* **Until then, the beam's rate.** Two consecutive plots of a rotating radar less than
-  ``MAX_RATE_PAIR_S`` apart lie on the beam at their two times, so wrap(β₂ − β₁)/(t₂ − t₁) is
+* **Until then, the beam's rate.** Two consecutive plots of a rotating radar
+  ``MIN_RATE_PAIR_S`` to ``MAX_RATE_PAIR_S`` apart (or a batch's first and last, where its
+  plots come closer) lie on the beam at their two times, so wrap(β₂ − β₁)/(t₂ − t₁) is
   its angular rate ω (plus the azimuth noise over the interval); after ``MIN_REVISITS`` such
   pairs T = 2π / |median ω| serves while the revisits accumulate (a fraction of a revolution
   of plots instead of one or two revolutions: the tracks of a recording's first seconds are
   judged too). If fewer than half the rates are within 10% of their median, the plots are
   not stamped by a beam (a scan's plots at random times) and the radar's period stays
-  unknown, whatever the revisits say. A radar with one plot per revolution gives no such
+  unknown, whatever the revisits say; so too when fewer than half the consecutive plots less
+  than ``MAX_RATE_PAIR_S`` apart are as close in azimuth as the beam's turn between them
+  allows (plus ``BEAM_NOISE_RAD``). A radar with one plot per revolution gives no such
   pairs.
 * **Rotation direction** (the sign of dβ/dt) by the majority of consecutive plot pairs less
   than a quarter revolution apart.
@@ -64,6 +67,12 @@ REVISITS_KEPT = 512
 #: Longest interval of two consecutive plots that measures the beam's rate (s): well under a
 #: revolution of any surveillance radar (1 s for the fastest, 4–12 s for most).
 MAX_RATE_PAIR_S = 0.5
+#: Azimuth difference allowed between two plots on the beam beyond its turn (rad): their
+#: noise, 0.6°.
+BEAM_NOISE_RAD = 0.01
+#: Shortest interval that measures it: over a shorter one the azimuth noise (a few
+#: milliradians) is not small against the beam's turn (π/2 rad/s · 0.05 s = 0.08 rad).
+MIN_RATE_PAIR_S = 0.05
 #: Smallest angle the beam must be past a track before it is judged (rad): plot azimuth
 #: noise and the beam's own width.
 MIN_MARGIN_RAD = math.radians(2.0)
@@ -106,6 +115,7 @@ class RadarBeam:
         self._cells = np.full(AZIMUTH_CELLS, -np.inf)
         self._revisits: list[float] = []
         self._rates: list[float] = []
+        self._close: list[tuple[float, float]] = []  # (Δt, |Δβ|) of close consecutive plots
         self._period: float | None = self.given.rotation_period_s
         self._measured = False  # the period came from the feed (``measured_period``)
         self._revisit_period: float | None = None  # the revisits' estimate, once known
@@ -205,9 +215,17 @@ class RadarBeam:
         self._turns[0] += int((turning & (daz < 0)).sum())
         self._turns[1] += int((turning & (daz > 0)).sum())
         if self.given.rotation_period_s is None and not self._measured:
+            if len(self._close) < REVISITS_KEPT:
+                close = (dt > 0) & (dt <= MAX_RATE_PAIR_S)
+                self._close.extend(
+                    zip(dt[close].tolist(), np.abs(daz[close]).tolist(), strict=True)
+                )
             if len(self._rates) < REVISITS_KEPT:
-                pair = (dt > 0) & (dt <= MAX_RATE_PAIR_S) & (daz != 0)
+                pair = (dt >= MIN_RATE_PAIR_S) & (dt <= MAX_RATE_PAIR_S)
                 self._rates.extend((daz[pair] / dt[pair]).tolist())
+                span = t[-1] - t[0]  # the batch's ends: a rate where its plots come densely
+                if MIN_RATE_PAIR_S <= span <= MAX_RATE_PAIR_S and not pair.any():
+                    self._rates.append(float(_wrap(az[-1] - az[0])) / span)
             self._learn_period(time_s, azimuth_rad)
             self._period = self._estimate()
         self.last_s, self.last_az = float(time_s[-1]), float(azimuth_rad[-1])
@@ -243,7 +261,15 @@ class RadarBeam:
             if np.mean(np.abs(rates - w) <= 0.1 * abs(w)) < 0.5:
                 return None
             rate_period = TWO_PI / abs(w)
-        return self._revisit_period if self._revisit_period is not None else rate_period
+        period = self._revisit_period if self._revisit_period is not None else rate_period
+        if period is not None and len(self._close) >= MIN_REVISITS:
+            # On a beam, close plots are no farther apart in azimuth than the beam turned
+            # between them (and the noise); a scan's plots at random times are.
+            dt, daz = np.asarray(self._close).T
+            on_beam = daz <= 1.2 * TWO_PI * dt / period + BEAM_NOISE_RAD
+            if np.mean(on_beam) < 0.5:
+                return None
+        return period
 
     def measured_period(self, period_s: float) -> None:
         """The period measured by the feed (a radar's north markers or service messages):
