@@ -20,9 +20,9 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from test_rotating_association import as_plots, radars, scene
+from test_rotating_association import radars, scene
 
-from radarviz.core.experiments.association import scan_plots
+from radarviz.core.experiments.association import rotating_scene_plots, scan_plots
 from radarviz.core.scenarios.crossing import CrossingScene
 from radarviz.core.tracking.association import (
     AssociationOptions,
@@ -152,7 +152,7 @@ def test_rotating_scene_same_on_both_engines() -> None:
     """The defaults of ``track --associate gnn`` (IMM, ucm gate, plots as they come), four
     rotating radars, clutter, P_D < 1."""
     sites = radars()
-    plots = as_plots(sites, scene(7, sites, targets=12, duration_s=90.0))
+    plots = rotating_scene_plots(sites, scene(7, sites, targets=12, duration_s=90.0))
     results: dict[str, list[ScanResult]] = {}
     for engine in ("numpy", "compiled"):
         gnn = GNNTracker(

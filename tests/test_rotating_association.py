@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from radarviz.core.experiments.association import rotating_scene_plots
 from radarviz.core.scenarios.rotating import (
     CLUTTER,
     RotatingPlots,
@@ -71,21 +72,6 @@ def scene(
     return rotating_plots(rng, sites, traffic, duration_s)
 
 
-def as_plots(sites: list[RotatingRadar], pl: RotatingPlots) -> list[Plot]:
-    return [
-        Plot(
-            float(t),
-            float(r),
-            float(b),
-            sites[j].sigma_r_m,
-            sites[j].sigma_beta_rad,
-            site=(sites[j].x_m, sites[j].y_m, 0.0),
-            radar=sites[j].name,
-        )
-        for t, j, r, b in zip(pl.time_s, pl.radar, pl.range_m, pl.azimuth_rad, strict=True)
-    ]
-
-
 def associate(
     plots: list[Plot], coverage: dict[str, RadarCoverage] | None = None
 ) -> tuple[GNNTracker, list[str]]:
@@ -131,7 +117,7 @@ def test_scene_has_the_layout_of_real_data() -> None:
 def test_beam_estimates_period_sense_and_coverage() -> None:
     sites = radars()
     pl = scene(4, sites, targets=20, duration_s=120.0)
-    gnn, _ = associate(as_plots(sites, pl))
+    gnn, _ = associate(rotating_scene_plots(sites, pl))
     for r in sites:
         beam = gnn.beams[r.name]
         assert beam.period_s == pytest.approx(r.period_s, rel=0.01)
@@ -211,7 +197,7 @@ def test_book_confirms_m_of_n_expected_detections() -> None:
 def test_rotating_radars_with_partial_coverage_are_tracked(seed: int) -> None:
     sites = radars()
     pl = scene(seed, sites)
-    gnn, ids = associate(as_plots(sites, pl))
+    gnn, ids = associate(rotating_scene_plots(sites, pl))
     s = plot_scores(pl.origin, ids, set(gnn.ever_confirmed))
     assert s.targets == 30
     assert s.tracks_per_target <= 1.15, s
@@ -232,7 +218,7 @@ def test_target_seen_by_one_radar_only_is_held() -> None:
     one radar's 4–5 s revisit can break a track, ``docs/manoeuvre.md``)."""
     sites = radars(coverage_m=60e3)
     pl = scene(5, sites, targets=20, duration_s=300.0, turn_deg=0.0)
-    gnn, ids = associate(as_plots(sites, pl))
+    gnn, ids = associate(rotating_scene_plots(sites, pl))
     conf = set(gnn.ever_confirmed)
     s = plot_scores(pl.origin, ids, conf)
     assert s.target_plots_outside <= 0.02 and s.tracks_per_target <= 1.15, s

@@ -34,6 +34,7 @@ from radarviz.core.confidence import student_t_quantile
 from radarviz.core.filters.methods import ALL_METHODS
 from radarviz.core.params import check, check_choice, check_int, default
 from radarviz.core.scenarios.crossing import CrossingScene, crossing_scans
+from radarviz.core.scenarios.rotating import RotatingPlots, RotatingRadar
 from radarviz.core.tracking.association import AssociationOptions, GNNTracker
 from radarviz.core.tracking.gospa import TrackCounter, gospa
 from radarviz.core.tracking.stream import Plot, StreamOptions
@@ -107,6 +108,25 @@ def scan_plots(scene: CrossingScene, rng: np.random.Generator) -> list[list[Plot
             for r, b in zip(s.range_m, s.azimuth_rad, strict=True)
         ]
         for t, s in zip(scene.times_s, crossing_scans(scene, rng), strict=True)
+    ]
+
+
+def rotating_scene_plots(radars: list[RotatingRadar], plots: RotatingPlots) -> list[Plot]:
+    """A rotating-radar scene's plots (``core.scenarios.rotating``) as ``Plot`` records, each
+    with its radar's name, site and accuracies (2D, unlabelled)."""
+    return [
+        Plot(
+            float(t),
+            float(r),
+            float(b),
+            radars[j].sigma_r_m,
+            radars[j].sigma_beta_rad,
+            site=(radars[j].x_m, radars[j].y_m, 0.0),
+            radar=radars[j].name,
+        )
+        for t, j, r, b in zip(
+            plots.time_s, plots.radar, plots.range_m, plots.azimuth_rad, strict=True
+        )
     ]
 
 

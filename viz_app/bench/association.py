@@ -71,6 +71,7 @@ def bench_rotating(
     targets: int, duration_s: float = ROTATING_S, seed: int = 3, reference: bool = False
 ) -> dict[str, Any]:
     """The ``rotating_*`` figures (module docstring)."""
+    from radarviz.core.experiments.association import rotating_scene_plots
     from radarviz.core.scenarios.rotating import (
         CLUTTER,
         RotatingRadar,
@@ -79,7 +80,7 @@ def bench_rotating(
     )
     from radarviz.core.tracking.association import AssociationOptions, GNNTracker, plot_batches
     from radarviz.core.tracking.plot_scores import plot_scores
-    from radarviz.core.tracking.stream import Plot, StreamOptions
+    from radarviz.core.tracking.stream import StreamOptions
     from radarviz.core.tracking.targets import TargetTracker
 
     sites = [
@@ -89,18 +90,7 @@ def bench_rotating(
     rng = np.random.default_rng(seed)
     traffic = air_traffic(rng, targets, duration_s, turn_rate_dps=1.0)
     pl = rotating_plots(rng, sites, traffic, duration_s)
-    plots = [
-        Plot(
-            float(t),
-            float(r),
-            float(b),
-            sites[j].sigma_r_m,
-            sites[j].sigma_beta_rad,
-            site=(sites[j].x_m, sites[j].y_m, 0.0),
-            radar=sites[j].name,
-        )
-        for t, j, r, b in zip(pl.time_s, pl.radar, pl.range_m, pl.azimuth_rad, strict=True)
-    ]
+    plots = rotating_scene_plots(sites, pl)
     labels = [f"t{o}" if o != CLUTTER else f"c{i}" for i, o in enumerate(pl.origin.tolist())]
     labelled = [replace(p, target=t) for p, t in zip(plots, labels, strict=True)]
     options = StreamOptions(model="imm")
