@@ -106,6 +106,7 @@ from radarviz.core.filters.methods import (
     stack_parts,
 )
 from radarviz.core.filters.state import CVBatch, position_index, quad_form_inv
+from radarviz.core.geometry import direction_cosines
 from radarviz.core.params import ParameterError, check, check_choice, default
 from radarviz.core.tracking.coverage import (
     EDGE_FRACTION,
@@ -909,8 +910,7 @@ class GNNTracker:
         b = np.array([p.azimuth_rad for p in sub])
         e = np.array([p.elevation_rad or 0.0 for p in sub])
         site = np.array([p.site for p in sub], dtype=np.float64)
-        ground = r * np.cos(e)
-        xyz = site + np.stack([ground * np.cos(b), ground * np.sin(b), r * np.sin(e)], -1)
+        xyz = site + r[:, None] * direction_cosines(b, e)
         gap = np.linalg.norm(xyz[:, : self.dims] - book.x[slots][:, 0::2], axis=1)
         dt = np.array([p.time_s for p in sub]) - book.last_s[slots]
         sigma = np.array([p.sigma_r_m + p.range_m * p.sigma_azimuth_rad for p in sub])
