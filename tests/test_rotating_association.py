@@ -19,10 +19,12 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
+from numpy.typing import NDArray
 
 from radarviz.core.experiments.association import rotating_scene_plots
 from radarviz.core.scenarios.rotating import (
@@ -324,3 +326,67 @@ def test_a_track_of_one_plot_takes_no_plot_it_could_only_reach_too_fast() -> Non
         gnn.add_scan([Plot(0.0, 30e3, 0.0, 50.0, 0.002, radar="a")])
         res = gnn.add_scan([Plot(5.0, 30e3 + offset_m, 0.0, 50.0, 0.002, radar="a")])
         assert (res.track_ids == ["1"]) is joined, offset_m
+
+
+# ------------------------------------------------------------------------------------------
+# The prefilter of a turning IMM
+# ------------------------------------------------------------------------------------------
+
+
+def test_prefilter_keeps_every_pair_inside_the_gate_of_a_turning_imm() -> None:
+    """``GNNTracker.near`` on the default IMM's models (constant velocity, ±2.25°/s turns)
+    with quiet process noise (σa ≤ 0.3 m/s², so that the noise's T⁴ term does not cover
+    the turns): a target flies a circle at 2.25°/s (the IMM settles on that turn model),
+    seen every 4 s for 80 s, then coasts. For plots on a grid around its predicted position
+    4 to 40 s after the last plot, every pair inside the gate at the plot's own time
+    (``distances``: the track predicted by the engine) is among the prefilter's pairs, which
+    drop the pairs far outside; the straight-line bound without the turns' reach loses
+    some."""
+    omega = math.radians(2.25)
+    radius = 250.0 / omega  # 250 m/s
+    sigma_r, sigma_b = 20.0, math.radians(0.05)
+    rng = np.random.default_rng(4)
+
+    def plot(t: float, xy: NDArray[np.float64]) -> Plot:
+        return Plot(t, float(np.hypot(*xy)), float(np.arctan2(xy[1], xy[0])), sigma_r, sigma_b)
+
+    options = StreamOptions(model="imm", imm_sigma_a_mps2=(0.1, 0.3, 0.3, 0.3))
+    gnn = GNNTracker(("ucm",), False, options, AssociationOptions())
+    assert gnn.prefiltered and gnn._omega_max == pytest.approx(omega)
+    for t in np.arange(0.0, 80.1, 4.0):
+        xy = np.array([30e3 + radius * math.sin(omega * t), radius * (1 - math.cos(omega * t))])
+        noisy = plot(float(t), xy)
+        gnn.add_batch([replace_polar(noisy, rng, sigma_r, sigma_b)])
+    assert len(gnn.live()) == 1
+    slots = gnn.book.live_slots()
+    last = float(gnn.book.last_s[slots[0]])
+    missed_straight = 0
+    for ahead in (4.0, 12.0, 24.0, 40.0):
+        _, pred = gnn.states("ucm", last + ahead, status=gnn.status(gnn.live()[0]))
+        centre = pred.x[0, [0, 2]]
+        # The innovation's σ per axis, about: the prediction's and the plot's own.
+        sd = np.sqrt(np.diag(pred.P[0])[[0, 2]] + sigma_r**2 + (3e4 * sigma_b) ** 2)
+        u = np.linspace(-8.0, 8.0, 25)
+        grid = [centre + sd * (a, b) for a in u for b in u]
+        grid += [centre + np.array([a, b]) for a in (-1e5, 1e5) for b in (-1e5, 0.0, 1e5)]  # far
+        part = [plot(last + ahead, xy) for xy in grid]
+        d2 = gnn.distances(gnn.live(), part)[0]
+        inside = set(np.flatnonzero(d2 < gnn.gate).tolist())
+        assert inside, ahead
+        near = set(gnn.near(slots, part)[1].tolist())
+        assert inside <= near, (ahead, sorted(inside - near)[:5])
+        assert not near & set(range(len(part) - 6, len(part)))  # the far points are dropped
+        straight = gnn._omega_max
+        gnn._omega_max = 0.0
+        missed_straight += len(inside - set(gnn.near(slots, part)[1].tolist()))
+        gnn._omega_max = straight
+    assert missed_straight > 0
+
+
+def replace_polar(p: Plot, rng: np.random.Generator, sigma_r: float, sigma_b: float) -> Plot:
+    """``p`` with its range and azimuth perturbed by their noise."""
+    return replace(
+        p,
+        range_m=p.range_m + sigma_r * rng.normal(),
+        azimuth_rad=p.azimuth_rad + sigma_b * rng.normal(),
+    )

@@ -12,8 +12,9 @@ by the others only.
   revolution λ (uniform in range within the coverage and in azimuth, what a CFAR detector
   gives).
 * **Targets** (``air_traffic``): straight legs at constant speed joined by coordinated turns,
-  drawn per target: start on a circle, heading towards a point near the centre, speed in
-  [v_min, v_max], a turn of ``turn_deg`` at ``turn_rate_dps`` half way.
+  drawn per target: start on a circle, heading towards a point near the centre (or, en
+  route, anywhere in the disc with any heading), speed in [v_min, v_max], a turn of
+  ``turn_deg`` at ``turn_rate_dps`` half way.
 * **Stamping.** The beam's azimuth is θ(t) = θ₀ + d ω t (d = ±1, ω = 2π / T). In revolution
   n the beam passes a target at the time t with θ(t) ≡ β(p(t)) (mod 2π), found by the
   fixed point t ← t_n + ((d (β(p(t)) − θ(t_n))) mod 2π) / ω from the revolution's start
@@ -90,14 +91,21 @@ def air_traffic(
     turn_deg: float = 60.0,
     turn_rate_dps: float = 1.5,
     step_s: float = 0.1,
+    en_route: bool = False,
 ) -> Traffic:
-    """Straight legs with one coordinated turn each (module docstring)."""
+    """Straight legs with one coordinated turn each (module docstring); ``en_route``: each
+    target starts anywhere in the disc of ``radius_m`` (uniform in area) with any heading,
+    traffic already under way, instead of on the disc's rim heading inwards (which packs
+    many targets into one ring at the start)."""
     n = math.ceil(duration_s / step_s) + 1
     t = np.arange(n) * step_s
     start_angle = rng.uniform(0, 2 * math.pi, targets)
     start = radius_m * np.stack([np.cos(start_angle), np.sin(start_angle)], -1)
     aim = rng.uniform(-0.3, 0.3, (targets, 2)) * radius_m
     heading = np.arctan2(aim[:, 1] - start[:, 1], aim[:, 0] - start[:, 0])
+    if en_route:
+        start = start * np.sqrt(rng.uniform(0.0, 1.0, targets))[:, None]
+        heading = rng.uniform(0, 2 * math.pi, targets)
     speed = rng.uniform(*speed_mps, targets)
     sense = rng.choice([-1.0, 1.0], targets)
     turn_time = math.radians(turn_deg) / math.radians(turn_rate_dps)

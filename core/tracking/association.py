@@ -647,11 +647,14 @@ class GNNTracker:
         self.methods = tuple(methods)
         self.dense = dense
         # A turn model's predicted mean follows an arc, not a segment: no box between times.
-        turns = options.model == "imm" and any(options.imm_turn_rate_degps or ())
-        self._interval = options.model in INTERVAL_MODELS and not turns
+        rates = options.imm_turn_rate_degps or () if options.model == "imm" else ()
+        self._interval = options.model in INTERVAL_MODELS and not any(rates)
         motion = options.motion()
-        # q̄ of ``near``: the largest σa² of the motion model('s models).
+        # q̄ and ω̄ of ``near``: the largest σa² of the motion model('s models), and the
+        # largest turn rate of the IMM's models (rad/s).
         self._q_max = float(np.max(np.square(motion.sigma_a_mps2)))
+        self.model = options.model
+        self._omega_max = math.radians(max((abs(float(w)) for w in rates), default=0.0))
         self.association = a = association
         # The gate reads predictions and deletes tracks (TargetTracker.predicted, forget) on
         # either engine: the compiled one (the default) runs the kernels' own prediction,
@@ -730,17 +733,30 @@ class GNNTracker:
         them (``pairs`` returns no other pair inside it), and usually little else. For a
         gating method with ``boxed`` and a model in ``INTERVAL_MODELS`` (``prefiltered``).
 
-        For a track predicted T after its last plot, on each position axis i the mean is
-        x⁻_i = x_i + T ẋ_i and the variance P⁻_ii(T) = P_pp + 2T P_pv + T² P_vv + q T⁴/4:
-        exact for the cv model; for the IMM the combined prediction is F P Fᵀ + Σⱼ c̄ⱼ Qⱼ
-        (the mixing preserves the mixture, whose prediction is its combined posterior's), at
-        most that with q̄ the largest model's σa². As d² ≥ ν_i² / S_ii on every axis
-        (``gate_box_pairs``), with ν = z + s − H x⁻ (``boxed``) and S_ii = P⁻_ii + R_ii, a pair
-        inside the gate has (z_i + s_i − x⁻_i)² < γ (P⁻_ii + R_ii) ≤ γ (V_i(T) + R_ii) on
-        every axis, at its plot's own time; ``PREFILTER_MARGIN`` widens γ well past rounding.
-        One compiled pass (``core.tracking.kernels_gate.near_pairs``), O(K P) for K tracks
-        and P plots, no Python loop over the tracks. ``points``: ``gate_points(plots)``,
-        when the caller has it.
+        The bound. A track is predicted T ≥ 0 after its last plot. For the cv model the
+        position on axis i is U_i = p_i + T v_i with mean c_i = x_i + T ẋ_i and variance
+        Var U_i = P_pp + 2T P_pv + T² P_vv, plus the noise's q T⁴/4. For the IMM, the mixed
+        initial conditions (weights c̄ⱼ) are a mixture with the combined posterior's mean and
+        covariance (x, P: what the book holds), and the combined prediction is that
+        mixture's moments after each component's own motion: a constant-velocity model
+        moves the horizontal position by T v, a turn at ωⱼ by Aⱼ v with
+        Aⱼ = ∫₀ᵀ R(ωⱼ s) ds, R the rotation. As |R(θ) − I| ≤ |θ|, |Aⱼ − T I| ≤ |ωⱼ| T²/2, so
+        the predicted position is U + G + W with G = (A_J − T I) v, J the model, so
+        E G_i² ≤ E|G|² ≤ δ², δ = ω̄ T²/2 · √E|v_h|² (E|v_h|² = |ẋ_h|² + tr P_vv over the
+        two horizontal axes, ω̄ the largest |ωⱼ|; G = 0 on z), and W the noise, zero-mean
+        given the model and the state, E W_i² ≤ q̄ T⁴/4 (q̄ the largest σa²). Hence the
+        predicted mean is within |E G_i| ≤ δ of c_i, and
+        P⁻_ii = Var(U_i + G_i) + E W_i² ≤ (√Var U_i + δ)² + q̄ T⁴/4 = V_i(T) (the variance
+        of a sum is at most (σ₁ + σ₂)², and Var G_i ≤ E G_i² ≤ δ²). With no
+        turn model δ = 0 and V_i is exact for the cv model.
+
+        As d² ≥ ν_i² / S_ii on every axis (``gate_box_pairs``), with ν = z + s − H x⁻
+        (``boxed``) and S_ii = P⁻_ii + R_ii, a pair inside the gate has
+        |z_i + s_i − x⁻_i| < √(γ (P⁻_ii + R_ii)), so (|z_i + s_i − c_i| − δ)₊² < γ (V_i(T) +
+        R_ii) on every axis, at its plot's own time; ``PREFILTER_MARGIN`` widens γ well
+        past rounding. One compiled pass (``core.tracking.kernels_gate.near_pairs``), O(K P)
+        for K tracks and P plots, no Python loop over the tracks. ``points``:
+        ``gate_points(plots)``, when the caller has it.
         """
         from radarviz.core.tracking.kernels_gate import near_pairs
 
@@ -751,16 +767,17 @@ class GNNTracker:
         rows = np.empty(slots.size * n_p, dtype=np.intp)
         cols = np.empty(slots.size * n_p, dtype=np.intp)
         found = near_pairs(
-            slots, book.x, book.P, book.last_s, times, self._q_max, points, r_ii,
-            g.threshold * PREFILTER_MARGIN, rows, cols,
+            slots, book.x, book.P, book.last_s, times, self._q_max, self._omega_max,
+            points, r_ii, g.threshold * PREFILTER_MARGIN, rows, cols,
         )  # fmt: skip
         return rows[:found], cols[:found]
 
     @property
     def prefiltered(self) -> bool:
         """Whether the sparse route's candidates come from ``near`` (a boxed gating method,
-        a model in ``INTERVAL_MODELS``) rather than ``pairs``' coarse box of every track."""
-        return boxed(self._gate.method) and self._interval
+        a model in ``INTERVAL_MODELS``, turn models included) rather than ``pairs``' coarse
+        box of every track."""
+        return boxed(self._gate.method) and self.model in INTERVAL_MODELS
 
     def scored(
         self,

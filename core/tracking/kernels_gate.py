@@ -8,11 +8,13 @@ use only.
 
 from __future__ import annotations
 
+import math
+
 from radarviz.core.filters.kernels_2d import _jit, coefficients, convert
 
 
 @_jit
-def near_pairs(slots, x, P, last_s, time_s, q_max, points, r_ii, scale, rows, cols):
+def near_pairs(slots, x, P, last_s, time_s, q_max, omega_max, points, r_ii, scale, rows, cols):
     """Write into rows, cols (N·B at most) the (track, plot) pairs, track k of ``slots``
     (N,) and plot j of the batch's B, whose bound on the gate holds; returns how many, in
     track then plot order.
@@ -22,26 +24,38 @@ def near_pairs(slots, x, P, last_s, time_s, q_max, points, r_ii, scale, rows, co
             last_s (K,) (the time of each track's last plot, s).
         time_s: (B,) the plots' times (s).
         q_max: the largest σa² of the motion model(s) (m²/s⁴).
+        omega_max: the largest |ω| of the IMM's turn models (rad/s; 0 for none).
         points: (B, d) the plots' converted positions (site added); r_ii (B, d) their R_ii.
         scale: γ times the margin.
 
-    Per axis i, with T = t_j − the track's last time: the mean x_i + T ẋ_i and
-    V_i(T) = P_pp + 2T P_pv + T² P_vv + q_max T⁴/4; the pair holds when, on every axis,
-    (z_i − x_i − T ẋ_i)² < scale · (V_i(T) + R_ii). A NaN anywhere leaves the pair out.
+    Per axis i, with T = t_j − the track's last time: the straight-line mean
+    c_i = x_i + T ẋ_i, the turns' reach δ = ω̄ T²/2 · √(|ẋ_h|² + tr P_vv,h) on the two
+    horizontal axes (0 on z) and V_i(T) = (√(P_pp + 2T P_pv + T² P_vv) + δ)² + q_max T⁴/4;
+    the pair holds when, on every axis, max(|z_i − c_i| − δ, 0)² < scale · (V_i(T) + R_ii)
+    (``GNNTracker.near`` derives it). A NaN anywhere leaves the pair out.
     """
     d, n_p = points.shape[1], points.shape[0]
     found = 0
     for k in range(slots.shape[0]):
         s = slots[k]
+        # E|v_h|²: the horizontal speed's second moment under the track's posterior.
+        speed2 = x[s, 1] ** 2 + x[s, 3] ** 2 + P[s, 1, 1] + P[s, 3, 3]
+        reach = 0.5 * omega_max * math.sqrt(speed2)  # a NaN state: NaN, the pair fails
         for j in range(n_p):
             T = time_s[j] - last_s[s]
             inside = True
             for a in range(d):
                 p, v = 2 * a, 2 * a + 1
-                nu = points[j, a] - (x[s, p] + T * x[s, v])
+                delta = reach * T * T if a < 2 else 0.0
+                nu = abs(points[j, a] - (x[s, p] + T * x[s, v])) - delta
+                if nu < 0.0:
+                    nu = 0.0
                 var = P[s, p, p] + 2.0 * T * P[s, p, v] + T * T * P[s, v, v]
-                var += 0.25 * q_max * T**4
-                if not nu * nu < scale * (var + r_ii[j, a]):  # a NaN fails too
+                if var < 0.0:  # rounding of a tiny variance
+                    var = 0.0
+                sd = math.sqrt(var) + delta
+                var = sd * sd + 0.25 * q_max * T**4
+                if not nu * nu < scale * (var + r_ii[j, a]):  # a NaN fails
                     inside = False
                     break
             if inside:

@@ -27,7 +27,8 @@ scan by scan (so that a shared machine's load falls on all three alike):
   same way (``stamped_correct``: every track on one target).
 
 * ``rotating_*``: the layout of real multi-radar data (``core.scenarios.rotating``):
-  ``targets`` targets of air traffic over ``ROTATING_S`` seconds, four rotating radars
+  ``targets`` targets of air traffic en route (anywhere in a disc of 60 km, any heading)
+  over ``ROTATING_S`` seconds, four rotating radars
   113 km apart (periods 4.0 to 5.1 s, phases staggered, 80 km coverage, P_D 0.9, 5 false
   plots a revolution), each plot stamped by its radar's beam; the plots associated as they
   come with the defaults of ``track --associate gnn`` (IMM, gate ``ucm``, ``plot_batches``:
@@ -88,7 +89,7 @@ def bench_rotating(
         for j, (x, y) in enumerate(ROTATING_SITES)
     ]
     rng = np.random.default_rng(seed)
-    traffic = air_traffic(rng, targets, duration_s, turn_rate_dps=1.0)
+    traffic = air_traffic(rng, targets, duration_s, turn_rate_dps=1.0, en_route=True)
     pl = rotating_plots(rng, sites, traffic, duration_s)
     plots = rotating_scene_plots(sites, pl)
     labels = [f"t{o}" if o != CLUTTER else f"c{i}" for i, o in enumerate(pl.origin.tolist())]
