@@ -118,6 +118,10 @@ def _plots(target: str = "") -> list[radarviz.Plot]:
         (lambda: radarviz.run_gorshkov(tracking_runs=1), "tracking_runs must be 0"),
         (lambda: radarviz.finite_memory(0, sigma_r_m=1, sigma_vr_mps=1, period_s=1), "k must"),
         (lambda: radarviz.track([], init="later"), "init must be one of"),
+        (lambda: radarviz.track([], model="imm", sigma_a_mps2=1.0), "sigma_a_mps2 is the cv"),
+        (lambda: radarviz.track([], imm_sigma_a_mps2=(1, 5), transition_prob=(1,)), "transit"),
+        (lambda: radarviz.track([], model="cv", imm_turn_rate_degps=(0, 2)), "imm_turn_rate"),
+        (lambda: radarviz.track([], model="bogus"), "model must be one of"),
         (lambda: radarviz.to_table(42), "result must be"),
         (lambda: radarviz.record("nope", "x.rrd"), "preset must be one of"),
         (
@@ -144,11 +148,13 @@ def test_bad_input_is_one_line_naming_the_parameter(call, start: str) -> None:
 
 
 def test_track_equals_the_file_tracker(tmp_path: Path) -> None:
+    """``radarviz track`` with its defaults, ``radarviz.track_file`` and ``radarviz.track``
+    with theirs: the same tracker (the IMM), the same numbers."""
     plots, radars = simulated_plots("fusion", 2, 1.0, 20)
     meas, sites = tmp_path / "m.csv", tmp_path / "r.toml"
     write_measurements(str(meas), str(sites), plots, radars)
     out = tmp_path / "tracks.csv"
-    run_track(str(meas), str(sites), str(out))
+    assert main(["track", "--input", str(meas), "--radars", str(sites), "--out", str(out)]) == 0
     with out.open() as fh:
         cli_rows = list(csv.DictReader(fh))
     from_file = radarviz.track_file(str(meas), str(sites))
@@ -168,6 +174,9 @@ def test_track_equals_the_file_tracker(tmp_path: Path) -> None:
     assert set(table.method) == set(from_file.methods)
     pos = from_file.positions_m("ekf")
     assert pos.shape == (len(plots), 3)
+    # The papers' filter is one argument away, and differs (Q = 0 is over-confident).
+    papers = radarviz.track_file(str(meas), str(sites), model="cv", sigma_a_mps2=0.0)
+    assert papers.steps[-1].P[1, 1] < 0.5 * from_file.steps[-1].P[1, 1]
 
 
 def test_track_of_many_targets_equals_each_target_alone() -> None:
@@ -202,7 +211,9 @@ def test_track_file_associates_as_the_cli_does(tmp_path: Path) -> None:
     with out.open() as fh:
         cli_rows = list(csv.DictReader(fh))
     options = radarviz.AssociationOptions(confirm_m=2)
-    tracks = radarviz.track_file(str(m), str(r), ["ucm", "ekf"], association=options)
+    tracks = radarviz.track_file(
+        str(m), str(r), ["ucm", "ekf"], association=options, model="cv", sigma_a_mps2=0.0
+    )
     assert len(tracks.steps) == len(cli_rows) > 0
     for s, row in zip(tracks.steps, cli_rows, strict=True):
         assert (s.method, s.target, s.status) == (row["method"], row["target"], row["status"])

@@ -353,6 +353,77 @@ class StreamOptions:
         return CVModel(self.sigma_a_mps2)
 
 
+def motion_fields(
+    model: str | None = None,
+    sigma_a_mps2: float | None = None,
+    imm_sigma_a_mps2: tuple[float, ...] | list[float] | None = None,
+    transition_prob: object = None,
+    imm_turn_rate_degps: tuple[float, ...] | list[float] | None = None,
+    names: dict[str, str] | None = None,
+) -> dict[str, object]:
+    """The motion-model fields of ``StreamOptions`` from what a caller gave, None for not
+    given: the one rule of ``radarviz track`` and of ``radarviz.track``/``track_file``.
+
+    * ``model`` None: ``cv`` if ``sigma_a_mps2`` is given, else ``imm`` (the IMM of
+      ``DEFAULT_IMM``: a quiet, two turning and a manoeuvre model, consistent on
+      manoeuvring aircraft). ``sigma_a_mps2`` None means 0 for ``cv`` (the papers' Q = 0).
+    * A value of the other model is refused rather than ignored: ``sigma_a_mps2`` with
+      ``imm``; ``imm_sigma_a_mps2``, ``transition_prob`` or ``imm_turn_rate_degps`` with
+      ``cv``.
+    * ``transition_prob``: rows, or r × r numbers row by row (r the number of models).
+    * The default models' turn rates go with the default σa; models given by
+      ``imm_sigma_a_mps2`` are constant velocity unless ``imm_turn_rate_degps`` says
+      otherwise.
+
+    ``names`` maps a parameter to what the caller calls it in its errors (the command line:
+    its flags). Each value is then checked by ``StreamOptions``.
+    """
+    call = {k: k for k in ("model", "sigma_a_mps2", "imm_sigma_a_mps2", "transition_prob")}
+    call |= {"imm_turn_rate_degps": "imm_turn_rate_degps"} | dict(names or {})
+    if model is None:
+        model = "cv" if sigma_a_mps2 is not None else "imm"
+    if model == "imm" and sigma_a_mps2 is not None:
+        raise ParameterError(
+            f"{call['sigma_a_mps2']} is the cv model's; with {call['model']} imm use "
+            f"{call['imm_sigma_a_mps2']}",
+            "sigma_a_mps2",
+        )
+    if model == "cv":
+        for name, value in (
+            ("imm_sigma_a_mps2", imm_sigma_a_mps2),
+            ("transition_prob", transition_prob),
+            ("imm_turn_rate_degps", imm_turn_rate_degps),
+        ):
+            if value is not None:
+                raise ParameterError(
+                    f"{call[name]} is the imm model's; it needs {call['model']} imm", name
+                )
+    sigmas = tuple(DEFAULT_IMM.sigma_a_mps2 if imm_sigma_a_mps2 is None else imm_sigma_a_mps2)
+    transition = DEFAULT_IMM.transition
+    if transition_prob is not None:
+        r = len(sigmas)
+        rows = np.asarray(transition_prob, dtype=np.float64)
+        if rows.ndim == 1 and rows.size == r * r:
+            rows = rows.reshape(r, r)
+        if rows.shape != (r, r):
+            raise ParameterError(
+                f"{call['transition_prob']} must give {r * r} probabilities ({r} rows of {r}, "
+                f"one per model of {call['imm_sigma_a_mps2']}) (got {rows.size})",
+                "transition_prob",
+            )
+        transition = tuple(tuple(float(v) for v in row) for row in rows)
+    turns = DEFAULT_IMM.turn_rate_degps if imm_sigma_a_mps2 is None else None
+    if imm_turn_rate_degps is not None:
+        turns = tuple(imm_turn_rate_degps)
+    return {
+        "model": model,
+        "sigma_a_mps2": 0.0 if sigma_a_mps2 is None else sigma_a_mps2,
+        "imm_sigma_a_mps2": sigmas,
+        "transition_prob": transition,
+        "imm_turn_rate_degps": turns,
+    }
+
+
 def check_methods(methods: tuple[str, ...], three_d: bool) -> None:
     """``methods`` must be at least one of the methods that exist in 2D or in 3D."""
     allowed = METHODS_3D if three_d else ALL_METHODS

@@ -12,7 +12,13 @@ from numpy.typing import NDArray
 from radarviz.core.filters.state import position_index
 from radarviz.core.params import ParameterError
 from radarviz.core.tracking.association import AssociationOptions, AssociationReport
-from radarviz.core.tracking.stream import Plot, PlotError, StateRow, StreamOptions
+from radarviz.core.tracking.stream import (
+    Plot,
+    PlotError,
+    StateRow,
+    StreamOptions,
+    motion_fields,
+)
 from radarviz.viz_app.io.plots import (
     Radar,
     RowObserver,
@@ -146,8 +152,11 @@ def track(
     plots: Iterable[Plot],
     methods: Sequence[str] | None = None,
     *,
-    model: str = "cv",
-    sigma_a_mps2: float = 0.0,
+    model: str | None = None,
+    sigma_a_mps2: float | None = None,
+    imm_sigma_a_mps2: Sequence[float] | None = None,
+    transition_prob: Sequence[Sequence[float]] | Sequence[float] | None = None,
+    imm_turn_rate_degps: Sequence[float] | None = None,
     sigma_v0_mps: float = 1000.0,
     use_doppler: bool = True,
     doppler_update: str = "line_of_sight",
@@ -172,11 +181,18 @@ def track(
             targets, each with its ``target`` label and in time order within its target, or
             none labelled with ``association``.
         methods: filters (default every one of the plots' kind).
-        model: ``cv`` (constant velocity with ``sigma_a_mps2``; the default here, the papers'
-            filter) or ``imm`` (the IMM of a quiet and a manoeuvre model, the default of
-            ``radarviz track``).
-        sigma_a_mps2: process-noise acceleration std of ``cv``, m/s² (0: constant velocity
-            exactly).
+        model: ``imm`` or ``cv``; by default, as ``radarviz track``: ``cv`` when
+            ``sigma_a_mps2`` is given, else ``imm`` (the IMM of a quiet, two turning and a
+            manoeuvre model, consistent on manoeuvring aircraft;
+            ``core.tracking.stream.motion_fields`` is the one rule). ``model="cv"`` with
+            ``sigma_a_mps2=0`` is the papers' filter (Q = 0).
+        sigma_a_mps2: process-noise acceleration std of ``cv``, m/s² (default 0: constant
+            velocity exactly); refused with ``imm``.
+        imm_sigma_a_mps2, transition_prob, imm_turn_rate_degps: the IMM's σa per model
+            (m/s²), its transition probabilities (rows, or r × r numbers row by row) and
+            each model's turn rate (°/s, 0 constant velocity), as ``--imm-sigma-a``,
+            ``--imm-transition`` and ``--imm-turn-rate``; default the IMM of
+            ``radarviz track``; refused with ``cv``.
         sigma_v0_mps: velocity std of the start, m/s.
         use_doppler: use the plots' radial velocities where they have them.
         doppler_update: how they update the tracks: ``line_of_sight`` (along the measured
@@ -202,8 +218,9 @@ def track(
     from radarviz.core.tracking.targets import TargetTracker
 
     options = _options(
-        model=model,
-        sigma_a_mps2=sigma_a_mps2,
+        **motion_fields(
+            model, sigma_a_mps2, imm_sigma_a_mps2, transition_prob, imm_turn_rate_degps
+        ),
         sigma_v0_mps=sigma_v0_mps,
         use_doppler=use_doppler,
         doppler_update=doppler_update,
@@ -307,8 +324,11 @@ def track_file(
     radars: str,
     methods: Sequence[str] | None = None,
     *,
-    model: str = "cv",
-    sigma_a_mps2: float = 0.0,
+    model: str | None = None,
+    sigma_a_mps2: float | None = None,
+    imm_sigma_a_mps2: Sequence[float] | None = None,
+    transition_prob: Sequence[Sequence[float]] | Sequence[float] | None = None,
+    imm_turn_rate_degps: Sequence[float] | None = None,
     sigma_v0_mps: float = 1000.0,
     use_doppler: bool = True,
     doppler_update: str = "line_of_sight",
@@ -326,6 +346,7 @@ def track_file(
         methods: see ``track``.
         model: see ``track``.
         sigma_a_mps2: see ``track``.
+        imm_sigma_a_mps2, transition_prob, imm_turn_rate_degps: see ``track``.
         sigma_v0_mps: see ``track``.
         use_doppler: see ``track``.
         doppler_update: see ``track``.
@@ -345,8 +366,9 @@ def track_file(
         ``Tracks``, with the file's radars.
     """
     options = _options(
-        model=model,
-        sigma_a_mps2=sigma_a_mps2,
+        **motion_fields(
+            model, sigma_a_mps2, imm_sigma_a_mps2, transition_prob, imm_turn_rate_degps
+        ),
         sigma_v0_mps=sigma_v0_mps,
         use_doppler=use_doppler,
         doppler_update=doppler_update,

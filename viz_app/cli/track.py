@@ -19,9 +19,15 @@ from radarviz.core.params import ParameterError, check, check_choice, default, p
 from radarviz.core.scenarios.crossing import CrossingScene
 from radarviz.core.tracking.association import ASSOCIATE_MODES, AssociationOptions
 from radarviz.core.tracking.consistency import ConsistencyMonitor
-from radarviz.core.tracking.stream import INIT_MODES, METHODS_3D, Plot, StreamOptions
+from radarviz.core.tracking.stream import (
+    INIT_MODES,
+    METHODS_3D,
+    Plot,
+    StreamOptions,
+    motion_fields,
+)
 from radarviz.viz_app.cli.args import integer, number
-from radarviz.viz_app.cli.params import add_parameter, map_flag
+from radarviz.viz_app.cli.params import add_parameter, map_flag, parameter_flags
 from radarviz.viz_app.cli.presets import (
     ALL_PRESETS,
     FLIGHT_NAMES,
@@ -343,46 +349,16 @@ def _warn(text: str) -> None:
 
 
 def _motion_options(args: argparse.Namespace) -> dict:
-    """The motion-model fields of ``StreamOptions`` from the flags (checked by it)."""
-    model = args.model
-    if model is None:
-        model = "cv" if args.sigma_a_mps2 is not None else "imm"
-    # A flag of the other model would be ignored without a word: refuse it instead.
-    if model == "imm" and args.sigma_a_mps2 is not None:
-        raise ParameterError("--sigma-a is the cv model's; with --model imm use --imm-sigma-a")
-    if model == "cv":
-        for flag, value in (
-            ("--imm-sigma-a", args.imm_sigma_a_mps2),
-            ("--imm-transition", args.imm_transition),
-            ("--imm-turn-rate", args.imm_turn_rate_degps),
-        ):
-            if value is not None:
-                raise ParameterError(f"{flag} is the imm model's; it needs --model imm")
-    sigmas = tuple(
-        DEFAULT_IMM.sigma_a_mps2 if args.imm_sigma_a_mps2 is None else args.imm_sigma_a_mps2
+    """The motion-model fields of ``StreamOptions`` from the flags (``motion_fields``, the
+    rule ``radarviz.track`` follows too; errors name the flags)."""
+    return motion_fields(
+        args.model,
+        args.sigma_a_mps2,
+        args.imm_sigma_a_mps2,
+        args.imm_transition,
+        args.imm_turn_rate_degps,
+        names=parameter_flags(args),
     )
-    transition = DEFAULT_IMM.transition
-    if args.imm_transition is not None:
-        r = len(sigmas)
-        if len(args.imm_transition) != r * r:
-            raise ParameterError(
-                f"--imm-transition must give {r * r} probabilities ({r} rows of {r}, one per "
-                f"model of --imm-sigma-a) (got {len(args.imm_transition)})"
-            )
-        values = tuple(args.imm_transition)
-        transition = tuple(values[i * r : (i + 1) * r] for i in range(r))
-    # The default models' turn rates go with the default σa; models given by --imm-sigma-a
-    # are constant velocity unless --imm-turn-rate says otherwise.
-    turns = DEFAULT_IMM.turn_rate_degps if args.imm_sigma_a_mps2 is None else None
-    if args.imm_turn_rate_degps is not None:
-        turns = tuple(args.imm_turn_rate_degps)
-    return {
-        "model": model,
-        "sigma_a_mps2": 0.0 if args.sigma_a_mps2 is None else args.sigma_a_mps2,
-        "imm_sigma_a_mps2": sigmas,
-        "transition_prob": transition,
-        "imm_turn_rate_degps": turns,
-    }
 
 
 def cmd_track(args: argparse.Namespace) -> int:
