@@ -23,6 +23,8 @@ from dataclasses import dataclass
 from numbers import Integral, Real
 from typing import Literal
 
+import numpy as np
+
 
 class ParameterError(ValueError):
     """A parameter is outside its allowed range. The message is one line, fit for a user.
@@ -89,6 +91,37 @@ def check_real(
     if high is not None and (v >= high if high_open else v > high):
         raise err
     return v
+
+
+def check_reals(
+    name: str,
+    values: object,
+    *,
+    low: float | None = None,
+    high: float | None = None,
+    low_open: bool = True,
+    high_open: bool = False,
+) -> np.ndarray:
+    """``values`` (a number or an array of numbers) as a float64 array if every one is a
+    finite real in the interval (``check_real``'s), else raise ``ParameterError`` naming
+    ``name``, the interval and the first value outside it (with its index for an array)."""
+    rng = interval_text(low, high, low_open=low_open, high_open=high_open)
+    try:
+        a = np.asarray(values, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ParameterError(
+            f"{name} must be finite numbers {rng} (got {_fmt(values)})", name
+        ) from None
+    bad = ~np.isfinite(a)
+    if low is not None:
+        bad |= (a <= low) if low_open else (a < low)
+    if high is not None:
+        bad |= (a >= high) if high_open else (a > high)
+    if bad.any():
+        where = np.unravel_index(int(np.argmax(bad)), a.shape) if a.ndim else ()
+        at = f" at index {where[0] if len(where) == 1 else where}" if a.ndim else ""
+        raise ParameterError(f"{name} must be finite numbers {rng} (got {a[where]:g}{at})", name)
+    return a
 
 
 def check_int(
@@ -170,6 +203,18 @@ class Parameter:
         d = self.default if default is _TABLE_DEFAULT else default
         tail = "" if d is None else f", default {_fmt_default(d)}"
         return f"{self.symbol}, {self.meaning}{unit}, {self.interval(high)}{tail}"
+
+    def check_all(self, values: object) -> np.ndarray:
+        """Validate a number or an array of numbers against this entry's interval
+        (``check_reals``): a float64 array."""
+        return check_reals(
+            self.name,
+            values,
+            low=self.low,
+            high=self.high,
+            low_open=self.low_open,
+            high_open=self.high_open,
+        )
 
     def check(self, value: object, *, high: float | None = None) -> float | int:
         """Validate ``value`` against this entry (``high`` tightens the upper end)."""

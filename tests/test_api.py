@@ -99,6 +99,19 @@ def test_estimate_velocity_recovers_the_true_velocity_without_noise() -> None:
     assert table.shape[0] == 1 and table.geometry_m.iloc[0] == pytest.approx(0.053, abs=5e-4)
 
 
+def _convert(method: str = "ucm", **values: object) -> object:
+    """``radarviz.convert`` of a plot at 10 km, with ``values`` replacing its own."""
+    args = {"range_m": 1e4, "azimuth_rad": 0.3, "sigma_r_m": 50.0, "sigma_azimuth_rad": 0.01}
+    args |= values
+    return radarviz.convert(
+        method,
+        args["range_m"],
+        args["azimuth_rad"],
+        sigma_r_m=args["sigma_r_m"],
+        sigma_azimuth_rad=args["sigma_azimuth_rad"],
+    )
+
+
 def _plots(target: str = "") -> list[radarviz.Plot]:
     """A few plots of one target, labelled ``target``."""
     from dataclasses import replace
@@ -118,6 +131,13 @@ def _plots(target: str = "") -> list[radarviz.Plot]:
         (lambda: radarviz.run_gorshkov(tracking_runs=1), "tracking_runs must be 0"),
         (lambda: radarviz.finite_memory(0, sigma_r_m=1, sigma_vr_mps=1, period_s=1), "k must"),
         (lambda: radarviz.track([], init="later"), "init must be one of"),
+        (lambda: _convert("bogus"), "method must be one of"),
+        (lambda: _convert(sigma_r_m=-1.0), "sigma_r_m must be finite numbers in [0.001,"),
+        (lambda: _convert(range_m=[1e4, np.nan]), "range_m must be finite numbers in (0,"),
+        (lambda: _convert(range_m=[1e4, -5.0]), "range_m must be finite numbers in (0,"),
+        (lambda: _convert(sigma_azimuth_rad=-0.01), "sigma_azimuth_rad must be finite number"),
+        (lambda: _convert(azimuth_rad=np.inf), "azimuth_rad must be finite numbers"),
+        (lambda: _convert("ducm"), "predicted_xy_m is needed by ducm"),
         (lambda: radarviz.track([], model="imm", sigma_a_mps2=1.0), "sigma_a_mps2 is the cv"),
         (lambda: radarviz.track([], imm_sigma_a_mps2=(1, 5), transition_prob=(1,)), "transit"),
         (lambda: radarviz.track([], model="cv", imm_turn_rate_degps=(0, 2)), "imm_turn_rate"),

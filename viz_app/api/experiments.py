@@ -7,12 +7,13 @@ Every function validates its arguments once, by the core configuration or estima
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Iterable, Sequence
 from typing import NamedTuple
 
 from numpy.typing import ArrayLike
 
-from radarviz.core.conversion.planar import Converted
+from radarviz.core.conversion.planar import METHODS_2D, Converted
 from radarviz.core.conversion.planar import convert as _convert
 from radarviz.core.experiments.doppler_start import (
     DopplerTrackingConfig,
@@ -33,7 +34,15 @@ from radarviz.core.finite_memory.fit import (
     finite_memory_fit,
 )
 from radarviz.core.finite_memory.fit import run_gorshkov as _run_gorshkov
-from radarviz.core.params import ParameterError, check, check_int, default
+from radarviz.core.params import (
+    ParameterError,
+    check,
+    check_choice,
+    check_int,
+    check_reals,
+    default,
+    parameter,
+)
 from radarviz.core.velocity.estimate import (
     VelocityEstimate,
     VelocityExperiment,
@@ -69,14 +78,34 @@ def convert(
     Returns:
         ``Converted``: ``z`` the converted points (..., 2) in m and ``R`` their covariances
         (..., 2, 2) in m².
+
+    Raises:
+        ParameterError: an unknown method, or a value outside its range (the bounds of
+            ``radarviz track``'s plots: range (0, 10⁸] m, σr [10⁻³, 10⁵] m, σβ within the
+            σβ bounds of ``sigma_beta_deg``, in rad; every value finite).
     """
+    check_choice("method", method, METHODS_2D)
+    r = parameter("range_m").check_all(range_m)
+    sr = parameter("sigma_r_m").check_all(sigma_r_m)
+    beta = parameter("sigma_beta_deg")  # the σβ bounds, here in rad
+    sb = check_reals(
+        "sigma_azimuth_rad",
+        sigma_azimuth_rad,
+        low=math.radians(beta.low),
+        high=math.radians(beta.high),
+        low_open=beta.low_open,
+    )
+    az = check_reals("azimuth_rad", azimuth_rad)
+    xy = None if predicted_xy_m is None else check_reals("predicted_xy_m", predicted_xy_m)
+    if method == "ducm" and xy is None:
+        raise ParameterError("predicted_xy_m is needed by ducm (its R is at the prediction)")
     return _convert(
         method,
-        range_m,
-        azimuth_rad,
-        sigma_r_m=sigma_r_m,
-        sigma_azimuth_rad=sigma_azimuth_rad,
-        predicted_xy=predicted_xy_m,
+        r,
+        az,
+        sigma_r_m=sr,
+        sigma_azimuth_rad=sb,
+        predicted_xy=xy,
     )
 
 
