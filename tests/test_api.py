@@ -93,7 +93,7 @@ def test_estimate_velocity_recovers_the_true_velocity_without_noise() -> None:
         sigma_elevation_rad=np.deg2rad([0.2, 0.5, 1.0]),
     )
     np.testing.assert_allclose(est.velocity, v, atol=1e-9)
-    # The README's first-order σ of the baseline: 2.157, 3.385, 10.665 m/s.
+    # The first-order σ of the baseline (docs/velocity.md): 2.157, 3.385, 10.665 m/s.
     np.testing.assert_allclose(np.sqrt(np.diag(est.covariance)), [2.157, 3.385, 10.665], atol=5e-4)
     table = radarviz.to_table(est)
     assert table.shape[0] == 1 and table.geometry_m.iloc[0] == pytest.approx(0.053, abs=5e-4)

@@ -44,7 +44,8 @@ def _wait_http(url: str, timeout: float = 30.0) -> None:
     raise TimeoutError(f"{url} did not answer within {timeout} s")
 
 
-#: Where the README's screenshots live; ``RADARVIZ_WRITE_DOCS=1`` makes this test rewrite them.
+#: Where the docs' screenshots live (README.md and docs/viewer.md show them);
+#: ``RADARVIZ_WRITE_DOCS=1`` makes this test rewrite them.
 DOCS = Path(__file__).resolve().parents[1] / "docs"
 VIEWPORT = {"width": 1600, "height": 1000}
 #: Pixels within this RGB distance of a palette colour count as that colour.

@@ -1,6 +1,6 @@
 """The shape of the code: which layer may import what, no import cycles, every package installed.
 
-radarviz has two layers. ``core/`` is the numerics (numpy, scipy, filterpy): it computes and
+radarviz has two layers. ``core/`` is the numerics (numpy, scipy, numba): it computes and
 returns arrays and dataclasses, and never draws, records, serves or writes files. ``viz_app/``
 adapts those results to the CLI, Rerun recordings, the Viser panel, matplotlib figures and Dask
 sweeps. Inside ``core`` the estimation engine (``core/filters``) does not know about the
@@ -46,7 +46,7 @@ FORBIDDEN_IMPORTS: tuple[tuple[str, tuple[str, ...], str], ...] = (
     (
         "core/",
         ("radarviz.viz_app", "rerun", "viser", "matplotlib", "dask", "distributed", "pyarrow"),
-        "core is the numerics (numpy/scipy/filterpy) and knows nothing of the application",
+        "core is the numerics (numpy/scipy/numba) and knows nothing of the application",
     ),
     (
         "core/filters/",

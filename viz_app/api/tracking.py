@@ -338,7 +338,7 @@ def track_file(
     input_format: str = "auto",
 ) -> Tracks:
     """Track a measurement file (CSV or ASTERIX CAT048) with its radars TOML file (the formats
-    of ``radarviz track``, described in the README); nothing is written.
+    of ``radarviz track``, described in ``docs/tracking.md``); nothing is written.
 
     Args:
         measurements: path of the measurement CSV or ASTERIX file.

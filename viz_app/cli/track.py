@@ -126,8 +126,8 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
         "--model",
         default=None,
         metavar="MODEL",
-        help="motion model: imm (the default: an IMM of a quiet and a manoeuvre model, "
-        "consistent on manoeuvring aircraft) or cv (constant velocity with --sigma-a; the "
+        help="motion model: imm (the default: an IMM of a quiet, two turning and a manoeuvre "
+        "model, consistent on manoeuvring aircraft) or cv (constant velocity with --sigma-a; the "
         "default when --sigma-a is given; --model cv --sigma-a 0 is the papers' Q = 0)",
     )
     map_flag(tr, "model", "--model")
