@@ -22,12 +22,30 @@ from websockets.asyncio.server import ServerConnection
 from websockets.datastructures import Headers
 from websockets.http11 import Request, Response
 
+from radarviz.viz_app.rerun.viewer import LOOPBACK, viewer_url
+
 ProcessRequest = Callable[[ServerConnection, Request], Awaitable[Response | None] | Response | None]
 
 #: Width of the controls' frame, px. Viser's phone layout starts at 36 em (576 px) and below.
 CONTROLS_MIN_PX = 580
 #: The query that asks for Viser's own page (the controls) instead of the two-frame page.
 CONTROLS_QUERY = "controls"
+
+
+def embedded_viewer_url(connect_host: str, web_port: int, grpc_port: int) -> str:
+    """The viewer's address for the page's frame: as ``viewer_url``, but on ``localhost``
+    when the servers are on 127.0.0.1.
+
+    Chromium keeps frames of one site (scheme and host, any port) in one renderer process,
+    so a viewer frame on ``127.0.0.1`` would share the controls' main thread, and the
+    controls would freeze while the viewer takes in a run (seconds with software WebGL).
+    ``localhost`` is another site on the same loopback address: the viewer gets a process
+    of its own. Its gRPC source stays on ``connect_host``.
+    """
+    url = viewer_url(connect_host, web_port, grpc_port)
+    if connect_host == LOOPBACK:
+        url = url.replace(f"http://{LOOPBACK}:{web_port}/", f"http://localhost:{web_port}/", 1)
+    return url
 
 
 def panel_page(viewer_url: str, title: str = "radarviz tune") -> str:

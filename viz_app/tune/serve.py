@@ -35,7 +35,7 @@ from radarviz.viz_app.rerun.viewer import (
     wait_viewer,
 )
 from radarviz.viz_app.tune.guard import PanelGuard, guarded_viser_server
-from radarviz.viz_app.tune.page import panel_page, serve_page
+from radarviz.viz_app.tune.page import embedded_viewer_url, panel_page, serve_page
 from radarviz.viz_app.tune.panel import TunePanel
 from radarviz.viz_app.tune.params import TuneParams
 from radarviz.viz_app.tune.session import TuneSession, prepare_blueprints
@@ -182,7 +182,7 @@ def cmd_tune(
         web_port = viewer_port or free_port(connect)
         proc = start_rerun(bind, grpc_port, web_port)
         view_url = viewer_url(connect, web_port, grpc_port)
-        page = panel_page(view_url)
+        page = panel_page(embedded_viewer_url(connect, web_port, grpc_port))
         guard = PanelGuard(host=host, bind=bind)
         server = guarded_viser_server(
             guard, port, wrap=lambda inner: serve_page(inner, page), verbose=False
