@@ -790,7 +790,7 @@ def test_tune_page_switches_scenes_and_each_is_drawn(chromium: tuple[str, list[s
                         typed, want, half = "0.3", r"sigma_beta_deg=0\.3 ", r"sigma_beta_deg"
                     box.click()
                     box.press("Control+a")
-                    box.type(typed, delay=120)  # a quick typist: 120 ms between keys
+                    box.type(typed, delay=80)  # a quick typist: 80 ms between keys
                 t0 = time.monotonic()
                 after, step_s, _ = _first_complete_frame(page, t0, runs_of(scene), frame)
                 assert re.search(want, runs[-1]), (want, runs)
@@ -800,6 +800,18 @@ def test_tune_page_switches_scenes_and_each_is_drawn(chromium: tuple[str, list[s
                 assert _coloured(after) > MIN_COLOURED_VIEW, (scene, "after the change")
                 figures[f"{i + 1}_{scene}"] = {"switch_s": switch_s, "change_s": step_s}
                 previous = after
+            # Bad input: σβ typed as 0 is one error line in the panel, and the viewer keeps
+            # the last good run on screen.
+            box = controls.get_by_role("slider").first.locator(SLIDER_BOX).first
+            box.click()
+            box.press("Control+a")
+            box.type("0")
+            error = _expect(lines, r"^error (.*)", 60, log).group(1)
+            assert error.startswith("sigma_beta_deg must be"), error
+            controls.get_by_text("showing the last good run").first.wait_for(timeout=60_000)
+            time.sleep(3.0)
+            still = _viewer_frame(page)
+            assert _changed_share(still, previous) < SAME_FRAME, "the last good run is gone"
             page.screenshot(path=str(ARTIFACTS / "tune_page.png"))
             browser.close()
     finally:

@@ -40,7 +40,7 @@ TUNE_CONTROLS: dict[str, tuple[str, float, str | None]] = {
     "seed": ("number", 1, "seed"),
 }
 #: Pause (s) after the last keystroke or slider step before a value is run.
-SETTLE_S = 0.4
+SETTLE_S = 0.5
 #: The choice of how the Doppler accuracy is entered: label → the control it shows.
 DOPPLER_INPUTS: dict[str, str] = {"σVr (m/s)": "sigma_vr_mps", "C0": "c0"}
 
