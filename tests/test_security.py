@@ -100,9 +100,18 @@ def _ws(url: urllib.parse.SplitResult, path: str, origin: str) -> None:
 def test_panel_needs_its_token(panel: urllib.parse.SplitResult) -> None:
     token = panel.path.strip("/")
     assert len(token) >= 40, f"the printed address carries no token: {panel.geturl()}"
-    status, page = _get(panel, panel.path)
+    status, page = _get(panel, panel.path)  # the page: the controls' and the viewer's frames
+    assert status == 200 and b"<title>radarviz tune</title>" in page and b"./?controls" in page
+    status, page = _get(panel, panel.path + "?controls")
     assert status == 200 and b"<title>Viser</title>" in page
-    for path in ("/", "/index.html", "/?token=" + token, "/" + token[:-1] + "/", "/x" + token):
+    for path in (
+        "/",
+        "/?controls",
+        "/index.html",
+        "/?token=" + token,
+        "/" + token[:-1] + "/",
+        "/x" + token,
+    ):
         assert _get(panel, path)[0] == 403, path
 
 

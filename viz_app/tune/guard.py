@@ -158,8 +158,16 @@ class PanelGuard:
         return process_request
 
 
-def guarded_viser_server(guard: PanelGuard, port: int, **kwargs: Any) -> Any:
+def guarded_viser_server(
+    guard: PanelGuard,
+    port: int,
+    wrap: Callable[[ProcessRequest | None], ProcessRequest] | None = None,
+    **kwargs: Any,
+) -> Any:
     """``viser.ViserServer(host=guard.bind, port=port, ...)`` with ``guard`` before every request.
+
+    ``wrap``, if given, goes between the guard and Viser's own ``process_request`` (the panel
+    page, ``tune.page.serve_page``): it sees only requests the guard let through.
 
     Raises ServiceError (after stopping the server) if Viser did not build its server through
     ``websockets.asyncio.server.serve`` with a ``process_request``: an unguarded panel never
@@ -174,7 +182,8 @@ def guarded_viser_server(guard: PanelGuard, port: int, **kwargs: Any) -> Any:
 
     def serve(*args: Any, **serve_kwargs: Any) -> Any:
         if "process_request" in serve_kwargs and not installed:
-            serve_kwargs["process_request"] = guard.wrap(serve_kwargs["process_request"])
+            inner = serve_kwargs["process_request"]
+            serve_kwargs["process_request"] = guard.wrap(wrap(inner) if wrap else inner)
             installed.append(True)
         return original(*args, **serve_kwargs)
 

@@ -1,7 +1,11 @@
 """``radarviz tune``: the Viser panel's controls (``serve`` starts it with its servers).
 
-Every control acts where its parameter enters the chosen scene (``tune.params``); a bad value
-is one error line naming the parameter and its range, and the last good run stays on screen.
+Every control acts where its parameter enters the chosen scene (``tune.params``), and only
+the controls the chosen scene reads are shown (``SCENE_PARAMETERS``). The Doppler accuracy is
+one control, entered as σVr or as C0 (the user's choice; the other is derived and shown).
+Typed numbers and the σβ slider apply after a pause of ``SETTLE_S`` (a half-typed "0.3" is
+never run as 0); the scene, the preset and the method boxes apply at once. A bad value is
+one error line naming the parameter and its range, and the last good run stays on screen.
 """
 
 from __future__ import annotations
@@ -10,9 +14,11 @@ import contextlib
 from typing import Any
 
 from radarviz.core.experiments.prosov import ALL_METHODS
-from radarviz.core.finite_memory.fit import PRESETS
-from radarviz.core.params import PARAMETERS, ParameterError
+from radarviz.core.finite_memory.fit import PRESETS, c0_ratio
+from radarviz.core.params import PARAMETERS, ParameterError, check
+from radarviz.viz_app.tune.page import CONTROLS_MIN_PX
 from radarviz.viz_app.tune.params import (
+    SCENE_PARAMETERS,
     SCENES,
     TUNE_LIMITS,
     TuneParams,
@@ -29,9 +35,14 @@ TUNE_CONTROLS: dict[str, tuple[str, float, str | None]] = {
     "sigma_beta_deg": ("slider", 0.1, None),
     "period_s": ("number", 0.5, None),
     "c0": ("number", 0.01, None),
+    "sigma_vr_mps": ("number", 0.1, None),
     "runs": ("number", 1, "Monte Carlo runs"),
     "seed": ("number", 1, "seed"),
 }
+#: Pause (s) after the last keystroke or slider step before a value is run.
+SETTLE_S = 0.5
+#: The choice of how the Doppler accuracy is entered: label → the control it shows.
+DOPPLER_INPUTS: dict[str, str] = {"σVr (m/s)": "sigma_vr_mps", "C0": "c0"}
 
 
 def control_spec(name: str) -> dict[str, Any]:
@@ -94,10 +105,13 @@ class TunePanel:
         self.server, self.session, self.worker = server, session, worker
         gui = server.gui
         with contextlib.suppress(Exception):
-            gui.configure_theme(control_layout="fixed", control_width="large", show_logo=False)
+            gui.configure_theme(control_width="large", show_logo=False, show_share_button=False)
+            gui.main_panel.dock_left()
+            gui.main_panel.set_width(CONTROLS_MIN_PX)
         gui.add_markdown(
-            "## radarviz tune\nEach change re-runs the chosen scene; the Rerun viewer (its own "
-            "tab) switches to the new run. Number fields ignore text that is not a number."
+            "## radarviz tune\nEach change re-runs the chosen scene; the Rerun viewer beside "
+            f"these controls switches to the new run. Typed numbers apply after a {SETTLE_S:g} s "
+            "pause; only the values the scene reads are shown."
         )
         self.scene = gui.add_dropdown(
             "scene",
@@ -109,26 +123,57 @@ class TunePanel:
             "preset",
             ("custom", *PRESETS),
             initial_value="custom",
-            hint="RLS1 … RLS6 fill σr, T and C0 (from σVr)",
+            hint="RLS1 … RLS6 fill σr, T and the Doppler accuracy σVr (C0)",
         )
-        self.controls = {name: add_control(gui, name, getattr(p, name)) for name in TUNE_CONTROLS}
-        self.sigma_r, self.sigma_beta, self.period, self.c0, self.runs, self.seed = (
-            self.controls.values()
+        self.doppler_input = gui.add_dropdown(
+            "Doppler accuracy as",
+            tuple(DOPPLER_INPUTS),
+            initial_value="C0",
+            hint="enter σVr and derive C0 = σr²/(T²σVr²), or enter C0 and derive σVr = σr/(T√C0)",
         )
-        self.sigma_vr = gui.add_markdown(self._sigma_vr_text(p.sigma_r_m, p.period_s, p.c0))
-        gui.add_markdown("**methods shown** (Prosov)")
+        initial_values = {n: getattr(p, n) for n in TUNE_CONTROLS if n != "sigma_vr_mps"}
+        initial_values["sigma_vr_mps"] = round(p.sigma_vr_mps, 6)  # p carries C0
+        self.controls = {n: add_control(gui, n, initial_values[n]) for n in TUNE_CONTROLS}
+        self.derived = gui.add_markdown("")
+        self.methods_title = gui.add_markdown("**methods shown**")
         self.methods = {m: gui.add_checkbox(m, m in p.methods) for m in ALL_METHODS}
         self.save_button = gui.add_button("save recording")
         self.error_md = gui.add_markdown("")
         self.status_md = gui.add_markdown(session.status_markdown())
         self._steps = p.steps
-        for h in (self.scene, *self.controls.values(), *self.methods.values()):
+        for h in self.controls.values():
+            h.on_update(self._typed)
+        for h in (self.scene, self.doppler_input, *self.methods.values()):
             h.on_update(self._changed)
         self.preset.on_update(self._preset_changed)
         self.save_button.on_click(self._save)
         session.listeners.append(self.refresh)
+        self._show_scene_controls()
         with contextlib.suppress(Exception):  # the scene lives in the viewer, not here
             server.scene.world_axes.visible = False
+
+    # --- what is shown ---------------------------------------------------------------------
+
+    @property
+    def doppler_name(self) -> str:
+        """The Doppler control the user types into: ``sigma_vr_mps`` or ``c0``."""
+        return DOPPLER_INPUTS[self.doppler_input.value]
+
+    def _show_scene_controls(self) -> None:
+        """Show only the controls the chosen scene reads (``SCENE_PARAMETERS``)."""
+        reads = SCENE_PARAMETERS[self.scene.value]
+        doppler = "sigma_vr_mps" in reads
+        for name, handle in self.controls.items():
+            if name in ("c0", "sigma_vr_mps"):
+                handle.visible = doppler and name == self.doppler_name
+            else:
+                handle.visible = name in reads
+        self.doppler_input.visible = self.derived.visible = doppler
+        methods = "methods" in reads
+        self.methods_title.visible = methods
+        for h in self.methods.values():
+            h.visible = methods
+        self.derived.content = self._derived_text(self.raw_values())
 
     @staticmethod
     def _sigma_vr_text(sigma_r_m: Any, period_s: Any, c0: Any) -> str:
@@ -139,27 +184,67 @@ class TunePanel:
             return f"σVr = σr/(T√C0): — ({exc})"
         return f"σVr = σr/(T√C0) = **{v:.4g} m/s**"
 
+    @staticmethod
+    def _c0_text(sigma_r_m: Any, period_s: Any, sigma_vr_mps: Any) -> str:
+        """C0 = σr² / (T² σVr²), or why there is none (an invalid σr, T or σVr)."""
+        try:
+            c0 = c0_ratio(
+                sigma_r_m=check("sigma_r_m", float(sigma_r_m)),
+                sigma_vr_mps=check("sigma_vr_mps", float(sigma_vr_mps)),
+                period_s=check("period_s", float(period_s)),
+            )
+        except (ParameterError, TypeError, ValueError) as exc:
+            return f"C0 = σr²/(T²σVr²): — ({exc})"
+        return f"C0 = σr²/(T²σVr²) = **{c0:.4g}**"
+
+    def _derived_text(self, values: dict[str, Any]) -> str:
+        sr, t = values["sigma_r_m"], values["period_s"]
+        if self.doppler_name == "c0":
+            return self._sigma_vr_text(sr, t, values["c0"])
+        return self._c0_text(sr, t, values["sigma_vr_mps"])
+
+    # --- values -----------------------------------------------------------------------------
+
+    def raw_values(self) -> dict[str, Any]:
+        return {name: h.value for name, h in self.controls.items()}
+
     def raw(self) -> dict[str, Any]:
+        """The panel's values for ``TuneParams.from_raw``: the Doppler accuracy as typed (σVr
+        or C0), the other one left out."""
+        values = self.raw_values()
+        other = "c0" if self.doppler_name == "sigma_vr_mps" else "sigma_vr_mps"
+        values.pop(other)
         return {
             "scene": self.scene.value,
-            **{name: h.value for name, h in self.controls.items()},
+            **values,
             "steps": self._steps,
             "methods": tuple(m for m, h in self.methods.items() if h.value),
         }
 
+    def _submit(self, settle_s: float) -> None:
+        self.derived.content = self._derived_text(self.raw_values())
+        self.worker.submit(self.raw(), settle_s=settle_s)
+
+    def _typed(self, _event: Any = None) -> None:
+        """A number or the slider: run once the typing has paused."""
+        self._submit(SETTLE_S)
+
     def _changed(self, _event: Any = None) -> None:
-        raw = self.raw()
-        self.sigma_vr.content = self._sigma_vr_text(raw["sigma_r_m"], raw["period_s"], raw["c0"])
-        self.worker.submit(raw)
+        """The scene, the Doppler input or a method box: show its controls and run at once."""
+        self._show_scene_controls()
+        self._submit(0.0)
 
     def _preset_changed(self, _event: Any = None) -> None:
         if self.preset.value == "custom":
             return
         v = preset_values(self.preset.value)
-        self.sigma_r.value = v["sigma_r_m"]
-        self.period.value = v["period_s"]
-        self.c0.value = round(v["c0"], 4)
-        self._changed()
+        self.controls["sigma_r_m"].value = v["sigma_r_m"]
+        self.controls["period_s"].value = v["period_s"]
+        self.controls["c0"].value = round(v["c0"], 4)
+        self.controls["sigma_vr_mps"].value = round(
+            sigma_vr_from_c0(v["sigma_r_m"], v["period_s"], v["c0"]), 6
+        )
+        self._submit(0.0)
 
     def _save(self, _event: Any = None) -> None:
         try:

@@ -12,9 +12,14 @@ finite number in (0, 1e+06] (got -5)``. Where each value enters:
 T          every scan period (Prosov, finite memory, Doppler start, velocity radars)
 C0         C0 = σr² / (T² σVr²): σVr = σr / (T √C0) of the finite memory, the Doppler start and
            the velocity radars (Prosov uses positions only)
+σVr        the same Doppler accuracy given directly (the panel takes σVr or C0, the user's
+           choice, and derives the other with σr and T)
 runs       Monte Carlo runs of the scene (Prosov filters, Gorshkov trials and Doppler start)
 seed       the root of every random stream
 =========  =====================================================================================
+
+:data:`SCENE_PARAMETERS` lists the values each scene reads; the panel hides the others (a
+change of C0 in the Prosov scene would re-run an identical scene).
 """
 
 from __future__ import annotations
@@ -32,6 +37,17 @@ SCENES: dict[str, str] = {
     "prosov": "Prosov: converted measurements",
     "gorshkov": "Gorshkov: finite memory and the Doppler start",
     "velocity": "Velocity: several radars' radial velocities",
+}
+#: The values each scene reads (``sigma_vr_mps`` stands for the Doppler accuracy, σVr or C0):
+#: a control outside its scene's set cannot change that scene's result. The velocity scene is
+#: one draw of its radars' measurements per scan (no Monte Carlo runs), and only Prosov runs
+#: several tracking methods.
+SCENE_PARAMETERS: dict[str, frozenset[str]] = {
+    "prosov": frozenset({"sigma_r_m", "sigma_beta_deg", "period_s", "runs", "seed", "methods"}),
+    "gorshkov": frozenset(
+        {"sigma_r_m", "sigma_beta_deg", "period_s", "sigma_vr_mps", "runs", "seed"}
+    ),
+    "velocity": frozenset({"sigma_r_m", "sigma_beta_deg", "period_s", "sigma_vr_mps", "seed"}),
 }
 #: Largest run count the panel accepts (one block of the Monte Carlo engine).
 MAX_TUNE_RUNS = min(5000, BLOCK_RUNS)
@@ -73,8 +89,17 @@ class TuneParams:
 
     @classmethod
     def from_raw(cls, raw: dict[str, Any]) -> TuneParams:
-        """From panel values (floats from number inputs are accepted for integer fields)."""
+        """From panel values (floats from number inputs are accepted for integer fields).
+
+        A ``sigma_vr_mps`` (σVr typed instead of C0) is checked and turned into
+        C0 = σr² / (T² σVr²) with the σr and T given (each checked first).
+        """
         kw = dict(raw)
+        if "sigma_vr_mps" in kw:
+            sigma_vr_mps = check("sigma_vr_mps", kw.pop("sigma_vr_mps"))
+            sigma_r_m = check("sigma_r_m", kw.get("sigma_r_m", default("sigma_r_m")))
+            period_s = check("period_s", kw.get("period_s", default("period_s")))
+            kw["c0"] = c0_ratio(sigma_r_m=sigma_r_m, sigma_vr_mps=sigma_vr_mps, period_s=period_s)
         for name in ("runs", "seed", "steps"):
             v = kw.get(name)
             if isinstance(v, float) and v.is_integer():

@@ -6,6 +6,8 @@ address it prints, with its secret token, and only to its own Host names and Ori
 is one line naming it, not an address served by some other program. Every change of a control only
 records the newest parameters (``worker.Coalescer``); the worker runs the newest, logs it as a
 new recording to the gRPC server (``session.TuneSession``), and the panel shows the result.
+The printed panel address opens one page with the controls and the viewer side by side
+(``tune.page``); the viewer's own address is printed too.
 """
 
 from __future__ import annotations
@@ -33,9 +35,10 @@ from radarviz.viz_app.rerun.viewer import (
     wait_viewer,
 )
 from radarviz.viz_app.tune.guard import PanelGuard, guarded_viser_server
+from radarviz.viz_app.tune.page import embedded_viewer_url, panel_page, serve_page
 from radarviz.viz_app.tune.panel import TunePanel
 from radarviz.viz_app.tune.params import TuneParams
-from radarviz.viz_app.tune.session import TuneSession
+from radarviz.viz_app.tune.session import TuneSession, prepare_blueprints
 from radarviz.viz_app.tune.worker import Coalescer
 
 LOOPBACK = "127.0.0.1"
@@ -178,15 +181,19 @@ def cmd_tune(
         grpc_port = free_port(connect)
         web_port = viewer_port or free_port(connect)
         proc = start_rerun(bind, grpc_port, web_port)
+        view_url = viewer_url(connect, web_port, grpc_port)
+        page = panel_page(embedded_viewer_url(connect, web_port, grpc_port))
         guard = PanelGuard(host=host, bind=bind)
-        server = guarded_viser_server(guard, port, verbose=False)
+        server = guarded_viser_server(
+            guard, port, wrap=lambda inner: serve_page(inner, page), verbose=False
+        )
         session = TuneSession(grpc_uri(bind, grpc_port), echo=True)
         worker = Coalescer(session.run, session.done, session.error)
         panel = TunePanel(server, session, worker)
+        prepare_blueprints()  # no run (a first switch of scene included) builds one
         wait_port(bind, grpc_port, proc=proc)
         wait_viewer(proc, "--viewer-port", bind, web_port)
         panel_url = guard.url(connect, server.get_port())
-        view_url = viewer_url(connect, web_port, grpc_port)
         print(f"panel {panel_url}", flush=True)
         print(f"viewer {view_url}", flush=True)
         print("stop with Ctrl-C", flush=True)
@@ -194,8 +201,7 @@ def cmd_tune(
         if not no_browser:
             import webbrowser
 
-            webbrowser.open(panel_url)
-            webbrowser.open(view_url)
+            webbrowser.open(panel_url)  # the page holds the viewer too
         while True:
             time.sleep(0.5)
             if proc.poll() is not None:

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import contextlib
 import sys
+import tempfile
 import threading
 import time
 import uuid
@@ -21,6 +22,7 @@ from typing import Any
 
 import rerun as rr
 import rerun.blueprint as rrb
+from rerun.chunk import Chunk
 
 from radarviz.core.finite import ResultError
 from radarviz.core.params import ParameterError
@@ -37,7 +39,7 @@ from radarviz.viz_app.tune.scenes import (
 )
 
 RECORDINGS_DIR = Path("recordings")
-_BLUEPRINTS: dict[str, Any] = {}
+_BLUEPRINTS: dict[str, list[Chunk]] = {}
 _BLUEPRINT_LOCK = threading.Lock()
 
 
@@ -57,23 +59,86 @@ def scene_blueprint(scene: str) -> rrb.Blueprint:
     return blueprint(velocity_scene.views(velocity_scene.panel_frame()).tab, log_tab)
 
 
-def send_blueprint(rec: rr.RecordingStream, scene: str) -> None:
-    """Send the scene's blueprint, built once per scene.
+def _blueprint_stream() -> rr.RecordingStream:
+    """A new blueprint stream of the application (a fresh blueprint id), logging to memory
+    only when told (``memory_recording``); disconnect it when done, which ends its threads."""
+    from rerun.recording_stream import RecordingStream
 
-    ``rec.send_blueprint`` builds a new in-memory blueprint stream on every call, and
-    rerun-sdk 0.41 never frees it (two native threads each); reusing the built storage keeps
-    the thread count flat over any number of runs.
+    return RecordingStream._from_native(
+        rr.bindings.new_blueprint(
+            application_id=APPLICATION_ID,
+            make_default=False,
+            make_thread_default=False,
+            default_enabled=True,
+        )
+    )
+
+
+def blueprint_chunks(scene: str) -> list[Chunk]:
+    """The chunks of the scene's blueprint, built once per scene (a few hundred ms) and kept.
+
+    The blueprint is logged as ``rerun.blueprint.api.create_in_memory_blueprint`` does, into
+    a memory sink whose bytes are read back as chunks (``RrdReader`` reads files only: a
+    temporary one, removed at once). Chunks carry no store id: :func:`send_blueprint` puts
+    them into a new blueprint store each time.
     """
-    from rerun.blueprint.api import create_in_memory_blueprint
+    from rerun.chunk import RrdReader
 
     with _BLUEPRINT_LOCK:
-        storage = _BLUEPRINTS.get(scene)
-        if storage is None:
-            built = create_in_memory_blueprint(
-                application_id=APPLICATION_ID, blueprint=scene_blueprint(scene)
-            )
-            storage = _BLUEPRINTS[scene] = built.storage
-    rr.bindings.send_blueprint(storage, True, True, recording=rec.to_native())
+        chunks = _BLUEPRINTS.get(scene)
+        if chunks is None:
+            stream = _blueprint_stream()
+            try:
+                memory = stream.memory_recording()
+                stream.set_time("blueprint", sequence=0)
+                scene_blueprint(scene).to_blueprint()._log_to_stream(stream)
+                data = memory.drain_as_bytes()
+            finally:
+                with contextlib.suppress(Exception):
+                    stream.disconnect()
+            with tempfile.TemporaryDirectory(prefix="radarviz-blueprint-") as tmp:
+                path = Path(tmp) / f"{scene}.rrd"
+                path.write_bytes(data)
+                reader = RrdReader(path)
+                (store,) = reader.blueprints()
+                chunks = _BLUEPRINTS[scene] = list(reader.stream(store=store))
+    return chunks
+
+
+def prepare_blueprints() -> None:
+    """Build every scene's blueprint now, so that no run (the first switch to a scene
+    included) waits for one."""
+    for scene in SCENES:
+        blueprint_chunks(scene)
+
+
+def send_blueprint(rec: rr.RecordingStream, scene: str) -> None:
+    """Send the scene's blueprint with ``rec``, as a NEW blueprint store, made active.
+
+    Every run carries its whole blueprint under a fresh blueprint id, for two reasons:
+
+    - the viewer switches layout only on a blueprint it activates: a blueprint it has seen
+      before (prosov → velocity → prosov) or none at all leaves it on the previous scene's
+      views, which then show "No data available";
+    - a viewer opened later gets only what the gRPC server still buffers
+      (``serve.SERVER_MEMORY_LIMIT`` drops the oldest runs): the newest run must carry its
+      own blueprint.
+
+    The SDK's ``send_blueprint`` drains the storage it is given (a storage sent twice sends
+    nothing the second time), and building the blueprint anew each run would cost hundreds of
+    ms; so the scene's chunks are built once (:func:`blueprint_chunks`) and copied into a new
+    blueprint stream per run (≈ 10–30 ms), which is disconnected afterwards so its native
+    threads end with it.
+    """
+    chunks = blueprint_chunks(scene)
+    stream = _blueprint_stream()
+    try:
+        memory = stream.memory_recording()
+        stream.send_chunks(chunks)
+        rr.bindings.send_blueprint(memory.storage, True, True, recording=rec.to_native())
+    finally:
+        with contextlib.suppress(Exception):
+            stream.disconnect()
 
 
 def log_tuning_scene(rec: rr.RecordingStream, params: TuneParams) -> TuneResult:

@@ -3,6 +3,10 @@
 GUI callbacks run on a thread pool and can arrive concurrently while a slider is dragged;
 ``submit`` only records the newest item under a lock, and the worker coalesces: when newer
 items arrive during a run, it runs once more with the newest only.
+
+A typed number arrives one keystroke at a time ("0.3" as 0, 0., 0.3): ``submit(item,
+settle_s=…)`` makes the worker wait until no newer item has come for ``settle_s`` seconds,
+so a half-typed value is never run.
 """
 
 from __future__ import annotations
@@ -17,9 +21,10 @@ from typing import Any
 class Coalescer:
     """One worker thread that runs ``fn`` on the newest submitted item only.
 
-    ``submit`` just stores the item (and its submit time) under the lock and notifies. The
-    worker takes the newest item, runs ``fn`` outside the lock, then ``on_done(item, result,
-    ms)`` with ``ms`` the time from that item's submission to the end of the run, or
+    ``submit`` just stores the item (its submit time, and when it may run) under the lock and
+    notifies. The worker takes the newest item once its settling time has passed with no newer
+    one, runs ``fn`` outside the lock, then ``on_done(item, result, ms)`` with ``ms`` the time
+    from that item's submission to the end of the run (the settling pause included), or
     ``on_error(item, exc)`` on any exception (the worker keeps going).
     """
 
@@ -34,7 +39,7 @@ class Coalescer:
         self._on_done = on_done
         self._on_error = on_error
         self._cond = threading.Condition()
-        self._pending: tuple[Any, float] | None = None
+        self._pending: tuple[Any, float, float] | None = None  # item, submitted, runs at
         self._busy = False
         self._stopping = False
         self.submitted = 0
@@ -43,9 +48,11 @@ class Coalescer:
         self._thread = threading.Thread(target=self._loop, name=name, daemon=True)
         self._thread.start()
 
-    def submit(self, item: Any) -> None:
+    def submit(self, item: Any, settle_s: float = 0.0) -> None:
+        """Make ``item`` the next to run, once ``settle_s`` seconds pass with no newer one."""
+        now = time.perf_counter()
         with self._cond:
-            self._pending = (item, time.perf_counter())
+            self._pending = (item, now, now + max(settle_s, 0.0))
             self.submitted += 1
             self._cond.notify_all()
 
@@ -69,11 +76,16 @@ class Coalescer:
     def _loop(self) -> None:
         while True:
             with self._cond:
-                self._cond.wait_for(lambda: self._pending is not None or self._stopping)
-                if self._stopping:
-                    return
-                assert self._pending is not None
-                item, t0 = self._pending
+                while True:
+                    self._cond.wait_for(lambda: self._pending is not None or self._stopping)
+                    if self._stopping:
+                        return
+                    assert self._pending is not None
+                    wait = self._pending[2] - time.perf_counter()
+                    if wait <= 0:
+                        break
+                    self._cond.wait(wait)  # a newer submit moves the time on
+                item, t0, _ = self._pending
                 self._pending = None
                 self._busy = True
             try:
