@@ -49,8 +49,8 @@ offset in the capture file, and errors name its packet too (number from 1, byte 
 when that record has a usable height, and of many targets when it has a track number; every
 later record must then have the same (one without is refused, byte offset named; so is one
 with a height or a track number the first lacks: "Corruption" below). Data blocks of other
-categories than CAT048 and CAT034 are skipped whole (after the checks below). Within a target (or the whole
-file, without track numbers) times must not decrease, as in a CSV.
+categories than CAT048 and CAT034 are skipped whole (after the checks below). Within a
+target (or the whole file, without track numbers) times must not decrease, as in a CSV.
 
 **Duplicates.** A redundant feed sends each record twice, maybe in other packets and blocks;
 applied twice, a plot would halve its track's covariance. A record whose octets equal a record
