@@ -173,6 +173,10 @@ def check_outputs(
             raise ParameterError(f"{flag} must name a regular file ({text} is {kind})")
         if not target.parent.is_dir():
             raise ParameterError(f"{flag}: no such directory {str(target.parent)!r}")
+        if not os.access(target.parent, os.W_OK | os.X_OK):
+            raise ParameterError(
+                f"{flag}: the directory {str(target.parent)!r} is not writable (nothing done)"
+            )
         if not overwrite and target.exists():
             raise ParameterError(f"{flag} {text} exists: refusing to overwrite (pass --overwrite)")
         for other, other_path in [*given[:i], *inputs]:
