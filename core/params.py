@@ -110,6 +110,16 @@ def check_int(
     return v
 
 
+def check_distinct(name: str, values: tuple[str, ...]) -> None:
+    """Refuse a list that names an item twice (``--methods ucm ucm``): results are keyed by
+    the item, so a repeat would sum or overwrite the first one's."""
+    repeated = sorted({v for v in values if values.count(v) > 1})
+    if repeated:
+        raise ParameterError(
+            f"{name} must name each one once (got {', '.join(repeated)} more than once)", name
+        )
+
+
 def check_choice(
     name: str, value: object, choices: Iterable[str], *, parameter: str | None = None
 ) -> str:

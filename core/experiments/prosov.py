@@ -59,6 +59,7 @@ from radarviz.core.params import (
     ParameterError,
     check,
     check_choice,
+    check_distinct,
     check_int,
     default,
 )
@@ -147,6 +148,7 @@ class TrackingConfig:
             )
         for m in self.methods:
             check_choice("method", m, ALL_METHODS)
+        check_distinct("methods", tuple(self.methods))
         check_choice("engine", self.engine, ENGINES)
         if self.dims == 3:
             if self.sigma_elevation_deg is None:

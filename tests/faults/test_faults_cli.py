@@ -29,3 +29,22 @@ def test_a_figure_format_matplotlib_cannot_write_is_refused_up_front(
     (line,) = err.strip().splitlines()
     assert line.startswith("radarviz: error: --plot: cannot write a figure as .xyz"), line
     assert ".png" in line and out == "" and not figure.exists()
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["reproduce", "prosov", "--runs", "3"],
+        ["reproduce", "association", "--runs", "2", "--scans", "8"],
+    ],
+    ids=lambda a: a[1],
+)
+def test_a_method_named_twice_is_refused(capsys, argv: list[str]) -> None:
+    """``--methods ucm ucm``: a traceback from the statistics' accumulator (prosov), or the
+    method's row twice (association)."""
+    assert main([*argv, "--methods", "ucm", "ucm"]) == 2
+    out, err = capsys.readouterr()
+    assert err.strip().splitlines() == [
+        "radarviz: error: --methods must name each one once (got ucm more than once)"
+    ]
+    assert out == ""
