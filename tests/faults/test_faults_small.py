@@ -22,3 +22,16 @@ def test_a_bracketed_host_is_an_address_and_a_port_only(header: str, name: str) 
     assert _host_name(header) == name
     if not name:
         assert not PanelGuard().host_allowed(_host_name(header))
+
+
+def test_simulate_prosov_refuses_scans_it_would_ignore(tmp_path, capsys) -> None:
+    """``simulate --preset prosov --scans 500`` wrote the preset's 60 plots without a word."""
+    from radarviz.viz_app.cli.main import main
+
+    out, toml = tmp_path / "m.csv", tmp_path / "r.toml"
+    argv = ["simulate", "--preset", "prosov", "--out", str(out), "--radars-out", str(toml)]
+    assert main([*argv, "--scans", "500"]) == 2
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert line.startswith("radarviz: error: --scans is not the prosov preset's"), line
+    assert not out.exists() and not toml.exists()
+    assert main(argv) == 0  # without --scans: its 60 scans, as documented

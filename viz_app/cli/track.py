@@ -495,6 +495,12 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         for flag, value in extra:
             if value is not None:
                 raise ParameterError(f"{flag} is the crossing preset's (--preset crossing)")
+    if args.preset == "prosov" and args.steps is not None:
+        # The prosov preset is the paper's one run of 60 scans: --scans was ignored silently.
+        raise ParameterError(
+            f"--scans is not the prosov preset's (its run has {default('steps')} scans; "
+            "--preset fusion, manoeuvre or crossing take --scans)"
+        )
     fmt = output_format_of(args.out, args.format)
     check_outputs(
         [("--out", args.out), ("--radars-out", args.radars_out), ("--truth-out", args.truth_out)]
