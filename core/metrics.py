@@ -73,6 +73,14 @@ class TrackMetrics(NamedTuple):
     nees_state: NDArray[np.float64]
 
 
+#: The ``TrackMetrics`` fields that cannot be negative (a σ, an RMSE, a NEES): their Monte Carlo
+#: bands are cut at 0 (``core.experiments.prosov.TrackingResult.band95``), and a negative value
+#: is a failed computation (``viz_app.reports.prosov.check_metrics``).
+NONNEGATIVE_METRICS: frozenset[str] = frozenset(
+    {"sigma_x_filter", "rmse_x", "std_x", "rmse_y", "sigma_y_filter", "nees_pos", "nees_state"}
+)
+
+
 #: Most rows (runs × scans) ``MetricsAccumulator`` stages before forming their sums. At the
 #: tuning panel's few hundred runs per scan, 20 scans are then one pass of ~70 vector
 #: operations instead of 20 (per-call overhead dominates there: 200 runs cost 4 ms a method

@@ -143,6 +143,16 @@ def check_int(
     return v
 
 
+def check_distinct(name: str, values: tuple[str, ...]) -> None:
+    """Refuse a list that names an item twice (``--methods ucm ucm``): results are keyed by
+    the item, so a repeat would sum or overwrite the first one's."""
+    repeated = sorted({v for v in values if values.count(v) > 1})
+    if repeated:
+        raise ParameterError(
+            f"{name} must name each one once (got {', '.join(repeated)} more than once)", name
+        )
+
+
 def check_choice(
     name: str, value: object, choices: Iterable[str], *, parameter: str | None = None
 ) -> str:
@@ -267,6 +277,12 @@ MAX_SIGMA_ANGLE_DEG = 20.0
 #: NEES, NaN).
 MIN_SIGMA_ANGLE_DEG = 1e-6
 
+#: Fewest Monte Carlo runs (trials): every figure comes with its delete-a-group jackknife band
+#: (``core.confidence``), whose leave-outs each drop a group of runs; a sample σ needs two runs
+#: in every leave-out, so with two runs (one per group) every σ band was NaN. Three is the
+#: fewest for which every band of every experiment exists.
+MIN_MONTE_CARLO_RUNS = 3
+
 #: The parameter table. Defaults are the Prosov experiment (one radar at the origin, target at
 #: 150 km moving radially outward at 200 m/s, σr = 250 m, σβ = 1°, T = 10 s, 60 scans, Q = 0).
 PARAMETERS: dict[str, Parameter] = {
@@ -305,8 +321,8 @@ PARAMETERS: dict[str, Parameter] = {
         ),
         _real("period_s", "T", "scan period", "s", 1e-3, 3600.0, 10.0, low_open=False),
         _int("steps", "N", "scans per run", 2, 100_000, 60),
-        _int("runs", "M", "Monte Carlo runs", 2, None, 1000),
-        _int("trials", "M", "Monte Carlo trials", 2, 100_000_000, 100_000),
+        _int("runs", "M", "Monte Carlo runs", MIN_MONTE_CARLO_RUNS, None, 1000),
+        _int("trials", "M", "Monte Carlo trials", MIN_MONTE_CARLO_RUNS, 100_000_000, 100_000),
         _int("seed", "seed", "root of numpy.random.SeedSequence", 0, None, 1),
         _real(
             "c0",

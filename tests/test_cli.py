@@ -89,7 +89,7 @@ def test_reproduce_prosov_table_and_plot(tmp_path: Path, capsys) -> None:
         (["--sigma-r-m", "inf"], "--sigma-r-m must be a finite number"),
         (["--period", "0"], "--period must be a finite number in [0.001, 3600]"),
         (["--period", "nan"], "--period must be a finite number in [0.001, 3600]"),
-        (["--runs", "1"], "--runs must be an integer >= 2"),
+        (["--runs", "1"], "--runs must be an integer >= 3"),
         (["--steps", "1"], "--steps must be an integer in [2, 100000]"),
         (["--methods", "naive", "magic"], "--methods must be among naive, seed, cmkf_d"),
         (["--runs", "ten"], "not an integer: 'ten'"),
@@ -380,7 +380,7 @@ def test_reproduce_gorshkov_json_document(capsys) -> None:
     ("args", "needle"),
     [
         (["--radars", "RLS7"], "--radars must be among RLS1, RLS2, RLS3, RLS4, RLS5, RLS6"),
-        (["--trials", "1"], "--trials must be an integer in [2,"),
+        (["--trials", "1"], "--trials must be an integer in [3,"),
         (["--tracking-runs", "1"], "--tracking-runs must be 0 (skip) or an integer >= 2"),
         (["--tracking-radar", "X"], "--tracking-radar must be one of RLS1"),
         (["--sigma-beta-deg", "nan"], "--sigma-beta-deg must be a finite number in [1e-06, 20]"),

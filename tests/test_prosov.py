@@ -135,7 +135,7 @@ def test_all_methods_run_and_report_finite_statistics() -> None:
             {"sigma_beta_deg": float("nan")},
             "sigma_beta_deg must be a finite number in [1e-06, 20]",
         ),
-        ({"runs": 1}, "runs must be an integer >= 2"),
+        ({"runs": 1}, "runs must be an integer >= 3"),
         ({"methods": ("naive", "kalman")}, "method must be one of naive, seed"),
     ],
 )
@@ -152,7 +152,7 @@ def _assert_same_metrics(a, b) -> None:
             np.testing.assert_array_equal(getattr(a.metrics[m], name), getattr(b.metrics[m], name))
 
 
-@pytest.mark.parametrize(("runs", "block"), [(2, BLOCK_RUNS), (300, BLOCK_RUNS), (300, 128)])
+@pytest.mark.parametrize(("runs", "block"), [(3, BLOCK_RUNS), (300, BLOCK_RUNS), (300, 128)])
 def test_scene_is_run_tracking_plus_the_displayed_run_alone(runs: int, block: int) -> None:
     """The displayed run rides in the Monte Carlo's first block; neither changes the other.
 

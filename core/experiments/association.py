@@ -32,7 +32,7 @@ from numpy.typing import NDArray
 
 from radarviz.core.confidence import student_t_quantile
 from radarviz.core.filters.methods import ALL_METHODS
-from radarviz.core.params import check, check_choice, check_int, default
+from radarviz.core.params import check, check_choice, check_distinct, check_int, default
 from radarviz.core.scenarios.crossing import CrossingScene, crossing_scans
 from radarviz.core.scenarios.rotating import RotatingPlots, RotatingRadar
 from radarviz.core.tracking.association import AssociationOptions, GNNTracker
@@ -75,6 +75,7 @@ class AssociationConfig:
             check_choice("methods", "", ALL_METHODS)
         for m in self.methods:
             check_choice("methods", m, ALL_METHODS)
+        check_distinct("methods", tuple(self.methods))
         check("sigma_a_mps2", self.sigma_a_mps2)
         check("sigma_v0_mps", self.sigma_v0_mps)
         check("gospa_cutoff_m", self.gospa_cutoff_m)

@@ -46,6 +46,7 @@ from radarviz.core.filters.run import run_scans
 from radarviz.core.filters.state import CVBatch
 from radarviz.core.geometry import range_cross_basis
 from radarviz.core.metrics import (
+    NONNEGATIVE_METRICS,
     MetricsAccumulator,
     TrackMetrics,
     delta_percent,
@@ -58,6 +59,7 @@ from radarviz.core.params import (
     ParameterError,
     check,
     check_choice,
+    check_distinct,
     check_int,
     default,
 )
@@ -146,6 +148,7 @@ class TrackingConfig:
             )
         for m in self.methods:
             check_choice("method", m, ALL_METHODS)
+        check_distinct("methods", tuple(self.methods))
         check_choice("engine", self.engine, ENGINES)
         if self.dims == 3:
             if self.sigma_elevation_deg is None:
@@ -227,7 +230,12 @@ class TrackingResult:
         value = getattr(self.metrics[method], name)
         if method not in self.leave_one_out:
             return _nan_band(value)
-        return jackknife_band(value, getattr(self.leave_one_out[method], name))
+        lo, hi = jackknife_band(value, getattr(self.leave_one_out[method], name))
+        if name in NONNEGATIVE_METRICS:
+            # The jackknife band is symmetric; a heavy-tailed NEES (σβ = 20°: values ≥ 1.4,
+            # half-widths of 10⁴) put its lower end far below 0, where no NEES can be.
+            lo = np.maximum(lo, 0.0)
+        return lo, hi
 
 
 def _delta_x(a: TrackMetrics, b: TrackMetrics) -> dict[str, NDArray[np.float64]]:

@@ -90,6 +90,11 @@ COND_MAX = 1e8
 #: Two sites closer than this (m) are the same site; a target closer than this to a site has no
 #: line of sight.
 SITE_TOL_M = 1e-6
+#: Fewest trials of a sweep point (and so of the experiment, whose sweep takes min(trials,
+#: ``SWEEP_TRIALS``)): the robust σ's band is by batch means over the groups holding at least
+#: two trials, and needs two such groups; trial t is in group t mod ``BAND_GROUPS``, so
+#: ``BAND_GROUPS + 2`` trials give the first two groups two each (fewer left the band NaN).
+MIN_SWEEP_TRIALS = BAND_GROUPS + 2
 #: Monte Carlo trials per block (bounds the working set).
 BLOCK_TRIALS = 1 << 17
 #: Names of the velocity components, in the order of every vector and matrix here.
@@ -911,12 +916,12 @@ def run_velocity_experiment(
     altitudes_km: tuple[float, ...] = SWEEP_ALTITUDES_KM,
 ) -> VelocityExperiment:
     """Run the baseline and the sweep (``sweep_trials`` defaults to min(trials, SWEEP_TRIALS))."""
-    trials = int(check("trials", trials))
+    trials = check_int("trials", int(check("trials", trials)), low=MIN_SWEEP_TRIALS)
     seed = int(check("seed", seed))
     st = (
         min(trials, SWEEP_TRIALS)
         if sweep_trials is None
-        else check_int("sweep_trials", sweep_trials, low=2)
+        else check_int("sweep_trials", sweep_trials, low=MIN_SWEEP_TRIALS)
     )
     grid = [(float(h), float(d)) for h in altitudes_km for d in distances_km]
     children = np.random.SeedSequence(seed).spawn(1 + len(grid))

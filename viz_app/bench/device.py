@@ -12,6 +12,7 @@ from typing import Any
 
 from radarviz.core.experiments.prosov import TrackingConfig, block_measurements
 from radarviz.core.filters.compiled import COMPILED_METHODS, FilterSettings
+from radarviz.core.params import MIN_MONTE_CARLO_RUNS
 
 
 class NoGPUError(RuntimeError):
@@ -44,7 +45,7 @@ def bench_gpu(runs: int = 100_000, repeats: int = 3) -> dict[str, Any]:
     from radarviz.core.filters.array_api import filter_history_xp
 
     cp, device = gpu_namespace()
-    config = TrackingConfig(runs=2)
+    config = TrackingConfig(runs=MIN_MONTE_CARLO_RUNS)
     truth = config.target.truth()
     r_hat, b_hat = block_measurements(config, 0, runs, truth)
     r_dev, b_dev = cp.asarray(r_hat), cp.asarray(b_hat)

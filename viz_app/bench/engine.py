@@ -87,6 +87,7 @@ from radarviz.core.filters.position import cv_update
 from radarviz.core.filters.predict import transition_matrix
 from radarviz.core.filters.run import run_scans
 from radarviz.core.filters.state import cv_init
+from radarviz.core.params import MIN_MONTE_CARLO_RUNS
 from radarviz.core.scenarios.planar import polar_measurements, prosov_target
 from radarviz.viz_app.bench.association import bench_association, format_association
 from radarviz.viz_app.bench.per_method import bench_filterpy_per_method, bench_per_method
@@ -535,7 +536,7 @@ def run_bench(
     from radarviz.viz_app.bench.asterix import bench_asterix
 
     host = machine()
-    config = TrackingConfig(runs=2, target=prosov_target())
+    config = TrackingConfig(runs=MIN_MONTE_CARLO_RUNS, target=prosov_target())
     gorshkov_s = bench_gorshkov()
     fp = bench_filterpy(filterpy_runs, config)
     kf, kf_only = [], []

@@ -28,7 +28,7 @@ from radarviz.core.params import ParameterError, check_int, check_real
 from radarviz.viz_app.cli import recording, score, sweep, track
 from radarviz.viz_app.cli.args import integer, number, print_report
 from radarviz.viz_app.cli.params import add_parameter, cli_message, map_flag
-from radarviz.viz_app.io.atomic import WriteError, check_outputs
+from radarviz.viz_app.io.atomic import WriteError
 
 EXIT_USAGE = 2
 #: Exit status when an output could not be written (``viz_app.io.atomic.WriteError``).
@@ -322,7 +322,9 @@ def _cmd_reproduce_association(args: argparse.Namespace) -> int:
         gospa_cutoff_m=args.gospa_cutoff_m,
         gospa_order=args.gospa_order,
     )
-    check_outputs([("--plot", args.plot)])
+    from radarviz.viz_app.figures.common import check_figure_outputs  # matplotlib: late
+
+    check_figure_outputs("--plot", args.plot)
     from radarviz.viz_app.reports.association import (
         association_document,
         format_association_table,
@@ -358,8 +360,9 @@ def _emit(
 
 def _cmd_reproduce_prosov(args: argparse.Namespace) -> int:
     import radarviz
+    from radarviz.viz_app.figures.common import check_figure_outputs  # matplotlib: late
 
-    check_outputs([("--plot", args.plot)])
+    check_figure_outputs("--plot", args.plot)
     from radarviz.viz_app.reports.prosov import format_prosov_table, prosov_document
     from radarviz.viz_app.runtime import tune_allocator
 
@@ -402,7 +405,9 @@ def _cmd_reproduce_gorshkov(args: argparse.Namespace) -> int:
         c0 = check_real("--custom C0", args.custom[1], low=0.0, high=1e8)
         T = check_real("--custom PERIOD_S", args.custom[2], low=0.0, high=3600.0)
         radars = [*radars, RadarPreset("custom", "-", sr, sr / (T * c0**0.5), T)]
-    check_outputs([("--plot", args.plot)])
+    from radarviz.viz_app.figures.common import check_figure_outputs  # matplotlib: late
+
+    check_figure_outputs("--plot", args.plot)
     from radarviz.viz_app.reports.gorshkov import format_gorshkov_table, gorshkov_document
     from radarviz.viz_app.runtime import tune_allocator
 
@@ -432,7 +437,9 @@ def _cmd_reproduce_doppler(args: argparse.Namespace) -> int:
     for name in radars:
         if name not in PRESETS:
             raise ParameterError(f"--radars must be among {', '.join(PRESETS)} (got {name!r})")
-    check_outputs([("--plot", args.plot)])
+    from radarviz.viz_app.figures.common import check_figure_outputs  # matplotlib: late
+
+    check_figure_outputs("--plot", args.plot)
     from radarviz.viz_app.reports.doppler import doppler_document, format_doppler_table
     from radarviz.viz_app.runtime import tune_allocator
 
@@ -450,8 +457,9 @@ def _cmd_reproduce_doppler(args: argparse.Namespace) -> int:
 
 def _cmd_reproduce_velocity(args: argparse.Namespace) -> int:
     import radarviz
+    from radarviz.viz_app.figures.common import check_figure_outputs  # matplotlib: late
 
-    check_outputs([("--plot", args.plot)])
+    check_figure_outputs("--plot", args.plot)
     from radarviz.viz_app.reports.velocity import format_velocity_table, velocity_document
     from radarviz.viz_app.runtime import tune_allocator
 

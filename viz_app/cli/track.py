@@ -389,36 +389,41 @@ def cmd_track(args: argparse.Namespace) -> int:
     # pyarrow's default pool (jemalloc or mimalloc) keeps what the blocks free, so the peak
     # grew with the file's length; the system allocator hands it back.
     pa.set_memory_pool(pa.system_memory_pool())
-    s = run_track(
-        args.input, args.radars, args.out, methods, options, observer, open_source, association
-    )
-    doc = track_summary_document(
-        monitor,
-        options,
-        input_path=args.input,
-        plots=s.plots,
-        rows=s.rows,
-        three_d=s.three_d,
-        methods=s.methods,
-        targets=s.targets,
-        input_counts=s.input,
-    )
+    # The track file, the recording and the summary change together or not at all: a summary
+    # that cannot be written (a read-only directory, a full disk) leaves the track file as
+    # it was (``commit_together``; ``run_track``'s own unit joins this one).
+    with commit_together():
+        s = run_track(
+            args.input, args.radars, args.out, methods, options, observer, open_source, association
+        )
+        doc = track_summary_document(
+            monitor,
+            options,
+            input_path=args.input,
+            plots=s.plots,
+            rows=s.rows,
+            three_d=s.three_d,
+            methods=s.methods,
+            targets=s.targets,
+            input_counts=s.input,
+        )
+        if s.association is not None:
+            doc["association"] = association_document(s.association)
+        if args.summary:
+            with atomic_write(args.summary, "w", encoding="utf-8") as fh:
+                json.dump(doc, fh, allow_nan=False, indent=1)
+                fh.write("\n")
     if s.input is not None:
         from radarviz.viz_app.io.asterix import input_line
 
         print(f"radarviz: input: {input_line(args.input, s.input)}", file=sys.stderr)
     untracked = None
     if s.association is not None:
-        doc["association"] = association_document(s.association)
         for line in association_lines(s.association):
             print(f"radarviz: {line}", file=sys.stderr)
         untracked = untracked_warning(s.association)
         if untracked is not None:
             _warn(untracked)
-    if args.summary:
-        with atomic_write(args.summary, "w", encoding="utf-8") as fh:
-            json.dump(doc, fh, allow_nan=False, indent=1)
-            fh.write("\n")
     for line in inconsistency_lines(doc):
         _warn(line)
     if args.json:
@@ -466,6 +471,12 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         for flag, value in extra:
             if value is not None:
                 raise ParameterError(f"{flag} is the crossing preset's (--preset crossing)")
+    if args.preset == "prosov" and args.steps is not None:
+        # The prosov preset is the paper's one run of 60 scans: --scans was ignored silently.
+        raise ParameterError(
+            f"--scans is not the prosov preset's (its run has {default('steps')} scans; "
+            "--preset fusion, manoeuvre or crossing take --scans)"
+        )
     fmt = output_format_of(args.out, args.format)
     check_outputs(
         [("--out", args.out), ("--radars-out", args.radars_out), ("--truth-out", args.truth_out)]

@@ -9,7 +9,8 @@ from typing import Any
 
 from matplotlib.figure import Figure
 
-from radarviz.viz_app.io.atomic import atomic_write
+from radarviz.core.params import ParameterError
+from radarviz.viz_app.io.atomic import atomic_write, check_outputs
 from radarviz.viz_app.palette import RADAR_SEQUENCE, hex_colour
 
 DPI = 120
@@ -20,20 +21,38 @@ DPI = 120
 PALETTE: tuple[str, ...] = tuple(hex_colour(c) for c in RADAR_SEQUENCE)
 
 
+def figure_format(path: str | Path, flag: str = "--plot") -> str:
+    """The matplotlib format a figure file's suffix names ("png" without one); a
+    ``ParameterError`` naming ``flag`` and the formats there are otherwise. Checked before any
+    work (``check_figure_outputs``) and again when writing, from the one list matplotlib has."""
+    from matplotlib.backend_bases import FigureCanvasBase
+
+    fmt = Path(path).suffix.lstrip(".").lower() or "png"
+    supported = FigureCanvasBase.get_supported_filetypes()
+    if fmt not in supported:
+        raise ParameterError(
+            f"{flag}: cannot write a figure as .{fmt} ({path}); use one of "
+            + ", ".join("." + k for k in sorted(supported))
+        )
+    return fmt
+
+
+def check_figure_outputs(flag: str, path: str | None) -> None:
+    """``check_outputs`` of a figure file and its format, before any computing: a bad
+    suffix was found only when the figure was written, after the whole experiment."""
+    check_outputs([(flag, path)])
+    if path is not None:
+        figure_format(path, flag)
+
+
 def write_figure_atomically(fig: Figure, path: Path, dpi: int = DPI) -> None:
     """Render into a staged file beside ``path`` (``viz_app.io.atomic``), then rename it onto
     ``path`` once fsynced and checked.
 
-    Raises ValueError (one line) if matplotlib cannot write the suffix's format; on any error
-    the temporary file is removed and ``path`` is untouched.
+    Raises ``ParameterError`` (one line, ``figure_format``) if matplotlib cannot write the
+    suffix's format; on any error the temporary file is removed and ``path`` is untouched.
     """
-    fmt = path.suffix.lstrip(".").lower() or "png"
-    supported = fig.canvas.get_supported_filetypes()
-    if fmt not in supported:
-        raise ValueError(
-            f"cannot write a figure as .{fmt} ({path}); use one of "
-            + ", ".join("." + k for k in sorted(supported))
-        )
+    fmt = figure_format(path)
     with atomic_write(path) as fh:
         fig.savefig(fh, format=fmt, dpi=dpi)
 

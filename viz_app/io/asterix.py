@@ -47,9 +47,10 @@ offset in the capture file, and errors name its packet too (number from 1, byte 
 
 **The file's kind** is set by its first CAT048 record, as a CSV's is by its header: it is 3D
 when that record has a usable height, and of many targets when it has a track number; every
-later record must then have the same (one without is refused, byte offset named). Data blocks
-of other categories than CAT048 and CAT034 are skipped whole. Within a target (or the whole
-file, without track numbers) times must not decrease, as in a CSV.
+later record must then have the same (one without is refused, byte offset named; so is one
+with a height or a track number the first lacks: "Corruption" below). Data blocks of other
+categories than CAT048 and CAT034 are skipped whole (after the checks below). Within a
+target (or the whole file, without track numbers) times must not decrease, as in a CSV.
 
 **Duplicates.** A redundant feed sends each record twice, maybe in other packets and blocks;
 applied twice, a plot would halve its track's covariance. A record whose octets equal a record
@@ -70,6 +71,24 @@ range (these by the block's offset and the record's number in it, from 1), a fil
 without any CAT048 target report (what was passed over, counted). The file is read
 ``READ_BYTES`` at a time, one data block (≤ 64 KiB) decoded at a time: memory does not grow
 with the file.
+
+**Corruption.** ASTERIX has no checksum: a changed octet is found only by what it makes
+implausible, and the reader refuses such a file rather than track what is left (a corrupt
+FSPEC bit or repetition count makes a record take the next ones as its items, and a corrupt
+category octet skips a block of plots as "another category"). Refused, each by its byte
+offset (and record number): a record without I048/010 or I048/140 (every CAT048 record has
+both, track-only ones too); a time of day jumping more than ``MAX_TIME_JUMP_S`` from the
+previous record's (CAT048 or CAT034; it would move every later record's day); a height
+outside ``MIN_HEIGHT_M`` … ``MAX_HEIGHT_M``; a record of another kind than the first (a
+height when the first record, of a radar measuring heights, has none; a track number when it
+has none); a record whose items run over the records after it (``_successor_inside``: from
+an octet inside it, the rest of it reads as whole records of the radars file's data sources,
+the first a target report of the file's kind within ``SUCCESSOR_WINDOW_S``; tested where a
+record's FSPEC or length differs from the previous one's); a data block of a category number
+no published ASTERIX category has (``ASTERIX_CATEGORIES``), or of another category whose
+records read whole as CAT048 target reports of the file's data sources (its category octet
+corrupt). Blocks of other categories that pass are skipped and counted, with the first one's
+byte offset and category (``input_summary``, the ``track`` input line).
 
 **Two consumers, one reader.** ``AsterixReader`` yields (position, ``Plot``) for the row path
 (``viz_app.io.plots.run_track``: a recording, the association, a finite-memory start) and, by
@@ -126,6 +145,15 @@ FL_M = 100.0 * FT_M
 #: The 4/3 effective earth radius of standard refraction: the mean earth radius 6371 km × 4/3.
 EFFECTIVE_EARTH_RADIUS_M = 6_371_000.0 * 4.0 / 3.0
 DAY_S = 86_400.0
+#: Largest step of time of day between consecutive records (CAT048 and CAT034, file order),
+#: s. A record more than 12 h from the previous is ambiguous (``_DayClock`` takes the nearest
+#: day), so one corrupt time would move every later record by a day; a recording's records
+#: are seconds apart, so a jump of over 6 h is refused as corrupt, well before the ambiguity.
+MAX_TIME_JUMP_S = 6 * 3600.0
+#: Largest time of day (s) between a record and the next in its data block, for telling a
+#: swallowed successor (``AsterixReader._successor_inside``): a data block holds a sector's
+#: or a scan's reports, seconds apart.
+SUCCESSOR_WINDOW_S = 60.0
 #: Least significant bits of the items written: I048/140 time (s), I048/040 RHO (NM) and
 #: THETA (deg), I048/110 height (ft), I048/120 CAL (m/s).
 TIME_LSB_S = 1.0 / 128.0
@@ -171,6 +199,21 @@ DUPLICATE_RECORDS = 1 << 16
 #: so these span ~10⁴ plots; a block older than that is named by its byte offset alone (exact
 #: too), and memory stays bounded (~200 octets each).
 NAMED_BLOCKS = 1024
+#: Physical bounds of a measured height above mean sea level (I048/110, or I048/090 as
+#: pressure altitude), m: from below the lowest dry land (the Dead Sea shore, −430 m) and the
+#: lowest pressure altitude a standard atmosphere reports (FL −15) to above the highest
+#: aircraft (50 km, stratospheric balloons). The items hold ±62 km (I048/110) and ±62 km
+#: (I048/090): a value outside these bounds is a corrupt record, not a target.
+MIN_HEIGHT_M = -1_000.0
+MAX_HEIGHT_M = 50_000.0
+#: The published ASTERIX categories (EUROCONTROL's list: civil and military standards and the
+#: special applications 150, 205, 240, 247, 252). A data block of another category number is
+#: not skipped as "another category": a corrupt header, or data blocks that are not framed
+#: where the file says (a LEN changed), so the reader refuses it.
+ASTERIX_CATEGORIES = frozenset(
+    (1, 2, 4, 8, 9, 10, 11, 15, 16, 17, 18, 19, 20, 21, 23, 24, 25, 30, 31, 32, 34, 48, 62,
+     63, 65, 150, 205, 240, 247, 252)
+)  # fmt: skip
 #: A plot's position packs (data block byte offset, record index in the block).
 _RECORDS_PER_POSITION = 1 << 16
 
@@ -349,6 +392,11 @@ class _DayClock:
         self.previous: float | None = None
 
     def __call__(self, tod: float) -> float:
+        """``tod`` on the running day. Raises ``ValueError`` for a time of day that is not one
+        (not under 24 h) or that jumps more than ``MAX_TIME_JUMP_S`` from the previous: a
+        corrupt time would otherwise move the day of every later record."""
+        if not 0.0 <= tod < DAY_S:
+            raise ValueError(f"time of day {tod!r} s is not under 24 h (a corrupt record)")
         if self.previous is None:
             t = tod
         else:
@@ -359,6 +407,12 @@ class _DayClock:
             elif t > self.previous + DAY_S / 2:
                 self.day_s -= DAY_S
                 t -= DAY_S
+            if abs(t - self.previous) > MAX_TIME_JUMP_S:
+                raise ValueError(
+                    f"time of day {tod!r} s is {abs(t - self.previous) / 3600:.1f} h from the "
+                    f"previous record's: over {MAX_TIME_JUMP_S / 3600:g} h, a corrupt time (a "
+                    "recording with such a gap: split it)"
+                )
         self.previous = t
         return t
 
@@ -443,7 +497,8 @@ class InputCounts:
     """What the reader passed over, counted as it reads: ``records`` (CAT048 records read),
     of them ``track_only_skipped`` (without I048/040: a track status, no plot) and
     ``duplicates_dropped`` (``_RecentRecords``); ``cat034_messages``, ``other_blocks`` (data
-    blocks of other categories); for a capture ``capture`` (``viz_app.io.pcap``'s counts)
+    blocks of other categories) and ``first_other`` (the first one's byte offset and
+    category); for a capture ``capture`` (``viz_app.io.pcap``'s counts)
     and ``not_asterix`` (UDP datagrams that are not ASTERIX data blocks)."""
 
     records: int = 0
@@ -453,6 +508,7 @@ class InputCounts:
     other_blocks: int = 0
     capture: CaptureCounts | None = None
     not_asterix: int = 0
+    first_other: tuple[int, int] | None = None
 
 
 class _Source(NamedTuple):
@@ -509,6 +565,10 @@ class AsterixReader:
         # capture: a ring of constant size, searched only to word an error.
         self._packet_of: deque[tuple[int, int, int]] = deque(maxlen=NAMED_BLOCKS)
         self._first_foreign: tuple[int, int] | None = None
+        #: The previous CAT048 record's (FSPEC, length): a record of another shape is tested
+        #: for a swallowed successor (``_framed``).
+        self._last_shape: tuple[bytes, int] | None = None
+        self.three_d = self.targets = False  # the file's kind: set by its first record below
         head = _head(fh, 12)
         self.capture = container == "pcap" or is_capture(head)
         self.container = "asterix"
@@ -523,6 +583,10 @@ class AsterixReader:
         position, rec = first
         radar = self._radar(position, rec)
         self.three_d = radar.sigma_elevation_deg is not None and _height_m(rec) is not None
+        #: The first record is of a radar that measures heights but has none: a later record
+        #: with a height is of another kind than the file's, refused. (A 2D radar's first
+        #: plot leaves a later 3D radar's heights unused, as before: a mixed fleet.)
+        self._first_heightless_3d = radar.sigma_elevation_deg is not None and not self.three_d
         self.targets = "track_number" in rec
         #: The plots carry the radar's own track numbers (I048/161), as ``Plot.radar_track``
         #: and as their ``target`` labels (``track --associate`` keeps the first only).
@@ -565,6 +629,9 @@ class AsterixReader:
             "duplicates_dropped": c.duplicates_dropped,
             "cat034_messages": c.cat034_messages,
             "other_category_blocks": c.other_blocks,
+            "first_other_category_block": None
+            if c.first_other is None
+            else {"byte": c.first_other[0], "category": c.first_other[1]},
         }
         if c.capture is not None:
             doc |= {
@@ -631,36 +698,167 @@ class AsterixReader:
     def _decoded(self, blocks: Iterable[tuple[int, int, bytes]]) -> Iterator[tuple[int, Any]]:
         """The CAT048 target reports of the data blocks as (position, decoded items); track-only
         records and duplicates are counted and passed over, CAT034 blocks read for the scan
-        timing, other categories' blocks skipped whole."""
-        uap, counts, recent = self._parser.uap48, self.counts, self._recent
+        timing, other categories' blocks skipped whole (``_foreign``). Each record is framed
+        (``_framed``) before it is used."""
+        counts, recent = self.counts, self._recent
         for offset, cat, block in blocks:
             if cat != CATEGORY:
+                self._foreign(offset, cat, block)
                 if cat == CAT034:
                     self._service(offset, block)
                 else:
                     counts.other_blocks += 1  # another category: not target reports
+                    if counts.first_other is None:
+                        counts.first_other = (offset, cat)
                 continue
             position = offset * _RECORDS_PER_POSITION
-            for index, (rec, raw) in enumerate(self._split(offset, block, uap, cat)):
-                if rec.get("_fspec_reserved"):
-                    raise ParameterError(
-                        f"{self.source} {self._where(position + index)}: the FSPEC announces "
-                        "items beyond CAT048's UAP (another edition?)"
-                    )
+            for index, (rec, raw) in enumerate(self._framed(offset, block)):
                 counts.records += 1
                 if "rho" not in rec:
                     # No measured position: a track-only record (a track status, a coasted
                     # track), nothing to track; counted, not refused.
                     counts.track_only_skipped += 1
                     continue
-                if recent.repeat(raw, rec.get("time_of_day")):
+                if recent.repeat(raw, rec["time_of_day"]):
                     counts.duplicates_dropped += 1  # a redundant feed's second copy
                     continue
                 yield position + index, rec
 
+    def _framed(self, offset: int, block: bytes) -> list[tuple[Any, bytes]]:
+        """A CAT048 data block's records, each checked to be framed where its FSPEC says.
+
+        ASTERIX has no checksum and no record length: a corrupt FSPEC bit or repetition count
+        changes where the next record starts, and what follows is read from the wrong octets.
+        Such a file is refused here, not tracked (by the block's offset and the record's
+        number): a record announcing items beyond the UAP; a record without I048/010 (the
+        UAP's one mandatory item) or I048/140 (every CAT048 record is stamped, track-only
+        ones too: a record of octets torn from another has neither, or not where they
+        belong); and a record whose items run
+        over a record that follows it (``_successor_inside``, tested for a record whose FSPEC
+        or length differs from its predecessor's, where a corruption shows)."""
+        records = self._split(offset, block, self._parser.uap48, CATEGORY)
+        position = offset * _RECORDS_PER_POSITION
+        start = 3
+        for index, (rec, raw) in enumerate(records):
+            where = self._where(position + index)
+            if rec.get("_fspec_reserved"):
+                raise ParameterError(
+                    f"{self.source} {where}: the FSPEC announces items beyond CAT048's UAP "
+                    "(another edition, or a corrupt record)"
+                )
+            for key, item in (("sac", "I048/010"), ("time_of_day", "I048/140")):
+                if key not in rec:
+                    raise ParameterError(
+                        f"{self.source} {where}, item {item}: missing (every CAT048 record has "
+                        "one; a record without is corrupt, or not framed where its block says)"
+                    )
+            shape = (raw[: _fspec_length(raw)], len(raw))
+            if shape != self._last_shape:
+                self._successor_inside(block, start, len(raw), rec["time_of_day"], where)
+            self._last_shape = shape
+            start += len(raw)
+        return records
+
+    def _successor_inside(
+        self, block: bytes, start: int, length: int, near_tod: float, where: str
+    ) -> None:
+        """Refuse a record (octets ``start`` … ``start + length`` of ``block``, its time of
+        day ``near_tod``) that swallowed
+        the record(s) after it: when, from an octet inside it, its remaining octets read as
+        whole CAT048 records of the radars file's data sources to its last octet exactly,
+        the first a target report of the file's kind (``_is_successor``) within
+        ``SUCCESSOR_WINDOW_S`` of the record's own time, those are the records that followed
+        it, and an FSPEC bit or a repetition count set by corruption made it take them as
+        its own items (a Mode S item taking the next record, an RDS or explicit item the
+        next 32). Honest item octets reading so are far less likely than the corruption: a
+        known SAC/SIC, the FSPEC bits of the kind's items and a time of day within the
+        window, at one offset, and whole records to the end."""
+        end = start + length
+        by_id = self._by_id
+        for p in range(start + 1, end - 2):
+            if not block[p] & 0x80:  # no I048/010 (the cheap tests first: most octets fail)
+                continue
+            f = p + _fspec_length(block[p : min(p + 8, end)])
+            if f + 2 > end or (block[f], block[f + 1]) not in by_id:
+                continue
+            n = self._whole_reports(block, p, end, target_reports=False, near_tod=near_tod)
+            if n:
+                raise ParameterError(
+                    f"{self.source} {where}: the record's items run over {n} record(s) of "
+                    f"the radars file's data sources ({p - start} octets into it): a corrupt "
+                    "FSPEC or item length, refused rather than losing them"
+                )
+
+    def _whole_reports(
+        self,
+        block: bytes,
+        start: int,
+        end: int,
+        target_reports: bool,
+        near_tod: float | None = None,
+    ) -> int:
+        """How many CAT048 records octets ``start`` … ``end`` of ``block`` read as, each one
+        of a data source of the radars file with a time of day (and a measured position, with
+        ``target_reports``), the last ending at ``end`` exactly; 0 when they do not. With
+        ``near_tod`` (a swallowed successor), the first must be ``_is_successor``."""
+        parse, uap, n = self._parser.parse_record, self._parser.uap48, 0
+        pos = start
+        while pos < end:
+            if not block[pos] & 0x80:  # no I048/010: not a record's start
+                return 0
+            f = _fspec_length(block[pos : min(pos + 8, end)])
+            if pos + f + 2 > end or (block[pos + f], block[pos + f + 1]) not in self._by_id:
+                return 0
+            try:
+                rec, consumed = parse(block, pos, uap=uap, block_end=end)
+            except self._parser.malformed:
+                return 0
+            if rec.get("_fspec_reserved") or "time_of_day" not in rec:
+                return 0
+            if target_reports and "rho" not in rec:
+                return 0
+            if n == 0 and near_tod is not None and not self._is_successor(rec, near_tod):
+                return 0
+            pos += consumed
+            n += 1
+        return n
+
+    def _is_successor(self, rec: Any, near_tod: float) -> bool:
+        """A decoded record could be the one after a record of time of day ``near_tod``: a
+        target report within ``SUCCESSOR_WINDOW_S`` of it (modulo a day), with a track number
+        and a height when the file's kind (its first record) has them."""
+        if "rho" not in rec:
+            return False
+        age = abs(rec["time_of_day"] - near_tod) % DAY_S
+        if min(age, DAY_S - age) > SUCCESSOR_WINDOW_S:
+            return False
+        if self.targets and "track_number" not in rec:
+            return False
+        return not (self.three_d and _height_m(rec) is None)
+
+    def _foreign(self, offset: int, cat: int, block: bytes) -> None:
+        """Refuse a data block of another category that is not one: a category number that
+        is no published ASTERIX category (``ASTERIX_CATEGORIES``: a corrupt header, or the
+        block does not start where the previous block's LEN says), or a block whose octets
+        read whole as CAT048 target reports of the radars file's data sources (its category
+        octet corrupt: skipped, its plots would be lost without a word)."""
+        if cat not in ASTERIX_CATEGORIES:
+            raise ParameterError(
+                f"{self.source} {self._block_where(offset)}: data block of category {cat}, "
+                "which is no ASTERIX category: a corrupt block header, or the previous block's "
+                "LEN is wrong"
+            )
+        n = self._whole_reports(block, 3, len(block), target_reports=True)
+        if n:
+            raise ParameterError(
+                f"{self.source} {self._block_where(offset)}: a CAT{cat:03d} data block whose "
+                f"{n} records read as CAT048 target reports of the radars file's data sources: "
+                "a corrupt category octet, refused rather than skipping its plots"
+            )
+
     def _service(self, offset: int, block: bytes) -> None:
         """A CAT034 data block's north markers and sector crossings into ``scan_timing``."""
-        for rec, _ in self._split(offset, block, self._parser.uap34, CAT034):
+        for index, (rec, _) in enumerate(self._split(offset, block, self._parser.uap34, CAT034)):
             self.counts.cat034_messages += 1
             kind = rec.get("message_type")
             if kind not in (NORTH_MARKER, SECTOR_CROSSING) or "sac" not in rec:
@@ -676,10 +874,19 @@ class AsterixReader:
             tod = rec.get("time_of_day")
             if kind == NORTH_MARKER:
                 if tod is not None:
-                    log.north.append(self._clock(tod))
+                    log.north.append(self._service_time(offset, index, tod))
             else:
                 log.sectors += 1
                 log.last_sector_deg = rec.get("sector_number_deg")
+
+    def _service_time(self, offset: int, index: int, tod: float) -> float:
+        """A CAT034 message's I034/030 on the running day (``_DayClock``), its error by the
+        block's offset and the message's number."""
+        try:
+            return self._clock(tod)
+        except ValueError as exc:
+            where = self._where(offset * _RECORDS_PER_POSITION + index)
+            raise ParameterError(f"{self.source} {where}, item I034/030: {exc}") from None
 
     def _radar(self, position: int, rec: Any) -> Radar:
         if "sac" not in rec:
@@ -731,7 +938,10 @@ class AsterixReader:
             radar = c.radar
             if "time_of_day" not in rec:
                 raise self._bad(position, "I048/140", "missing (every plot needs a time)")
-            t = clock(rec["time_of_day"])  # midnight: the day nearest the previous time
+            try:
+                t = clock(rec["time_of_day"])  # midnight: the day nearest the previous time
+            except ValueError as exc:
+                raise self._bad(position, "I048/140", str(exc)) from None
             if abs(t) > MAX_TIME_S:
                 raise self._bad(position, "I048/140", f"time {t!r} s is beyond {MAX_TIME_S:g} s")
             if labelled:
@@ -743,6 +953,11 @@ class AsterixReader:
                 track = rec["track_number"]
                 target = str(track)
                 last_t = last_of.get(target, -math.inf)
+            elif "track_number" in rec:
+                raise self._bad(
+                    position, "I048/161", "a track number, but the file's first record has "
+                    "none, so its plots are one target's (a record of another kind: corrupt?)"
+                )  # fmt: skip
             if t < last_t:
                 of = f" of target {target}" if labelled else ""
                 raise self._bad(
@@ -759,8 +974,19 @@ class AsterixReader:
             if beta_deg <= -180.0:
                 beta_deg += 360.0
             el = None
+            h = _height_m(rec) if radar.sigma_elevation_deg is not None else None
+            if h is not None and not MIN_HEIGHT_M <= h <= MAX_HEIGHT_M:
+                raise self._bad(
+                    position, "I048/110 or I048/090", f"height {h:.0f} m is outside the "
+                    f"physical range [{MIN_HEIGHT_M:g}, {MAX_HEIGHT_M:g}] m (a corrupt record)"
+                )  # fmt: skip
+            if h is not None and not three_d and self._first_heightless_3d:
+                raise self._bad(
+                    position, "I048/110 or I048/090", "a height, but the file's first record "
+                    "(of a radar with sigma_elevation_deg) has none, so the file is 2D (a "
+                    "record of another kind: corrupt?)"
+                )  # fmt: skip
             if three_d:
-                h = _height_m(rec)
                 if h is None:
                     raise self._bad(
                         position, "I048/110 or I048/090", "missing: the file's first record "
@@ -893,6 +1119,12 @@ def input_line(source: str, doc: dict[str, Any]) -> str:
         f"{doc['records']} CAT048 records ({doc['track_only_skipped']} track-only skipped, "
         f"{doc['duplicates_dropped']} duplicates dropped)"
     )
+    first = doc.get("first_other_category_block")
+    if first is not None:
+        parts.append(
+            f"{doc['other_category_blocks']} data blocks of other categories skipped (the "
+            f"first CAT{first['category']:03d} at byte {first['byte']})"
+        )
     scans = [
         f"{name} {s['rotation_period_s']:.3f} s ({s['period_from']})"
         for name, s in doc["scan_timing"].items()
@@ -912,6 +1144,15 @@ def _head(fh: IO[bytes], n: int) -> bytes:
             break
         head += chunk
     return head
+
+
+def _fspec_length(raw: bytes) -> int:
+    """Octets of the FSPEC at the start of ``raw``: up to and with the first octet whose FX
+    bit (the last) is 0 (all of ``raw`` when none is)."""
+    for i, octet in enumerate(raw):
+        if not octet & 1:
+            return i + 1
+    return len(raw)
 
 
 def _height_m(rec: Any) -> float | None:

@@ -38,6 +38,7 @@ from __future__ import annotations
 import contextlib
 import contextvars
 import errno
+import fcntl
 import io
 import os
 import re
@@ -173,6 +174,10 @@ def check_outputs(
             raise ParameterError(f"{flag} must name a regular file ({text} is {kind})")
         if not target.parent.is_dir():
             raise ParameterError(f"{flag}: no such directory {str(target.parent)!r}")
+        if not os.access(target.parent, os.W_OK | os.X_OK):
+            raise ParameterError(
+                f"{flag}: the directory {str(target.parent)!r} is not writable (nothing done)"
+            )
         if not overwrite and target.exists():
             raise ParameterError(f"{flag} {text} exists: refusing to overwrite (pass --overwrite)")
         for other, other_path in [*given[:i], *inputs]:
@@ -210,10 +215,34 @@ def _held_open(pid: int, path: Path) -> bool:
     return False
 
 
+def _locked(path: Path) -> bool:
+    """Whether a live writer holds ``path``'s lock (``Stage`` holds an exclusive ``flock`` on
+    its temporary file from creating it until it is renamed or removed). A lock belongs to the
+    open file, not to a process id, so it is seen across PID namespaces (a writer in a
+    container sharing the directory, whose pid means nothing here) and dies with its holder.
+    False when the lock is free or cannot be taken on this file system (the pid rules then
+    decide)."""
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0))
+    except OSError:
+        return False
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        return True
+    except OSError:
+        return False
+    finally:
+        os.close(fd)
+    return False
+
+
 def _is_stale(path: Path, pid: int | None, now: float) -> bool:
     try:
         mtime = os.lstat(path).st_mtime
     except OSError:
+        return False
+    if _locked(path):  # a live writer, whatever its pid says
         return False
     if pid is None:  # an earlier version's name: only its age tells
         return now - mtime > STALE_AGE_S
@@ -227,8 +256,10 @@ def _is_stale(path: Path, pid: int | None, now: float) -> bool:
 def remove_stale_temps(target: Path) -> list[Path]:
     """Remove this module's temporary files beside ``target`` left by runs that died.
 
-    A ``.NAME.PID-TOKEN.tmp`` (or ``.part``) is stale when its creator is dead and it was last
-    written before this process started, or when it is older than :data:`STALE_AGE_S` and its
+    A file whose lock a writer holds (``_locked``: every ``Stage`` locks its temporary file) is
+    never stale. Otherwise a ``.NAME.PID-TOKEN.tmp`` (or ``.part``, or a file of a version
+    that took no lock) is stale when its creator is dead and it was last written before this
+    process started, or when it is older than :data:`STALE_AGE_S` and its
     creator's pid no longer holds it open (the pid was reused). An earlier version's
     ``.NAME.XXXXXXXX.tmp`` is stale, for this very target only, when older than
     :data:`STALE_AGE_S`. A directory is swept once per process (a chunk store writes thousands
@@ -293,6 +324,13 @@ class Stage:
             self.fd: int | None = os.open(self.path, flags, 0o666)  # the umask applies
         except OSError as exc:
             raise write_error(self.target, exc) from None
+        # A lock held until the rename or removal tells a sweeper of another run, even in
+        # another PID namespace, that this file is being written (``remove_stale_temps``).
+        # It is on a descriptor of its own: a writer may close ``fd``.
+        self._lock_fd: int | None = None
+        with contextlib.suppress(OSError):  # a file system without flock: the pid rules
+            self._lock_fd = os.open(self.path, os.O_RDONLY | getattr(os, "O_CLOEXEC", 0))
+            fcntl.flock(self._lock_fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         try:
             if self.existing is not None:  # a replaced file keeps its mode (and owner, as root)
                 os.fchmod(self.fd, stat.S_IMODE(self.existing.st_mode))
@@ -321,6 +359,12 @@ class Stage:
                 str(self.target),
             )
         return st
+
+    def release_lock(self) -> None:
+        """Drop the writer's lock (after the rename, or with the removed file)."""
+        if self._lock_fd is not None:
+            fd, self._lock_fd = self._lock_fd, None
+            os.close(fd)
 
     def close_fd(self) -> None:
         if self.fd is not None:
@@ -372,6 +416,10 @@ class Stage:
                 raise self.error(exc, "it does not read back whole") from None
 
     def _rename(self) -> None:
+        self._rename_onto_target()
+        self.release_lock()
+
+    def _rename_onto_target(self) -> None:
         target = self.target
         if self.overwrite:
             kind = special_kind(target)  # it may have changed since the stage began
@@ -455,6 +503,8 @@ class Stage:
             self.close_fd()
         with contextlib.suppress(FileNotFoundError):
             os.unlink(self.path)
+        with contextlib.suppress(OSError):
+            self.release_lock()
 
     def __enter__(self) -> Stage:
         return self

@@ -14,7 +14,7 @@ import numpy as np
 from radarviz.core.confidence import BAND_GROUPS, BAND_LEVEL
 from radarviz.core.experiments.prosov import TrackingResult, check_delta_x_claims
 from radarviz.core.finite import check_finite_result
-from radarviz.core.metrics import TrackMetrics
+from radarviz.core.metrics import NONNEGATIVE_METRICS, TrackMetrics
 
 #: Per-method series in the document, in this order.
 METRIC_KEYS: tuple[str, ...] = (
@@ -27,9 +27,7 @@ METRIC_KEYS: tuple[str, ...] = (
     "nees_state",
 )
 #: Series that are a σ, an RMSE or a NEES: negative is a failure, not a value.
-NONNEGATIVE_KEYS: frozenset[str] = frozenset(
-    {"sigma_x_filter", "rmse_x", "std_x", "nees_pos", "nees_state"}
-)
+NONNEGATIVE_KEYS: frozenset[str] = NONNEGATIVE_METRICS
 
 
 def check_metrics(
@@ -57,7 +55,12 @@ def check_metrics(
             if name in bands:
                 for side, band in zip(("lo", "hi"), bands[name][key], strict=True):
                     check_finite_result(
-                        where, f"{key} 95% band {side} of {name}", band, defined=defined, index=n
+                        where,
+                        f"{key} 95% band {side} of {name}",
+                        band,
+                        defined=defined,
+                        nonnegative=key in NONNEGATIVE_KEYS,
+                        index=n,
                     )
 
 
@@ -194,7 +197,7 @@ def format_prosov_table(doc: dict[str, Any]) -> str:
     for case in doc["cases"]:
         n = case["n"]
         cols = _scan_columns(n)
-        head = "".join(f"{'n=' + str(n[i]):>9}" for i in cols)
+        labels = [f"n={n[i]}" for i in cols]
         dims = int(case.get("dims", 2))
         where = (
             f", 3D: elevation {case['elevation_deg']:g}°, σε = {case['sigma_elevation_deg']:g}°"
@@ -207,28 +210,26 @@ def format_prosov_table(doc: dict[str, Any]) -> str:
             f"[{case['nees_pos_band95'][0]:.3f}, {case['nees_pos_band95'][1]:.3f}])"
         )
         if "delta_x_percent" in case:
-            lines.append(f"  Δx(n) of seed vs naive, %   {head}")
+            rows: list[tuple[str, list[str]]] = []
             for reading in ("filter", "rmse", "std"):
                 vals = case["delta_x_percent"][reading]
-                row = "".join(f"{fmt(vals[i], '9.2f')}" for i in cols)
-                lines.append(f"    {reading + ' reading':<26}{row}")
+                rows.append((reading + " reading", [fmt(vals[i], ".2f") for i in cols]))
                 half = _half_widths(case["delta_x_ci95"][reading])
-                row = "".join(f"{fmt(half[i], '9.2f')}" for i in cols)
-                lines.append(f"    {'  ± (95%)':<26}{row}")
+                rows.append(("  ± (95%)", [fmt(half[i], ".2f") for i in cols]))
+            lines += _block("Δx(n) of seed vs naive, %", labels, rows)
         for label, key, spec in (
-            ("range bias, m", "bias_range", "9.1f"),
-            ("RMSE x, m", "rmse_x", "9.1f"),
-            ("filter σx, m", "sigma_x_filter", "9.1f"),
-            (f"NEES position ({dims} dof)", "nees_pos", "9.2f"),
-            (f"NEES state ({2 * dims} dof)", "nees_state", "9.2f"),
+            ("range bias, m", "bias_range", ".1f"),
+            ("RMSE x, m", "rmse_x", ".1f"),
+            ("filter σx, m", "sigma_x_filter", ".1f"),
+            (f"NEES position ({dims} dof)", "nees_pos", ".2f"),
+            (f"NEES state ({2 * dims} dof)", "nees_state", ".2f"),
         ):
-            lines.append(f"  {label + ' (± 95%)':<28}{head}")
+            rows = []
             for name, m in case["methods"].items():
-                row = "".join(f"{fmt(m[key][i], spec)}" for i in cols)
-                lines.append(f"    {name:<26}{row}")
+                rows.append((name, [fmt(m[key][i], spec) for i in cols]))
                 half = _half_widths(m["ci95"][key])
-                row = "".join(f"{fmt(half[i], spec)}" for i in cols)
-                lines.append(f"    {'  ±':<26}{row}")
+                rows.append(("  ±", [fmt(half[i], spec) for i in cols]))
+            lines += _block(label + " (± 95%)", labels, rows)
         if case.get("claims"):
             lines.append(f"  The paper's claims, from the 95% bands of {doc['runs']} runs:")
             for c in case["claims"]:
@@ -239,6 +240,15 @@ def format_prosov_table(doc: dict[str, Any]) -> str:
     )
     lines.append("ucm about +r·s, ducm small (s = σβ² in rad²); compare the rows with their bands.")
     return "\n".join(lines)
+
+
+def _block(title: str, labels: list[str], rows: list[tuple[str, list[str]]]) -> list[str]:
+    """A table block: a header line (``title`` and the column labels) and one line per row,
+    every column as wide as its widest cell (at least 8) with a space before it, so large
+    values (``98858.03`` then ``164647.62``) never run together."""
+    width = max(8, *(len(c) for c in labels), *(len(c) for _, cells in rows for c in cells))
+    line = lambda cells: "".join(f" {c:>{width}}" for c in cells)  # noqa: E731
+    return [f"  {title:<28}{line(labels)}"] + [f"    {name:<26}{line(c)}" for name, c in rows]
 
 
 def _half_widths(band: dict[str, list[float | None]]) -> list[float | None]:

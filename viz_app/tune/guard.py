@@ -64,7 +64,11 @@ def _host_name(authority: str) -> str:
     """The host part of a ``Host`` header or URL authority, lower case, IPv6 brackets off."""
     authority = authority.strip().lower()
     if authority.startswith("["):
-        return authority[1 : authority.find("]")] if "]" in authority else ""
+        # "[addr]" or "[addr]:port" only: "[::1].evil.example:PORT" names evil.example's host,
+        # not the loopback address (a rebinding page's Host), so it gives no name at all.
+        addr, close, rest = authority[1:].partition("]")
+        port_ok = rest == "" or (rest.startswith(":") and rest[1:].isdigit())
+        return addr if close and port_ok else ""
     return authority.rsplit(":", 1)[0] if authority.count(":") == 1 else authority
 
 
