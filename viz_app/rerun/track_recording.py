@@ -61,8 +61,9 @@ from radarviz.core.tracking.consistency import ConsistencyMonitor
 from radarviz.core.tracking.stream import Plot, StateRow
 from radarviz.core.tracking.targets import track_name
 from radarviz.viz_app.io.plots import Radar
-from radarviz.viz_app.palette import radar_rgb
+from radarviz.viz_app.palette import RADAR_GREYS, track_rgb
 from radarviz.viz_app.rerun.recording import colour, ellipsoid_axes, log_text, recording_file
+from radarviz.viz_app.rerun.scenes import PresetLayout, blueprint_of
 from radarviz.viz_app.rerun.shapes import (
     CLOUD_MARKER,
     FAINT_LINE,
@@ -124,7 +125,8 @@ class TrackRecorder:
                 rr.Points3D(
                     [(r.x_m, r.y_m, r.z_m)],
                     radii=[MARKER],
-                    colors=[radar_rgb(j)],
+                    # Greys: a radar never takes a method's or a track's colour.
+                    colors=[RADAR_GREYS[j % len(RADAR_GREYS)]],
                     labels=[_label(r)],
                 ),
                 static=True,
@@ -151,6 +153,11 @@ class TrackRecorder:
         # Targets deleted since the last flush: a tentative one's path is never drawn.
         self._deleted: set[str] = set()
         self._styled: set[str] = set()
+        # Each track's colour, by method, or by track id when one method tracks many.
+        self._colours: dict[str, tuple[int, int, int]] = {}
+        self._methods: set[str] = set()
+        # The confirmed rows' series values, for axes that ignore their outliers.
+        self._series: dict[str, list[np.ndarray]] = defaultdict(list)
         self._time_s = 0.0
 
     def _extend(self, pts: np.ndarray) -> None:
@@ -186,6 +193,7 @@ class TrackRecorder:
                 name=series + title,
                 time_ranges=whole,
                 plot_legend=rrb.PlotLegend(corner="RightTop"),
+                axis_y=self._robust_axis(name),
             )
             for name, title in (
                 ("sigma_pos_m", "√trace of the position covariance, m"),
@@ -195,8 +203,9 @@ class TrackRecorder:
         title = "radars, plots and tracks, m"
         if self.statuses:
             title += " (faint: tentative; deleted tracks cleared)"
-        self.rec.send_blueprint(
-            rrb.Blueprint(
+        #: The recording's layout (``PresetLayout`` of ``viz_app.rerun.scenes``): one tab.
+        self.layout = PresetLayout(
+            (
                 rrb.Horizontal(
                     rrb.Vertical(
                         rrb.Spatial3DView(
@@ -216,11 +225,25 @@ class TrackRecorder:
                     ),
                     rrb.Vertical(*plots),
                     column_shares=[3, 2],
+                    name="tracks",
                 ),
-                rrb.TimePanel(timeline="plot", state="collapsed"),
-                collapse_panels=True,
-            )
+            ),
+            timeline="plot",
+            tabbed=False,
         )
+        self.rec.send_blueprint(blueprint_of(self.layout))
+
+    def _robust_axis(self, series: str) -> rrb.ScalarAxis | None:
+        """A y range holding the series' values but not their outliers (a clutter plot that
+        briefly pulls a track makes a speed spike that would flatten every other curve):
+        ``plot2d.robust_limits`` with a margin; None (the view's own) without values."""
+        from radarviz.viz_app.rerun.plot2d import robust_limits
+
+        if not self._series.get(series):
+            return None
+        lo, hi = robust_limits(self._series[series])
+        pad = 0.08 * max(hi - lo, abs(hi) * 0.05, 1e-9)
+        return rrb.ScalarAxis(range=(max(lo - pad, 0.0), hi + pad))
 
     @classmethod
     @contextlib.contextmanager
@@ -262,6 +285,7 @@ class TrackRecorder:
         else:
             self._meas[plot.radar].append((self.count, plot.time_s, np.array([point])))
         for method, x, P in rows:
+            self._methods.add(method)
             self._tracks[(plot.target, method)].append((self.count, plot.time_s, x, P, status))
         if self.count % RRD_CHUNK == 0:
             self.flush()
@@ -349,7 +373,12 @@ class TrackRecorder:
         POS, VEL = list(position_index(3)), list(velocity_index(3))
         pos, vel = x[:, POS], x[:, VEL]
         cov = P[:, POS][:, :, POS]
-        rgb, dim = colour(method), faint(colour(method))
+        label = track_name(target, method) if target else method
+        rgb = self._colours.get(name)
+        if rgb is None:  # by id when one method tracks many targets, else by method
+            by_id = bool(target) and len(self._methods) == 1
+            rgb = self._colours[name] = track_rgb(len(self._colours)) if by_id else colour(method)
+        dim = faint(rgb)
         tentative = np.array([s == TENTATIVE for s in statuses])
         rgbs = [dim if s else rgb for s in tentative]
         idx = self.indexes(list(n), list(t))
@@ -361,6 +390,8 @@ class TrackRecorder:
                 positions=pos,
                 colors=rgbs,
                 radii=[FAINT_MARKER if s else MARKER for s in tentative],
+                # A confirmed track's id beside it (tentative ones are too many to name).
+                labels=["" if s else label for s in tentative],
             ),
         )
         half, quat = ellipsoid_axes(cov)
@@ -408,13 +439,11 @@ class TrackRecorder:
                 )
         sel = slice(first, None)
         at = self.indexes(list(n[sel]), list(t[sel]))
-        rec.send_columns(
-            f"plots/sigma_pos_m/{name}",
-            indexes=at,
-            columns=rr.Scalars.columns(scalars=np.sqrt(np.trace(cov[sel], axis1=1, axis2=2))),
-        )
-        rec.send_columns(
-            f"plots/speed_mps/{name}",
-            indexes=at,
-            columns=rr.Scalars.columns(scalars=np.linalg.norm(vel[sel], axis=1)),
-        )
+        for series, values in (
+            ("sigma_pos_m", np.sqrt(np.trace(cov[sel], axis1=1, axis2=2))),
+            ("speed_mps", np.linalg.norm(vel[sel], axis=1)),
+        ):
+            rec.send_columns(
+                f"plots/{series}/{name}", indexes=at, columns=rr.Scalars.columns(scalars=values)
+            )
+            self._series[series].append(values.astype(np.float32))
