@@ -130,17 +130,19 @@ def log_axis(lo: float, hi: float) -> Axis:
 
 
 def robust_limits(values: Sequence[NDArray], reach: float = 3.0) -> tuple[float, float]:
-    """(lo, hi) of the values inside Tukey's fences, ``reach`` interquartile ranges beyond
-    the quartiles: a single clutter spike then leaves the axis where the tracks are, while
-    any value of the bulk stays inside. (0, 1) without finite values."""
+    """(lo, hi) of the values inside Tukey's fences (``reach`` interquartile ranges beyond
+    the quartiles), widened to the 0.5 and 99.5 percentiles: a single clutter spike then
+    leaves the axis where the tracks are, while the bulk and a steady series' excursions stay
+    inside. (0, 1) without finite values."""
     v = np.concatenate([np.ravel(np.asarray(a, dtype=np.float64)) for a in values])
     v = v[np.isfinite(v)]
     if v.size == 0:
         return 0.0, 1.0
-    q1, q3 = np.percentile(v, [25.0, 75.0])
+    p_lo, q1, q3, p_hi = np.percentile(v, [0.5, 25.0, 75.0, 99.5])
     iqr = max(q3 - q1, 1e-9 * max(abs(q1), abs(q3), 1.0))
     inside = v[(v >= q1 - reach * iqr) & (v <= q3 + reach * iqr)]
-    return float(inside.min()), float(inside.max())
+    # A steady series has a tiny IQR: its 0.5–99.5 percentiles keep its real excursions in.
+    return float(min(inside.min(), p_lo)), float(max(inside.max(), p_hi))
 
 
 def format_value(v: float, step: float | None = None) -> str:
