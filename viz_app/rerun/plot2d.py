@@ -45,7 +45,7 @@ GRID = (215, 215, 215)
 AXIS = (90, 90, 90)
 #: Room around the box, as fractions of HEIGHT: left for the y numbers, below for the x
 #: numbers, right for the curves' labels, above for the top number.
-MARGIN_LEFT, MARGIN_BOTTOM, MARGIN_RIGHT, MARGIN_TOP = 0.34, 0.22, 0.95, 0.1
+MARGIN_LEFT, MARGIN_BOTTOM, MARGIN_RIGHT, MARGIN_TOP = 0.34, 0.3, 0.95, 0.1
 
 
 @dataclass(frozen=True)

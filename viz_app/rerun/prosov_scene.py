@@ -340,10 +340,10 @@ def log_target_frame(
             rec.log(
                 f"{base}/note",
                 rr.Points2D(
-                    [[-0.45 * frame.cross_half_m, -0.36 * frame.cross_half_m / k]],
+                    [[0.0, -0.3 * frame.cross_half_m / k]],
                     radii=[0.0],
                     colors=[pale(colour, 0.2)],
-                    labels=[f"pale: {m}'s converted plots (Monte Carlo), × their mean"],
+                    labels=["pale: converted plots (Monte Carlo), × their mean"],
                     show_labels=True,
                 ),
                 static=True,
@@ -357,13 +357,10 @@ def log_target_frame(
         rec.log(
             f"{polar}/note",
             rr.Points2D(
-                [[-0.35 * frame.cross_half_m, -0.36 * frame.cross_half_m / k]],
+                [[0.0, -0.3 * frame.cross_half_m / k]],
                 radii=[0.0],
                 colors=[grey],
-                labels=[
-                    "grey: the plots converted naively, × their mean (this filter takes "
-                    "them in polar form)"
-                ],
+                labels=["grey: plots converted naively, × their mean (fed polar plots)"],
                 show_labels=True,
             ),
             static=True,
@@ -528,7 +525,7 @@ def log_statistics(rec: rr.RecordingStream, scene: ProsovScene, root: str = ROOT
 
 #: Width of the statistics charts' boxes (drawn units; their height is ``plot2d.HEIGHT``),
 #: for views about 3.5 times wider than high.
-CHART_WIDTH = 380.0
+CHART_WIDTH = 420.0
 
 
 def log_charts(rec: rr.RecordingStream, scene: ProsovScene, root: str = ROOT) -> None:
@@ -752,7 +749,8 @@ def log_prosov3d(
 ) -> float:
     """The 3D Prosov scene (``prosov_scene`` of a 3D config): every method's estimate of the
     displayed run and its 1σ ellipsoid in the target frame, and the Monte Carlo statistics.
-    Returns the half-size (km) of the frame's view."""
+    Returns the half-size (km) of the frame's views: 1.2 × the largest 1σ half axis of the
+    run's second half."""
     from radarviz.core.experiments.prosov import prosov_configs
     from radarviz.core.geometry import range_cross_up_basis
     from radarviz.viz_app.rerun.recording import ellipsoid_axes
@@ -797,7 +795,8 @@ def log_prosov3d(
                 fill_mode=[rr.components.FillMode.MajorWireframe] * n,
             ).partition([1] * n),
         )
-    axis = plot2d.nice_step(1.2 * largest, 1)  # a round length, written on the axes
+    reach = 1.2 * largest  # the views frame this
+    axis = plot2d.nice_step(reach, 1)  # a round length, written at the axes' tips
     rec.log(
         f"{ROOT_3D}/target/truth",
         rr.Points3D([[0.0, 0.0, 0.0]], radii=-6.0, colors=[rgb("truth")], labels=["truth"]),
@@ -808,8 +807,18 @@ def log_prosov3d(
         rr.Arrows3D(
             vectors=[[axis, 0.0, 0.0], [0.0, axis, 0.0], [0.0, 0.0, axis]],
             colors=[(120, 120, 120)] * 3,
-            labels=[f"{a} {axis:g} km" for a in ("down-range", "cross-range", "up")],
             radii=-1.0,
+        ),
+        static=True,
+    )
+    rec.log(
+        f"{ROOT_3D}/target/axes/tips",
+        rr.Points3D(
+            np.eye(3) * axis,
+            radii=[0.0],
+            colors=[(120, 120, 120)],
+            labels=[f"{a} {axis:g} km" for a in ("down-range", "cross-range", "up")],
+            show_labels=True,
         ),
         static=True,
     )
@@ -820,14 +829,14 @@ def log_prosov3d(
         f"Prosov 3D: {runs} Monte Carlo runs, σβ = {sigma_beta_deg:g}°, σε = "
         f"{sigma_elevation_deg:g}°, target at elevation {elevation_deg:g}°, seed {seed}",
     )
-    return axis
+    return reach
 
 
 def views_3d(axis_km: float, methods: Sequence[str] = METHODS_SHOWN) -> rrb.Container:
     """The 3D tab: small multiples, one 3D target frame per method (its estimate and 1σ
     ellipsoid, the truth and the axes; every camera the same, so sizes compare across
     views), the legend, and the per-scan statistics."""
-    d = 2.2 * axis_km
+    d = 1.7 * axis_km  # the camera close enough that the ellipsoids fill a small view
     eye = rrb.EyeControls3D(
         position=(0.9 * d, -0.7 * d, 0.6 * d),
         look_target=(0.0, 0.0, 0.0),
