@@ -124,9 +124,12 @@ def log_axis(lo: float, hi: float) -> Axis:
     d0, d1 = int(np.floor(np.log10(lo_t))), int(np.ceil(np.log10(hi_t)))
     ticks = np.array([m * 10.0**d for d in range(d0, d1 + 1) for m in mult])
     ticks = ticks[(ticks >= lo_t * 0.9999) & (ticks <= hi_t * 1.0001)]
-    # The ends are numbered too (on a decade scale they may be 2 or 5 × 10ⁿ).
-    ticks = np.unique(np.r_[lo_t, ticks, hi_t])
-    return Axis(lo_t, hi_t, True, ticks)
+    # The ends are numbered too (on a decade scale they may be 2 or 5 × 10ⁿ), unless that
+    # puts them within 15% of the axis of a decade's number.
+    axis = Axis(lo_t, hi_t, True, ticks)
+    u = axis.to_unit(ticks)
+    ends = [e for e in (lo_t, hi_t) if ticks.size == 0 or np.abs(u - axis.to_unit(e)).min() > 0.15]
+    return Axis(lo_t, hi_t, True, np.unique(np.r_[ticks, ends]))
 
 
 def robust_limits(values: Sequence[NDArray], reach: float = 3.0) -> tuple[float, float]:
