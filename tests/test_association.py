@@ -1042,3 +1042,28 @@ def test_bench_only_association(capsys: pytest.CaptureFixture[str]) -> None:
     assert (doc["targets"], doc["correct"], doc["same_as_dense"]) == (20, True, True)
     assert main(["bench", "--only", "association", "--targets", "0"]) == 2
     assert "--targets" in capsys.readouterr().err
+
+
+def test_track_rrd_draws_the_truth_file(tmp_path: Path, capsys, rrd_contents) -> None:
+    """``track --rrd --truth``: each truth target's path (static) and its position at each truth
+    time, on the ``time`` timeline at the truth's times; ``--truth`` without ``--rrd`` is a
+    one-line error (exit 2) before any tracking."""
+    from radarviz.viz_app.io.score_files import read_truth
+
+    m, r, t = simulate(tmp_path, "--clutter-per-scan", "1")
+    out, rrd = tmp_path / "tracks.csv", tmp_path / "tracks.rrd"
+    argv = ["track", "--input", str(m), "--radars", str(r), "--out", str(out)]
+    argv += ["--associate", "gnn", "--method", "ucm", "--model", "cv", "--sigma-a", "1"]
+    assert main([*argv, "--truth", str(t)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--truth" in err and "--rrd" in err
+    assert not out.exists()
+    assert main([*argv, "--rrd", str(rrd), "--truth", str(t)]) == 0
+    truth = read_truth(str(t))
+    rows, cols = rrd_contents(rrd)
+    for target in set(truth.targets.tolist()):
+        entity = f"/world/truth/{target}/position"
+        times = np.sort(truth.times_s[truth.targets == target])
+        assert rows[entity] == len(times)
+        np.testing.assert_allclose(np.array(cols[entity]["time"]) / 1e9, times, atol=1e-6)
+        assert f"/world/truth/{target}/path" in rows

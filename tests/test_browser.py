@@ -6,7 +6,6 @@ Required in CI (``CI=true``): there a missing browser is a failure, not a skip.
 from __future__ import annotations
 
 import os
-import shutil
 import subprocess
 import sys
 import time
@@ -44,9 +43,6 @@ def _wait_http(url: str, timeout: float = 30.0) -> None:
     raise TimeoutError(f"{url} did not answer within {timeout} s")
 
 
-#: Where the docs' screenshots live (README.md and docs/viewer.md show them);
-#: ``RADARVIZ_WRITE_DOCS=1`` makes this test rewrite them.
-DOCS = Path(__file__).resolve().parents[1] / "docs"
 VIEWPORT = {"width": 1600, "height": 1000}
 #: Pixels within this RGB distance of a palette colour count as that colour.
 COLOUR_TOLERANCE = 30.0
@@ -140,8 +136,6 @@ def test_each_scene_opens_on_legible_views(
                 views = slice(60, VIEWPORT["height"] - 40)
                 changed = np.abs(early[views, :, :3] - late[views, :, :3]).max(axis=-1) > 0.1
                 assert changed.mean() > 0.002, (preset, changed.mean())
-            if os.environ.get("RADARVIZ_WRITE_DOCS") == "1":
-                shutil.copyfile(ARTIFACTS / f"viewer_{preset}.png", DOCS / f"viewer_{preset}.png")
             browser.close()
     finally:
         os.killpg(proc.pid, 15)

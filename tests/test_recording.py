@@ -143,7 +143,8 @@ def test_record_refuses_to_overwrite_and_leaves_no_temporary(
     assert out.read_bytes() == b"keep me"
     assert main(["record", "--preset", "gorshkov", "--out", str(out), "--overwrite"]) == 0
     rows, _ = rrd_contents(out)
-    assert rows["/plots/gorshkov/gain_r_percent/RLS6"] == 20
+    # The six radars' gains against k: one static curve each.
+    assert rows["/charts/gorshkov/gain_r_percent/curves/5"] == 0
     assert sorted(p.name for p in tmp_path.iterdir()) == ["g.rrd"]
 
 
@@ -162,9 +163,10 @@ def test_demo_writes_a_recording_headless(tmp_path: Path, capsys, rrd_contents) 
     per_scan |= {"/plots/doppler_start/rmse_vr_mps/range_doppler": 58}
     for path, n in per_scan.items():
         assert rows.get(path) == n, (path, rows.get(path))
-    # Gorshkov's curves are functions of the window length: timeline window_k, k = 1 … 20.
-    gain = cols["/plots/gorshkov/gain_r_percent/RLS6"]
-    assert gain["window_k"] == list(range(1, 21)) and "scan" not in gain
+    # Gorshkov's curves are functions of the window length: static charts, no timeline of
+    # their own (every tab shows whichever timeline is active).
+    assert rows["/charts/gorshkov/gain_r_percent/curves/5"] == 0
+    assert not any("window_k" in c for entity in cols.values() for c in entity)
     scene = prosov_scene(TrackingConfig(sigma_beta_deg=2.0, runs=500, seed=1))
     np.testing.assert_array_equal(
         [v[0] for v in cols["/plots/prosov/rmse_x_m/naive"]["Scalars:scalars"]],

@@ -77,3 +77,28 @@ def radar_rgb(index: int) -> tuple[int, int, int]:
 def hex_colour(c: tuple[int, int, int]) -> str:
     """``#rrggbb`` for matplotlib."""
     return "#{:02x}{:02x}{:02x}".format(*c)
+
+
+#: Radar colours once every palette colour is taken by something else in the view: dark to
+#: light greys (a radar's label names it).
+RADAR_GREYS: tuple[tuple[int, int, int], ...] = ((60, 60, 60), (105, 105, 105), (150, 150, 150))
+
+
+def radar_rgb_avoiding(index: int, avoid: list[tuple[int, int, int]]) -> tuple[int, int, int]:
+    """The ``index``-th radar's colour in a view that also draws the colours ``avoid`` (its
+    methods or motion models): the radar sequence without them, so a radar never looks like
+    a method; greys (cycling) when no colour is left over."""
+    free = [c for c in RADAR_SEQUENCE if c not in set(avoid)]
+    return free[index] if index < len(free) else RADAR_GREYS[(index - len(free)) % 3]
+
+
+#: Colours of tracks told apart by their ids (one method, many targets): the palette's seven
+#: colours, then darker shades of them.
+TRACK_SEQUENCE: tuple[tuple[int, int, int], ...] = RADAR_SEQUENCE + tuple(
+    (r * 3 // 5, g * 3 // 5, b * 3 // 5) for r, g, b in RADAR_SEQUENCE
+)
+
+
+def track_rgb(ordinal: int) -> tuple[int, int, int]:
+    """The colour of the ``ordinal``-th track (in order of appearance), cycling after 14."""
+    return TRACK_SEQUENCE[ordinal % len(TRACK_SEQUENCE)]

@@ -40,6 +40,7 @@ from radarviz.experiments import (
     run_prosov,
     run_velocity,
 )
+from radarviz.style import colour, use_palette
 from radarviz.tables import to_arrow, to_columns, to_table
 from radarviz.tracking import ScanEnd, Tracks, TrackStep, track, track_file
 from radarviz.viewer import PRESETS, record, show, use_offline_assets
@@ -55,6 +56,7 @@ __all__ = [
     "ScanEnd",
     "TrackStep",
     "Tracks",
+    "colour",
     "convert",
     "estimate_velocity",
     "finite_memory",
@@ -69,4 +71,5 @@ __all__ = [
     "track",
     "track_file",
     "use_offline_assets",
+    "use_palette",
 ]

@@ -19,6 +19,7 @@ from radarviz.core.params import ParameterError, check, check_choice, default, p
 from radarviz.core.scenarios.crossing import CrossingScene
 from radarviz.core.tracking.association import ASSOCIATE_MODES, AssociationOptions
 from radarviz.core.tracking.consistency import ConsistencyMonitor
+from radarviz.core.tracking.scoring import Truth
 from radarviz.core.tracking.stream import (
     INIT_MODES,
     METHODS_3D,
@@ -100,6 +101,13 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
         default=None,
         metavar="OUT.rrd",
         help="also write a Rerun recording of the plots and tracks (replaced)",
+    )
+    tr.add_argument(
+        "--truth",
+        default=None,
+        metavar="TRUTH.csv",
+        help="the truth, drawn in the --rrd recording (needs --rrd): CSV or Parquet with "
+        "time_s, target, x_m, y_m [, z_m] (simulate --truth-out writes one)",
     )
     tr.add_argument(
         "--init",
@@ -332,14 +340,16 @@ def association_options(args: argparse.Namespace) -> AssociationOptions | None:
     return AssociationOptions(**kw)
 
 
-def _recorder(path: str, monitor: ConsistencyMonitor | None = None) -> ObserverFactory:
+def _recorder(
+    path: str, monitor: ConsistencyMonitor | None = None, truth: Truth | None = None
+) -> ObserverFactory:
     """A factory of the Rerun recorder writing ``path`` (Rerun is imported when it is called);
-    ``monitor``'s band exits go to the recording's log."""
+    ``monitor``'s band exits go to the recording's log; ``truth`` is drawn in it."""
 
     def factory(radars: Iterable[Radar]) -> AbstractContextManager[RowObserver]:
         from radarviz.viz_app.rerun.track_recording import TrackRecorder
 
-        return TrackRecorder.to_file(path, radars, monitor=monitor)
+        return TrackRecorder.to_file(path, radars, monitor=monitor, truth=truth)
 
     return factory
 
@@ -364,8 +374,16 @@ def _motion_options(args: argparse.Namespace) -> dict:
 def cmd_track(args: argparse.Namespace) -> int:
     check_outputs(
         [("--out", args.out), ("--rrd", args.rrd), ("--summary", args.summary)],
-        [("--input", args.input), ("--radars", args.radars)],
+        [("--input", args.input), ("--radars", args.radars)]
+        + ([("--truth", args.truth)] if args.truth is not None else []),
     )
+    truth = None
+    if args.truth is not None:
+        if args.rrd is None:
+            raise ParameterError("--truth is drawn in the --rrd recording: give --rrd too")
+        from radarviz.viz_app.io.score_files import read_truth
+
+        truth = read_truth(args.truth)
     association = association_options(args)
     monitor = ConsistencyMonitor(args.nis_window, on_event=exit_warner(_warn))
     doppler_update = DOPPLER_MODES[check_choice("--doppler", args.doppler, DOPPLER_MODES)]
@@ -380,7 +398,7 @@ def cmd_track(args: argparse.Namespace) -> int:
         **_motion_options(args),
     )
     methods = None if args.method is None else tuple(args.method)
-    observer = None if args.rrd is None else _recorder(args.rrd, monitor)
+    observer = None if args.rrd is None else _recorder(args.rrd, monitor, truth)
     from radarviz.viz_app.io.asterix import source_for
 
     open_source = source_for(args.input, args.format)

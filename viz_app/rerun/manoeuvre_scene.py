@@ -26,7 +26,8 @@ import rerun.blueprint as rrb
 
 from radarviz.core.experiments.manoeuvre import FlightTracks, track_flight
 from radarviz.core.scenarios.manoeuvre import FLIGHTS, MANOEUVRE_RADARS
-from radarviz.viz_app.palette import radar_rgb, rgb
+from radarviz.viz_app.palette import radar_rgb_avoiding, rgb
+from radarviz.viz_app.rerun import plot2d
 from radarviz.viz_app.rerun.recording import log_series, log_text
 from radarviz.viz_app.rerun.shapes import MARKER, SMALL_MARKER, THIN_LINE, colours, radii
 
@@ -41,12 +42,15 @@ def log_manoeuvre(rec: rr.RecordingStream, seed: int = 1) -> FlightTracks:
     n = ft.time_s.size
     scans = np.arange(1, n + 1)
     at = [rr.TimeColumn("scan", sequence=scans), rr.TimeColumn("time", duration=ft.time_s)]
+    # Radars in colours the motion models do not use.
+    models = [rgb(label) for label in ft.estimates]
+    tone = [radar_rgb_avoiding(j, models) for j in range(len(MANOEUVRE_RADARS))]
     rec.log(
         f"{ROOT}/map/radars",
         rr.Points3D(
             [r.position for r in MANOEUVRE_RADARS],
             radii=[MARKER],
-            colors=[radar_rgb(j) for j in range(len(MANOEUVRE_RADARS))],
+            colors=tone,
             labels=[r.name for r in MANOEUVRE_RADARS],
         ),
         static=True,
@@ -68,7 +72,7 @@ def log_manoeuvre(rec: rr.RecordingStream, seed: int = 1) -> FlightTracks:
         indexes=at,
         columns=rr.Points3D.columns(
             positions=ft.measured_m,
-            colors=np.array([radar_rgb(int(k)) for k in ft.radar], dtype=np.uint8),
+            colors=np.array([tone[int(k)] for k in ft.radar], dtype=np.uint8),
             radii=radii(SMALL_MARKER, n),
         ),
     )
@@ -97,6 +101,7 @@ def log_manoeuvre(rec: rr.RecordingStream, seed: int = 1) -> FlightTracks:
     idx = np.searchsorted(ft.time_s, w[:, 0]) + 1
     for j, part in ((2, "band_lo"), (3, "band_hi")):
         log_series(rec, f"plots/{ROOT}/nis/{part}", idx, w[:, 0], w[:, j], rgb("band"), part)
+    _log_charts(rec, ft, at)
     log_text(
         rec,
         f"manoeuvre: flight {FLIGHTS[FLIGHT].name}, {n} plots from 3 radars; ucm tracked with "
@@ -106,20 +111,51 @@ def log_manoeuvre(rec: rr.RecordingStream, seed: int = 1) -> FlightTracks:
     return ft
 
 
+#: Box width of the scene's charts (drawn units, height ``plot2d.HEIGHT``).
+CHART_WIDTH = 150.0
+
+
+def _log_charts(rec: rr.RecordingStream, ft: FlightTracks, at: list[rr.TimeColumn]) -> None:
+    """The position error per plot (log scale, a cursor labelling it) and the windowed NIS
+    per degree of freedom over the IMM's 95% χ² band (log scale: it spans decades), against
+    the flight's time."""
+    plot2d.log_plot(
+        rec,
+        f"charts/{ROOT}/error_m",
+        [plot2d.Curve(label, ft.time_s, e, rgb(label)) for label, e in ft.errors_m.items()],
+        width=CHART_WIDTH,
+        x_label="t, s",
+        log_y=True,
+        cursor=at,
+        cursor_x=ft.time_s,
+        unit=" m",
+    )
+    w = ft.windows["imm"]
+    plot2d.log_plot(
+        rec,
+        f"charts/{ROOT}/nis",
+        [plot2d.Curve(label, w[:, 0], w[:, 1], rgb(label)) for label, w in ft.windows.items()],
+        width=CHART_WIDTH,
+        x_label="t, s",
+        log_y=True,
+        band=plot2d.Band("95% χ² band", w[:, 0], w[:, 2], w[:, 3]),
+    )
+
+
 def views() -> rrb.Container:
     """The scene's tab: the map beside the error and the windowed NIS."""
     return rrb.Horizontal(
         rrb.Spatial3DView(origin=f"{ROOT}/map", name="Manoeuvre: radars, plots, truth, tracks, m"),
         rrb.Vertical(
-            rrb.TimeSeriesView(
-                origin=f"plots/{ROOT}/error_m",
-                name="position error |x̂ − x|, m (Q = 0 against the IMM)",
-                plot_legend=rrb.PlotLegend(corner="LeftTop"),
+            plot2d.plot_view(
+                f"charts/{ROOT}/error_m",
+                "position error |x̂ − x|, m (log scale): Q = 0 against the IMM",
+                CHART_WIDTH,
             ),
-            rrb.TimeSeriesView(
-                origin=f"plots/{ROOT}/nis",
-                name="windowed NIS per degree of freedom and its 95% band",
-                plot_legend=rrb.PlotLegend(corner="LeftTop"),
+            plot2d.plot_view(
+                f"charts/{ROOT}/nis",
+                "windowed NIS per degree of freedom (log scale) and the 95% χ² band",
+                CHART_WIDTH,
             ),
         ),
         column_shares=[3, 2],

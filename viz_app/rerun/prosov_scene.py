@@ -53,6 +53,7 @@ from radarviz.core.experiments.prosov import (
 from radarviz.core.filters.methods import ALL_METHODS
 from radarviz.core.geometry import range_cross_basis
 from radarviz.viz_app.palette import rgb
+from radarviz.viz_app.rerun import plot2d
 from radarviz.viz_app.rerun.recording import indexes, log_series, log_text
 from radarviz.viz_app.rerun.shapes import (
     CLOUD_MARKER,
@@ -95,7 +96,8 @@ class TargetFrame:
         cross_half_m: the views show cross-range ±cross_half_m.
         range_half_m: … and down-range ±range_half_m (true metres).
         bias_half_m: the bias forest plot shows down-range offsets ±bias_half_m.
-        map_extent_m: (x0, x1, y0, y1) of the situation map, m.
+        map_extent_m: (x0, x1, y0, y1) of the true path in the situation map, m (the map is
+            framed on it: ``MAP_HALF_WIDTH``).
     """
 
     exaggeration: int
@@ -135,9 +137,12 @@ def target_frame(scene: ProsovScene, cloud: ConversionCloud) -> TargetFrame:
         )
         for c in SHOWN_CONVERSIONS
     )
+    # The map is framed on the true path (the radar may be far off it), the plots' spread
+    # across it included.
     xy = scene.truth[:, [0, 2]]
-    x1 = float(xy[:, 0].max()) * 1.05
-    x0 = min(float(xy[:, 0].min()), 0.0) - 0.2 * x1
+    x0, x1 = float(xy[:, 0].min()), float(xy[:, 0].max())
+    if x1 - x0 < 1.0:  # a target standing still
+        x0, x1 = x0 - 500.0, x1 + 500.0
     half_y = max(float(np.abs(xy[:, 1]).max()), 0.12 * (x1 - x0))
     return TargetFrame(
         k,
@@ -184,8 +189,17 @@ def log_map(rec: rr.RecordingStream, scene: ProsovScene, frame: TargetFrame, lab
     idx = indexes(scans, times)
     n = len(scans)
     base = f"{ROOT}/map"
-    span = frame.map_extent_m[1]
-    rec.log(base, flip_y(1.0 / span), static=True)
+    x0, x1, y0, y1 = frame.map_extent_m
+    scale = 1.0 / (x1 - x0)
+    cx, cy = (x0 + x1) / 2.0, (y0 + y1) / 2.0
+    # Drawn (u, v) = scale (x − cx, −(y − cy)): the path's extent is u ∈ [−0.5, 0.5].
+    rec.log(
+        base,
+        rr.Transform3D(
+            translation=[-cx * scale, cy * scale, 0.0], mat3x3=np.diag([scale, -scale, 1.0])
+        ),
+        static=True,
+    )
     rec.log(
         f"{base}/radar",
         rr.Points2D([[0.0, 0.0]], radii=[MARKER], colors=[rgb("truth")], labels=[label]),
@@ -193,14 +207,36 @@ def log_map(rec: rr.RecordingStream, scene: ProsovScene, frame: TargetFrame, lab
     )
     truth = scene.truth[:, [0, 2]]
     end = truth[-1]
+    width = x1 - x0
+    # The radar is usually far off the framed path: a label at the map's left edge says where.
+    left = cx - MAP_HALF_WIDTH / scale
+    top = cy + 0.8 * MAP_HALF_HEIGHT / scale
+    bar = plot2d.nice_step(width, 5)
+    bottom = cy - 0.8 * MAP_HALF_HEIGHT / scale
+    start = cx - 0.45 * width
     rec.log(
         f"{base}/scale",
         rr.Points2D(
-            [end],
-            radii=[SMALL_MARKER],
+            [
+                [left + 0.25 * width, top],
+                [end[0], cy - 0.35 * MAP_HALF_HEIGHT / scale],
+                [start + bar / 2.0, bottom + 0.12 * MAP_HALF_HEIGHT / scale],
+            ],
+            radii=[0.0],
             colors=[rgb("truth")],
-            labels=[f"{np.hypot(*end) / 1e3:.0f} km"],
+            labels=[
+                f"← radar at {np.hypot(*truth[0]) / 1e3:.0f} km from the start: {label}",
+                f"end: {np.hypot(*end) / 1e3:.0f} km from the radar",
+                f"{bar / 1e3:g} km",
+            ],
             show_labels=True,
+        ),
+        static=True,
+    )
+    rec.log(
+        f"{base}/scale/bar",
+        rr.LineStrips2D(
+            [[[start, bottom], [start + bar, bottom]]], colors=[rgb("truth")], radii=[LINE]
         ),
         static=True,
     )
@@ -301,12 +337,34 @@ def log_target_frame(
         )
         if own:
             _log_measured(rec, base, idx, measured[m], clouds[m], means[m], colour, frame)
+            rec.log(
+                f"{base}/note",
+                rr.Points2D(
+                    [[0.0, -0.3 * frame.cross_half_m / k]],
+                    radii=[0.0],
+                    colors=[pale(colour, 0.2)],
+                    labels=["pale: converted plots (Monte Carlo), × their mean"],
+                    show_labels=True,
+                ),
+                static=True,
+            )
     # Filters fed polar plots (ducm, ekf, ukf) share one grey copy of the naive points.
     if any(m not in SHOWN_CONVERSIONS for m in scene.tracks):
         grey = rgb("measurement")
         polar = f"{ROOT}/target/polar"
         naive = (measured["naive"], clouds["naive"], means["naive"])
         _log_measured(rec, polar, idx, *naive, grey, frame)
+        rec.log(
+            f"{polar}/note",
+            rr.Points2D(
+                [[0.0, -0.3 * frame.cross_half_m / k]],
+                radii=[0.0],
+                colors=[grey],
+                labels=["grey: plots converted naively, × their mean (fed polar plots)"],
+                show_labels=True,
+            ),
+            static=True,
+        )
     _log_bias(rec, cloud, frame, idx)
 
 
@@ -462,6 +520,61 @@ def log_statistics(rec: rr.RecordingStream, scene: ProsovScene, root: str = ROOT
                 READING_COLOURS[reading],
                 f"Δx, {reading} reading",
             )
+    log_charts(rec, scene, root)
+
+
+#: Width of the statistics charts' boxes (drawn units; their height is ``plot2d.HEIGHT``),
+#: for views about 3.5 times wider than high.
+CHART_WIDTH = 420.0
+
+
+def log_charts(rec: rr.RecordingStream, scene: ProsovScene, root: str = ROOT) -> None:
+    """The per-scan statistics as charts with their own axes (``plot2d``) at
+    ``charts/{root}/{metric}``: bias and RMSE per method, the NEES on a log scale over its 95%
+    band, Δx with the RMSE reading's band; a cursor gives each curve's value at the scan."""
+    scans, times = _scan_axes(scene)
+    result = scene.result
+    cursor = indexes(scans, times)
+    x = scans.astype(np.float64)
+    for entity, attr, _ in SERIES:
+        curves = [
+            plot2d.Curve(name, x, getattr(m, attr), rgb(name)) for name, m in result.metrics.items()
+        ]
+        band = None
+        if entity == "nees_pos":
+            lo, hi = result.nees_pos_band95
+            band = plot2d.Band(
+                f"95% band {lo:.2f}–{hi:.2f}", x[[0, -1]], np.array([lo]), np.array([hi])
+            )
+        plot2d.log_plot(
+            rec,
+            f"charts/{root}/{entity}",
+            curves,
+            width=CHART_WIDTH,
+            log_y=entity != "bias_range_m",
+            robust=entity == "bias_range_m",
+            include_zero=entity == "bias_range_m",
+            band=band,
+            cursor=cursor,
+            cursor_x=x,
+            unit=" m" if entity.endswith("_m") else "",
+        )
+    if "seed" in result.metrics and "naive" in result.metrics:
+        lo, hi = result.delta_x_ci95()["rmse"]
+        plot2d.log_plot(
+            rec,
+            f"charts/{root}/delta_x_percent",
+            [
+                plot2d.Curve(f"{reading} reading", x, v, READING_COLOURS[reading])
+                for reading, v in result.delta_x_percent().items()
+            ],
+            width=CHART_WIDTH,
+            include_zero=True,
+            band=plot2d.Band("rmse 95%", x, lo, hi, pale(READING_COLOURS["rmse"], 0.3)),
+            cursor=cursor,
+            cursor_x=x,
+            unit=" %",
+        )
 
 
 #: Δx's three readings of σ̂x (as in the Prosov figure).
@@ -542,12 +655,20 @@ def method_view(method: str) -> rrb.Spatial2DView:
     )
 
 
+#: The situation map's half width and height in units of the true path's length (the
+#: path spans ±0.5), for a view about 3.3 times wider than high.
+MAP_HALF_WIDTH, MAP_HALF_HEIGHT = 0.56, 0.17
+
+
 def map_view() -> rrb.Spatial2DView:
-    """The situation (north up), every scan up to the cursor; distances in its labels."""
+    """The situation (north up), framed on the true path, every scan up to the cursor; a
+    scale bar and the distances in its labels."""
     return _space(
-        "situation: radar, truth, plots and tracks (north up)",
+        "situation: truth, plots and tracks (north up), framed on the path",
         "map",
-        rrb.VisualBounds2D(x_range=[-0.25, 1.1], y_range=[-0.12, 0.12]),
+        rrb.VisualBounds2D(
+            x_range=[-MAP_HALF_WIDTH, MAP_HALF_WIDTH], y_range=[-MAP_HALF_HEIGHT, MAP_HALF_HEIGHT]
+        ),
         time_ranges=rrb.VisibleTimeRange(
             "scan",
             start=rrb.TimeRangeBoundary.infinite(),
@@ -571,20 +692,22 @@ def method_legend_view() -> rrb.Spatial2DView:
     return legend_view(ROOT, "legend", len(METHODS_SHOWN), "methods")
 
 
-def series_views(root: str = ROOT, dims: int = 2) -> list[rrb.TimeSeriesView]:
+def series_views(root: str = ROOT, dims: int = 2) -> list[rrb.Spatial2DView]:
+    """The statistics charts (``log_charts``), one view each, titled with their units."""
+    titles = {
+        "bias_range_m": "track bias along range, m",
+        "rmse_x_m": "track RMSE in x, m (log scale)",
+        "nees_pos": f"position NEES ({dims} dof, log scale) over its 95% band",
+    }
     views = [
-        rrb.TimeSeriesView(
-            origin=f"plots/{root}/{entity}",
-            name=title.replace("(2 dof)", f"({dims} dof)"),
-            plot_legend=rrb.PlotLegend(visible=False),
-        )
-        for entity, _, title in SERIES
+        plot2d.plot_view(f"charts/{root}/{entity}", titles[entity], CHART_WIDTH)
+        for entity, _, _ in SERIES
     ]
     views.append(
-        rrb.TimeSeriesView(
-            origin=f"plots/{root}/delta_x_percent",
-            name="Δx seed vs naive, %: filter (blue), rmse ± 95% (vermillion), std (green)",
-            plot_legend=rrb.PlotLegend(visible=False),
+        plot2d.plot_view(
+            f"charts/{root}/delta_x_percent",
+            "Δx, seed against naive, %: three readings of σ̂x, and the rmse reading's 95% band",
+            CHART_WIDTH,
         )
     )
     return views
@@ -626,7 +749,8 @@ def log_prosov3d(
 ) -> float:
     """The 3D Prosov scene (``prosov_scene`` of a 3D config): every method's estimate of the
     displayed run and its 1σ ellipsoid in the target frame, and the Monte Carlo statistics.
-    Returns the half-size (km) of the frame's view."""
+    Returns the half-size (km) of the frame's views: 1.2 × the largest 1σ half axis of the
+    run's second half."""
     from radarviz.core.experiments.prosov import prosov_configs
     from radarviz.core.geometry import range_cross_up_basis
     from radarviz.viz_app.rerun.recording import ellipsoid_axes
@@ -671,7 +795,8 @@ def log_prosov3d(
                 fill_mode=[rr.components.FillMode.MajorWireframe] * n,
             ).partition([1] * n),
         )
-    axis = 1.2 * largest
+    reach = 1.2 * largest  # the views frame this
+    axis = plot2d.nice_step(reach, 1)  # a round length, written at the axes' tips
     rec.log(
         f"{ROOT_3D}/target/truth",
         rr.Points3D([[0.0, 0.0, 0.0]], radii=-6.0, colors=[rgb("truth")], labels=["truth"]),
@@ -682,8 +807,18 @@ def log_prosov3d(
         rr.Arrows3D(
             vectors=[[axis, 0.0, 0.0], [0.0, axis, 0.0], [0.0, 0.0, axis]],
             colors=[(120, 120, 120)] * 3,
-            labels=["down-range, km", "cross-range, km", "up, km"],
             radii=-1.0,
+        ),
+        static=True,
+    )
+    rec.log(
+        f"{ROOT_3D}/target/axes/tips",
+        rr.Points3D(
+            np.eye(3) * axis,
+            radii=[0.0],
+            colors=[(120, 120, 120)],
+            labels=[f"{a} {axis:g} km" for a in ("down-range", "cross-range", "up")],
+            show_labels=True,
         ),
         static=True,
     )
@@ -694,26 +829,42 @@ def log_prosov3d(
         f"Prosov 3D: {runs} Monte Carlo runs, σβ = {sigma_beta_deg:g}°, σε = "
         f"{sigma_elevation_deg:g}°, target at elevation {elevation_deg:g}°, seed {seed}",
     )
-    return axis
+    return reach
 
 
-def views_3d(axis_km: float) -> rrb.Container:
-    """The 3D tab: every method's estimate and 1σ ellipsoid in the target frame, the legend,
-    and the per-scan statistics."""
-    d = 2.2 * axis_km
-    frame = rrb.Spatial3DView(
-        origin=ROOT_3D,
-        contents=["$origin/target/**"],
-        name="3D target frame at the scan (down-range, cross-range, up; km): 1σ ellipsoids",
-        eye_controls=rrb.EyeControls3D(
-            position=(0.9 * d, -0.7 * d, 0.6 * d),
-            look_target=(0.0, 0.0, 0.0),
-            eye_up=(0.0, 0.0, 1.0),
-        ),
+def views_3d(axis_km: float, methods: Sequence[str] = METHODS_SHOWN) -> rrb.Container:
+    """The 3D tab: small multiples, one 3D target frame per method (its estimate and 1σ
+    ellipsoid, the truth and the axes; every camera the same, so sizes compare across
+    views), the legend, and the per-scan statistics."""
+    d = 1.7 * axis_km  # the camera close enough that the ellipsoids fill a small view
+    eye = rrb.EyeControls3D(
+        position=(0.9 * d, -0.7 * d, 0.6 * d),
+        look_target=(0.0, 0.0, 0.0),
+        eye_up=(0.0, 0.0, 1.0),
     )
+    frames = [
+        rrb.Spatial3DView(
+            origin=ROOT_3D,
+            contents=[
+                f"$origin/target/{m}/**",
+                "$origin/target/truth/**",
+                "$origin/target/axes/**",
+            ],
+            name=f"{m}: 3D target frame, km, 1σ ellipsoid",
+            eye_controls=eye,
+        )
+        for m in methods
+    ]
     return rrb.Horizontal(
         rrb.Vertical(
-            legend_view(ROOT_3D, "legend", len(METHODS_SHOWN), "methods"), frame, row_shares=[1, 12]
+            legend_view(
+                ROOT_3D,
+                "legend",
+                len(METHODS_SHOWN),
+                "methods (axes: down-range, cross-range, up, km)",
+            ),
+            rrb.Grid(*frames, grid_columns=3),
+            row_shares=[1, 12],
         ),
         rrb.Vertical(*series_views(ROOT_3D, 3)),
         column_shares=[3, 2],

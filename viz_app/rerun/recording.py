@@ -1,10 +1,12 @@
 """Rerun streams and the logging helpers every scene shares.
 
 Each scene has its own entity root and documents its paths: ``prosov/…``
-(``prosov_scene``), ``velocity/…`` (``velocity_scene``), ``gorshkov/…`` and the
-``window_k`` timeline (``gorshkov_scene``), ``world/…`` for a measurement file's tracks
+(``prosov_scene``), ``velocity/…`` (``velocity_scene``), ``gorshkov/…``
+(``gorshkov_scene``), ``world/…`` for a measurement file's tracks
 (``track_recording``), ``sweep/…`` for sweeps (``viz_app.sweep.output``). Time series go to
-``plots/<scene>/<quantity_unit>/<series>``; ``log`` is the text log.
+``plots/<scene>/<quantity_unit>/<series>`` (values, on the timelines) and are drawn as charts
+with their own axes at ``charts/<scene>/<quantity_unit>`` (``plot2d``); ``log`` is the text
+log.
 
 Timelines: ``scan`` (sequence n = 1 …) and ``time`` (duration, s). Everything per scan goes
 through ``send_columns`` (one call per entity, not one ``log`` per scan).

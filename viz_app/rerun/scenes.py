@@ -5,8 +5,8 @@ One scene per paper, each in its own tab, never two scenes of different scale in
     prosov     Prosov: converted measurements (``prosov_scene``)
     prosov3d   the same in 3D, the target frame down-range, cross-range, up with every
                method's 1σ ellipsoid (``prosov_scene.log_prosov3d``)
-    gorshkov   Gorshkov: finite memory against k, on the ``window_k`` timeline, and the
-               Doppler-aided track start on ``scan`` (``gorshkov_scene``)
+    gorshkov   Gorshkov: finite memory against k (charts of their own, on any timeline),
+               and the Doppler-aided track start on ``scan`` (``gorshkov_scene``)
     velocity   Velocity: several radars' radial velocities (``velocity_scene``)
     manoeuvre  a manoeuvring flight, Q = 0 against the IMM, the NIS monitor
                (``manoeuvre_scene``)
@@ -16,6 +16,8 @@ One scene per paper, each in its own tab, never two scenes of different scale in
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import rerun as rr
 import rerun.blueprint as rrb
@@ -52,10 +54,9 @@ def overview(vframe: velocity_scene.VelocityFrame) -> rrb.Container:
                 prosov_scene.method_view(OVERVIEW_DEBIASED),
             ),
             prosov_scene.map_view(),
-            rrb.TimeSeriesView(
-                origin="plots/doppler_start/rmse_vr_mps",
-                name="Gorshkov: radial-velocity RMSE of a Doppler-aided track start, m/s",
-                plot_legend=rrb.PlotLegend(corner="RightTop"),
+            gorshkov_scene.start_view(
+                "rmse_vr_mps",
+                "Gorshkov: radial-velocity RMSE of a Doppler-aided track start, m/s (log)",
             ),
             row_shares=[1, 6, 4, 4],
         ),
@@ -70,10 +71,38 @@ def overview(vframe: velocity_scene.VelocityFrame) -> rrb.Container:
     )
 
 
-def record_preset(rec: rr.RecordingStream, preset: str, seed: int = 1) -> None:
-    """Fill ``rec`` with one of the presets and send its blueprint."""
+@dataclass(frozen=True)
+class PresetLayout:
+    """What a preset's blueprint is built from: its tabs (in order) and the timeline it opens
+    on. ``blueprint_of`` makes a blueprint of it opening on any tab and timeline."""
+
+    tabs: tuple[rrb.Container, ...]
+    timeline: str = "scan"
+    #: Where the tabs sit: the ``Tabs`` container (a tab bar) or, for one tab, the tab alone.
+    tabbed: bool = True
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        """The tabs' names, in order (the tab bar's labels)."""
+        return tuple(str(t.name) for t in self.tabs)
+
+
+def blueprint_of(
+    layout: PresetLayout, active_tab: int = 0, timeline: str | None = None
+) -> rrb.Blueprint:
+    """The blueprint of ``layout`` with tab ``active_tab`` open and the time panel on
+    ``timeline`` (the layout's own unless given)."""
+    root = rrb.Tabs(*layout.tabs, active_tab=active_tab) if layout.tabbed else layout.tabs[0]
+    return rrb.Blueprint(
+        root,
+        rrb.TimePanel(timeline=timeline or layout.timeline, state="collapsed"),
+        collapse_panels=True,
+    )
+
+
+def log_preset(rec: rr.RecordingStream, preset: str, seed: int = 1) -> PresetLayout:
+    """Fill ``rec`` with one of the presets; returns its layout (no blueprint sent)."""
     tabs: list[rrb.Container] = []
-    timeline = "scan"
     if preset in ("demo", "prosov"):
         prosov_scene.log_prosov(rec, seed=seed)
         tabs.append(prosov_scene.views(prosov_scene.METHODS_SHOWN))
@@ -86,15 +115,20 @@ def record_preset(rec: rr.RecordingStream, preset: str, seed: int = 1) -> None:
     if preset in ("demo", "gorshkov"):
         radars = gorshkov_scene.log_gorshkov(rec, seed=seed)
         k_tab, start_tab = gorshkov_scene.views(radars), gorshkov_scene.start_views()
-        if preset == "gorshkov":
-            tabs += [k_tab, start_tab]
-            timeline = gorshkov_scene.WINDOW_TIMELINE
-        else:  # the demo's timeline is ``scan``: the k curves open when window_k is chosen
-            tabs += [start_tab, k_tab]
+        # The k curves are static charts: both tabs show on any timeline.
+        tabs += [k_tab, start_tab] if preset == "gorshkov" else [start_tab, k_tab]
     if preset in ("demo", "manoeuvre"):
         manoeuvre_scene.log_manoeuvre(rec, seed=seed)
         tabs.append(manoeuvre_scene.views())
     if preset == "demo":
         tabs.insert(0, overview(vframe))
     tabs.append(rrb.Vertical(text_log_view(), name="log"))
-    rec.send_blueprint(blueprint(*tabs, timeline=timeline))
+    return PresetLayout(tuple(tabs))
+
+
+def record_preset(rec: rr.RecordingStream, preset: str, seed: int = 1) -> PresetLayout:
+    """Fill ``rec`` with one of the presets and send its blueprint (opening on its first tab);
+    returns the layout."""
+    layout = log_preset(rec, preset, seed)
+    rec.send_blueprint(blueprint_of(layout))
+    return layout

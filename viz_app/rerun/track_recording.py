@@ -11,6 +11,12 @@ method)::
     world/tracks/{m}/path/{k}        the track path, one static strip per chunk of plots
     plots/sigma_pos_m/{m}            √trace of the position covariance, m
     plots/speed_mps/{m}              track speed, m/s
+    world/truth/{t}/path, /position  the truth (``track --truth``): path (static), position at
+                                     each truth time (on ``plot``: the plot of that time)
+    inset/{m}/estimate, /covariance  the first (confirmed) target's estimate per method and
+                                     its horizontal 1σ ellipse, about the methods' mean (m),
+                                     framed so the ellipses show (they are metres in a map
+                                     of kilometres)
 
 In a file of many targets (a ``target`` column) every target and method is one entity:
 ``{m}`` above becomes ``{t}/{m}`` (``core.tracking.targets.track_name``; a label's characters
@@ -58,11 +64,13 @@ import rerun.blueprint as rrb
 from radarviz.core.filters.state import position_index, velocity_index
 from radarviz.core.tracking.association import CONFIRMED, TENTATIVE, AssociationReport
 from radarviz.core.tracking.consistency import ConsistencyMonitor
+from radarviz.core.tracking.scoring import Truth
 from radarviz.core.tracking.stream import Plot, StateRow
 from radarviz.core.tracking.targets import track_name
 from radarviz.viz_app.io.plots import Radar
-from radarviz.viz_app.palette import radar_rgb
+from radarviz.viz_app.palette import RADAR_GREYS, track_rgb
 from radarviz.viz_app.rerun.recording import colour, ellipsoid_axes, log_text, recording_file
+from radarviz.viz_app.rerun.scenes import PresetLayout, blueprint_of
 from radarviz.viz_app.rerun.shapes import (
     CLOUD_MARKER,
     FAINT_LINE,
@@ -72,6 +80,7 @@ from radarviz.viz_app.rerun.shapes import (
     SMALL_MARKER,
     THIN_LINE,
     faint,
+    flip_y,
 )
 
 #: Plots buffered before the recording is sent a chunk.
@@ -111,8 +120,12 @@ class TrackRecorder:
         rec: rr.RecordingStream,
         radars: Iterable[Radar],
         monitor: ConsistencyMonitor | None = None,
+        truth: Truth | None = None,
     ):
         self.rec = rec
+        self.truth = truth
+        # Each plot's time: where the truth's times fall on the ``plot`` timeline.
+        self._plot_times: list[float] = []
         self.monitor = monitor
         self._events_logged = 0
         self.count = 0
@@ -124,7 +137,8 @@ class TrackRecorder:
                 rr.Points3D(
                     [(r.x_m, r.y_m, r.z_m)],
                     radii=[MARKER],
-                    colors=[radar_rgb(j)],
+                    # Greys: a radar never takes a method's or a track's colour.
+                    colors=[RADAR_GREYS[j % len(RADAR_GREYS)]],
                     labels=[_label(r)],
                 ),
                 static=True,
@@ -151,7 +165,23 @@ class TrackRecorder:
         # Targets deleted since the last flush: a tentative one's path is never drawn.
         self._deleted: set[str] = set()
         self._styled: set[str] = set()
+        # Each track's colour, by method, or by track id when one method tracks many.
+        self._colours: dict[str, tuple[int, int, int]] = {}
+        self._methods: set[str] = set()
+        # The confirmed rows' series values, for axes that ignore their outliers.
+        self._series: dict[str, list[np.ndarray]] = defaultdict(list)
         self._time_s = 0.0
+        # The inset: the first target's estimates and 1σ ellipses about the methods' mean
+        # (``_inset_rows``: plot, time_s, method, offset (2,), covariance (2, 2)).
+        self._inset_target: str | None = None
+        self._inset_rows: list[tuple[int, float, str, np.ndarray, np.ndarray]] = []
+        self._inset_reach_m: list[float] = []
+        rec.log("inset", flip_y(1.0), static=True)  # north up
+        rec.log(
+            "inset/reference",
+            rr.Points2D([[0.0, 0.0]], radii=[SMALL_MARKER], colors=[colour("truth")]),
+            static=True,
+        )
 
     def _extend(self, pts: np.ndarray) -> None:
         ok = np.all(np.isfinite(pts), axis=1)
@@ -164,6 +194,8 @@ class TrackRecorder:
         framed on every radar and plot, the whole run in the time series."""
         self.end_scan([])
         self.flush()
+        if self.truth is not None:
+            self._log_truth(self.truth)
         log_text(
             self.rec,
             f"{self.count} plots from {len(self.radars)} radar(s): "
@@ -186,6 +218,7 @@ class TrackRecorder:
                 name=series + title,
                 time_ranges=whole,
                 plot_legend=rrb.PlotLegend(corner="RightTop"),
+                axis_y=self._robust_axis(name),
             )
             for name, title in (
                 ("sigma_pos_m", "√trace of the position covariance, m"),
@@ -195,8 +228,9 @@ class TrackRecorder:
         title = "radars, plots and tracks, m"
         if self.statuses:
             title += " (faint: tentative; deleted tracks cleared)"
-        self.rec.send_blueprint(
-            rrb.Blueprint(
+        #: The recording's layout (``PresetLayout`` of ``viz_app.rerun.scenes``): one tab.
+        self.layout = PresetLayout(
+            (
                 rrb.Horizontal(
                     rrb.Vertical(
                         rrb.Spatial3DView(
@@ -214,13 +248,27 @@ class TrackRecorder:
                         rrb.TextLogView(origin="log", name="log"),
                         row_shares=[4, 1],
                     ),
-                    rrb.Vertical(*plots),
+                    rrb.Vertical(self._inset_view(), *plots, row_shares=[3, 2, 2]),
                     column_shares=[3, 2],
+                    name="tracks",
                 ),
-                rrb.TimePanel(timeline="plot", state="collapsed"),
-                collapse_panels=True,
-            )
+            ),
+            timeline="plot",
+            tabbed=False,
         )
+        self.rec.send_blueprint(blueprint_of(self.layout))
+
+    def _robust_axis(self, series: str) -> rrb.ScalarAxis | None:
+        """A y range holding the series' values but not their outliers (a clutter plot that
+        briefly pulls a track makes a speed spike that would flatten every other curve):
+        ``plot2d.robust_limits`` with a margin; None (the view's own) without values."""
+        from radarviz.viz_app.rerun.plot2d import robust_limits
+
+        if not self._series.get(series):
+            return None
+        lo, hi = robust_limits(self._series[series])
+        pad = 0.08 * max(hi - lo, abs(hi) * 0.05, 1e-9)
+        return rrb.ScalarAxis(range=(max(lo - pad, 0.0), hi + pad))
 
     @classmethod
     @contextlib.contextmanager
@@ -229,11 +277,13 @@ class TrackRecorder:
         path: str | os.PathLike,
         radars: Iterable[Radar],
         monitor: ConsistencyMonitor | None = None,
+        truth: Truth | None = None,
     ) -> Iterator[TrackRecorder]:
         """A recorder writing ``path`` atomically (replaced if it exists); ``monitor``: its
-        NIS band exits and returns are written to the log as they happen."""
+        NIS band exits and returns are written to the log as they happen; ``truth`` (a truth
+        file's, ``viz_app.io.score_files.read_truth``) is drawn in black."""
         with recording_file(path, overwrite=True) as rec:
-            recorder = cls(rec, radars, monitor)
+            recorder = cls(rec, radars, monitor, truth)
             yield recorder
             recorder.close()
 
@@ -242,6 +292,7 @@ class TrackRecorder:
         plot's track after its scan, ``tentative`` or ``confirmed`` ("" without)."""
         self.count += 1
         self._time_s = plot.time_s
+        self._plot_times.append(plot.time_s)
         if status and not self.statuses:
             self.statuses = True
             log_text(self.rec, STATUS_LEGEND, scan=self.count, timeline="plot")
@@ -261,10 +312,113 @@ class TrackRecorder:
             self._scan.append((self.count, plot.time_s, plot.radar, status, point))
         else:
             self._meas[plot.radar].append((self.count, plot.time_s, np.array([point])))
+        if rows and (self._inset_target is None or plot.target == self._inset_target):
+            if status != TENTATIVE:  # the inset follows a confirmed track (or the only one)
+                self._inset_target = plot.target
+                self._add_inset(rows)
         for method, x, P in rows:
+            self._methods.add(method)
             self._tracks[(plot.target, method)].append((self.count, plot.time_s, x, P, status))
         if self.count % RRD_CHUNK == 0:
             self.flush()
+
+    def _log_truth(self, truth: Truth) -> None:
+        """The truth: each target's path (a static black strip) and its position at each
+        truth time, on the ``time`` timeline and at the plot of that time on ``plot``."""
+        times = np.asarray(self._plot_times)
+        pos = np.asarray(truth.position_m, dtype=np.float64)
+        if pos.shape[1] == 2:
+            pos = np.c_[pos, np.zeros(len(pos))]
+        self._extend(pos)
+        black = colour("truth")
+        for target in dict.fromkeys(truth.targets.tolist()):
+            sel = np.flatnonzero(truth.targets == target)
+            sel = sel[np.argsort(truth.times_s[sel], kind="stable")]
+            t, p = truth.times_s[sel], pos[sel]
+            base = f"world/truth/{rr.escape_entity_path_part(str(target))}"
+            self.rec.log(
+                f"{base}/path",
+                rr.LineStrips3D([p], colors=[black], radii=[FAINT_LINE]),
+                static=True,
+            )
+            n = np.clip(np.searchsorted(times, t, side="right"), 1, None) if times.size else 1
+            k = len(t)
+            self.rec.send_columns(
+                f"{base}/position",
+                indexes=self.indexes(list(np.broadcast_to(n, k)), list(t)),
+                columns=rr.Points3D.columns(
+                    positions=p,
+                    colors=[black] * k,
+                    radii=[SMALL_MARKER] * k,
+                    labels=[f"truth {target}"] * k,
+                ),
+            )
+
+    def _add_inset(self, rows: list[StateRow]) -> None:
+        """The inset's rows of one plot: each method's horizontal position offset from the
+        methods' mean (m) and its horizontal position covariance."""
+        POS = list(position_index(3))[:2]
+        xy = np.array([x[POS] for _, x, _ in rows])
+        ref = xy.mean(axis=0)
+        for (method, _, P), p in zip(rows, xy, strict=True):
+            cov = np.asarray(P)[np.ix_(POS, POS)]
+            off = p - ref
+            reach = float(np.abs(off).max() + np.sqrt(max(np.linalg.eigvalsh(cov).max(), 0.0)))
+            if np.isfinite(reach):
+                self._inset_reach_m.append(reach)
+            self._inset_rows.append((self.count, self._time_s, method, off, cov))
+
+    def _send_inset(self) -> None:
+        """The buffered inset rows, one ``send_columns`` per method and part."""
+        from radarviz.viz_app.rerun.shapes import LINE, ellipse_outline
+
+        if not self._inset_rows:
+            return
+        by_method: dict[str, list] = defaultdict(list)
+        for row in self._inset_rows:
+            by_method[row[2]].append(row)
+        for method, items in by_method.items():
+            n, t, _, off, cov = zip(*items, strict=True)
+            off, cov = np.array(off), np.array(cov)
+            k = len(n)
+            rgb = self._colours.get(self._inset_name(method), colour(method))
+            idx = self.indexes(list(n), list(t))
+            self.rec.send_columns(
+                f"inset/{method}/estimate",
+                indexes=idx,
+                columns=rr.Points2D.columns(
+                    positions=off, colors=[rgb] * k, radii=[MARKER] * k, labels=[method] * k
+                ),
+            )
+            self.rec.send_columns(
+                f"inset/{method}/covariance",
+                indexes=idx,
+                columns=rr.LineStrips2D.columns(
+                    strips=ellipse_outline(off, cov), colors=[rgb] * k, radii=[LINE] * k
+                ),
+            )
+        self._inset_rows.clear()
+
+    def _inset_name(self, method: str) -> str:
+        target = self._inset_target or ""
+        return track_name(rr.escape_entity_path_part(target), method) if target else method
+
+    def _inset_view(self) -> rrb.Spatial2DView:
+        """The inset's view: ± a round distance holding every offset and 1σ ellipse."""
+        from radarviz.viz_app.rerun.prosov_scene import nice_ceiling
+
+        # Most rows, not the start's wide ellipses, set the frame (those then overflow it).
+        reach = float(np.percentile(self._inset_reach_m, 80)) if self._inset_reach_m else 1.0
+        half = nice_ceiling(max(1.15 * reach, 1.0))
+        who = f"track {self._inset_target}" if self._inset_target else "the target"
+        return rrb.Spatial2DView(
+            origin="inset",
+            name=f"{who}: each method's estimate and 1σ ellipse about their mean (black), "
+            f"view ±{half:g} m, east right, north up",
+            visual_bounds=rrb.VisualBounds2D(
+                x_range=[-1.6 * half, 1.6 * half], y_range=[-half, half]
+            ),
+        )
 
     def end_scan(self, deleted: list[str]) -> None:
         """The association's scan is complete: its plots become one row per status (at its
@@ -335,6 +489,7 @@ class TrackRecorder:
                 for name in [k for k in book if k.startswith(prefix)]:
                     del book[name]
         self._deleted.clear()
+        self._send_inset()
         self._meas.clear()
         self._tracks.clear()
         self.chunk += 1
@@ -349,7 +504,12 @@ class TrackRecorder:
         POS, VEL = list(position_index(3)), list(velocity_index(3))
         pos, vel = x[:, POS], x[:, VEL]
         cov = P[:, POS][:, :, POS]
-        rgb, dim = colour(method), faint(colour(method))
+        label = track_name(target, method) if target else method
+        rgb = self._colours.get(name)
+        if rgb is None:  # by id when one method tracks many targets, else by method
+            by_id = bool(target) and len(self._methods) == 1
+            rgb = self._colours[name] = track_rgb(len(self._colours)) if by_id else colour(method)
+        dim = faint(rgb)
         tentative = np.array([s == TENTATIVE for s in statuses])
         rgbs = [dim if s else rgb for s in tentative]
         idx = self.indexes(list(n), list(t))
@@ -361,6 +521,8 @@ class TrackRecorder:
                 positions=pos,
                 colors=rgbs,
                 radii=[FAINT_MARKER if s else MARKER for s in tentative],
+                # A confirmed track's id beside it (tentative ones are too many to name).
+                labels=["" if s else label for s in tentative],
             ),
         )
         half, quat = ellipsoid_axes(cov)
@@ -408,13 +570,11 @@ class TrackRecorder:
                 )
         sel = slice(first, None)
         at = self.indexes(list(n[sel]), list(t[sel]))
-        rec.send_columns(
-            f"plots/sigma_pos_m/{name}",
-            indexes=at,
-            columns=rr.Scalars.columns(scalars=np.sqrt(np.trace(cov[sel], axis1=1, axis2=2))),
-        )
-        rec.send_columns(
-            f"plots/speed_mps/{name}",
-            indexes=at,
-            columns=rr.Scalars.columns(scalars=np.linalg.norm(vel[sel], axis=1)),
-        )
+        for series, values in (
+            ("sigma_pos_m", np.sqrt(np.trace(cov[sel], axis1=1, axis2=2))),
+            ("speed_mps", np.linalg.norm(vel[sel], axis=1)),
+        ):
+            rec.send_columns(
+                f"plots/{series}/{name}", indexes=at, columns=rr.Scalars.columns(scalars=values)
+            )
+            self._series[series].append(values.astype(np.float32))

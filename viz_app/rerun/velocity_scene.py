@@ -40,6 +40,7 @@ from radarviz.core.scenarios.multi_radar import Scenario3D, fusion_scenario
 from radarviz.core.velocity.estimate import M_WARN
 from radarviz.core.velocity.scans import VelocityScans, estimate_scans
 from radarviz.viz_app.palette import OKABE_ITO, radar_rgb, rgb
+from radarviz.viz_app.rerun import plot2d
 from radarviz.viz_app.rerun.recording import ellipsoid_axes, indexes, log_series, log_text
 from radarviz.viz_app.rerun.shapes import (
     LINE,
@@ -51,6 +52,8 @@ from radarviz.viz_app.rerun.shapes import (
 )
 
 ROOT = "velocity"
+#: V̂'s arrow: wider than the truth's, which is drawn over it.
+WIDE_LINE = rr.Radius.ui_points(3.0)
 #: Colours of the velocity components (none is a radar's).
 AXIS_COLOURS: dict[str, tuple[int, int, int]] = {
     "vx": OKABE_ITO["orange"],
@@ -137,11 +140,17 @@ def log_velocity_run(rec: rr.RecordingStream, run: VelocityScans) -> VelocityFra
     # --- the velocity vector, m/s ---
     base = f"{ROOT}/vector"
     zeros = np.zeros((k, 3))
+    # V thin and black over a thick V̂, each labelled with its speed at its tip.
+    true_speed = np.linalg.norm(run.true_velocity, axis=-1)
     rec.send_columns(
         f"{base}/truth",
         indexes=idx,
         columns=rr.Arrows3D.columns(
-            origins=zeros, vectors=run.true_velocity, colors=[rgb("truth")] * k, radii=[LINE] * k
+            origins=zeros,
+            vectors=run.true_velocity,
+            colors=[rgb("truth")] * k,
+            radii=[THIN_LINE] * k,
+            labels=[f"V {v:.0f} m/s" for v in true_speed],
         ),
     )
     # A flagged scan gets a row with no instance, so the last good estimate is not shown in
@@ -158,7 +167,8 @@ def log_velocity_run(rec: rr.RecordingStream, run: VelocityScans) -> VelocityFra
                 origins=zeros[ok],
                 vectors=vel[ok],
                 colors=tone,
-                radii=[LINE] * k_ok,
+                radii=[WIDE_LINE] * k_ok,
+                labels=[f"V̂ {v:.0f} m/s" for v in np.linalg.norm(vel[ok], axis=-1)],
             ).partition(rows),
         )
     speed = float(np.linalg.norm(run.true_velocity, axis=-1).max())
@@ -213,6 +223,7 @@ def log_velocity_run(rec: rr.RecordingStream, run: VelocityScans) -> VelocityFra
     # error view's ±1 is ±error_half m/s, the vector view's 1 is the largest true speed.
     rec.log(base, rr.Transform3D(scale=1.0 / error_half), static=True)
     rec.log(f"{ROOT}/vector", rr.Transform3D(scale=1.0 / speed), static=True)
+    _log_axes(rec, f"{ROOT}/vector/axes", plot2d.nice_step(speed, 2))
     _log_axes(rec, f"{base}/axes", error_half)
     rec.log(
         f"{base}/truth",
@@ -242,9 +253,62 @@ def log_velocity_run(rec: rr.RecordingStream, run: VelocityScans) -> VelocityFra
         rgb("band"),
         "warning level",
     )
+    _log_charts(rec, n, t, err, cov, m)
     log_text(rec, f"velocity fusion: {len(radars)} radars, {k} scans")
     return geometry_frame(
         run, float(1.1 * np.nanmax(np.abs(err))) if np.isfinite(err).any() else None
+    )
+
+
+#: Box width of the scene's charts (drawn units, height ``plot2d.HEIGHT``).
+CHART_WIDTH = 220.0
+
+
+def _log_charts(
+    rec: rr.RecordingStream,
+    n: NDArray,
+    t: NDArray,
+    err: NDArray[np.float64],
+    cov: NDArray[np.float64],
+    m: NDArray[np.float64],
+) -> None:
+    """V̂ − V and the first-order σ per axis and the geometry metric as charts (``plot2d``),
+    flagged scans (NaN) left out, with a cursor labelling the values at the scan."""
+    x = np.asarray(n, dtype=np.float64)
+    cursor = indexes(n, t)
+    names = ("vx", "vy", "vz")
+    sigma = np.sqrt(np.diagonal(cov, axis1=-2, axis2=-1))
+    for entity, values, prefix, log_y in (
+        ("error_mps", err, "V̂−V ", False),
+        ("sigma_mps", sigma, "σ ", True),
+    ):
+        curves = [
+            plot2d.Curve(f"{prefix}{a[1]}", x, values[:, j], AXIS_COLOURS[a])
+            for j, a in enumerate(names)
+        ]
+        plot2d.log_plot(
+            rec,
+            f"charts/{ROOT}/{entity}",
+            curves,
+            width=CHART_WIDTH,
+            log_y=log_y,
+            robust=not log_y,
+            include_zero=not log_y,
+            cursor=cursor,
+            cursor_x=x,
+            unit=" m/s",
+        )
+    plot2d.log_plot(
+        rec,
+        f"charts/{ROOT}/geometry_m",
+        [
+            plot2d.Curve("m", x, m, rgb("fused")),
+            plot2d.Curve("warning", x, np.full(x.size, M_WARN), rgb("band")),
+        ],
+        width=CHART_WIDTH,
+        log_y=True,
+        cursor=cursor,
+        cursor_x=x,
     )
 
 
@@ -268,7 +332,8 @@ def panel_frame() -> VelocityFrame:
 
 
 def _log_axes(rec: rr.RecordingStream, entity: str, half: float) -> None:
-    """Three grey axes through the origin of the error view, labelled with their length."""
+    """Three grey axes through the origin (of the error or the vector view), labelled with
+    their length: the view's scale."""
     v = np.eye(3) * half
     rec.log(
         entity,
@@ -344,23 +409,18 @@ def views(frame: VelocityFrame) -> VelocityViews:
     )
     legend = radar_legend_view(frame)
     plots = [
-        rrb.TimeSeriesView(
-            origin=f"plots/{ROOT}/error_mps",
-            name="V̂ − V per axis (x, y, z as in the legend), m/s",
-            plot_legend=rrb.PlotLegend(visible=False),
-            axis_y=None
-            if frame.error_lim_mps is None
-            else rrb.ScalarAxis(range=(-frame.error_lim_mps, frame.error_lim_mps)),
+        plot2d.plot_view(
+            f"charts/{ROOT}/error_mps",
+            "V̂ − V per axis, m/s (flagged scans left out)",
+            CHART_WIDTH,
         ),
-        rrb.TimeSeriesView(
-            origin=f"plots/{ROOT}/sigma_mps",
-            name="first-order 1σ per axis, m/s",
-            plot_legend=rrb.PlotLegend(visible=False),
+        plot2d.plot_view(
+            f"charts/{ROOT}/sigma_mps", "first-order 1σ per axis, m/s (log scale)", CHART_WIDTH
         ),
-        rrb.TimeSeriesView(
-            origin=f"plots/{ROOT}/geometry_m",
-            name="geometry metric m (unitless), grey: warning level",
-            plot_legend=rrb.PlotLegend(visible=False),
+        plot2d.plot_view(
+            f"charts/{ROOT}/geometry_m",
+            "geometry metric m (unitless, log scale) and its warning level",
+            CHART_WIDTH,
         ),
     ]
     tab = rrb.Horizontal(

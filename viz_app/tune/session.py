@@ -54,7 +54,6 @@ def scene_blueprint(scene: str) -> rrb.Blueprint:
             gorshkov_scene.views((PANEL_RADAR,)),
             gorshkov_scene.start_views(),
             log_tab,
-            timeline=gorshkov_scene.WINDOW_TIMELINE,
         )
     return blueprint(velocity_scene.views(velocity_scene.panel_frame()).tab, log_tab)
 

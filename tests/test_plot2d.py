@@ -1,0 +1,89 @@
+"""The charts drawn as 2D entities (``viz_app.rerun.plot2d``): ticks, log axes, outlier-proof
+ranges, labels that do not cover each other, and curves drawn where their values say."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from radarviz.viz_app.rerun import plot2d
+from radarviz.viz_app.rerun.recording import indexes, recording_file
+
+
+def test_linear_ticks_are_round_and_cover_the_data() -> None:
+    a = plot2d.linear_axis(-350.0, 314.0)
+    np.testing.assert_allclose(a.ticks, [-400, -200, 0, 200, 400])
+    assert (a.lo, a.hi) == (-400.0, 400.0)
+    b = plot2d.linear_axis(3.0, 7.0, include_zero=True)
+    assert b.lo == 0.0 and b.hi >= 7.0
+    # A constant series still gets a span.
+    c = plot2d.linear_axis(5.0, 5.0)
+    assert c.lo < 5.0 < c.hi
+
+
+def test_log_axis_holds_the_data_and_numbers_its_ends() -> None:
+    a = plot2d.log_axis(1.1, 18.5)
+    assert (a.lo, a.hi) == (1.0, 20.0)
+    np.testing.assert_allclose(a.ticks, [1, 2, 5, 10, 20])
+    b = plot2d.log_axis(0.47, 85.0)
+    assert (b.lo, b.hi) == (0.2, 100.0)
+    np.testing.assert_allclose(b.ticks, [0.2, 1, 10, 100])
+    np.testing.assert_allclose(b.to_unit(np.array([0.2, 100.0])), [0.0, 1.0])
+
+
+def test_robust_limits_ignore_a_spike() -> None:
+    rng = np.random.default_rng(1)
+    speeds = [250.0 + rng.normal(size=300), 180.0 + rng.normal(size=300), np.array([2100.0])]
+    lo, hi = plot2d.robust_limits(speeds)
+    assert 175.0 < lo < 180.0 and 250.0 < hi < 255.0
+    # Without outliers the limits are the data's.
+    lo, hi = plot2d.robust_limits([np.array([1.0, 2.0, 3.0])])
+    assert (lo, hi) == (1.0, 3.0)
+
+
+def test_spread_keeps_order_and_gap_inside_the_box() -> None:
+    y = np.array([10.0, 11.0, 12.0, 90.0, 99.0])
+    s = plot2d.spread(y, 17.0, 0.0, 100.0)
+    assert np.all(np.diff(s[np.argsort(y)]) >= 17.0 - 1e-9)
+    assert s.min() >= 0.0 and s.max() <= 100.0
+
+
+@pytest.mark.parametrize("value", [0.0, 1000.0, 0.492, -12.9, 2.5e6])
+def test_format_value_is_short(value: float) -> None:
+    text = plot2d.format_value(value)
+    assert len(text) <= 6
+    assert float(text.replace("e", "e+") if "e" in text and "-" not in text else text) == (
+        pytest.approx(value, rel=0.05)
+    )
+
+
+def test_a_chart_draws_its_curves_ticks_band_and_cursor(tmp_path: Path, rrd_contents) -> None:
+    """The drawn curve is the data mapped into the box; the tick labels are the axis' numbers;
+    the cursor labels each curve's value per scan."""
+    x = np.arange(1.0, 11.0)
+    y = 10.0 ** np.linspace(0.0, 2.0, 10)  # 1 … 100: two decades
+    path = tmp_path / "c.rrd"
+    with recording_file(path) as rec:
+        plot = plot2d.log_plot(
+            rec,
+            "charts/t/q",
+            [plot2d.Curve("q", x, y, (0, 114, 178))],
+            width=200.0,
+            log_y=True,
+            band=plot2d.Band("95% band", x[[0, -1]], np.array([2.0]), np.array([5.0])),
+            cursor=indexes(x.astype(int), x),
+            cursor_x=x,
+            unit=" m",
+        )
+    rows, cols = rrd_contents(path)
+    assert (plot.y.lo, plot.y.hi) == (1.0, 100.0)
+    for part in ("grid/box", "grid/lines", "ticks", "band/fill", "band/edges", "curves/0"):
+        assert f"/charts/t/q/{part}" in rows, part
+    assert rows["/charts/t/q/cursor/labels"] == 10
+    labels = [v[0] for v in cols["/charts/t/q/cursor/labels"]["Points2D:labels"]]
+    assert labels[0] == "q 1 m" and labels[-1] == "q 100 m"
+    dots = np.array([v[0] for v in cols["/charts/t/q/cursor/values"]["Points2D:positions"]])
+    np.testing.assert_allclose(dots[:, 0], (x - 1.0) / 9.0 * 200.0, rtol=1e-5)
+    np.testing.assert_allclose(dots[:, 1], np.linspace(0.0, 100.0, 10), atol=1e-3)
