@@ -294,7 +294,7 @@ def test_converted_doppler_in_the_many_target_tracker_and_the_imm() -> None:
     from radarviz.core.tracking.stream import StreamOptions, StreamTracker
     from radarviz.core.tracking.targets import TargetTracker
 
-    cfg, meas, _ = _mc_converted_tracks("RLS3", runs=2, steps=10)
+    cfg, meas, _ = _mc_converted_tracks("RLS3", runs=3, steps=10)
     options = StreamOptions(sigma_a_mps2=0.5, doppler_update="converted")
     per_target = [
         StreamTracker(ALL_METHODS, False, options).add_block(_plots_of_run(cfg, meas, j))

@@ -385,7 +385,7 @@ def test_cli_reproduce_velocity_table_and_plot(tmp_path, capsys) -> None:
 @pytest.mark.parametrize(
     ("args", "needle"),
     [
-        (["--trials", "1"], "--trials must be an integer in [2, 100000000] (got 1)"),
+        (["--trials", "1"], "--trials must be an integer in [3, 100000000] (got 1)"),
         (["--seed", "-1"], "--seed must be an integer >= 0 (got -1)"),
         (["--trials", "x"], "not an integer"),
         (["--plot", " "], "--plot must name a file"),

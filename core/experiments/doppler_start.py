@@ -49,7 +49,13 @@ from radarviz.core.finite_memory.fit import (
 )
 from radarviz.core.finite_memory.start import finite_memory_start
 from radarviz.core.geometry import polar_coordinates, radial_velocity
-from radarviz.core.metrics import STAGE_ROWS, MetricsAccumulator, TrackMetrics, nees_band
+from radarviz.core.metrics import (
+    STAGE_ROWS,
+    MetricsAccumulator,
+    TrackMetrics,
+    metric_band,
+    nees_band,
+)
 from radarviz.core.params import ParameterError, check, check_choice, check_int, default
 from radarviz.core.scenarios.planar import ConstantVelocityTarget2D
 
@@ -189,8 +195,8 @@ class DopplerTrackingResult(NamedTuple):
     def band95(self, variant: str, name: str) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """The 95% Monte Carlo band (lo, hi) per scan of one variant's ``TrackMetrics`` field
         (``"rmse_x"``, ``"nees_pos"``, …): the delete-a-group jackknife; NaN before the start."""
-        return jackknife_band(
-            getattr(self.metrics[variant], name), getattr(self.leave_one_out[variant], name)
+        return metric_band(
+            name, getattr(self.metrics[variant], name), getattr(self.leave_one_out[variant], name)
         )
 
 

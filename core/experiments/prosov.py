@@ -46,10 +46,10 @@ from radarviz.core.filters.run import run_scans
 from radarviz.core.filters.state import CVBatch
 from radarviz.core.geometry import range_cross_basis
 from radarviz.core.metrics import (
-    NONNEGATIVE_METRICS,
     MetricsAccumulator,
     TrackMetrics,
     delta_percent,
+    metric_band,
     nees_band,
     nees_dof,
     truth_line_of_sight,
@@ -230,12 +230,7 @@ class TrackingResult:
         value = getattr(self.metrics[method], name)
         if method not in self.leave_one_out:
             return _nan_band(value)
-        lo, hi = jackknife_band(value, getattr(self.leave_one_out[method], name))
-        if name in NONNEGATIVE_METRICS:
-            # The jackknife band is symmetric; a heavy-tailed NEES (σβ = 20°: values ≥ 1.4,
-            # half-widths of 10⁴) put its lower end far below 0, where no NEES can be.
-            lo = np.maximum(lo, 0.0)
-        return lo, hi
+        return metric_band(name, value, getattr(self.leave_one_out[method], name))
 
 
 def _delta_x(a: TrackMetrics, b: TrackMetrics) -> dict[str, NDArray[np.float64]]:
