@@ -677,8 +677,9 @@ def _changed_share(a: np.ndarray, b: np.ndarray) -> float:
 
 
 def _first_complete_frame(page, t0: float, run_done, before=None, timeout: float = 60.0):
-    """Screenshot the viewer until the run (``run_done()`` true) is drawn, differs from the
-    frame ``before`` the change and holds still for ``STILL_S``; the final frame, and the
+    """Screenshot the viewer until the run (``run_done()`` true) is drawn (not blank, as the
+    viewer is while it loads a run), differs from the frame ``before`` the change and holds
+    still for ``STILL_S``; the final frame, and the
     seconds from ``t0`` to the end of the first screenshot that already looked like it (an
     upper bound: the frame was complete at the latest when that screenshot ended)."""
     shots: list[tuple[float, float, np.ndarray]] = []  # (started, ended, frame)
@@ -688,6 +689,8 @@ def _first_complete_frame(page, t0: float, run_done, before=None, timeout: float
         frame = _viewer_frame(page)
         shots.append((started, time.monotonic(), frame))
         if not run_done() or (before is not None and _changed_share(frame, before) < SAME_FRAME):
+            continue
+        if _coloured(frame) <= MIN_COLOURED_VIEW:  # a blank viewer (loading) is not complete
             continue
         still = [s for s in shots if s[1] >= shots[-1][1] - STILL_S]
         if shots[-1][1] - shots[0][1] > STILL_S and still[0] is not shots[-1]:
