@@ -199,7 +199,9 @@ def build_parser() -> argparse.ArgumentParser:
     for module in (recording, track, sweep, score):
         module.add_commands(sub)
 
-    tune = sub.add_parser("tune", help="Viser panel that re-runs the Prosov scene into Rerun")
+    tune = sub.add_parser(
+        "tune", help="Viser panel that re-runs a scene (Prosov, Gorshkov, velocity) into Rerun"
+    )
     tune.add_argument(
         "--host",
         default="127.0.0.1",
