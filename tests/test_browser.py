@@ -19,7 +19,7 @@ from radarviz.core.filters.methods import ALL_METHODS
 from radarviz.viz_app.palette import radar_rgb, rgb
 from radarviz.viz_app.rerun.recording import recording_file
 from radarviz.viz_app.rerun.scenes import record_preset
-from radarviz.viz_app.rerun.viewer import free_port, viewer_url
+from radarviz.viz_app.rerun.viewer import free_port, viewer_url, wait_viewer
 
 ARTIFACTS = Path(__file__).resolve().parents[1] / "test-artifacts"
 
@@ -30,17 +30,6 @@ def _answers(url: str) -> bool:
             return True
     except OSError:
         return False
-
-
-def _wait_http(url: str, timeout: float = 30.0) -> None:
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        try:
-            with urllib.request.urlopen(url, timeout=2):
-                return
-        except OSError:
-            time.sleep(0.2)
-    raise TimeoutError(f"{url} did not answer within {timeout} s")
 
 
 VIEWPORT = {"width": 1600, "height": 1000}
@@ -87,7 +76,7 @@ def _serve(rrd: Path) -> tuple[subprocess.Popen, int, int]:
         text=True,
         start_new_session=True,
     )
-    _wait_http(f"http://127.0.0.1:{web}/")
+    wait_viewer(proc, "--web-port", "127.0.0.1", web, timeout=30.0)
     return proc, grpc, web
 
 

@@ -21,7 +21,6 @@ import shutil
 import subprocess
 import sys
 import time
-import urllib.request
 from pathlib import Path
 
 import numpy as np
@@ -30,7 +29,7 @@ import rerun.blueprint as rrb
 
 from radarviz.viz_app.rerun.recording import new_recording, recording_file
 from radarviz.viz_app.rerun.scenes import PresetLayout, blueprint_of, log_preset
-from radarviz.viz_app.rerun.viewer import free_port, viewer_url
+from radarviz.viz_app.rerun.viewer import free_port, viewer_url, wait_viewer
 
 ARTIFACTS = Path(__file__).resolve().parents[1] / "test-artifacts" / "views"
 DOCS = Path(__file__).resolve().parents[1] / "docs"
@@ -112,17 +111,6 @@ def _shot(page) -> np.ndarray:
     return imread(io.BytesIO(page.screenshot(timeout=120_000)), format="png")
 
 
-def _wait_http(url: str, timeout: float = 240.0) -> None:
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        try:
-            with urllib.request.urlopen(url, timeout=2):
-                return
-        except OSError:
-            time.sleep(0.2)
-    raise TimeoutError(f"{url} did not answer within {timeout} s")
-
-
 def check_every_tab(
     rrd: Path, layout: PresetLayout, recording_id: str, label: str, chromium
 ) -> list[Path]:
@@ -143,7 +131,7 @@ def check_every_tab(
     ctl = None
     try:
         # ``radarviz view`` reads the whole file back before serving it (a demo: ~40 MB).
-        _wait_http(f"http://127.0.0.1:{web}/")
+        wait_viewer(proc, "--web-port", "127.0.0.1", web, timeout=240.0)
         executable, args = chromium
         with sync_playwright() as p:
             browser = p.chromium.launch(executable_path=executable, args=args)
