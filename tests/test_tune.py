@@ -375,6 +375,19 @@ def _group_alive(pgid: int) -> bool:
     return True
 
 
+def _stop_group(proc: subprocess.Popen) -> None:
+    """Stop ``radarviz tune`` and its servers (its process group): SIGTERM, and SIGKILL with
+    a failure when it does not exit within 15 s."""
+    if _group_alive(proc.pid):
+        os.killpg(proc.pid, signal.SIGTERM)
+    try:
+        proc.wait(timeout=15)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait(timeout=5)
+        raise
+
+
 def _start_tune() -> tuple[subprocess.Popen, int, queue.Queue]:
     """``radarviz tune --no-browser`` on free ports: the process, its viewer port and a queue
     of its output lines (read by a thread)."""
@@ -578,14 +591,7 @@ def test_tune_panel_drives_each_scene_from_two_tabs(
             viewer_shows_data(view, ARTIFACTS / "tune_viewer_velocity.png")
             browser.close()
     finally:
-        if _group_alive(proc.pid):
-            os.killpg(proc.pid, signal.SIGTERM)
-        try:
-            proc.wait(timeout=15)
-        except subprocess.TimeoutExpired:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait(timeout=5)
-            raise
+        _stop_group(proc)
 
 
 def _group_rss_mb(pgid: int) -> float:
@@ -818,14 +824,7 @@ def test_tune_page_switches_scenes_and_each_is_drawn(chromium: tuple[str, list[s
             page.screenshot(path=str(ARTIFACTS / "tune_page.png"))
             browser.close()
     finally:
-        if _group_alive(proc.pid):
-            os.killpg(proc.pid, signal.SIGTERM)
-        try:
-            proc.wait(timeout=15)
-        except subprocess.TimeoutExpired:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait(timeout=5)
-            raise
+        _stop_group(proc)
     (ARTIFACTS / "tune_first_frame.json").write_text(json.dumps(figures, indent=1) + "\n")
     print(json.dumps(figures))
     # The budget holds only on a machine where the viewer's software WebGL has the CPU to
