@@ -89,7 +89,7 @@ from __future__ import annotations
 
 import heapq
 import math
-from collections.abc import Iterable, Iterator, Mapping
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import NamedTuple, TypeVar
 
@@ -108,10 +108,12 @@ from radarviz.core.filters.methods import (
 from radarviz.core.filters.state import CVBatch, position_index, quad_form_inv
 from radarviz.core.geometry import direction_cosines
 from radarviz.core.params import ParameterError, check, check_choice, default
+from radarviz.core.tracking.association_compiled import CompiledAssociation, eligible
 from radarviz.core.tracking.coverage import (
     EDGE_FRACTION,
     MAX_MARGIN_RAD,
     MIN_MARGIN_RAD,
+    BeamTable,
     RadarBeam,
     RadarCoverage,
 )
@@ -123,6 +125,7 @@ from radarviz.core.tracking.stream import (
     StateRow,
     StreamOptions,
     polar_arrays,
+    state_rows,
 )
 from radarviz.core.tracking.targets import TargetTracker
 
@@ -670,14 +673,23 @@ class GNNTracker:
         self.book = TrackBook(a.confirm_m, a.confirm_n, a.delete_misses, 2 * dims)
         self._coverage = dict(coverage or {})
         #: Each radar's beam and coverage (``core.tracking.coverage``), by name, in order of
-        #: first plot.
+        #: first plot; their state rows in one table.
         self.beams: dict[str, RadarBeam] = {}
+        self._table = BeamTable(0)
         self._sites: list[NDArray[np.float64]] = []
         self._started = 0
         #: Batches (and scans) associated so far.
         self.batches = 0
         #: Ids of every track confirmed so far, in order of confirmation.
         self.ever_confirmed: list[str] = []
+        #: The compiled route (``core.tracking.association_compiled``), or None: the Python
+        #: route of ``_add``.
+        self._compiled: CompiledAssociation | None = None
+        if eligible(options, three_d, boxed(a.method), dense):
+            self._compiled = CompiledAssociation(
+                a.method, options, self.gate, self.gate * PREFILTER_MARGIN, self._q_max,
+                self._omega_max, a, self.book, self._table,
+            )  # fmt: skip
 
     @property
     def gate(self) -> float:
@@ -889,11 +901,96 @@ class GNNTracker:
         rows, cols_all, d2s = (np.concatenate(v) for v in zip(*found, strict=True))
         return rows.astype(np.intp), cols_all.astype(np.intp), d2s
 
+    def add_batches(
+        self,
+        batches: Sequence[list[Plot]],
+        measured_period_s: Sequence[float | None] | None = None,
+        whole_scan: bool = False,
+    ) -> list[ScanResult]:
+        """``add_batch`` of each of ``batches`` in order, on the compiled route in one call
+        (``core.tracking.association_compiled``): the same association, without a batch's
+        fixed cost. ``measured_period_s``: per batch, its radar's antenna period as the feed
+        measured it before the batch (``measured_period``), or None. A ``PlotError`` carries
+        ``batch`` and ``index`` (the plot's position in it)."""
+        measured = list(measured_period_s or [None] * len(batches))
+        if self._compiled is None:
+            out = []
+            for b, (plots, period) in enumerate(zip(batches, measured, strict=True)):
+                if period is not None and plots:
+                    self.measured_period(plots[0].radar, period)
+                try:
+                    out.append(self._add(plots, whole_scan))
+                except PlotError as exc:
+                    exc.batch = b  # type: ignore[attr-defined]
+                    raise
+            return out
+        radar: list[int] = []
+        for b, plots in enumerate(batches):
+            try:
+                self._check_batch(plots)
+            except PlotError as exc:
+                exc.batch = b  # type: ignore[attr-defined]
+                raise
+            # The feed's period applies to a radar already seen (``measured_period``).
+            if not plots or plots[0].radar not in self.beams:
+                measured[b] = None
+            reg = self._radar(plots)
+            radar += [reg[0]] * len(plots) if reg is not None else []
+        starts = np.cumsum([0, *map(len, batches)])
+        res, bad = self._compiled.run(
+            batches, np.array(radar, np.int64), np.array(self._sites).reshape(-1, 2),
+            whole_scan, measured,
+        )  # fmt: skip
+        if bad >= 0:  # the gating track's kernel found a plot out of order
+            b = int(np.searchsorted(starts, bad, side="right")) - 1
+            exc = PlotError(
+                "time_s", "times must not decrease within a track", index=int(bad - starts[b])
+            )
+            exc.batch = b  # type: ignore[attr-defined]
+            raise exc
+        self.batches += len(batches)
+        self._started = self.book._started
+        # The requested methods' tracks of the labelled plots, from the call's own arrays.
+        owner = res.ids
+        ids = [str(i) for i in owner.tolist()]
+        u, first, inv = np.unique(owner, return_index=True, return_inverse=True)
+        order = np.argsort(first)  # labels in order of their first plot
+        rank = np.empty_like(order)
+        rank[order] = np.arange(order.size)
+        block = res.block._replace(
+            target=rank[inv.reshape(-1)].astype(np.intp), labels=tuple(str(t) for t in u[order])
+        )
+        try:
+            rows = state_rows(self.tracker.add_arrays(block), self.methods)
+            if self._gate.tracker is not self.tracker:
+                self._gate.tracker.add_arrays(block)
+        except PlotError as exc:
+            b = int(np.searchsorted(starts, exc.index, side="right")) - 1
+            exc.batch, exc.index = b, int(exc.index - starts[b])  # type: ignore[attr-defined]
+            raise
+        deleted = [t for d in res.deleted for t in d]
+        if deleted:
+            self.tracker.forget(deleted)
+            if self._gate.tracker is not self.tracker:
+                self._gate.tracker.forget(deleted)
+        names = (TENTATIVE, CONFIRMED)
+        status = [names[c] for c in res.status.tolist()]
+        out = []
+        for b in range(len(batches)):
+            lo, hi = int(starts[b]), int(starts[b + 1])
+            self.ever_confirmed.extend(res.confirmed[b])
+            out.append(
+                ScanResult(ids[lo:hi], status[lo:hi], rows[lo:hi], res.confirmed[b], res.deleted[b])
+            )
+        return out
+
     def add_scan(self, plots: list[Plot]) -> ScanResult:
         """Associate and filter one whole scan of one radar (its plots, or none): every live
         track inside the radar's coverage without a plot in the scan has missed it (an
         empty scan: every live track). A ``PlotError`` carries ``index``, the plot's position
         in the scan."""
+        if self._compiled is not None:
+            return self.add_batches([plots], whole_scan=True)[0]
         return self._add(plots, whole_scan=True)
 
     def add_batch(self, plots: list[Plot]) -> ScanResult:
@@ -902,6 +999,8 @@ class GNNTracker:
         without a plot are missed (``core.tracking.coverage``); a scan-stamped radar's batch
         is a whole scan. A ``PlotError`` carries ``index``, the plot's position in the
         batch."""
+        if self._compiled is not None:
+            return self.add_batches([plots])[0]
         return self._add(plots, whole_scan=False)
 
     def _too_fast(
@@ -943,17 +1042,22 @@ class GNNTracker:
             if p.radar != name:
                 raise PlotError("radar", "a batch holds the plots of one radar", index=i)
         if name not in self.beams:
-            self.beams[name] = RadarBeam(self._coverage.get(name))
+            row = len(self.beams)
+            self._table.grow(row + 1, self._table.length)
+            self.beams[name] = RadarBeam(self._coverage.get(name), self._table, row)
             self._sites.append(np.asarray(plots[0].site, dtype=np.float64)[: self.dims])
             self.book.radars(len(self.beams))
         return list(self.beams).index(name), self.beams[name]
 
-    def _add(self, plots: list[Plot], whole_scan: bool) -> ScanResult:
+    def _check_batch(self, plots: list[Plot]) -> None:
         for i, p in enumerate(plots):
             if (self.dims == 3) != (p.elevation_rad is not None):
                 raise PlotError(
                     "elevation_deg", "every plot of a 3D track needs an elevation", index=i
                 )
+
+    def _add(self, plots: list[Plot], whole_scan: bool) -> ScanResult:
+        self._check_batch(plots)
         radar = self._radar(plots)
         self.batches += 1
         times = np.array([p.time_s for p in plots], dtype=np.float64)

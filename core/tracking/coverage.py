@@ -102,75 +102,169 @@ class RadarCoverage:
     max_elevation_rad: float | None = None
 
 
-def _wrap(a: NDArray[np.float64] | float) -> NDArray[np.float64]:
-    """Angles in [−π, π)."""
-    return np.mod(np.asarray(a) + math.pi, TWO_PI) - math.pi
+def beam_constants() -> tuple[int, float, int, int, float, float, float]:
+    """The constants of the beam's estimates, in ``observe_beam``'s order after its state
+    and plots: cells, min revisit, min revisits, kept, max and min rate pair, beam noise."""
+    return (
+        AZIMUTH_CELLS, MIN_REVISIT_S, MIN_REVISITS, REVISITS_KEPT, MAX_RATE_PAIR_S,
+        MIN_RATE_PAIR_S, BEAM_NOISE_RAD,
+    )  # fmt: skip
+
+
+def _nan(v: float | None) -> float:
+    return math.nan if v is None else float(v)
+
+
+def _none(v: float) -> float | None:
+    return None if math.isnan(v) else float(v)
+
+
+class BeamTable:
+    """The state of R radars' beams as stacked arrays (``core.tracking.kernels_associate.
+    BeamArrays``): the rows ``RadarBeam`` reads and the compiled association changes in
+    place. ``grow`` makes room for more radars, or for longer lists of beam rates and close
+    pairs (up to ``REVISITS_KEPT`` plus a batch's plots are kept)."""
+
+    def __init__(self, radars: int = 1, length: int = 2 * REVISITS_KEPT):
+        from radarviz.core.tracking.kernels_associate import (
+            B_EL_HI,
+            B_EL_LO,
+            B_RANGE_HI,
+            B_RANGE_LO,
+            BEAM_COUNTS,
+            BEAM_FLOATS,
+            BeamArrays,
+        )
+
+        self.radars, self.length = 0, 0
+        f = np.full((0, BEAM_FLOATS), np.nan)
+        self.arrays = BeamArrays(
+            f,
+            np.zeros((0, BEAM_COUNTS), np.int64),
+            np.zeros((0, AZIMUTH_CELLS)),
+            np.zeros((0, REVISITS_KEPT)),
+            np.zeros((0, 0)),
+            np.zeros((0, 0, 2)),
+        )
+        self._fresh = (B_RANGE_LO, B_RANGE_HI, B_EL_LO, B_EL_HI)
+        self.grow(radars, length)
+
+    def grow(self, radars: int, length: int) -> None:
+        """Room for ``radars`` radars and lists of ``length``; new rows are fresh beams."""
+        radars, length = max(radars, self.radars), max(length, self.length)
+        if radars == self.radars and length == self.length:
+            return
+        a = self.arrays
+        lo_r, hi_r, lo_e, hi_e = self._fresh
+        f = np.full((radars, a.f.shape[1]), np.nan)
+        f[:, [lo_r, lo_e]], f[:, [hi_r, hi_e]] = np.inf, -np.inf
+        f[: self.radars] = a.f
+        c = np.zeros((radars, a.c.shape[1]), np.int64)
+        c[: self.radars] = a.c
+        cells = np.full((radars, AZIMUTH_CELLS), -np.inf)
+        cells[: self.radars] = a.cells
+        revisits = np.zeros((radars, REVISITS_KEPT))
+        revisits[: self.radars] = a.revisits
+        rates = np.zeros((radars, length))
+        rates[: self.radars, : self.length] = a.rates
+        close = np.zeros((radars, length, 2))
+        close[: self.radars, : self.length] = a.close
+        self.arrays = type(a)(f, c, cells, revisits, rates, close)
+        self.radars, self.length = radars, length
 
 
 class RadarBeam:
-    """One radar's coverage and beam, given or estimated from its plots (module docstring)."""
+    """One radar's coverage and beam, given or estimated from its plots (module docstring).
 
-    def __init__(self, given: RadarCoverage | None = None):
+    Its state is row ``row`` of a ``BeamTable`` (its own table of one row by default), so
+    that the compiled association (``core.tracking.kernels_associate``) and this class read
+    and learn the same numbers by the same code (``observe_beam``)."""
+
+    def __init__(
+        self, given: RadarCoverage | None = None, table: BeamTable | None = None, row: int = 0
+    ):
+        from radarviz.core.tracking import kernels_associate as ka
+
+        self._k = ka
         self.given = given or RadarCoverage()
-        self._cells = np.full(AZIMUTH_CELLS, -np.inf)
-        self._revisits: list[float] = []
-        self._rates: list[float] = []
-        self._close: list[tuple[float, float]] = []  # (Δt, |Δβ|) of close consecutive plots
-        self._period: float | None = self.given.rotation_period_s
-        self._measured = False  # the period came from the feed (``measured_period``)
-        self._revisit_period: float | None = None  # the revisits' estimate, once known
-        self._same = self._other = 0
-        self._turns = [0, 0]  # pairs turning negative, positive
-        self._range = [math.inf, -math.inf]
-        self._elevation = [math.inf, -math.inf]
-        self.last_s: float | None = None
-        self.last_az = 0.0
-        #: Time of the previous batch's end, for the sweep (None before the first batch).
-        self.swept_to_s: float | None = None
+        self.table = BeamTable() if table is None else table
+        self.row = row
+        g = self.given
+        f = self._f
+        f[ka.B_PERIOD] = f[ka.B_GIVEN_PERIOD] = _nan(g.rotation_period_s)
+        f[ka.B_GIVEN_MIN_R], f[ka.B_GIVEN_MAX_R] = _nan(g.min_range_m), _nan(g.max_range_m)
+        f[ka.B_GIVEN_MIN_EL] = _nan(g.min_elevation_rad)
+        f[ka.B_GIVEN_MAX_EL] = _nan(g.max_elevation_rad)
+
+    @property
+    def _f(self) -> NDArray[np.float64]:
+        return self.table.arrays.f[self.row]
+
+    @property
+    def _c(self) -> NDArray[np.int64]:
+        return self.table.arrays.c[self.row]
 
     # -- estimates -------------------------------------------------------------------------
 
     @property
     def period_s(self) -> float | None:
         """T: given, else estimated (None until ``MIN_REVISITS`` revisits)."""
-        return self._period
+        return _none(self._f[self._k.B_PERIOD])
 
     @property
     def scan_stamped(self) -> bool:
         """Most consecutive plots of the radar share their time stamp (module docstring)."""
-        return self._same > self._other
+        return bool(self._c[self._k.B_SAME] > self._c[self._k.B_OTHER])
 
     @property
     def direction(self) -> float:
         """+1 when the beam turns towards increasing azimuth (counter-clockwise), −1 else."""
-        return 1.0 if self._turns[1] >= self._turns[0] else -1.0
+        c = self._c
+        return 1.0 if c[self._k.B_TURN_POS] >= c[self._k.B_TURN_NEG] else -1.0
+
+    @property
+    def last_az(self) -> float:
+        """The azimuth of the radar's latest plot (rad)."""
+        return float(self._f[self._k.B_LAST_AZ])
+
+    @property
+    def swept_to_s(self) -> float | None:
+        """Time of the previous batch's end, for the sweep (None before the first batch)."""
+        return _none(self._f[self._k.B_SWEPT_TO])
+
+    @swept_to_s.setter
+    def swept_to_s(self, value: float) -> None:
+        self._f[self._k.B_SWEPT_TO] = value
 
     def range_limits(self, estimated: bool = True) -> tuple[float, float]:
         """(min, max) range: given, else (``estimated``) the extremes of the plots seen, else
         unbounded (m)."""
-        g = self.given
-        lo, hi = self._range if estimated else (0.0, math.inf)
+        g, f = self.given, self._f
+        lo, hi = (f[self._k.B_RANGE_LO], f[self._k.B_RANGE_HI]) if estimated else (0.0, math.inf)
         return (
-            lo if g.min_range_m is None else g.min_range_m,
-            hi if g.max_range_m is None else g.max_range_m,
+            float(lo) if g.min_range_m is None else g.min_range_m,
+            float(hi) if g.max_range_m is None else g.max_range_m,
         )
 
     def elevation_limits(self, estimated: bool = True) -> tuple[float, float]:
         """(min, max) elevation: given, else (``estimated``) the extremes of the plots seen,
         else unbounded (rad)."""
-        g = self.given
-        lo, hi = self._elevation if estimated else (-math.pi / 2, math.pi / 2)
+        g, f = self.given, self._f
+        lo, hi = (
+            (f[self._k.B_EL_LO], f[self._k.B_EL_HI]) if estimated else (-math.pi / 2, math.pi / 2)
+        )
         return (
-            lo if g.min_elevation_rad is None else g.min_elevation_rad,
-            hi if g.max_elevation_rad is None else g.max_elevation_rad,
+            float(lo) if g.min_elevation_rad is None else g.min_elevation_rad,
+            float(hi) if g.max_elevation_rad is None else g.max_elevation_rad,
         )
 
     def estimated(self) -> dict[str, float | None]:
         """What was not given and has been estimated from the plots, by name (SI units)."""
         g = self.given
         out: dict[str, float | None] = {}
-        if g.rotation_period_s is None and not self._measured and not self.scan_stamped:
-            out["rotation_period_s"] = self._period
+        measured = bool(self._c[self._k.B_MEASURED])
+        if g.rotation_period_s is None and not measured and not self.scan_stamped:
+            out["rotation_period_s"] = self.period_s
         lo, hi = self.range_limits()
         if g.min_range_m is None and math.isfinite(lo):
             out["min_range_m"] = lo
@@ -190,93 +284,27 @@ class RadarBeam:
         range_m: NDArray[np.float64],
         elevation_rad: NDArray[np.float64] | None,
     ) -> None:
-        """Learn from a batch of the radar's plots, (B,) each, in time order."""
+        """Learn from a batch of the radar's plots, (B,) each, in time order
+        (``core.tracking.kernels_associate.observe_beam``)."""
         if not time_s.size:
             return
-        self._range = [
-            min(self._range[0], float(range_m.min())),
-            max(self._range[1], float(range_m.max())),
-        ]
-        if elevation_rad is not None:
-            self._elevation = [
-                min(self._elevation[0], float(elevation_rad.min())),
-                max(self._elevation[1], float(elevation_rad.max())),
-            ]
-        # np.concatenate, not np.r_: a batch is a few plots, and np.r_'s parsing of its
-        # arguments cost more than the rest of this method.
-        t = time_s if self.last_s is None else np.concatenate(([self.last_s], time_s))
-        az = azimuth_rad if self.last_s is None else np.concatenate(([self.last_az], azimuth_rad))
-        dt, daz = np.diff(t), _wrap(np.diff(az))
-        same = dt == 0.0
-        self._same += int(same.sum())
-        self._other += int((~same).sum())
-        quarter = (self._period or math.inf) / 4
-        turning = (dt > 0) & (dt < quarter) & (np.abs(daz) < math.pi / 3)
-        self._turns[0] += int((turning & (daz < 0)).sum())
-        self._turns[1] += int((turning & (daz > 0)).sum())
-        if self.given.rotation_period_s is None and not self._measured:
-            if len(self._close) < REVISITS_KEPT:
-                close = (dt > 0) & (dt <= MAX_RATE_PAIR_S)
-                self._close.extend(
-                    zip(dt[close].tolist(), np.abs(daz[close]).tolist(), strict=True)
-                )
-            if len(self._rates) < REVISITS_KEPT:
-                pair = (dt >= MIN_RATE_PAIR_S) & (dt <= MAX_RATE_PAIR_S)
-                self._rates.extend((daz[pair] / dt[pair]).tolist())
-                span = t[-1] - t[0]  # the batch's ends: a rate where its plots come densely
-                if MIN_RATE_PAIR_S <= span <= MAX_RATE_PAIR_S and not pair.any():
-                    self._rates.append(float(_wrap(az[-1] - az[0])) / span)
-            self._learn_period(time_s, azimuth_rad)
-            self._period = self._estimate()
-        self.last_s, self.last_az = float(time_s[-1]), float(azimuth_rad[-1])
-
-    def _learn_period(self, time_s: NDArray[np.float64], azimuth_rad: NDArray[np.float64]) -> None:
-        cell = (np.mod(azimuth_rad, TWO_PI) * (AZIMUTH_CELLS / TWO_PI)).astype(np.intp)
-        cell = np.minimum(cell, AZIMUTH_CELLS - 1)
-        c = self._cells
-        for k, t in zip(cell.tolist(), time_s.tolist(), strict=True):
-            prev = max(c[k - 1], c[k], c[(k + 1) % AZIMUTH_CELLS])
-            if math.isfinite(prev) and t - prev >= MIN_REVISIT_S:
-                self._revisits.append(t - prev)
-            c[k] = t
-        if len(self._revisits) > REVISITS_KEPT:
-            del self._revisits[: len(self._revisits) - REVISITS_KEPT]
-        if len(self._revisits) >= MIN_REVISITS:
-            r = np.asarray(self._revisits)
-            low = float(np.quantile(r, 0.1, method="lower"))  # a revisit seen, not between two
-            near = r[(r >= 0.9 * low) & (r <= 1.1 * low)]
-            # The shortest revisits must be a cluster (a tenth of them at least), not a stray.
-            if near.size >= max(3, r.size // 10):
-                self._revisit_period = float(np.median(near))
-
-    def _estimate(self) -> float | None:
-        """The period from the plots (module docstring): the revisits', else the beam
-        rate's; None while neither is known, or when the rates of close plots disagree (their
-        stamps are not a beam's, e.g. a scan's plots at random times, whose same-sweep
-        neighbours look like short revisits)."""
-        rate_period = None
-        if len(self._rates) >= MIN_REVISITS:
-            rates = np.asarray(self._rates)
-            w = float(np.median(rates))
-            if np.mean(np.abs(rates - w) <= 0.1 * abs(w)) < 0.5:
-                return None
-            rate_period = TWO_PI / abs(w)
-        period = self._revisit_period if self._revisit_period is not None else rate_period
-        if period is not None and len(self._close) >= MIN_REVISITS:
-            # On a beam, close plots are no farther apart in azimuth than the beam turned
-            # between them (and the noise); a scan's plots at random times are.
-            dt, daz = np.asarray(self._close).T
-            on_beam = daz <= 1.2 * TWO_PI * dt / period + BEAM_NOISE_RAD
-            if np.mean(on_beam) < 0.5:
-                return None
-        return period
+        self.table.grow(self.table.radars, REVISITS_KEPT + time_s.size)
+        a, r = self.table.arrays, self.row
+        el = elevation_rad if elevation_rad is not None else time_s
+        columns = (time_s, azimuth_rad, range_m, el)
+        plots = (np.ascontiguousarray(v, dtype=np.float64) for v in columns)
+        self._k.observe_beam(
+            a.f[r], a.c[r], a.cells[r], a.revisits[r], a.rates[r], a.close[r], *plots,
+            elevation_rad is not None, *beam_constants(),
+        )  # fmt: skip
 
     def measured_period(self, period_s: float) -> None:
         """The period measured by the feed (a radar's north markers or service messages):
         used from now on instead of the estimate from the plots (a period in the radars file
         still comes first)."""
         if self.given.rotation_period_s is None:
-            self._period, self._measured = period_s, True
+            self._f[self._k.B_PERIOD] = period_s
+            self._c[self._k.B_MEASURED] = 1
 
     # -- the sweep -------------------------------------------------------------------------
 
@@ -315,7 +343,7 @@ class RadarBeam:
         k = azimuth_rad.shape[0]
         if whole_scan:
             return np.ones(k, dtype=bool), np.full(k, end_s)
-        T = self._period
+        T = self.period_s
         if start is None or T is None:
             return np.zeros(k, dtype=bool), np.full(k, end_s)
         turned = TWO_PI * (end_s - start) / T

@@ -53,9 +53,14 @@ def near_pairs(slots, x, P, last_s, time_s, q_max, omega_max, points, r_ii, scal
                 var = P[s, p, p] + 2.0 * T * P[s, p, v] + T * T * P[s, v, v]
                 if var < 0.0:  # rounding of a tiny variance
                     var = 0.0
+                noise = 0.25 * q_max * T**4 + r_ii[j, a]
+                # (√var + δ)² ≤ 2 var + 2 δ²: a pair outside that looser bound is outside
+                # the bound itself, and most pairs are, without a square root.
+                if not nu * nu < scale * (2.0 * (var + delta * delta) + noise):
+                    inside = False
+                    break
                 sd = math.sqrt(var) + delta
-                var = sd * sd + 0.25 * q_max * T**4
-                if not nu * nu < scale * (var + r_ii[j, a]):  # a NaN fails
+                if not nu * nu < scale * (sd * sd + noise):  # a NaN fails
                     inside = False
                     break
             if inside:

@@ -44,7 +44,9 @@ class TrackBook:
     def __init__(self, confirm_m: int, confirm_n: int, delete_misses: int, state_size: int):
         self.m, self.n, self.kdel = confirm_m, confirm_n, delete_misses
         self.slot: dict[str, int] = {}  # id → slot, in order of initiation
-        self._free: list[int] = []
+        #: The free slots, a stack (its top ``free_top``; the lowest slot on top first).
+        self.free = np.zeros(0, np.int64)
+        self.free_top = 0
         self._cap, self._radars = 0, 0
         self._n = state_size
         self.status = np.zeros(0, np.int8)
@@ -105,7 +107,12 @@ class TrackBook:
         folded = np.zeros((rad, 2), np.int64)
         folded[: self.folded.shape[0]] = self.folded
         self.folded = folded
-        self._free.extend(range(cap - 1, self._cap - 1, -1))
+        # The new slots go on top of the free stack, the lowest handed out first.
+        new = np.arange(cap - 1, self._cap - 1, -1)
+        free = np.zeros(cap, np.int64)
+        free[: self.free_top] = self.free[: self.free_top]
+        free[self.free_top : self.free_top + new.size] = new
+        self.free, self.free_top = free, self.free_top + new.size
         self._cap, self._radars = cap, rad
 
     def radars(self, count: int) -> None:
@@ -122,9 +129,10 @@ class TrackBook:
 
     def start(self, track: str, time_s: float, radar: int) -> int:
         """A new tentative track from one plot of ``radar`` at ``time_s`` (its first hit)."""
-        if not self._free:
+        if not self.free_top:
             self._grow(max(16, 2 * self._cap), self._radars)
-        s = self._free.pop()
+        self.free_top -= 1
+        s = int(self.free[self.free_top])
         self.slot[track] = s
         self.alive[s], self.label[s], self.rank[s] = True, track, self._started
         self._started += 1
@@ -166,7 +174,14 @@ class TrackBook:
         s = self.slot.pop(track)
         self.alive[s] = False
         self.folded[: self._radars, int(self.status[s])] += self.plots[s, : self._radars]
-        self._free.append(s)
+        self.free[self.free_top] = s
+        self.free_top += 1
+
+    def reserve(self, slots: int) -> None:
+        """Make sure at least ``slots`` slots are free (the compiled association starts up
+        to one track per plot of a call without growing the arrays)."""
+        if self.free_top < slots:
+            self._grow(max(2 * self._cap, self._cap + slots - self.free_top, 16), self._radars)
 
     def plot_counts(self) -> NDArray[np.int64]:
         """(R, 3) plots per radar: [in confirmed tracks, in tracks still tentative, in tracks

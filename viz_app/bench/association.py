@@ -32,13 +32,15 @@ scan by scan (so that a shared machine's load falls on all three alike):
   113 km apart (periods 4.0 to 5.1 s, phases staggered, 80 km coverage, P_D 0.9, 5 false
   plots a revolution), each plot stamped by its radar's beam; the plots associated as they
   come with the defaults of ``track --associate gnn`` (IMM, gate ``ucm``, ``plot_batches``:
-  a few plots a batch) by the compiled engine (``rotating_plots_per_cpu_s``) and, with
+  a few plots a batch; the batches of ``LABELLED_BLOCK`` plots handed over at once,
+  ``GNNTracker.add_batches``, as the command does) by the compiled route
+  (``rotating_plots_per_cpu_s``, the gating method's own filtering included) and, with
   ``reference``, by the numpy engine (``rotating_numpy_plots_per_cpu_s``, the reference
   route, and ``rotating_same_as_numpy``: the same track ids), against the labelled
   filtering of the same plots (each plot's true target, a false plot its own label) in
   blocks of ``LABELLED_BLOCK`` (``rotating_labelled_plots_per_cpu_s``; the ratio of the
   times ``rotating_over_labelled``). Times are CPU seconds (``time.process_time``: a shared
-  machine's other work is not counted), the passes interleaved batch by batch;
+  machine's other work is not counted), the passes interleaved block by block;
   ``rotating_purity`` and ``rotating_tracks_per_target`` (``core.tracking.plot_scores``)
   say the association held the targets.
 
@@ -81,7 +83,7 @@ def bench_rotating(
     )
     from radarviz.core.tracking.association import AssociationOptions, GNNTracker, plot_batches
     from radarviz.core.tracking.plot_scores import plot_scores
-    from radarviz.core.tracking.stream import StreamOptions
+    from radarviz.core.tracking.stream import Plot, StreamOptions
     from radarviz.core.tracking.targets import TargetTracker
 
     sites = [
@@ -111,18 +113,22 @@ def bench_rotating(
     ids: dict[str, list[str]] = {e: [] for e in engines}
     done = 0  # plots filtered with their labels so far
     sector = gnns["compiled"].association.batch_sector_deg
+    chunk: list[list[Plot]] = []
     for batch in plot_batches(enumerate(plots), sector):
-        part = [p for _, p in batch]
-        for e, gnn in gnns.items():
-            t0 = time.process_time()
-            ids[e] += gnn.add_batch(part).track_ids
-            cpu[e] += time.process_time() - t0
+        chunk.append([p for _, p in batch])
         end = batch[-1][0] + 1
         if end - done >= LABELLED_BLOCK or end == len(plots):
+            # As ``radarviz track`` does: the batches of a block of plots in one call.
+            for e, gnn in gnns.items():
+                t0 = time.process_time()
+                for result in gnn.add_batches(chunk):
+                    ids[e] += result.track_ids
+                cpu[e] += time.process_time() - t0
             t0 = time.process_time()
             tracker.add_block(labelled[done:end])
             cpu["labelled"] += time.process_time() - t0
             done = end
+            chunk = []
     n = len(plots)
     gnn = gnns["compiled"]
     score = plot_scores(pl.origin, ids["compiled"], set(gnn.ever_confirmed))

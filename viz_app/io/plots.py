@@ -924,7 +924,7 @@ def track_plots(
     id and the track's status after the batch, ``on_scan(deleted)`` the ids of the tracks
     deleted at the batch after its last plot's ``on_rows``, ``on_report`` the association's
     account at the end, and ``targets`` are the ids of the tracks ever confirmed. Memory holds
-    one batch.
+    the batches of about ``READ_BLOCK`` plots.
     """
     three_d, labelled = reader.three_d, reader.targets
     if methods is None:
@@ -1070,6 +1070,29 @@ def _associate_plots(
     # A capture's CAT034 messages time the antennas (``AsterixReader.scan_timing``): a period
     # they give replaces the one estimated from the plots.
     timing = getattr(reader, "scan_timing", None)
+    # Batches are associated ``READ_BLOCK`` plots at a time (``GNNTracker.add_batches``: one
+    # compiled call), each with the period its radar's CAT034 messages gave by then.
+    chunk: list[list[tuple[int, Plot]]] = []
+    periods: list[float | None] = []
+
+    def run_chunk() -> None:
+        try:
+            results = tracker.add_batches([[p for _, p in b] for b in chunk], periods)
+        except PlotError as exc:
+            scan = chunk[getattr(exc, "batch", 0)]
+            where = _place(source, locate(scan[exc.index][0], exc.column))
+            raise ParameterError(f"{where}: {exc}") from None
+        for scan, result in zip(chunk, results, strict=True):
+            for (_, plot), track, status, rows in zip(
+                scan, result.track_ids, result.statuses, result.rows, strict=True
+            ):
+                on_rows(replace(plot, target=track), rows, status)
+            if on_scan is not None:
+                on_scan(result.deleted)
+        chunk.clear()
+        periods.clear()
+
+    held = 0
     while True:
         try:
             scan = next(batches)
@@ -1077,23 +1100,18 @@ def _associate_plots(
             break
         except LatePlotError as exc:
             raise ParameterError(f"{_place(source, locate(exc.key, exc.column))}: {exc}") from None
+        period = None
         if timing:
-            radar = scan[0][1].radar
-            period = getattr(timing.get(radar), "rotation_period_s", None)
-            if period is not None:
-                tracker.measured_period(radar, period)
-        try:
-            result = tracker.add_batch([plot for _, plot in scan])
-        except PlotError as exc:
-            where = _place(source, locate(scan[exc.index][0], exc.column))
-            raise ParameterError(f"{where}: {exc}") from None
-        for (_, plot), track, status, rows in zip(
-            scan, result.track_ids, result.statuses, result.rows, strict=True
-        ):
-            on_rows(replace(plot, target=track), rows, status)
-        if on_scan is not None:
-            on_scan(result.deleted)
+            period = getattr(timing.get(scan[0][1].radar), "rotation_period_s", None)
+        chunk.append(scan)
+        periods.append(period)
+        held += len(scan)
         plots += len(scan)
+        if held >= READ_BLOCK:
+            run_chunk()
+            held = 0
+    if chunk:
+        run_chunk()
     if on_report is not None:
         on_report(tracker.report())
     return plots, reader.three_d, methods, tuple(tracker.ever_confirmed)

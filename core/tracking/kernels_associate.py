@@ -1,0 +1,788 @@
+"""The association as one compiled loop (numba): GNN over many batches of plots in one call.
+
+``core.tracking.association.GNNTracker`` associates a rotating radar's plots a batch at a
+time, and a batch holds two or three plots: a Python and numpy batch costs milliseconds, the
+labelled filtering of the same plots microseconds. Here the whole batch loop runs compiled:
+per batch the beam's estimates (``observe_beam``), the prefilter of every live track
+(``core.tracking.kernels_gate.near_pairs``), each candidate predicted to its plot's own time
+and scored by the gating method's position NIS (``core.filters.kernels_imm``'s
+``combined_prediction``, the tracker kernels' own steps), the speed gate of two-plot
+initiation, the optimal assignment (``sparse_assign``), the gating method's update of every
+plot's track (``core.filters.kernels_imm.track_plots_imm_2d``), hits and starts, the sweep's
+misses, M-of-N confirmation and deletion (``core.tracking.management``'s rules on its arrays).
+
+What each step computes is written, with its reasons, in ``core.tracking.association``,
+``core.tracking.coverage`` and ``core.tracking.management``; the code below follows them step
+by step, on the same arrays (``TrackBook``'s, and ``RadarBeam``'s state rows), so that the
+compiled route makes the same association as the Python one on the numpy engine
+(``tests/test_association_kernel.py``). The route covers 2D plots, a gating method that
+converts the plot alone (``boxed``) and the IMM; the rest takes the Python route.
+
+Imported on first use only.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+from numpy.typing import NDArray
+
+from radarviz.core.filters.kernels_2d import _jit, coefficients, convert
+from radarviz.core.filters.kernels_imm import combined_prediction, track_plots_imm_2d
+from radarviz.core.filters.kernels_track import position_measurement, position_nis
+from radarviz.core.tracking.kernels_gate import near_pairs
+
+TWO_PI = 2.0 * math.pi
+
+# -- a radar beam's state: one row of floats and one of counts per radar ------------------
+# Floats (NaN: not known). The given coverage is kept beside the estimates.
+B_PERIOD, B_GIVEN_PERIOD, B_REVISIT_PERIOD = 0, 1, 2
+B_RANGE_LO, B_RANGE_HI, B_EL_LO, B_EL_HI = 3, 4, 5, 6
+B_LAST_S, B_LAST_AZ, B_SWEPT_TO = 7, 8, 9
+B_GIVEN_MIN_R, B_GIVEN_MAX_R, B_GIVEN_MIN_EL, B_GIVEN_MAX_EL = 10, 11, 12, 13
+BEAM_FLOATS = 14
+# Counts.
+B_SAME, B_OTHER, B_TURN_NEG, B_TURN_POS, B_MEASURED = 0, 1, 2, 3, 4
+B_N_REVISITS, B_REVISIT_HEAD, B_N_RATES, B_N_CLOSE, B_SEEN = 5, 6, 7, 8, 9
+BEAM_COUNTS = 10
+
+
+class BeamArrays(NamedTuple):
+    """One radar's beam state (``core.tracking.coverage.RadarBeam``), or R radars' stacked
+    on a first axis: f (BEAM_FLOATS,), c (BEAM_COUNTS,) int64, cells (AZIMUTH_CELLS,) the
+    last plot time per azimuth cell, revisits (REVISITS_KEPT,) a ring of the latest
+    revisits, rates (L,) the beam rates seen, close (L, 2) the (Δt, |Δβ|) of close
+    consecutive plots (L ≥ REVISITS_KEPT plus a call's plots: a batch's pairs are all kept
+    while fewer than REVISITS_KEPT were)."""
+
+    f: NDArray[np.float64]
+    c: NDArray[np.int64]
+    cells: NDArray[np.float64]
+    revisits: NDArray[np.float64]
+    rates: NDArray[np.float64]
+    close: NDArray[np.float64]
+
+
+@_jit
+def _wrap(a: float) -> float:
+    return (a + math.pi) % TWO_PI - math.pi
+
+
+@_jit
+def _median(a):
+    return np.median(a)
+
+
+@_jit
+def _lower_quantile(a, q: float) -> float:
+    """``np.quantile(a, q, method="lower")``: the element at floor(q (n − 1)) in order."""
+    k = int(q * (a.shape[0] - 1))  # q (n − 1) ≥ 0: truncation is the floor
+    return np.partition(a.copy(), k)[k]
+
+
+@_jit
+def observe_beam(
+    f, c, cells, revisits, rates, close, time_s, azimuth_rad, range_m, elevation_rad,
+    has_elevation, cells_n, min_revisit_s, min_revisits, kept, max_pair_s, min_pair_s,
+    beam_noise_rad,
+):  # fmt: skip
+    """``RadarBeam.observe``: learn from a batch of one radar's plots, (B,) each, in time
+    order, into the beam's state f, c, cells, revisits, rates, close (``BeamArrays``).
+    The constants are ``core.tracking.coverage``'s (passed in: one definition)."""
+    n = time_s.shape[0]
+    if n == 0:
+        return
+    for i in range(n):
+        f[B_RANGE_LO] = min(f[B_RANGE_LO], range_m[i])
+        f[B_RANGE_HI] = max(f[B_RANGE_HI], range_m[i])
+        if has_elevation:
+            f[B_EL_LO] = min(f[B_EL_LO], elevation_rad[i])
+            f[B_EL_HI] = max(f[B_EL_HI], elevation_rad[i])
+    period = f[B_PERIOD]
+    quarter = period / 4.0 if math.isfinite(period) else math.inf
+    learn = math.isnan(f[B_GIVEN_PERIOD]) and c[B_MEASURED] == 0
+    take_close = learn and c[B_N_CLOSE] < kept
+    take_rates = learn and c[B_N_RATES] < kept
+    any_pair = False
+    prev_t, prev_az = f[B_LAST_S], f[B_LAST_AZ]
+    first = 0 if math.isfinite(prev_t) else 1
+    for i in range(first, n):
+        t0 = prev_t if i == 0 else time_s[i - 1]
+        a0 = prev_az if i == 0 else azimuth_rad[i - 1]
+        dt, daz = time_s[i] - t0, _wrap(azimuth_rad[i] - a0)
+        if dt == 0.0:
+            c[B_SAME] += 1
+        else:
+            c[B_OTHER] += 1
+        if dt > 0 and dt < quarter and abs(daz) < math.pi / 3 and daz != 0.0:
+            c[B_TURN_POS if daz > 0 else B_TURN_NEG] += 1
+        if take_close and dt > 0 and dt <= max_pair_s:
+            close[c[B_N_CLOSE], 0], close[c[B_N_CLOSE], 1] = dt, abs(daz)
+            c[B_N_CLOSE] += 1
+        if take_rates and dt >= min_pair_s and dt <= max_pair_s:
+            rates[c[B_N_RATES]] = daz / dt
+            c[B_N_RATES] += 1
+            any_pair = True
+    if learn:
+        if take_rates and not any_pair:
+            # The batch's ends: a rate where its plots come densely.
+            t0 = prev_t if first == 0 else time_s[0]
+            a0 = prev_az if first == 0 else azimuth_rad[0]
+            span = time_s[n - 1] - t0
+            if min_pair_s <= span and span <= max_pair_s:
+                rates[c[B_N_RATES]] = _wrap(azimuth_rad[n - 1] - a0) / span
+                c[B_N_RATES] += 1
+        _learn_period(f, c, cells, revisits, time_s, azimuth_rad, cells_n, min_revisit_s,
+                      min_revisits, kept)  # fmt: skip
+        f[B_PERIOD] = _estimate(f, c, rates, close, min_revisits, beam_noise_rad)
+    f[B_LAST_S], f[B_LAST_AZ] = time_s[n - 1], azimuth_rad[n - 1]
+
+
+@_jit
+def _learn_period(f, c, cells, revisits, time_s, azimuth_rad, cells_n, min_revisit_s,
+                  min_revisits, kept):  # fmt: skip
+    """``RadarBeam._learn_period``: revisits of azimuth cells into the ring, and the
+    revisits' period estimate."""
+    for i in range(time_s.shape[0]):
+        k = int((azimuth_rad[i] % TWO_PI) * (cells_n / TWO_PI))
+        if k > cells_n - 1:
+            k = cells_n - 1
+        prev = max(cells[k - 1 if k > 0 else cells_n - 1], cells[k], cells[(k + 1) % cells_n])
+        t = time_s[i]
+        if math.isfinite(prev) and t - prev >= min_revisit_s:
+            revisits[c[B_REVISIT_HEAD]] = t - prev
+            c[B_REVISIT_HEAD] = (c[B_REVISIT_HEAD] + 1) % kept
+            c[B_N_REVISITS] = min(c[B_N_REVISITS] + 1, kept)
+        cells[k] = t
+    m = c[B_N_REVISITS]
+    if m >= min_revisits:
+        r = revisits[:m]
+        low = _lower_quantile(r, 0.1)
+        near = r[(r >= 0.9 * low) & (r <= 1.1 * low)]
+        # The shortest revisits must be a cluster (a tenth of them at least), not a stray.
+        if near.shape[0] >= max(3, m // 10):
+            f[B_REVISIT_PERIOD] = _median(near)
+
+
+@_jit
+def _estimate(f, c, rates, close, min_revisits, beam_noise_rad) -> float:
+    """``RadarBeam._estimate``: the revisits' period, else the beam rate's; NaN while
+    neither is known or when close plots are not on a beam."""
+    rate_period = np.nan
+    nr = c[B_N_RATES]
+    if nr >= min_revisits:
+        w = _median(rates[:nr])
+        agree = 0
+        for i in range(nr):
+            if abs(rates[i] - w) <= 0.1 * abs(w):
+                agree += 1
+        if agree / nr < 0.5:
+            return np.nan
+        rate_period = TWO_PI / abs(w)
+    period = f[B_REVISIT_PERIOD]
+    if math.isnan(period):
+        period = rate_period
+    nc = c[B_N_CLOSE]
+    if math.isfinite(period) and nc >= min_revisits:
+        on = 0
+        for i in range(nc):
+            if close[i, 1] <= 1.2 * TWO_PI * close[i, 0] / period + beam_noise_rad:
+                on += 1
+        if on / nc < 0.5:
+            return np.nan
+    return period
+
+
+# -- the optimal assignment of a small component ----------------------------------------
+
+
+@_jit
+def lsap(cost):
+    """The minimum-cost assignment of a dense (nr, nc) matrix: (rows, cols) of min(nr, nc)
+    pairs, rows increasing: the shortest augmenting path algorithm (Jonker and Volgenant
+    1987, in the form of Crouse 2016, as ``scipy.optimize.linear_sum_assignment``)."""
+    nr, nc = cost.shape
+    tr = nr > nc
+    a = cost.T.copy() if tr else cost
+    n, m = a.shape  # n ≤ m
+    u, v = np.zeros(n), np.zeros(m)
+    col4row = np.full(n, -1, np.int64)
+    row4col = np.full(m, -1, np.int64)
+    path = np.full(m, -1, np.int64)
+    short = np.empty(m)
+    sr = np.zeros(n, np.bool_)
+    sc = np.zeros(m, np.bool_)
+    remaining = np.empty(m, np.int64)
+    for cur in range(n):
+        min_val = 0.0
+        i = cur
+        num_rem = m
+        for j in range(m):
+            remaining[j] = m - j - 1
+        sr[:] = False
+        sc[:] = False
+        short[:] = np.inf
+        sink = -1
+        while sink == -1:
+            index = -1
+            lowest = np.inf
+            sr[i] = True
+            for it in range(num_rem):
+                j = remaining[it]
+                r = min_val + a[i, j] - u[i] - v[j]
+                if r < short[j]:
+                    path[j] = i
+                    short[j] = r
+                if short[j] < lowest or (short[j] == lowest and row4col[j] == -1):
+                    lowest = short[j]
+                    index = it
+            min_val = lowest
+            j = remaining[index]
+            if row4col[j] == -1:
+                sink = j
+            else:
+                i = row4col[j]
+            sc[j] = True
+            num_rem -= 1
+            remaining[index] = remaining[num_rem]
+        u[cur] += min_val
+        for i2 in range(n):
+            if sr[i2] and i2 != cur:
+                u[i2] += min_val - short[col4row[i2]]
+        for j2 in range(m):
+            if sc[j2]:
+                v[j2] -= min_val - short[j2]
+        j = sink
+        while True:
+            i = path[j]
+            row4col[j] = i
+            j, col4row[i] = col4row[i], j
+            if i == cur:
+                break
+    rows = np.empty(n, np.int64)
+    cols = np.empty(n, np.int64)
+    if tr:
+        # rows of the transposed problem are the columns: sort by the original rows
+        order = np.argsort(col4row)
+        for q in range(n):
+            rows[q] = col4row[order[q]]
+            cols[q] = order[q]
+    else:
+        for q in range(n):
+            rows[q], cols[q] = q, col4row[q]
+    return rows, cols
+
+
+@_jit
+def _root(parent, a):
+    while parent[a] != a:
+        parent[a] = parent[parent[a]]  # path halving
+        a = parent[a]
+    return a
+
+
+@_jit
+def sparse_assign(rows, cols, d2, gate, n_tracks, n_plots, out_r, out_c):
+    """``core.tracking.association.sparse_gnn_assign`` of N scored pairs (rows into the
+    tracks, columns into the plots, d²): the pairs inside the gate form a bipartite graph,
+    each connected component's assignment is solved on its own (``lsap`` on its small dense
+    matrix of d² − γ, a missing pair costing 0), a component of one edge is assigned.
+    Writes the assigned pairs into out_r, out_c; returns how many."""
+    n = rows.shape[0]
+    parent = np.arange(n_tracks + n_plots)
+    inside = np.empty(n, np.int64)
+    ne = 0
+    for e in range(n):
+        if d2[e] < gate:
+            inside[ne] = e
+            ne += 1
+            a, b = _root(parent, rows[e]), _root(parent, n_tracks + cols[e])
+            if a != b:
+                parent[a] = b
+    if ne == 0:
+        return 0
+    comp = np.empty(ne, np.int64)
+    for q in range(ne):
+        comp[q] = _root(parent, rows[inside[q]])
+    order = np.argsort(comp, kind="mergesort")
+    found = 0
+    s = 0
+    while s < ne:
+        e = s
+        while e < ne and comp[order[e]] == comp[order[s]]:
+            e += 1
+        if e - s == 1:
+            q = inside[order[s]]
+            out_r[found], out_c[found] = rows[q], cols[q]
+            found += 1
+        else:
+            idx = inside[order[s:e]]
+            r_u = np.unique(rows[idx])
+            c_u = np.unique(cols[idx])
+            m = np.zeros((r_u.shape[0], c_u.shape[0]))
+            for q in idx:
+                m[np.searchsorted(r_u, rows[q]), np.searchsorted(c_u, cols[q])] = d2[q] - gate
+            a, b = lsap(m)
+            for q in range(a.shape[0]):
+                if m[a[q], b[q]] < 0.0:
+                    out_r[found], out_c[found] = r_u[a[q]], c_u[b[q]]
+                    found += 1
+        s = e
+    return found
+
+
+# -- the batch loop ----------------------------------------------------------------------
+
+
+class BookArrays(NamedTuple):
+    """``core.tracking.management.TrackBook``'s arrays (K slots, R radars), changed in
+    place; free (K,) the stack of free slots (its top in ``counters``)."""
+
+    status: NDArray[np.int8]
+    hits: NDArray[np.int64]
+    expected: NDArray[np.int64]
+    misses: NDArray[np.int64]
+    born_s: NDArray[np.float64]
+    last_s: NDArray[np.float64]
+    x: NDArray[np.float64]
+    P: NDArray[np.float64]
+    sigma_m: NDArray[np.float64]
+    sigma_v: NDArray[np.float64]
+    alive: NDArray[np.bool_]
+    rank: NDArray[np.int64]
+    hit_s: NDArray[np.float64]
+    judged_s: NDArray[np.float64]
+    plots: NDArray[np.int64]
+    folded: NDArray[np.int64]
+    free: NDArray[np.int64]
+
+
+class GateFilter(NamedTuple):
+    """The gating method's IMM tracks, one per book slot, in the layout of
+    ``core.tracking.compiled.CompiledTracks`` with one method: xs (K, 1, r, 4),
+    Ps (K, 1, r, 4, 4), mus (K, 1, r), started (K,), last_t (K,); and its model: codes,
+    start_codes (1,) the method's, sigma_a, omega (r,), Pi (r, r), mu0 (r,), v0 (σv0, m/s),
+    prm (the UKF's weights)."""
+
+    codes: NDArray[np.int64]
+    start_codes: NDArray[np.int64]
+    sigma_a: NDArray[np.float64]
+    omega: NDArray[np.float64]
+    Pi: NDArray[np.float64]
+    mu0: NDArray[np.float64]
+    v0: float
+    prm: NDArray[np.float64]
+    xs: NDArray[np.float64]
+    Ps: NDArray[np.float64]
+    mus: NDArray[np.float64]
+    started: NDArray[np.bool_]
+    last_t: NDArray[np.float64]
+
+
+class PlotArrays(NamedTuple):
+    """B plots in time order, cut into batches: time_s, range_m, azimuth_rad (B,);
+    radial_velocity_mps (B,), NaN where none (or Doppler unused); noise (B,) rows of the
+    noise table site (T, 2), sigma_r_m, sigma_azimuth_rad, sigma_radial_velocity_mps (T,);
+    radar (B,) the association's radar of each plot; batch_start (nb + 1,) each batch's
+    first plot; whole_scan (nb,) a batch handed in as a whole scan; measured_period_s (nb,)
+    the feed's period of the batch's radar, NaN where none."""
+
+    time_s: NDArray[np.float64]
+    range_m: NDArray[np.float64]
+    azimuth_rad: NDArray[np.float64]
+    radial_velocity_mps: NDArray[np.float64]
+    noise: NDArray[np.int64]
+    site: NDArray[np.float64]
+    sigma_r_m: NDArray[np.float64]
+    sigma_azimuth_rad: NDArray[np.float64]
+    sigma_radial_velocity_mps: NDArray[np.float64]
+    radar: NDArray[np.int64]
+    batch_start: NDArray[np.int64]
+    whole_scan: NDArray[np.bool_]
+    measured_period_s: NDArray[np.float64]
+
+
+class Rules(NamedTuple):
+    """The association's numbers: gate γ; scale (γ times ``PREFILTER_MARGIN``); q_max and
+    omega_max (``GNNTracker.near``); max_speed_mps; confirm_m, confirm_n, delete_misses;
+    the sweep's min_margin_rad, max_margin_rad, edge_fraction; the beam's cells,
+    min_revisit_s, min_revisits, kept, max_pair_s, min_pair_s, beam_noise_rad
+    (``core.tracking.coverage``)."""
+
+    gate: float
+    scale: float
+    q_max: float
+    omega_max: float
+    max_speed_mps: float
+    confirm_m: int
+    confirm_n: int
+    delete_misses: int
+    min_margin_rad: float
+    max_margin_rad: float
+    edge_fraction: float
+    cells: int
+    min_revisit_s: float
+    min_revisits: int
+    kept: int
+    max_pair_s: float
+    min_pair_s: float
+    beam_noise_rad: float
+
+
+#: ``counters`` of ``associate_2d``: live tracks, tracks started (the last id), batches, free
+#: slots (the top of ``BookArrays.free``), events written.
+C_LIVE, C_STARTED, C_BATCHES, C_FREE, C_EVENTS = 0, 1, 2, 3, 4
+#: Event kinds (``associate_2d``'s events rows: batch, kind, slot, id).
+EV_START, EV_CONFIRM, EV_DELETE = 0, 1, 2
+TENTATIVE_CODE, CONFIRMED_CODE = 0, 1
+
+
+@_jit
+def associate_2d(pl, beams, radar_site, book, gf, rules, live, counters, owner, status_out,
+                 events):  # fmt: skip
+    """Associate every batch of ``pl`` (``PlotArrays``) in order (module docstring): the
+    beams (``BeamArrays``, R rows), the radars' sites (R, 2), the book (``BookArrays``) and
+    the gating tracks (``GateFilter``) changed in place; live (K,) the live slots in order of
+    initiation (their number in counters). Writes per plot the id of its track (owner (B,))
+    and that track's status after its batch (status_out (B,)), and the events in order
+    (events (E, 4): batch, kind, slot, id). Returns −1, or the index of a plot earlier than
+    its track's previous one (nothing from its batch on is done). The book must have a free
+    slot per plot (``C_FREE`` ≥ B)."""
+    n_plots = pl.time_s.shape[0]
+    n_batches = pl.whole_scan.shape[0]
+    nx = book.x.shape[1]
+    points, r_ii = np.empty((n_plots, 2)), np.empty((n_plots, 2))
+    for j in range(n_plots):  # the gating method's conversion of every plot (z + s, R_ii)
+        g = pl.noise[j]
+        sr2, s = pl.sigma_r_m[g] ** 2, pl.sigma_azimuth_rad[g] ** 2
+        co = coefficients(gf.codes[0], s, sr2)
+        zx, zy, r00, _, r11 = convert(
+            gf.codes[0], pl.range_m[j], pl.azimuth_rad[j], sr2, s, 0.0, 0.0, co
+        )
+        points[j, 0], points[j, 1] = zx + pl.site[g, 0], zy + pl.site[g, 1]
+        r_ii[j, 0], r_ii[j, 1] = r00, r11
+    r = gf.sigma_a.shape[0]
+    x0, P0 = np.empty((r, 4)), np.empty((r, 4, 4))
+    mu, cc, w = np.empty(r), np.empty(r), np.empty((r, r))
+    xp, Pp = np.empty(4), np.empty((4, 4))
+    for b in range(n_batches):
+        lo, hi = pl.batch_start[b], pl.batch_start[b + 1]
+        bad = _batch(pl, beams, radar_site, book, gf, rules, live, counters, owner,
+                     status_out, events, b, lo, hi, points, r_ii, nx, x0, P0, mu, cc, w, xp,
+                     Pp)  # fmt: skip
+        if bad >= 0:
+            return bad
+    return -1
+
+
+@_jit
+def _batch(pl, beams, radar_site, book, gf, rules, live, counters, owner, status_out, events,
+           b, lo, hi, points, r_ii, nx, x0, P0, mu, cc, w, xp, Pp):  # fmt: skip
+    """One batch, plots lo:hi (``GNNTracker._add`` and ``_manage``)."""
+    n = hi - lo
+    counters[C_BATCHES] += 1
+    g = pl.radar[lo] if n else -1
+    times = pl.time_s[lo:hi]
+    if g >= 0:
+        f = beams.f[g]
+        beams.c[g, B_SEEN] = 1
+        if math.isfinite(pl.measured_period_s[b]) and math.isnan(f[B_GIVEN_PERIOD]):
+            # ``RadarBeam.measured_period``: the feed's period, from now on.
+            f[B_PERIOD] = pl.measured_period_s[b]
+            beams.c[g, B_MEASURED] = 1
+        observe_beam(
+            f, beams.c[g], beams.cells[g], beams.revisits[g], beams.rates[g], beams.close[g],
+            times, pl.azimuth_rad[lo:hi], pl.range_m[lo:hi], times, False, rules.cells,
+            rules.min_revisit_s, rules.min_revisits, rules.kept, rules.max_pair_s,
+            rules.min_pair_s, rules.beam_noise_rad,
+        )  # fmt: skip
+    period = beams.f[g, B_PERIOD] if g >= 0 else np.nan
+    n_live = counters[C_LIVE]
+    before = live[:n_live].copy()  # the tracks that existed before this batch
+    own = np.full(n, -1, np.int64)  # each plot's slot
+    free = np.arange(n)  # plots (of the batch) not yet assigned
+    n_free = n
+    for code in (CONFIRMED_CODE, TENTATIVE_CODE):  # confirmed tracks choose first
+        if n_free == 0:
+            continue
+        slots = np.empty(n_live, np.int64)
+        k = 0
+        for q in range(n_live):
+            s = before[q]
+            if book.status[s] != code:
+                continue
+            # A track takes at most one plot per sweep of a radar.
+            if math.isfinite(period) and not book.hit_s[s, g] <= times[0] - period / 2:
+                continue
+            slots[k] = s
+            k += 1
+        if k == 0:
+            continue
+        slots = slots[:k]
+        fr = free[:n_free]
+        cols_pl = fr + lo  # the free plots' indices in pl
+        rows = np.empty(k * n_free, np.int64)
+        cols = np.empty(k * n_free, np.int64)
+        found = near_pairs(
+            slots, book.x, book.P, book.last_s, pl.time_s[cols_pl], rules.q_max,
+            rules.omega_max, points[cols_pl], r_ii[cols_pl], rules.scale, rows, cols,
+        )  # fmt: skip
+        d2 = np.empty(found)
+        for e in range(found):
+            s, j = slots[rows[e]], cols_pl[cols[e]]
+            d2[e] = _gate_d2(pl, gf, s, j, x0, P0, mu, cc, w, xp, Pp)
+            if code == TENTATIVE_CODE and book.hits[s] == 1 and _too_fast(pl, book, rules, s, j):
+                d2[e] = np.inf
+        out_r, out_c = np.empty(found, np.int64), np.empty(found, np.int64)
+        m = sparse_assign(rows[:found], cols[:found], d2, rules.gate, k, n_free, out_r, out_c)
+        taken = np.zeros(n_free, np.bool_)
+        for e in range(m):
+            own[fr[out_c[e]]] = slots[out_r[e]]
+            taken[out_c[e]] = True
+        n_keep = 0
+        for q in range(n_free):
+            if not taken[q]:
+                free[n_keep] = fr[q]
+                n_keep += 1
+        n_free = n_keep
+    # Hits, then starts (``_manage``).
+    for j in range(n):
+        s = own[j]
+        if s >= 0:  # ``TrackBook.hit``
+            book.hits[s] += 1
+            book.expected[s] += 1
+            book.misses[s] = 0
+            book.last_s[s] = times[j]
+            book.hit_s[s, g] = times[j]
+            book.plots[s, g] += 1
+    for q in range(n_free):  # unassigned plots start tentative tracks (``TrackBook.start``)
+        j = free[q]
+        counters[C_FREE] -= 1
+        s = book.free[counters[C_FREE]]
+        counters[C_STARTED] += 1
+        ident = counters[C_STARTED]
+        own[j] = s
+        book.alive[s], book.rank[s] = True, ident - 1
+        book.status[s] = CONFIRMED_CODE if rules.confirm_m <= 1 else TENTATIVE_CODE
+        book.hits[s], book.expected[s], book.misses[s] = 1, 1, 0
+        book.born_s[s] = book.last_s[s] = times[j]
+        book.hit_s[s, :] = -np.inf
+        book.judged_s[s, :] = -np.inf
+        book.hit_s[s, g] = times[j]
+        book.plots[s, :] = 0
+        book.plots[s, g] = 1
+        gf.started[s] = False  # a reused slot's old track is gone
+        live[counters[C_LIVE]] = s
+        counters[C_LIVE] += 1
+        _event(events, counters, b, EV_START, s, ident)
+    for j in range(n):  # the track ids: "1", "2", … in order of initiation
+        owner[lo + j] = book.rank[own[j]] + 1
+    # The gating method's update of every plot's track, in plot order.
+    if n:
+        out_x, out_P, out_nis = np.empty((n, 1, 4)), np.empty((n, 1, 4, 4)), np.empty((n, 1))
+        vr = pl.radial_velocity_mps[lo:hi]
+        bad = track_plots_imm_2d(
+            gf.codes, gf.start_codes, own, times, pl.range_m[lo:hi], pl.azimuth_rad[lo:hi],
+            vr, ~np.isnan(vr), pl.noise[lo:hi], pl.site, pl.sigma_r_m, pl.sigma_azimuth_rad,
+            pl.sigma_radial_velocity_mps, gf.sigma_a, gf.omega, gf.Pi, gf.mu0, gf.v0, gf.prm,
+            False, gf.xs, gf.Ps, gf.mus, gf.started, gf.last_t, out_x, out_P, out_nis,
+        )  # fmt: skip
+        if bad >= 0:
+            return lo + bad
+        for j in range(n):  # each track's latest state, for its sweeps
+            s = own[j]
+            book.x[s] = out_x[j, 0, :nx]
+            book.P[s] = out_P[j, 0, :nx, :nx]
+            book.sigma_m[s] = math.sqrt(max(out_P[j, 0, 0, 0], out_P[j, 0, 2, 2]))
+            book.sigma_v[s] = math.sqrt(max(out_P[j, 0, 1, 1], out_P[j, 0, 3, 3]))
+    # The sweep's misses, then confirmation and deletion.
+    judged = _swept(pl, beams, radar_site, book, rules, g, times, before, pl.whole_scan[b])
+    hit_now = np.zeros(book.alive.shape[0], np.bool_)
+    for j in range(n):
+        hit_now[own[j]] = True
+    touched = np.zeros(book.alive.shape[0], np.bool_)
+    for s in judged:
+        if not hit_now[s]:  # ``TrackBook.miss``
+            book.expected[s] += 1
+            book.misses[s] += 1
+            touched[s] = True
+    for j in range(n):
+        touched[own[j]] = True
+    coast = _coast_s(beams, rules, radar_site.shape[0])
+    end = times[n - 1] if n else np.nan
+    doomed = np.zeros(book.alive.shape[0], np.bool_)
+    # ``TrackBook.settle`` over the touched slots in slot order (the confirmations' order
+    # below is by id).
+    for q in range(counters[C_LIVE]):
+        s = live[q]
+        if not touched[s]:
+            continue
+        if book.status[s] == TENTATIVE_CODE:
+            if book.hits[s] >= rules.confirm_m:
+                book.status[s] = CONFIRMED_CODE
+                _event(events, counters, b, EV_CONFIRM, s, book.rank[s] + 1)
+            elif book.hits[s] + (rules.confirm_n - book.expected[s]) < rules.confirm_m:
+                doomed[s] = True
+        elif book.misses[s] >= rules.delete_misses:
+            doomed[s] = True
+    if math.isfinite(coast) and n:
+        for s in before:  # a track started in this batch has not coasted
+            if book.last_s[s] < end - coast:
+                doomed[s] = True
+    if rules.confirm_m <= 1:
+        for q in range(n_free):
+            s = own[free[q]]
+            _event(events, counters, b, EV_CONFIRM, s, book.rank[s] + 1)
+    # Deletions in order of id (= order of initiation, the live list's).
+    keep = 0
+    n_live = counters[C_LIVE]
+    for q in range(n_live):
+        s = live[q]
+        if doomed[s]:  # ``TrackBook.remove``
+            book.alive[s] = False
+            st = book.status[s]
+            for a in range(book.folded.shape[0]):
+                book.folded[a, st] += book.plots[s, a]
+            book.free[counters[C_FREE]] = s
+            counters[C_FREE] += 1
+            _event(events, counters, b, EV_DELETE, s, book.rank[s] + 1)
+        else:
+            live[keep] = s
+            keep += 1
+    counters[C_LIVE] = keep
+    for j in range(n):
+        s = own[j]
+        # A track deleted at this batch cannot have a plot in it (it was missed).
+        status_out[lo + j] = book.status[s] if book.alive[s] else TENTATIVE_CODE
+    return -1
+
+
+@_jit
+def _event(events, counters, b, kind, slot, ident):
+    e = counters[C_EVENTS]
+    events[e, 0], events[e, 1], events[e, 2], events[e, 3] = b, kind, slot, ident
+    counters[C_EVENTS] = e + 1
+
+
+@_jit
+def _coast_s(beams, rules, n_radars) -> float:
+    """``GNNTracker.coast_s``: ``delete_misses`` + 1 revolutions of the slowest radar seen
+    whose period is known; NaN when none is."""
+    top = np.nan
+    for a in range(n_radars):
+        p = beams.f[a, B_PERIOD]
+        if beams.c[a, B_SEEN] and math.isfinite(p) and not p <= top:
+            top = p
+    return (rules.delete_misses + 1) * top
+
+
+@_jit
+def _gate_d2(pl, gf, s, j, x0, P0, mu, cc, w, xp, Pp) -> float:
+    """d² of plot j against slot s's gating track predicted to the plot's time
+    (``core.filters.kernels_imm.gate_nis_imm_2d``'s statistic); ∞ for a NaN."""
+    combined_prediction(
+        gf.xs[s, 0], gf.Ps[s, 0], gf.mus[s, 0], pl.time_s[j] - gf.last_t[s], gf.sigma_a,
+        gf.omega, gf.Pi, x0, P0, mu, cc, w, xp, Pp,
+    )  # fmt: skip
+    g = pl.noise[j]
+    sr2, sb2 = pl.sigma_r_m[g] * pl.sigma_r_m[g], pl.sigma_azimuth_rad[g] * pl.sigma_azimuth_rad[g]
+    code = gf.codes[0]
+    co = coefficients(code, sb2, sr2)
+    meas = position_measurement(
+        code, xp, pl.range_m[j], pl.azimuth_rad[j], sr2, sb2, pl.site[g, 0], pl.site[g, 1], co
+    )
+    d2 = position_nis(Pp, *meas)
+    return d2 if math.isfinite(d2) else np.inf
+
+
+@_jit
+def _too_fast(pl, book, rules, s, j) -> bool:
+    """``GNNTracker._too_fast`` of one pair (slot s holds one plot): plot j only reachable
+    faster than ``max_speed_mps``."""
+    g = pl.noise[j]
+    r, b = pl.range_m[j], pl.azimuth_rad[j]
+    px = pl.site[g, 0] + r * math.cos(b)
+    py = pl.site[g, 1] + r * math.sin(b)
+    gap = math.hypot(px - book.x[s, 0], py - book.x[s, 2])
+    dt = pl.time_s[j] - book.last_s[s]
+    sigma = pl.sigma_r_m[g] + r * pl.sigma_azimuth_rad[g]
+    reach = rules.max_speed_mps * dt + 3.0 * (sigma + book.sigma_m[s])
+    return gap > reach
+
+
+@_jit
+def _swept(pl, beams, radar_site, book, rules, g, times, slots, whole_scan):
+    """``GNNTracker._swept``: the slots among ``slots`` this batch's sweep judges (passed by
+    the beam inside the radar's coverage, not judged in this sweep already), their
+    ``judged_s`` set; the beam's sweep start moved (``RadarBeam.swept``)."""
+    if slots.shape[0] == 0:
+        return slots
+    if g < 0:
+        return slots if whole_scan else slots[:0]
+    f, c = beams.f[g], beams.c[g]
+    n = times.shape[0]
+    end = times[n - 1]
+    whole = whole_scan or (c[B_SAME] > c[B_OTHER] and times[0] == times[n - 1])
+    period = f[B_PERIOD]
+    known = math.isfinite(period)
+    start = f[B_SWEPT_TO]
+    f[B_SWEPT_TO] = end
+    direction = 1.0 if c[B_TURN_POS] >= c[B_TURN_NEG] else -1.0
+    # The coverage: given, else (unless a whole scan handed in) the extremes seen.
+    lo_r = f[B_RANGE_LO] if not whole_scan else 0.0
+    hi_r = f[B_RANGE_HI] if not whole_scan else math.inf
+    if not math.isnan(f[B_GIVEN_MIN_R]):
+        lo_r = f[B_GIVEN_MIN_R]
+    if not math.isnan(f[B_GIVEN_MAX_R]):
+        hi_r = f[B_GIVEN_MAX_R]
+    out = np.empty(slots.shape[0], np.int64)
+    k = 0
+    if not whole and (math.isnan(start) or not known):
+        return out[:0]  # no sweep to judge by yet (``RadarBeam.swept``)
+    half = period / 2
+    turned = TWO_PI * (end - start) / period if not whole else 0.0
+    # The beam's direction, for a test that needs no arctangent: a track more than its
+    # margin plus the turn away from the beam cannot be in the swept window.
+    bx, by = math.cos(f[B_LAST_AZ]), math.sin(f[B_LAST_AZ])
+    window = not whole and turned < TWO_PI
+    for q in range(slots.shape[0]):
+        s = slots[q]
+        if known and not whole:
+            # Judged or hit by this radar within half a period of the end: not this sweep's.
+            if not (book.judged_s[s, g] + half < end and book.hit_s[s, g] <= end - half):
+                continue
+        ahead = end - book.last_s[s]
+        px = book.x[s, 0] + book.x[s, 1] * ahead
+        py = book.x[s, 2] + book.x[s, 3] * ahead
+        sigma = math.hypot(book.sigma_m[s], book.sigma_v[s] * ahead)
+        rx, ry = px - radar_site[g, 0], py - radar_site[g, 1]
+        rng = math.sqrt(rx * rx + ry * ry)
+        margin = min(max(3.0 * sigma / max(rng, 1.0), rules.min_margin_rad),
+                     rules.max_margin_rad)  # fmt: skip
+        if window:
+            # The angle θ to the beam exceeds φ = margin + turn when cos θ < 1 − φ²/2 ≤ cos φ
+            # (less a rounding allowance): outside the window whatever the exact angle.
+            phi = margin + turned
+            if rx * bx + ry * by < (1.0 - 0.5 * phi * phi - 1e-9) * rng:
+                continue
+        if whole:
+            passed, passed_s = True, end
+        else:
+            az = math.atan2(ry, rx)
+            delta = (direction * (f[B_LAST_AZ] - az)) % TWO_PI
+            passed_s = end - delta * (period / TWO_PI)
+            passed = delta > margin and (turned >= TWO_PI or delta <= margin + turned)
+        edge = 3.0 * book.sigma_m[s] + rules.edge_fraction * rng
+        ok = passed and rng >= lo_r + edge and rng <= hi_r - edge
+        ok = ok and book.born_s[s] < passed_s
+        if known and not whole:
+            ok = ok and passed_s > book.judged_s[s, g] + half
+            # A plot of this sweep already came (the beam passed it a little early).
+            ok = ok and book.hit_s[s, g] <= passed_s - half
+        if ok:
+            book.judged_s[s, g] = passed_s
+            out[k] = s
+            k += 1
+    return out[:k]
