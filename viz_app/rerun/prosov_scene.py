@@ -20,7 +20,8 @@ Entity paths (``{m}`` a method: naive, seed, cmkf_d, ucm, ducm, ekf, ukf)::
     prosov/target/{c}/cloud_mean       the cloud's mean per scan
     prosov/target/polar/…              the same for the naive points in grey, shown in the
                                        views of the filters fed polar plots (ducm, ekf, ukf)
-    prosov/bias/{c}                    conversion c's mean down-range offset ± 95% CI per scan
+    prosov/bias                        the bias forest plot (``plot2d.forest_plot``): its axis in m
+    prosov/bias/{c}/mean, /ci95        conversion c's mean down-range offset ± 95% CI per scan
     prosov/legend                      one labelled swatch per method (static)
     plots/prosov/{metric}/{m}          per-scan Monte Carlo statistics (names carry units)
     plots/prosov/delta_x_percent/{reading}   Prosov's Δx(n), seed against naive
@@ -63,7 +64,6 @@ from radarviz.viz_app.rerun.shapes import (
     THIN_LINE,
     colours,
     ellipse_outline,
-    flip_y,
     legend_view,
     log_legend,
     pale,
@@ -105,12 +105,6 @@ class TargetFrame:
     range_half_m: float
     bias_half_m: float
     map_extent_m: tuple[float, float, float, float]
-
-    @property
-    def bias_row_m(self) -> float:
-        """Row spacing of the forest plot: its rows fill a view about 2.3 times wider than
-        high."""
-        return 2.0 * self.bias_half_m / 2.3 / (len(SHOWN_CONVERSIONS) + 1)
 
 
 def target_frame(scene: ProsovScene, cloud: ConversionCloud) -> TargetFrame:
@@ -418,58 +412,36 @@ def _crosses(centre: NDArray[np.float64], frame: TargetFrame) -> NDArray[np.floa
     return centre[:, None, None, :] + np.stack([d1, d2])[None]
 
 
+#: Width of the bias forest plot's box (drawn units; its height is ``plot2d.HEIGHT``), for a
+#: grid cell about 2.6 times wider than high, with room for the names and values beside it.
+BIAS_WIDTH = 220.0
+
+
 def _log_bias(
     rec: rr.RecordingStream,
     cloud: ConversionCloud,
     frame: TargetFrame,
     idx: list[rr.TimeColumn],
 ) -> None:
-    """A forest plot per scan: each conversion's mean down-range offset from the truth (m)
-    with its 95% confidence interval, one row per conversion, the truth at 0 (true scale)."""
-    base = f"{ROOT}/bias"
-    rec.log(base, flip_y(1.0 / frame.bias_half_m), static=True)
-    rec.log(
-        f"{base}/scale",
-        rr.Points2D(
-            [[0.55 * frame.bias_half_m, 0.45 * frame.bias_row_m]],
-            radii=[SMALL_MARKER],
-            colors=[rgb("truth")],
-            labels=[f"line: truth; view ±{frame.bias_half_m:g} m"],
-            show_labels=True,
-        ),
-        static=True,
+    """A forest plot per scan (``plot2d.forest_plot``): each conversion's mean down-range
+    offset from the truth (m) with its 95% confidence interval, one row per conversion, the
+    truth the line at 0, on an axis of ±``bias_half_m`` fixed over the run (true scale)."""
+    rows = list(SHOWN_CONVERSIONS)
+    plot2d.forest_plot(
+        rec,
+        f"{ROOT}/bias",
+        rows,
+        [rgb(c) for c in rows],
+        np.stack([cloud.offset_mean_m[c][:, 1] for c in rows], 1),
+        np.stack([cloud.offset_half_width95_m[c][:, 1] for c in rows], 1),
+        plot2d.linear_axis(-frame.bias_half_m, frame.bias_half_m, 4),
+        idx,
+        width=BIAS_WIDTH,
+        unit=" m",
+        x_unit="m",
+        reference="truth",
+        reference_colour=rgb("truth"),
     )
-    rows = len(SHOWN_CONVERSIONS)
-    row = frame.bias_row_m
-    top, bottom = row * 0.6, -(rows - 0.4) * row
-    rec.log(
-        f"{base}/truth",
-        rr.LineStrips2D([[[0.0, top], [0.0, bottom]]], colors=[rgb("truth")], radii=[THIN_LINE]),
-        static=True,
-    )
-    for i, c in enumerate(SHOWN_CONVERSIONS):
-        down = cloud.offset_mean_m[c][:, 1]
-        hw = cloud.offset_half_width95_m[c][:, 1]
-        n = len(down)
-        y = np.full(n, -i * row)
-        rec.send_columns(
-            f"{base}/{c}/mean",
-            indexes=idx,
-            columns=rr.Points2D.columns(
-                positions=np.stack([down, y], -1),
-                radii=radii(MARKER, n),
-                colors=colours(rgb(c), n),
-                labels=[c] * n,
-            ),
-        )
-        ends = np.stack([np.stack([down - hw, y], -1), np.stack([down + hw, y], -1)], 1)
-        rec.send_columns(
-            f"{base}/{c}/ci95",
-            indexes=idx,
-            columns=rr.LineStrips2D.columns(
-                strips=ends, colors=colours(rgb(c), n), radii=radii(LINE, n)
-            ),
-        )
 
 
 def log_statistics(rec: rr.RecordingStream, scene: ProsovScene, root: str = ROOT) -> None:
@@ -678,13 +650,12 @@ def map_view() -> rrb.Spatial2DView:
 
 
 def bias_view() -> rrb.Spatial2DView:
-    """The forest plot (scaled to ±1 by its transform)."""
-    rows = len(SHOWN_CONVERSIONS)
-    row = 2.0 / 2.3 / (rows + 1)
-    return _space(
-        "conversion bias along range at the scan: MC mean ± 95% CI",
-        "bias",
-        rrb.VisualBounds2D(x_range=[-1.0, 1.0], y_range=[-row, rows * row]),
+    """The forest plot (``_log_bias``), framed with its numbers, names and values."""
+    return plot2d.plot_view(
+        f"{ROOT}/bias",
+        "conversion bias along range, m: mean ± 95% CI",
+        BIAS_WIDTH,
+        plot2d.FOREST_MARGIN_LEFT,
     )
 
 
