@@ -537,7 +537,9 @@ def log_charts(rec: rr.RecordingStream, scene: ProsovScene, root: str = ROOT) ->
             rec,
             f"charts/{root}/delta_x_percent",
             [
-                plot2d.Curve(f"{reading} reading", x, v, READING_COLOURS[reading])
+                # Named by the reading alone (the view's title says "readings"): the labels
+                # with their values must fit right of the box.
+                plot2d.Curve(reading, x, v, READING_COLOURS[reading])
                 for reading, v in result.delta_x_percent().items()
             ],
             width=CHART_WIDTH,
@@ -767,10 +769,12 @@ def log_prosov3d(
             ).partition([1] * n),
         )
     reach = 1.2 * largest  # the views frame this
-    axis = plot2d.nice_step(reach, 1)  # a round length, written at the axes' tips
+    axis = axis_length_km(reach)
+    # The truth is the black dot at the origin (the legend's title says so): a label there
+    # would sit on the axes' names and the ellipsoid's centre in a small view.
     rec.log(
         f"{ROOT_3D}/target/truth",
-        rr.Points3D([[0.0, 0.0, 0.0]], radii=-6.0, colors=[rgb("truth")], labels=["truth"]),
+        rr.Points3D([[0.0, 0.0, 0.0]], radii=-6.0, colors=[rgb("truth")]),
         static=True,
     )
     rec.log(
@@ -788,7 +792,7 @@ def log_prosov3d(
             np.eye(3) * axis,
             radii=[0.0],
             colors=[(120, 120, 120)],
-            labels=[f"{a} {axis:g} km" for a in ("down-range", "cross-range", "up")],
+            labels=list(AXIS_NAMES),
             show_labels=True,
         ),
         static=True,
@@ -803,16 +807,39 @@ def log_prosov3d(
     return reach
 
 
-def views_3d(axis_km: float, methods: Sequence[str] = METHODS_SHOWN) -> rrb.Container:
+#: The 3D frame's axes, named at their tips (their common length is in the legend's title).
+AXIS_NAMES = ("down-range", "cross-range", "up")
+#: The axes reach at most this share of what the views frame.
+AXIS_REACH = 0.8
+
+
+def axis_length_km(reach_km: float) -> float:
+    """The axes' length for views framing ``reach_km``: the largest 1, 1.5, 2, 3, 5 or
+    7 × 10ⁿ km at or below 0.8 × reach, so that the tips and their names stay inside every
+    small view (``views_3d``'s camera shows about ±reach around the origin) and the length
+    reads as a round number."""
+    target = AXIS_REACH * reach_km
+    exp = 10.0 ** np.floor(np.log10(target))
+    steps = (1.0, 1.5, 2.0, 3.0, 5.0, 7.0)
+    return float(max(m * exp for m in steps if m * exp <= target * 1.0001))
+
+
+def camera_3d(reach_km: float) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+    """(eye position, up) of the small multiples' common camera, looking at the origin from
+    above the down-range, minus-cross-range side, close enough that the ellipsoids of
+    ``reach_km`` fill a small view."""
+    d = 1.7 * reach_km
+    return (0.9 * d, -0.7 * d, 0.6 * d), (0.0, 0.0, 1.0)
+
+
+def views_3d(reach_km: float, methods: Sequence[str] = METHODS_SHOWN) -> rrb.Container:
     """The 3D tab: small multiples, one 3D target frame per method (its estimate and 1σ
     ellipsoid, the truth and the axes; every camera the same, so sizes compare across
-    views), the legend, and the per-scan statistics."""
-    d = 1.7 * axis_km  # the camera close enough that the ellipsoids fill a small view
-    eye = rrb.EyeControls3D(
-        position=(0.9 * d, -0.7 * d, 0.6 * d),
-        look_target=(0.0, 0.0, 0.0),
-        eye_up=(0.0, 0.0, 1.0),
-    )
+    views), the legend (which gives the axes' length), and the per-scan statistics.
+    ``reach_km``: what ``log_prosov3d`` returned."""
+    position, up = camera_3d(reach_km)
+    eye = rrb.EyeControls3D(position=position, look_target=(0.0, 0.0, 0.0), eye_up=up)
+    length = axis_length_km(reach_km)
     frames = [
         rrb.Spatial3DView(
             origin=ROOT_3D,
@@ -821,7 +848,7 @@ def views_3d(axis_km: float, methods: Sequence[str] = METHODS_SHOWN) -> rrb.Cont
                 "$origin/target/truth/**",
                 "$origin/target/axes/**",
             ],
-            name=f"{m}: 3D target frame, km, 1σ ellipsoid",
+            name=f"{m}: 1σ ellipsoid, km",
             eye_controls=eye,
         )
         for m in methods
@@ -832,7 +859,7 @@ def views_3d(axis_km: float, methods: Sequence[str] = METHODS_SHOWN) -> rrb.Cont
                 ROOT_3D,
                 "legend",
                 len(METHODS_SHOWN),
-                "methods (axes: down-range, cross-range, up, km)",
+                f"methods; black: the truth; axes {length:g} km (target frame)",
             ),
             rrb.Grid(*frames, grid_columns=3),
             row_shares=[1, 12],
