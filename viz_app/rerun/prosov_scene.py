@@ -295,7 +295,8 @@ def log_target_frame(
     k = frame.exaggeration
     stretch = f", down-range ×{k}" if k != 1 else ""
     scale_label = rr.Points2D(
-        [[-0.6 * frame.cross_half_m, 0.36 * frame.cross_half_m / k]],
+        # Centred at the top: a label as wide as half a small view stays inside it.
+        [[0.0, 0.36 * frame.cross_half_m / k]],
         radii=[0.0],
         labels=[f"view ±{frame.cross_half_m / 1e3:g} km across{stretch}"],
         show_labels=True,
