@@ -87,3 +87,65 @@ def test_a_chart_draws_its_curves_ticks_band_and_cursor(tmp_path: Path, rrd_cont
     dots = np.array([v[0] for v in cols["/charts/t/q/cursor/values"]["Points2D:positions"]])
     np.testing.assert_allclose(dots[:, 0], (x - 1.0) / 9.0 * 200.0, rtol=1e-5)
     np.testing.assert_allclose(dots[:, 1], np.linspace(0.0, 100.0, 10), atol=1e-3)
+
+
+def test_a_forest_plot_draws_its_rows_on_a_numbered_axis(tmp_path: Path, rrd_contents) -> None:
+    """Each row's mean and interval are drawn where the x axis puts them, the axis' numbers
+    end with its unit, the rows' names sit left of the box (which the view frames, so none is
+    cut off) and each row's value at the scan is written out."""
+    n = 3
+    centre = np.array([[-157.0, 6.0], [-100.0, 0.0], [50.0, -20.0]])
+    half = np.array([[10.0, 11.0], [12.0, 13.0], [14.0, 900.0]])
+    axis = plot2d.linear_axis(-500.0, 500.0, 4)
+    path = tmp_path / "f.rrd"
+    with recording_file(path) as rec:
+        plot = plot2d.forest_plot(
+            rec,
+            "f/bias",
+            ["naive", "ucm"],
+            [(213, 94, 0), (0, 158, 115)],
+            centre,
+            half,
+            axis,
+            indexes(np.arange(1, n + 1), np.arange(n) * 10.0),
+            width=200.0,
+            unit=" m",
+            x_unit="m",
+            reference="truth",
+        )
+    rows, cols = rrd_contents(path)
+    assert rows["/f/bias/naive/mean"] == rows["/f/bias/ucm/ci95"] == rows["/f/bias/values"] == n
+    for static in ("/f/bias/grid/box", "/f/bias/ticks", "/f/bias/rows", "/f/bias/reference"):
+        assert static in rows, static
+    dots = np.array([v[0] for v in cols["/f/bias/naive/mean"]["Points2D:positions"]])
+    np.testing.assert_allclose(dots[:, 0], (centre[:, 0] + 500.0) / 1000.0 * 200.0, rtol=1e-5)
+    assert np.all(dots[:, 1] > 0.5 * plot2d.HEIGHT)  # the first row above the second
+    ucm = np.array([v[0] for v in cols["/f/bias/ucm/mean"]["Points2D:positions"]])
+    assert np.all(ucm[:, 1] < 0.5 * plot2d.HEIGHT)
+    # An interval beyond the axis is drawn to the box's edge only.
+    ends = np.array(cols["/f/bias/ucm/ci95"]["LineStrips2D:strips"][2][0])
+    np.testing.assert_allclose(ends[:, 0], [0.0, 200.0], atol=1e-4)
+    values = cols["/f/bias/values"]["Points2D:labels"]
+    assert values[0] == ["-157 ± 10 m", "6 ± 11 m"] and values[2][1] == "-20 ± 900 m"
+    assert plot.x_unit == "m"
+    names = _static(path, "/f/bias/rows")
+    assert names["Points2D:labels"][0] == ["naive", "ucm"]
+    ticks = _static(path, "/f/bias/ticks")["Points2D:labels"][0]
+    assert ticks[0] == "-500" and ticks[-1] == "500 m" and "0" in ticks
+    # The names fit the room the view leaves left of the box (about 0.06 HEIGHT a character,
+    # centred on their point).
+    for (x, _), name in zip(
+        names["Points2D:positions"][0], names["Points2D:labels"][0], strict=True
+    ):
+        assert x - 0.03 * plot2d.HEIGHT * len(name) >= -plot2d.FOREST_MARGIN_LEFT * plot2d.HEIGHT
+
+
+def _static(path: Path, entity: str) -> dict[str, list]:
+    """The static columns of ``entity`` in the recording at ``path``."""
+    from rerun.chunk import RrdReader
+
+    for chunk in RrdReader(str(path)).stream():
+        if chunk.is_static and chunk.entity_path == entity:
+            rb = chunk.to_record_batch()
+            return {name: rb.column(name).to_pylist() for name in rb.schema.names}
+    raise AssertionError(f"no static {entity}")

@@ -250,6 +250,22 @@ def test_prosov3d_scene_logs_every_method_in_the_3d_target_frame(tmp_path, rrd_c
     with recording_file(path) as rec:
         axis = log_prosov3d(rec, runs=40, seed=2)
     assert np.isfinite(axis) and axis > 0
+    # The axes' tips and their names stay inside what the small views frame (about ±axis
+    # around the origin): at most AXIS_REACH of it, and a round length not far below.
+    from rerun.chunk import RrdReader
+
+    from radarviz.viz_app.rerun.prosov_scene import AXIS_NAMES, AXIS_REACH, axis_length_km
+
+    (tips,) = [
+        c.to_record_batch()
+        for c in RrdReader(str(path)).stream()
+        if c.is_static and c.entity_path == "/prosov3d/target/axes/tips"
+    ]
+    tip = np.array(tips.column("Points3D:positions").to_pylist()[0])
+    length = axis_length_km(axis)
+    np.testing.assert_allclose(np.linalg.norm(tip, axis=1), length)
+    assert AXIS_REACH * axis / 1.5 <= length <= AXIS_REACH * axis
+    assert tips.column("Points3D:labels").to_pylist()[0] == list(AXIS_NAMES)
     rows, _ = rrd_contents(path)
     for m in ALL_METHODS:
         for part in ("estimate", "covariance"):

@@ -236,3 +236,52 @@ def test_every_view_of_a_tracked_crossing_scene_shows_data(
     shots = check_every_tab(rrd, layout, recorder.rec.get_recording_id(), "track", chromium)
     assert len(shots) == len(timelines(rrd)) == 2
     write_docs(shots[0], "track")
+
+
+#: A notebook cell's viewer (about 900 px wide, ``show(height=640)``): the tab content's rows.
+NOTEBOOK = (0, CONTENT_TOP, 900, 612)
+#: Smallest frame (below the title bar) a view may get there, px: a chart's numbers and
+#: labels are sized for about 150 px of height; half the width for small multiples.
+MIN_NOTEBOOK_FRAME = (440, 120)
+
+
+def _views(node: object) -> list[object]:
+    contents = getattr(node, "contents", None)
+    if contents is None or not hasattr(node, "kind"):
+        return [node]
+    return [v for k in contents for v in _views(k)]
+
+
+@pytest.mark.parametrize("preset", ["prosov", "prosov3d", "gorshkov", "velocity", "manoeuvre"])
+def test_the_notebook_layout_stacks_every_view_legibly(preset: str) -> None:
+    """``narrow_layout`` (what ``radarviz.show`` sends for a notebook cell) holds every view
+    of the wide layout once, each at least ``MIN_NOTEBOOK_FRAME`` at 900 × 640 (the wide
+    layout there squeezes views to a third of that), the legend above each page of small
+    multiples, and no view id twice (the viewer would draw it once)."""
+    from radarviz.viz_app.rerun.recording import new_recording
+    from radarviz.viz_app.rerun.scenes import _is_legend, narrow_layout
+
+    rec = new_recording()
+    rec.set_sinks()
+    wide = log_preset(rec, preset)
+    narrow = narrow_layout(wide)
+    ids = [v.id for t in narrow.tabs for v in _views(t)]
+    assert len(ids) == len(set(ids))
+    shown = {v.id for t in wide.tabs for v in _views(t) if not _is_legend(v)}
+    assert {v.id for t in narrow.tabs for v in _views(t) if not _is_legend(v)} == shown
+    for tab in narrow.tabs:
+        legends = {str(v.name) for v in _views(tab) if _is_legend(v)} | {"log"}
+        for name, (x0, y0, x1, y1) in view_rects(tab, NOTEBOOK):
+            frame = (x1 - x0, y1 - y0 - TITLE_BAR)
+            if name not in legends:
+                assert frame[0] >= MIN_NOTEBOOK_FRAME[0], (tab.name, name, frame)
+                assert frame[1] >= MIN_NOTEBOOK_FRAME[1], (tab.name, name, frame)
+        if any("grid" in str(getattr(k, "kind", "")).lower() for k in tab.contents):
+            assert _is_legend(tab.contents[0]), tab.name
+    squeezed = [
+        name
+        for tab in wide.tabs
+        for name, (x0, y0, x1, y1) in view_rects(tab, NOTEBOOK)
+        if x1 - x0 < MIN_NOTEBOOK_FRAME[0] or y1 - y0 - TITLE_BAR < MIN_NOTEBOOK_FRAME[1]
+    ]
+    assert squeezed  # what the stacked layout is for

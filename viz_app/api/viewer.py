@@ -28,8 +28,15 @@ OFFLINE_ASSETS = "serve-local"
 Recordable = str | Tracks
 
 
-def _log(rec: rr.RecordingStream, what: Recordable, seed: int) -> None:
-    """Fill ``rec`` with a preset's scenes or a ``Tracks`` result, and send its blueprint."""
+#: Viewer widths (pixels) below which ``show`` stacks the views (``narrow_layout``).
+NARROW_BELOW_PX = 1200
+
+
+def _log(rec: rr.RecordingStream, what: Recordable, seed: int, narrow: bool = False) -> None:
+    """Fill ``rec`` with a preset's scenes or a ``Tracks`` result, and send its blueprint:
+    the wide one, or with ``narrow`` the stacked one of ``scenes.narrow_layout``."""
+    from radarviz.viz_app.rerun.scenes import blueprint_of, narrow_layout
+
     if isinstance(what, Tracks):
         from radarviz.viz_app.rerun.track_recording import TrackRecorder
 
@@ -41,7 +48,9 @@ def _log(rec: rr.RecordingStream, what: Recordable, seed: int) -> None:
             )
         recorder = TrackRecorder(rec, what.radars)
         what.replay(recorder)
-        recorder.close()
+        recorder.close()  # sends the wide blueprint; a later one sent replaces it
+        if narrow:
+            rec.send_blueprint(blueprint_of(narrow_layout(recorder.layout)))
         return
     if not isinstance(what, str):
         raise ParameterError(
@@ -49,12 +58,13 @@ def _log(rec: rr.RecordingStream, what: Recordable, seed: int) -> None:
             f"(got {type(what).__name__})",
             "what",
         )
-    from radarviz.viz_app.rerun.scenes import record_preset
+    from radarviz.viz_app.rerun.scenes import log_preset
     from radarviz.viz_app.runtime import tune_allocator
 
     check_choice("preset", what, PRESETS)
     tune_allocator()
-    record_preset(rec, what, seed=seed)
+    layout = log_preset(rec, what, seed=seed)
+    rec.send_blueprint(blueprint_of(narrow_layout(layout) if narrow else layout))
 
 
 def record(
@@ -113,6 +123,12 @@ def show(what: Recordable, *, seed: int = 1, width: int | str = "auto", height: 
 
     Return it as a cell's last value (or call ``.display()`` on it) to show it.
 
+    A notebook cell is about 900 px wide, where the recordings' wide tabs (made for a
+    1600 px window) squeeze their charts until the labels cover each other: below
+    ``NARROW_BELOW_PX``, and for ``"auto"`` (the cell's width), the views are stacked on
+    more tabs instead (``viz_app.rerun.scenes.narrow_layout``: at most three charts or four
+    small multiples a tab, the legend above the small multiples).
+
     Args:
         what: as for ``record``.
         seed: root seed of a preset's Monte Carlo.
@@ -124,11 +140,13 @@ def show(what: Recordable, *, seed: int = 1, width: int | str = "auto", height: 
     """
     check_int("seed", seed, low=0)
     check_int("height", height, low=100, high=10_000)
+    if width != "auto":
+        check_int("width", width, low=100, high=10_000)
     use_offline_assets()
     from rerun.notebook import Viewer
 
     from radarviz.viz_app.rerun.recording import new_recording
 
     rec = new_recording()
-    _log(rec, what, seed)
+    _log(rec, what, seed, narrow=width == "auto" or int(width) < NARROW_BELOW_PX)
     return Viewer(width=width, height=height, recording=rec)  # type: ignore[arg-type]

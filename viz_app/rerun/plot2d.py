@@ -21,6 +21,10 @@ Entities under a plot's root ``{p}``::
     {p}/curves/{i}     curve i's line (static)
     {p}/labels         each curve's name and last value at its right end (static)
     {p}/cursor         per scan: the cursor line and each curve's value, labelled
+
+A *forest plot* (``forest_plot``) uses the same box and x axis for a few rows of per-scan
+estimates, each a mean with its confidence interval: the rows' names sit left of the box
+where a plot has its y numbers, and each row's value at the scan right of it.
 """
 
 from __future__ import annotations
@@ -34,7 +38,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 from numpy.typing import NDArray
 
-from radarviz.viz_app.rerun.shapes import SMALL_MARKER, colours, flip_y, pale, radii
+from radarviz.viz_app.rerun.shapes import MARKER, SMALL_MARKER, colours, flip_y, pale, radii
 
 #: Height of every plot box, drawn units (its width is given per plot).
 HEIGHT = 100.0
@@ -46,6 +50,8 @@ AXIS = (90, 90, 90)
 #: Room around the box, as fractions of HEIGHT: left for the y numbers, below for the x
 #: numbers, right for the curves' labels, above for the top number.
 MARGIN_LEFT, MARGIN_BOTTOM, MARGIN_RIGHT, MARGIN_TOP = 0.34, 0.3, 0.95, 0.1
+#: Room left of a forest plot's box for its rows' names (up to 6 characters), HEIGHT units.
+FOREST_MARGIN_LEFT = 0.5
 
 
 @dataclass(frozen=True)
@@ -187,16 +193,23 @@ def spread(
 
 #: Vertical room of one label, drawn units (labels are about 15 px high at the views' sizes).
 LABEL_GAP = 0.17 * HEIGHT
+#: How far below its point Rerun draws a label's centre, drawn units (about 11 px at the
+#: views' sizes): labels meant level with a mark are raised by it.
+LABEL_DROP = 0.09 * HEIGHT
 
 
 @dataclass(frozen=True)
 class Plot:
-    """What ``log_plot`` drew: the box width and axes (to place further marks)."""
+    """What ``log_plot`` drew: the box width and axes (to place further marks).
+
+    ``x_label`` is written left of the x numbers (the scan, k); ``x_unit`` after the last
+    x number ("500 m"), for plots whose left side holds other names."""
 
     width: float
     x: Axis
     y: Axis
     x_label: str = ""
+    x_unit: str = ""
 
     def to_drawn(self, x: NDArray, y: NDArray) -> NDArray[np.float64]:
         """Data (x, y) → drawn positions (..., 2), clipped to the box."""
@@ -339,11 +352,13 @@ def _log_grid(rec: rr.RecordingStream, entity: str, plot: Plot) -> None:
             # the box (about 0.045 HEIGHT per character at the views' sizes).
             pos.append([-0.03 * HEIGHT - 0.024 * HEIGHT * len(text), u * HEIGHT])
             labels.append(text)
-    for t in plot.x.ticks:
-        u = float(plot.x.to_unit(t))
-        if -1e-6 <= u <= 1 + 1e-6:
-            pos.append([u * plot.width, -0.1 * HEIGHT])
-            labels.append(format_value(float(t), x_step))
+    shown = [t for t in plot.x.ticks if -1e-6 <= float(plot.x.to_unit(t)) <= 1 + 1e-6]
+    for i, t in enumerate(shown):
+        text = format_value(float(t), x_step)
+        if plot.x_unit and i == len(shown) - 1:
+            text += f" {plot.x_unit}"
+        pos.append([float(plot.x.to_unit(t)) * plot.width, -0.1 * HEIGHT])
+        labels.append(text)
     if plot.x_label:
         pos.append([-0.03 * HEIGHT - 0.024 * HEIGHT * len(plot.x_label), -0.1 * HEIGHT])
         labels.append(plot.x_label)
@@ -482,17 +497,139 @@ def _log_cursor(
     )
 
 
-def plot_view(entity: str, name: str, width: float = 300.0) -> rrb.Spatial2DView:
+def forest_plot(
+    rec: rr.RecordingStream,
+    entity: str,
+    rows: Sequence[str],
+    tones: Sequence[tuple[int, int, int]],
+    centre: NDArray[np.float64],
+    half_width: NDArray[np.float64],
+    x_axis: Axis,
+    cursor: list[rr.TimeColumn],
+    *,
+    width: float = 240.0,
+    unit: str = "",
+    x_unit: str = "",
+    reference: str = "",
+    reference_colour: tuple[int, int, int] = (0, 0, 0),
+) -> Plot:
+    """Per scan, each row's estimate ``centre`` ± ``half_width`` (both (N, rows)) as a dot on
+    a horizontal interval, one row per name, over a numbered x axis (module docstring).
+
+    Entities: ``{entity}/{row}/mean`` and ``{entity}/{row}/ci95`` per scan, each row's
+    "centre ± half-width unit" at ``{entity}/values`` right of the box, the names at
+    ``{entity}/rows`` left of it. ``x_unit``: the axis' unit, written after its last
+    number. ``reference``: a labelled vertical line at x = 0 (e.g. the truth, when the
+    estimates are offsets from it). Values beyond the axis are drawn at its
+    edge, so ``x_axis`` should hold every interval (the labels still give the true values).
+    """
+    count = len(rows)
+    # One row per unit, the first at the top; above the rows, room for the reference's label.
+    plot = Plot(width, x_axis, Axis(0.0, count + 0.7), x_unit=x_unit)
+    rec.log(entity, flip_y(1.0), static=True)
+    _log_grid(rec, entity, plot)
+    heights = count - np.arange(count) - 0.5
+    drawn_y = plot.to_drawn(np.zeros(count), heights)[:, 1]
+    # A label is centred across on its point but drawn below it: the names and values are
+    # raised by LABEL_DROP to stand level with their rows' dots. A name's centre sits half its
+    # width (about 0.06 HEIGHT per character with its background) left of the box.
+    left = [
+        [-0.05 * HEIGHT - 0.03 * HEIGHT * len(r), y + LABEL_DROP]
+        for r, y in zip(rows, drawn_y, strict=True)
+    ]
+    rec.log(
+        f"{entity}/rows",
+        rr.Points2D(left, radii=[0.0], colors=list(tones), labels=list(rows), show_labels=True),
+        static=True,
+    )
+    if reference:
+        line = plot.to_drawn(np.zeros(2), np.array([0.0, count]))
+        rec.log(
+            f"{entity}/reference",
+            rr.LineStrips2D([line], colors=[reference_colour], radii=[CURVE_LINE]),
+            static=True,
+        )
+        rec.log(
+            f"{entity}/reference/label",
+            rr.Points2D(
+                plot.to_drawn(np.zeros(1), np.array([count + 0.35])),
+                radii=[0.0],
+                colors=[reference_colour],
+                labels=[reference],
+                show_labels=True,
+            ),
+            static=True,
+        )
+    centre = np.asarray(centre, dtype=np.float64)
+    half_width = np.asarray(half_width, dtype=np.float64)
+    n = centre.shape[0]
+    texts, label_pos = [], []
+    for i, (row, tone) in enumerate(zip(rows, tones, strict=True)):
+        y = np.full(n, heights[i])
+        mid = plot.to_drawn(centre[:, i], y)
+        ends = np.stack(
+            [
+                plot.to_drawn(centre[:, i] - half_width[:, i], y),
+                plot.to_drawn(centre[:, i] + half_width[:, i], y),
+            ],
+            1,
+        )
+        rec.send_columns(
+            f"{entity}/{row}/mean",
+            indexes=cursor,
+            columns=rr.Points2D.columns(
+                positions=mid, radii=radii(MARKER, n), colors=colours(tone, n)
+            ),
+        )
+        rec.send_columns(
+            f"{entity}/{row}/ci95",
+            indexes=cursor,
+            columns=rr.LineStrips2D.columns(
+                strips=ends, colors=colours(tone, n), radii=radii(CURVE_LINE, n)
+            ),
+        )
+        texts.append(
+            [
+                f"{format_value(float(c))} ± {format_value(float(h))}{unit}"
+                for c, h in zip(centre[:, i], half_width[:, i], strict=True)
+            ]
+        )
+        label_pos.append(mid[:, 1])
+    # Per scan, row after row: (n · rows) labels, ``rows`` per scan.
+    text = [texts[i][k] for k in range(n) for i in range(count)]
+    pos = [
+        [label_x(plot, text[k * count + i]), label_pos[i][k] + LABEL_DROP]
+        for k in range(n)
+        for i in range(count)
+    ]
+    rec.send_columns(
+        f"{entity}/values",
+        indexes=cursor,
+        columns=rr.Points2D.columns(
+            positions=np.array(pos),
+            colors=np.array([tones[i] for _ in range(n) for i in range(count)], dtype=np.uint8),
+            radii=radii(0.0, n * count),
+            labels=text,
+            show_labels=[True] * (n * count),
+        ).partition([count] * n),
+    )
+    return plot
+
+
+def plot_view(
+    entity: str, name: str, width: float = 300.0, margin_left: float = MARGIN_LEFT
+) -> rrb.Spatial2DView:
     """A 2D view of the plot at ``entity`` (box ``width`` × ``HEIGHT``), framed with room for
-    its numbers and labels. The view's origin is the plot's parent, so its y-up transform
-    applies."""
+    its numbers and labels (``margin_left`` × ``HEIGHT`` left of the box: a forest plot's row
+    names need ``FOREST_MARGIN_LEFT``). The view's origin is the plot's parent, so its y-up
+    transform applies."""
     parent, _, leaf = entity.rpartition("/")
     return rrb.Spatial2DView(
         origin=parent or "/",
         contents=[f"$origin/{leaf}/**"],
         name=name,
         visual_bounds=rrb.VisualBounds2D(
-            x_range=[-MARGIN_LEFT * HEIGHT, width + MARGIN_RIGHT * HEIGHT],
+            x_range=[-margin_left * HEIGHT, width + MARGIN_RIGHT * HEIGHT],
             y_range=[-(1.0 + MARGIN_TOP) * HEIGHT, MARGIN_BOTTOM * HEIGHT],
         ),
     )

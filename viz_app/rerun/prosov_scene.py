@@ -20,7 +20,8 @@ Entity paths (``{m}`` a method: naive, seed, cmkf_d, ucm, ducm, ekf, ukf)::
     prosov/target/{c}/cloud_mean       the cloud's mean per scan
     prosov/target/polar/…              the same for the naive points in grey, shown in the
                                        views of the filters fed polar plots (ducm, ekf, ukf)
-    prosov/bias/{c}                    conversion c's mean down-range offset ± 95% CI per scan
+    prosov/bias                        the bias forest plot (``plot2d.forest_plot``): its axis in m
+    prosov/bias/{c}/mean, /ci95        conversion c's mean down-range offset ± 95% CI per scan
     prosov/legend                      one labelled swatch per method (static)
     plots/prosov/{metric}/{m}          per-scan Monte Carlo statistics (names carry units)
     plots/prosov/delta_x_percent/{reading}   Prosov's Δx(n), seed against naive
@@ -63,7 +64,6 @@ from radarviz.viz_app.rerun.shapes import (
     THIN_LINE,
     colours,
     ellipse_outline,
-    flip_y,
     legend_view,
     log_legend,
     pale,
@@ -105,12 +105,6 @@ class TargetFrame:
     range_half_m: float
     bias_half_m: float
     map_extent_m: tuple[float, float, float, float]
-
-    @property
-    def bias_row_m(self) -> float:
-        """Row spacing of the forest plot: its rows fill a view about 2.3 times wider than
-        high."""
-        return 2.0 * self.bias_half_m / 2.3 / (len(SHOWN_CONVERSIONS) + 1)
 
 
 def target_frame(scene: ProsovScene, cloud: ConversionCloud) -> TargetFrame:
@@ -301,7 +295,8 @@ def log_target_frame(
     k = frame.exaggeration
     stretch = f", down-range ×{k}" if k != 1 else ""
     scale_label = rr.Points2D(
-        [[-0.6 * frame.cross_half_m, 0.36 * frame.cross_half_m / k]],
+        # Centred at the top: a label as wide as half a small view stays inside it.
+        [[0.0, 0.36 * frame.cross_half_m / k]],
         radii=[0.0],
         labels=[f"view ±{frame.cross_half_m / 1e3:g} km across{stretch}"],
         show_labels=True,
@@ -418,58 +413,36 @@ def _crosses(centre: NDArray[np.float64], frame: TargetFrame) -> NDArray[np.floa
     return centre[:, None, None, :] + np.stack([d1, d2])[None]
 
 
+#: Width of the bias forest plot's box (drawn units; its height is ``plot2d.HEIGHT``), for a
+#: grid cell about 2.6 times wider than high, with room for the names and values beside it.
+BIAS_WIDTH = 220.0
+
+
 def _log_bias(
     rec: rr.RecordingStream,
     cloud: ConversionCloud,
     frame: TargetFrame,
     idx: list[rr.TimeColumn],
 ) -> None:
-    """A forest plot per scan: each conversion's mean down-range offset from the truth (m)
-    with its 95% confidence interval, one row per conversion, the truth at 0 (true scale)."""
-    base = f"{ROOT}/bias"
-    rec.log(base, flip_y(1.0 / frame.bias_half_m), static=True)
-    rec.log(
-        f"{base}/scale",
-        rr.Points2D(
-            [[0.55 * frame.bias_half_m, 0.45 * frame.bias_row_m]],
-            radii=[SMALL_MARKER],
-            colors=[rgb("truth")],
-            labels=[f"line: truth; view ±{frame.bias_half_m:g} m"],
-            show_labels=True,
-        ),
-        static=True,
+    """A forest plot per scan (``plot2d.forest_plot``): each conversion's mean down-range
+    offset from the truth (m) with its 95% confidence interval, one row per conversion, the
+    truth the line at 0, on an axis of ±``bias_half_m`` fixed over the run (true scale)."""
+    rows = list(SHOWN_CONVERSIONS)
+    plot2d.forest_plot(
+        rec,
+        f"{ROOT}/bias",
+        rows,
+        [rgb(c) for c in rows],
+        np.stack([cloud.offset_mean_m[c][:, 1] for c in rows], 1),
+        np.stack([cloud.offset_half_width95_m[c][:, 1] for c in rows], 1),
+        plot2d.linear_axis(-frame.bias_half_m, frame.bias_half_m, 4),
+        idx,
+        width=BIAS_WIDTH,
+        unit=" m",
+        x_unit="m",
+        reference="truth",
+        reference_colour=rgb("truth"),
     )
-    rows = len(SHOWN_CONVERSIONS)
-    row = frame.bias_row_m
-    top, bottom = row * 0.6, -(rows - 0.4) * row
-    rec.log(
-        f"{base}/truth",
-        rr.LineStrips2D([[[0.0, top], [0.0, bottom]]], colors=[rgb("truth")], radii=[THIN_LINE]),
-        static=True,
-    )
-    for i, c in enumerate(SHOWN_CONVERSIONS):
-        down = cloud.offset_mean_m[c][:, 1]
-        hw = cloud.offset_half_width95_m[c][:, 1]
-        n = len(down)
-        y = np.full(n, -i * row)
-        rec.send_columns(
-            f"{base}/{c}/mean",
-            indexes=idx,
-            columns=rr.Points2D.columns(
-                positions=np.stack([down, y], -1),
-                radii=radii(MARKER, n),
-                colors=colours(rgb(c), n),
-                labels=[c] * n,
-            ),
-        )
-        ends = np.stack([np.stack([down - hw, y], -1), np.stack([down + hw, y], -1)], 1)
-        rec.send_columns(
-            f"{base}/{c}/ci95",
-            indexes=idx,
-            columns=rr.LineStrips2D.columns(
-                strips=ends, colors=colours(rgb(c), n), radii=radii(LINE, n)
-            ),
-        )
 
 
 def log_statistics(rec: rr.RecordingStream, scene: ProsovScene, root: str = ROOT) -> None:
@@ -565,7 +538,9 @@ def log_charts(rec: rr.RecordingStream, scene: ProsovScene, root: str = ROOT) ->
             rec,
             f"charts/{root}/delta_x_percent",
             [
-                plot2d.Curve(f"{reading} reading", x, v, READING_COLOURS[reading])
+                # Named by the reading alone (the view's title says "readings"): the labels
+                # with their values must fit right of the box.
+                plot2d.Curve(reading, x, v, READING_COLOURS[reading])
                 for reading, v in result.delta_x_percent().items()
             ],
             width=CHART_WIDTH,
@@ -678,13 +653,12 @@ def map_view() -> rrb.Spatial2DView:
 
 
 def bias_view() -> rrb.Spatial2DView:
-    """The forest plot (scaled to ±1 by its transform)."""
-    rows = len(SHOWN_CONVERSIONS)
-    row = 2.0 / 2.3 / (rows + 1)
-    return _space(
-        "conversion bias along range at the scan: MC mean ± 95% CI",
-        "bias",
-        rrb.VisualBounds2D(x_range=[-1.0, 1.0], y_range=[-row, rows * row]),
+    """The forest plot (``_log_bias``), framed with its numbers, names and values."""
+    return plot2d.plot_view(
+        f"{ROOT}/bias",
+        "conversion bias along range, m: mean ± 95% CI",
+        BIAS_WIDTH,
+        plot2d.FOREST_MARGIN_LEFT,
     )
 
 
@@ -796,10 +770,12 @@ def log_prosov3d(
             ).partition([1] * n),
         )
     reach = 1.2 * largest  # the views frame this
-    axis = plot2d.nice_step(reach, 1)  # a round length, written at the axes' tips
+    axis = axis_length_km(reach)
+    # The truth is the black dot at the origin (the legend's title says so): a label there
+    # would sit on the axes' names and the ellipsoid's centre in a small view.
     rec.log(
         f"{ROOT_3D}/target/truth",
-        rr.Points3D([[0.0, 0.0, 0.0]], radii=-6.0, colors=[rgb("truth")], labels=["truth"]),
+        rr.Points3D([[0.0, 0.0, 0.0]], radii=-6.0, colors=[rgb("truth")]),
         static=True,
     )
     rec.log(
@@ -817,7 +793,7 @@ def log_prosov3d(
             np.eye(3) * axis,
             radii=[0.0],
             colors=[(120, 120, 120)],
-            labels=[f"{a} {axis:g} km" for a in ("down-range", "cross-range", "up")],
+            labels=list(AXIS_NAMES),
             show_labels=True,
         ),
         static=True,
@@ -832,16 +808,39 @@ def log_prosov3d(
     return reach
 
 
-def views_3d(axis_km: float, methods: Sequence[str] = METHODS_SHOWN) -> rrb.Container:
+#: The 3D frame's axes, named at their tips (their common length is in the legend's title).
+AXIS_NAMES = ("down-range", "cross-range", "up")
+#: The axes reach at most this share of what the views frame.
+AXIS_REACH = 0.8
+
+
+def axis_length_km(reach_km: float) -> float:
+    """The axes' length for views framing ``reach_km``: the largest 1, 1.5, 2, 3, 5 or
+    7 × 10ⁿ km at or below 0.8 × reach, so that the tips and their names stay inside every
+    small view (``views_3d``'s camera shows about ±reach around the origin) and the length
+    reads as a round number."""
+    target = AXIS_REACH * reach_km
+    exp = 10.0 ** np.floor(np.log10(target))
+    steps = (1.0, 1.5, 2.0, 3.0, 5.0, 7.0)
+    return float(max(m * exp for m in steps if m * exp <= target * 1.0001))
+
+
+def camera_3d(reach_km: float) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+    """(eye position, up) of the small multiples' common camera, looking at the origin from
+    above the down-range, minus-cross-range side, close enough that the ellipsoids of
+    ``reach_km`` fill a small view."""
+    d = 1.7 * reach_km
+    return (0.9 * d, -0.7 * d, 0.6 * d), (0.0, 0.0, 1.0)
+
+
+def views_3d(reach_km: float, methods: Sequence[str] = METHODS_SHOWN) -> rrb.Container:
     """The 3D tab: small multiples, one 3D target frame per method (its estimate and 1σ
     ellipsoid, the truth and the axes; every camera the same, so sizes compare across
-    views), the legend, and the per-scan statistics."""
-    d = 1.7 * axis_km  # the camera close enough that the ellipsoids fill a small view
-    eye = rrb.EyeControls3D(
-        position=(0.9 * d, -0.7 * d, 0.6 * d),
-        look_target=(0.0, 0.0, 0.0),
-        eye_up=(0.0, 0.0, 1.0),
-    )
+    views), the legend (which gives the axes' length), and the per-scan statistics.
+    ``reach_km``: what ``log_prosov3d`` returned."""
+    position, up = camera_3d(reach_km)
+    eye = rrb.EyeControls3D(position=position, look_target=(0.0, 0.0, 0.0), eye_up=up)
+    length = axis_length_km(reach_km)
     frames = [
         rrb.Spatial3DView(
             origin=ROOT_3D,
@@ -850,7 +849,7 @@ def views_3d(axis_km: float, methods: Sequence[str] = METHODS_SHOWN) -> rrb.Cont
                 "$origin/target/truth/**",
                 "$origin/target/axes/**",
             ],
-            name=f"{m}: 3D target frame, km, 1σ ellipsoid",
+            name=f"{m}: 1σ ellipsoid, km",
             eye_controls=eye,
         )
         for m in methods
@@ -861,7 +860,7 @@ def views_3d(axis_km: float, methods: Sequence[str] = METHODS_SHOWN) -> rrb.Cont
                 ROOT_3D,
                 "legend",
                 len(METHODS_SHOWN),
-                "methods (axes: down-range, cross-range, up, km)",
+                f"methods; black: the truth; axes {length:g} km (target frame)",
             ),
             rrb.Grid(*frames, grid_columns=3),
             row_shares=[1, 12],

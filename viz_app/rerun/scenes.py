@@ -17,6 +17,8 @@ One scene per paper, each in its own tab, never two scenes of different scale in
 
 from __future__ import annotations
 
+import copy
+import uuid
 from dataclasses import dataclass
 
 import rerun as rr
@@ -98,6 +100,115 @@ def blueprint_of(
         rrb.TimePanel(timeline=timeline or layout.timeline, state="collapsed"),
         collapse_panels=True,
     )
+
+
+# --- narrow windows (a notebook cell) --------------------------------------------------------
+
+#: How much page height a view takes in the stacked layout (3D scenes need more than a chart),
+#: and how much one page holds: at a notebook's ~600 px, three charts of ~170 px each, which
+#: is what the charts' labels are sized for.
+VIEW_UNITS = {"Spatial3DView": 2}
+PAGE_UNITS = 3
+#: Small multiples per page in the stacked layout: two columns of two.
+GRID_PAGE = 4
+#: A legend's row share on a page whose content has ``PAGE_UNITS`` shares.
+LEGEND_SHARE = 0.6
+
+
+def _is_legend(view: object) -> bool:
+    """A legend view (``shapes.legend_view``: contents ``$origin/…legend/**``)."""
+    return any(str(c).endswith("legend/**") for c in getattr(view, "contents", None) or [])
+
+
+def _is_container(node: object) -> bool:
+    return hasattr(node, "kind") and getattr(node, "contents", None) is not None
+
+
+def _units(node: object) -> int:
+    if _is_container(node):
+        return max(_units(k) for k in node.contents)  # type: ignore[attr-defined]
+    return VIEW_UNITS.get(type(node).__name__, 1)
+
+
+def _copy_view(view: object) -> object:
+    """The same view under a new id: a blueprint holds each view once, and the stacked
+    layout repeats a tab's legend on each of its pages."""
+    twin = copy.copy(view)
+    twin.id = uuid.uuid4()  # type: ignore[attr-defined]
+    return twin
+
+
+def _pieces(node: object) -> tuple[list[object], list[list[object]], list[object]]:
+    """(legends, grids' views, other pieces) of a tab, in order. A piece is a view or a row
+    of at most two views side by side (kept together: at a notebook's width each gets half);
+    wider rows and columns come apart."""
+    legends: list[object] = []
+    grids: list[list[object]] = []
+    pieces: list[object] = []
+
+    def walk(n: object) -> None:
+        if not _is_container(n):
+            (legends if _is_legend(n) else pieces).append(n)
+            return
+        kind = str(n.kind).lower()  # type: ignore[attr-defined]
+        kids = list(n.contents)  # type: ignore[attr-defined]
+        if "grid" in kind:
+            grids.append(kids)
+        elif "horizontal" in kind and len(kids) == 2 and not any(map(_is_container, kids)):
+            pieces.append(rrb.Horizontal(*kids))
+        else:
+            for k in kids:
+                walk(k)
+
+    walk(node)
+    return legends, grids, pieces
+
+
+def narrow_tabs(tab: rrb.Container) -> list[rrb.Container]:
+    """One tab of a wide layout as tabs of a narrow window (about 900 px, a notebook cell):
+    its views stacked on pages instead of squeezed side by side, each page holding at most
+    ``PAGE_UNITS`` of height (``VIEW_UNITS``) or ``GRID_PAGE`` small multiples in two columns,
+    the tab's legend repeated at the top of each page of small multiples (or of its first
+    page, without any). A tab that fits one page stays whole (its views stacked)."""
+    legends, grids, pieces = _pieces(tab)
+    pages: list[tuple[list[object], list[float]]] = []
+    for views in grids:
+        for i in range(0, len(views), GRID_PAGE):
+            chunk = views[i : i + GRID_PAGE]
+            pages.append(([rrb.Grid(*chunk, grid_columns=min(2, len(chunk)))], [PAGE_UNITS]))
+    grid_pages = len(pages)
+    page: list[object] = []
+    for piece in pieces:
+        used = sum(_units(p) for p in page)
+        if page and used + _units(piece) > PAGE_UNITS:
+            pages.append((page, [float(_units(p)) for p in page]))
+            page = []
+        page.append(piece)
+    if page:
+        pages.append((page, [float(_units(p)) for p in page]))
+    name = str(tab.name or "")
+    short = name.split(":")[0] if len(pages) > 1 else name
+    out: list[rrb.Container] = []
+    # The legend tops the pages of small multiples (they name no colour themselves); pages of
+    # charts, which name their curves, get their height instead, unless the tab has no grid.
+    for i, (content, shares) in enumerate(pages):
+        keyed = i < grid_pages or (grid_pages == 0 and i == 0)
+        head = [_copy_view(v) if i else v for v in legends] if keyed else []
+        out.append(
+            rrb.Vertical(
+                *head,
+                *content,
+                row_shares=[LEGEND_SHARE] * len(head) + shares,
+                name=f"{short} {i + 1}/{len(pages)}" if len(pages) > 1 else short,
+            )
+        )
+    return out
+
+
+def narrow_layout(layout: PresetLayout) -> PresetLayout:
+    """``layout`` for a narrow window (``narrow_tabs`` of each tab), always with a tab bar."""
+    tabs = [t for tab in layout.tabs for t in narrow_tabs(tab)]
+    return PresetLayout(tuple(tabs), layout.timeline, tabbed=True)
 
 
 def log_preset(rec: rr.RecordingStream, preset: str, seed: int = 1) -> PresetLayout:
