@@ -1224,9 +1224,9 @@ class GNNTracker:
         pos = x[:, 0::2] + x[:, 1::2] * ahead[:, None]
         # The predicted position's σ (the velocity's σ carried over the time since the last
         # plot): a fresh track, its velocity still ±σv0, may be anywhere in a wide arc.
-        sigma = np.hypot(book.sigma_m[slots], book.sigma_v[slots] * ahead)
+        sigma = np.sqrt(book.sigma_m[slots] ** 2 + (book.sigma_v[slots] * ahead) ** 2)
         rel = pos - self._sites[ri]
-        ground = np.hypot(rel[:, 0], rel[:, 1])
+        ground = np.sqrt(rel[:, 0] ** 2 + rel[:, 1] ** 2)
         rng = np.sqrt(np.sum(rel**2, axis=1))
         elev = np.arctan2(rel[:, 2], ground) if self.dims == 3 else None
         az = np.arctan2(rel[:, 1], rel[:, 0])

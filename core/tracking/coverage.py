@@ -143,6 +143,7 @@ class BeamTable:
             np.zeros((0, BEAM_COUNTS), np.int64),
             np.zeros((0, AZIMUTH_CELLS)),
             np.zeros((0, REVISITS_KEPT)),
+            np.zeros((0, REVISITS_KEPT)),
             np.zeros((0, 0)),
             np.zeros((0, 0, 2)),
         )
@@ -165,11 +166,13 @@ class BeamTable:
         cells[: self.radars] = a.cells
         revisits = np.zeros((radars, REVISITS_KEPT))
         revisits[: self.radars] = a.revisits
+        ordered = np.zeros((radars, REVISITS_KEPT))
+        ordered[: self.radars] = a.ordered
         rates = np.zeros((radars, length))
         rates[: self.radars, : self.length] = a.rates
         close = np.zeros((radars, length, 2))
         close[: self.radars, : self.length] = a.close
-        self.arrays = type(a)(f, c, cells, revisits, rates, close)
+        self.arrays = type(a)(f, c, cells, revisits, ordered, rates, close)
         self.radars, self.length = radars, length
 
 
@@ -294,7 +297,7 @@ class RadarBeam:
         columns = (time_s, azimuth_rad, range_m, el)
         plots = (np.ascontiguousarray(v, dtype=np.float64) for v in columns)
         self._k.observe_beam(
-            a.f[r], a.c[r], a.cells[r], a.revisits[r], a.rates[r], a.close[r], *plots,
+            a.f[r], a.c[r], a.cells[r], a.revisits[r], a.ordered[r], a.rates[r], a.close[r], *plots,
             elevation_rad is not None, *beam_constants(),
         )  # fmt: skip
 

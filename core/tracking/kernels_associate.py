@@ -42,18 +42,21 @@ B_PERIOD, B_GIVEN_PERIOD, B_REVISIT_PERIOD = 0, 1, 2
 B_RANGE_LO, B_RANGE_HI, B_EL_LO, B_EL_HI = 3, 4, 5, 6
 B_LAST_S, B_LAST_AZ, B_SWEPT_TO = 7, 8, 9
 B_GIVEN_MIN_R, B_GIVEN_MAX_R, B_GIVEN_MIN_EL, B_GIVEN_MAX_EL = 10, 11, 12, 13
-BEAM_FLOATS = 14
+B_RATE_MEDIAN = 14  # the median of the beam rates, as of B_RATES_AT of them
+BEAM_FLOATS = 15
 # Counts.
 B_SAME, B_OTHER, B_TURN_NEG, B_TURN_POS, B_MEASURED = 0, 1, 2, 3, 4
 B_N_REVISITS, B_REVISIT_HEAD, B_N_RATES, B_N_CLOSE, B_SEEN = 5, 6, 7, 8, 9
-BEAM_COUNTS = 10
+B_RATES_AT, B_RATES_AGREE = 10, 11  # the rates B_RATE_MEDIAN is of, and how many agree
+BEAM_COUNTS = 12
 
 
 class BeamArrays(NamedTuple):
     """One radar's beam state (``core.tracking.coverage.RadarBeam``), or R radars' stacked
     on a first axis: f (BEAM_FLOATS,), c (BEAM_COUNTS,) int64, cells (AZIMUTH_CELLS,) the
     last plot time per azimuth cell, revisits (REVISITS_KEPT,) a ring of the latest
-    revisits, rates (L,) the beam rates seen, close (L, 2) the (Δt, |Δβ|) of close
+    revisits and ordered (REVISITS_KEPT,) the same in increasing order (its quantile and
+    median without a sort), rates (L,) the beam rates seen, close (L, 2) the (Δt, |Δβ|) of close
     consecutive plots (L ≥ REVISITS_KEPT plus a call's plots: a batch's pairs are all kept
     while fewer than REVISITS_KEPT were)."""
 
@@ -61,6 +64,7 @@ class BeamArrays(NamedTuple):
     c: NDArray[np.int64]
     cells: NDArray[np.float64]
     revisits: NDArray[np.float64]
+    ordered: NDArray[np.float64]
     rates: NDArray[np.float64]
     close: NDArray[np.float64]
 
@@ -76,20 +80,21 @@ def _median(a):
 
 
 @_jit
-def _lower_quantile(a, q: float) -> float:
-    """``np.quantile(a, q, method="lower")``: the element at floor(q (n − 1)) in order."""
-    k = int(q * (a.shape[0] - 1))  # q (n − 1) ≥ 0: truncation is the floor
-    return np.partition(a.copy(), k)[k]
+def _sorted_median(a, lo: int, hi: int) -> float:
+    """``np.median`` of a[lo:hi], a in increasing order (hi > lo)."""
+    n, mid = hi - lo, lo + (hi - lo) // 2
+    return a[mid] if n % 2 else (a[mid - 1] + a[mid]) / 2.0
 
 
 @_jit
 def observe_beam(
-    f, c, cells, revisits, rates, close, time_s, azimuth_rad, range_m, elevation_rad,
+    f, c, cells, revisits, ordered, rates, close, time_s, azimuth_rad, range_m, elevation_rad,
     has_elevation, cells_n, min_revisit_s, min_revisits, kept, max_pair_s, min_pair_s,
     beam_noise_rad,
 ):  # fmt: skip
     """``RadarBeam.observe``: learn from a batch of one radar's plots, (B,) each, in time
-    order, into the beam's state f, c, cells, revisits, rates, close (``BeamArrays``).
+    order, into the beam's state f, c, cells, revisits, ordered, rates, close
+    (``BeamArrays``).
     The constants are ``core.tracking.coverage``'s (passed in: one definition)."""
     n = time_s.shape[0]
     if n == 0:
@@ -134,17 +139,18 @@ def observe_beam(
             if min_pair_s <= span and span <= max_pair_s:
                 rates[c[B_N_RATES]] = _wrap(azimuth_rad[n - 1] - a0) / span
                 c[B_N_RATES] += 1
-        _learn_period(f, c, cells, revisits, time_s, azimuth_rad, cells_n, min_revisit_s,
-                      min_revisits, kept)  # fmt: skip
+        _learn_period(f, c, cells, revisits, ordered, time_s, azimuth_rad, cells_n,
+                      min_revisit_s, min_revisits, kept)  # fmt: skip
         f[B_PERIOD] = _estimate(f, c, rates, close, min_revisits, beam_noise_rad)
     f[B_LAST_S], f[B_LAST_AZ] = time_s[n - 1], azimuth_rad[n - 1]
 
 
 @_jit
-def _learn_period(f, c, cells, revisits, time_s, azimuth_rad, cells_n, min_revisit_s,
+def _learn_period(f, c, cells, revisits, ordered, time_s, azimuth_rad, cells_n, min_revisit_s,
                   min_revisits, kept):  # fmt: skip
-    """``RadarBeam._learn_period``: revisits of azimuth cells into the ring, and the
-    revisits' period estimate."""
+    """``RadarBeam._learn_period``: revisits of azimuth cells into the ring (and its ordered
+    copy), and the revisits' period estimate: the median of those within ±10% of their
+    10th percentile (``np.quantile``'s "lower": the value at floor(0.1 (n − 1)) in order)."""
     for i in range(time_s.shape[0]):
         k = int((azimuth_rad[i] % TWO_PI) * (cells_n / TWO_PI))
         if k > cells_n - 1:
@@ -152,18 +158,27 @@ def _learn_period(f, c, cells, revisits, time_s, azimuth_rad, cells_n, min_revis
         prev = max(cells[k - 1 if k > 0 else cells_n - 1], cells[k], cells[(k + 1) % cells_n])
         t = time_s[i]
         if math.isfinite(prev) and t - prev >= min_revisit_s:
+            m = c[B_N_REVISITS]
+            if m == kept:  # the oldest leaves the ordered copy
+                gone = np.searchsorted(ordered[:m], revisits[c[B_REVISIT_HEAD]])
+                ordered[gone : m - 1] = ordered[gone + 1 : m].copy()
+                m -= 1
+            at = np.searchsorted(ordered[:m], t - prev)
+            ordered[at + 1 : m + 1] = ordered[at:m].copy()
+            ordered[at] = t - prev
             revisits[c[B_REVISIT_HEAD]] = t - prev
             c[B_REVISIT_HEAD] = (c[B_REVISIT_HEAD] + 1) % kept
-            c[B_N_REVISITS] = min(c[B_N_REVISITS] + 1, kept)
+            c[B_N_REVISITS] = m + 1
         cells[k] = t
     m = c[B_N_REVISITS]
     if m >= min_revisits:
-        r = revisits[:m]
-        low = _lower_quantile(r, 0.1)
-        near = r[(r >= 0.9 * low) & (r <= 1.1 * low)]
+        r = ordered[:m]
+        low = r[int(0.1 * (m - 1))]  # 0.1 (m − 1) ≥ 0: truncation is the floor
+        lo = np.searchsorted(r, 0.9 * low, side="left")
+        hi = np.searchsorted(r, 1.1 * low, side="right")
         # The shortest revisits must be a cluster (a tenth of them at least), not a stray.
-        if near.shape[0] >= max(3, m // 10):
-            f[B_REVISIT_PERIOD] = _median(near)
+        if hi - lo >= max(3, m // 10):
+            f[B_REVISIT_PERIOD] = _sorted_median(r, lo, hi)
 
 
 @_jit
@@ -173,11 +188,14 @@ def _estimate(f, c, rates, close, min_revisits, beam_noise_rad) -> float:
     rate_period = np.nan
     nr = c[B_N_RATES]
     if nr >= min_revisits:
-        w = _median(rates[:nr])
-        agree = 0
-        for i in range(nr):
-            if abs(rates[i] - w) <= 0.1 * abs(w):
-                agree += 1
+        if c[B_RATES_AT] != nr:  # the rates stop changing once REVISITS_KEPT are kept
+            w = _median(rates[:nr])
+            agree = 0
+            for i in range(nr):
+                if abs(rates[i] - w) <= 0.1 * abs(w):
+                    agree += 1
+            f[B_RATE_MEDIAN], c[B_RATES_AT], c[B_RATES_AGREE] = w, nr, agree
+        w, agree = f[B_RATE_MEDIAN], c[B_RATES_AGREE]
         if agree / nr < 0.5:
             return np.nan
         rate_period = TWO_PI / abs(w)
@@ -493,7 +511,8 @@ def _batch(pl, beams, radar_site, book, gf, rules, live, counters, owner, status
             f[B_PERIOD] = pl.measured_period_s[b]
             beams.c[g, B_MEASURED] = 1
         observe_beam(
-            f, beams.c[g], beams.cells[g], beams.revisits[g], beams.rates[g], beams.close[g],
+            f, beams.c[g], beams.cells[g], beams.revisits[g], beams.ordered[g], beams.rates[g],
+            beams.close[g],
             times, pl.azimuth_rad[lo:hi], pl.range_m[lo:hi], times, False, rules.cells,
             rules.min_revisit_s, rules.min_revisits, rules.kept, rules.max_pair_s,
             rules.min_pair_s, rules.beam_noise_rad,
@@ -705,7 +724,8 @@ def _too_fast(pl, book, rules, s, j) -> bool:
     r, b = pl.range_m[j], pl.azimuth_rad[j]
     px = pl.site[g, 0] + r * math.cos(b)
     py = pl.site[g, 1] + r * math.sin(b)
-    gap = math.hypot(px - book.x[s, 0], py - book.x[s, 2])
+    dx, dy = px - book.x[s, 0], py - book.x[s, 2]
+    gap = math.sqrt(dx * dx + dy * dy)
     dt = pl.time_s[j] - book.last_s[s]
     sigma = pl.sigma_r_m[g] + r * pl.sigma_azimuth_rad[g]
     reach = rules.max_speed_mps * dt + 3.0 * (sigma + book.sigma_m[s])
@@ -756,7 +776,8 @@ def _swept(pl, beams, radar_site, book, rules, g, times, slots, whole_scan):
         ahead = end - book.last_s[s]
         px = book.x[s, 0] + book.x[s, 1] * ahead
         py = book.x[s, 2] + book.x[s, 3] * ahead
-        sigma = math.hypot(book.sigma_m[s], book.sigma_v[s] * ahead)
+        sv = book.sigma_v[s] * ahead
+        sigma = math.sqrt(book.sigma_m[s] * book.sigma_m[s] + sv * sv)
         rx, ry = px - radar_site[g, 0], py - radar_site[g, 1]
         rng = math.sqrt(rx * rx + ry * ry)
         margin = min(max(3.0 * sigma / max(rng, 1.0), rules.min_margin_rad),
