@@ -79,10 +79,16 @@ per track when the targets are apart, and assigns the small components; the per-
 bookkeeping (the sweep, M of N) is numpy over the live tracks, no Python loop over them.
 ``radarviz bench --only association`` measures both layouts: the grid of targets seen by
 one radar in whole scans (``viz_app.bench.association``), and four rotating radars whose
-plots come a few at a time (the ``rotating_*`` figures, plots per CPU-second). On the
-rotating layout a batch costs a few hundred microseconds of Python and numpy, whatever the
-number of live tracks: thousands of plots per CPU-second, against some 10⁵ for the labelled
-filtering of the same plots.
+plots come a few at a time (the ``rotating_*`` figures, plots per CPU-second).
+
+* **The compiled route.** For 2D plots, the IMM, a ``boxed`` gating method and the sparse
+  assignment on the compiled engine (``core.tracking.association_compiled.eligible``), the
+  whole batch loop above runs in one compiled call over many batches
+  (``core.tracking.kernels_associate``, ``add_batches``: a batch of a few plots costs no
+  Python), on the same book and beam arrays; the requested methods' tracks then filter the
+  call's labelled plots in one block. The Python route (``_add``) is the reference on the
+  numpy engine, and the two give every plot the same track
+  (``tests/test_association_kernel.py``).
 """
 
 from __future__ import annotations
