@@ -33,8 +33,8 @@ from radarviz.core.finite_memory.fit import (
     GorshkovResult,
     RadarPreset,
     finite_memory_fit,
-    preset,
 )
+from radarviz.core.finite_memory.fit import preset as _preset
 from radarviz.core.finite_memory.fit import run_gorshkov as _run_gorshkov
 from radarviz.core.geometry import direction_cosines as _direction_cosines
 from radarviz.core.params import (
@@ -270,11 +270,11 @@ def finite_memory(
     )
 
 
-def radar_preset(name: str) -> RadarPreset:
+def radar_preset(preset: str) -> RadarPreset:
     """One radar of the finite-memory paper's table, for ``finite_memory`` or ``run_gorshkov``.
 
     Args:
-        name: ``RLS1`` … ``RLS6``.
+        preset: ``RLS1`` … ``RLS6``.
 
     Returns:
         ``RadarPreset``: ``name``, ``band``, ``sigma_r_m`` (m), ``sigma_vr_mps`` (m/s) and
@@ -283,7 +283,7 @@ def radar_preset(name: str) -> RadarPreset:
     Raises:
         ParameterError: an unknown name (the message lists the known ones).
     """
-    return preset(name)
+    return _preset(preset)
 
 
 def direction_cosines(azimuth_rad: ArrayLike, elevation_rad: ArrayLike) -> NDArray[np.float64]:
