@@ -49,14 +49,14 @@ def test_run_prosov_is_the_engine_bit_for_bit() -> None:
         )
     )
     for m in ("naive", "seed"):
-        for field in ("bias_range", "rmse_x", "nees_pos"):
+        for field in ("bias_range_m", "rmse_x_m", "nees_pos"):
             np.testing.assert_array_equal(
                 getattr(res.metrics[m], field), getattr(ref.metrics[m], field)
             )
     table = radarviz.to_table([res])
     assert len(table) == 2 * 12
     rows = table[table.method == "seed"].sort_values("scan")
-    np.testing.assert_array_equal(rows.bias_range.to_numpy(), ref.metrics["seed"].bias_range)
+    np.testing.assert_array_equal(rows.bias_range_m.to_numpy(), ref.metrics["seed"].bias_range_m)
     assert radarviz.to_arrow(res).num_rows == 24
 
 
@@ -97,7 +97,7 @@ def test_estimate_velocity_recovers_the_true_velocity_without_noise() -> None:
     # The first-order σ of the baseline (docs/velocity.md): 2.157, 3.385, 10.665 m/s.
     np.testing.assert_allclose(np.sqrt(np.diag(est.covariance)), [2.157, 3.385, 10.665], atol=5e-4)
     table = radarviz.to_table(est)
-    assert table.shape[0] == 1 and table.geometry_m.iloc[0] == pytest.approx(0.053, abs=5e-4)
+    assert table.shape[0] == 1 and table.geometry_metric.iloc[0] == pytest.approx(0.053, abs=5e-4)
 
 
 def _convert(method: str = "ucm", **values: object) -> object:
@@ -426,7 +426,7 @@ def test_cli_reproduce_is_the_api(capsys: pytest.CaptureFixture[str]) -> None:
     case = doc["cases"][0]
     for m in ALL_METHODS:
         np.testing.assert_allclose(
-            case["methods"][m]["bias_range"], res.metrics[m].bias_range, rtol=1e-15
+            case["methods"][m]["bias_range_m"], res.metrics[m].bias_range_m, rtol=1e-15
         )
     assert main(["reproduce", "gorshkov", "--k-max", "0"]) == 2
     assert "--k-max must be an integer in [1, 20]" in capsys.readouterr().err
