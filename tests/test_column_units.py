@@ -5,8 +5,8 @@ Dimensionless statistics are the exception the documentation names once: a NEES 
 
 The names are checked where the tables are built (the sweep's Parquet columns, the track
 file's header, ``radarviz.to_columns`` of each result) and in the JSON documents of
-``reproduce prosov``, ``gorshkov``, ``velocity`` and ``association``, whose keys the command
-line prints."""
+``reproduce prosov``, ``gorshkov``, ``velocity``, ``association`` and ``doppler``, whose keys
+the command line prints."""
 
 from __future__ import annotations
 
@@ -18,8 +18,10 @@ import pytest
 
 import radarviz
 from radarviz.core.experiments.association import AssociationConfig, run_association
+from radarviz.core.experiments.doppler_start import compare_doppler_updates
 from radarviz.viz_app.io.plots import TRACK_COLUMNS, track_columns
 from radarviz.viz_app.reports.association import association_document
+from radarviz.viz_app.reports.doppler import doppler_document
 from radarviz.viz_app.reports.gorshkov import gorshkov_document
 from radarviz.viz_app.reports.prosov import prosov_document
 from radarviz.viz_app.reports.velocity import velocity_document
@@ -190,5 +192,6 @@ def test_reproduce_documents(prosov: list[Any], gorshkov: radarviz.GorshkovRun) 
         gorshkov_document(gorshkov.fits, gorshkov.tracking),
         velocity_document(radarviz.run_velocity(trials=64)),
         association_document(run_association(association)),
+        doppler_document(compare_doppler_updates(("RLS3",), sigma_beta_deg=1.0, runs=64, seed=1)),
     ):
         assert sorted(set(without_unit(number_keys(doc)))) == [], doc["experiment"]

@@ -1,8 +1,9 @@
 """radarviz: radar target tracking research, as a Python API.
 
 ``import radarviz`` gives the functions below (``radarviz.__all__``), the stable import
-surface; the command line (``radarviz reproduce …``, ``simulate``, ``track``, ``record``,
-``demo``) calls the same functions, and the notebooks in ``examples/`` use nothing else.
+surface; the command line (``radarviz reproduce …``, ``record``, ``demo``) calls the same
+functions, ``simulate`` and ``write_measurements`` give the plots and the files of
+``radarviz simulate``, and the notebooks in ``examples/`` use nothing else.
 
 Quantities carry their unit in their name, for arguments and table columns alike
 (``sigma_r_m``, ``period_s``, ``azimuth_rad``, ``sigma_vr_mps``); arrays are numpy arrays
