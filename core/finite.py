@@ -111,7 +111,7 @@ def check_finite_document(
     """:func:`check_finite_result` on every number of a JSON-ready document (dicts, lists,
     numbers; strings, booleans and None are not results). A number under a key in
     ``nonnegative`` (True: every number, e.g. a benchmark's times and ratios) must be >= 0.
-    The failing value is named by its path in the document ("baseline.sigma_mc[1]"). For
+    The failing value is named by its path in the document ("baseline.sigma_mc_mps[1]"). For
     documents where nothing is undefined by construction."""
     if isinstance(doc, Mapping):
         for key, value in doc.items():

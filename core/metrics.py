@@ -8,16 +8,16 @@ block size, not on how the work was scheduled.
 
 Definitions, with e = x̂ − x the estimation error of run m at scan n and M runs:
 
-    bias_x      = mean e_x                      rmse_x = sqrt(mean e_x²)
-    std_x       = sqrt(Σ (e_x − bias_x)² / (M − 1))
-    sigma_x_filter = sqrt(mean P_xx)            (what the filter believes)
-    bias_range, bias_cross: mean of e projected on the true line of sight u = (cos β, sin β)
-                 and on its left normal (−sin β, cos β)
-    nees_pos    = mean e_posᵀ P_pos⁻¹ e_pos     (2 dof)
-    nees_state  = mean eᵀ P⁻¹ e                 (4 dof)
+    bias_x_m         = mean e_x                 rmse_x_m = sqrt(mean e_x²)
+    std_x_m          = sqrt(Σ (e_x − bias_x_m)² / (M − 1))
+    sigma_x_filter_m = sqrt(mean P_xx)          (what the filter believes)
+    bias_range_m, bias_cross_m: mean of e projected on the true line of sight
+                       u = (cos β, sin β) and on its left normal (−sin β, cos β)
+    nees_pos         = mean e_posᵀ P_pos⁻¹ e_pos   (2 dof)
+    nees_state       = mean eᵀ P⁻¹ e               (4 dof)
 
-In 3D (states (x, ẋ, y, ẏ, z, ż)) the same sums mean: bias_range along the 3D line of sight
-u = (cos ε cos β, cos ε sin β, sin ε), bias_cross along the horizontal cross-range
+In 3D (states (x, ẋ, y, ẏ, z, ż)) the same sums mean: bias_range_m along the 3D line of sight
+u = (cos ε cos β, cos ε sin β, sin ε), bias_cross_m along the horizontal cross-range
 (−sin β, cos β, 0), nees_pos with 3 dof and nees_state with 6 (``nees_dof``); ex, ey, pxx,
 pyy are the x and y axes as in 2D. The 2D sums are formed by the 2D code, unchanged.
 
@@ -61,14 +61,14 @@ SUM_NAMES: tuple[str, ...] = (
 class TrackMetrics(NamedTuple):
     """Per-scan statistics of one method over M runs; every field is (N,)."""
 
-    sigma_x_filter: NDArray[np.float64]
-    rmse_x: NDArray[np.float64]
-    std_x: NDArray[np.float64]
-    bias_x: NDArray[np.float64]
-    rmse_y: NDArray[np.float64]
-    sigma_y_filter: NDArray[np.float64]
-    bias_range: NDArray[np.float64]
-    bias_cross: NDArray[np.float64]
+    sigma_x_filter_m: NDArray[np.float64]
+    rmse_x_m: NDArray[np.float64]
+    std_x_m: NDArray[np.float64]
+    bias_x_m: NDArray[np.float64]
+    rmse_y_m: NDArray[np.float64]
+    sigma_y_filter_m: NDArray[np.float64]
+    bias_range_m: NDArray[np.float64]
+    bias_cross_m: NDArray[np.float64]
     nees_pos: NDArray[np.float64]
     nees_state: NDArray[np.float64]
 
@@ -77,7 +77,15 @@ class TrackMetrics(NamedTuple):
 #: bands are cut at 0 (``core.experiments.prosov.TrackingResult.band95``), and a negative value
 #: is a failed computation (``viz_app.reports.prosov.check_metrics``).
 NONNEGATIVE_METRICS: frozenset[str] = frozenset(
-    {"sigma_x_filter", "rmse_x", "std_x", "rmse_y", "sigma_y_filter", "nees_pos", "nees_state"}
+    {
+        "sigma_x_filter_m",
+        "rmse_x_m",
+        "std_x_m",
+        "rmse_y_m",
+        "sigma_y_filter_m",
+        "nees_pos",
+        "nees_state",
+    }
 )
 
 
@@ -418,7 +426,7 @@ class MetricsAccumulator:
 
     def band95(self, name: str) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """The 95% Monte Carlo band (lo, hi) per scan of the ``TrackMetrics`` field ``name``
-        (e.g. ``"rmse_x"``, ``"bias_range"``, ``"nees_pos"``): the delete-a-group jackknife
+        (e.g. ``"rmse_x_m"``, ``"bias_range_m"``, ``"nees_pos"``): the delete-a-group jackknife
         (``core.confidence``). NaN where it is undefined."""
         return jackknife_band(getattr(self.result(), name), getattr(self.leave_one_out(), name))
 
@@ -430,18 +438,18 @@ def metrics_from_sums(runs: NDArray[np.int64], sums: NDArray[np.float64]) -> Tra
     m[m == 0] = np.nan
     s = dict(zip(SUM_NAMES, sums, strict=True))
     with np.errstate(invalid="ignore", divide="ignore"):
-        bias_x = s["ex"] / m
+        bias_x_m = s["ex"] / m
         # Sample variance from the sums; clip tiny negative values left by rounding.
-        var_x = np.maximum(s["ex2"] - s["ex"] * bias_x, 0.0) / (m - 1.0)
+        var_x = np.maximum(s["ex2"] - s["ex"] * bias_x_m, 0.0) / (m - 1.0)
         return TrackMetrics(
-            sigma_x_filter=np.sqrt(s["pxx"] / m),
-            rmse_x=np.sqrt(s["ex2"] / m),
-            std_x=np.sqrt(var_x),
-            bias_x=bias_x,
-            rmse_y=np.sqrt(s["ey2"] / m),
-            sigma_y_filter=np.sqrt(s["pyy"] / m),
-            bias_range=s["er"] / m,
-            bias_cross=s["ec"] / m,
+            sigma_x_filter_m=np.sqrt(s["pxx"] / m),
+            rmse_x_m=np.sqrt(s["ex2"] / m),
+            std_x_m=np.sqrt(var_x),
+            bias_x_m=bias_x_m,
+            rmse_y_m=np.sqrt(s["ey2"] / m),
+            sigma_y_filter_m=np.sqrt(s["pyy"] / m),
+            bias_range_m=s["er"] / m,
+            bias_cross_m=s["ec"] / m,
             nees_pos=s["nees_pos"] / m,
             nees_state=s["nees_state"] / m,
         )

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import contextlib
 import csv
+import inspect
 import json
 from pathlib import Path
 
@@ -48,14 +49,14 @@ def test_run_prosov_is_the_engine_bit_for_bit() -> None:
         )
     )
     for m in ("naive", "seed"):
-        for field in ("bias_range", "rmse_x", "nees_pos"):
+        for field in ("bias_range_m", "rmse_x_m", "nees_pos"):
             np.testing.assert_array_equal(
                 getattr(res.metrics[m], field), getattr(ref.metrics[m], field)
             )
     table = radarviz.to_table([res])
     assert len(table) == 2 * 12
     rows = table[table.method == "seed"].sort_values("scan")
-    np.testing.assert_array_equal(rows.bias_range.to_numpy(), ref.metrics["seed"].bias_range)
+    np.testing.assert_array_equal(rows.bias_range_m.to_numpy(), ref.metrics["seed"].bias_range_m)
     assert radarviz.to_arrow(res).num_rows == 24
 
 
@@ -96,7 +97,7 @@ def test_estimate_velocity_recovers_the_true_velocity_without_noise() -> None:
     # The first-order σ of the baseline (docs/velocity.md): 2.157, 3.385, 10.665 m/s.
     np.testing.assert_allclose(np.sqrt(np.diag(est.covariance)), [2.157, 3.385, 10.665], atol=5e-4)
     table = radarviz.to_table(est)
-    assert table.shape[0] == 1 and table.geometry_m.iloc[0] == pytest.approx(0.053, abs=5e-4)
+    assert table.shape[0] == 1 and table.geometry_metric.iloc[0] == pytest.approx(0.053, abs=5e-4)
 
 
 def _convert(method: str = "ucm", **values: object) -> object:
@@ -165,6 +166,65 @@ def test_bad_input_is_one_line_naming_the_parameter(call, start: str) -> None:
         call()
     assert str(exc.value).startswith(start), str(exc.value)
     assert "\n" not in str(exc.value)
+
+
+#: One bad value for every public function that takes an argument: the parameter the error
+#: must name, and the call.
+BAD_VALUE: dict[str, tuple[str, object]] = {
+    "convert": ("sigma_r_m", lambda: _convert(sigma_r_m=-1.0)),
+    "finite_memory": (
+        "period_s",
+        lambda: radarviz.finite_memory(3, sigma_r_m=1.0, sigma_vr_mps=1.0, period_s=np.nan),
+    ),
+    "radar_preset": ("preset", lambda: radarviz.radar_preset("RLS9")),
+    "estimate_velocity": (
+        "radial_velocity_mps",
+        lambda: radarviz.estimate_velocity(
+            np.eye(3) * 1e4,
+            [1.0, np.nan, 3.0],
+            [0.0, 1.0, 2.0],
+            [0.1, 0.2, 0.3],
+            sigma_vr_mps=1.0,
+            sigma_azimuth_rad=0.01,
+            sigma_elevation_rad=0.01,
+        ),
+    ),
+    "direction_cosines": ("elevation_rad", lambda: radarviz.direction_cosines(0.0, [0.1, np.inf])),
+    "run_prosov": ("runs", lambda: radarviz.run_prosov(1.0, runs=1)),
+    "run_gorshkov": ("k_max", lambda: radarviz.run_gorshkov(k_max=0)),
+    "run_velocity": ("trials", lambda: radarviz.run_velocity(trials=1)),
+    "track": ("init", lambda: radarviz.track([], init="later")),
+    "track_file": ("init", lambda: radarviz.track_file("m.csv", "r.toml", init="later")),
+    "simulate": ("steps", lambda: radarviz.simulate("fusion", steps=0)),
+    "write_measurements": ("plots", lambda: radarviz.write_measurements("m.csv", "r.toml", [], [])),
+    "record": ("seed", lambda: radarviz.record("prosov", "x.rrd", seed=-1)),
+    "show": ("width", lambda: radarviz.show("prosov", width=5)),
+    "colour": ("name", lambda: radarviz.colour("mauve")),
+    "to_table": ("result", lambda: radarviz.to_table(42)),
+    "to_arrow": ("result", lambda: radarviz.to_arrow(42)),
+    "to_columns": ("result", lambda: radarviz.to_columns(42)),
+}
+
+
+def test_every_public_function_has_a_bad_value_case() -> None:
+    """A new public function that takes arguments gets its line in ``BAD_VALUE``."""
+    taking_arguments = {
+        name
+        for name in radarviz.__all__
+        if inspect.isfunction(obj := getattr(radarviz, name)) and inspect.signature(obj).parameters
+    }
+    assert set(BAD_VALUE) == taking_arguments
+
+
+@pytest.mark.parametrize("name", sorted(BAD_VALUE))
+def test_each_public_function_refuses_a_bad_value_naming_it(name: str, tmp_path: Path) -> None:
+    parameter, call = BAD_VALUE[name]
+    with contextlib.chdir(tmp_path), pytest.raises(ParameterError) as exc:
+        call()  # type: ignore[operator]
+    assert exc.value.parameter == parameter, str(exc.value)
+    assert str(exc.value).startswith(parameter + " "), str(exc.value)
+    assert "\n" not in str(exc.value)
+    assert not list(tmp_path.iterdir()), "a refused call left a file behind"
 
 
 def test_track_equals_the_file_tracker(tmp_path: Path) -> None:
@@ -366,7 +426,7 @@ def test_cli_reproduce_is_the_api(capsys: pytest.CaptureFixture[str]) -> None:
     case = doc["cases"][0]
     for m in ALL_METHODS:
         np.testing.assert_allclose(
-            case["methods"][m]["bias_range"], res.metrics[m].bias_range, rtol=1e-15
+            case["methods"][m]["bias_range_m"], res.metrics[m].bias_range_m, rtol=1e-15
         )
     assert main(["reproduce", "gorshkov", "--k-max", "0"]) == 2
     assert "--k-max must be an integer in [1, 20]" in capsys.readouterr().err

@@ -767,7 +767,7 @@ def test_reproduce_association_json_and_figure(
     assert png.stat().st_size > 10_000
     assert list(doc["methods"]) == ["ucm", "ekf"] and len(doc["times_s"]) == 16
     for e in doc["methods"].values():
-        band = e["gospa_per_scan"]
+        band = e["gospa_per_scan_m"]
         assert all(
             lo <= m <= hi for lo, m, hi in zip(band["lo"], band["mean"], band["hi"], strict=True)
         )
@@ -778,7 +778,7 @@ def test_reproduce_association_json_and_figure(
     assert doc["reference"] == "ucm"
     ucm, ekf = doc["methods"]["ucm"], doc["methods"]["ekf"]
     assert ucm["minus_reference"]["false_tracks"] == {"delta": 0.0, "lo": 0.0, "hi": 0.0}
-    for key in ("gospa", "swaps", "false_tracks"):
+    for key in ("gospa_m", "swaps", "false_tracks"):
         d = ekf["minus_reference"][key]["delta"]
         assert d == pytest.approx(ekf[key]["mean"] - ucm[key]["mean"], abs=1e-9)
     assert main(["reproduce", "association", "--runs", "1"]) == 2
@@ -804,7 +804,7 @@ def test_reproduce_association_refuses_a_nan(
     out, err = capsys.readouterr()
     assert out == "" and not png.exists()
     assert err == (
-        "radarviz: error: reproduce association: methods.ucm.gospa_per_scan.mean[3] is NaN "
+        "radarviz: error: reproduce association: methods.ucm.gospa_per_scan_m.mean[3] is NaN "
         "(not a finite result)\n"
     )
 

@@ -16,11 +16,11 @@ import pytest
 from radarviz.viz_app.cli.main import main
 
 METHOD_KEYS = {
-    "sigma_x_filter",
-    "rmse_x",
-    "std_x",
-    "bias_range",
-    "bias_cross",
+    "sigma_x_filter_m",
+    "rmse_x_m",
+    "std_x_m",
+    "bias_range_m",
+    "bias_cross_m",
     "nees_pos",
     "nees_state",
 }
@@ -63,7 +63,7 @@ def test_reproduce_prosov_json_document(capsys: pytest.CaptureFixture[str]) -> N
                     lo <= x <= hi for lo, x, hi in zip(band["lo"], m[key], band["hi"], strict=True)
                 )
         assert set(case["delta_x_percent"]) == {"filter", "rmse", "std"}
-        assert set(case["delta_x_ci95"]) == {"filter", "rmse", "std"}
+        assert set(case["delta_x_ci95_percent"]) == {"filter", "rmse", "std"}
         assert case["claims"] == []  # the paper's claims are over 20 scans; this run has 5
         lo, hi = case["nees_pos_band95"]
         assert 0 < lo < 2 < hi
@@ -344,36 +344,38 @@ def test_reproduce_gorshkov_json_document(capsys) -> None:
     for group in ("sigma", "sigma_analytic"):
         assert set(rls1[group]) == {"range_only", "range_doppler"}
         for v in rls1[group].values():
-            assert set(v) == {"r", "vr", "a"} and all(len(x) == 20 for x in v.values())
+            assert set(v) == {"r_m", "vr_mps", "a_mps2"} and all(len(x) == 20 for x in v.values())
     # Undefined values are null: range-only acceleration below k = 3, velocity at k = 1,
     # Doppler acceleration at k = 1.
     ro, rd = rls1["sigma"]["range_only"], rls1["sigma"]["range_doppler"]
-    assert ro["a"][:2] == [None, None] and ro["a"][2] is not None
-    assert ro["vr"][0] is None and rd["vr"][0] is not None
-    assert rd["a"][0] is None and rd["a"][1] is not None
-    assert set(rls1["gain_percent"]) == {"r", "vr", "a"}
+    assert ro["a_mps2"][:2] == [None, None] and ro["a_mps2"][2] is not None
+    assert ro["vr_mps"][0] is None and rd["vr_mps"][0] is not None
+    assert rd["a_mps2"][0] is None and rd["a_mps2"][1] is not None
+    assert set(rls1["gain_percent"]) == {"r_m", "vr_mps", "a_mps2"}
     tr = doc["tracking"]
     assert tr["radar"] == "RLS3" and tr["runs"] == 50 and tr["start_scans"] == 3
     assert set(tr["variants"]) == {"range_only", "range_doppler"}
-    assert tr["variants"]["range_doppler"]["rmse_vr"][:2] == [None, None]
+    assert tr["variants"]["range_doppler"]["rmse_vr_mps"][:2] == [None, None]
     # Every Monte Carlo series has its band, null exactly where the series is null, and the
     # band brackets the value.
     assert doc["band"]["level"] == 0.95 and doc["band"]["groups"] == 32
     pairs = [
         (rls1["sigma"][v][c], rls1["sigma_ci95"][v][c])
         for v in ("range_only", "range_doppler")
-        for c in ("r", "vr", "a")
+        for c in ("r_m", "vr_mps", "a_mps2")
     ]
-    pairs += [(rls1["gain_percent"][c], rls1["gain_percent_ci95"][c]) for c in ("vr", "a")]
+    pairs += [(rls1["gain_percent"][c], rls1["gain_ci95_percent"][c]) for c in ("vr_mps", "a_mps2")]
     for name in ("range_only", "range_doppler"):
         entry = tr["variants"][name]
-        pairs += [(entry[k], entry["ci95"][k]) for k in ("rmse_vr", "rmse_x", "nees_pos")]
+        pairs += [(entry[k], entry["ci95"][k]) for k in ("rmse_vr_mps", "rmse_x_m", "nees_pos")]
     for values, band in pairs:
         for x, lo, hi in zip(values, band["lo"], band["hi"], strict=True):
             assert (x is None) == (lo is None) == (hi is None)
             assert x is None or lo < x < hi
     peak = rls1["range_gain_peak"]
-    assert peak["k"] in peak["k_within_band"] and peak["ci95"][0] < peak["percent"]
+    assert (
+        peak["k"] in peak["k_within_band"] and peak["gain_ci95_percent"][0] < peak["gain_percent"]
+    )
 
 
 @pytest.mark.parametrize(

@@ -125,8 +125,8 @@ def test_experiment_engines_agree_on_every_statistic() -> None:
             vb = getattr(b.metrics[method], name)
             scale = np.nanmax(np.abs(vb))
             np.testing.assert_allclose(va, vb, rtol=0, atol=TOL * scale, err_msg=name)
-        lo_a, hi_a = a.band95(method, "rmse_x")
-        lo_b, hi_b = b.band95(method, "rmse_x")
+        lo_a, hi_a = a.band95(method, "rmse_x_m")
+        lo_b, hi_b = b.band95(method, "rmse_x_m")
         np.testing.assert_allclose(hi_a - lo_a, hi_b - lo_b, rtol=1e-7)
 
 
@@ -172,8 +172,10 @@ def test_doppler_experiment_engines_agree() -> None:
         for name, va in a.metrics[variant]._asdict().items():
             vb = getattr(b.metrics[variant], name)
             np.testing.assert_allclose(va, vb, rtol=0, atol=TOL * np.nanmax(np.abs(vb)))
-        np.testing.assert_allclose(a.rmse_vr[variant], b.rmse_vr[variant], rtol=TOL)
-        np.testing.assert_allclose(a.sigma_vr_filter[variant], b.sigma_vr_filter[variant], rtol=TOL)
+        np.testing.assert_allclose(a.rmse_vr_mps[variant], b.rmse_vr_mps[variant], rtol=TOL)
+        np.testing.assert_allclose(
+            a.sigma_vr_filter_mps[variant], b.sigma_vr_filter_mps[variant], rtol=TOL
+        )
 
 
 def test_kernel_metric_terms_match_scan_terms() -> None:
@@ -259,10 +261,10 @@ def test_a_method_without_a_kernel_runs_on_the_numpy_engine(monkeypatch) -> None
     cfg = TrackingConfig(runs=100, methods=("naive", "ukf"), seed=2)
     mixed = run_tracking(cfg)
     reference = run_tracking(replace(cfg, engine="numpy"))
-    np.testing.assert_array_equal(mixed.metrics["ukf"].rmse_x, reference.metrics["ukf"].rmse_x)
-    assert not np.array_equal(mixed.metrics["naive"].rmse_x, reference.metrics["naive"].rmse_x)
+    np.testing.assert_array_equal(mixed.metrics["ukf"].rmse_x_m, reference.metrics["ukf"].rmse_x_m)
+    assert not np.array_equal(mixed.metrics["naive"].rmse_x_m, reference.metrics["naive"].rmse_x_m)
     np.testing.assert_allclose(
-        mixed.metrics["naive"].rmse_x, reference.metrics["naive"].rmse_x, rtol=TOL
+        mixed.metrics["naive"].rmse_x_m, reference.metrics["naive"].rmse_x_m, rtol=TOL
     )
 
 

@@ -93,9 +93,9 @@ def test_prosov_bands_cover_at_95_percent() -> None:
             sigma_beta_deg=2.0, runs=runs, seed=500 + r, target=target, methods=("naive", "seed")
         )
         res = run_tracking(cfg)
-        bands = {f"dx_{k}": v for k, v in res.delta_x_ci95().items()}
+        bands = {f"dx_{k}": v for k, v in res.delta_x_ci95_percent().items()}
         values = {f"dx_{k}": v for k, v in res.delta_x_percent().items()}
-        for name in ("rmse_x", "bias_range"):
+        for name in ("rmse_x_m", "bias_range_m"):
             bands[name] = res.band95("seed", name)
             values[name] = getattr(res.metrics["seed"], name)
         for k, v in values.items():
@@ -105,10 +105,10 @@ def test_prosov_bands_cover_at_95_percent() -> None:
         for method in sums:
             m = res.metrics[method]
             # Σe, Σe², ΣPxx, Σe_range of the replicate, from its statistics.
-            s_e = runs * m.bias_x[-1]
-            s_e2 = (runs - 1) * m.std_x[-1] ** 2 + runs * m.bias_x[-1] ** 2
+            s_e = runs * m.bias_x_m[-1]
+            s_e2 = (runs - 1) * m.std_x_m[-1] ** 2 + runs * m.bias_x_m[-1] ** 2
             sums[method].append(
-                np.array([s_e, s_e2, runs * m.sigma_x_filter[-1] ** 2, runs * m.bias_range[-1]])
+                np.array([s_e, s_e2, runs * m.sigma_x_filter_m[-1] ** 2, runs * m.bias_range_m[-1]])
             )
     total = replicates * runs
     pooled = {}
@@ -121,8 +121,8 @@ def test_prosov_bands_cover_at_95_percent() -> None:
         "dx_filter": float(delta_percent(np.array(a[0]), np.array(b[0]))),
         "dx_rmse": float(delta_percent(np.array(a[1]), np.array(b[1]))),
         "dx_std": float(delta_percent(np.array(a[2]), np.array(b[2]))),
-        "rmse_x": a[1],
-        "bias_range": a[3],
+        "rmse_x_m": a[1],
+        "bias_range_m": a[3],
     }
     for k, value in ref.items():
         _check_coverage(_covered(np.array(lo[k]), np.array(hi[k]), value), replicates, k)

@@ -555,7 +555,7 @@ def test_track_runs_every_method_on_3d_plots(tmp_path: Path, doppler: str) -> No
                 k: np.array([float(row[k]) for row in mine]) for k in mine[0] if k != "method"
             }
             assert all(np.all(np.isfinite(v)) for v in values.values()), method
-            assert all(np.all(values[k] > 0) for k in ("p_xx", "p_yy", "p_zz")), method
+            assert all(np.all(values[k] > 0) for k in ("p_xx_m2", "p_yy_m2", "p_zz_m2")), method
             pos = np.stack([values["x_m"], values["y_m"], values["z_m"]], axis=-1)
             rmse = math.sqrt(np.mean(np.sum((pos - truth) ** 2, axis=1)))
             assert rmse < raw_rmse, (method, seed, rmse, raw_rmse)

@@ -143,7 +143,7 @@ def test_doppler_experiment_runs_the_converted_variant_from_the_same_start() -> 
     res = run_doppler_tracking(cfg)
     a, b = (res.metrics[v] for v in cfg.variants)
     k = cfg.start_scans - 1  # the start scan: the same finite-memory start for both
-    assert a.rmse_x[k] == b.rmse_x[k] and a.nees_pos[k] == b.nees_pos[k]
+    assert a.rmse_x_m[k] == b.rmse_x_m[k] and a.nees_pos[k] == b.nees_pos[k]
     assert not np.array_equal(a.nees_pos[k + 1 :], b.nees_pos[k + 1 :])
     (summary,) = [doppler_consistency(r) for r in compare_doppler_updates(("RLS2",), runs=60)]
     assert [c.variant for c in summary] == [

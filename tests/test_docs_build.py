@@ -3,6 +3,7 @@ errors (Sphinx, myst-parser, napoleon: Google-style docstrings), offline."""
 
 from __future__ import annotations
 
+import html
 import re
 import subprocess
 import sys
@@ -50,3 +51,19 @@ def test_docs_build_without_warnings(tmp_path: Path) -> None:
     assert "Args:" not in api and "Parameters" in api
     for page in ("conversion", "finite_memory", "velocity", "references"):
         assert (out / f"{page}.html").is_file(), page
+    check_api_page_reads(api)
+
+
+def check_api_page_reads(page: str) -> None:
+    """The API page as a newcomer reads it: type aliases by their names (numpy's
+    ``ArrayLike`` expanded is a union of seven private types, for every argument), the
+    package's introduction once, its example whole."""
+    text = html.unescape(re.sub(r"<[^>]+>", "", page))
+    for expanded in ("_Buffer", "_SupportsArray", "_NestedSequence", "TypeAliasForwardRef"):
+        assert expanded not in text, f"{expanded} in the built API page"
+    assert "range_m: ArrayLike" in text, "convert's signature does not show ArrayLike"
+    intro = "Quantities carry their unit in their name"
+    assert text.count(intro) == 1, f"the introduction appears {text.count(intro)} times"
+    example = radarviz.__doc__.split("Example::", 1)[1]
+    for line in filter(None, (ln.strip() for ln in example.splitlines())):
+        assert line in text, f"the example's line {line!r} is not in the built page"

@@ -106,15 +106,15 @@ def test_finite_memory_start_covariance_matches_monte_carlo(doppler: bool) -> No
 
 def test_doppler_start_and_track_beat_range_only_for_rls3() -> None:
     res = run_doppler_tracking(DopplerTrackingConfig(radar="RLS3", runs=3000, steps=30))
-    ro, rd = res.rmse_vr["range_only"], res.rmse_vr["range_doppler"]
+    ro, rd = res.rmse_vr_mps["range_only"], res.rmse_vr_mps["range_doppler"]
     assert np.all(np.isnan(ro[:2])) and np.isfinite(ro[2])
     # At the start the radial-velocity error is the fit's: σVr-like with Doppler, far larger
     # without (the paper's gains); the filter's own σ agrees with the empirical RMSE.
     assert rd[2] < 0.5 * ro[2]
     for v in ("range_only", "range_doppler"):
         rel_se = 1.0 / np.sqrt(2 * res.config.runs)
-        s = res.sigma_vr_filter[v][2]
-        assert abs(res.rmse_vr[v][2] - s) < Z * rel_se * s + 0.02 * s
+        s = res.sigma_vr_filter_mps[v][2]
+        assert abs(res.rmse_vr_mps[v][2] - s) < Z * rel_se * s + 0.02 * s
     # Consistent over the track for this radar (NEES near 2, loose: EKF, not exact).
     for v in ("range_only", "range_doppler"):
         assert np.all(res.metrics[v].nees_pos[2:] < 2.6)

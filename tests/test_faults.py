@@ -526,8 +526,8 @@ def test_check_finite_result_names_the_value_and_spares_undefined_ones() -> None
         check_finite_result(
             "w", "g", np.array([[0.0, 0.0, 0.0], [0.0, 0.0, np.inf]]), index_name="k", index=[3, 7]
         )
-    with pytest.raises(ResultError, match=r"^w: baseline\.sigma_mc\[1\] is NaN"):
-        check_finite_document("w", {"baseline": {"sigma_mc": [1.0, math.nan], "warning": None}})
+    with pytest.raises(ResultError, match=r"^w: baseline\.sigma_mc_mps\[1\] is NaN"):
+        check_finite_document("w", {"baseline": {"sigma_mc_mps": [1.0, math.nan], "warning": None}})
 
 
 def _spoil(result, method: str, key: str, scan: int, value: float):
@@ -583,10 +583,10 @@ def test_reproduce_gorshkov_undefined_is_null_and_a_nan_is_an_error(
     argv += ["--tracking-runs", "20", "--json"]
     assert main(argv) == 0
     doc = json.loads(capsys.readouterr().out)
-    assert doc["radars"][0]["sigma"]["range_only"]["a"][:2] == [None, None]
-    assert all(v is not None for v in doc["radars"][0]["sigma"]["range_only"]["a"][2:])
+    assert doc["radars"][0]["sigma"]["range_only"]["a_mps2"][:2] == [None, None]
+    assert all(v is not None for v in doc["radars"][0]["sigma"]["range_only"]["a_mps2"][2:])
     start = doc["tracking"]["start_scans"]
-    rmse = doc["tracking"]["variants"]["range_doppler"]["rmse_x"]
+    rmse = doc["tracking"]["variants"]["range_doppler"]["rmse_x_m"]
     assert rmse[: start - 1] == [None] * (start - 1) and None not in rmse[start - 1 :]
 
     real_fit = api._run_gorshkov
@@ -607,10 +607,10 @@ def test_reproduce_gorshkov_undefined_is_null_and_a_nan_is_an_error(
     monkeypatch.setattr(
         api,
         "run_doppler_tracking",
-        lambda cfg: _spoil(real_track(cfg), "range_only", "rmse_x", 10, math.nan),
+        lambda cfg: _spoil(real_track(cfg), "range_only", "rmse_x_m", 10, math.nan),
     )
     assert main(argv) == 1
-    one_error_line(capsys.readouterr().err, "rmse_x of range_only at scan 10 is NaN")
+    one_error_line(capsys.readouterr().err, "rmse_x_m of range_only at scan 10 is NaN")
 
 
 def test_reproduce_velocity_refuses_a_nan(
@@ -629,7 +629,7 @@ def test_reproduce_velocity_refuses_a_nan(
     assert main(["reproduce", "velocity", "--trials", "2000"]) == 1
     out, err = capsys.readouterr()
     assert out == ""
-    one_error_line(err, "reproduce velocity: baseline.sigma_mc[1] is NaN (not a finite result)")
+    one_error_line(err, "reproduce velocity: baseline.sigma_mc_mps[1] is NaN (not a finite result)")
 
 
 @pytest.mark.parametrize("entry, value", [((2, 2), math.nan), ((0, 0), -1.0)])
@@ -662,7 +662,7 @@ def test_track_refuses_a_nan_or_negative_variance_and_writes_nothing(
     out, rrd = tmp_path / "t.csv", tmp_path / "t.rrd"
     argv = track(meas, radars, "--out", str(out), "--rrd", str(rrd), "--method", "naive")
     assert main(argv) == 1
-    column = "p_yy" if entry == (2, 2) else "p_xx"
+    column = "p_yy_m2" if entry == (2, 2) else "p_xx_m2"
     what = "is NaN (not a finite result)" if math.isnan(value) else "is -1 (a negative value"
     line = one_error_line(capsys.readouterr().err, f"{column} of naive", what)
     assert line.startswith(f"radarviz: error: track: {meas} at time 60.0 s:")
@@ -701,7 +701,7 @@ def test_sweep_refuses_a_nan_and_writes_no_table(
 
     def spoiled(spec, *args, **kwargs):
         run = real(spec, *args, **kwargs)
-        _spoil(run.results[0], "naive", "rmse_x", 3, math.nan)
+        _spoil(run.results[0], "naive", "rmse_x_m", 3, math.nan)
         return run
 
     monkeypatch.setattr(cli_sweep, "run_sweep", spoiled)
@@ -710,7 +710,7 @@ def test_sweep_refuses_a_nan_and_writes_no_table(
     assert main([*args, "--json", "--methods", "naive", "--out", str(out)]) == 1
     stdout, err = capsys.readouterr()
     assert stdout == ""
-    one_error_line(err, "sweep: point 0: rmse_x of naive at scan 3 is NaN")
+    one_error_line(err, "sweep: point 0: rmse_x_m of naive at scan 3 is NaN")
     assert not out.exists()
 
 

@@ -30,15 +30,15 @@ def test_accumulator_equals_direct_statistics_over_blocks() -> None:
         u = truth[n, [0, 2]] / np.hypot(truth[n, 0], truth[n, 2])
         epos = e[:, [0, 2]]
         Ppos = Ps[n][:, [0, 2]][:, :, [0, 2]]
-        np.testing.assert_allclose(res.bias_x[n], e[:, 0].mean(), rtol=1e-12)
-        np.testing.assert_allclose(res.rmse_x[n], np.sqrt((e[:, 0] ** 2).mean()), rtol=1e-12)
-        np.testing.assert_allclose(res.std_x[n], e[:, 0].std(ddof=1), rtol=1e-9)
-        np.testing.assert_allclose(res.bias_range[n], (epos @ u).mean(), rtol=1e-9)
+        np.testing.assert_allclose(res.bias_x_m[n], e[:, 0].mean(), rtol=1e-12)
+        np.testing.assert_allclose(res.rmse_x_m[n], np.sqrt((e[:, 0] ** 2).mean()), rtol=1e-12)
+        np.testing.assert_allclose(res.std_x_m[n], e[:, 0].std(ddof=1), rtol=1e-9)
+        np.testing.assert_allclose(res.bias_range_m[n], (epos @ u).mean(), rtol=1e-9)
         np.testing.assert_allclose(
-            res.bias_cross[n], (epos @ np.array([-u[1], u[0]])).mean(), rtol=1e-9
+            res.bias_cross_m[n], (epos @ np.array([-u[1], u[0]])).mean(), rtol=1e-9
         )
         np.testing.assert_allclose(
-            res.sigma_x_filter[n], np.sqrt(Ps[n][:, 0, 0].mean()), rtol=1e-12
+            res.sigma_x_filter_m[n], np.sqrt(Ps[n][:, 0, 0].mean()), rtol=1e-12
         )
         nees_pos = np.einsum("mi,mij,mj->m", epos, np.linalg.inv(Ppos), epos).mean()
         nees = np.einsum("mi,mij,mj->m", e, np.linalg.inv(Ps[n]), e).mean()

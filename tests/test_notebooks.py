@@ -4,6 +4,7 @@ installed rerun-notebook package (no network)."""
 
 from __future__ import annotations
 
+import ast
 import time
 from pathlib import Path
 
@@ -33,6 +34,50 @@ def test_notebooks_are_committed_without_outputs() -> None:
         nb = nbformat.read(path, as_version=4)
         dirty = [i for i, c in enumerate(nb.cells) if c.cell_type == "code" and c.outputs]
         assert not dirty, f"{path.name}: cells {dirty} hold outputs (clear them before committing)"
+
+
+def radarviz_internals(source: str) -> list[str]:
+    """The imports of a radarviz submodule in a code cell's source (IPython's ``%`` and ``!``
+    lines dropped first, since they are not Python): ``import radarviz.core…``,
+    ``from radarviz.x import …`` and ``from radarviz import core`` all reach past the public
+    API, whose functions are reached as attributes of ``import radarviz``."""
+    python = "\n".join(
+        "" if line.lstrip().startswith(("%", "!")) else line for line in source.splitlines()
+    )
+    found = []
+    for node in ast.walk(ast.parse(python)):
+        if isinstance(node, ast.Import):
+            found += [a.name for a in node.names if a.name.startswith("radarviz.")]
+        elif isinstance(node, ast.ImportFrom) and node.module:
+            if node.module.startswith("radarviz."):
+                found.append(f"from {node.module}")
+            elif node.module == "radarviz":
+                found += [f"from radarviz import {a.name}" for a in node.names]
+    return found
+
+
+def test_internals_are_found() -> None:
+    """The check of ``test_notebooks_import_only_radarviz`` catches each form of import."""
+    assert radarviz_internals("import radarviz\nimport numpy as np") == []
+    assert radarviz_internals("%matplotlib inline\nimport radarviz.core.geometry") == [
+        "radarviz.core.geometry"
+    ]
+    assert radarviz_internals("def f():\n    from radarviz.viz_app.io import plots") == [
+        "from radarviz.viz_app.io"
+    ]
+    assert radarviz_internals("from radarviz import core") == ["from radarviz import core"]
+
+
+@pytest.mark.parametrize("path", NOTEBOOKS, ids=[p.stem for p in NOTEBOOKS])
+def test_notebooks_import_only_radarviz(path: Path) -> None:
+    """A notebook is an example of the public API: what it needs, ``radarviz`` exports."""
+    nb = nbformat.read(path, as_version=4)
+    internals = {
+        i: found
+        for i, c in enumerate(nb.cells)
+        if c.cell_type == "code" and (found := radarviz_internals(c.source))
+    }
+    assert not internals, f"{path.name}: cells import radarviz internals: {internals}"
 
 
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=[p.stem for p in NOTEBOOKS])

@@ -54,8 +54,8 @@ def test_filter_bias_pattern(two_degree) -> None:
         "ducm": (-0.12, 0.12),
     }.items():
         m = res.metrics[name]
-        bias = np.mean(m.bias_range[win])
-        se = np.max(m.std_x[win]) / np.sqrt(res.config.runs)
+        bias = np.mean(m.bias_range_m[win])
+        se = np.max(m.std_x_m[win]) / np.sqrt(res.config.runs)
         assert lo * rs - Z * se <= bias <= hi * rs + Z * se, (name, bias, rs)
 
 
@@ -114,7 +114,7 @@ def test_same_seed_is_bit_identical_and_seed_matters() -> None:
             np.testing.assert_array_equal(x, y)
     (other,) = prosov_configs([1.0], runs=300, steps=8, seed=2, methods=("naive",))
     assert not np.array_equal(
-        run_tracking(other).metrics["naive"].rmse_x, a.metrics["naive"].rmse_x
+        run_tracking(other).metrics["naive"].rmse_x_m, a.metrics["naive"].rmse_x_m
     )
 
 
@@ -220,17 +220,17 @@ def test_bands_and_claim_verdicts_in_the_document() -> None:
     doc = prosov_document([run_tracking(c) for c in configs])
     assert doc["band"]["groups"] >= 2 and doc["band"]["level"] == 0.95
     for case in doc["cases"]:
-        for reading, band in case["delta_x_ci95"].items():
+        for reading, band in case["delta_x_ci95_percent"].items():
             lo, value, hi = (np.array(band["lo"]), case["delta_x_percent"][reading], band["hi"])
             assert np.all((lo < value) & (value < np.array(hi)))
         ci = case["methods"]["ucm"]["ci95"]
-        for key in ("rmse_x", "bias_range", "nees_pos"):
+        for key in ("rmse_x_m", "bias_range_m", "nees_pos"):
             value = np.array(case["methods"]["ucm"][key])
             assert np.all((np.array(ci[key]["lo"]) < value) & (value < np.array(ci[key]["hi"])))
         verdicts = {c["reading"]: c["verdict"] for c in case["claims"]}
         assert verdicts["filter"] == "does not hold" and verdicts["std"] == "holds"
         bound = {1.0: 2.1, 2.0: 18.0}[case["sigma_beta_deg"]]
-        band = case["delta_x_ci95"]["rmse"]
+        band = case["delta_x_ci95_percent"]["rmse"]
         assert verdicts["rmse"] == claim_verdict(band["lo"][:20], band["hi"][:20], bound)
         for c in case["claims"]:
             lo, hi = c["peak_ci95"]
@@ -257,9 +257,9 @@ def test_delta_x_band_is_nan_without_group_sums() -> None:
     }
     res = tracking_result(cfg, acc)
     assert res.leave_one_out == {}
-    lo, hi = res.delta_x_ci95()["rmse"]
+    lo, hi = res.delta_x_ci95_percent()["rmse"]
     assert np.isnan(lo).all() and np.isnan(hi).all()
-    assert np.isnan(res.band95("seed", "rmse_x")[0]).all()
+    assert np.isnan(res.band95("seed", "rmse_x_m")[0]).all()
 
 
 def test_figure_draws_every_band_and_names_its_runs() -> None:

@@ -96,16 +96,16 @@ def test_first_scan_bias_along_the_line_of_sight_matches_the_analytic_value() ->
     lb, le = np.exp(-(np.deg2rad(sb) ** 2) / 2), np.exp(-(np.deg2rad(se) ** 2) / 2)
     c2, s2 = np.cos(np.deg2rad(elev)) ** 2, np.sin(np.deg2rad(elev)) ** 2
     naive_bias = 150e3 * ((lb * le - 1) * c2 + (le - 1) * s2)
-    ucm = res.metrics["ucm"].bias_range[0]
-    lo, hi = res.band95("ucm", "bias_range")
+    ucm = res.metrics["ucm"].bias_range_m[0]
+    lo, hi = res.band95("ucm", "bias_range_m")
     assert lo[0] < 0.0 < hi[0]
     # naive − ucm on the same runs: ucm is unbiased, so the mean of the difference is naive's
     # bias exactly. Per run the difference is r̂ times a smooth function of the angles that
     # varies by O(σr/r + σ) ≈ 4% of itself, so over 4000 runs its mean's relative standard
     # error is under 0.1%: 1% is ten standard errors.
-    diff = res.metrics["naive"].bias_range[0] - ucm
+    diff = res.metrics["naive"].bias_range_m[0] - ucm
     assert diff == pytest.approx(naive_bias, rel=0.01)
-    seed_diff = res.metrics["seed"].bias_range[0] - ucm
+    seed_diff = res.metrics["seed"].bias_range_m[0] - ucm
     assert seed_diff == pytest.approx(2.0 * naive_bias, rel=0.01)
     # χ²(3 · 4000) / 4000: 3 ± 1.96 √(6 / 4000)
     assert res.nees_pos_band95 == pytest.approx((2.924, 3.076), abs=0.002)
@@ -129,7 +129,7 @@ def test_3d_at_zero_elevation_is_the_planar_experiment_plus_a_height_axis() -> N
     # (T²σv0² = 10⁸ m²): scan 2 −726 m against −382 m (the test below).
     for m in [m for m in flat.methods if m != "ukf"]:
         np.testing.assert_allclose(
-            b.metrics[m].bias_range, a.metrics[m].bias_range, atol=0.5, err_msg=m
+            b.metrics[m].bias_range_m, a.metrics[m].bias_range_m, atol=0.5, err_msg=m
         )
         extra = b.metrics[m].nees_pos - a.metrics[m].nees_pos
         assert np.all(np.abs(extra - 1.0) < tol), (m, extra)
@@ -142,7 +142,7 @@ def test_3d_scene_rides_in_the_monte_carlo_and_equals_track_history() -> None:
     scene = prosov_scene(cfg)
     ref = run_tracking(cfg)
     for m in cfg.methods:
-        for name in ("rmse_x", "nees_state", "bias_range"):
+        for name in ("rmse_x_m", "nees_state", "bias_range_m"):
             np.testing.assert_array_equal(
                 getattr(scene.result.metrics[m], name), getattr(ref.metrics[m], name)
             )

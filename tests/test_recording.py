@@ -69,9 +69,9 @@ def test_logged_series_equal_core_outputs(prosov_rrd: Path, rrd_contents) -> Non
     _, cols = rrd_contents(prosov_rrd)
     res = run_tracking(TrackingConfig(sigma_beta_deg=2.0, runs=200, seed=3))
     for m, name, metric in (
-        ("naive", "rmse_x_m", "rmse_x"),
+        ("naive", "rmse_x_m", "rmse_x_m"),
         ("ducm", "nees_pos", "nees_pos"),
-        ("ukf", "bias_range_m", "bias_range"),
+        ("ukf", "bias_range_m", "bias_range_m"),
     ):
         got = cols[f"/plots/prosov/{name}/{m}"]
         assert got["scan"] == list(range(1, 61))
@@ -170,7 +170,7 @@ def test_demo_writes_a_recording_headless(tmp_path: Path, capsys, rrd_contents) 
     scene = prosov_scene(TrackingConfig(sigma_beta_deg=2.0, runs=500, seed=1))
     np.testing.assert_array_equal(
         [v[0] for v in cols["/plots/prosov/rmse_x_m/naive"]["Scalars:scalars"]],
-        scene.result.metrics["naive"].rmse_x,
+        scene.result.metrics["naive"].rmse_x_m,
     )
     for m in ("seed", "ukf"):
         pts = cols[f"/prosov/map/tracks/{m}/position"]["Points2D:positions"]
@@ -193,7 +193,7 @@ def test_velocity_preset_logs_the_fused_velocity_and_flags_bad_geometry(
         assert rows[f"/velocity/map/lines_of_sight/{r}"] == scans
         assert rows[f"/velocity/vector/radial/{r}"] == scans
     assert rows["/velocity/map/fused/position"] == scans
-    m_col = cols["/plots/velocity/geometry_m/m"]
+    m_col = cols["/plots/velocity/geometry_metric/m"]
     m = np.array([v[0] for v in m_col["Scalars:scalars"]])
     flagged = {n for n, mv in zip(m_col["scan"], m, strict=True) if mv > M_WARN}
     warnings = [t[0] for t in cols["/log"]["TextLog:text"] if "velocity at scan" in t[0]]

@@ -21,7 +21,7 @@ from radarviz.viz_app.cli.main import main
 from radarviz.viz_app.io.score_files import TrackFile, read_truth
 
 TRUTH_HEADER = ["time_s", "target", "x_m", "y_m"]
-TRACK_HEADER = ["time_s", "target", "method", "x_m", "y_m", "z_m", "p_xx", "p_xy", "p_yy"]
+TRACK_HEADER = ["time_s", "target", "method", "x_m", "y_m", "z_m", "p_xx_m2", "p_xy_m2", "p_yy_m2"]
 
 
 def _write(path: Path, header: list[str], rows: list[list[object]]) -> Path:
@@ -419,9 +419,12 @@ def test_undefined_figures_are_null_with_a_reason(tmp_path: Path, capsys) -> Non
         ),
         (
             None,
-            [["time_s", "method", "x_m", "y_m", "p_xx", "p_xy", "p_yy"], [0, "m", 0, 0, -1, 0, 1]],
+            [
+                ["time_s", "method", "x_m", "y_m", "p_xx_m2", "p_xy_m2", "p_yy_m2"],
+                [0, "m", 0, 0, -1, 0, 1],
+            ],
             [],
-            "tracks.csv row 1, column p_xx: must be a finite number >= 0 (got '-1')",
+            "tracks.csv row 1, column p_xx_m2: must be a finite number >= 0 (got '-1')",
         ),
         (
             None,

@@ -146,7 +146,7 @@ def test_sweep_point_equals_reproduce_prosov_json(tmp_path: Path, capsys) -> Non
     case = doc["cases"][0]
     for method in ("naive", "ekf"):
         idx = [i for i in rows if table["method"][i] == method]
-        for key in ("rmse_x", "std_x", "bias_range", "nees_pos", "sigma_x_filter"):
+        for key in ("rmse_x_m", "std_x_m", "bias_range_m", "nees_pos", "sigma_x_filter_m"):
             assert [table[key][i] for i in idx] == case["methods"][method][key], (method, key)
 
 
@@ -242,14 +242,14 @@ def _sweep_cli_on(scheduler: str, serial_results, tmp_path: Path, capsys) -> Non
     for col in COLUMNS:
         assert table.column(col).equals(expected.column(col)), col
     assert sorted(p.name for p in (tmp_path / "figs").iterdir()) == [
-        "sweep_bias_range.png",
+        "sweep_bias_range_m.png",
         "sweep_nees_pos.png",
-        "sweep_rmse_x.png",
+        "sweep_rmse_x_m.png",
     ]
     entities = {c.entity_path for c in RrdReader(str(rrd)).stream()}
     for m in METHODS:
         assert f"/sweep/heatmap/nees_pos/{m}" in entities
-        assert f"/sweep/final/rmse_x/{m}" in entities
+        assert f"/sweep/final/rmse_x_m/{m}" in entities
 
 
 def test_bench_sweep_rows_match_the_serial_sweep_and_their_wall_times(capsys, monkeypatch) -> None:
@@ -598,7 +598,9 @@ def test_3d_grid_point_is_the_3d_reproduction_bitwise() -> None:
     assert got.nees_pos_band95 == nees_band(3, 700)  # 3 degrees of freedom in 3D
     # The elevation noise reaches the statistics: the points differ in their σε.
     results = run_sweep_serial(spec)
-    assert results[2].metrics["naive"].bias_range[0] != results[3].metrics["naive"].bias_range[0]
+    assert (
+        results[2].metrics["naive"].bias_range_m[0] != results[3].metrics["naive"].bias_range_m[0]
+    )
 
 
 def test_3d_chunk_keys_see_elevation_and_sigma_elevation() -> None:
@@ -650,5 +652,5 @@ def test_3d_sweep_point_equals_reproduce_prosov_dims_3_json(tmp_path: Path, caps
             for i, (sb, m) in enumerate(zip(d["sigma_beta_deg"], d["method"], strict=True))
             if sb == 1.0 and m == method
         ]
-        for key in ("rmse_x", "bias_range", "nees_pos", "nees_state", "sigma_x_filter"):
+        for key in ("rmse_x_m", "bias_range_m", "nees_pos", "nees_state", "sigma_x_filter_m"):
             assert [d[key][i] for i in idx] == case["methods"][method][key], (method, key)

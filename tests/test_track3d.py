@@ -39,7 +39,12 @@ from radarviz.core.finite_memory.start import finite_memory_start
 from radarviz.core.tracking.stream import METHODS_3D, Plot, StreamOptions, StreamTracker
 from radarviz.core.velocity.estimate import BASELINE_VELOCITY_MPS
 from radarviz.viz_app.cli.main import main
-from radarviz.viz_app.io.plots import TRACK_COLUMNS, fusion_plots, state_from_row
+from radarviz.viz_app.io.plots import (
+    TRACK_COLUMNS,
+    covariance_column,
+    fusion_plots,
+    state_from_row,
+)
 
 # Deterministic cross-checks: the same arithmetic in a different order (filterpy's explicit
 # (I − KH) P (I − KH)ᵀ against the multiplied-out Joseph form, inv(S) against solve, degrees
@@ -365,7 +370,7 @@ ZS = ["z", "vz"]
 
 
 def pair_key(row: dict[str, str], a: str, b: str) -> str:
-    return f"p_{a}{b}" if f"p_{a}{b}" in row else f"p_{b}{a}"
+    return covariance_column(a, b) if covariance_column(a, b) in row else covariance_column(b, a)
 
 
 @pytest.mark.parametrize("init", ["first-plot", "finite-memory"])
@@ -414,10 +419,10 @@ def test_zero_elevation_reduces_to_2d(tmp_path: Path, init: str, doppler: str) -
         assert float(b["z_m"]) == 0.0 and float(b["vz_mps"]) == 0.0
         # z and ż are decoupled from the x–y block exactly.
         assert all(float(b[pair_key(b, p, q)]) == 0.0 for p in XY for q in ZS)
-        assert float(b["p_vzvz"]) > 0.0
+        assert float(b["p_vzvz_m2ps2"]) > 0.0
         # (with σε = 1e-6° the measured z has variance ~1e-12 m² against a predicted 1e7 m²:
-        # below rounding, so p_zz is only checked for the realistic σε)
-        assert float(b["p_zz"]) > 0.0 or se_deg < 1e-6
+        # below rounding, so p_zz_m2 is only checked for the realistic σε)
+        assert float(b["p_zz_m2"]) > 0.0 or se_deg < 1e-6
 
 
 # --------------------------------------------------------------------------------------------

@@ -38,6 +38,7 @@ from radarviz.viz_app.cli.main import main
 from radarviz.viz_app.io.plots import (
     READ_BLOCK,
     TRACK_COLUMNS,
+    covariance_column,
     parse_radars,
     simulated_plots,
     state_from_row,
@@ -85,9 +86,22 @@ def state_of(row: dict[str, str]) -> tuple[np.ndarray, np.ndarray]:
     P = np.empty((4, 4))
     for i, a in enumerate(names):
         for j, b in enumerate(names):
-            key = f"p_{a}{b}" if f"p_{a}{b}" in row else f"p_{b}{a}"
+            key = (
+                covariance_column(a, b)
+                if covariance_column(a, b) in row
+                else covariance_column(b, a)
+            )
             P[i, j] = float(row[key])
-    for k in ("z_m", "vz_mps", "p_xz", "p_yz", "p_zz", "p_vzvz", "p_zvx", "p_xvz"):
+    for k in (
+        "z_m",
+        "vz_mps",
+        "p_xz_m2",
+        "p_yz_m2",
+        "p_zz_m2",
+        "p_vzvz_m2ps2",
+        "p_zvx_m2ps",
+        "p_xvz_m2ps",
+    ):
         assert float(row[k]) == 0.0
     return x, P
 

@@ -350,13 +350,13 @@ def test_cli_reproduce_velocity_json(capsys: pytest.CaptureFixture[str]) -> None
     doc = json.loads(capsys.readouterr().out)
     assert doc["experiment"] == "velocity" and doc["trials"] == 3000 and doc["seed"] == 2
     b = doc["baseline"]
-    for key in ("sigma_first_order", "sigma_mc", "bias_mc", "bias_second_order"):
+    for key in ("sigma_first_order_mps", "sigma_mc_mps", "bias_mc_mps", "bias_second_order_mps"):
         assert len(b[key]) == 3 and all(isinstance(v, float) for v in b[key])
     for key in ("corr_first_order", "corr_mc"):
         assert np.shape(b[key]) == (3, 3)
     assert b["condition_number"] > 1 and 0 < b["m"] < M_WARN
-    lo, hi = np.array(b["sigma_mc_ci95"]["lo"]), np.array(b["sigma_mc_ci95"]["hi"])
-    assert np.all((lo < b["sigma_mc"]) & (np.array(b["sigma_mc"]) < hi))
+    lo, hi = np.array(b["sigma_mc_ci95_mps"]["lo"]), np.array(b["sigma_mc_ci95_mps"]["hi"])
+    assert np.all((lo < b["sigma_mc_mps"]) & (np.array(b["sigma_mc_mps"]) < hi))
     corr_lo, corr_hi = np.array(b["corr_mc_ci95"]["lo"]), np.array(b["corr_mc_ci95"]["hi"])
     assert corr_lo.shape == (3, 3) and np.all(corr_lo <= np.array(b["corr_mc"]) + 1e-12)
     assert np.all(np.array(b["corr_mc"]) <= corr_hi + 1e-12)

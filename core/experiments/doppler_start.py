@@ -171,30 +171,31 @@ class DopplerTrackingResult(NamedTuple):
     Attributes:
         config: what was run.  n: (N,) scans 1 … N.
         metrics: variant → the Prosov experiment's metrics (position bias, RMSE, filter σ, NEES).
-        rmse_vr / sigma_vr_filter: variant → (N,) RMSE of the track's radial velocity and the
-            filter's σ of it (√(g P gᵀ), g = ∂Vr/∂state).
+        rmse_vr_mps / sigma_vr_filter_mps: variant → (N,) RMSE of the track's radial
+            velocity and the filter's σ of it (√(g P gᵀ), g = ∂Vr/∂state), m/s.
         start_fits: variant → the finite-memory fit used for the start.
         nees_pos_band95: the 95% χ² band of the run-averaged position NEES of a consistent
             filter.
         leave_one_out: variant → the metrics with each group of runs left out, (G, N) fields
             (``MetricsAccumulator.leave_one_out``), for ``band95``.
-        rmse_vr_ci95: variant → the 95% Monte Carlo band (lo, hi) of ``rmse_vr``, (N,) each:
-            the delete-a-group jackknife (``core.confidence``) of √(Σ (V̂r − Vr)² / M).
+        rmse_vr_mps_ci95: variant → the 95% Monte Carlo band (lo, hi) of ``rmse_vr_mps``,
+            (N,) each: the delete-a-group jackknife (``core.confidence``) of
+            √(Σ (V̂r − Vr)² / M).
     """
 
     config: DopplerTrackingConfig
     n: NDArray[np.int64]
     metrics: dict[str, TrackMetrics]
-    rmse_vr: dict[str, NDArray[np.float64]]
-    sigma_vr_filter: dict[str, NDArray[np.float64]]
+    rmse_vr_mps: dict[str, NDArray[np.float64]]
+    sigma_vr_filter_mps: dict[str, NDArray[np.float64]]
     start_fits: dict[str, FiniteMemoryFit]
     nees_pos_band95: tuple[float, float]
     leave_one_out: dict[str, TrackMetrics]
-    rmse_vr_ci95: dict[str, tuple[NDArray[np.float64], NDArray[np.float64]]]
+    rmse_vr_mps_ci95: dict[str, tuple[NDArray[np.float64], NDArray[np.float64]]]
 
     def band95(self, variant: str, name: str) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """The 95% Monte Carlo band (lo, hi) per scan of one variant's ``TrackMetrics`` field
-        (``"rmse_x"``, ``"nees_pos"``, …): the delete-a-group jackknife; NaN before the start."""
+        (``"rmse_x_m"``, ``"nees_pos"``, …): the delete-a-group jackknife; NaN before the start."""
         return metric_band(
             name, getattr(self.metrics[variant], name), getattr(self.leave_one_out[variant], name)
         )
@@ -240,9 +241,9 @@ class _VariantSums:
         return {
             "metrics": self.acc.result(),
             "leave_one_out": self.acc.leave_one_out(),
-            "rmse_vr": rmse,
-            "sigma_vr_filter": np.sqrt(self.var / runs),
-            "rmse_vr_ci95": jackknife_band(rmse, loo),
+            "rmse_vr_mps": rmse,
+            "sigma_vr_filter_mps": np.sqrt(self.var / runs),
+            "rmse_vr_mps_ci95": jackknife_band(rmse, loo),
         }
 
 

@@ -206,7 +206,7 @@ class TrackingResult:
         """Prosov's Δx(n) of ``seed`` against ``naive`` under the three readings of σ̂x."""
         return _delta_x(self.metrics["seed"], self.metrics["naive"])
 
-    def delta_x_ci95(self) -> dict[str, tuple[NDArray[np.float64], NDArray[np.float64]]]:
+    def delta_x_ci95_percent(self) -> dict[str, tuple[NDArray[np.float64], NDArray[np.float64]]]:
         """The 95% Monte Carlo band of ``delta_x_percent``: reading → (lo, hi) per scan, %.
 
         Δx is a ratio of two methods' statistics over the *same* runs, so its band is the
@@ -224,7 +224,7 @@ class TrackingResult:
 
     def band95(self, method: str, name: str) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """The 95% Monte Carlo band (lo, hi) per scan of one method's ``TrackMetrics`` field
-        ``name``: ``band95("ucm", "rmse_x")``, ``band95("seed", "bias_range")``,
+        ``name``: ``band95("ucm", "rmse_x_m")``, ``band95("seed", "bias_range_m")``,
         ``band95("ducm", "nees_pos")``; the delete-a-group jackknife (``core.confidence``),
         NaN where undefined."""
         value = getattr(self.metrics[method], name)
@@ -236,9 +236,9 @@ class TrackingResult:
 def _delta_x(a: TrackMetrics, b: TrackMetrics) -> dict[str, NDArray[np.float64]]:
     """Δx of ``a`` against ``b`` under the three readings (any common shape)."""
     return {
-        "filter": delta_percent(a.sigma_x_filter, b.sigma_x_filter),
-        "rmse": delta_percent(a.rmse_x, b.rmse_x),
-        "std": delta_percent(a.std_x, b.std_x),
+        "filter": delta_percent(a.sigma_x_filter_m, b.sigma_x_filter_m),
+        "rmse": delta_percent(a.rmse_x_m, b.rmse_x_m),
+        "std": delta_percent(a.std_x_m, b.std_x_m),
     }
 
 
@@ -292,7 +292,7 @@ def check_delta_x_claims(
     sb = result.config.sigma_beta_deg
     if "seed" not in result.metrics or "naive" not in result.metrics:
         return []
-    values, bands = result.delta_x_percent(), result.delta_x_ci95()
+    values, bands = result.delta_x_percent(), result.delta_x_ci95_percent()
     out = []
     for claim in claims:
         if not np.isclose(claim.sigma_beta_deg, sb) or claim.scans > len(result.n):

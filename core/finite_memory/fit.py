@@ -626,6 +626,14 @@ def sliding_window_estimates(
 # --------------------------------------------------------------------------------------------
 
 
+#: The three fitted parameters along the last axis of every ``FilterStats`` array, each as
+#: (name, unit suffix): range r in m, radial velocity Vr in m/s, acceleration a in m/s². Tables
+#: and documents name a parameter's values with them (``sigma_mc_r_m``, ``"vr_mps"``).
+STATES: tuple[tuple[str, str], ...] = (("r", "m"), ("vr", "mps"), ("a", "mps2"))
+#: ``STATES`` as names with their units: ``("r_m", "vr_mps", "a_mps2")``.
+STATE_NAMES: tuple[str, ...] = tuple(f"{name}_{unit}" for name, unit in STATES)
+
+
 class FilterStats(NamedTuple):
     """Error statistics of one filter variant of one radar, per k.  Every (K, 3) array holds
     (r, Vr, a) along the last axis; NaN where the parameter is not fitted.

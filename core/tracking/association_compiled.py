@@ -117,6 +117,8 @@ class CompiledAssociation:
         self.live = np.zeros(0, np.int64)
         #: live tracks, tracks started, batches, free slots, events (``kernels_associate``).
         self.counters = np.zeros(5, np.int64)
+        #: A lower bound of the live tracks' last plot times (the coasting pass's skip).
+        self.since = np.full(1, -np.inf)
 
     def _fit(self) -> None:
         """The gating tracks' and the live list's arrays as large as the book's."""
@@ -181,7 +183,7 @@ class CompiledAssociation:
         events = np.zeros((3 * n + c[ka.C_LIVE] + 1, 4), np.int64)
         bad = ka.associate_2d(
             pl, self.beams.arrays, np.ascontiguousarray(sites[:, :2]), arrays, gf, self.rules,
-            self.live, c, owner, status, events,
+            self.live, c, self.since, owner, status, events,
         )  # fmt: skip
         book.free_top = int(c[ka.C_FREE])
         out = CallResult(len(batches))

@@ -161,10 +161,12 @@ def _learn_period(f, c, cells, revisits, ordered, time_s, azimuth_rad, cells_n, 
             m = c[B_N_REVISITS]
             if m == kept:  # the oldest leaves the ordered copy
                 gone = np.searchsorted(ordered[:m], revisits[c[B_REVISIT_HEAD]])
-                ordered[gone : m - 1] = ordered[gone + 1 : m].copy()
+                for q in range(gone, m - 1):  # element loops: no temporary array
+                    ordered[q] = ordered[q + 1]
                 m -= 1
             at = np.searchsorted(ordered[:m], t - prev)
-            ordered[at + 1 : m + 1] = ordered[at:m].copy()
+            for q in range(m, at, -1):
+                ordered[q] = ordered[q - 1]
             ordered[at] = t - prev
             revisits[c[B_REVISIT_HEAD]] = t - prev
             c[B_REVISIT_HEAD] = (c[B_REVISIT_HEAD] + 1) % kept
@@ -458,12 +460,13 @@ TENTATIVE_CODE, CONFIRMED_CODE = 0, 1
 
 
 @_jit
-def associate_2d(pl, beams, radar_site, book, gf, rules, live, counters, owner, status_out,
-                 events):  # fmt: skip
+def associate_2d(pl, beams, radar_site, book, gf, rules, live, counters, since, owner,
+                 status_out, events):  # fmt: skip
     """Associate every batch of ``pl`` (``PlotArrays``) in order (module docstring): the
     beams (``BeamArrays``, R rows), the radars' sites (R, 2), the book (``BookArrays``) and
     the gating tracks (``GateFilter``) changed in place; live (K,) the live slots in order of
-    initiation (their number in counters). Writes per plot the id of its track (owner (B,))
+    initiation (their number in counters); since (1,) a lower bound of their last plot
+    times. Writes per plot the id of its track (owner (B,))
     and that track's status after its batch (status_out (B,)), and the events in order
     (events (E, 4): batch, kind, slot, id). Returns −1, or the index of a plot earlier than
     its track's previous one (nothing from its batch on is done). The book must have a free
@@ -487,7 +490,7 @@ def associate_2d(pl, beams, radar_site, book, gf, rules, live, counters, owner, 
     xp, Pp = np.empty(4), np.empty((4, 4))
     for b in range(n_batches):
         lo, hi = pl.batch_start[b], pl.batch_start[b + 1]
-        bad = _batch(pl, beams, radar_site, book, gf, rules, live, counters, owner,
+        bad = _batch(pl, beams, radar_site, book, gf, rules, live, counters, since, owner,
                      status_out, events, b, lo, hi, points, r_ii, nx, x0, P0, mu, cc, w, xp,
                      Pp)  # fmt: skip
         if bad >= 0:
@@ -496,8 +499,8 @@ def associate_2d(pl, beams, radar_site, book, gf, rules, live, counters, owner, 
 
 
 @_jit
-def _batch(pl, beams, radar_site, book, gf, rules, live, counters, owner, status_out, events,
-           b, lo, hi, points, r_ii, nx, x0, P0, mu, cc, w, xp, Pp):  # fmt: skip
+def _batch(pl, beams, radar_site, book, gf, rules, live, counters, since, owner, status_out,
+           events, b, lo, hi, points, r_ii, nx, x0, P0, mu, cc, w, xp, Pp):  # fmt: skip
     """One batch, plots lo:hi (``GNNTracker._add`` and ``_manage``)."""
     n = hi - lo
     counters[C_BATCHES] += 1
@@ -519,7 +522,9 @@ def _batch(pl, beams, radar_site, book, gf, rules, live, counters, owner, status
         )  # fmt: skip
     period = beams.f[g, B_PERIOD] if g >= 0 else np.nan
     n_live = counters[C_LIVE]
-    before = live[:n_live].copy()  # the tracks that existed before this batch
+    # The tracks that existed before this batch (starts append to ``live`` after them; the
+    # deletions compact it at the batch's end).
+    before = live[:n_live]
     own = np.full(n, -1, np.int64)  # each plot's slot
     free = np.arange(n)  # plots (of the batch) not yet assigned
     n_free = n
@@ -616,50 +621,58 @@ def _batch(pl, beams, radar_site, book, gf, rules, live, counters, owner, status
             book.P[s] = out_P[j, 0, :nx, :nx]
             book.sigma_m[s] = math.sqrt(max(out_P[j, 0, 0, 0], out_P[j, 0, 2, 2]))
             book.sigma_v[s] = math.sqrt(max(out_P[j, 0, 1, 1], out_P[j, 0, 3, 3]))
-    # The sweep's misses, then confirmation and deletion.
+    # The sweep's misses, then confirmation and deletion, on the tracks they touch.
     judged = _swept(pl, beams, radar_site, book, rules, g, times, before, pl.whole_scan[b])
-    hit_now = np.zeros(book.alive.shape[0], np.bool_)
-    for j in range(n):
-        hit_now[own[j]] = True
-    touched = np.zeros(book.alive.shape[0], np.bool_)
+    touched = np.empty(judged.shape[0] + n, np.int64)
+    nt = 0
     for s in judged:
-        if not hit_now[s]:  # ``TrackBook.miss``
+        hit = False
+        for j in range(n):
+            hit = hit or own[j] == s
+        if not hit:  # ``TrackBook.miss``
             book.expected[s] += 1
             book.misses[s] += 1
-            touched[s] = True
+            touched[nt] = s
+            nt += 1
     for j in range(n):
-        touched[own[j]] = True
-    coast = _coast_s(beams, rules, radar_site.shape[0])
-    end = times[n - 1] if n else np.nan
-    doomed = np.zeros(book.alive.shape[0], np.bool_)
-    # ``TrackBook.settle`` over the touched slots in slot order (the confirmations' order
-    # below is by id).
-    for q in range(counters[C_LIVE]):
-        s = live[q]
-        if not touched[s]:
-            continue
+        touched[nt] = own[j]
+        nt += 1
+    touched = touched[:nt][np.argsort(book.rank[touched[:nt]])]  # in order of id
+    doomed = np.empty(nt + n_live, np.int64)
+    nd = 0
+    for s in touched:  # ``TrackBook.settle``
         if book.status[s] == TENTATIVE_CODE:
             if book.hits[s] >= rules.confirm_m:
                 book.status[s] = CONFIRMED_CODE
                 _event(events, counters, b, EV_CONFIRM, s, book.rank[s] + 1)
             elif book.hits[s] + (rules.confirm_n - book.expected[s]) < rules.confirm_m:
-                doomed[s] = True
+                doomed[nd] = s
+                nd += 1
         elif book.misses[s] >= rules.delete_misses:
-            doomed[s] = True
-    if math.isfinite(coast) and n:
+            doomed[nd] = s
+            nd += 1
+    coast = _coast_s(beams, rules, radar_site.shape[0])
+    if math.isfinite(coast) and n and times[n - 1] - coast > since[0]:
+        # Some track may have coasted (``since`` bounds the live tracks' last plot times
+        # from below, so the pass is skipped until one can have).
+        end = times[n - 1]
+        lowest = math.inf
         for s in before:  # a track started in this batch has not coasted
             if book.last_s[s] < end - coast:
-                doomed[s] = True
+                doomed[nd] = s
+                nd += 1
+            else:
+                lowest = min(lowest, book.last_s[s])
+        since[0] = min(lowest, times[0])
     if rules.confirm_m <= 1:
         for q in range(n_free):
             s = own[free[q]]
             _event(events, counters, b, EV_CONFIRM, s, book.rank[s] + 1)
-    # Deletions in order of id (= order of initiation, the live list's).
-    keep = 0
-    n_live = counters[C_LIVE]
-    for q in range(n_live):
-        s = live[q]
-        if doomed[s]:  # ``TrackBook.remove``
+    if nd:  # deletions in order of id (``TrackBook.remove``)
+        doomed = doomed[:nd][np.argsort(book.rank[doomed[:nd]])]
+        for s in doomed:
+            if not book.alive[s]:
+                continue  # doomed twice
             book.alive[s] = False
             st = book.status[s]
             for a in range(book.folded.shape[0]):
@@ -667,10 +680,12 @@ def _batch(pl, beams, radar_site, book, gf, rules, live, counters, owner, status
             book.free[counters[C_FREE]] = s
             counters[C_FREE] += 1
             _event(events, counters, b, EV_DELETE, s, book.rank[s] + 1)
-        else:
-            live[keep] = s
-            keep += 1
-    counters[C_LIVE] = keep
+        keep = 0
+        for q in range(counters[C_LIVE]):
+            if book.alive[live[q]]:
+                live[keep] = live[q]
+                keep += 1
+        counters[C_LIVE] = keep
     for j in range(n):
         s = own[j]
         # A track deleted at this batch cannot have a plot in it (it was missed).

@@ -119,30 +119,30 @@ def _finite(name: str, value: ArrayLike, shape: tuple[int, ...]) -> NDArray[np.f
         a = np.broadcast_to(_f(value), shape).copy()
     except (ValueError, TypeError):
         raise ParameterError(
-            f"{name} must be an array of shape {shape} (got shape {np.shape(value)})"
+            f"{name} must be an array of shape {shape} (got shape {np.shape(value)})", name
         ) from None
     if not np.all(np.isfinite(a)):
-        raise ParameterError(f"{name} must be finite (got {np.asarray(value).tolist()})")
+        raise ParameterError(f"{name} must be finite (got {np.asarray(value).tolist()})", name)
     return a
 
 
 def _positive(name: str, value: ArrayLike, n: int) -> NDArray[np.float64]:
     a = _finite(name, value, (n,))
     if np.any(a <= 0.0):
-        raise ParameterError(f"{name} must be > 0 for every radar (got {a.tolist()})")
+        raise ParameterError(f"{name} must be > 0 for every radar (got {a.tolist()})", name)
     return a
 
 
-def _sites(sites: ArrayLike) -> NDArray[np.float64]:
+def _sites(sites: ArrayLike, name: str = "sites") -> NDArray[np.float64]:
     s = _f(sites)
     if s.ndim != 2 or s.shape[1] != 3:
-        raise ParameterError(f"sites must have shape (N, 3) (got {s.shape})")
+        raise ParameterError(f"{name} must have shape (N, 3) (got {s.shape})", name)
     if s.shape[0] < 3:
         raise GeometryError(
             f"a 3D velocity needs at least 3 radars (got {s.shape[0]}): velocity not observable"
         )
     if not np.all(np.isfinite(s)):
-        raise ParameterError("sites must be finite")
+        raise ParameterError(f"{name} must be finite", name)
     return s
 
 
@@ -696,10 +696,10 @@ class VelocityEstimate(NamedTuple):
 
 
 def estimate_velocity(
-    sites: ArrayLike,
-    radial_velocity: ArrayLike,
-    azimuth: ArrayLike,
-    elevation: ArrayLike,
+    sites_m: ArrayLike,
+    radial_velocity_mps: ArrayLike,
+    azimuth_rad: ArrayLike,
+    elevation_rad: ArrayLike,
     *,
     sigma_vr_mps: ArrayLike,
     sigma_azimuth_rad: ArrayLike,
@@ -714,11 +714,11 @@ def estimate_velocity(
         GeometryError: fewer than 3 radars, duplicate sites leaving < 3 lines of sight, or
             coplanar lines of sight.
     """
-    s = _sites(sites)
+    s = _sites(sites_m, "sites_m")
     n = s.shape[0]
-    vr = _finite("radial_velocity", radial_velocity, (n,))
-    az = _finite("azimuth", azimuth, (n,))
-    el = _finite("elevation", elevation, (n,))
+    vr = _finite("radial_velocity_mps", radial_velocity_mps, (n,))
+    az = _finite("azimuth_rad", azimuth_rad, (n,))
+    el = _finite("elevation_rad", elevation_rad, (n,))
     sigmas = {
         "sigma_vr_mps": _positive("sigma_vr_mps", sigma_vr_mps, n),
         "sigma_azimuth_rad": (sb := _positive("sigma_azimuth_rad", sigma_azimuth_rad, n)),

@@ -1,19 +1,28 @@
 """radarviz: radar target tracking research, as a Python API.
 
-The functions below are the stable import surface (``__all__``); the command line
-(``radarviz reproduce …``, ``record``, ``demo``) calls the same functions. Quantities carry
-their unit in their name (``sigma_r_m``, ``period_s``, ``azimuth_rad``); a bad value raises
-``ParameterError`` with one line naming the parameter and its allowed range.
+``import radarviz`` gives the functions below (``radarviz.__all__``), the stable import
+surface; the command line (``radarviz reproduce …``, ``record``, ``demo``) calls the same
+functions, ``simulate`` and ``write_measurements`` give the plots and the files of
+``radarviz simulate``, and the notebooks in ``examples/`` use nothing else.
+
+Quantities carry their unit in their name, for arguments and table columns alike
+(``sigma_r_m``, ``period_s``, ``azimuth_rad``, ``sigma_vr_mps``); arrays are numpy arrays
+whose shapes each function states. A value outside its allowed range raises
+``ParameterError``, one line naming the parameter and the range.
 
 The engine is ``radarviz.core`` (numpy and scipy only) and the adapters (files, Rerun, the
-command line) are ``radarviz.viz_app``; both stay importable as before.
+command line) are ``radarviz.viz_app``; both stay importable, but their names may change.
 
 Example::
 
     import radarviz
+
+    # Prosov's Monte Carlo at σβ = 1° and 2°, 1000 runs each.
     results = radarviz.run_prosov([1.0, 2.0], runs=1000)
-    radarviz.to_table(results)            # one row per (σβ, method, scan)
-    radarviz.show("prosov")               # the embedded Rerun viewer, in a notebook
+    # One row per (σβ, method, scan): bias_range_m, rmse_x_m, nees_pos, …
+    table = radarviz.to_table(results)
+    # The embedded Rerun viewer, in a notebook cell.
+    radarviz.show("prosov")
 """
 
 from __future__ import annotations
@@ -34,15 +43,26 @@ from radarviz.core.tracking.stream import Plot
 from radarviz.experiments import (
     GorshkovRun,
     convert,
+    direction_cosines,
     estimate_velocity,
     finite_memory,
+    radar_preset,
     run_gorshkov,
     run_prosov,
     run_velocity,
 )
 from radarviz.style import colour, use_palette
 from radarviz.tables import to_arrow, to_columns, to_table
-from radarviz.tracking import ScanEnd, Tracks, TrackStep, track, track_file
+from radarviz.tracking import (
+    Radar,
+    ScanEnd,
+    Tracks,
+    TrackStep,
+    simulate,
+    track,
+    track_file,
+    write_measurements,
+)
 from radarviz.viewer import PRESETS, record, show, use_offline_assets
 
 __version__ = "0.1.0"
@@ -53,18 +73,22 @@ __all__ = [
     "GorshkovRun",
     "ParameterError",
     "Plot",
+    "Radar",
     "ScanEnd",
     "TrackStep",
     "Tracks",
     "colour",
     "convert",
+    "direction_cosines",
     "estimate_velocity",
     "finite_memory",
+    "radar_preset",
     "record",
     "run_gorshkov",
     "run_prosov",
     "run_velocity",
     "show",
+    "simulate",
     "to_arrow",
     "to_columns",
     "to_table",
@@ -72,4 +96,5 @@ __all__ = [
     "track_file",
     "use_offline_assets",
     "use_palette",
+    "write_measurements",
 ]

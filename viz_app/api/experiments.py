@@ -11,7 +11,8 @@ import math
 from collections.abc import Callable, Iterable, Sequence
 from typing import NamedTuple
 
-from numpy.typing import ArrayLike
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from radarviz.core.conversion.planar import METHODS_2D, Converted
 from radarviz.core.conversion.planar import convert as _convert
@@ -33,7 +34,9 @@ from radarviz.core.finite_memory.fit import (
     RadarPreset,
     finite_memory_fit,
 )
+from radarviz.core.finite_memory.fit import preset as _preset
 from radarviz.core.finite_memory.fit import run_gorshkov as _run_gorshkov
+from radarviz.core.geometry import direction_cosines as _direction_cosines
 from radarviz.core.params import (
     ParameterError,
     check,
@@ -264,6 +267,44 @@ def finite_memory(
         sigma_vr_mps=sigma_vr_mps,
         period_s=period_s,
         with_doppler=with_doppler,
+    )
+
+
+def radar_preset(preset: str) -> RadarPreset:
+    """One radar of the finite-memory paper's table, for ``finite_memory`` or ``run_gorshkov``.
+
+    Args:
+        preset: ``RLS1`` … ``RLS6``.
+
+    Returns:
+        ``RadarPreset``: ``name``, ``band``, ``sigma_r_m`` (m), ``sigma_vr_mps`` (m/s) and
+        ``period_s`` (s), e.g. ``finite_memory(5, sigma_r_m=p.sigma_r_m, …)``.
+
+    Raises:
+        ParameterError: an unknown name (the message lists the known ones).
+    """
+    return _preset(preset)
+
+
+def direction_cosines(azimuth_rad: ArrayLike, elevation_rad: ArrayLike) -> NDArray[np.float64]:
+    """The unit vectors u = (cos ε cos β, cos ε sin β, sin ε) from a site towards a target.
+
+    The radial velocity a radar measures is u · v, so ``direction_cosines(az, el) @ v`` gives
+    the noise-free Vr of a velocity v (3,) seen from N sites: the truth ``estimate_velocity``
+    inverts.
+
+    Args:
+        azimuth_rad: azimuths β, shape (...,), rad (from x towards y).
+        elevation_rad: elevations ε, shape (...,) (broadcast with ``azimuth_rad``), rad.
+
+    Returns:
+        Unit vectors, shape (..., 3).
+
+    Raises:
+        ParameterError: a value that is not a finite number.
+    """
+    return _direction_cosines(
+        check_reals("azimuth_rad", azimuth_rad), check_reals("elevation_rad", elevation_rad)
     )
 
 

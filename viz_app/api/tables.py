@@ -1,5 +1,10 @@
 """Results as tables: one row per observation, columns named with their units.
 
+A column is its quantity's name with the unit's suffix (``_m``, ``_mps``, ``_mps2``, ``_rad``,
+``_deg``, ``_s``, ``_percent``), the same name the result's field, the JSON document of the
+command line and the sweep's Parquet table give it. Dimensionless statistics carry none: a
+NEES or NIS (``nees_pos``, ``nees_state``), a count (``scan``, ``k``), a condition number.
+
 ``to_columns`` gives plain numpy columns, ``to_arrow`` a ``pyarrow.Table`` and ``to_table`` a
 ``pandas.DataFrame`` (pandas comes with the ``notebook`` extra).
 """
@@ -13,7 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from radarviz.core.experiments.prosov import TrackingResult
-from radarviz.core.finite_memory.fit import GorshkovResult
+from radarviz.core.finite_memory.fit import STATES, GorshkovResult
 from radarviz.core.metrics import TrackMetrics
 from radarviz.core.params import ParameterError
 from radarviz.core.velocity.estimate import VelocityEstimate
@@ -23,7 +28,6 @@ from radarviz.tracking import Tracks
 Columns = dict[str, NDArray[Any]]
 #: The state components of a track row, in the order of the state vector (x, vx, y, vy, z, vz).
 STATE_COLUMNS = ("x_m", "vx_mps", "y_m", "vy_mps", "z_m", "vz_mps")
-_GORSHKOV_STATES = ("r_m", "vr_mps", "a_mps2")
 
 
 def _stack(parts: Sequence[Columns]) -> Columns:
@@ -47,6 +51,8 @@ def _prosov(results: Sequence[TrackingResult]) -> Columns:
 
 
 def _gorshkov(result: GorshkovResult) -> Columns:
+    # Wide, one row per (radar, variant, k): σ of r, Vr and a have three different units, so
+    # each parameter's values get columns of their own, named with the unit (``STATES``).
     parts = []
     ks = result.ks.astype(np.int64)
     for rad in result.radars:
@@ -54,22 +60,20 @@ def _gorshkov(result: GorshkovResult) -> Columns:
             ("range_only", rad.range_only),
             ("range_doppler", rad.range_doppler),
         ):
-            for j, state in enumerate(_GORSHKOV_STATES):
-                parts.append(
-                    {
-                        "radar": np.full(ks.size, rad.preset.name, dtype=object),
-                        "variant": np.full(ks.size, variant, dtype=object),
-                        "state": np.full(ks.size, state, dtype=object),
-                        "k": ks,
-                        "sigma_analytic": stats.sigma_analytic[:, j],
-                        "sigma_mc": stats.sigma_mc[:, j],
-                        "sigma_mc_ci95_lo": stats.sigma_mc_ci95_lo[:, j],
-                        "sigma_mc_ci95_hi": stats.sigma_mc_ci95_hi[:, j],
-                        "bias_mc": stats.bias_mc[:, j],
-                        "gain_analytic_percent": rad.gain_analytic[:, j],
-                        "gain_mc_percent": rad.gain_mc[:, j],
-                    }
-                )
+            part: Columns = {
+                "radar": np.full(ks.size, rad.preset.name, dtype=object),
+                "variant": np.full(ks.size, variant, dtype=object),
+                "k": ks,
+            }
+            for j, (name, unit) in enumerate(STATES):
+                part[f"sigma_analytic_{name}_{unit}"] = stats.sigma_analytic[:, j]
+                part[f"sigma_mc_{name}_{unit}"] = stats.sigma_mc[:, j]
+                part[f"sigma_mc_ci95_lo_{name}_{unit}"] = stats.sigma_mc_ci95_lo[:, j]
+                part[f"sigma_mc_ci95_hi_{name}_{unit}"] = stats.sigma_mc_ci95_hi[:, j]
+                part[f"bias_mc_{name}_{unit}"] = stats.bias_mc[:, j]
+                part[f"gain_analytic_{name}_percent"] = rad.gain_analytic[:, j]
+                part[f"gain_mc_{name}_percent"] = rad.gain_mc[:, j]
+            parts.append(part)
     return _stack(parts)
 
 
@@ -100,7 +104,7 @@ def _velocity(est: VelocityEstimate) -> Columns:
         cols[f"v{axis}_mps"] = np.array([est.velocity[j]])
         cols[f"sigma_v{axis}_mps"] = np.array([sd[j]])
     cols["condition_number"] = np.array([est.condition_number])
-    cols["geometry_m"] = np.array([est.m])
+    cols["geometry_metric"] = np.array([est.m])
     return cols
 
 
@@ -109,9 +113,11 @@ def to_columns(result: object) -> Columns:
 
     Args:
         result: a ``run_prosov`` list (or one ``TrackingResult``): one row per (σβ, method,
-            scan); a ``GorshkovRun`` or ``GorshkovResult``: one row per (radar, variant,
-            state, k); ``Tracks``: one row per (plot, method) with the state and its 1σ (and
-            the target, for plots of many targets); a ``VelocityEstimate``: one row.
+            scan); a ``GorshkovRun`` or ``GorshkovResult``: one row per (radar, variant, k),
+            each statistic in a column per parameter (``sigma_mc_r_m``, ``sigma_mc_vr_mps``,
+            ``sigma_mc_a_mps2``, ``gain_mc_r_percent``, …); ``Tracks``: one row per (plot,
+            method) with the state and its 1σ (and the target, for plots of many targets); a
+            ``VelocityEstimate``: one row.
 
     Returns:
         Column name → (rows,) array.

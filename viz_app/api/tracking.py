@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import os
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 
@@ -10,7 +11,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from radarviz.core.filters.state import position_index
-from radarviz.core.params import ParameterError
+from radarviz.core.params import ParameterError, check, default
 from radarviz.core.tracking.association import AssociationOptions, AssociationReport
 from radarviz.core.tracking.stream import (
     Plot,
@@ -26,8 +27,10 @@ from radarviz.viz_app.io.plots import (
     labels_refused,
     load_radars,
     radar_coverage,
+    simulated_plots,
     track_plots,
 )
+from radarviz.viz_app.io.plots import write_measurements as _write_measurements
 
 
 @dataclass(frozen=True)
@@ -432,3 +435,74 @@ class _Collector:
 
     def report(self, account: AssociationReport) -> None:
         self.account = account
+
+
+def simulate(
+    preset: str = "fusion",
+    *,
+    seed: int = default("seed"),
+    sigma_beta_deg: float = default("sigma_beta_deg"),
+    steps: int = default("steps"),
+) -> tuple[list[Plot], list[Radar]]:
+    """The plots and radars of one of ``radarviz simulate``'s scenes, in memory.
+
+    Tracking them with ``track`` gives what tracking the files ``simulate`` writes gives (the
+    angles are already rounded through degrees, as the file stores them).
+
+    Args:
+        preset: ``fusion`` (three 3D radars with Doppler, scans staggered by a third of a
+            period, one turning target; ``steps`` scans per radar) or ``prosov`` (one 2D
+            radar at the origin, the Prosov run of 60 scans at ``sigma_beta_deg``).
+        seed: root of the random numbers.
+        sigma_beta_deg: azimuth noise σβ of ``prosov``, degrees.
+        steps: scans per radar of ``fusion``.
+
+    Returns:
+        (plots, radars): the plots in time order and the radars they come from, ready for
+        ``track`` or ``write_measurements``.
+
+    Raises:
+        ParameterError: an unknown preset or a value outside its range (every value is
+            checked, whichever preset uses it).
+    """
+    check("seed", seed)
+    return simulated_plots(preset, seed, sigma_beta_deg, steps)
+
+
+def write_measurements(
+    measurements: str | os.PathLike[str],
+    radars: str | os.PathLike[str],
+    plots: Sequence[Plot],
+    sites: Sequence[Radar],
+) -> int:
+    """Write plots as a measurement CSV and their radars as a radars TOML file, the input
+    ``track_file`` and ``radarviz track`` read (``docs/tracking.md``).
+
+    Both files are written under temporary names and renamed together when both are
+    complete, so a failure leaves neither half-written.
+
+    Args:
+        measurements: path of the CSV (time_s, radar, range_m, azimuth_deg, …), replaced if
+            it exists.
+        radars: path of the TOML file, replaced if it exists.
+        plots: the plots (from ``simulate``, or ``Plot`` values of your own), each naming its
+            radar in ``Plot.radar``.
+        sites: the radars the plots name.
+
+    Returns:
+        The number of plots written.
+
+    Raises:
+        ParameterError: no plots, no radars, or a plot naming a radar not in ``sites``.
+    """
+    if not plots:
+        raise ParameterError("plots must hold at least one plot (got none)", "plots")
+    if not sites:
+        raise ParameterError("sites must hold at least one radar (got none)", "sites")
+    names = {r.name for r in sites}
+    for i, p in enumerate(plots):
+        if p.radar not in names:
+            raise ParameterError(
+                f"plots[{i}].radar must be one of {sorted(names)} (got {p.radar!r})", "plots"
+            )
+    return _write_measurements(os.fspath(measurements), os.fspath(radars), list(plots), list(sites))

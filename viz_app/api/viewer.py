@@ -132,16 +132,20 @@ def show(what: Recordable, *, seed: int = 1, width: int | str = "auto", height: 
     Args:
         what: as for ``record``.
         seed: root seed of a preset's Monte Carlo.
-        width: viewer width, pixels, or ``"auto"`` (the cell's width).
-        height: viewer height, pixels.
+        width: viewer width, pixels in [100, 10 000], or ``"auto"`` (the cell's width).
+        height: viewer height, pixels in [100, 10 000].
 
     Returns:
         A ``rerun.notebook.Viewer`` widget holding the recording.
     """
+    # Every value is checked before the widget's module is imported: that import starts the
+    # asset server, which a call refused for a bad value should not leave behind.
     check_int("seed", seed, low=0)
-    check_int("height", height, low=100, high=10_000)
     if width != "auto":
         check_int("width", width, low=100, high=10_000)
+    check_int("height", height, low=100, high=10_000)
+    if isinstance(what, str):
+        check_choice("preset", what, PRESETS)
     use_offline_assets()
     from rerun.notebook import Viewer
 

@@ -265,6 +265,13 @@ def build_parser() -> argparse.ArgumentParser:
         default=1_000_000,
         help="plots of the radarviz track figure's air-traffic file (default 1000000)",
     )
+    bench.add_argument(
+        "--markdown",
+        metavar="PAGE.md",
+        default=None,
+        help="also write the figures, the machine and the load average into PAGE.md between "
+        "its marker comments (docs/performance.md holds them); the full CPU bench only",
+    )
     return parser
 
 
@@ -500,6 +507,15 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     check_int("--targets", args.targets, low=1, high=100_000)
     check_int("--asterix-plots", args.asterix_plots, low=100, high=10_000_000)
     check_int("--asterix-targets", args.asterix_targets, low=1, high=4095)
+    if args.markdown is not None:
+        from radarviz.viz_app.bench.markdown import check_markdown_target
+
+        if args.only is not None or args.device != "cpu":
+            raise ParameterError(
+                "--markdown writes the full CPU bench's figures: leave out --only and --device",
+                "--markdown",
+            )
+        check_markdown_target(args.markdown)  # before minutes of timing, not after
     if args.only == "asterix":
         from radarviz.viz_app.bench.asterix import bench_asterix, format_asterix
 
@@ -539,6 +555,15 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     )
     check_finite_document("bench", doc, nonnegative=True)  # times, rates and ratios
     print_report(doc, args.json, format_bench)
+    if args.markdown is not None:
+        from radarviz.viz_app.bench.markdown import bench_section, write_bench_section
+
+        # The command as run, every size spelled out (defaults too), so a reduced run says so.
+        argv = ["bench", "--runs", *map(str, args.runs)]
+        for flag in ("filterpy_runs", "targets", "asterix_plots", "asterix_targets", "track_plots"):
+            argv += ["--" + flag.replace("_", "-"), str(getattr(args, flag))]
+        argv += ["--markdown", args.markdown]
+        write_bench_section(args.markdown, bench_section(doc, argv))
     return 0
 
 

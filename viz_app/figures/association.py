@@ -24,7 +24,7 @@ from matplotlib.figure import Figure
 from radarviz.viz_app.figures.common import PALETTE, band_label, fill_band, write_figure_atomically
 
 WIDTH_IN, HEIGHT_IN = 15.0, 4.8
-_PARTS = (("localisation", "localisation"), ("missed", "missed"), ("false", "false"))
+_PARTS = (("localisation_m_p", "localisation"), ("missed_m_p", "missed"), ("false_m_p", "false"))
 
 
 def _err(b: dict[str, Any]) -> list[float]:
@@ -40,7 +40,7 @@ def plot_association(doc: dict[str, Any], path: str | os.PathLike) -> None:
     methods = list(doc["methods"])
     runs = doc["runs"]
     for k, m in enumerate(methods):
-        e = doc["methods"][m]["gospa_per_scan"]
+        e = doc["methods"][m]["gospa_per_scan_m"]
         colour = PALETTE[k % len(PALETTE)]
         ax1.plot(times, e["mean"], color=colour, lw=1.4, label=m)
         fill_band(ax1, times, e, colour)

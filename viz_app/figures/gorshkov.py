@@ -11,7 +11,7 @@ velocity Vr, radial acceleration a), two columns:
   range row each radar's peak is marked and listed beside the paper's claims.
 
 The Monte Carlo σ and gains carry their 95% bands (the document's ``sigma_ci95`` and
-``gain_percent_ci95``), shaded lightly in the radar's colour; the styles legend says how many
+``gain_ci95_percent``), shaded lightly in the radar's colour; the styles legend says how many
 trials they come from.
 
 Radars whose analytic curves coincide exactly (range-only σr depends on σr alone, range-only σVr
@@ -49,9 +49,9 @@ from radarviz.viz_app.figures.common import (
 RADAR_ORDER: tuple[str, ...] = ("RLS1", "RLS2", "RLS3", "RLS4", "RLS5", "RLS6")
 #: Rows: key in the document, symbol, unit.
 _STATES: tuple[tuple[str, str, str], ...] = (
-    ("r", "r", "m"),
-    ("vr", "Vr", "m/s"),
-    ("a", "a", "m/s²"),
+    ("r_m", "r", "m"),
+    ("vr_mps", "Vr", "m/s"),
+    ("a_mps2", "a", "m/s²"),
 )
 _VARIANTS: tuple[str, ...] = ("range_only", "range_doppler")
 #: Dashed analytic line and hollow MC marker (range only) or solid and filled; legend label.
@@ -305,7 +305,7 @@ def _plot_gain(
         x, y = _broken(rad.get("k") or [], _get(rad, "gain_percent", key))
         if not any(not math.isnan(v) for v in y):
             continue
-        fill_band(ax, rad.get("k") or [], _get(rad, "gain_percent_ci95", key), colours[name])
+        fill_band(ax, rad.get("k") or [], _get(rad, "gain_ci95_percent", key), colours[name])
         ax.plot(x, y, color=colours[name], lw=LINE_WIDTH, zorder=3)
         peak = _peak(x, y)
         if mark_peaks and peak is not None:
@@ -396,7 +396,7 @@ def _build_figure(
     k_all = [k for _, rad in radars for v in rad.get("k") or [] if (k := _number(v)) is not None]
     for row, (key, symbol, unit) in enumerate(_STATES):
         _plot_sigma(axes[row, 0], radars, key, symbol, unit, colours)
-        _plot_gain(axes[row, 1], radars, key, symbol, colours, mark_peaks=key == "r")
+        _plot_gain(axes[row, 1], radars, key, symbol, colours, mark_peaks=key == "r_m")
         for ax in axes[row]:
             ax.grid(True, which="major", color="0.88", lw=0.6)
             ax.tick_params(labelbottom=True, labelsize=8.5)

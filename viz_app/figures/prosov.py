@@ -10,7 +10,7 @@ One column per σβ case of the JSON document (see :mod:`viz_app.reports.prosov`
 3. position NEES (2 dof) of every method against n on a log axis, with the χ² range of a
    consistent filter's run average.
 
-Every Monte Carlo curve carries its 95% band (the document's ``ci95`` / ``delta_x_ci95``,
+Every Monte Carlo curve carries its 95% band (the document's ``ci95`` / ``delta_x_ci95_percent``,
 shaded lightly in the curve's colour; the legends say "95% band from N runs").
 
 The figure is built on :class:`matplotlib.figure.Figure` directly, so importing or calling this
@@ -148,7 +148,7 @@ def _plot_delta(ax: Axes, case: Mapping[str, Any], paper_scans: int, doc_runs: A
             color="0.3",
         )
     ax.axhline(0.0, color="black", lw=0.6, zorder=1)
-    bands = case.get("delta_x_ci95") or {}
+    bands = case.get("delta_x_ci95_percent") or {}
     for key, label, colour in _READINGS:
         x, y = readings[key]
         if x:
@@ -222,8 +222,8 @@ def _plot_bias(ax: Axes, case: Mapping[str, Any], colours: Mapping[str, str]) ->
         series = methods.get(name)
         if series is None:
             continue
-        ranges[name] = finite_points(ns, series.get("bias_range"))
-        for xv, v in zip(*finite_points(ns, series.get("bias_cross")), strict=True):
+        ranges[name] = finite_points(ns, series.get("bias_range_m"))
+        for xv, v in zip(*finite_points(ns, series.get("bias_cross_m")), strict=True):
             cross_by_n.setdefault(xv, []).append(v)
     if not any(x for x, _ in ranges.values()):
         _note(ax, "no range-bias values")
@@ -231,7 +231,7 @@ def _plot_bias(ax: Axes, case: Mapping[str, Any], colours: Mapping[str, str]) ->
     ax.axhline(0.0, color="black", lw=0.6, zorder=1)
     for name, (x, y) in ranges.items():
         if x:
-            fill_band(ax, ns, (methods[name].get("ci95") or {}).get("bias_range"), colours[name])
+            fill_band(ax, ns, (methods[name].get("ci95") or {}).get("bias_range_m"), colours[name])
             ax.plot(x, y, color=colours[name], lw=1.6, ls=_style(name), zorder=3)
     notes: list[str] = []
     if cross_by_n:
@@ -350,7 +350,7 @@ def _build_figure(
             top.append(Patch(color=_WINDOW_COLOUR, label=f"paper's window n ≤ {paper_scans}"))
         if any(_paper_bound(c) is not None for c in cases):
             top.append(Line2D([], [], color="0.45", ls="--", lw=0.9, label="paper's bound on |Δx|"))
-        if any(c.get("delta_x_ci95") for c in cases):
+        if any(c.get("delta_x_ci95_percent") for c in cases):
             top.append(Patch(color="0.3", alpha=BAND_ALPHA, label=band_label(doc.get("runs", "?"))))
         sub_delta.legend(
             handles=top,

@@ -137,12 +137,12 @@ def _build_figure(doc: Mapping[str, Any]) -> Figure:
     axs = fig.subplots(2, 2)
     b = doc["baseline"]
     trials = doc.get("trials", "?")
-    band = b.get("sigma_mc_ci95")
+    band = b.get("sigma_mc_ci95_mps")
     _bars(
         axs[0, 0],
         AXES,
-        b["sigma_first_order"],
-        b["sigma_mc"],
+        b["sigma_first_order_mps"],
+        b["sigma_mc_mps"],
         "%.2f",
         (band["lo"], band["hi"]) if band else None,
         trials,

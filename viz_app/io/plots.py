@@ -43,11 +43,11 @@ plot's rows are the starting states (with ``--init finite-memory`` rows begin at
 plot); a file of many targets has the plot's ``target`` after ``time_s``::
 
     time_s, [target,] method, x_m, y_m, z_m, vx_mps, vy_mps, vz_mps,
-    p_xx, p_xy, p_xz, p_yy, p_yz, p_zz,                    position covariance (upper triangle)
-    p_vxvx, p_vxvy, p_vxvz, p_vyvy, p_vyvz, p_vzvz,        velocity covariance (upper triangle)
-    p_xvx, p_xvy, p_xvz, p_yvx, p_yvy, p_yvz, p_zvx, p_zvy, p_zvz   position–velocity block
+    p_xx_m2, p_xy_m2, …, p_zz_m2                 position covariance (upper triangle), m²
+    p_vxvx_m2ps2, p_vxvy_m2ps2, …, p_vzvz_m2ps2  velocity covariance (upper triangle), m²/s²
+    p_xvx_m2ps, p_xvy_m2ps, …, p_zvz_m2ps        position–velocity block, m²/s
 
-(m, m/s, m², m²/s, m²/s²; p_xvy is cov(x, vy)). In 2D, z, vz and every covariance entry
+(``covariance_column``; p_xvy_m2ps is cov(x, vy)). In 2D, z, vz and every covariance entry
 involving them are 0. Floats are written in their shortest round-trip form (pyarrow's CSV
 writer, a block of rows at a time; text cells quoted), so nothing is lost.
 
@@ -164,6 +164,15 @@ _PAIRS: tuple[tuple[int, int], ...] = (
     + tuple((i, j) for i in range(3, 6) for j in range(i, 6))
     + tuple((i, j) for i in range(3) for j in range(3, 6))
 )
+
+
+def covariance_column(a: str, b: str) -> str:
+    """The track file's column of cov(a, b), components ``x`` … ``vz``, with its unit:
+    ``p_xy_m2``, ``p_xvy_m2ps`` (m²/s), ``p_vxvy_m2ps2`` (m²/s²)."""
+    velocities = a.startswith("v") + b.startswith("v")
+    return f"p_{a}{b}_{('m2', 'm2ps', 'm2ps2')[velocities]}"
+
+
 TRACK_COLUMNS: tuple[str, ...] = (
     "time_s",
     "method",
@@ -173,7 +182,7 @@ TRACK_COLUMNS: tuple[str, ...] = (
     "vx_mps",
     "vy_mps",
     "vz_mps",
-    *(f"p_{_COMPONENTS[i][0]}{_COMPONENTS[j][0]}" for i, j in _PAIRS),
+    *(covariance_column(_COMPONENTS[i][0], _COMPONENTS[j][0]) for i, j in _PAIRS),
 )
 _STATE_INDEX = np.array([k for _, k in _COMPONENTS])
 _COV_ROWS = np.array([_COMPONENTS[i][1] for i, _ in _PAIRS])
@@ -694,7 +703,7 @@ class TrackWriter:
 
 
 #: The variances among the track columns: they must not be negative.
-VARIANCE_COLUMNS = frozenset({"p_xx", "p_yy", "p_zz", "p_vxvx", "p_vyvy", "p_vzvz"})
+VARIANCE_COLUMNS = frozenset(covariance_column(c, c) for c, _ in _COMPONENTS)
 _ROW_NONNEGATIVE = np.array([c in VARIANCE_COLUMNS for c in TRACK_COLUMNS[2:]])
 
 

@@ -14,10 +14,10 @@ Truth file, one row per truth time and target::
 ``radarviz track``'s (``viz_app.io.plots``), or any file with at least ``time_s``,
 ``method``, ``x_m`` and ``y_m``; the optional columns used are ``target`` (the track id;
 without it each method is one track), ``status`` (``tentative`` or ``confirmed``), ``z_m``,
-``vx_mps``, ``vy_mps``, ``vz_mps`` and the position covariance ``p_xx``, ``p_xy``, ``p_yy``
-(with ``p_xz``, ``p_yz``, ``p_zz`` in 3D); other columns are ignored. Every number must be
-finite, every time within ±``MAX_TIME_S``, every variance ≥ 0; a bad cell is one
-``ParameterError`` line naming the file, the row and the column.
+``vx_mps``, ``vy_mps``, ``vz_mps`` and the position covariance ``p_xx_m2``, ``p_xy_m2``,
+``p_yy_m2`` (with ``p_xz_m2``, ``p_yz_m2``, ``p_zz_m2`` in 3D); other columns are ignored.
+Every number must be finite, every time within ±``MAX_TIME_S``, every variance ≥ 0; a bad
+cell is one ``ParameterError`` line naming the file, the row and the column.
 """
 
 from __future__ import annotations
@@ -33,6 +33,7 @@ from numpy.typing import NDArray
 from radarviz.core.params import PARAMETERS, ParameterError
 from radarviz.core.tracking.association import CONFIRMED, TENTATIVE
 from radarviz.core.tracking.scoring import TrackRows, Truth
+from radarviz.viz_app.io.plots import covariance_column
 
 #: The first bytes of a Parquet file.
 PARQUET_MAGIC = b"PAR1"
@@ -45,12 +46,10 @@ TRACK_REQUIRED = ("time_s", "method", "x_m", "y_m")
 TRACK_VELOCITY = ("vx_mps", "vy_mps", "vz_mps")
 #: Position covariance columns: (column, row, col) of the 3 × 3 block; the first three needed.
 TRACK_COVARIANCE = (
-    ("p_xx", 0, 0),
-    ("p_xy", 0, 1),
-    ("p_yy", 1, 1),
-    ("p_xz", 0, 2),
-    ("p_yz", 1, 2),
-    ("p_zz", 2, 2),
+    *(
+        (covariance_column("xyz"[i], "xyz"[j]), i, j)
+        for i, j in ((0, 0), (0, 1), (1, 1), (0, 2), (1, 2), (2, 2))
+    ),
 )
 STATUSES = (TENTATIVE, CONFIRMED)
 #: A track file's text columns; every other column used is a number.

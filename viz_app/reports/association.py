@@ -10,12 +10,15 @@ The JSON keys are an interface (``--json``)::
      "gospa": {"cutoff_m": c, "order": p},
      "times_s": [N],
      "methods": {METHOD: {
-         "gospa_per_scan": {"mean": [N], "lo": [N], "hi": [N]},          m
-         "gospa": {"mean", "lo", "hi"},                   the per-run mean over scans, m
-         "localisation" | "missed" | "false": {"mean", "lo", "hi"},   per scan, m^p
+         "gospa_per_scan_m": {"mean": [N], "lo": [N], "hi": [N]},
+         "gospa_m": {"mean", "lo", "hi"},                 the per-run mean over scans
+         "localisation_m_p" | "missed_m_p" | "false_m_p": {"mean", "lo", "hi"},  per scan
          "swaps" | "false_tracks" | "tracks": {"mean", "lo", "hi"},      per run
-         "minus_reference": {"gospa" | "swaps" | "false_tracks": {"delta", "lo", "hi"}}}},
+         "minus_reference": {"gospa_m" | "swaps" | "false_tracks": {"delta", "lo", "hi"}}}},
      "reference": METHOD}
+
+A key's suffix is its unit: ``_m`` metres, ``_m_p`` metres to the GOSPA order p (the parts of
+d^p, as ``radarviz score`` names them); swaps and tracks are counts.
 
 ``minus_reference`` is the method's per-run value minus the reference method's on the same
 run (``ucm`` when it is run, else the first method), averaged: the paired difference, whose
@@ -61,18 +64,18 @@ def association_document(
     methods: dict[str, Any] = {}
     ref = cfg.methods.index("ucm") if "ucm" in cfg.methods else 0
     per_run = {
-        "gospa": result.gospa[..., 0].mean(axis=2),
+        "gospa_m": result.gospa[..., 0].mean(axis=2),
         "swaps": result.swaps.astype(np.float64),
         "false_tracks": result.false_tracks.astype(np.float64),
     }
     for i, m in enumerate(cfg.methods):
         g = result.gospa[i]  # (runs, N, 4)
         entry: dict[str, Any] = {
-            "gospa_per_scan": _band(g[..., 0]),
-            "gospa": _band(g[..., 0].mean(axis=1)),
+            "gospa_per_scan_m": _band(g[..., 0]),
+            "gospa_m": _band(g[..., 0].mean(axis=1)),
         }
         for k, part in enumerate(GOSPA_PARTS[1:], start=1):
-            entry[part] = _band(g[..., k].mean(axis=1))
+            entry[f"{part}_m_p"] = _band(g[..., k].mean(axis=1))
         for key, counts in (
             ("swaps", result.swaps[i]),
             ("false_tracks", result.false_tracks[i]),
@@ -147,13 +150,13 @@ def format_association_table(doc: dict[str, Any]) -> str:
         f"{'− ' + doc['reference'] + ': GOSPA':>18} {'false tr.':>13}",
     ]
     for m, e in doc["methods"].items():
-        parts = [e[k]["mean"] for k in ("localisation", "missed", "false")]
+        parts = [e[k]["mean"] for k in ("localisation_m_p", "missed_m_p", "false_m_p")]
         total = sum(parts) or 1.0
         share = [100.0 * v / total for v in parts]
         lines.append(
-            f"{m:<8} {_pm(e['gospa'], '.1f'):>16} {share[0]:>6.1f} {share[1]:>7.1f} "
+            f"{m:<8} {_pm(e['gospa_m'], '.1f'):>16} {share[0]:>6.1f} {share[1]:>7.1f} "
             f"{share[2]:>8.1f} {_pm(e['swaps'], '.2f'):>14} {_pm(e['false_tracks'], '.2f'):>14} "
-            f"{_pm(e['tracks'], '.2f'):>14}   {_pm(e['minus_reference']['gospa'], '+.1f'):>18} "
+            f"{_pm(e['tracks'], '.2f'):>14}   {_pm(e['minus_reference']['gospa_m'], '+.1f'):>18} "
             f"{_pm(e['minus_reference']['false_tracks'], '+.2f'):>13}"
         )
     lines += [

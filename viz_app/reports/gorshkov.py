@@ -3,7 +3,7 @@
 JSON keys are an interface (``radarviz reproduce gorshkov --json``); lists are per window
 length k, with null where a value is undefined (e.g. range-only acceleration at k < 3).
 Every Monte Carlo series has its 95% band beside it: ``sigma_ci95`` (χ², exact for these
-Gaussian estimates), ``gain_percent_ci95`` (delete-a-group jackknife over the paired trials),
+Gaussian estimates), ``gain_ci95_percent`` (delete-a-group jackknife over the paired trials),
 and in the tracking part ``ci95`` per variant; ``band`` says which method made which.
 """
 
@@ -16,7 +16,12 @@ import numpy as np
 from radarviz.core.confidence import BAND_GROUPS, BAND_LEVEL
 from radarviz.core.experiments.doppler_start import DopplerTrackingResult
 from radarviz.core.finite import check_finite_result
-from radarviz.core.finite_memory.fit import FilterStats, GorshkovRadar, GorshkovResult
+from radarviz.core.finite_memory.fit import (
+    STATE_NAMES,
+    FilterStats,
+    GorshkovRadar,
+    GorshkovResult,
+)
 from radarviz.viz_app.reports.prosov import (
     METRIC_KEYS,
     band_document,
@@ -24,11 +29,12 @@ from radarviz.viz_app.reports.prosov import (
     json_series,
 )
 
-_STATE_KEYS = ("r", "vr", "a")
+#: The per-parameter keys, each the parameter with its unit (the gain under them is in %).
+_STATE_KEYS = STATE_NAMES
 
 
 def _by_state(a: np.ndarray) -> dict[str, list[float | None]]:
-    """(K, 3) → {"r": [...], "vr": [...], "a": [...]}."""
+    """(K, 3) → {"r_m": [...], "vr_mps": [...], "a_mps2": [...]}."""
     return {key: json_series(a[:, i]) for i, key in enumerate(_STATE_KEYS)}
 
 
@@ -37,7 +43,7 @@ def _variants(get: str, ro: FilterStats, rd: FilterStats) -> dict[str, Any]:
 
 
 def _band_by_state(lo: np.ndarray, hi: np.ndarray) -> dict[str, dict[str, list[float | None]]]:
-    """(K, 3) lo and hi → {"r": {"lo": [...], "hi": [...]}, "vr": …, "a": …}."""
+    """(K, 3) lo and hi → {"r_m": {"lo": [...], "hi": [...]}, "vr_mps": …, "a_mps2": …}."""
     return {key: band_document((lo[:, i], hi[:, i])) for i, key in enumerate(_STATE_KEYS)}
 
 
@@ -58,8 +64,8 @@ def range_gain_peak(rad: GorshkovRadar, ks: np.ndarray) -> dict[str, Any] | None
     tied = [int(k) for k, h in zip(ks, hi, strict=True) if np.isfinite(h) and h >= lo[i]]
     return {
         "k": int(ks[i]),
-        "percent": float(gain[i]),
-        "ci95": json_series(np.array([lo[i], hi[i]])),
+        "gain_percent": float(gain[i]),
+        "gain_ci95_percent": json_series(np.array([lo[i], hi[i]])),
         "k_within_band": tied,
     }
 
@@ -70,10 +76,10 @@ def tracking_document(result: DopplerTrackingResult) -> dict[str, Any]:
     variants = {}
     for name, m in result.metrics.items():
         entry: dict[str, Any] = {k: json_series(getattr(m, k)) for k in METRIC_KEYS}
-        entry["rmse_vr"] = json_series(result.rmse_vr[name])
-        entry["sigma_vr_filter"] = json_series(result.sigma_vr_filter[name])
+        entry["rmse_vr_mps"] = json_series(result.rmse_vr_mps[name])
+        entry["sigma_vr_filter_mps"] = json_series(result.sigma_vr_filter_mps[name])
         entry["ci95"] = {k: band_document(result.band95(name, k)) for k in METRIC_KEYS}
-        entry["ci95"]["rmse_vr"] = band_document(result.rmse_vr_ci95[name])
+        entry["ci95"]["rmse_vr_mps"] = band_document(result.rmse_vr_mps_ci95[name])
         variants[name] = entry
     return {
         "radar": cfg.radar_preset().name,
@@ -127,8 +133,8 @@ def check_gorshkov_result(
     defined = np.asarray(tracking.n) >= first
     for variant in tracking.metrics:
         for key, values in (
-            ("rmse_vr", tracking.rmse_vr[variant]),
-            ("sigma_vr_filter", tracking.sigma_vr_filter[variant]),
+            ("rmse_vr_mps", tracking.rmse_vr_mps[variant]),
+            ("sigma_vr_filter_mps", tracking.sigma_vr_filter_mps[variant]),
         ):
             check_finite_result(
                 where,
@@ -138,10 +144,10 @@ def check_gorshkov_result(
                 nonnegative=True,
                 index=tracking.n,
             )
-        for side, band in zip(("lo", "hi"), tracking.rmse_vr_ci95[variant], strict=True):
+        for side, band in zip(("lo", "hi"), tracking.rmse_vr_mps_ci95[variant], strict=True):
             check_finite_result(
                 where,
-                f"rmse_vr 95% band {side} of {variant}",
+                f"rmse_vr_mps 95% band {side} of {variant}",
                 band,
                 defined=defined,
                 index=tracking.n,
@@ -171,7 +177,7 @@ def gorshkov_document(
                 "sigma_analytic": _variants("sigma_analytic", rad.range_only, rad.range_doppler),
                 "sigma_ci95": _sigma_bands(rad.range_only, rad.range_doppler),
                 "gain_percent": _by_state(rad.gain_mc),
-                "gain_percent_ci95": _band_by_state(rad.gain_mc_ci95_lo, rad.gain_mc_ci95_hi),
+                "gain_ci95_percent": _band_by_state(rad.gain_mc_ci95_lo, rad.gain_mc_ci95_hi),
                 "range_gain_peak": range_gain_peak(rad, result.ks),
             }
         )
@@ -208,18 +214,18 @@ def format_gorshkov_table(doc: dict[str, Any]) -> str:
         )
         lines.append("   k " + "".join(f"{k:>8}" for k in ks))
         for label, var, key in (
-            ("σr  range only", "range_only", "r"),
-            ("σr  range+Vr", "range_doppler", "r"),
-            ("σVr range only", "range_only", "vr"),
-            ("σVr range+Vr", "range_doppler", "vr"),
-            ("σa  range only", "range_only", "a"),
-            ("σa  range+Vr", "range_doppler", "a"),
+            ("σr  range only", "range_only", "r_m"),
+            ("σr  range+Vr", "range_doppler", "r_m"),
+            ("σVr range only", "range_only", "vr_mps"),
+            ("σVr range+Vr", "range_doppler", "vr_mps"),
+            ("σa  range only", "range_only", "a_mps2"),
+            ("σa  range+Vr", "range_doppler", "a_mps2"),
         ):
             vals = rad["sigma"][var][key]
-            spec = "8.3f" if key == "a" else "8.1f"
+            spec = "8.3f" if key == "a_mps2" else "8.1f"
             lines.append(f"  {label:<16}" + "".join(f(v, spec) for v in vals))
-        sig = rad["sigma"]["range_doppler"]["r"]
-        band = rad["sigma_ci95"]["range_doppler"]["r"]
+        sig = rad["sigma"]["range_doppler"]["r_m"]
+        band = rad["sigma_ci95"]["range_doppler"]["r_m"]
         rel = [
             (h - lo) / 2 / v * 100
             for v, lo, h in zip(sig, band["lo"], band["hi"], strict=True)
@@ -227,13 +233,13 @@ def format_gorshkov_table(doc: dict[str, Any]) -> str:
         ]
         if rel:
             lines.append(f"  σ: 95% χ² band ± {max(rel):.2f}% of each value")
-        for key, label in (("r", "gain r, %"), ("vr", "gain Vr, %"), ("a", "gain a, %")):
+        for key, label in (("r_m", "gain r, %"), ("vr_mps", "gain Vr, %"), ("a_mps2", "gain a, %")):
             lines.append(f"  {label:<16}" + "".join(f(v, "8.1f") for v in rad["gain_percent"][key]))
-            half = _half(rad["gain_percent_ci95"][key])
+            half = _half(rad["gain_ci95_percent"][key])
             lines.append(f"  {'  ± (95%)':<16}" + "".join(f(v, "8.2f") for v in half))
         peak = rad.get("range_gain_peak")
         if peak:
-            lo, hi = peak["ci95"]
+            lo, hi = peak["gain_ci95_percent"]
             width = "" if lo is None or hi is None else f" ± {(hi - lo) / 2:.2f}%"
             within = peak["k_within_band"]
             tied = (
@@ -241,9 +247,8 @@ def format_gorshkov_table(doc: dict[str, Any]) -> str:
                 if within == [peak["k"]]
                 else f" (k = {', '.join(map(str, within))} within its band)"
             )
-            lines.append(
-                f"  range gain peaks at {peak['percent']:.1f}%{width} for k = {peak['k']}{tied}"
-            )
+            gain = peak["gain_percent"]
+            lines.append(f"  range gain peaks at {gain:.1f}%{width} for k = {peak['k']}{tied}")
         lines.append("")
     tr = doc.get("tracking")
     if tr:
@@ -257,9 +262,9 @@ def format_gorshkov_table(doc: dict[str, Any]) -> str:
         lines.append(f"  {'':<34}" + "".join(f"{'n=' + str(n[i]):>9}" for i in cols))
         for var, e in tr["variants"].items():
             for label, key in (
-                ("RMSE Vr, m/s", "rmse_vr"),
-                ("filter σVr, m/s", "sigma_vr_filter"),
-                ("RMSE x, m", "rmse_x"),
+                ("RMSE Vr, m/s", "rmse_vr_mps"),
+                ("filter σVr, m/s", "sigma_vr_filter_mps"),
+                ("RMSE x, m", "rmse_x_m"),
                 ("NEES position", "nees_pos"),
             ):
                 row = "".join(f(e[key][i], "9.2f") for i in cols)

@@ -18,11 +18,11 @@ from radarviz.core.metrics import NONNEGATIVE_METRICS, TrackMetrics
 
 #: Per-method series in the document, in this order.
 METRIC_KEYS: tuple[str, ...] = (
-    "sigma_x_filter",
-    "rmse_x",
-    "std_x",
-    "bias_range",
-    "bias_cross",
+    "sigma_x_filter_m",
+    "rmse_x_m",
+    "std_x_m",
+    "bias_range_m",
+    "bias_cross_m",
     "nees_pos",
     "nees_state",
 )
@@ -75,7 +75,7 @@ def check_tracking_result(where: str, result: TrackingResult) -> None:
     check_metrics(where, result.metrics, result.n, bands)
     if "seed" in result.metrics and "naive" in result.metrics:
         grouped = "seed" in result.leave_one_out and "naive" in result.leave_one_out
-        ci = result.delta_x_ci95()
+        ci = result.delta_x_ci95_percent()
         for reading, values in result.delta_x_percent().items():
             check_finite_result(where, f"delta_x_percent ({reading})", values, index=result.n)
             for side, band in zip(("lo", "hi"), ci[reading], strict=True):
@@ -115,7 +115,7 @@ def case_document(result: TrackingResult) -> dict[str, Any]:
     """One σβ case of the document.
 
     Besides the series: ``methods[name]["ci95"][key]`` the 95% Monte Carlo band of each
-    series (``TrackingResult.band95``), ``delta_x_ci95[reading]`` that of Δx, and ``claims``
+    series (``TrackingResult.band95``), ``delta_x_ci95_percent[reading]`` that of Δx, and ``claims``
     the paper's claims checked against each reading (``check_delta_x_claims``).
     """
     cfg = result.config
@@ -133,7 +133,9 @@ def case_document(result: TrackingResult) -> dict[str, Any]:
     }
     if "seed" in result.metrics and "naive" in result.metrics:
         case["delta_x_percent"] = {k: json_series(v) for k, v in result.delta_x_percent().items()}
-        case["delta_x_ci95"] = {k: band_document(v) for k, v in result.delta_x_ci95().items()}
+        case["delta_x_ci95_percent"] = {
+            k: band_document(v) for k, v in result.delta_x_ci95_percent().items()
+        }
         case["claims"] = [
             {
                 "reading": c.reading,
@@ -214,13 +216,13 @@ def format_prosov_table(doc: dict[str, Any]) -> str:
             for reading in ("filter", "rmse", "std"):
                 vals = case["delta_x_percent"][reading]
                 rows.append((reading + " reading", [fmt(vals[i], ".2f") for i in cols]))
-                half = _half_widths(case["delta_x_ci95"][reading])
+                half = _half_widths(case["delta_x_ci95_percent"][reading])
                 rows.append(("  ± (95%)", [fmt(half[i], ".2f") for i in cols]))
             lines += _block("Δx(n) of seed vs naive, %", labels, rows)
         for label, key, spec in (
-            ("range bias, m", "bias_range", ".1f"),
-            ("RMSE x, m", "rmse_x", ".1f"),
-            ("filter σx, m", "sigma_x_filter", ".1f"),
+            ("range bias, m", "bias_range_m", ".1f"),
+            ("RMSE x, m", "rmse_x_m", ".1f"),
+            ("filter σx, m", "sigma_x_filter_m", ".1f"),
             (f"NEES position ({dims} dof)", "nees_pos", ".2f"),
             (f"NEES state ({2 * dims} dof)", "nees_state", ".2f"),
         ):

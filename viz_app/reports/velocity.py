@@ -3,21 +3,24 @@
 The JSON keys are an interface (``radarviz reproduce velocity --json``)::
 
     {"experiment": "velocity", "trials": N, "seed": S, "sweep_trials": n,
-     "baseline": {"sigma_first_order": [3], "sigma_mc": [3], "bias_mc": [3],
-                  "bias_mc_se": [3], "bias_second_order": [3], "bias_paper_term": [3],
+     "baseline": {"sigma_first_order_mps": [3], "sigma_mc_mps": [3], "bias_mc_mps": [3],
+                  "bias_mc_se_mps": [3], "bias_second_order_mps": [3],
+                  "bias_paper_term_mps": [3],
                   "corr_first_order": [[3x3]], "corr_mc": [[3x3]],
                   "condition_number": x, "m": x, "warning": str | null, ...},
      "sweep": [{"distance_km": x, "altitude_km": x, "m": x, "condition_number": x,
                 "ratio_mc_to_linear": [3], "ratio_robust_to_linear": [3],
-                "sigma_first_order": [3], "warning": str | null}, ...]}
+                "sigma_first_order_mps": [3], "warning": str | null}, ...]}
 
-Vectors are (Vx, Vy, Vz) in m/s. ``ratio_mc_to_linear`` is the sample σ over the first-order σ;
-``ratio_robust_to_linear`` uses the interquartile σ instead (insensitive to the heavy tails that
-near-singular draws of Ĉ produce at large m). Nothing is undefined: every number passes
+Vectors are (Vx, Vy, Vz) in m/s, as their ``_mps`` says; ``m`` is the paper's dimensionless
+geometry metric (not metres), and correlations and ratios are dimensionless too.
+``ratio_mc_to_linear`` is the sample σ over the first-order σ; ``ratio_robust_to_linear`` uses
+the interquartile σ instead (insensitive to the heavy tails that near-singular draws of Ĉ
+produce at large m). Nothing is undefined: every number passes
 ``core.finite.check_finite_document`` (a NaN, or a negative σ, ratio, m or condition number, is
 a ``ResultError`` naming its path, never a null).
 
-Every Monte Carlo value has its 95% band beside it as {"lo": …, "hi": …}: ``sigma_mc_ci95``
+Every Monte Carlo value has its 95% band beside it as {"lo": …, "hi": …}: ``sigma_mc_ci95_mps``
 and ``corr_mc_ci95`` (delete-a-group jackknife) in the baseline, ``ratio_mc_to_linear_ci95``
 (the σ band over the first-order σ, a constant) and ``ratio_robust_to_linear_ci95`` (batch
 means) in the sweep (``core.velocity.estimate.VelocityMC``); ``band`` names the methods.
@@ -46,9 +49,9 @@ from radarviz.core.velocity.estimate import (
 
 #: Keys of the document whose numbers are a σ, a ratio of σ, m or a condition number.
 NONNEGATIVE_KEYS = (
-    "sigma_first_order",
-    "sigma_mc",
-    "bias_mc_se",
+    "sigma_first_order_mps",
+    "sigma_mc_mps",
+    "bias_mc_se_mps",
     "condition_number",
     "m",
     "ratio_mc_to_linear",
@@ -87,13 +90,13 @@ def velocity_document(
         "sigma_vr_mps": list(BASELINE_SIGMA_VR_MPS),
         "sigma_el_deg": list(BASELINE_SIGMA_EL_DEG),
         "sigma_az_deg": list(BASELINE_SIGMA_AZ_DEG),
-        "sigma_first_order": _vec(st.sigma),
-        "sigma_mc": _vec(mc.sigma),
-        "sigma_mc_ci95": _band(mc.sigma_ci95_lo, mc.sigma_ci95_hi),
-        "bias_mc": _vec(mc.mean),
-        "bias_mc_se": _vec(mc.mean_se),
-        "bias_second_order": _vec(st.bias_second_order),
-        "bias_paper_term": _vec(st.bias_curvature),
+        "sigma_first_order_mps": _vec(st.sigma),
+        "sigma_mc_mps": _vec(mc.sigma),
+        "sigma_mc_ci95_mps": _band(mc.sigma_ci95_lo, mc.sigma_ci95_hi),
+        "bias_mc_mps": _vec(mc.mean),
+        "bias_mc_se_mps": _vec(mc.mean_se),
+        "bias_second_order_mps": _vec(st.bias_second_order),
+        "bias_paper_term_mps": _vec(st.bias_curvature),
         "corr_first_order": _mat(st.correlation),
         "corr_mc": _mat(mc.correlation),
         "corr_mc_ci95": _band(mc.correlation_ci95_lo, mc.correlation_ci95_hi),
@@ -118,7 +121,7 @@ def velocity_document(
                 "ratio_robust_to_linear_ci95": _band(
                     p.mc.sigma_robust_ci95_lo / s.sigma, p.mc.sigma_robust_ci95_hi / s.sigma
                 ),
-                "sigma_first_order": _vec(s.sigma),
+                "sigma_first_order_mps": _vec(s.sigma),
                 "warning": s.geometry.warning,
             }
         )
@@ -158,14 +161,14 @@ def format_velocity_table(doc: dict[str, Any]) -> str:
         f"  condition number of C = {b['condition_number']:.3f},  m = {b['m']:.4f} "
         f"(warning above {doc['m_warn']:g})",
         f"  {'':<28}" + "".join(f"{k:>10}" for k in AXES),
-        row("σ first order, m/s", b["sigma_first_order"]),
-        row("σ Monte Carlo, m/s", b["sigma_mc"]),
-        row("  95% band from", b["sigma_mc_ci95"]["lo"]),
-        row("  to", b["sigma_mc_ci95"]["hi"]),
-        row("bias Monte Carlo, m/s", b["bias_mc"]),
-        row("  ± standard error", b["bias_mc_se"]),
-        row("bias 2nd order, m/s", b["bias_second_order"]),
-        row("  paper's term only", b["bias_paper_term"]),
+        row("σ first order, m/s", b["sigma_first_order_mps"]),
+        row("σ Monte Carlo, m/s", b["sigma_mc_mps"]),
+        row("  95% band from", b["sigma_mc_ci95_mps"]["lo"]),
+        row("  to", b["sigma_mc_ci95_mps"]["hi"]),
+        row("bias Monte Carlo, m/s", b["bias_mc_mps"]),
+        row("  ± standard error", b["bias_mc_se_mps"]),
+        row("bias 2nd order, m/s", b["bias_second_order_mps"]),
+        row("  paper's term only", b["bias_paper_term_mps"]),
         "  correlation first order / Monte Carlo:",
     ]
     for i in range(3):

@@ -71,11 +71,11 @@ def log_gorshkov_results(
     log_k_charts(rec, result, analytic)
     n = tracking.n
     times = (n - 1) * tracking.config.scenario().period_s
-    for var in tracking.rmse_vr:
+    for var in tracking.rmse_vr_mps:
         label = VARIANTS.get(var, var)
         for entity, values, what in (
-            ("rmse_vr_mps", tracking.rmse_vr[var], "RMSE"),
-            ("sigma_vr_filter_mps", tracking.sigma_vr_filter[var], "filter σ"),
+            ("rmse_vr_mps", tracking.rmse_vr_mps[var], "RMSE"),
+            ("sigma_vr_filter_mps", tracking.sigma_vr_filter_mps[var], "filter σ"),
         ):
             log_series(
                 rec,
@@ -147,8 +147,8 @@ def log_start_charts(rec: rr.RecordingStream, tracking: DopplerTrackingResult) -
     times = (n - 1) * tracking.config.scenario().period_s
     x = n.astype(np.float64)
     for entity, values in (
-        ("rmse_vr_mps", tracking.rmse_vr),
-        ("sigma_vr_filter_mps", tracking.sigma_vr_filter),
+        ("rmse_vr_mps", tracking.rmse_vr_mps),
+        ("sigma_vr_filter_mps", tracking.sigma_vr_filter_mps),
     ):
         curves = [plot2d.Curve(VARIANTS.get(var, var), x, v, rgb(var)) for var, v in values.items()]
         plot2d.log_plot(

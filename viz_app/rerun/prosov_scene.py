@@ -76,8 +76,8 @@ METHODS_SHOWN: tuple[str, ...] = ALL_METHODS
 #: Per-scan statistics drawn, each at ``plots/prosov/<name>/<method>``: (name, attribute of
 #: ``core.metrics.TrackMetrics``, view title).
 SERIES: tuple[tuple[str, str, str], ...] = (
-    ("bias_range_m", "bias_range", "track bias along range, m"),
-    ("rmse_x_m", "rmse_x", "track RMSE in x, m"),
+    ("bias_range_m", "bias_range_m", "track bias along range, m"),
+    ("rmse_x_m", "rmse_x_m", "track RMSE in x, m"),
     ("nees_pos", "nees_pos", "position NEES (2 dof), 95% band grey"),
 )
 #: Cloud points drawn per scan and method, and points behind each mean.
@@ -473,7 +473,7 @@ def log_statistics(rec: rr.RecordingStream, scene: ProsovScene, root: str = ROOT
         )
     if "seed" in result.metrics and "naive" in result.metrics:
         # The 95% band of the RMSE reading (the paper's claim is judged on it).
-        for tag, band in zip(("lo", "hi"), result.delta_x_ci95()["rmse"], strict=True):
+        for tag, band in zip(("lo", "hi"), result.delta_x_ci95_percent()["rmse"], strict=True):
             log_series(
                 rec,
                 f"plots/{root}/delta_x_percent/rmse_band95_{tag}",
@@ -533,7 +533,7 @@ def log_charts(rec: rr.RecordingStream, scene: ProsovScene, root: str = ROOT) ->
             unit=" m" if entity.endswith("_m") else "",
         )
     if "seed" in result.metrics and "naive" in result.metrics:
-        lo, hi = result.delta_x_ci95()["rmse"]
+        lo, hi = result.delta_x_ci95_percent()["rmse"]
         plot2d.log_plot(
             rec,
             f"charts/{root}/delta_x_percent",

@@ -19,7 +19,7 @@ Entity paths (``{r}`` a radar: R1, R2, R3)::
     velocity/legend                     one labelled swatch per radar (static)
     plots/velocity/error_mps/{vx,vy,vz} V̂ − V per axis
     plots/velocity/sigma_mps/{vx,vy,vz} first-order 1σ per axis
-    plots/velocity/geometry_m/{m,m_warn} the geometry metric m and its warning level
+    plots/velocity/geometry_metric/{m,m_warn} the geometry metric m and its warning level
 
 Scans whose geometry is flagged (m above ``core.velocity.estimate.M_WARN``) are drawn grey,
 left out of the plots and noted in the text log; a scan whose geometry is singular gets no
@@ -243,10 +243,10 @@ def log_velocity_run(rec: rr.RecordingStream, run: VelocityScans) -> VelocityFra
         log_series(
             rec, f"plots/{ROOT}/sigma_mps/{axis}", n, t, np.sqrt(cov[:, j, j]), c, f"σ {axis}"
         )
-    log_series(rec, f"plots/{ROOT}/geometry_m/m", n, t, m, rgb("fused"), "geometry metric m")
+    log_series(rec, f"plots/{ROOT}/geometry_metric/m", n, t, m, rgb("fused"), "geometry metric m")
     log_series(
         rec,
-        f"plots/{ROOT}/geometry_m/m_warn",
+        f"plots/{ROOT}/geometry_metric/m_warn",
         n,
         t,
         np.full(k, M_WARN),
@@ -300,7 +300,7 @@ def _log_charts(
         )
     plot2d.log_plot(
         rec,
-        f"charts/{ROOT}/geometry_m",
+        f"charts/{ROOT}/geometry_metric",
         [
             plot2d.Curve("m", x, m, rgb("fused")),
             plot2d.Curve("warning", x, np.full(x.size, M_WARN), rgb("band")),
@@ -418,7 +418,7 @@ def views(frame: VelocityFrame) -> VelocityViews:
             f"charts/{ROOT}/sigma_mps", "first-order 1σ per axis, m/s (log scale)", CHART_WIDTH
         ),
         plot2d.plot_view(
-            f"charts/{ROOT}/geometry_m",
+            f"charts/{ROOT}/geometry_metric",
             "geometry metric m (unitless, log scale) and its warning level",
             CHART_WIDTH,
         ),

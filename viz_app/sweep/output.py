@@ -11,9 +11,10 @@ The Parquet table has one row per (grid point, method, scan n), columns:
     method           naive, seed, cmkf_d, ucm, ducm, ekf, ukf
     scan, time_s     n = 1 … N and (n − 1) T
     runs, seed       Monte Carlo runs M at the point and the root seed
-    bias_x, rmse_x, std_x, sigma_x_filter, rmse_y, sigma_y_filter, bias_range, bias_cross,
-    nees_pos, nees_state
-                     the per-scan statistics of ``core.metrics`` (m; NEES dimensionless)
+    bias_x_m, rmse_x_m, std_x_m, sigma_x_filter_m, rmse_y_m, sigma_y_filter_m,
+    bias_range_m, bias_cross_m, nees_pos, nees_state
+                     the per-scan statistics of ``core.metrics`` (m, as their suffix says;
+                     a NEES is dimensionless)
     nees_pos_lo95, nees_pos_hi95, nees_state_lo95, nees_state_hi95
                      95% χ² band of the run-averaged NEES of a consistent filter (2 and 4
                      degrees of freedom in 2D, 3 and 6 in 3D)
@@ -40,14 +41,14 @@ from radarviz.viz_app.io.atomic import atomic_write
 
 #: The TrackMetrics fields written to the table, in column order.
 METRIC_COLUMNS: tuple[str, ...] = (
-    "bias_x",
-    "rmse_x",
-    "std_x",
-    "sigma_x_filter",
-    "rmse_y",
-    "sigma_y_filter",
-    "bias_range",
-    "bias_cross",
+    "bias_x_m",
+    "rmse_x_m",
+    "std_x_m",
+    "sigma_x_filter_m",
+    "rmse_y_m",
+    "sigma_y_filter_m",
+    "bias_range_m",
+    "bias_cross_m",
     "nees_pos",
     "nees_state",
 )
@@ -75,8 +76,8 @@ def table_columns(dims: int) -> tuple[str, ...]:
 COLUMNS: tuple[str, ...] = table_columns(2)
 #: Heat-map metrics at the last scan: column, title, colour map.
 HEATMAPS: tuple[tuple[str, str, str], ...] = (
-    ("rmse_x", "RMSE of x at the last scan, m", "viridis"),
-    ("bias_range", "range bias at the last scan, m", "RdBu_r"),
+    ("rmse_x_m", "RMSE of x at the last scan, m", "viridis"),
+    ("bias_range_m", "range bias at the last scan, m", "RdBu_r"),
     ("nees_pos", "position NEES at the last scan", "RdBu_r"),
 )
 
@@ -201,7 +202,7 @@ def plot_sweep(spec: SweepSpec, results: list[TrackingResult], directory: Path) 
                 lo = min(finite.min(), nominal - 0.1) if finite.size else nominal - 1.0
                 hi = max(finite.max(), nominal + 0.1) if finite.size else nominal + 1.0
                 norm: colors.Normalize = colors.TwoSlopeNorm(nominal, lo, hi)
-            elif metric == "bias_range":
+            elif metric == "bias_range_m":
                 lim = float(np.abs(finite).max()) if finite.size else 1.0
                 norm = colors.Normalize(-lim or -1.0, lim or 1.0)
             else:

@@ -167,7 +167,7 @@ def _prosov_summary(scene: ProsovScene) -> tuple[dict[str, float], tuple[str, ..
     alerts = []
     for name, m in scene.result.metrics.items():
         nees = float(m.nees_pos[-1])
-        figures[f"{name}.bias_range_m"] = float(m.bias_range[-1])
+        figures[f"{name}.bias_range_m"] = float(m.bias_range_m[-1])
         figures[f"{name}.nees_pos"] = nees
         if nees > NEES_ALERT_FACTOR * hi or nees < lo / NEES_ALERT_FACTOR:
             alerts.append(
@@ -202,7 +202,7 @@ def _gorshkov_summary(
     below = np.flatnonzero(rad.range_only.sigma_analytic[:, 1] < p.sigma_vr_mps)
     if below.size:
         figures["k_range_only_beats_doppler"] = float(ks[below[0]])
-    for var, rmse in tracking.rmse_vr.items():
+    for var, rmse in tracking.rmse_vr_mps.items():
         figures[f"{var}.rmse_vr_mps"] = float(rmse[-1])
     return _finite("gorshkov", figures), ()
 
