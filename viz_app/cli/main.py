@@ -498,7 +498,10 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         check_int("--runs", m, low=100, high=10_000_000)
     check_int("--filterpy-runs", args.filterpy_runs, low=1, high=100_000)
     check_int("--targets", args.targets, low=1, high=100_000)
-    check_int("--asterix-plots", args.asterix_plots, low=100, high=10_000_000)
+    from radarviz.viz_app.io.plots import MAX_SIMULATE_STEPS
+
+    # the files are simulate's fusion preset: three radars of at most MAX_SIMULATE_STEPS scans
+    check_int("--asterix-plots", args.asterix_plots, low=100, high=3 * MAX_SIMULATE_STEPS)
     check_int("--asterix-targets", args.asterix_targets, low=1, high=4095)
     if args.only == "asterix":
         from radarviz.viz_app.bench.asterix import bench_asterix, format_asterix
