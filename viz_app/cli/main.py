@@ -547,7 +547,11 @@ def _cmd_bench(args: argparse.Namespace) -> int:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``radarviz`` console script; returns the exit status."""
-    args = build_parser().parse_args(argv)
+    try:
+        args = build_parser().parse_args(argv)
+    except KeyboardInterrupt:
+        print("radarviz: interrupted while starting, nothing done", file=sys.stderr)
+        return 130
     try:
         if args.command == "reproduce" and args.experiment == "prosov":
             return _cmd_reproduce_prosov(args)
