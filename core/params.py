@@ -282,6 +282,16 @@ MIN_SIGMA_ANGLE_DEG = 1e-6
 #: in every leave-out, so with two runs (one per group) every σ band was NaN. Three is the
 #: fewest for which every band of every experiment exists.
 MIN_MONTE_CARLO_RUNS = 3
+#: Most Monte Carlo runs (trials) of one experiment: 10⁸ runs of the Prosov run are 6 · 10⁹
+#: filter steps per method, hours of work; beyond it the list of blocks alone outgrew the
+#: memory (10¹⁵ runs: MemoryError) or an index (10³⁰: OverflowError) before the first run.
+MAX_MONTE_CARLO_RUNS = 100_000_000
+
+#: Largest GOSPA order p: GOSPA's parts are p-th powers of distances up to the cut-off c, and
+#: their Monte Carlo bands need the squares, so c^(2p) must stay a float at the largest
+#: cut-off (10⁸ m): 10^(8 · 2 · 16) = 10²⁵⁶. At p = 100 even the default c = 2 km gave
+#: c^p = 10³³⁰, an OverflowError.
+MAX_GOSPA_ORDER = 16.0
 
 #: The parameter table. Defaults are the Prosov experiment (one radar at the origin, target at
 #: 150 km moving radially outward at 200 m/s, σr = 250 m, σβ = 1°, T = 10 s, 60 scans, Q = 0).
@@ -321,8 +331,10 @@ PARAMETERS: dict[str, Parameter] = {
         ),
         _real("period_s", "T", "scan period", "s", 1e-3, 3600.0, 10.0, low_open=False),
         _int("steps", "N", "scans per run", 2, 100_000, 60),
-        _int("runs", "M", "Monte Carlo runs", MIN_MONTE_CARLO_RUNS, None, 1000),
-        _int("trials", "M", "Monte Carlo trials", MIN_MONTE_CARLO_RUNS, 100_000_000, 100_000),
+        _int("runs", "M", "Monte Carlo runs", MIN_MONTE_CARLO_RUNS, MAX_MONTE_CARLO_RUNS, 1000),
+        _int(
+            "trials", "M", "Monte Carlo trials", MIN_MONTE_CARLO_RUNS, MAX_MONTE_CARLO_RUNS, 100_000
+        ),
         _int("seed", "seed", "root of numpy.random.SeedSequence", 0, None, 1),
         _real(
             "c0",
@@ -549,7 +561,7 @@ PARAMETERS: dict[str, Parameter] = {
         ),
         # GOSPA (``core.tracking.gospa``).
         _real("gospa_cutoff_m", "c", "GOSPA cut-off distance", "m", 0.0, 1e8, 2000.0),
-        _real("gospa_order", "p", "GOSPA order", "", 1.0, 100.0, 2.0, low_open=False),
+        _real("gospa_order", "p", "GOSPA order", "", 1.0, MAX_GOSPA_ORDER, 2.0, low_open=False),
         # Scoring a track file against the truth (``core.tracking.scoring``).
         _real(
             "score_max_gap_s",

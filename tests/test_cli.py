@@ -89,7 +89,7 @@ def test_reproduce_prosov_table_and_plot(tmp_path: Path, capsys) -> None:
         (["--sigma-r-m", "inf"], "--sigma-r-m must be a finite number"),
         (["--period", "0"], "--period must be a finite number in [0.001, 3600]"),
         (["--period", "nan"], "--period must be a finite number in [0.001, 3600]"),
-        (["--runs", "1"], "--runs must be an integer >= 3"),
+        (["--runs", "1"], "--runs must be an integer in [3, 100000000]"),
         (["--steps", "1"], "--steps must be an integer in [2, 100000]"),
         (["--methods", "naive", "magic"], "--methods must be among naive, seed, cmkf_d"),
         (["--runs", "ten"], "not an integer: 'ten'"),

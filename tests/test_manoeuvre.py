@@ -405,7 +405,7 @@ def test_track_recording_logs_the_band_exits(manoeuvre_files, tmp_path: Path, rr
     ("args", "needle"),
     [
         (["--flight", "loop"], "--flight must be one of approach, departure"),
-        (["--scans", "1"], "--scans must be an integer in [2, 10000000] (got 1)"),
+        (["--scans", "1"], "--scans must be an integer in [2, 1000000] (got 1)"),
     ],
 )
 def test_bad_manoeuvre_preset_input_writes_nothing(tmp_path: Path, capsys, args, needle) -> None:

@@ -135,7 +135,7 @@ def test_all_methods_run_and_report_finite_statistics() -> None:
             {"sigma_beta_deg": float("nan")},
             "sigma_beta_deg must be a finite number in [1e-06, 20]",
         ),
-        ({"runs": 1}, "runs must be an integer >= 3"),
+        ({"runs": 1}, "runs must be an integer in [3, 100000000]"),
         ({"methods": ("naive", "kalman")}, "method must be one of naive, seed"),
     ],
 )

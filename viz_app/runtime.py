@@ -2,12 +2,16 @@
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import ctypes.util
 import os
 import platform
 import resource
+import signal
 import sys
+from collections.abc import Iterator
+from types import FrameType
 from typing import Any
 
 from radarviz.core.cores import available_cores
@@ -73,3 +77,36 @@ def machine() -> dict[str, Any]:
         "load_avg_1min": round(load, 2) if load is not None else None,
         "python": platform.python_version(),
     }
+
+
+@contextlib.contextmanager
+def sigint_deferred() -> Iterator[None]:
+    """Hold a Ctrl-C back while the block runs; raise it as ``KeyboardInterrupt`` when the
+    block has ended (or instead of the error it ended with, which the interrupt caused).
+
+    For a block that must not stop half way, such as the start of a Dask cluster: an
+    interrupt in the middle of one left it half made, and its ``atexit`` close then failed
+    with a traceback of its own. Once the block is over, what it made is whole and the
+    ``with`` statements around it close it cleanly. Only in the main thread (where Python
+    runs signal handlers); elsewhere the block runs as it is.
+    """
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    caught: list[int] = []
+
+    def note(signum: int, frame: FrameType | None) -> None:
+        caught.append(signum)
+
+    previous = signal.signal(signal.SIGINT, note)
+    try:
+        yield
+    except Exception:
+        if not caught:
+            raise
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    if caught:
+        raise KeyboardInterrupt

@@ -47,6 +47,11 @@ from radarviz.core.scenarios.spatial import ConstantVelocityTarget3D, prosov_tar
 CHUNK_VERSION = 1
 #: Largest number of grid points of one sweep (a guard against a mistyped step).
 MAX_POINTS = 100_000
+#: Largest number of chunks of one sweep (grid points × blocks per point). Each chunk is a
+#: task held by the scheduler (a few kB with its future) and a file in the chunks directory:
+#: a million is already gigabytes of bookkeeping, and ``--runs 10**15`` at one point would
+#: have built a list of 6 · 10¹⁰ tasks before the first one ran (MemoryError).
+MAX_CHUNKS = 1_000_000
 
 
 class AxisSpec(NamedTuple):
@@ -220,6 +225,13 @@ class SweepSpec:
         if count > MAX_POINTS:
             raise ParameterError(
                 f"grid must have at most {MAX_POINTS} points (got {count}: {self.shape})"
+            )
+        chunks = count * -(-self.base.runs // self.block)
+        if chunks > MAX_CHUNKS:
+            raise ParameterError(
+                f"runs must make at most {MAX_CHUNKS} chunks of block {self.block} runs over "
+                f"the grid's {count} point(s) (got {self.base.runs} runs: {chunks} chunks)",
+                "runs",
             )
 
     @property

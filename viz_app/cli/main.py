@@ -505,7 +505,10 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         check_int("--runs", m, low=100, high=10_000_000)
     check_int("--filterpy-runs", args.filterpy_runs, low=1, high=100_000)
     check_int("--targets", args.targets, low=1, high=100_000)
-    check_int("--asterix-plots", args.asterix_plots, low=100, high=10_000_000)
+    from radarviz.viz_app.io.plots import MAX_SIMULATE_STEPS
+
+    # the files are simulate's fusion preset: three radars of at most MAX_SIMULATE_STEPS scans
+    check_int("--asterix-plots", args.asterix_plots, low=100, high=3 * MAX_SIMULATE_STEPS)
     check_int("--asterix-targets", args.asterix_targets, low=1, high=4095)
     if args.markdown is not None:
         from radarviz.viz_app.bench.markdown import check_markdown_target
@@ -569,7 +572,11 @@ def _cmd_bench(args: argparse.Namespace) -> int:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``radarviz`` console script; returns the exit status."""
-    args = build_parser().parse_args(argv)
+    try:
+        args = build_parser().parse_args(argv)
+    except KeyboardInterrupt:
+        print("radarviz: interrupted while starting, nothing done", file=sys.stderr)
+        return 130
     try:
         if args.command == "reproduce" and args.experiment == "prosov":
             return _cmd_reproduce_prosov(args)

@@ -25,7 +25,7 @@ from radarviz.core.params import ParameterError, check_choice, check_int
 from radarviz.viz_app.bench.sweep import DEFAULT_GRID, DEFAULT_RUNS, format_bench, run_bench
 from radarviz.viz_app.cli.args import integer, number, print_report
 from radarviz.viz_app.cli.params import add_parameter, map_flag, parameter_flags
-from radarviz.viz_app.io.atomic import check_outputs, commit_together, same_file
+from radarviz.viz_app.io.atomic import check_outputs, commit_together
 from radarviz.viz_app.runtime import tune_allocator
 from radarviz.viz_app.sweep.run import (
     SCHEDULER_HELP,
@@ -227,24 +227,55 @@ def _spec_from_args(args: argparse.Namespace) -> SweepSpec:
     return spec
 
 
-def _check_output_paths(args: argparse.Namespace) -> tuple[Path, Path | None, Path | None]:
+def _check_output_paths(
+    args: argparse.Namespace, spec: SweepSpec
+) -> tuple[Path, Path | None, Path | None, list[Path]]:
     """Fail before any work if an output cannot be written where asked, or would replace
-    another output (``viz_app.io.atomic.check_outputs``)."""
+    another output (``viz_app.io.atomic.check_outputs``): the table, the recording, the chunks
+    directory beside the table, and the figures of ``--plot`` (their names are known before
+    computing, ``figure_paths``). A ``--plot`` directory that does not exist is created here,
+    so a path that cannot be one fails now; returned are the directories created, which the
+    caller removes again if the sweep writes nothing."""
+    from radarviz.viz_app.sweep.output import figure_paths
+
     check_outputs([("--out", args.out), ("--rrd", args.rrd)])
     out = Path(args.out)
     rrd = None if args.rrd is None else Path(args.rrd)
-    plot = None
-    if args.plot is not None:
-        if not args.plot.strip():
-            raise ParameterError("--plot must name a directory (got an empty string)")
-        plot = Path(args.plot)
-        if plot.exists() and not plot.is_dir():
-            raise ParameterError(f"--plot must name a directory (got the file {args.plot!r})")
-        for flag, path in (("--out", out), ("--rrd", rrd)):  # figures are sweep_*.png
-            if path is not None and path.name.startswith("sweep_") and path.suffix == ".png":
-                if same_file(path.parent, plot):
-                    raise ParameterError(f"{flag} may be replaced by a figure of --plot ({path})")
-    return out, plot, rrd
+    chunks = chunk_dir(out)
+    if chunks.exists() and not chunks.is_dir():
+        raise ParameterError(
+            f"--out: its chunks directory {str(chunks)!r} exists and is not a directory"
+        )
+    if args.plot is None:
+        return out, None, rrd, []
+    if not args.plot.strip():
+        raise ParameterError("--plot must name a directory (got an empty string)")
+    plot = Path(args.plot)
+    if plot.exists() and not plot.is_dir():
+        raise ParameterError(f"--plot must name a directory (got the file {args.plot!r})")
+    created = [d for d in (plot, *plot.parents) if not d.exists()][::-1]
+    try:
+        plot.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ParameterError(
+            f"--plot: cannot create the directory {args.plot!r} ({exc.strerror or exc})"
+        ) from None
+    try:
+        figures = [("--plot", path) for path in figure_paths(spec, plot)]
+        check_outputs([("--out", out), ("--rrd", rrd), *figures])
+    except ParameterError:
+        _remove_empty(created)
+        raise
+    return out, plot, rrd, created
+
+
+def _remove_empty(directories: list[Path]) -> None:
+    """Remove the directories ``_check_output_paths`` created, deepest first, if still empty."""
+    for d in reversed(directories):
+        try:
+            d.rmdir()
+        except OSError:
+            return
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:
@@ -254,7 +285,27 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         workers = os.cpu_count() or 1
     else:
         workers = check_int("--workers", args.workers, low=1, high=1024)
-    out, plot_dir, rrd = _check_output_paths(args)
+    out, plot_dir, rrd, created = _check_output_paths(args, spec)
+    try:
+        code = _sweep(args, spec, scheduler, workers, out, plot_dir, rrd)
+    except BaseException:
+        _remove_empty(created)
+        raise
+    if code:
+        _remove_empty(created)
+    return code
+
+
+def _sweep(
+    args: argparse.Namespace,
+    spec: SweepSpec,
+    scheduler: str,
+    workers: int,
+    out: Path,
+    plot_dir: Path | None,
+    rrd: Path | None,
+) -> int:
+    """The sweep once its outputs are checked (``cmd_sweep``)."""
     from radarviz.viz_app.reports.prosov import check_tracking_result
     from radarviz.viz_app.sweep.output import plot_sweep, record_sweep, sweep_table, write_parquet
 
@@ -277,7 +328,6 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     with commit_together():  # the table, the figures and the recording: all or none
         write_parquet(sweep_table(spec, run.results), out)
         if plot_dir is not None:
-            plot_dir.mkdir(parents=True, exist_ok=True)
             figures = [str(p) for p in plot_sweep(spec, run.results, plot_dir)]
         if rrd is not None:
             record_sweep(spec, run.results, rrd)

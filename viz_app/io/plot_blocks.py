@@ -61,6 +61,7 @@ from radarviz.viz_app.io.plots import (
     csv_source,
     input_summary,
     is_parquet,
+    long_line_error,
     parquet_writer,
     radar_table,
     track_columns,
@@ -120,9 +121,7 @@ class PlotBlockReader:
         self.fh, self.source, self.radars = fh, source, radars
         head = fh.readline(MAX_LINE_BYTES + 1)
         if len(head) > MAX_LINE_BYTES:
-            raise ParameterError(
-                f"{source} line 1: longer than {MAX_LINE_BYTES} bytes (not a plots file?)"
-            )
+            raise long_line_error(source, 1, head)
         if head.startswith(b"\xef\xbb\xbf"):
             head = head[3:]
         try:

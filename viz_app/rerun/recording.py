@@ -15,10 +15,12 @@ through ``send_columns`` (one call per entity, not one ``log`` per scan).
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
+import shutil
 import uuid
 import warnings
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 
 import numpy as np
 import rerun as rr
@@ -40,9 +42,14 @@ def new_recording(recording_id: str | None = None) -> rr.RecordingStream:
     return rr.RecordingStream(APPLICATION_ID, recording_id=recording_id or str(uuid.uuid4()))
 
 
+#: The open ``recording_file(..., to_disk=True)`` streams: id of the recording → pushes what
+#: it has logged so far to its temporary file (``drain``).
+_DRAINS: dict[int, Callable[[], None]] = {}
+
+
 @contextlib.contextmanager
 def recording_file(
-    path: str | os.PathLike, overwrite: bool = False
+    path: str | os.PathLike, overwrite: bool = False, *, to_disk: bool = False
 ) -> Iterator[rr.RecordingStream]:
     """Log into a new recording saved at ``path``: written, verified, then renamed onto it.
 
@@ -54,7 +61,19 @@ def recording_file(
     temporary file is removed, ``path`` is untouched and a ``WriteError`` names ``path``.
     Refuses to replace an existing file unless ``overwrite`` (also when another run creates
     it meanwhile). The encoded recording is held in memory until it is written.
+
+    ``to_disk``: for a recording that grows with its input (``track --rrd``), whose bytes
+    held in memory were the whole peak (10⁵ plots of 7 methods: 2.2 GB). The SDK's file sink
+    writes the staged file as the stream encodes, and the logger calls :func:`drain` after each
+    chunk it logs: the stream is flushed into the file and, before the next chunk, the disk
+    must have room for twice the last one, so a disk filling up is a ``WriteError`` of ours,
+    not a stalled writer. (The bytes of several ``binary_stream`` reads cannot be one file:
+    each read is a whole stream with its own manifest, which the readers refuse.)
     """
+    if to_disk:
+        with _recording_to_disk(path, overwrite) as rec:
+            yield rec
+        return
     stage = Stage(path, overwrite=overwrite)  # the target is checked before any work
     try:
         rec = new_recording()
@@ -79,6 +98,56 @@ def recording_file(
         fh.write(data)
     del data
     stage.commit(verify=verify_recording)
+
+
+@contextlib.contextmanager
+def _recording_to_disk(path: str | os.PathLike, overwrite: bool) -> Iterator[rr.RecordingStream]:
+    """``recording_file(path, overwrite, to_disk=True)``: the SDK's file sink on the staged
+    temporary file, flushed by :func:`drain`."""
+    stage = Stage(path, overwrite=overwrite)
+    try:
+        stage.close_fd()  # the sink opens the temporary file by its name
+        rec = new_recording()
+        rec.save(stage.path)
+    except BaseException:
+        stage.abort()
+        raise
+    written = [0]
+
+    def flush_to_file() -> None:
+        rec.flush()
+        size = os.stat(stage.path).st_size
+        step, written[0] = size - written[0], size
+        if shutil.disk_usage(stage.path.parent).free < 2 * step + (1 << 20):
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    _DRAINS[id(rec)] = flush_to_file
+    try:
+        try:
+            yield rec
+        finally:
+            del _DRAINS[id(rec)]
+        rec.flush()
+        rec.disconnect()
+    except BaseException as exc:
+        with contextlib.suppress(Exception):
+            rec.disconnect()
+        failure = stage.failed(exc)
+        if failure is exc and isinstance(exc, RuntimeError):  # the SDK's writer failed
+            raise stage.error(exc, "the recording's writer failed") from None
+        if failure is exc:
+            raise
+        raise failure from None
+    stage.commit(verify=verify_recording)
+
+
+def drain(rec: rr.RecordingStream) -> None:
+    """Flush what ``rec`` has logged into its file, freeing that memory, and check there is
+    room for as much again: a ``recording_file(..., to_disk=True)`` stream only (elsewhere,
+    e.g. a viewer's stream, nothing is done)."""
+    flush = _DRAINS.get(id(rec))
+    if flush is not None:
+        flush()
 
 
 #: The first bytes of every Rerun recording file.

@@ -174,6 +174,18 @@ def _panels(spec: SweepSpec, grid: NDArray) -> list[tuple[str, NDArray]]:
     return out
 
 
+def figure_paths(spec: SweepSpec, directory: Path) -> list[Path]:
+    """The files ``plot_sweep`` writes into ``directory``, in its order: ``sweep_METRIC.png``
+    per heat map, or ``sweep_METRIC_SSS.png`` per slice when more than two axes are gridded.
+    Known before computing, so the command line checks them first."""
+    slices = int(np.prod(spec.shape[:-2], dtype=np.int64)) if len(spec.axes) > 2 else 0
+    return [
+        directory / f"sweep_{metric}{f'_{s:03d}' if slices else ''}.png"
+        for metric, _, _ in HEATMAPS
+        for s in range(max(slices, 1))
+    ]
+
+
 def plot_sweep(spec: SweepSpec, results: list[TrackingResult], directory: Path) -> list[Path]:
     """One figure per heat-map metric (and per slice of any axes beyond two), a panel per
     method, sharing one colour scale so panels compare. Returns the files written."""
@@ -191,6 +203,7 @@ def plot_sweep(spec: SweepSpec, results: list[TrackingResult], directory: Path) 
     x_axis = axes[-1] if axes else None
     y_axis = axes[-2] if len(axes) >= 2 else None
     written = []
+    paths = iter(figure_paths(spec, directory))
     for metric, title, cmap in HEATMAPS:
         grids = {m: _panels(spec, final_scan_grid(spec, results, metric, m)) for m in methods}
         for s, (label, _) in enumerate(grids[methods[0]]):
@@ -253,8 +266,7 @@ def plot_sweep(spec: SweepSpec, results: list[TrackingResult], directory: Path) 
                 f"{shown} — {b.runs} runs per point, seed {b.seed}"
                 + (f" ({label})" if label else "")
             )
-            suffix = f"_{s:03d}" if label else ""
-            path = directory / f"sweep_{metric}{suffix}.png"
+            path = next(paths)
             write_figure_atomically(fig, path)
             written.append(path)
     return written

@@ -46,7 +46,7 @@ from radarviz.core.experiments.sweep import (
 )
 from radarviz.core.params import ParameterError, check_choice
 from radarviz.viz_app.io.atomic import atomic_write
-from radarviz.viz_app.runtime import tune_allocator
+from radarviz.viz_app.runtime import sigint_deferred, tune_allocator
 
 #: Values one grid axis may have (a guard against a mistyped step such as 0.5:300:0.001).
 MAX_AXIS_VALUES = 1000
@@ -271,27 +271,60 @@ def dask_client(scheduler: str, workers: int) -> Iterator[Any]:
     from distributed import Client, LocalCluster
 
     if scheduler == "local":
+        import dask
+
         security = local_security()
-        with (
-            LocalCluster(
-                n_workers=workers,
-                threads_per_worker=1,
-                processes=True,
-                host="127.0.0.1",
-                protocol="tls",
-                security=security,
-                dashboard_address=None,
-                # No dashboard; the scheduler's small HTTP server (health, metrics) still
-                # starts, so give it a free loopback port instead of the shared default 8787.
-                scheduler_kwargs={"dashboard": False, "dashboard_address": "127.0.0.1:0"},
-                silence_logs=logging.ERROR,
-            ) as cluster,
-            Client(cluster, security=security) as client,
-        ):
-            yield client
+        # Workers forked from a forkserver that ignores SIGINT: the terminal's Ctrl-C goes to
+        # the whole process group, and each worker printed its own KeyboardInterrupt
+        # traceback (~33 lines); now only this process sees it. The cluster starts with the
+        # interrupt held back (``sigint_deferred``), so it is whole when the sweep stops.
+        with dask.config.set({"distributed.worker.multiprocessing-method": "forkserver"}):
+            _start_forkserver_deaf_to_sigint()
+            with contextlib.ExitStack() as stack:
+                with sigint_deferred():
+                    cluster = stack.enter_context(
+                        LocalCluster(
+                            n_workers=workers,
+                            threads_per_worker=1,
+                            processes=True,
+                            host="127.0.0.1",
+                            protocol="tls",
+                            security=security,
+                            dashboard_address=None,
+                            # No dashboard; the scheduler's small HTTP server (health,
+                            # metrics) still starts, so give it a free loopback port instead
+                            # of the shared default 8787.
+                            scheduler_kwargs={
+                                "dashboard": False,
+                                "dashboard_address": "127.0.0.1:0",
+                            },
+                            silence_logs=logging.ERROR,
+                        )
+                    )
+                    client = stack.enter_context(Client(cluster, security=security))
+                yield client
     else:
         with Client(scheduler, timeout="20s") as client:
             yield client
+
+
+def _start_forkserver_deaf_to_sigint() -> None:
+    """Start multiprocessing's forkserver (the parent of the local cluster's workers) with
+    SIGINT ignored, which it keeps and every worker forked from it inherits. (Blocking the
+    signal instead would not do: a new Python process unblocks every signal as it starts.)
+    A Ctrl-C in the moment the server is started is lost; one that is already running is
+    left as it is."""
+    import multiprocessing.forkserver
+    import signal
+
+    from distributed.utils import get_mp_context
+
+    get_mp_context()  # distributed's preload list for the server (imports, so not ignoring)
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        multiprocessing.forkserver.ensure_running()
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def run_sweep(

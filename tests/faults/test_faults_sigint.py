@@ -1,0 +1,71 @@
+"""Ctrl-C during a sweep on the local cluster: the terminal sends SIGINT to the whole process
+group, so every worker printed its own KeyboardInterrupt traceback (~33 lines each), and an
+interrupt while the cluster started left it half made, its ``atexit`` close failing with a
+28-line trace. Now the workers are forked from a server that ignores SIGINT, the cluster's
+start holds the interrupt back until it is whole, and the command ends with one line and
+exit status 130, writing no table."""
+
+from __future__ import annotations
+
+import os
+import re
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from radarviz.viz_app.runtime import sigint_deferred
+
+RADARVIZ = [sys.executable, "-m", "radarviz.viz_app.cli.main"]
+
+
+def test_an_interrupt_in_a_deferred_block_is_raised_when_it_ends() -> None:
+    reached_the_end = False
+    with pytest.raises(KeyboardInterrupt):
+        with sigint_deferred():
+            os.kill(os.getpid(), signal.SIGINT)
+            reached_the_end = True  # no KeyboardInterrupt inside the block
+    assert reached_the_end
+    # The block's error is replaced by the interrupt that caused it; without one it stays.
+    with pytest.raises(KeyboardInterrupt), sigint_deferred():
+        os.kill(os.getpid(), signal.SIGINT)
+        raise RuntimeError("Nanny failed to start.")
+    with pytest.raises(RuntimeError), sigint_deferred():
+        raise RuntimeError("a failure of its own")
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
+def _interrupt_when(tmp_path: Path, marker: str) -> tuple[int, list[str]]:
+    """Run a local-cluster sweep in its own process group, send the group SIGINT (as a
+    terminal's Ctrl-C does) once a line of standard error matches ``marker``; the exit status
+    and every line of standard error."""
+    out = tmp_path / "s.parquet"
+    argv = [*RADARVIZ, "sweep", "--workers", "2", "--runs", "200000", "--out", str(out)]
+    proc = subprocess.Popen(
+        argv, stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True, start_new_session=True
+    )
+    assert proc.stderr is not None
+    lines = []
+    for line in proc.stderr:
+        lines.append(line.rstrip("\n"))
+        if re.search(marker, line):
+            os.killpg(proc.pid, signal.SIGINT)
+            break
+    lines += proc.stderr.read().splitlines()
+    code = proc.wait(timeout=120)
+    assert not out.exists(), lines
+    return code, lines
+
+
+@pytest.mark.parametrize(
+    "marker",
+    [r" 0/200000 runs \(0%\)", r" [1-9]\d*/200000 runs"],
+    ids=["at the start", "mid-sweep"],
+)
+def test_ctrl_c_of_a_sweep_is_one_line_and_status_130(tmp_path: Path, marker: str) -> None:
+    code, lines = _interrupt_when(tmp_path, marker)
+    assert code == 130, lines
+    assert lines[-1] == "radarviz: interrupted: sweep stopped, no output written", lines
+    assert all(line.startswith("sweep 1 point(s): ") for line in lines[:-1]), lines
