@@ -8,11 +8,18 @@
   order, and at the capture's pace: the arrival times' span is the capture's span over the
   speed, within a loose margin (the machine is shared: this checks the pacing is applied,
   not its precision).
+* ``live``: the capture replayed at about 2000 plots/s into ``live --udp … --no-viewer``:
+  every plot accounted for (tracked, out of order, dropped: here all tracked), and the
+  plots' track ids, in order, those of ``track --associate gnn`` on the capture itself
+  (compared by the summary's hash of them); the latency is in the summary, finite.
 * Bad input: one line naming the flag, exit 2.
 """
 
 from __future__ import annotations
 
+import csv
+import hashlib
+import json
 import math
 import socket
 import struct
@@ -89,12 +96,17 @@ def listen() -> tuple[socket.socket, int]:
 
 @pytest.fixture(scope="module")
 def capture(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path, int, list[float]]:
-    return write_capture(tmp_path_factory.mktemp("live"))
+    return write_capture(tmp_path_factory.mktemp("live"), duration_s=LIVE_SCENE_S)
+
+
+#: The scene's length (s of feed time) and the replay's speed: about 150 plots/s of feed
+#: time, so about 2000 plots/s for some 15 s.
+LIVE_SCENE_S, LIVE_SPEED = 200.0, 13.0
 
 
 def test_replay_sends_every_datagram_in_order_at_the_capture_pace(capture) -> None:
     cap, _, _, times = capture
-    speed = 20.0
+    speed = 40.0
     sock, port = listen()
     got: list[tuple[float, bytes]] = []
     sock.settimeout(5.0)
@@ -169,3 +181,78 @@ def test_replay_of_an_ast_file_paces_by_time_of_day(tmp_path: Path) -> None:
     # Sent at half the recording's times: the last block at its time of day over 2.
     assert counts.span_s > 10.0
     assert clock[0] == pytest.approx(counts.span_s / 2.0, abs=1e-9)
+
+
+def free_udp_port() -> int:
+    sock, port = listen()
+    sock.close()
+    return port
+
+
+def test_live_tracks_a_replayed_feed_as_track_does_the_capture(capture, tmp_path: Path) -> None:
+    cap, toml, n_plots, times = capture
+    out = tmp_path / "t.csv"
+    argv = ["track", "--input", str(cap), "--radars", str(toml), "--out", str(out)]
+    assert main([*argv, "--associate", "gnn", "--method", "ucm"]) == 0
+    expected = hashlib.sha256()
+    confirmed: set[str] = set()
+    with open(out, newline="") as fh:
+        for row in csv.DictReader(fh):
+            expected.update(row["target"].encode() + b"\n")
+            if row["status"] == "confirmed":
+                confirmed.add(row["target"])
+
+    port = free_udp_port()
+    summary = tmp_path / "live.json"
+    live = subprocess.Popen(
+        [
+            RADARVIZ, "live", "--udp", f"127.0.0.1:{port}", "--radars", str(toml),
+            "--method", "ucm", "--no-viewer", "--max-plots", str(n_plots),
+            "--duration-s", "240", "--summary", str(summary),
+        ],
+        stderr=subprocess.PIPE,
+        text=True,
+    )  # fmt: skip
+    try:
+        # The live side is listening once it says so.
+        assert live.stderr is not None
+        line = live.stderr.readline()
+        assert "tracking udp" in line, line
+        replay = [RADARVIZ, "replay", str(cap), "--to", f"127.0.0.1:{port}"]
+        replay += ["--speed", str(LIVE_SPEED)]
+        done = subprocess.run(replay, capture_output=True, timeout=300)
+        assert done.returncode == 0, done.stderr
+        err = live.stderr.read()
+        assert live.wait(timeout=300) == 0, err
+    finally:
+        if live.poll() is None:
+            live.kill()
+    doc = json.loads(summary.read_text())
+    assert doc["datagrams"] == len(times) and doc["malformed"] == {}
+    assert doc["plots"] == n_plots
+    parts = ("tracked", "out_of_order", "dropped", "untracked_at_stop")
+    assert sum(doc[k] for k in parts) == n_plots
+    assert doc["tracked"] == n_plots  # a clean loopback feed: nothing lost
+    assert doc["track_ids_sha256"] == expected.hexdigest()
+    assert set(doc["confirmed_tracks"]) == confirmed
+    lat = doc["latency_ms"]
+    assert 0.0 < lat["median"] <= lat["p99"]
+    assert f"{n_plots} tracked" in err and "latency median" in err
+
+
+@pytest.mark.parametrize(
+    ("extra", "words"),
+    [
+        (["--udp", "10.1.2.3:8600"], "--udp 10.1.2.3:8600 listens beyond this machine"),
+        (["--udp", "127.0.0.1:8600", "--budget-ms", "0"], "--budget-ms must be a finite number"),
+        (["--udp", "127.0.0.1:8600", "--duration-s", "-1"], "--duration-s must be a finite"),
+        (["--udp", "127.0.0.1:8600", "--max-plots", "0"], "--max-plots must be"),
+        (["--udp", "127.0.0.1"], "--udp must be HOST:PORT"),
+    ],
+)
+def test_live_bad_input_is_one_line_exit_2(
+    capture, extra: list[str], words: str, capsys: pytest.CaptureFixture
+) -> None:
+    assert main(["live", "--radars", str(capture[1]), "--no-viewer", *extra]) == 2
+    err = capsys.readouterr().err
+    assert words in err and err.count("\n") == 1, err
