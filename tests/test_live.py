@@ -21,6 +21,7 @@ import csv
 import hashlib
 import json
 import math
+import signal
 import socket
 import struct
 import subprocess
@@ -256,3 +257,81 @@ def test_live_bad_input_is_one_line_exit_2(
     assert main(["live", "--radars", str(capture[1]), "--no-viewer", *extra]) == 2
     err = capsys.readouterr().err
     assert words in err and err.count("\n") == 1, err
+
+
+def test_live_counts_malformed_datagrams_once_and_goes_on(tmp_path: Path) -> None:
+    """A datagram that is not ASTERIX (twice: said once), a record sent twice (a duplicate,
+    counted by the reader) and the feed's plots all tracked after them."""
+    _, toml, n_plots, _ = write_capture(tmp_path, targets=10, duration_s=20.0)
+    with open(tmp_path / "feed.ast", "rb") as fh:
+        blocks = [b for _, _, b in ax.data_blocks(fh, "feed.ast")]
+    last = records_of(blocks[0])[-1:]  # within the reader's duplicate window of itself
+    port = free_udp_port()
+    summary = tmp_path / "live.json"
+    live = subprocess.Popen(
+        [
+            RADARVIZ, "live", "--udp", f"127.0.0.1:{port}", "--radars", str(toml),
+            "--method", "ucm", "--no-viewer", "--max-plots", str(n_plots),
+            "--duration-s", "120", "--summary", str(summary),
+        ],
+        stderr=subprocess.PIPE,
+        text=True,
+    )  # fmt: skip
+    try:
+        assert live.stderr is not None
+        assert "tracking udp" in live.stderr.readline()
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as out:
+            for payload in [b"not asterix", *blocks[:1], b"\x30\x00", as_block(last), *blocks[1:]]:
+                out.sendto(payload, ("127.0.0.1", port))
+                time.sleep(0.002)
+        err = live.stderr.read()
+        assert live.wait(timeout=120) == 0, err
+    finally:
+        if live.poll() is None:
+            live.kill()
+    doc = json.loads(summary.read_text())
+    assert doc["malformed"] == {"a datagram that is not a run of ASTERIX data blocks": 2}, err
+    assert err.count("not a run of ASTERIX data blocks") == 1
+    assert doc["duplicate_records"] == 1
+    assert doc["tracked"] == doc["plots"] == n_plots
+
+
+def test_live_follows_a_growing_file_and_ctrl_c_leaves_a_valid_recording(tmp_path: Path) -> None:
+    from radarviz.viz_app.rerun.recording import verify_recording
+
+    _, toml, n_plots, _ = write_capture(tmp_path, targets=10, duration_s=20.0)
+    data = (tmp_path / "feed.ast").read_bytes()
+    with open(tmp_path / "feed.ast", "rb") as fh:
+        cut = [off for off, _, _ in ax.data_blocks(fh, "feed.ast")][1] + 5  # inside a block
+    grown = tmp_path / "grown.ast"
+    grown.write_bytes(data[:cut])
+    rrd, summary = tmp_path / "live.rrd", tmp_path / "live.json"
+    live = subprocess.Popen(
+        [
+            RADARVIZ, "live", "--follow", str(grown), "--radars", str(toml), "--method", "ucm",
+            "--no-viewer", "--rrd", str(rrd), "--summary", str(summary), "--reorder-s", "0",
+        ],
+        stderr=subprocess.PIPE,
+        text=True,
+    )  # fmt: skip
+    try:
+        assert live.stderr is not None
+        assert "tracking" in live.stderr.readline()
+        time.sleep(1.0)
+        with open(grown, "ab") as fh:
+            fh.write(data[cut:])
+        # The follower polls every 50 ms: seconds are ample for its 167 plots (not a timing
+        # check: the account below must balance whenever the interrupt comes).
+        time.sleep(3.0)
+        live.send_signal(signal.SIGINT)
+        err = live.stderr.read()
+        assert live.wait(timeout=120) == 130, err
+    finally:
+        if live.poll() is None:
+            live.kill()
+    assert "interrupted" in err and str(rrd) in err
+    verify_recording(rrd)  # a whole recording, footer and all
+    doc = json.loads(summary.read_text())
+    assert doc["plots"] == n_plots
+    assert doc["tracked"] + doc["untracked_at_stop"] == n_plots
+    assert not list(tmp_path.glob(".live.rrd.*"))  # no temporary file left behind

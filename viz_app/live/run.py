@@ -161,14 +161,9 @@ def run_live(args: argparse.Namespace) -> int:
             interrupted = True
         stop.set()
         reader.join(timeout=5.0)
-        # Plots the tracker did not take (an interrupted session): still accounted for.
-        left = 0
-        while True:
-            try:
-                item = plots.get_nowait()
-            except queue.Empty:
-                break
-            left += item is not None
+        # Plots the tracker had not finished at an interrupt (in the queue, waiting for their
+        # time order or their batch): still accounted for, as untracked.
+        left = counts.plots - counts.tracked - counts.out_of_order - counts.dropped
         seconds = time.monotonic() - start
         if recorder is not None:
             recorder.report(tracker.report())
