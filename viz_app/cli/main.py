@@ -25,7 +25,7 @@ from typing import Any, NoReturn
 from radarviz.core.experiments.prosov import ALL_METHODS
 from radarviz.core.finite import ResultError, check_finite_document
 from radarviz.core.params import ParameterError, check_int, check_real
-from radarviz.viz_app.cli import recording, score, sweep, track
+from radarviz.viz_app.cli import live, recording, score, sweep, track
 from radarviz.viz_app.cli.args import integer, number, print_report
 from radarviz.viz_app.cli.params import add_parameter, cli_message, map_flag
 from radarviz.viz_app.io.atomic import WriteError
@@ -196,7 +196,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     _add_association(rep_sub)
 
-    for module in (recording, track, sweep, score):
+    for module in (recording, track, sweep, score, live):
         module.add_commands(sub)
 
     tune = sub.add_parser(
@@ -596,7 +596,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             from radarviz.viz_app.tune.serve import cmd_tune
 
             return cmd_tune(args.host, args.port, args.viewer_port, args.no_browser)
-        for module in (recording, track, sweep, score):
+        for module in (recording, track, sweep, score, live):
             if args.command in module.COMMANDS:
                 return module.COMMANDS[args.command](args)
     except ParameterError as exc:

@@ -26,6 +26,11 @@ length the smaller of ``original_len`` and the block's room) and the obsolete Pa
 (type 2: ``interface_id (2) drops (2) ts (8) captured_len (4) original_len (4) data``). Other
 blocks (name resolution, statistics, custom…) are skipped.
 
+**Times.** Each datagram carries its packet's capture time (``Datagram.time_s``, s since the
+epoch): a pcap record's ``ts_sec + ts_frac`` (µs or ns by the magic), a pcapng packet's 64-bit
+timestamp in its interface's unit (the IDB option ``if_tsresol``, µs by default); a Simple
+Packet Block has none (None). ``radarviz replay`` paces a capture by them.
+
 **Link layers** (``LINK_TYPES``): Ethernet (1), with any number of 802.1Q / 802.1ad VLAN tags
 (``0x8100``, ``0x88A8``, ``0x9100``: 4 octets each, TCI then the next EtherType); Linux cooked
 capture SLL (113: 16 octets, the protocol at octet 14) and SLL2 (276: 20 octets, the protocol
@@ -122,12 +127,15 @@ class CaptureCounts:
 
 class Datagram(NamedTuple):
     """A UDP payload: the packet's number (from 1), the byte offset of the packet's record or
-    block in the file, the byte offset of the payload in the file, and the payload."""
+    block in the file, the byte offset of the payload in the file, the payload, and the
+    packet's capture time (s since the epoch; None for a pcapng Simple Packet Block, which
+    has none)."""
 
     packet: int
     packet_offset: int
     offset: int
     payload: bytes
+    time_s: float | None = None
 
 
 def packet_place(packet: int, offset: int) -> str:
@@ -157,7 +165,7 @@ def udp_datagrams(
             f"{start[:4].hex() or 'none'}; a capture starts with a pcap magic or a pcapng "
             "section header)"
         )
-    for number, offset, link, data_offset, data in packets:
+    for number, offset, link, data_offset, data, time_s in packets:
         counts.packets = number
         got = _udp_payload(link, data)
         if isinstance(got, str):
@@ -170,7 +178,7 @@ def udp_datagrams(
             continue
         start_in_data, payload = got
         counts.udp_datagrams += 1
-        yield Datagram(number, offset, data_offset + start_in_data, payload)
+        yield Datagram(number, offset, data_offset + start_in_data, payload, time_s)
 
 
 class _Reader:
@@ -202,7 +210,8 @@ def _truncated(source: str, what: str, offset: int, need: int, got: int) -> Para
     )
 
 
-_Packet = tuple[int, int, int, int, bytes]  # number, offset, link type, data offset, data
+#: number, offset, link type, data offset, data, capture time (s) or None
+_Packet = tuple[int, int, int, int, bytes, float | None]
 
 
 def _pcap_packets(reader: _Reader, source: str) -> Iterator[_Packet]:
@@ -212,6 +221,8 @@ def _pcap_packets(reader: _Reader, source: str) -> Iterator[_Packet]:
         raise _truncated(source, "byte 0, the pcap file header", 0, 24, len(header))
     order = "<" if header[:4] in (FILE_MAGICS[0], FILE_MAGICS[2]) else ">"
     link = struct.unpack(order + "I", header[20:24])[0] & 0xFFFF
+    # The nanosecond magic's second field counts nanoseconds, the other's microseconds.
+    frac_s = 1e-9 if header[:4] in (FILE_MAGICS[1], FILE_MAGICS[3]) else 1e-6
     record = struct.Struct(order + "IIII")
     number = 0
     while True:
@@ -224,7 +235,7 @@ def _pcap_packets(reader: _Reader, source: str) -> Iterator[_Packet]:
         if len(raw) < 16:
             raise _truncated(source, f"packet {number} (byte {offset}), its record header",
                              offset, 16, len(raw))  # fmt: skip
-        _, _, incl_len, _ = record.unpack(raw)
+        ts_sec, ts_frac, incl_len, _ = record.unpack(raw)
         if incl_len > MAX_PACKET_BYTES:
             raise ParameterError(
                 f"{where}: captured length {incl_len} is beyond {MAX_PACKET_BYTES} octets "
@@ -234,13 +245,14 @@ def _pcap_packets(reader: _Reader, source: str) -> Iterator[_Packet]:
         if len(data) < incl_len:
             raise _truncated(source, f"packet {number} (byte {offset})", offset,
                              16 + incl_len, 16 + len(data))  # fmt: skip
-        yield number, offset, link, offset + 16, data
+        yield number, offset, link, offset + 16, data, ts_sec + ts_frac * frac_s
 
 
 def _pcapng_packets(reader: _Reader, source: str) -> Iterator[_Packet]:
     """The packets of a pcapng file (module docstring), each with its interface's link type."""
     order = "<"
     links: list[int] = []
+    units: list[float] = []  # each interface's timestamp unit (s)
     number = 0
     while True:
         offset = reader.offset
@@ -262,6 +274,7 @@ def _pcapng_packets(reader: _Reader, source: str) -> Iterator[_Packet]:
                     f"magic (got {magic.hex()})"
                 )
             links = []  # interfaces are numbered per section
+            units = []
         kind, length = struct.unpack(order + "II", head[:8])
         is_packet = kind in (PCAPNG_EPB, PCAPNG_SPB, PCAPNG_PB)
         what = f"packet {number + 1} (byte {offset})" if is_packet else f"byte {offset}"
@@ -278,15 +291,19 @@ def _pcapng_packets(reader: _Reader, source: str) -> Iterator[_Packet]:
             if len(body) < 8:
                 raise ParameterError(f"{source} {what}: interface description block too short")
             links.append(struct.unpack(order + "H", body[:2])[0])
+            units.append(_tsresol(body[8:], order))
             continue
         if not is_packet:
             continue  # name resolution, statistics, custom blocks: nothing to read
         number += 1
+        stamp: int | None = None
         if kind == PCAPNG_EPB:
-            fields, iface, cap_len = 20, *struct.unpack(order + "I8xI", body[:16])
+            fields, iface, high, low, cap_len = 20, *struct.unpack(order + "IIII", body[:16])
+            stamp = high << 32 | low
         elif kind == PCAPNG_PB:
-            fields, iface, cap_len = 20, *struct.unpack(order + "H10xI", body[:16])
-        else:  # SPB: interface 0, the captured length bounded by the block
+            fields, iface, high, low, cap_len = 20, *struct.unpack(order + "H2xIII", body[:16])
+            stamp = high << 32 | low
+        else:  # SPB: interface 0, the captured length bounded by the block, no timestamp
             fields, iface = 4, 0
             cap_len = min(struct.unpack(order + "I", body[:4])[0], len(body) - 4)
         if iface >= len(links):
@@ -299,7 +316,34 @@ def _pcapng_packets(reader: _Reader, source: str) -> Iterator[_Packet]:
                 f"{source} {what}: captured length {cap_len} runs past its block "
                 f"({len(body) - fields} octets of data; corrupt)"
             )
-        yield number, offset, links[iface], offset + 8 + fields, body[fields : fields + cap_len]
+        time_s = None if stamp is None else stamp * units[iface]
+        yield (
+            number,
+            offset,
+            links[iface],
+            offset + 8 + fields,
+            body[fields : fields + cap_len],
+            time_s,
+        )
+
+
+#: pcapng's Interface Description Block option ``if_tsresol`` (its timestamps' unit).
+IF_TSRESOL = 9
+
+
+def _tsresol(options: bytes, order: str) -> float:
+    """An interface's timestamp unit (s) from its IDB options: ``if_tsresol`` (one octet: 10⁻ⁿ,
+    or 2⁻ⁿ with the top bit set), else the format's default, microseconds."""
+    pos = 0
+    while pos + 4 <= len(options):
+        code, length = struct.unpack(order + "HH", options[pos : pos + 4])
+        if code == 0:  # opt_endofopt
+            break
+        if code == IF_TSRESOL and length >= 1 and pos + 5 <= len(options):
+            v = options[pos + 4]
+            return 2.0 ** -(v & 0x7F) if v & 0x80 else 10.0**-v
+        pos += 4 + (length + 3) // 4 * 4
+    return 1e-6
 
 
 def _udp_payload(link: int, data: bytes) -> tuple[int, bytes] | str:

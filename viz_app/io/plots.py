@@ -1107,29 +1107,7 @@ def _associate_plots(
     # A capture's CAT034 messages time the antennas (``AsterixReader.scan_timing``): a period
     # they give replaces the one estimated from the plots.
     timing = getattr(reader, "scan_timing", None)
-    # Batches are associated ``READ_BLOCK`` plots at a time (``GNNTracker.add_batches``: one
-    # compiled call), each with the period its radar's CAT034 messages gave by then.
-    chunk: list[list[tuple[int, Plot]]] = []
-    periods: list[float | None] = []
-
-    def run_chunk() -> None:
-        try:
-            results = tracker.add_batches([[p for _, p in b] for b in chunk], periods)
-        except PlotError as exc:
-            scan = chunk[getattr(exc, "batch", 0)]
-            where = _place(source, locate(scan[exc.index][0], exc.column))
-            raise ParameterError(f"{where}: {exc}") from None
-        for scan, result in zip(chunk, results, strict=True):
-            for (_, plot), track, status, rows in zip(
-                scan, result.track_ids, result.statuses, result.rows, strict=True
-            ):
-                on_rows(replace(plot, target=track), rows, status)
-            if on_scan is not None:
-                on_scan(result.deleted)
-        chunk.clear()
-        periods.clear()
-
-    held = 0
+    runner = BatchRunner(tracker, source, locate, on_rows, on_scan)
     while True:
         try:
             scan = next(batches)
@@ -1140,18 +1118,71 @@ def _associate_plots(
         period = None
         if timing:
             period = getattr(timing.get(scan[0][1].radar), "rotation_period_s", None)
-        chunk.append(scan)
-        periods.append(period)
-        held += len(scan)
+        runner.hold(scan, period)
         plots += len(scan)
-        if held >= READ_BLOCK:
-            run_chunk()
-            held = 0
-    if chunk:
-        run_chunk()
+        if runner.held >= READ_BLOCK:
+            runner.run()
+    runner.run()
     if on_report is not None:
         on_report(tracker.report())
     return plots, reader.three_d, methods, tuple(tracker.ever_confirmed)
+
+
+class BatchRunner:
+    """The association's batches, held and associated in one compiled call
+    (``GNNTracker.add_batches``) when asked: ``track --associate`` runs them ``READ_BLOCK``
+    plots at a time, ``radarviz live`` also when its time budget is spent.
+
+    ``hold(batch, period)`` keeps a batch of (key, plot) pairs with its radar's antenna period
+    as the feed measured it by then (or None); ``run()`` associates what is held, hands every
+    plot to ``on_rows(plot labelled with its track id, rows, status)`` and each batch's
+    deleted tracks to ``on_scan``, and returns the keys of the plots it ran. A tracker error
+    is a ``ParameterError`` naming the plot (``locate``).
+    """
+
+    def __init__(
+        self,
+        tracker: GNNTracker,
+        source: str,
+        locate: Locate,
+        on_rows: Callable[..., None],
+        on_scan: Callable[[list[str]], None] | None = None,
+    ):
+        self.tracker = tracker
+        self.source = source
+        self.locate = locate
+        self.on_rows = on_rows
+        self.on_scan = on_scan
+        self.chunk: list[list[tuple[Any, Plot]]] = []
+        self.periods: list[float | None] = []
+        #: Plots held.
+        self.held = 0
+
+    def hold(self, batch: list[tuple[Any, Plot]], period: float | None = None) -> None:
+        self.chunk.append(batch)
+        self.periods.append(period)
+        self.held += len(batch)
+
+    def run(self) -> list[Any]:
+        chunk, keys = self.chunk, []
+        if not chunk:
+            return keys
+        try:
+            results = self.tracker.add_batches([[p for _, p in b] for b in chunk], self.periods)
+        except PlotError as exc:
+            scan = chunk[getattr(exc, "batch", 0)]
+            where = _place(self.source, self.locate(scan[exc.index][0], exc.column))
+            raise ParameterError(f"{where}: {exc}") from None
+        for scan, result in zip(chunk, results, strict=True):
+            for (key, plot), track, status, rows in zip(
+                scan, result.track_ids, result.statuses, result.rows, strict=True
+            ):
+                self.on_rows(replace(plot, target=track), rows, status)
+                keys.append(key)
+            if self.on_scan is not None:
+                self.on_scan(result.deleted)
+        self.chunk, self.periods, self.held = [], [], 0
+        return keys
 
 
 class RowObserver(Protocol):

@@ -214,6 +214,12 @@ class TrackRecorder:
             scan=max(self.count, 1),
             timeline="plot",
         )
+        self.send_layout()
+
+    def send_layout(self) -> None:
+        """Send the blueprint: a 3D view framed on every radar and plot so far, the whole
+        run in the time series (``close`` sends it at the end; a live session also at its
+        start, so the viewer is laid out while the plots come)."""
         lo = np.where(np.isfinite(self._lo), self._lo, 0.0)
         hi = np.where(np.isfinite(self._hi), self._hi, 0.0)
         centre = (lo + hi) / 2.0

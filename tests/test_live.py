@@ -1,0 +1,337 @@
+"""A radar feed replayed and tracked as it comes (``radarviz replay``, ``radarviz live``).
+
+* The test's capture: a rotating-radar scene of four radars and a few hundred targets
+  (``core.scenarios.rotating``), written as ASTERIX (``viz_app.io.asterix.write_asterix``)
+  and wrapped in a pcap, one UDP datagram per data block of ``RECORDS_PER_DATAGRAM`` records,
+  each stamped with its first plot's time (as a capture of the feed would be).
+* ``replay``: every datagram reaches a socket the test listens on, byte for byte and in
+  order, and at the capture's pace: the arrival times' span is the capture's span over the
+  speed, within a loose margin (the machine is shared: this checks the pacing is applied,
+  not its precision).
+* ``live``: the capture replayed at about 2000 plots/s into ``live --udp … --no-viewer``:
+  every plot accounted for (tracked, out of order, dropped: here all tracked), and the
+  plots' track ids, in order, those of ``track --associate gnn`` on the capture itself
+  (compared by the summary's hash of them); the latency is in the summary, finite.
+* Bad input: one line naming the flag, exit 2.
+"""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import json
+import math
+import signal
+import socket
+import struct
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from test_pcap import as_block, ethernet, ipv4, records_of, udp
+
+from radarviz.core.experiments.association import rotating_scene_plots
+from radarviz.core.scenarios.rotating import RotatingRadar, air_traffic, rotating_plots
+from radarviz.viz_app.cli.main import main
+from radarviz.viz_app.io import asterix as ax
+from radarviz.viz_app.io.plots import Radar
+
+ROOT = Path(__file__).resolve().parents[1]
+RADARVIZ = str(Path(sys.executable).with_name("radarviz"))
+#: CAT048 records per datagram of the test's capture (a real feed sends a sector's plots).
+RECORDS_PER_DATAGRAM = 16
+SITES = ((-40e3, -40e3), (40e3, -40e3), (40e3, 40e3), (-40e3, 40e3))
+
+
+def rotating_radars() -> list[RotatingRadar]:
+    """Four radars 113 km apart, periods 4.0 to 5.1 s, phases staggered."""
+    return [
+        RotatingRadar(f"r{j}", x, y, period_s=4.0 + 0.37 * j, phase_rad=1.3 * j)
+        for j, (x, y) in enumerate(SITES)
+    ]
+
+
+def write_capture(
+    tmp: Path, targets: int = 300, duration_s: float = 60.0, seed: int = 5
+) -> tuple[Path, Path, int, list[float]]:
+    """The test's capture (module docstring): its path, the radars file, its plots and each
+    datagram's capture time."""
+    sites = rotating_radars()
+    rng = np.random.default_rng(seed)
+    traffic = air_traffic(rng, targets, duration_s, turn_deg=60.0, turn_rate_dps=1.5)
+    plots = rotating_scene_plots(sites, rotating_plots(rng, sites, traffic, duration_s))
+    radars = ax.with_source_ids(
+        [
+            Radar(s.name, s.x_m, s.y_m, 0.0, s.sigma_r_m, math.degrees(s.sigma_beta_rad))
+            for s in sites
+        ]
+    )
+    ast, toml = tmp / "feed.ast", tmp / "radars.toml"
+    ax.write_asterix(str(ast), str(toml), plots, radars)
+    with open(ast, "rb") as fh:
+        records = [r for _, _, b in ax.data_blocks(fh, "feed.ast") for r in records_of(b)]
+    frames, times = [], []
+    for k in range(0, len(records), RECORDS_PER_DATAGRAM):
+        frames.append(ethernet(ipv4(udp(as_block(records[k : k + RECORDS_PER_DATAGRAM])))))
+        times.append(plots[k].time_s)
+    out = struct.pack("<IHHiIII", 0xA1B2C3D4, 2, 4, 0, 0, 65535, 1)
+    for t, f in zip(times, frames, strict=True):
+        sec = int(t)
+        out += struct.pack("<IIII", 1_700_000_000 + sec, round((t - sec) * 1e6), len(f), len(f))
+        out += f
+    cap = tmp / "feed.pcap"
+    cap.write_bytes(out)
+    return cap, toml, len(plots), times
+
+
+def listen() -> tuple[socket.socket, int]:
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 22)
+    sock.bind(("127.0.0.1", 0))
+    return sock, sock.getsockname()[1]
+
+
+@pytest.fixture(scope="module")
+def capture(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path, int, list[float]]:
+    return write_capture(tmp_path_factory.mktemp("live"), duration_s=LIVE_SCENE_S)
+
+
+#: The scene's length (s of feed time) and the replay's speed: about 150 plots/s of feed
+#: time, so about 2000 plots/s for some 15 s.
+LIVE_SCENE_S, LIVE_SPEED = 200.0, 13.0
+
+
+def test_replay_sends_every_datagram_in_order_at_the_capture_pace(capture) -> None:
+    cap, _, _, times = capture
+    speed = 40.0
+    sock, port = listen()
+    got: list[tuple[float, bytes]] = []
+    sock.settimeout(5.0)
+
+    def receive() -> None:
+        while len(got) < len(times):
+            try:
+                data = sock.recv(65536)
+            except TimeoutError:
+                return
+            got.append((time.monotonic(), data))
+
+    thread = threading.Thread(target=receive)
+    thread.start()
+    argv = [RADARVIZ, "replay", str(cap), "--to", f"127.0.0.1:{port}", "--speed", str(speed)]
+    done = subprocess.run(argv, capture_output=True, text=True, timeout=300)
+    thread.join()
+    sock.close()
+    assert done.returncode == 0, done.stderr
+    assert f"replayed {len(times)} datagrams" in done.stderr
+    with open(cap, "rb") as fh:
+        from radarviz.viz_app.io.pcap import CaptureCounts, udp_datagrams
+
+        sent = [d.payload for d in udp_datagrams(fh, "c", CaptureCounts())]
+    assert [d for _, d in got] == sent
+    span = (times[-1] - times[0]) / speed
+    arrived = got[-1][0] - got[0][0]
+    # Paced: not sent as fast as the socket goes (that takes milliseconds), nor slower than
+    # the pace plus a generous allowance for a shared machine.
+    assert 0.9 * span <= arrived <= span + 5.0
+    # And spread along: half the datagrams (by capture time) arrive near half-time.
+    mid = len(times) // 2
+    assert abs((got[mid][0] - got[0][0]) - (times[mid] - times[0]) / speed) < 0.25 * span + 1.0
+
+
+@pytest.mark.parametrize(
+    ("extra", "words"),
+    [
+        (["--speed", "0"], "--speed must be a finite number in (0, 10000]"),
+        (["--speed", "nan"], "--speed must be a finite number"),
+        (["--to", "127.0.0.1"], "--to must be HOST:PORT"),
+        (["--to", "127.0.0.1:70000"], "--to port must be in [1, 65535]"),
+    ],
+)
+def test_replay_bad_input_is_one_line_exit_2(
+    capture, extra: list[str], words: str, capsys: pytest.CaptureFixture
+) -> None:
+    assert main(["replay", str(capture[0]), *extra]) == 2
+    err = capsys.readouterr().err
+    assert words in err and err.count("\n") == 1
+
+
+def test_replay_of_an_ast_file_paces_by_time_of_day(tmp_path: Path) -> None:
+    """A file of data blocks: a datagram per block, paced by the blocks' times of day."""
+    from radarviz.viz_app.live.replay import paced, recorded_feed
+
+    write_capture(tmp_path, targets=20, duration_s=20.0)
+    ast = tmp_path / "feed.ast"
+    clock = [0.0]
+    sleeps: list[float] = []
+
+    def sleep(s: float) -> None:
+        sleeps.append(s)
+        clock[0] += s
+
+    sent: list[bytes] = []
+    with open(ast, "rb") as fh:
+        counts = paced(recorded_feed(fh, "feed.ast"), 2.0, sent.append, lambda: clock[0], sleep)
+    with open(ast, "rb") as fh:
+        blocks = [b for _, _, b in ax.data_blocks(fh, "feed.ast")]
+    assert sent == blocks
+    # Sent at half the recording's times: the last block at its time of day over 2.
+    assert counts.span_s > 10.0
+    assert clock[0] == pytest.approx(counts.span_s / 2.0, abs=1e-9)
+
+
+def free_udp_port() -> int:
+    sock, port = listen()
+    sock.close()
+    return port
+
+
+def test_live_tracks_a_replayed_feed_as_track_does_the_capture(capture, tmp_path: Path) -> None:
+    cap, toml, n_plots, times = capture
+    out = tmp_path / "t.csv"
+    argv = ["track", "--input", str(cap), "--radars", str(toml), "--out", str(out)]
+    assert main([*argv, "--associate", "gnn", "--method", "ucm"]) == 0
+    expected = hashlib.sha256()
+    confirmed: set[str] = set()
+    with open(out, newline="") as fh:
+        for row in csv.DictReader(fh):
+            expected.update(row["target"].encode() + b"\n")
+            if row["status"] == "confirmed":
+                confirmed.add(row["target"])
+
+    port = free_udp_port()
+    summary = tmp_path / "live.json"
+    live = subprocess.Popen(
+        [
+            RADARVIZ, "live", "--udp", f"127.0.0.1:{port}", "--radars", str(toml),
+            "--method", "ucm", "--no-viewer", "--max-plots", str(n_plots),
+            "--duration-s", "240", "--summary", str(summary),
+        ],
+        stderr=subprocess.PIPE,
+        text=True,
+    )  # fmt: skip
+    try:
+        # The live side is listening once it says so.
+        assert live.stderr is not None
+        line = live.stderr.readline()
+        assert "tracking udp" in line, line
+        replay = [RADARVIZ, "replay", str(cap), "--to", f"127.0.0.1:{port}"]
+        replay += ["--speed", str(LIVE_SPEED)]
+        done = subprocess.run(replay, capture_output=True, timeout=300)
+        assert done.returncode == 0, done.stderr
+        err = live.stderr.read()
+        assert live.wait(timeout=300) == 0, err
+    finally:
+        if live.poll() is None:
+            live.kill()
+    doc = json.loads(summary.read_text())
+    assert doc["datagrams"] == len(times) and doc["malformed"] == {}
+    assert doc["plots"] == n_plots
+    parts = ("tracked", "out_of_order", "dropped", "untracked_at_stop")
+    assert sum(doc[k] for k in parts) == n_plots
+    assert doc["tracked"] == n_plots  # a clean loopback feed: nothing lost
+    assert doc["track_ids_sha256"] == expected.hexdigest()
+    assert set(doc["confirmed_tracks"]) == confirmed
+    lat = doc["latency_ms"]
+    assert 0.0 < lat["median"] <= lat["p99"]
+    assert f"{n_plots} tracked" in err and "latency median" in err
+
+
+@pytest.mark.parametrize(
+    ("extra", "words"),
+    [
+        (["--udp", "10.1.2.3:8600"], "--udp 10.1.2.3:8600 listens beyond this machine"),
+        (["--udp", "127.0.0.1:8600", "--budget-ms", "0"], "--budget-ms must be a finite number"),
+        (["--udp", "127.0.0.1:8600", "--duration-s", "-1"], "--duration-s must be a finite"),
+        (["--udp", "127.0.0.1:8600", "--max-plots", "0"], "--max-plots must be"),
+        (["--udp", "127.0.0.1"], "--udp must be HOST:PORT"),
+    ],
+)
+def test_live_bad_input_is_one_line_exit_2(
+    capture, extra: list[str], words: str, capsys: pytest.CaptureFixture
+) -> None:
+    assert main(["live", "--radars", str(capture[1]), "--no-viewer", *extra]) == 2
+    err = capsys.readouterr().err
+    assert words in err and err.count("\n") == 1, err
+
+
+def test_live_counts_malformed_datagrams_once_and_goes_on(tmp_path: Path) -> None:
+    """A datagram that is not ASTERIX (twice: said once), a record sent twice (a duplicate,
+    counted by the reader) and the feed's plots all tracked after them."""
+    _, toml, n_plots, _ = write_capture(tmp_path, targets=10, duration_s=20.0)
+    with open(tmp_path / "feed.ast", "rb") as fh:
+        blocks = [b for _, _, b in ax.data_blocks(fh, "feed.ast")]
+    last = records_of(blocks[0])[-1:]  # within the reader's duplicate window of itself
+    port = free_udp_port()
+    summary = tmp_path / "live.json"
+    live = subprocess.Popen(
+        [
+            RADARVIZ, "live", "--udp", f"127.0.0.1:{port}", "--radars", str(toml),
+            "--method", "ucm", "--no-viewer", "--max-plots", str(n_plots),
+            "--duration-s", "120", "--summary", str(summary),
+        ],
+        stderr=subprocess.PIPE,
+        text=True,
+    )  # fmt: skip
+    try:
+        assert live.stderr is not None
+        assert "tracking udp" in live.stderr.readline()
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as out:
+            for payload in [b"not asterix", *blocks[:1], b"\x30\x00", as_block(last), *blocks[1:]]:
+                out.sendto(payload, ("127.0.0.1", port))
+                time.sleep(0.002)
+        err = live.stderr.read()
+        assert live.wait(timeout=120) == 0, err
+    finally:
+        if live.poll() is None:
+            live.kill()
+    doc = json.loads(summary.read_text())
+    assert doc["malformed"] == {"a datagram that is not a run of ASTERIX data blocks": 2}, err
+    assert err.count("not a run of ASTERIX data blocks") == 1
+    assert doc["duplicate_records"] == 1
+    assert doc["tracked"] == doc["plots"] == n_plots
+
+
+def test_live_follows_a_growing_file_and_ctrl_c_leaves_a_valid_recording(tmp_path: Path) -> None:
+    from radarviz.viz_app.rerun.recording import verify_recording
+
+    _, toml, n_plots, _ = write_capture(tmp_path, targets=10, duration_s=20.0)
+    data = (tmp_path / "feed.ast").read_bytes()
+    with open(tmp_path / "feed.ast", "rb") as fh:
+        cut = [off for off, _, _ in ax.data_blocks(fh, "feed.ast")][1] + 5  # inside a block
+    grown = tmp_path / "grown.ast"
+    grown.write_bytes(data[:cut])
+    rrd, summary = tmp_path / "live.rrd", tmp_path / "live.json"
+    live = subprocess.Popen(
+        [
+            RADARVIZ, "live", "--follow", str(grown), "--radars", str(toml), "--method", "ucm",
+            "--no-viewer", "--rrd", str(rrd), "--summary", str(summary), "--reorder-s", "0",
+        ],
+        stderr=subprocess.PIPE,
+        text=True,
+    )  # fmt: skip
+    try:
+        assert live.stderr is not None
+        assert "tracking" in live.stderr.readline()
+        time.sleep(1.0)
+        with open(grown, "ab") as fh:
+            fh.write(data[cut:])
+        # The follower polls every 50 ms: seconds are ample for its 167 plots (not a timing
+        # check: the account below must balance whenever the interrupt comes).
+        time.sleep(3.0)
+        live.send_signal(signal.SIGINT)
+        err = live.stderr.read()
+        assert live.wait(timeout=120) == 130, err
+    finally:
+        if live.poll() is None:
+            live.kill()
+    assert "interrupted" in err and str(rrd) in err
+    verify_recording(rrd)  # a whole recording, footer and all
+    doc = json.loads(summary.read_text())
+    assert doc["plots"] == n_plots
+    assert doc["tracked"] + doc["untracked_at_stop"] == n_plots
+    assert not list(tmp_path.glob(".live.rrd.*"))  # no temporary file left behind

@@ -1,0 +1,143 @@
+"""``radarviz replay`` and ``radarviz live``: a radar feed sent again, and tracked as it comes.
+
+``replay`` (``viz_app.live.replay``) sends a recording's ASTERIX datagrams to a UDP address at
+the recording's pace. ``live`` (``viz_app.live.session``) receives such a feed, or follows a
+growing ``.ast`` file, associates its plots as they come and logs them to a live Rerun viewer.
+Both stay on this machine unless told otherwise.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Callable
+
+from radarviz.viz_app.cli.args import integer, number
+from radarviz.viz_app.cli.params import add_parameter, map_flag
+
+#: Default time order horizon of ``live`` (s): a merged feed is out of order by a packet or
+#: two; every plot waits this long (of the feed's time) before it is tracked.
+REORDER_S = 1.0
+#: Default time budget of ``live`` (ms): held batches are associated at least this often.
+BUDGET_MS = 100.0
+
+
+def add_commands(sub: argparse._SubParsersAction) -> None:
+    """Register ``replay`` and ``live`` on the ``radarviz`` parser."""
+    _add_live(sub)
+    rp = sub.add_parser(
+        "replay",
+        help="send a capture's or .ast file's ASTERIX datagrams to a UDP address at its pace",
+    )
+    rp.add_argument("capture", metavar="CAPTURE", help="pcap, pcapng or .ast file of data blocks")
+    rp.add_argument(
+        "--to",
+        default="127.0.0.1:8600",
+        metavar="HOST:PORT",
+        help="UDP address (default 127.0.0.1:8600; a multicast group is allowed)",
+    )
+    rp.add_argument(
+        "--speed",
+        type=number,
+        default=1.0,
+        metavar="N",
+        help="N times the recording's pace (default 1)",
+    )
+
+
+def cmd_replay(args: argparse.Namespace) -> int:
+    from radarviz.core.params import check_real
+    from radarviz.viz_app.live.replay import MAX_SPEED, parse_address, replay
+
+    check_real("--speed", args.speed, low=0.0, high=MAX_SPEED)
+    to = parse_address("--to", args.to)
+    if not to.loopback:
+        print(f"radarviz: replay: sending to {to}: the feed leaves this machine", file=sys.stderr)
+    try:
+        counts = replay(args.capture, to, args.speed)
+    except OSError as exc:
+        if exc.filename:  # the recording itself: bad input
+            raise
+        print(f"radarviz: error: replay to {to}: {exc.strerror or exc}", file=sys.stderr)
+        return 1
+    print(
+        f"replayed {counts.datagrams} datagrams ({counts.octets} octets, {counts.span_s:.3f} s "
+        f"of the recording) to {to}",
+        file=sys.stderr,
+    )
+    return 0
+
+
+def live_association_flags(flags: tuple[tuple[str, str], ...]) -> tuple[tuple[str, str], ...]:
+    """``track``'s association flags that ``live`` takes: all but the scan window (a live
+    feed is cut by radar and sector, ``plot_batches``)."""
+    return tuple((n, f) for n, f in flags if n != "scan_window_s")
+
+
+def _add_live(sub: argparse._SubParsersAction) -> None:
+    from radarviz.core.experiments.prosov import ALL_METHODS
+    from radarviz.core.params import parameter
+    from radarviz.viz_app.cli.track import ASSOCIATION_FLAGS
+
+    lv = sub.add_parser(
+        "live", help="track an ASTERIX feed as it arrives (UDP or a growing .ast file)"
+    )
+    src = lv.add_mutually_exclusive_group(required=True)
+    src.add_argument(
+        "--udp",
+        metavar="HOST:PORT",
+        help="UDP address to listen on (a multicast group is joined); beyond loopback needs --host",
+    )
+    src.add_argument("--follow", metavar="FILE", help="a growing .ast file, read as it grows")
+    lv.add_argument("--radars", required=True, metavar="RADARS.toml", help="radar sites, σ")
+    lv.add_argument(
+        "--method",
+        nargs="+",
+        default=None,
+        metavar="METHOD",
+        help=f"methods whose tracks are logged (default all: {' '.join(ALL_METHODS)})",
+    )
+    map_flag(lv, "method", "--method")
+    for name, flag in live_association_flags(ASSOCIATION_FLAGS):
+        shown = parameter(name).default
+        add_parameter(lv, name, flag, default=None, shown_default=shown)
+    lv.add_argument(
+        "--reorder-s",
+        type=number,
+        default=REORDER_S,
+        help=f"how late a plot may come and be put back in time order, s (default {REORDER_S:g})",
+    )
+    lv.add_argument(
+        "--budget-ms",
+        type=number,
+        default=BUDGET_MS,
+        help=f"associate held plots at least this often, ms (default {BUDGET_MS:g})",
+    )
+    lv.add_argument("--duration-s", type=number, default=None, help="stop after this long")
+    lv.add_argument("--max-plots", type=integer, default=None, help="stop after this many plots")
+    lv.add_argument("--rrd", default=None, metavar="OUT.rrd", help="also save the session")
+    lv.add_argument(
+        "--summary", default=None, metavar="SUMMARY.json", help="the final account as JSON"
+    )
+    lv.add_argument("--no-viewer", action="store_true", help="no live viewer")
+    lv.add_argument(
+        "--host",
+        default="127.0.0.1",
+        help="address the viewer binds and a non-loopback --udp needs (default 127.0.0.1; "
+        "anything else is exposed)",
+    )
+    lv.add_argument(
+        "--viewer-port", type=integer, default=0, help="web viewer port (default: a free one)"
+    )
+
+
+def cmd_live(args: argparse.Namespace) -> int:
+    from radarviz.viz_app.live.run import run_live
+
+    return run_live(args)
+
+
+COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
+    "replay": cmd_replay,
+    "live": cmd_live,
+}

@@ -1,0 +1,304 @@
+"""``radarviz live``: an ASTERIX feed tracked as it arrives.
+
+Two threads and a bounded queue between them:
+
+* **the reader** (a thread) receives the feed, a UDP socket (``UdpFeed``; a multicast group
+  is joined) or a growing ``.ast`` file (``FollowedFile``), and decodes it with the file
+  reader itself (``viz_app.io.asterix.AsterixReader``, reading the feed as a file that never
+  ends), so a datagram is checked exactly as a recorded file is. Each plot goes into the
+  queue with the time its datagram arrived; a full queue (the tracker behind) drops the plot
+  and counts it. A datagram that is not a run of data blocks, and a record the reader
+  refuses, are counted as malformed, each kind reported once on stderr, and the feed goes
+  on (the reader starts again on the next datagram; its duplicate window restarts with it).
+* **the tracker** (the calling thread) takes the plots from the queue, puts them in time
+  order (``core.tracking.association.time_ordered``, with a short horizon: it adds its
+  length to every plot's latency), cuts them into batches (``plot_batches``) and runs the
+  held batches in one compiled call (``viz_app.io.plots.BatchRunner``, the runner of
+  ``track --associate``) whenever ``budget_s`` has passed since the first of them was held,
+  or ``READ_BLOCK`` plots are held. Results go to a ``TrackRecorder`` (the one of
+  ``track --rrd``), flushed after every run, so the viewer shows each run as it is done.
+
+A plot earlier than the latest received by more than the horizon cannot be put back in
+order; it is counted as out of order and passed over (``time_ordered`` would refuse it).
+
+Every plot the reader decodes is counted once: tracked, out of order, or dropped; every
+datagram: delivered to the reader or malformed. Records the reader passes over are counted
+as it counts them in a file (duplicates, track-only).
+"""
+
+from __future__ import annotations
+
+import math
+import queue
+import re
+import socket
+import struct
+import sys
+import threading
+import time
+from collections import Counter
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from typing import IO, Any
+
+import numpy as np
+
+from radarviz.core.params import ParameterError
+from radarviz.core.tracking.association import GNNTracker, plot_batches, time_ordered
+from radarviz.core.tracking.stream import Plot
+from radarviz.viz_app.io.asterix import AsterixReader, tiled_blocks
+from radarviz.viz_app.io.plots import READ_BLOCK, BatchRunner, Radar
+from radarviz.viz_app.live.replay import Address
+
+#: Seconds a blocking receive or file read waits before looking at the stop flag.
+POLL_S = 0.05
+#: Plots the queue between the reader and the tracker holds; beyond, plots are dropped.
+QUEUE_PLOTS = 65_536
+#: Largest UDP datagram.
+MAX_DATAGRAM = 65_535
+#: Latencies kept for the percentiles (the newest).
+LATENCIES_KEPT = 1_000_000
+#: The queue's end mark.
+_END = None
+
+
+@dataclass
+class FeedCounts:
+    """The session's account (module docstring). ``malformed`` counts by kind."""
+
+    datagrams: int = 0
+    octets: int = 0
+    malformed: Counter = field(default_factory=Counter)
+    plots: int = 0
+    tracked: int = 0
+    out_of_order: int = 0
+    dropped: int = 0
+    duplicates: int = 0
+    track_only: int = 0
+
+    def document(self) -> dict[str, Any]:
+        return {
+            "datagrams": self.datagrams,
+            "octets": self.octets,
+            "malformed": dict(self.malformed),
+            "plots": self.plots,
+            "tracked": self.tracked,
+            "out_of_order": self.out_of_order,
+            "dropped": self.dropped,
+            "duplicate_records": self.duplicates,
+            "track_only_records": self.track_only,
+        }
+
+
+def malformed_kind(message: str) -> str:
+    """A refused record's kind: the reader's message without its place and numbers, so each
+    kind is said once however often it comes."""
+    what = message.split(": ", 1)[-1] if ", item " not in message else message
+    what = re.sub(r"^.*?, item ", "item ", what)
+    return re.sub(r"-?\d+(?:\.\d+)?(?:e-?\d+)?", "N", what)
+
+
+class _Feed:
+    """A feed read as a binary file by ``AsterixReader``: ``read`` blocks until octets come
+    and returns b"" once ``stop`` is set; ``arrived`` is when the last octets came."""
+
+    def __init__(self, stop: threading.Event, counts: FeedCounts):
+        self.stop = stop
+        self.counts = counts
+        self.arrived = time.monotonic()
+
+    def read(self, n: int = -1) -> bytes:
+        raise NotImplementedError
+
+
+class UdpFeed(_Feed):
+    """Datagrams of a UDP socket bound to ``address`` (a multicast group joined on every
+    interface); a datagram not tiled by ASTERIX data blocks is counted malformed and skipped."""
+
+    def __init__(self, address: Address, stop: threading.Event, counts: FeedCounts, warn: Callable):
+        super().__init__(stop, counts)
+        self.warn = warn
+        sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        # A burst of a whole scan must not overflow the kernel's buffer while the reader
+        # decodes: ask for a large one (the kernel caps it).
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 24)
+        try:
+            sock.bind(("" if address.multicast else address.host, address.port))
+            if address.multicast:
+                group = struct.pack("4s4s", socket.inet_aton(address.host), bytes(4))
+                sock.setsockopt(socket.IPPROTO_IP, socket.IP_ADD_MEMBERSHIP, group)
+        except OSError as exc:
+            sock.close()
+            why = exc.strerror or exc
+            raise ParameterError(f"--udp {address}: cannot listen ({why})") from None
+        sock.settimeout(POLL_S)
+        self.sock = sock
+
+    def read(self, n: int = -1) -> bytes:
+        while not self.stop.is_set():
+            try:
+                data = self.sock.recv(MAX_DATAGRAM)
+            except TimeoutError:
+                continue
+            self.counts.datagrams += 1
+            self.counts.octets += len(data)
+            if tiled_blocks(data) is None:
+                note(self.counts, "a datagram that is not a run of ASTERIX data blocks", self.warn)
+                continue
+            self.arrived = time.monotonic()
+            return data
+        return b""
+
+    def close(self) -> None:
+        self.sock.close()
+
+
+class FollowedFile(_Feed):
+    """A growing file of data blocks, read as it grows (from its start)."""
+
+    def __init__(self, fh: IO[bytes], stop: threading.Event, counts: FeedCounts):
+        super().__init__(stop, counts)
+        self.fh = fh
+
+    def read(self, n: int = -1) -> bytes:
+        while not self.stop.is_set():
+            data = self.fh.read(1 << 16)
+            if data:
+                self.counts.octets += len(data)
+                self.arrived = time.monotonic()
+                return data
+            time.sleep(POLL_S)
+        return b""
+
+    def close(self) -> None:
+        self.fh.close()
+
+
+def note(counts: FeedCounts, kind: str, warn: Callable[[str], None]) -> None:
+    """Count a malformed input of ``kind``; its first one is said."""
+    counts.malformed[kind] += 1
+    if counts.malformed[kind] == 1:
+        warn(f"malformed input skipped (counted, said once): {kind}")
+
+
+def read_feed(
+    feed: _Feed,
+    source: str,
+    radars: dict[str, Radar],
+    out: queue.Queue,
+    horizon_s: float,
+    max_plots: int | None,
+    warn: Callable[[str], None],
+) -> None:
+    """The reader thread (module docstring): decode ``feed`` into ``out`` until it ends."""
+    counts, stop = feed.counts, feed.stop
+    latest = -math.inf
+    try:
+        while not stop.is_set():
+            reader = None
+            try:
+                reader = AsterixReader(feed, source, radars)  # type: ignore[arg-type]
+                for position, plot in reader:
+                    counts.plots += 1
+                    if plot.time_s < latest - horizon_s:
+                        counts.out_of_order += 1
+                    else:
+                        latest = max(latest, plot.time_s)
+                        try:
+                            out.put_nowait((feed.arrived, position, plot))
+                        except queue.Full:
+                            counts.dropped += 1
+                    if max_plots is not None and counts.plots >= max_plots:
+                        stop.set()
+                        break
+                if not stop.is_set():  # the feed ended by itself
+                    stop.set()
+            except ParameterError as exc:
+                if not stop.is_set():
+                    note(counts, malformed_kind(str(exc)), warn)
+            finally:
+                if reader is not None:
+                    counts.duplicates += reader.counts.duplicates_dropped
+                    counts.track_only += reader.counts.track_only_skipped
+    finally:
+        out.put(_END)
+
+
+@dataclass
+class LiveResult:
+    """What a session did: its counts, the tracker, each tracked plot's latency (s, from its
+    datagram's arrival to its rows logged) and the session's length (s)."""
+
+    counts: FeedCounts
+    tracker: GNNTracker
+    latencies_s: list[float]
+    seconds: float
+
+
+def track_feed(
+    plots: queue.Queue,
+    tracker: GNNTracker,
+    counts: FeedCounts,
+    sector_deg: float,
+    horizon_s: float,
+    budget_s: float,
+    on_rows: Callable[..., None],
+    on_scan: Callable[[list[str]], None] | None,
+    after_run: Callable[[], None] | None,
+) -> list[float]:
+    """The tracker (module docstring): until the reader's end mark, associate the queue's
+    plots in runs at most ``budget_s`` apart; returns each plot's latency (s)."""
+    runner = BatchRunner(tracker, "live", lambda key, column: f"plot {key[1]}", on_rows, on_scan)
+    latencies: list[float] = []
+    first_held = [0.0]
+
+    def run() -> None:
+        keys = runner.run()
+        if not keys:
+            return
+        if after_run is not None:
+            after_run()
+        now = time.monotonic()
+        latencies.extend(now - k[0] for k in keys)
+        if len(latencies) > LATENCIES_KEPT:
+            del latencies[: len(latencies) - LATENCIES_KEPT]
+        counts.tracked += len(keys)
+
+    def due() -> bool:
+        return runner.held > 0 and (
+            runner.held >= READ_BLOCK or time.monotonic() - first_held[0] >= budget_s
+        )
+
+    def arrivals() -> Iterator[tuple[tuple[float, int], Plot]]:
+        while True:
+            try:
+                item = plots.get(timeout=budget_s / 2)
+            except queue.Empty:
+                item = False
+            if item is _END:
+                return
+            if item:
+                arrived, position, plot = item
+                yield (arrived, position), plot
+            if due():
+                run()
+
+    for batch in plot_batches(time_ordered(arrivals(), horizon_s), sector_deg):
+        if runner.held == 0:
+            first_held[0] = time.monotonic()
+        runner.hold(batch)
+    run()
+    return latencies
+
+
+def latency_ms(latencies_s: list[float]) -> dict[str, float | None]:
+    """Median and 99th percentile of the latencies, ms (None without any)."""
+    if not latencies_s:
+        return {"median": None, "p99": None}
+    a = np.asarray(latencies_s) * 1e3
+    return {"median": float(np.median(a)), "p99": float(np.percentile(a, 99))}
+
+
+def warn_line(text: str) -> None:
+    print(f"radarviz: live: {text}", file=sys.stderr, flush=True)
