@@ -68,16 +68,10 @@ def cmd_replay(args: argparse.Namespace) -> int:
     return 0
 
 
-def live_association_flags(flags: tuple[tuple[str, str], ...]) -> tuple[tuple[str, str], ...]:
-    """``track``'s association flags that ``live`` takes: all but the scan window (a live
-    feed is cut by radar and sector, ``plot_batches``)."""
-    return tuple((n, f) for n, f in flags if n != "scan_window_s")
-
-
 def _add_live(sub: argparse._SubParsersAction) -> None:
     from radarviz.core.experiments.prosov import ALL_METHODS
     from radarviz.core.params import parameter
-    from radarviz.viz_app.cli.track import ASSOCIATION_FLAGS
+    from radarviz.viz_app.cli.track import LIVE_ASSOCIATION_FLAGS
 
     lv = sub.add_parser(
         "live", help="track an ASTERIX feed as it arrives (UDP or a growing .ast file)"
@@ -98,7 +92,7 @@ def _add_live(sub: argparse._SubParsersAction) -> None:
         help=f"methods whose tracks are logged (default all: {' '.join(ALL_METHODS)})",
     )
     map_flag(lv, "method", "--method")
-    for name, flag in live_association_flags(ASSOCIATION_FLAGS):
+    for name, flag in LIVE_ASSOCIATION_FLAGS:
         shown = parameter(name).default
         add_parameter(lv, name, flag, default=None, shown_default=shown)
     lv.add_argument(

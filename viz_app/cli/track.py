@@ -296,6 +296,9 @@ ASSOCIATION_FLAGS: tuple[tuple[str, str], ...] = (
     ("batch_sector_deg", "--batch-sector-deg"),
     ("max_speed_mps", "--max-speed"),
 )
+#: The ones ``live`` takes: all but the scan window (a live feed is cut by radar and sector,
+#: ``plot_batches``).
+LIVE_ASSOCIATION_FLAGS = tuple((n, f) for n, f in ASSOCIATION_FLAGS if n != "scan_window_s")
 
 
 def _add_association_flags(tr: argparse.ArgumentParser) -> None:

@@ -48,10 +48,9 @@ def _options(args: argparse.Namespace) -> tuple[Any, Any, Any, tuple[str, ...]]:
     from radarviz.core.tracking.association import AssociationOptions
     from radarviz.core.tracking.consistency import ConsistencyMonitor
     from radarviz.core.tracking.stream import StreamOptions, motion_fields
-    from radarviz.viz_app.cli.live import live_association_flags
-    from radarviz.viz_app.cli.track import ASSOCIATION_FLAGS
+    from radarviz.viz_app.cli.track import LIVE_ASSOCIATION_FLAGS
 
-    given = {n: getattr(args, n) for n, _ in live_association_flags(ASSOCIATION_FLAGS)}
+    given = {n: getattr(args, n) for n, _ in LIVE_ASSOCIATION_FLAGS}
     association = AssociationOptions(**{k: v for k, v in given.items() if v is not None})
     monitor = ConsistencyMonitor()
     options = StreamOptions(monitor=monitor, **motion_fields())
