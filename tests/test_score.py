@@ -438,7 +438,7 @@ def test_undefined_figures_are_null_with_a_reason(tmp_path: Path, capsys) -> Non
             ["--gospa-cutoff-m", "0"],
             "--gospa-cutoff-m must be a finite number in (0, 1e+08]",
         ),
-        (None, None, ["--gospa-order", "0.5"], "--gospa-order must be a finite number in [1, 100]"),
+        (None, None, ["--gospa-order", "0.5"], "--gospa-order must be a finite number in [1, 16]"),
         (None, None, ["--max-gap-s", "-1"], "--max-gap-s must be a finite number in [0, 1e+06]"),
         (None, None, ["--method", "ucm"], "--method must be one of m (got 'ucm')"),
         (None, None, ["--out", "/no/such/dir/s.json"], "--out: no such directory '/no/such/dir'"),
