@@ -18,6 +18,7 @@ import queue
 import sys
 import threading
 import time
+from pathlib import Path
 from typing import Any
 
 from radarviz.core.finite import check_finite_document
@@ -38,6 +39,8 @@ from radarviz.viz_app.live.session import (
 )
 from radarviz.viz_app.rerun.viewer import is_loopback
 
+#: How long a saved recording may take to read back whole after the stream ends (s).
+SETTLE_S = 10.0
 #: Longest session asked for (s): a day.
 MAX_DURATION_S = 86_400.0
 
@@ -215,7 +218,21 @@ def _recording(
         rec.flush()
         rec.disconnect()
         if stage is not None:
-            stage.commit(verify=verify_recording)
+            stage.commit(verify=settled)
+
+    def settled(path: Path) -> None:
+        # The file sink writes from its own thread; beside a gRPC sink that is slow to drain,
+        # the footer has been seen to land just after ``disconnect`` returns: read the file
+        # back until it is whole, for a few seconds, before calling it broken.
+        end = time.monotonic() + SETTLE_S
+        while True:
+            try:
+                verify_recording(path)
+                return
+            except Exception:
+                if time.monotonic() > end:
+                    raise
+                time.sleep(0.2)
 
     return recorder, finish
 
