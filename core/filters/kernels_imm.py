@@ -561,10 +561,21 @@ def gate_nis_imm_2d(
     x, P = np.empty(4), np.empty((4, 4))
     for i in range(slot.shape[0]):
         k = slot[i]
-        combined_prediction(
-            xs[k, j], Ps[k, j], mus[k, j], dt[i], sigma_a, omega, Pi, x0, P0, mu, c, w, x, P
-        )
-        sr2, s = sigma_r[i] * sigma_r[i], sigma_b[i] * sigma_b[i]
-        co = coefficients(code, s, sr2)
-        meas = position_measurement(code, x, r_m[i], az_rad[i], sr2, s, site[i, 0], site[i, 1], co)
-        out[i] = position_nis(P, *meas)
+        out[i] = pair_nis_2d(
+            xs[k, j], Ps[k, j], mus[k, j], dt[i], sigma_a, omega, Pi, code, r_m[i], az_rad[i],
+            sigma_r[i], sigma_b[i], site[i, 0], site[i, 1], x0, P0, mu, c, w, x, P,
+        )  # fmt: skip
+
+
+@_inline
+def pair_nis_2d(xm, Pm, mu_k, dt, sigma_a, omega, Pi, code, r, b, sigma_r, sigma_b, sx, sy, x0,
+                P0, mu, c, w, x, P):  # fmt: skip
+    """d² of one (track, plot) pair in 2D: the track's models xm, Pm, μ mu_k predicted over
+    dt (``combined_prediction``) against the plot (r, b) with noise std sigma_r, sigma_b at
+    site (sx, sy), by method ``code``'s position measurement and its NIS (NaN where S is not
+    positive definite); x0 … P scratch as ``combined_prediction``'s."""
+    combined_prediction(xm, Pm, mu_k, dt, sigma_a, omega, Pi, x0, P0, mu, c, w, x, P)
+    sr2, s = sigma_r * sigma_r, sigma_b * sigma_b
+    co = coefficients(code, s, sr2)
+    meas = position_measurement(code, x, r, b, sr2, s, sx, sy, co)
+    return position_nis(P, *meas)

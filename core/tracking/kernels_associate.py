@@ -29,10 +29,9 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
-from radarviz.core.filters.kernels_2d import _jit, coefficients, convert
-from radarviz.core.filters.kernels_imm import combined_prediction, track_plots_imm_2d
-from radarviz.core.filters.kernels_track import position_measurement, position_nis
-from radarviz.core.tracking.kernels_gate import near_pairs
+from radarviz.core.filters.kernels_2d import _jit
+from radarviz.core.filters.kernels_imm import pair_nis_2d, track_plots_imm_2d
+from radarviz.core.tracking.kernels_gate import near_pairs, plot_points_2d
 
 TWO_PI = 2.0 * math.pi
 
@@ -474,16 +473,13 @@ def associate_2d(pl, beams, radar_site, book, gf, rules, live, counters, since, 
     n_plots = pl.time_s.shape[0]
     n_batches = pl.whole_scan.shape[0]
     nx = book.x.shape[1]
+    # The gating method's conversion of every plot (z + s, R_ii), as the prefilter takes it.
     points, r_ii = np.empty((n_plots, 2)), np.empty((n_plots, 2))
-    for j in range(n_plots):  # the gating method's conversion of every plot (z + s, R_ii)
-        g = pl.noise[j]
-        sr2, s = pl.sigma_r_m[g] ** 2, pl.sigma_azimuth_rad[g] ** 2
-        co = coefficients(gf.codes[0], s, sr2)
-        zx, zy, r00, _, r11 = convert(
-            gf.codes[0], pl.range_m[j], pl.azimuth_rad[j], sr2, s, 0.0, 0.0, co
-        )
-        points[j, 0], points[j, 1] = zx + pl.site[g, 0], zy + pl.site[g, 1]
-        r_ii[j, 0], r_ii[j, 1] = r00, r11
+    g = pl.noise
+    plot_points_2d(
+        gf.codes[0], pl.range_m, pl.azimuth_rad, pl.sigma_r_m[g], pl.sigma_azimuth_rad[g],
+        pl.site[g], points, r_ii,
+    )  # fmt: skip
     r = gf.sigma_a.shape[0]
     x0, P0 = np.empty((r, 4)), np.empty((r, 4, 4))
     mu, cc, w = np.empty(r), np.empty(r), np.empty((r, r))
@@ -715,19 +711,14 @@ def _coast_s(beams, rules, n_radars) -> float:
 @_jit
 def _gate_d2(pl, gf, s, j, x0, P0, mu, cc, w, xp, Pp) -> float:
     """d² of plot j against slot s's gating track predicted to the plot's time
-    (``core.filters.kernels_imm.gate_nis_imm_2d``'s statistic); ∞ for a NaN."""
-    combined_prediction(
-        gf.xs[s, 0], gf.Ps[s, 0], gf.mus[s, 0], pl.time_s[j] - gf.last_t[s], gf.sigma_a,
-        gf.omega, gf.Pi, x0, P0, mu, cc, w, xp, Pp,
-    )  # fmt: skip
+    (``core.filters.kernels_imm.pair_nis_2d``, the statistic of ``gate_nis_imm_2d``); ∞ for
+    a NaN."""
     g = pl.noise[j]
-    sr2, sb2 = pl.sigma_r_m[g] * pl.sigma_r_m[g], pl.sigma_azimuth_rad[g] * pl.sigma_azimuth_rad[g]
-    code = gf.codes[0]
-    co = coefficients(code, sb2, sr2)
-    meas = position_measurement(
-        code, xp, pl.range_m[j], pl.azimuth_rad[j], sr2, sb2, pl.site[g, 0], pl.site[g, 1], co
-    )
-    d2 = position_nis(Pp, *meas)
+    d2 = pair_nis_2d(
+        gf.xs[s, 0], gf.Ps[s, 0], gf.mus[s, 0], pl.time_s[j] - gf.last_t[s], gf.sigma_a,
+        gf.omega, gf.Pi, gf.codes[0], pl.range_m[j], pl.azimuth_rad[j], pl.sigma_r_m[g],
+        pl.sigma_azimuth_rad[g], pl.site[g, 0], pl.site[g, 1], x0, P0, mu, cc, w, xp, Pp,
+    )  # fmt: skip
     return d2 if math.isfinite(d2) else np.inf
 
 
