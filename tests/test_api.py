@@ -8,6 +8,7 @@ import contextlib
 import csv
 import inspect
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -115,10 +116,12 @@ def _convert(method: str = "ucm", **values: object) -> object:
 
 def _plots(target: str = "") -> list[radarviz.Plot]:
     """A few plots of one target, labelled ``target``."""
-    from dataclasses import replace
-
     plots, _ = simulated_plots("prosov", 1, 1.0, 5)
     return [replace(p, target=target) for p in plots]
+
+
+def _sites() -> list[radarviz.Radar]:
+    return simulated_plots("prosov", 1, 1.0, 5)[1]
 
 
 @pytest.mark.parametrize(
@@ -154,6 +157,18 @@ def _plots(target: str = "") -> list[radarviz.Plot]:
                 _plots(), association=radarviz.AssociationOptions(), init="finite-memory"
             ),
             "init must be first-plot",
+        ),
+        (
+            lambda: radarviz.write_measurements(
+                "m.csv", "r.toml", [replace(_plots()[0], range_m=np.nan)], _sites()
+            ),
+            "plots[0].range_m must be a finite number > 0 (got nan)",
+        ),
+        (
+            lambda: radarviz.write_measurements(
+                "m.csv", "r.toml", [replace(_plots()[0], sigma_r_m=0.0)], _sites()
+            ),
+            "plots[0].sigma_r_m must be a finite number > 0 (got 0.0)",
         ),
         (
             lambda: radarviz.track(_plots()[::-1], association=radarviz.AssociationOptions()),

@@ -469,6 +469,30 @@ def simulate(
     return simulated_plots(preset, seed, sigma_beta_deg, steps)
 
 
+#: A plot's numeric fields and whether each must be > 0 (else only finite); None is allowed
+#: for the optional elevation and radial velocity.
+_PLOT_VALUES = (
+    ("time_s", False),
+    ("range_m", True),
+    ("azimuth_rad", False),
+    ("sigma_r_m", True),
+    ("sigma_azimuth_rad", True),
+    ("elevation_rad", False),
+    ("radial_velocity_mps", False),
+)
+
+
+def _check_plot_values(i: int, plot: Plot) -> None:
+    """``ParameterError`` naming ``plots[i].field`` when a value could not be read back."""
+    for field, positive in _PLOT_VALUES:
+        v = getattr(plot, field)
+        if v is None and field in ("elevation_rad", "radial_velocity_mps"):
+            continue
+        if not isinstance(v, int | float) or not math.isfinite(v) or (positive and v <= 0):
+            want = "a finite number > 0" if positive else "a finite number"
+            raise ParameterError(f"plots[{i}].{field} must be {want} (got {v!r})", "plots")
+
+
 def write_measurements(
     measurements: str | os.PathLike[str],
     radars: str | os.PathLike[str],
@@ -493,7 +517,8 @@ def write_measurements(
         The number of plots written.
 
     Raises:
-        ParameterError: no plots, no radars, or a plot naming a radar not in ``sites``.
+        ParameterError: no plots, no radars, a plot naming a radar not in ``sites``, or a
+            plot value that is not finite (or not > 0 for a range or an accuracy).
     """
     if not plots:
         raise ParameterError("plots must hold at least one plot (got none)", "plots")
@@ -505,4 +530,5 @@ def write_measurements(
             raise ParameterError(
                 f"plots[{i}].radar must be one of {sorted(names)} (got {p.radar!r})", "plots"
             )
+        _check_plot_values(i, p)
     return _write_measurements(os.fspath(measurements), os.fspath(radars), list(plots), list(sites))
