@@ -406,6 +406,8 @@ def test_track_recording_logs_the_band_exits(manoeuvre_files, tmp_path: Path, rr
     [
         (["--flight", "loop"], "--flight must be one of approach, departure"),
         (["--scans", "1"], "--scans must be an integer in [2, 1000000] (got 1)"),
+        # The default flight lasts 240 of the fastest radar's periods: 241 scans, not more.
+        (["--scans", "5000"], "--scans must be an integer in [2, 241] (got 5000)"),
     ],
 )
 def test_bad_manoeuvre_preset_input_writes_nothing(tmp_path: Path, capsys, args, needle) -> None:

@@ -302,8 +302,12 @@ def manoeuvre_plots(
     seed = int(check("seed", seed))
     duration = min(f.duration_s for f in flights)
     if steps is not None:
-        steps = check_int("steps", steps, low=2)  # beyond the flight it changes nothing
-        duration = min(duration, (steps - 1) * min(r.period_s for r in radars))
+        # The fastest radar's scans of the whole flight: more would be a longer flight than
+        # the scene has, so they are refused rather than silently cut to it.
+        period_s = min(r.period_s for r in radars)
+        whole = math.floor(duration / period_s + 1e-9) + 1
+        steps = check_int("steps", steps, low=2, high=whole)
+        duration = min(duration, (steps - 1) * period_s)
     sched = plot_schedule(duration, radars)
     truths = [fly(f) for f in flights]
     tp = np.stack([tr.position_m[sched.grid] for tr in truths], axis=1)  # (N, F, 3)
