@@ -716,6 +716,21 @@ def test_associate_refuses_a_labelled_file(tmp_path: Path, capsys: pytest.Captur
     assert not out.exists()
 
 
+def test_crossing_scans_beyond_the_range_name_the_scans(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """At 40 km, 250 m/s and 5 s a scan, 56 scans keep the paths 5 km clear of the radar: more
+    is refused as ``--scans`` (the flag given), not as the range the scans would need."""
+    m, r = tmp_path / "m.csv", tmp_path / "r.toml"
+    argv = ["simulate", "--preset", "crossing", "--out", str(m), "--radars-out", str(r)]
+    assert main([*argv, "--scans", "57"]) == 2
+    assert capsys.readouterr().err == (
+        "radarviz: error: --scans must be an integer in [2, 56] (got 57)\n"
+    )
+    assert not m.exists() and not r.exists()
+    assert main([*argv, "--scans", "56"]) == 0
+
+
 @pytest.mark.parametrize(
     ("extra", "message"),
     [

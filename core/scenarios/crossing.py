@@ -28,7 +28,7 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
-from radarviz.core.params import check, check_real, default
+from radarviz.core.params import check, check_int, check_real, default
 
 #: ``CrossingScan.origin`` of a false plot.
 CLUTTER = -1
@@ -61,8 +61,13 @@ class CrossingScene:
         check("sigma_r_m", self.sigma_r_m)
         check("sigma_beta_deg", self.sigma_beta_deg)
         check_real("margin_m", self.margin_m, low=0.0, high=1e7, low_open=False)
-        half = self.speed_mps * self.period_s * (self.scans - 1) / 2.0
-        check_real("crossing_range_m", self.crossing_range_m, low=half + self.margin_m, high=1e7)
+        check_real("crossing_range_m", self.crossing_range_m, low=self.margin_m, high=1e7)
+        # Each target flies half its path to the crossing point and half beyond it; the path
+        # must stay margin_m clear of the radar, which bounds the scans at this range.
+        step_m = self.speed_mps * self.period_s
+        if step_m * (self.scans - 1) / 2.0 + self.margin_m >= self.crossing_range_m:
+            most = math.ceil(2.0 * (self.crossing_range_m - self.margin_m) / step_m)
+            check_int("steps", self.scans, low=2, high=max(2, most))
 
     @property
     def times_s(self) -> NDArray[np.float64]:
