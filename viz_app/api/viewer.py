@@ -16,12 +16,11 @@ from typing import TYPE_CHECKING, Any
 
 from radarviz.core.params import ParameterError, check_choice, check_int
 from radarviz.tracking import Tracks
+from radarviz.viz_app.rerun.preset_names import PRESETS
 
 if TYPE_CHECKING:
     import rerun as rr
 
-#: What ``record`` and ``show`` accept as a name: the scenes of ``radarviz record --preset``.
-PRESETS = ("demo", "prosov", "prosov3d", "gorshkov", "velocity", "manoeuvre")
 #: ``RERUN_NOTEBOOK_ASSET`` value that serves the widget's files from the installed package.
 OFFLINE_ASSETS = "serve-local"
 

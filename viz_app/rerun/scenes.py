@@ -24,9 +24,10 @@ from dataclasses import dataclass
 import rerun as rr
 import rerun.blueprint as rrb
 
+from radarviz.core.params import check_choice
 from radarviz.viz_app.rerun import gorshkov_scene, manoeuvre_scene, prosov_scene, velocity_scene
+from radarviz.viz_app.rerun.preset_names import PRESETS
 
-PRESETS: tuple[str, ...] = ("demo", "prosov", "prosov3d", "gorshkov", "velocity", "manoeuvre")
 #: The debiased method set beside ``naive`` in the overview.
 OVERVIEW_DEBIASED = "ucm"
 
@@ -213,6 +214,7 @@ def narrow_layout(layout: PresetLayout) -> PresetLayout:
 
 def log_preset(rec: rr.RecordingStream, preset: str, seed: int = 1) -> PresetLayout:
     """Fill ``rec`` with one of the presets; returns its layout (no blueprint sent)."""
+    check_choice("preset", preset, PRESETS)
     tabs: list[rrb.Container] = []
     if preset in ("demo", "prosov"):
         prosov_scene.log_prosov(rec, seed=seed)
