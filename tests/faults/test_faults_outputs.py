@@ -1,6 +1,6 @@
 """A command's outputs change together or not at all (``viz_app.io.atomic.commit_together``):
 ``track --out --summary`` with a summary that cannot be written leaves the track file as it
-was, and a read-only directory is refused before any work."""
+was, a read-only directory is refused before any work, and so is a read-only output file."""
 
 from __future__ import annotations
 
@@ -69,3 +69,33 @@ def test_an_unwritable_output_directory_is_refused_before_any_work(
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--summary" in err[0] and "not writable" in err[0], err
     assert not out.exists()
+
+
+def test_a_read_only_output_is_not_replaced(
+    inputs: tuple[Path, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A file its owner made read-only (0444) stays as it was: renaming over it needs only
+    the directory's permission, so the check is the command's own."""
+    meas, radars = inputs
+    out = tmp_path / "t.csv"
+    out.write_text("kept\n")
+    out.chmod(0o444)
+    assert main(["track", "--input", str(meas), "--radars", str(radars), "--out", str(out)]) == 2
+    assert capsys.readouterr().err == (
+        f"radarviz: error: --out {out} is read-only: refusing to replace it\n"
+    )
+    assert out.read_text() == "kept\n"
+
+
+def test_a_demo_output_under_a_file_is_one_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``demo --out p.csv/x.rrd`` with ``p.csv`` a file: the file named, not "File exists"."""
+    (tmp_path / "p.csv").write_text("x\n")
+    assert main(["demo", "--out", str(tmp_path / "p.csv" / "x.rrd")]) == 2
+    err = capsys.readouterr().err
+    assert err == (
+        f"radarviz: error: --out: cannot make the directory '{tmp_path / 'p.csv'}' "
+        f"({tmp_path / 'p.csv'} is a file)\n"
+    )
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["p.csv"]

@@ -85,7 +85,15 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
     check_int("--seed", args.seed, low=0)
     if args.out.strip():
-        Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+        parent = Path(args.out).parent
+        try:
+            parent.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:  # a component that is a file, a read-only parent
+            blocker = next((str(q) for q in [parent, *parent.parents] if q.is_file()), None)
+            why = f"{blocker} is a file" if blocker else (exc.strerror or str(exc))
+            raise ParameterError(
+                f"--out: cannot make the directory {str(parent)!r} ({why})", "--out"
+            ) from None
     check_outputs([("--out", args.out)])
     if Path(args.out).exists() and not args.overwrite and not is_recording(args.out):
         raise ParameterError(

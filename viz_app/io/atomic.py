@@ -160,8 +160,8 @@ def check_outputs(
 
     ``outputs`` and ``inputs`` are (option, path) pairs; a None path is skipped. An output
     is refused if its name is empty, its directory does not exist, it exists and is not a
-    regular file, it exists and ``overwrite`` is false, or it is the same file as an input or
-    as another output.
+    regular file, it exists and ``overwrite`` is false, it exists and is read-only (no write
+    permission for anyone), or it is the same file as an input or as another output.
     """
     given = [(flag, p) for flag, p in outputs if p is not None]
     for i, (flag, path) in enumerate(given):
@@ -180,6 +180,10 @@ def check_outputs(
             )
         if not overwrite and target.exists():
             raise ParameterError(f"{flag} {text} exists: refusing to overwrite (pass --overwrite)")
+        if target.exists() and not target.stat().st_mode & 0o222:
+            # Renaming over a file needs only the directory's permission: a file its owner
+            # made read-only would be replaced without a word.
+            raise ParameterError(f"{flag} {text} is read-only: refusing to replace it")
         for other, other_path in [*given[:i], *inputs]:
             if other_path is not None and same_file(text, other_path):
                 raise ParameterError(f"{flag} is the same file as {other} ({text})")
