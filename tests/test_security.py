@@ -196,3 +196,40 @@ def test_tune_on_a_taken_viewer_port_fails_at_once() -> None:
     assert done.returncode == 1 and time.monotonic() - start < 15
     assert done.stdout == ""
     assert done.stderr.count("\n") == 1 and f"--viewer-port {port}" in done.stderr, done.stderr
+
+
+def _listening(port: int) -> bool:
+    with socket.socket() as s:
+        s.settimeout(1.0)
+        return s.connect_ex(("127.0.0.1", port)) == 0
+
+
+def test_view_killed_by_sigkill_leaves_no_viewer_listening(tmp_path: Path) -> None:
+    """SIGKILL gives ``radarviz view`` no chance to stop its viewer: the viewer itself is
+    told to stop when its parent dies, so neither of its ports stays served."""
+    from radarviz.viz_app.rerun.viewer import free_port, wait_viewer
+
+    rrd = tmp_path / "x.rrd"
+    made = subprocess.run(
+        [str(EXE), "record", "--preset", "velocity", "--out", str(rrd)], capture_output=True
+    )
+    assert made.returncode == 0, made.stderr
+    grpc, web = free_port(), free_port()
+    proc = subprocess.Popen(
+        [str(EXE), "view", str(rrd), "--port", str(grpc), "--web-port", str(web)],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        start_new_session=True,
+    )
+    try:
+        wait_viewer(proc, "--web-port", "127.0.0.1", web, timeout=120.0)
+        assert _listening(grpc) and _listening(web)
+        proc.kill()
+        proc.wait(timeout=10)
+        end = time.monotonic() + 15.0
+        while time.monotonic() < end and (_listening(grpc) or _listening(web)):
+            time.sleep(0.2)
+        assert not _listening(grpc) and not _listening(web), "the viewer outlived its command"
+    finally:
+        if proc.poll() is None:
+            proc.kill()

@@ -1,20 +1,25 @@
 """The Rerun viewer as a separate process: free ports, its address, starting it.
 
 Nothing here imports the Rerun SDK: the viewer is the ``rerun`` executable installed beside
-Python, started in its own process group so it can be stopped with everything it spawned.
+Python, started in its own process group so it can be stopped with everything it spawned, and
+(on Linux) told to stop when the command that started it dies, even by SIGKILL.
 """
 
 from __future__ import annotations
 
 import contextlib
+import ctypes
 import http.client
 import ipaddress
+import os
 import shutil
+import signal
 import socket
 import subprocess
 import sys
 import time
 import urllib.parse
+from collections.abc import Callable
 from pathlib import Path
 
 from radarviz.core.params import ParameterError
@@ -138,11 +143,52 @@ def viewer_url(host: str, web_port: int, grpc_port: int) -> str:
 
 
 def rerun_executable() -> str:
+    """The viewer's binary: the one the ``rerun-sdk`` wheel bundles when it is there (its
+    ``rerun`` script runs that binary as a child of its own, which a signal to the script
+    would not reach), else the ``rerun`` beside Python or on the path."""
+    with contextlib.suppress(ImportError):
+        import rerun_cli
+
+        bundled = Path(rerun_cli.__file__).with_name("rerun")
+        if bundled.is_file() and os.access(bundled, os.X_OK):
+            return str(bundled)
     exe = Path(sys.executable).with_name("rerun")
     found = str(exe) if exe.exists() else shutil.which("rerun")
     if not found:
         raise ParameterError("the rerun viewer is not installed (pip install rerun-sdk)")
     return found
+
+
+#: PR_SET_PDEATHSIG of prctl(2): the signal a process gets when its parent dies.
+_PR_SET_PDEATHSIG = 1
+
+
+def _parent_death_signal() -> None:
+    """A ``preexec_fn``: the child gets SIGTERM when the thread that started it ends (Linux;
+    the servers are started from the command's main thread, so: when the command dies), so a
+    command killed by SIGKILL leaves no viewer listening on its port. Elsewhere a no-op."""
+    if _PRCTL is not None:
+        _PRCTL(_PR_SET_PDEATHSIG, signal.SIGTERM)
+
+
+def _libc_prctl() -> Callable[..., int] | None:
+    """libc's ``prctl`` on Linux, else None."""
+    if not sys.platform.startswith("linux"):
+        return None
+    try:
+        return ctypes.CDLL(None, use_errno=True).prctl
+    except (OSError, AttributeError):
+        return None
+
+
+# Looked up in the parent: a child between fork and exec should only make the call.
+_PRCTL = _libc_prctl()
+
+
+def popen_server(cmd: list[str], **kwargs) -> subprocess.Popen:
+    """``subprocess.Popen`` of a server of ours: its own session (stopped as a group) that
+    ends when the command that started it dies."""
+    return subprocess.Popen(cmd, start_new_session=True, preexec_fn=_parent_death_signal, **kwargs)
 
 
 def serve_recording(path: str, host: str, grpc_port: int, web_port: int) -> subprocess.Popen:
@@ -158,6 +204,4 @@ def serve_recording(path: str, host: str, grpc_port: int, web_port: int) -> subp
         "--web-viewer-port",
         str(web_port),
     ]
-    return subprocess.Popen(
-        cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, start_new_session=True
-    )
+    return popen_server(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)

@@ -30,6 +30,7 @@ from radarviz.viz_app.rerun.viewer import (
     connect_address,
     free_port,
     is_loopback,
+    popen_server,
     rerun_executable,
     viewer_url,
     wait_viewer,
@@ -90,9 +91,7 @@ def start_rerun(host: str, grpc_port: int, web_port: int | None) -> subprocess.P
     cmd += ["--bind", host, "--port", str(grpc_port)]
     cmd += ["--server-memory-limit", SERVER_MEMORY_LIMIT]
     env = {**os.environ, "RERUN_ANALYTICS": "0"}
-    return subprocess.Popen(
-        cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True, env=env
-    )
+    return popen_server(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env)
 
 
 def stop_process_group(proc: subprocess.Popen | None) -> None:
