@@ -6,15 +6,19 @@ the cross-range velocity given the position, (r σβ / T)² = 7·10⁻¹⁴ of �
 zeroed, it left P⁺ singular. A positive pivot is now kept (only a slightly negative one is
 rounding). At σr = 10⁻³ m against σβ = 20° (r σβ = 52 km), and at σr = 10⁵ m against
 σβ = 10⁻⁵°, the state covariance is singular to rounding whatever the filter (naive, ekf and
-ukf NaN): the minimums of σr and σβ are now the smallest at which every corner is finite.
+ukf NaN): the minimums of σr and σβ are now the smallest at which every corner is finite, and
+a run whose σr / (r σβ) leaves the interval probed finite (a sweep's range or period takes r far
+from 150 km) is refused in one line.
 """
 
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import pytest
 
+from radarviz.core.experiments.prosov import MAX_RANGE_CROSS_RATIO, MIN_RANGE_CROSS_RATIO
 from radarviz.core.params import PARAMETERS
 from radarviz.viz_app.cli.main import main
 
@@ -56,3 +60,38 @@ def test_half_the_minimum_is_refused_in_one_line(capsys, flag: str, spec) -> Non
         f"radarviz: error: {flag} must be a finite number in [{spec.low:g}, {spec.high:g}] "
         f"(got {spec.low / 2!r})"
     )
+
+
+def test_a_sweep_at_the_corners_of_its_grid_is_finite_or_refused_up_front(
+    tmp_path: Path, capsys
+) -> None:
+    """The grid's range axis runs from 1 m to 10⁵ km and T to an hour, so σr against r σβ
+    spans far more than the ranges of σr and σβ alone: the grid corner σr = 10⁵ m, r0 = 1 m
+    gave NaN (naive, ekf, ukf), as did σr = 2 m, σβ = 20° with T = 3600 s (the target 42 000 km
+    out by the last scan). ``TrackingConfig`` now refuses, in one line before any run, a point
+    whose σr / (r σβ) leaves the interval probed finite; a corner inside it is finite."""
+    out = tmp_path / "s.parquet"
+    high_km = PARAMETERS["target_range_m"].high / 1000.0
+    grid = [f"range_km=0.001,{high_km:g}", "period_s=0.001,3600"]
+    common = ["sweep", "--scheduler", "serial", "--out", str(out), "--json", "--grid", *grid]
+    code, _, err = run(capsys, *common, "--sigma-r-m", f"{SR.high:g}", "--sigma-beta-deg", "20")
+    assert code == 0, err
+    assert out.exists()
+    out.unlink()
+    code, _, err = run(capsys, *common, "--sigma-r-m", f"{SR.high:g}", "--runs", "3")
+    assert code == 2, err
+    (line,) = err.splitlines()
+    assert line.startswith(
+        f"radarviz: error: --sigma-r-m must be {MIN_RANGE_CROSS_RATIO:g} to "
+        f"{MAX_RANGE_CROSS_RATIO:g} times the cross-range σ r σβ along the run "
+    ), line
+    assert not out.exists()
+
+
+def test_prosov_refuses_a_period_that_takes_the_target_out_of_the_finite_interval(
+    capsys,
+) -> None:
+    argv = ["reproduce", "prosov", "--sigma-r-m", "2", "--sigma-beta-deg", "20"]
+    code, out, err = run(capsys, *argv, "--period", "3600")
+    assert code == 2 and out == "", err
+    assert "at r = 4.26e+07 m): the position covariance would be singular" in err, err
