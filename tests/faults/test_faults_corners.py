@@ -13,9 +13,12 @@ from 150 km) is refused in one line.
 
 from __future__ import annotations
 
+import csv
 import json
+import math
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from radarviz.core.experiments.prosov import MAX_RANGE_CROSS_RATIO, MIN_RANGE_CROSS_RATIO
@@ -95,3 +98,44 @@ def test_prosov_refuses_a_period_that_takes_the_target_out_of_the_finite_interva
     code, out, err = run(capsys, *argv, "--period", "3600")
     assert code == 2 and out == "", err
     assert "at r = 4.26e+07 m): the position covariance would be singular" in err, err
+
+
+def test_a_3d_track_straight_overhead_with_doppler_stays_finite(tmp_path: Path, capsys) -> None:
+    """Every elevation 89.9999°, with Doppler, the default IMM: the ukf rows were NaN from the
+    third plot. The IMM's mode probabilities are updated once per stage of a plot (position,
+    then Doppler); the first stage left one model at μ = 0 (its likelihood e⁻⁷⁴⁵ below the
+    other's), the second favoured that model as strongly, and with only the likelihoods shifted
+    by their maximum both weights were 0: μ = 0 / 0. The prior now enters the shift. The track
+    is where the plots put it: over the radar, at the measured range."""
+    rng = np.random.default_rng(5)
+    sr_m, sigma_deg, svr_mps = 150.0, 0.3, 1.0
+    lines = ["time_s,radar,range_m,azimuth_deg,elevation_deg,radial_velocity_mps"]
+    for k in range(20):
+        r = 10000.0 + 50.0 * k + sr_m * rng.standard_normal()
+        vr = 5.0 + svr_mps * rng.standard_normal()
+        az = 30.0 + sigma_deg * rng.standard_normal()
+        lines.append(f"{10.0 * k!r},a,{r!r},{az!r},89.9999,{vr!r}")
+    meas, radars, out = tmp_path / "m.csv", tmp_path / "r.toml", tmp_path / "t.csv"
+    meas.write_text("\n".join(lines) + "\n")
+    radars.write_text(
+        "[radars.a]\nx_m = 0.0\ny_m = 0.0\nz_m = 0.0\n"
+        f"sigma_range_m = {sr_m!r}\nsigma_azimuth_deg = {sigma_deg!r}\n"
+        f"sigma_elevation_deg = {sigma_deg!r}\nsigma_radial_velocity_mps = {svr_mps!r}\n"
+    )
+    code, _, err = run(
+        capsys, "track", "--input", str(meas), "--radars", str(radars), "--out", str(out)
+    )
+    assert code == 0, err
+    with open(out, newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    assert {r["method"] for r in rows} >= {"ukf", "ekf", "naive"}
+    # A plot's horizontal σ at the pole is r σε (52 m at 10 km); the truth is at x = y = 0 and
+    # z = r: every filtered position within 5 plot σ of it (the filters only average plots).
+    # Not the ukf's: its sigma points, 2.4 σ ≈ 25 km apart horizontally after the 1000 m/s
+    # start, straddle the pole, so their azimuths span every direction and its track wanders
+    # off by hundreds of km (finite, but no estimate; the conversions and the ekf are not).
+    horizontal_m = 5.0 * 11000.0 * math.radians(sigma_deg)
+    for r in (r for r in rows if r["method"] != "ukf"):
+        t = float(r["time_s"])
+        assert abs(float(r["x_m"])) < horizontal_m and abs(float(r["y_m"])) < horizontal_m, r
+        assert abs(float(r["z_m"]) - (10000.0 + 5.0 * t)) < 5.0 * sr_m, r
