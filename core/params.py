@@ -276,6 +276,15 @@ MAX_SIGMA_ANGLE_DEG = 20.0
 #: underflows against r and the conversions' second-order terms lose every digit (negative
 #: NEES, NaN).
 MIN_SIGMA_ANGLE_DEG = 1e-6
+#: Lower limit of the azimuth σβ, and :data:`MIN_SIGMA_R_M` of the range σr: the Prosov run's
+#: converted position covariance has variances σr² along the line of sight and (r σβ)² across
+#: it, and with σr = 10⁵ m against r σβ = 0.03 m (σβ = 10⁻⁵° at 150 km), or σr = 1 m against
+#: 52 km (σβ = 20°), the 4 × 4 state covariance is singular to rounding after two plots: some
+#: of 1000 runs got a NaN NEES (naive, ekf, ukf) or a negative one (ekf). Probed over the
+#: corners of [σr, 10⁵ m] × [σβ, 20°] with every method at 1000 runs, 5·10⁻⁵° and 2 m are the
+#: smallest limits (of 10⁻⁵, 5·10⁻⁵, 10⁻⁴; 1, 2, 3 m) at which every figure is finite.
+MIN_SIGMA_BETA_DEG = 5e-5
+MIN_SIGMA_R_M = 2.0
 
 #: Fewest Monte Carlo runs (trials): every figure comes with its delete-a-group jackknife band
 #: (``core.confidence``), whose leave-outs each drop a group of runs; a sample σ needs two runs
@@ -298,13 +307,13 @@ MAX_GOSPA_ORDER = 16.0
 PARAMETERS: dict[str, Parameter] = {
     p.name: p
     for p in (
-        _real("sigma_r_m", "σr", "range noise std", "m", 1e-3, 1e5, 250.0, low_open=False),
+        _real("sigma_r_m", "σr", "range noise std", "m", MIN_SIGMA_R_M, 1e5, 250.0, low_open=False),
         _real(
             "sigma_beta_deg",
             "σβ",
             "azimuth noise std",
             "deg",
-            MIN_SIGMA_ANGLE_DEG,
+            MIN_SIGMA_BETA_DEG,
             MAX_SIGMA_ANGLE_DEG,
             1.0,
             low_open=False,

@@ -136,7 +136,7 @@ def _sites() -> list[radarviz.Radar]:
         (lambda: radarviz.finite_memory(0, sigma_r_m=1, sigma_vr_mps=1, period_s=1), "k must"),
         (lambda: radarviz.track([], init="later"), "init must be one of"),
         (lambda: _convert("bogus"), "method must be one of"),
-        (lambda: _convert(sigma_r_m=-1.0), "sigma_r_m must be finite numbers in [0.001,"),
+        (lambda: _convert(sigma_r_m=-1.0), "sigma_r_m must be finite numbers in [2,"),
         (lambda: _convert(range_m=[1e4, np.nan]), "range_m must be finite numbers in (0,"),
         (lambda: _convert(range_m=[1e4, -5.0]), "range_m must be finite numbers in (0,"),
         (lambda: _convert(sigma_azimuth_rad=-0.01), "sigma_azimuth_rad must be finite number"),

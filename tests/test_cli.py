@@ -82,10 +82,10 @@ def test_reproduce_prosov_table_and_plot(tmp_path: Path, capsys) -> None:
 @pytest.mark.parametrize(
     ("args", "needle"),
     [
-        (["--sigma-beta-deg", "0"], "--sigma-beta-deg must be a finite number in [1e-06, 20]"),
-        (["--sigma-beta-deg", "-1"], "--sigma-beta-deg must be a finite number in [1e-06, 20]"),
-        (["--sigma-beta-deg", "nan"], "--sigma-beta-deg must be a finite number in [1e-06, 20]"),
-        (["--sigma-r-m", "0"], "--sigma-r-m must be a finite number in [0.001, 100000]"),
+        (["--sigma-beta-deg", "0"], "--sigma-beta-deg must be a finite number in [5e-05, 20]"),
+        (["--sigma-beta-deg", "-1"], "--sigma-beta-deg must be a finite number in [5e-05, 20]"),
+        (["--sigma-beta-deg", "nan"], "--sigma-beta-deg must be a finite number in [5e-05, 20]"),
+        (["--sigma-r-m", "0"], "--sigma-r-m must be a finite number in [2, 100000]"),
         (["--sigma-r-m", "inf"], "--sigma-r-m must be a finite number"),
         (["--period", "0"], "--period must be a finite number in [0.001, 3600]"),
         (["--period", "nan"], "--period must be a finite number in [0.001, 3600]"),
@@ -117,7 +117,7 @@ def test_console_script_exit_status_and_no_traceback() -> None:
     assert proc.returncode == 2
     assert proc.stdout == ""
     assert proc.stderr.strip().splitlines() == [
-        "radarviz: error: --sigma-beta-deg must be a finite number in [1e-06, 20] (got nan)"
+        "radarviz: error: --sigma-beta-deg must be a finite number in [5e-05, 20] (got nan)"
     ]
 
 
@@ -385,7 +385,7 @@ def test_reproduce_gorshkov_json_document(capsys) -> None:
         (["--trials", "1"], "--trials must be an integer in [3,"),
         (["--tracking-runs", "1"], "--tracking-runs must be 0 (skip) or an integer >= 2"),
         (["--tracking-radar", "X"], "--tracking-radar must be one of RLS1"),
-        (["--sigma-beta-deg", "nan"], "--sigma-beta-deg must be a finite number in [1e-06, 20]"),
+        (["--sigma-beta-deg", "nan"], "--sigma-beta-deg must be a finite number in [5e-05, 20]"),
         (["--k-max", "0"], "--k-max must be an integer in [1, 20]"),
         (["--custom", "250", "0", "10"], "--custom C0 must be a finite number in (0, 1e+08]"),
         (["--custom", "-1", "1", "10"], "--custom SIGMA_R_M must be a finite number in (0,"),

@@ -57,19 +57,19 @@ def test_help_shows_the_table_bounds(
 def test_bad_value_names_the_flag_in_the_cli_and_the_parameter_in_core(capsys) -> None:
     assert main(["reproduce", "prosov", "--sigma-beta-deg", "1", "-1", "--runs", "10"]) == 2
     assert capsys.readouterr().err == (
-        "radarviz: error: --sigma-beta-deg must be a finite number in [1e-06, 20] (got -1.0)\n"
+        "radarviz: error: --sigma-beta-deg must be a finite number in [5e-05, 20] (got -1.0)\n"
     )
     with pytest.raises(ParameterError) as info:
         TrackingConfig(sigma_beta_deg=-1)
     assert info.value.parameter == "sigma_beta_deg"
-    assert str(info.value) == "sigma_beta_deg must be a finite number in [1e-06, 20] (got -1)"
+    assert str(info.value) == "sigma_beta_deg must be a finite number in [5e-05, 20] (got -1)"
     # The same check behind the alias flag of another command, and behind the panel.
     assert main(
         ["simulate", "--preset", "fusion", "--out", "m", "--radars-out", "r", "--scans", "1"]
     )
     assert capsys.readouterr().err.startswith("radarviz: error: --scans must be an integer in [2,")
     with pytest.raises(
-        ParameterError, match=r"^sigma_r_m must be a finite number in \[0.001, 100000\]"
+        ParameterError, match=r"^sigma_r_m must be a finite number in \[2, 100000\]"
     ):
         TuneParams(sigma_r_m=-5.0)
 

@@ -130,10 +130,10 @@ def test_all_methods_run_and_report_finite_statistics() -> None:
 @pytest.mark.parametrize(
     ("kwargs", "needle"),
     [
-        ({"sigma_r_m": 0.0}, "sigma_r_m must be a finite number in [0.001, 100000]"),
+        ({"sigma_r_m": 0.0}, "sigma_r_m must be a finite number in [2, 100000]"),
         (
             {"sigma_beta_deg": float("nan")},
-            "sigma_beta_deg must be a finite number in [1e-06, 20]",
+            "sigma_beta_deg must be a finite number in [5e-05, 20]",
         ),
         ({"runs": 1}, "runs must be an integer in [3, 100000000]"),
         ({"methods": ("naive", "kalman")}, "method must be one of naive, seed"),

@@ -760,7 +760,7 @@ def test_track_3d_file_starting_at_the_pole(tmp_path: Path) -> None:
         assert p.elevation_rad is not None
         lines.append(f"{p.time_s!r},a,{p.range_m!r},0.0,{math.degrees(p.elevation_rad)!r}")
     meas.write_text("\n".join(lines) + "\n")
-    radars.write_text(radars_toml({"a": ((0.0, 0.0, 0.0), 1.0, 1.0, 1.0, 1.0)}))
+    radars.write_text(radars_toml({"a": ((0.0, 0.0, 0.0), 2.0, 1.0, 1.0, 1.0)}))
     rows = run_track(tmp_path, meas, radars)
     assert {r["method"] for r in rows} == set(METHODS_3D)
     assert len(rows) == 20 * len(METHODS_3D)

@@ -214,7 +214,7 @@ BAD_CASES = {
     "negative sigma": (
         HEADER + GOOD_ROWS[0],
         GOOD_RADARS.replace("100.0", "-1.0"),
-        "r.toml, radar 'b', key sigma_range_m: must be a finite number in [0.001, 100000]",
+        "r.toml, radar 'b', key sigma_range_m: must be a finite number in [2, 100000]",
     ),
     "missing radar key": (
         HEADER + GOOD_ROWS[0],

@@ -171,9 +171,7 @@ def test_bad_value_shows_error_and_keeps_last_good() -> None:
         w.stop()
     assert s.last_good is good
     assert s.last_error is not None and "\n" not in s.last_error
-    assert s.last_error.startswith(
-        "sigma_r_m must be a finite number in [0.001, 100000] (got -5.0)"
-    )
+    assert s.last_error.startswith("sigma_r_m must be a finite number in [2, 100000] (got -5.0)")
     assert "ucm" in s.status_markdown()
 
 

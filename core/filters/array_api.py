@@ -118,7 +118,7 @@ def _ukf(xp, x, P, r, b, vr, vb, sx, sy, prm):
         for k in range(j):
             d = d - L[j, k] * L[j, k]
         tol = SEMIDEFINITE_RTOL * c * P[j, j]
-        null = xp.abs(d) <= tol
+        null = (d <= 0.0) & (d >= -tol)  # a pivot above 0 is a variance, however small
         d = xp.where(null, 0.0, xp.where(d < -tol, xp.nan, d))
         L[j, j] = xp.sqrt(d)
         for i in range(j + 1, 4):

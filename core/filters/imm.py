@@ -110,14 +110,18 @@ def imm_predict(mixed: CVBatch, dt_s: float | NDArray[np.float64], model: IMMMod
 def mode_probabilities(
     prior: NDArray[np.float64], log_likelihood: NDArray[np.float64]
 ) -> NDArray[np.float64]:
-    """μⱼ ∝ Λⱼ c̄ⱼ, normalised over the last axis (log-likelihoods shifted by their maximum so
-    that a far-off plot does not underflow every model to 0). A model whose likelihood is not
-    finite (its S not positive definite) gets no weight; a track with no finite likelihood
-    keeps its prior c̄."""
-    ll = np.where(np.isfinite(log_likelihood), log_likelihood, -np.inf)
-    top = ll.max(axis=-1, keepdims=True)
+    """μⱼ ∝ Λⱼ c̄ⱼ, normalised over the last axis, as exp(log Λⱼ + log c̄ⱼ − max) (so that a
+    far-off plot does not underflow every model to 0). The prior is inside the shift: a plot
+    updates μ once per stage (position, then Doppler), and a first stage that left a model
+    μ = 0 (underflow) while the second stage's likelihood favours it by more than e⁷⁴⁵ gave
+    0 · 1 + μ · 0 = 0 / 0 with the likelihoods alone shifted (a 3D track at 89.9999° elevation
+    with Doppler: NaN states). A model whose likelihood is not finite (its S not positive
+    definite) gets no weight; a track with no finite weight keeps its prior c̄."""
+    with np.errstate(divide="ignore"):  # log 0 = −inf: a model of prior 0 stays at 0
+        lw = np.where(np.isfinite(log_likelihood), log_likelihood, -np.inf) + np.log(prior)
+    top = lw.max(axis=-1, keepdims=True)
     ok = np.isfinite(top)
-    w = prior * np.exp(np.where(ok, ll - np.where(ok, top, 0.0), 0.0))
+    w = np.where(ok, np.exp(lw - np.where(ok, top, 0.0)), prior)
     return w / w.sum(axis=-1, keepdims=True)
 
 

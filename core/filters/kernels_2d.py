@@ -232,8 +232,8 @@ def ekf_update_s(xt, p, r: float, b: float, vr: float, vb: float, sx: float, sy:
 
 @_inline
 def _pivot(d: float, tol: float):
-    # A Cholesky pivot within ``tol`` of 0 is a null direction (0); below −tol: NaN
-    null = abs(d) <= tol
+    # A pivot in [−tol, 0] is a null direction (0); below −tol: NaN; above 0: a variance
+    null = -tol <= d <= 0.0
     if null:
         d = 0.0
     elif d < -tol:

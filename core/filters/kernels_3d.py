@@ -347,7 +347,7 @@ def ukf_update_3d(x, P, r, b, el, sr2, sb2, se2, sx, sy, sz, prm, L, Z, K, S, Si
         for k in range(j):
             d -= L[j, k] * L[j, k]
         tol = SEMIDEFINITE_RTOL * c * P[j, j]
-        null = abs(d) <= tol
+        null = -tol <= d <= 0.0  # a pivot above 0 is a variance, however small
         if null:
             d = 0.0
         elif d < -tol:

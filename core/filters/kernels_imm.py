@@ -292,22 +292,23 @@ def combine_3d(xm, Pm, mu, x, P):
 @_inline
 def mode_probabilities(prior, ll, mu):
     """μⱼ ∝ Λⱼ c̄ⱼ (``core.filters.imm.mode_probabilities``) into mu (r,) (may be ``prior``):
-    log-likelihoods ll (r,) shifted by their maximum; a model whose likelihood is not finite
-    gets no weight; a track with no finite likelihood keeps its prior."""
+    exp(log Λⱼ + log c̄ⱼ − max), the prior inside the shift; a model whose likelihood is not
+    finite gets no weight; a track with no finite weight keeps its prior."""
     r = prior.shape[0]
     top = -np.inf
     for j in range(r):
-        v = ll[j]
-        if math.isfinite(v) and v > top:
-            top = v
+        if prior[j] > 0.0 and math.isfinite(ll[j]):
+            v = ll[j] + math.log(prior[j])
+            if v > top:
+                top = v
     ok = math.isfinite(top)
     total = 0.0
     for j in range(r):
-        e = 1.0
+        w = prior[j]
         if ok:
-            e = exp(ll[j] - top) if math.isfinite(ll[j]) else 0.0
-        mu[j] = prior[j] * e
-        total += mu[j]
+            w = exp(ll[j] + math.log(prior[j]) - top) if w > 0.0 and math.isfinite(ll[j]) else 0.0
+        mu[j] = w
+        total += w
     for j in range(r):
         mu[j] /= total
 

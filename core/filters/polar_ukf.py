@@ -105,11 +105,16 @@ class UKFParams(NamedTuple):
 _DEFAULT_UKF = UKFParams()
 
 
-#: A Cholesky pivot (the variance of a component given the earlier ones) at most this fraction
-#: of its diagonal entry is taken as zero: that direction is known to rounding. P⁺ = P⁻ − K S Kᵀ
-#: is a subtraction that loses log₁₀(P⁻ᵢᵢ / P⁺ᵢᵢ) of the 16 digits (a start with σv0 = 1000
-#: m/s and a scan later: 4 to 6 of them), so a null direction comes back as ± 10⁻¹⁶ to 10⁻¹¹
-#: of its diagonal; 10⁻⁹ (a conditional σ of 3·10⁻⁵ of the marginal σ) is above that.
+#: A negative Cholesky pivot (the variance of a component given the earlier ones) at most this
+#: fraction of its diagonal entry is taken as zero: that direction is known to rounding.
+#: P⁺ = P⁻ − K S Kᵀ is a subtraction that loses log₁₀(P⁻ᵢᵢ / P⁺ᵢᵢ) of the 16 digits (a start
+#: with σv0 = 1000 m/s and a scan later: 4 to 6 of them), so a null direction comes back as
+#: ± 10⁻¹⁶ to 10⁻¹¹ of its diagonal; 10⁻⁹ is above that. A positive pivot is a variance however
+#: small, and is kept: after two plots with σβ = 10⁻⁶° at 150 km and σv0 = 1000 m/s, T = 10 s,
+#: the cross-range velocity given the position has (rσβ / T)² = 7·10⁻⁸ m²/s², 7·10⁻¹⁴ of its
+#: marginal σv0², and zeroing it left P⁺ singular (NEES NaN). Keeping a positive pivot that is
+#: rounding of a true zero is harmless: the column below it is rounding over its square root,
+#: at most √(10⁻¹¹) of the marginal σ.
 SEMIDEFINITE_RTOL = 1e-9
 
 
@@ -123,7 +128,7 @@ def semidefinite_cholesky(
 
         d_j = P_jj − Σ_{k<j} L_jk²,   L_jj = √d_j,   L_ij = (P_ij − Σ_{k<j} L_ik L_jk) / L_jj
 
-    A pivot with |d_j| ≤ ``SEMIDEFINITE_RTOL`` · P_jj is a direction of zero variance (to
+    A pivot with −``SEMIDEFINITE_RTOL`` · P_jj ≤ d_j ≤ 0 is a direction of zero variance (to
     rounding): its column is zero, which is the exact factor of a semi-definite P (there the
     P_ij − Σ L_ik L_jk vanish with d_j). A pivot below −``SEMIDEFINITE_RTOL`` · P_jj (P
     indefinite beyond rounding) gives NaN for that track only. Where P is positive definite
@@ -139,7 +144,7 @@ def semidefinite_cholesky(
             for k in range(j):
                 d -= L[j, k] * L[j, k]
             tol = SEMIDEFINITE_RTOL * Pc[j, j]
-            null = np.abs(d) <= tol
+            null = (d <= 0.0) & (d >= -tol)
             d[null] = 0.0
             d[d < -tol] = np.nan  # indefinite beyond rounding: this track becomes NaN
             np.sqrt(d, out=d)
@@ -308,7 +313,7 @@ def ukf_update(
     Pc, oPc = cov_components(P), cov_components(out.P)
     last = Pc[n - 1, n - 1] - sum_terms([col[n - 1, k] * col[n - 1, k] for k in range(n - 1)]) / c
     tol = SEMIDEFINITE_RTOL * Pc[n - 1, n - 1]
-    last = np.where(np.abs(last) <= tol, 0.0, np.where(last < -tol, np.nan, last))
+    last = np.where(last >= 0.0, last, np.where(last < -tol, np.nan, 0.0))
     del tol
     kd0 = [sum_terms([K[e][i] * d0[e] for e in range(m)]) for i in range(n)]
     for i in range(n):  # the accumulators are out's own P (no temporaries per entry)

@@ -69,3 +69,43 @@ def test_ctrl_c_of_a_sweep_is_one_line_and_status_130(tmp_path: Path, marker: st
     assert code == 130, lines
     assert lines[-1] == "radarviz: interrupted: sweep stopped, no output written", lines
     assert all(line.startswith("sweep 1 point(s): ") for line in lines[:-1]), lines
+
+
+def _console_script() -> Path:
+    exe = Path(sys.executable).with_name("radarviz")
+    if not exe.exists():
+        pytest.skip("the radarviz console script is not installed beside this interpreter")
+    return exe
+
+
+@pytest.mark.skipif(not Path("/proc/self/maps").exists(), reason="needs /proc/PID/maps")
+@pytest.mark.parametrize("command", [["--help"], ["demo"]])
+def test_ctrl_c_during_the_start_up_imports_is_one_line_and_status_130(
+    command: list[str],
+) -> None:
+    """SIGINT once numpy's extension is mapped into the process: the command line's imports
+    (numpy, numba, every command's module) are then under way, a second or more of them. It
+    used to end in a KeyboardInterrupt traceback from inside some import (4 to 60 lines) and
+    the status of a process killed by SIGINT; now the console script's entry module imports
+    the command line inside a handler."""
+    proc = subprocess.Popen(
+        [str(_console_script()), *command],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    )
+    maps = Path(f"/proc/{proc.pid}/maps")
+    try:
+        while proc.poll() is None and "_multiarray_umath" not in maps.read_text():
+            pass
+    except FileNotFoundError:  # the process ended before numpy was mapped
+        pass
+    os.killpg(proc.pid, signal.SIGINT)
+    assert proc.stderr is not None
+    err = proc.stderr.read()
+    code = proc.wait(timeout=60)
+    assert (code, err.splitlines()) == (
+        130,
+        ["radarviz: interrupted while starting, nothing done"],
+    ), err

@@ -29,6 +29,7 @@ from radarviz.viz_app.cli import live, recording, score, sweep, track
 from radarviz.viz_app.cli.args import integer, number, print_report
 from radarviz.viz_app.cli.params import add_parameter, cli_message, map_flag
 from radarviz.viz_app.io.atomic import WriteError
+from radarviz_entry import EXIT_INTERRUPTED, STARTUP_INTERRUPTED
 
 EXIT_USAGE = 2
 #: Exit status when an output could not be written (``viz_app.io.atomic.WriteError``).
@@ -575,8 +576,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         args = build_parser().parse_args(argv)
     except KeyboardInterrupt:
-        print("radarviz: interrupted while starting, nothing done", file=sys.stderr)
-        return 130
+        print(STARTUP_INTERRUPTED, file=sys.stderr)
+        return EXIT_INTERRUPTED
     try:
         if args.command == "reproduce" and args.experiment == "prosov":
             return _cmd_reproduce_prosov(args)
@@ -613,7 +614,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         # Ctrl-C: every writer has removed its temporary file on the way out (the outputs are
         # atomic), so the targets are as before; 130 is the shell's status for SIGINT.
         print(f"radarviz: interrupted: {args.command} stopped, no output written", file=sys.stderr)
-        return 130
+        return EXIT_INTERRUPTED
     return _fail(f"unknown command {args.command!r}")
 
 
