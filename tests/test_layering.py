@@ -430,12 +430,21 @@ def test_every_package_is_installed() -> None:
     (setuptools installs only the listed ones: a missing entry works in the editable checkout
     and fails from a wheel)."""
     config = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))
-    listed = set(config["tool"]["setuptools"]["packages"])
+    setuptools = config["tool"]["setuptools"]
+    listed = set(setuptools["packages"])
+    # The folder of the top-level modules (the console script's entry, outside the package):
+    # its files are modules of their own, each listed in py-modules.
+    modules_dir = ROOT / setuptools["package-dir"][""]
     problems: list[str] = []
     found: set[str] = set()
+    for path in sorted(modules_dir.glob("*.py")):
+        if path.stem not in setuptools["py-modules"]:
+            problems.append(f"pyproject.toml [tool.setuptools] py-modules lacks {path.stem!r}")
     for folder in SOURCE_ROOTS:
         for path in sorted((ROOT / folder).rglob("*.py")):
             package_dir = path.parent
+            if package_dir == modules_dir:
+                continue
             rel = package_dir.relative_to(ROOT)
             if not (package_dir / "__init__.py").exists():
                 problems.append(f"{rel.as_posix()}/ has .py files but no __init__.py")
