@@ -38,6 +38,7 @@ from radarviz.viz_app.live.session import (
     warn_line,
 )
 from radarviz.viz_app.rerun.viewer import is_loopback
+from radarviz.viz_app.runtime import peak_rss_mb
 
 #: How long a saved recording may take to read back whole after the stream ends (s).
 SETTLE_S = 10.0
@@ -318,6 +319,7 @@ def _summary(
     doc["tracks_started"] = report.started
     doc["tracks_confirmed"] = report.confirmed
     doc["confirmed_tracks"] = list(tracker.ever_confirmed)
+    doc["peak_rss_mb"] = peak_rss_mb()
     return doc
 
 
