@@ -101,7 +101,6 @@ def run_live(args: argparse.Namespace) -> int:
             raise
         raise ParameterError(f"--{exc}") from None
 
-    _warm_up(radars, methods, options, association)
     counts = FeedCounts()
     stop = threading.Event()
     feed: UdpFeed | FollowedFile
@@ -185,51 +184,6 @@ def run_live(args: argparse.Namespace) -> int:
         print(f"radarviz: interrupted: live stopped{saved}", file=sys.stderr)
         return 130
     return 0
-
-
-#: The warm-up's scans: enough for a track to start, be confirmed and be updated.
-WARM_UP_SCANS = 6
-
-
-def _warm_up(radars: dict, methods: tuple[str, ...], options: Any, association: Any) -> None:
-    """Load the tracker's compiled kernels before the feed comes: a throw-away tracker of
-    the session's options (its own NIS monitor) tracks one target seen by each radar for
-    ``WARM_UP_SCANS`` revolutions. Their first call loads their machine code from numba's
-    cache (seconds); without this the feed's first plots would wait for it."""
-    import math
-    from dataclasses import replace
-
-    from radarviz.core.tracking.association import GNNTracker
-    from radarviz.core.tracking.consistency import ConsistencyMonitor
-
-    warm = GNNTracker(
-        methods,
-        False,
-        replace(options, monitor=ConsistencyMonitor()),
-        association,
-        coverage={n: radar_coverage(r) for n, r in radars.items()},
-    )
-    batches = []
-    for k in range(WARM_UP_SCANS):
-        for r in radars.values():
-            period_s = r.rotation_period_s or 4.0
-            el = r.sigma_elevation_deg
-            vr = r.sigma_radial_velocity_mps
-            plot = Plot(
-                time_s=k * period_s,
-                range_m=30e3 + 200.0 * k,
-                azimuth_rad=0.5,
-                sigma_r_m=r.sigma_range_m,
-                sigma_azimuth_rad=math.radians(r.sigma_azimuth_deg),
-                site=(r.x_m, r.y_m, r.z_m),
-                radar=r.name,
-                elevation_rad=None if el is None else 0.05,
-                sigma_elevation_rad=0.0 if el is None else math.radians(el),
-                radial_velocity_mps=None if vr is None else 200.0,
-                sigma_radial_velocity_mps=vr or 0.0,
-            )
-            batches.append([plot])
-    warm.add_batches(batches)
 
 
 def _discard(*_: object) -> None:
