@@ -593,8 +593,8 @@ def _cmd_bench(args: argparse.Namespace) -> int:
 
         # The command as run, every size spelled out (defaults too), so a reduced run says so.
         argv = ["bench", "--runs", *map(str, args.runs)]
-        sizes = ("filterpy_runs", "targets", "asterix_plots", "asterix_targets", "track_plots")
-        for flag in (*sizes, "live_rate", "live_seconds", "live_targets"):
+        sizes = ("filterpy_runs", "targets", "asterix_plots", "asterix_targets")
+        for flag in (*sizes, "live_rate", "live_seconds", "live_targets", "track_plots"):
             value = getattr(args, flag)
             argv += [
                 "--" + flag.replace("_", "-"),
