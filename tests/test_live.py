@@ -335,3 +335,18 @@ def test_live_follows_a_growing_file_and_ctrl_c_leaves_a_valid_recording(tmp_pat
     assert doc["plots"] == n_plots
     assert doc["tracked"] + doc["untracked_at_stop"] == n_plots
     assert not list(tmp_path.glob(".live.rrd.*"))  # no temporary file left behind
+
+
+def test_bench_live_accounts_for_every_plot_sent(capsys: pytest.CaptureFixture) -> None:
+    """``bench --only live`` (small: 3 s at 400 plots/s, with the viewer): the plots asked
+    for are sent, each accounted for once, and the latency is a finite ordered pair."""
+    argv = ["bench", "--only", "live", "--live-rate", "400", "--live-seconds", "3"]
+    assert main([*argv, "--live-targets", "100", "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)["live"]
+    assert doc["viewer"] and doc["sent_plots"] == 1200
+    parts = ("tracked", "dropped", "out_of_order", "untracked_at_stop")
+    assert sum(doc[k] for k in parts) == doc["sent_plots"]
+    assert doc["malformed"] == 0
+    assert 0.0 < doc["latency_median_ms"] <= doc["latency_p99_ms"]
+    assert doc["peak_rss_mb"] > 0.0
+    assert main(["bench", "--only", "live", "--live-rate", "0"]) == 2

@@ -60,6 +60,9 @@ Figures (ns per track-step = wall time / (runs × scans), one core):
   plots from CSV, plots per second and their same-run ratio, and ``track`` of an ASTERIX file
   of many targets end to end, the compiled block path against the row path and the decoder
   alone (``viz_app.bench.asterix``; alone: ``radarviz bench --only asterix``).
+* ``live``: a rotating-radar feed replayed to 127.0.0.1 into ``radarviz live`` with its
+  viewer: plots sent, tracked, dropped, malformed, the latency's median and 99th percentile,
+  the live process's peak RSS (``viz_app.bench.live``; alone: ``radarviz bench --only live``).
 * ``peak_rss_mb``: peak resident memory of the process.
 """
 
@@ -531,9 +534,12 @@ def run_bench(
     asterix_plots: int = 20_000,
     asterix_targets: int = 200,
     track_plots: int = 1_000_000,
+    live: tuple[float, float, int] = (2000.0, 20.0, 300),
 ) -> dict[str, Any]:
-    """All figures of ``radarviz bench`` as a JSON-ready dict."""
+    """All figures of ``radarviz bench`` as a JSON-ready dict (``live``: the live section's
+    rate, seconds and targets)."""
     from radarviz.viz_app.bench.asterix import bench_asterix
+    from radarviz.viz_app.bench.live import bench_live
 
     host = machine()
     config = TrackingConfig(runs=MIN_MONTE_CARLO_RUNS, target=prosov_target())
@@ -572,6 +578,7 @@ def run_bench(
         "targets": bench_targets(targets, config, fp, track_plots=track_plots),
         "association": bench_association(targets),
         "asterix": bench_asterix(asterix_plots, targets=asterix_targets),
+        "live": bench_live(*live),
         "peak_rss_mb": peak_rss_mb(),
         # the load at the start and at the end: a shared machine's figures read with it
         "machine": {**host, "load_avg_1min_after": machine()["load_avg_1min"]},
@@ -711,5 +718,9 @@ def format_bench(doc: dict[str, Any]) -> str:
     from radarviz.viz_app.bench.asterix import format_asterix
 
     lines.append(format_asterix(doc["asterix"]))
+    if "live" in doc:  # a document of before the section
+        from radarviz.viz_app.bench.live import format_live
+
+        lines.append(format_live(doc["live"]))
     lines.append(f"peak RSS: {doc['peak_rss_mb']:.0f} MiB")
     return "\n".join(lines)

@@ -255,10 +255,29 @@ def build_parser() -> argparse.ArgumentParser:
     )
     bench.add_argument(
         "--only",
-        choices=("asterix", "association"),
+        choices=("asterix", "association", "live"),
         default=None,
-        help="run one section: asterix (ASTERIX CAT048 reading vs CSV, track end to end) or "
-        "association (GNN at --targets targets, sparse vs dense route); default all",
+        help="run one section: asterix (ASTERIX CAT048 reading vs CSV, track end to end), "
+        "association (GNN at --targets targets, sparse vs dense route) or live (a feed "
+        "replayed into radarviz live with its viewer: counts, latency); default all",
+    )
+    bench.add_argument(
+        "--live-rate",
+        type=number,
+        default=2000.0,
+        help="plots/s of the live section's replay (default 2000)",
+    )
+    bench.add_argument(
+        "--live-seconds",
+        type=number,
+        default=20.0,
+        help="seconds of the live section's replay (default 20)",
+    )
+    bench.add_argument(
+        "--live-targets",
+        type=integer,
+        default=300,
+        help="targets of the live section's scene of four radars (default 300)",
     )
     bench.add_argument(
         "--track-plots",
@@ -511,6 +530,9 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     # the files are simulate's fusion preset: three radars of at most MAX_SIMULATE_STEPS scans
     check_int("--asterix-plots", args.asterix_plots, low=100, high=3 * MAX_SIMULATE_STEPS)
     check_int("--asterix-targets", args.asterix_targets, low=1, high=4095)
+    check_real("--live-rate", args.live_rate, low=1.0, high=100_000.0, low_open=False)
+    check_real("--live-seconds", args.live_seconds, low=1.0, high=3600.0, low_open=False)
+    check_int("--live-targets", args.live_targets, low=1, high=4095)
     if args.markdown is not None:
         from radarviz.viz_app.bench.markdown import check_markdown_target
 
@@ -526,6 +548,13 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         doc = {"asterix": bench_asterix(args.asterix_plots, targets=args.asterix_targets)}
         check_finite_document("bench", doc, nonnegative=True)
         print_report(doc, args.json, lambda d: format_asterix(d["asterix"]))
+        return 0
+    if args.only == "live":
+        from radarviz.viz_app.bench.live import bench_live, format_live
+
+        doc = {"live": bench_live(args.live_rate, args.live_seconds, args.live_targets)}
+        check_finite_document("bench", doc, nonnegative=True)
+        print_report(doc, args.json, lambda d: format_live(d["live"]))
         return 0
     if args.only == "association":
         from radarviz.viz_app.bench.association import bench_association, format_association
@@ -556,6 +585,7 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         asterix_plots=args.asterix_plots,
         asterix_targets=args.asterix_targets,
         track_plots=args.track_plots,
+        live=(args.live_rate, args.live_seconds, args.live_targets),
     )
     check_finite_document("bench", doc, nonnegative=True)  # times, rates and ratios
     print_report(doc, args.json, format_bench)
@@ -564,8 +594,13 @@ def _cmd_bench(args: argparse.Namespace) -> int:
 
         # The command as run, every size spelled out (defaults too), so a reduced run says so.
         argv = ["bench", "--runs", *map(str, args.runs)]
-        for flag in ("filterpy_runs", "targets", "asterix_plots", "asterix_targets", "track_plots"):
-            argv += ["--" + flag.replace("_", "-"), str(getattr(args, flag))]
+        sizes = ("filterpy_runs", "targets", "asterix_plots", "asterix_targets")
+        for flag in (*sizes, "live_rate", "live_seconds", "live_targets", "track_plots"):
+            value = getattr(args, flag)
+            argv += [
+                "--" + flag.replace("_", "-"),
+                f"{value:g}" if isinstance(value, float) else str(value),
+            ]
         argv += ["--markdown", args.markdown]
         write_bench_section(args.markdown, bench_section(doc, argv))
     return 0

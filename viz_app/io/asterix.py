@@ -1251,31 +1251,40 @@ def record_items(plot: Plot, radar: Radar, track_number: int | None) -> dict[str
     return items
 
 
-def encode_plots(plots: list[Plot], radars: list[Radar]) -> Iterator[bytes]:
-    """The CAT048 data blocks of ``plots`` (radars with sac/sic), ``BLOCK_RECORDS`` records
+def encode_plots(
+    plots: list[Plot], radars: list[Radar], block_records: int = BLOCK_RECORDS
+) -> Iterator[bytes]:
+    """The CAT048 data blocks of ``plots`` (radars with sac/sic), ``block_records`` records
     each. Labelled plots carry I048/161 (``track_numbers``)."""
     cat = _encoder()
     by_name = {r.name: r for r in radars}
     numbers = track_numbers(plots) if any(p.target for p in plots) else None
-    for start in range(0, len(plots), BLOCK_RECORDS):
+    for start in range(0, len(plots), block_records):
         records = [
             cat.cv_record.create(
                 record_items(p, by_name[p.radar], None if numbers is None else numbers[p.target])
             )
-            for p in plots[start : start + BLOCK_RECORDS]
+            for p in plots[start : start + block_records]
         ]
         yield cat.create(records).unparse().to_bytes()
 
 
-def write_asterix(meas_path: str, radars_path: str, plots: list[Plot], radars: list[Radar]) -> int:
-    """Plots as an ASTERIX CAT048 file and their radars (given SAC/SIC by ``with_source_ids``)
-    as TOML, committed together (both or neither; nothing on an error); returns plots. The
-    plots pass the finite-result check first, as ``write_measurements``'s do."""
+def write_asterix(
+    meas_path: str,
+    radars_path: str,
+    plots: list[Plot],
+    radars: list[Radar],
+    block_records: int = BLOCK_RECORDS,
+) -> int:
+    """Plots as an ASTERIX CAT048 file of data blocks of ``block_records`` records and their
+    radars (given SAC/SIC by ``with_source_ids``) as TOML, committed together (both or
+    neither; nothing on an error); returns plots. The plots pass the finite-result check
+    first, as ``write_measurements``'s do."""
     from radarviz.viz_app.io.atomic import atomic_write
 
     check_plots_finite(plots)  # a NaN is an error, not a record
     radars = with_source_ids(radars)
-    blocks = encode_plots(plots, radars)
+    blocks = encode_plots(plots, radars, block_records)
     with commit_together(), atomic_write(meas_path, "wb") as fh, atomic_text(radars_path) as rh:
         for block in blocks:
             fh.write(block)

@@ -38,6 +38,7 @@ from radarviz.viz_app.live.session import (
     warn_line,
 )
 from radarviz.viz_app.rerun.viewer import is_loopback
+from radarviz.viz_app.runtime import peak_rss_mb
 
 #: How long a saved recording may take to read back whole after the stream ends (s).
 SETTLE_S = 10.0
@@ -197,8 +198,8 @@ def _recording(
         return None, lambda: None
     import rerun as rr
 
+    from radarviz.viz_app.rerun.live_recording import LiveTrackRecorder
     from radarviz.viz_app.rerun.recording import new_recording, verify_recording
-    from radarviz.viz_app.rerun.track_recording import TrackRecorder
 
     sinks = []
     stage = None
@@ -211,7 +212,7 @@ def _recording(
         sinks.append(rr.GrpcSink(_serve_viewer(args, stack)))
     rec = new_recording()
     rec.set_sinks(*sinks)
-    recorder = TrackRecorder(rec, radars.values(), monitor)
+    recorder = LiveTrackRecorder(rec, radars.values(), monitor)
 
     def finish() -> None:
         recorder.close()
@@ -272,6 +273,7 @@ def _summary(
     doc["tracks_started"] = report.started
     doc["tracks_confirmed"] = report.confirmed
     doc["confirmed_tracks"] = list(tracker.ever_confirmed)
+    doc["peak_rss_mb"] = peak_rss_mb()
     return doc
 
 

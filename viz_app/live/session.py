@@ -15,8 +15,9 @@ Two threads and a bounded queue between them:
   length to every plot's latency), cuts them into batches (``plot_batches``) and runs the
   held batches in one compiled call (``viz_app.io.plots.BatchRunner``, the runner of
   ``track --associate``) whenever ``budget_s`` has passed since the first of them was held,
-  or ``READ_BLOCK`` plots are held. Results go to a ``TrackRecorder`` (the one of
-  ``track --rrd``), flushed after every run, so the viewer shows each run as it is done.
+  or ``READ_BLOCK`` plots are held. Results go to a ``LiveTrackRecorder``
+  (``viz_app.rerun.live_recording``: ``track --rrd``'s plots, one row of every live track per
+  method), flushed after every run, so the viewer shows each run as it is done.
 
 A plot earlier than the latest received by more than the horizon cannot be put back in
 order; it is counted as out of order and passed over (``time_ordered`` would refuse it).

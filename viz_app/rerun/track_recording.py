@@ -124,6 +124,9 @@ Row = tuple[int, float, np.ndarray, np.ndarray, str]
 class TrackRecorder:
     """Buffers plots and track states and sends them to a recording in chunks."""
 
+    #: Plots after which ``add`` flushes by itself (None: only when asked).
+    chunk_plots: int | None = RRD_CHUNK
+
     def __init__(
         self,
         rec: rr.RecordingStream,
@@ -336,7 +339,7 @@ class TrackRecorder:
         for method, x, P in rows:
             self._methods.add(method)
             self._tracks[(plot.target, method)].append((self.count, plot.time_s, x, P, status))
-        if self.count % RRD_CHUNK == 0:
+        if self.chunk_plots is not None and self.count % self.chunk_plots == 0:
             self.flush()
 
     def _log_truth(self, truth: Truth) -> None:
@@ -478,7 +481,18 @@ class TrackRecorder:
 
     def flush(self) -> None:
         """Send everything buffered (one ``send_columns`` per entity) and empty the buffers."""
-        rec = self.rec
+        self._send_measurements()
+        for (target, method), items in self._tracks.items():
+            if items:
+                self._send_track(target, method, items)
+        self._forget_deleted()
+        self._send_inset()
+        self._tracks.clear()
+        self.chunk += 1
+        drain(self.rec)  # the chunk's encoded bytes to the file: memory stays flat with its length
+
+    def _send_measurements(self) -> None:
+        """The buffered plots, one ``send_columns`` per measurement entity."""
         for entity, items in self._meas.items():
             if not items:
                 continue
@@ -488,7 +502,7 @@ class TrackRecorder:
             m = len(allpts)
             dim = entity.endswith(f"/{TENTATIVE}")
             rgb = faint(colour("measurement")) if dim else colour("measurement")
-            rec.send_columns(
+            self.rec.send_columns(
                 f"world/measurements/{entity}",
                 indexes=self.indexes(list(n), list(t)),
                 columns=rr.Points3D.columns(
@@ -498,36 +512,98 @@ class TrackRecorder:
                     colors=[rgb] * m,
                 ).partition([len(p) for p in pts]),
             )
-        for (target, method), items in self._tracks.items():
-            if items:
-                self._send_track(target, method, items)
-        for target in self._deleted:  # no more rows: forget it (a tentative one has no path)
+        self._meas.clear()
+
+    def _forget_deleted(self, targets: set[str] | None = None) -> None:
+        """Deleted tracks (``targets``, or all deleted since the last flush) have no more
+        rows: forget their path's state (a tentative one has no path)."""
+        targets = set(self._deleted) if targets is None else targets
+        for target in targets:
             prefix = f"{rr.escape_entity_path_part(target)}/"
             for book in (self._pending, self._last):
                 for name in [k for k in book if k.startswith(prefix)]:
                     del book[name]
-        self._deleted.clear()
-        self._send_inset()
-        self._meas.clear()
-        self._tracks.clear()
-        self.chunk += 1
-        drain(rec)  # the chunk's encoded bytes to the file: memory stays flat with its length
+        self._deleted -= targets
+
+    def _entity_name(self, target: str, method: str) -> str:
+        """The entity name of a target's method (``{t}/{m}``, or ``{m}`` in a file of one)."""
+        return track_name(rr.escape_entity_path_part(target), method) if target else method
+
+    def _track_colour(self, target: str, name: str, method: str) -> tuple[int, int, int]:
+        """A track's colour: by id when one method tracks many targets, else by method."""
+        rgb = self._colours.get(name)
+        if rgb is None:
+            by_id = bool(target) and len(self._methods) == 1
+            rgb = self._colours[name] = track_rgb(len(self._colours)) if by_id else colour(method)
+        return rgb
+
+    def _path_strips(
+        self, name: str, pos: np.ndarray, tentative: np.ndarray, rgb: tuple[int, int, int]
+    ) -> tuple[int, list[np.ndarray], list, list[float]]:
+        """A track's path for its buffered positions ``pos``: the index of its first
+        confirmed row (``len(pos)``: still tentative, the positions kept until it is
+        confirmed) and the strips to draw, their colours and radii (none while tentative)."""
+        # Statuses only go tentative → confirmed: the chunk's confirmed rows are a suffix.
+        first = int(np.argmin(tentative)) if not tentative.all() else len(pos)
+        start = self._pending.pop(name, np.zeros((0, 3)))
+        if first == len(pos):  # still tentative: its path waits for the confirmation
+            self._pending[name] = np.vstack([start, pos])
+            return first, [], [], []
+        strips, colours_, radii = [], [], []
+        early = np.vstack([start, pos[:first]])
+        if len(early):  # the tentative start, faint, joined to the first confirmed row
+            strips.append(np.vstack([early, pos[first : first + 1]]))
+            colours_.append(faint(rgb))
+            radii.append(FAINT_LINE)
+        later = pos[first:] if name not in self._last else np.vstack([self._last[name], pos])
+        strips.append(later)
+        colours_.append(rgb)
+        radii.append(THIN_LINE)
+        self._last[name] = pos[-1]
+        return first, strips, colours_, radii
+
+    def _send_series(
+        self,
+        target: str,
+        method: str,
+        name: str,
+        rgb: tuple[int, int, int],
+        at: list[rr.TimeColumn],
+        cov: np.ndarray,
+        vel: np.ndarray,
+    ) -> None:
+        """A track's confirmed rows' time series (√trace of the position covariance, speed)
+        at the indexes ``at``; the series are styled at the track's first call."""
+        rec = self.rec
+        if name not in self._styled:  # a track's first confirmed chunk
+            self._styled.add(name)
+            for series in ("sigma_pos_m", "speed_mps"):
+                rec.log(
+                    f"plots/{series}/{name}",
+                    rr.SeriesLines(colors=[rgb], names=[track_name(target, method)]),
+                    static=True,
+                )
+        for series, values in (
+            ("sigma_pos_m", np.sqrt(np.trace(cov, axis1=1, axis2=2))),
+            ("speed_mps", np.linalg.norm(vel, axis=1)),
+        ):
+            rec.send_columns(
+                f"plots/{series}/{name}", indexes=at, columns=rr.Scalars.columns(scalars=values)
+            )
+            self._series[series].append(values.astype(np.float32))
 
     def _send_track(self, target: str, method: str, items: list[Row]) -> None:
         """One track's buffered rows: position, covariance, velocity (tentative rows faint),
         its path strip(s) and its confirmed rows' time series."""
         rec = self.rec
-        name = track_name(rr.escape_entity_path_part(target), method) if target else method
+        name = self._entity_name(target, method)
         n, t, xs, ps, statuses = zip(*items, strict=True)
         x, P = np.array(xs), np.array(ps)
         POS, VEL = list(position_index(3)), list(velocity_index(3))
         pos, vel = x[:, POS], x[:, VEL]
         cov = P[:, POS][:, :, POS]
         label = track_name(target, method) if target else method
-        rgb = self._colours.get(name)
-        if rgb is None:  # by id when one method tracks many targets, else by method
-            by_id = bool(target) and len(self._methods) == 1
-            rgb = self._colours[name] = track_rgb(len(self._colours)) if by_id else colour(method)
+        rgb = self._track_colour(target, name, method)
         dim = faint(rgb)
         tentative = np.array([s == TENTATIVE for s in statuses])
         rgbs = [dim if s else rgb for s in tentative]
@@ -557,43 +633,14 @@ class TrackRecorder:
             indexes=idx,
             columns=rr.Arrows3D.columns(origins=pos, vectors=vel * ARROW_SECONDS, colors=rgbs),
         )
-        # Statuses only go tentative → confirmed: the chunk's confirmed rows are a suffix.
-        first = int(np.argmin(tentative)) if not tentative.all() else len(pos)
-        start = self._pending.pop(name, np.zeros((0, 3)))
-        if first == len(pos):  # still tentative: its path waits for the confirmation
-            self._pending[name] = np.vstack([start, pos])
+        first, strips, colours_, radii = self._path_strips(name, pos, tentative, rgb)
+        if not strips:
             return
-        strips, colours_, radii = [], [], []
-        early = np.vstack([start, pos[:first]])
-        if len(early):  # the tentative start, faint, joined to the first confirmed row
-            strips.append(np.vstack([early, pos[first : first + 1]]))
-            colours_.append(dim)
-            radii.append(FAINT_LINE)
-        later = pos[first:] if name not in self._last else np.vstack([self._last[name], pos])
-        strips.append(later)
-        colours_.append(rgb)
-        radii.append(THIN_LINE)
-        self._last[name] = pos[-1]
         rec.log(
             f"{base}/path/{self.chunk:06d}",
             rr.LineStrips3D(strips, colors=colours_, radii=radii),
             static=True,
         )
-        if name not in self._styled:  # a track's first confirmed chunk
-            self._styled.add(name)
-            for series in ("sigma_pos_m", "speed_mps"):
-                rec.log(
-                    f"plots/{series}/{name}",
-                    rr.SeriesLines(colors=[rgb], names=[track_name(target, method)]),
-                    static=True,
-                )
         sel = slice(first, None)
         at = self.indexes(list(n[sel]), list(t[sel]))
-        for series, values in (
-            ("sigma_pos_m", np.sqrt(np.trace(cov[sel], axis1=1, axis2=2))),
-            ("speed_mps", np.linalg.norm(vel[sel], axis=1)),
-        ):
-            rec.send_columns(
-                f"plots/{series}/{name}", indexes=at, columns=rr.Scalars.columns(scalars=values)
-            )
-            self._series[series].append(values.astype(np.float32))
+        self._send_series(target, method, name, rgb, at, cov[sel], vel[sel])

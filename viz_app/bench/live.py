@@ -1,0 +1,170 @@
+"""``radarviz bench``, section ``live``: a feed replayed into ``radarviz live`` and its latency.
+
+The scene: the association section's rotating radars (``viz_app.bench.association``: four
+radars 113 km apart, periods 4.0 to 5.1 s, each plot stamped by its beam) over ``targets``
+targets of air traffic, written (not timed) as an ASTERIX file of data blocks of
+``BLOCK_RECORDS`` records, a datagram each as a feed sends a sector's plots. Its first
+``rate_plots_per_s × seconds`` plots are replayed (``viz_app.live.replay.paced``) to
+127.0.0.1 at the speed that makes them ``rate_plots_per_s`` plots a second, into
+``radarviz live --udp … --method ucm`` in its own process, with its web viewer (a
+``rerun --serve-web`` server on loopback the recording streams to, no browser attached)
+unless ``viewer`` is False. The figures are the session's own summary (``--summary``):
+
+* ``sent_plots`` and ``sent_datagrams`` (what the replay sent), ``tracked``, ``dropped``
+  (the bounded queue full), ``out_of_order``, ``malformed`` (datagrams and records refused)
+  and ``untracked_at_stop``: every plot accounted for;
+* ``latency_median_ms`` and ``latency_p99_ms``: from a datagram's arrival to its plots'
+  rows handed to the recording and flushed, the viewer's logging included;
+* ``peak_rss_mb``: the live process's peak resident set (the viewer's server apart).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+from typing import Any
+
+import numpy as np
+
+#: Plots a second of the replay, and its seconds (``radarviz bench --live-rate``,
+#: ``--live-seconds``).
+DEFAULT_RATE = 2000.0
+DEFAULT_SECONDS = 20.0
+#: Targets of the scene (``radarviz bench --live-targets``).
+DEFAULT_TARGETS = 300
+#: Records of a data block (one datagram) of the replayed file.
+BLOCK_RECORDS = 16
+#: How long ``live`` may take to start (its viewer, its kernels) and to end after the feed.
+START_S, END_S = 120.0, 120.0
+
+
+def live_scene(tmp: str, targets: int, plots: int, seed: int = 5) -> tuple[str, str, int, float]:
+    """The section's file (module docstring) with at least ``plots`` plots where the scene
+    has them: its path, the radars file, the plots written and their span of feed time (s)."""
+    from radarviz.core.experiments.association import rotating_scene_plots
+    from radarviz.core.scenarios.rotating import RotatingRadar, air_traffic, rotating_plots
+    from radarviz.viz_app.bench.association import ROTATING_SITES
+    from radarviz.viz_app.io import asterix as ax
+    from radarviz.viz_app.io.plots import Radar
+
+    sites = [
+        RotatingRadar(f"r{j}", x, y, period_s=4.0 + 0.37 * j, phase_rad=1.3 * j)
+        for j, (x, y) in enumerate(ROTATING_SITES)
+    ]
+    # About half the targets are in a radar's coverage at any time, each seen by about two
+    # radars a revolution: a scene lasts the plots over that rate, and a little more.
+    per_s = max(0.2 * targets, 1.0)
+    duration_s = 1.2 * plots / per_s + 10.0
+    rng = np.random.default_rng(seed)
+    traffic = air_traffic(rng, targets, duration_s, turn_deg=60.0, turn_rate_dps=1.5)
+    scene = rotating_scene_plots(sites, rotating_plots(rng, sites, traffic, duration_s))
+    scene = scene[:plots]
+    radars = [
+        Radar(s.name, s.x_m, s.y_m, 0.0, s.sigma_r_m, math.degrees(s.sigma_beta_rad)) for s in sites
+    ]
+    ast, toml = os.path.join(tmp, "feed.ast"), os.path.join(tmp, "radars.toml")
+    ax.write_asterix(ast, toml, scene, radars, block_records=BLOCK_RECORDS)
+    return ast, toml, len(scene), scene[-1].time_s - scene[0].time_s
+
+
+def free_udp_port(host: str) -> int:
+    """A currently free UDP port on ``host`` (bind to port 0, read it, close)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind((host, 0))
+        return int(s.getsockname()[1])
+
+
+def bench_live(
+    rate_plots_per_s: float = DEFAULT_RATE,
+    seconds: float = DEFAULT_SECONDS,
+    targets: int = DEFAULT_TARGETS,
+    viewer: bool = True,
+) -> dict[str, Any]:
+    """The ``live`` figures (module docstring)."""
+    from radarviz.viz_app.live.replay import (
+        Address,
+        ReplayCounts,
+        paced,
+        recorded_feed,
+        udp_sender,
+    )
+
+    wanted = max(round(rate_plots_per_s * seconds), 1)
+    with tempfile.TemporaryDirectory(prefix="radarviz-bench-live-") as tmp:
+        ast, toml, plots, span_s = live_scene(tmp, targets, wanted)
+        speed = rate_plots_per_s * span_s / max(plots, 1) if span_s > 0 else 1.0
+        port = free_udp_port("127.0.0.1")
+        summary = os.path.join(tmp, "live.json")
+        argv = [sys.executable, "-m", "radarviz.viz_app.cli.main", "live"]
+        argv += ["--udp", f"127.0.0.1:{port}", "--radars", toml, "--method", "ucm"]
+        argv += ["--max-plots", str(plots), "--summary", summary]
+        argv += ["--duration-s", f"{START_S + plots / rate_plots_per_s + END_S:.0f}"]
+        if not viewer:
+            argv.append("--no-viewer")
+        live = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+        try:
+            assert live.stderr is not None
+            said: list[str] = []
+            while True:
+                line = live.stderr.readline()
+                if not line:
+                    raise RuntimeError(f"radarviz live did not start: {''.join(said)}")
+                said.append(line)
+                if "tracking udp" in line:
+                    break
+            sock, send = udp_sender(Address("127.0.0.1", port))
+            start = time.monotonic()
+            with sock, open(ast, "rb") as fh:
+                sent: ReplayCounts = paced(recorded_feed(fh, ast), speed, send)
+            replay_s = time.monotonic() - start
+            err = live.stderr.read()
+            if live.wait(timeout=START_S + END_S) != 0:
+                raise RuntimeError(f"radarviz live failed: {err}")
+        finally:
+            if live.poll() is None:
+                live.kill()
+                live.wait()
+        with open(summary, encoding="utf-8") as fh:
+            doc = json.load(fh)
+    lat = doc["latency_ms"]
+    return {
+        "viewer": viewer,
+        "targets": targets,
+        "rate_plots_per_s": rate_plots_per_s,
+        "replay_s": replay_s,
+        "speed": speed,
+        "sent_datagrams": sent.datagrams,
+        "sent_plots": plots,
+        "tracked": doc["tracked"],
+        "dropped": doc["dropped"],
+        "out_of_order": doc["out_of_order"],
+        "malformed": sum(doc["malformed"].values()),
+        "untracked_at_stop": doc["untracked_at_stop"],
+        "latency_median_ms": lat["median"],
+        "latency_p99_ms": lat["p99"],
+        "peak_rss_mb": doc["peak_rss_mb"],
+    }
+
+
+def format_live(doc: dict[str, Any]) -> str:
+    """One line of ``format_bench``."""
+    where = "with its web viewer" if doc["viewer"] else "without a viewer"
+    lat = (
+        f"latency median {doc['latency_median_ms']:.0f} ms, p99 {doc['latency_p99_ms']:.0f} ms"
+        if doc["latency_median_ms"] is not None
+        else "no plot tracked"
+    )
+    return (
+        f"live: {doc['sent_plots']} plots of {doc['targets']} targets and 4 radars replayed "
+        f"to 127.0.0.1 at {doc['rate_plots_per_s']:.0f} plots/s ({doc['replay_s']:.1f} s) "
+        f"into radarviz live --method ucm {where}: {doc['tracked']} tracked, "
+        f"{doc['dropped']} dropped, {doc['out_of_order']} out of order, {doc['malformed']} "
+        f"malformed, {doc['untracked_at_stop']} untracked at the stop; {lat}; peak RSS "
+        f"{doc['peak_rss_mb']:.0f} MiB"
+    )

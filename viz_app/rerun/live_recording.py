@@ -1,0 +1,207 @@
+"""``radarviz live``'s recording: the tracks as they are now, a few entities per method.
+
+``TrackRecorder`` (``track --rrd``) gives every track and method its own entities and sends
+each its rows: on a file, a chunk of 2048 plots at a time, that is a few calls per track.
+A live session flushes every run of the tracker (about ten a second): the same layout costs
+six calls per track per flush, a few hundred tracks make thousands of calls a second, and the
+viewer falls behind the feed (the call's overhead, not the data, is the cost). So a live
+session draws the tracks' current state instead, one row per flush per method::
+
+    world/tracks/{m}/position    every live track's latest position (tentative ones faint and
+                                 smaller, confirmed ones labelled with their id)
+    world/tracks/{m}/covariance  their 1σ ellipsoids
+    world/tracks/{m}/velocity    their velocity arrows (10 s of motion)
+    world/tracks/{m}/path/{k}    the paths drawn since the last path chunk, one static strip
+                                 set every ``PATH_S`` s of the session (a track's path is drawn
+                                 once it is confirmed, as ``TrackRecorder``'s); each flush draws
+                                 the buffered rows of a ``1 / PATH_SPREAD`` share of the
+                                 tracks, oldest first, so no flush pays for them all
+
+A deleted track leaves the row at the flush after its scan (nothing to clear); its path,
+static, stays. The time series (per confirmed track, as ``TrackRecorder``'s) are one call
+per track and series, a millisecond each: their rows wait in a queue of tracks,
+``SERIES_TRACKS`` of which are sent per flush, so a flush's cost stays bounded however many
+tracks are confirmed; a track's series lags by the queue's length over that (seconds for a
+few hundred confirmed tracks). The plots, the inset, the log and the layout are
+``TrackRecorder``'s; nothing is flushed but by ``flush``.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Iterable
+
+import numpy as np
+import rerun as rr
+
+from radarviz.core.filters.state import position_index, velocity_index
+from radarviz.core.tracking.association import TENTATIVE
+from radarviz.core.tracking.consistency import ConsistencyMonitor
+from radarviz.core.tracking.stream import Plot, StateRow
+from radarviz.core.tracking.targets import track_name
+from radarviz.viz_app.io.plots import Radar
+from radarviz.viz_app.rerun.recording import ellipsoid_axes
+from radarviz.viz_app.rerun.shapes import FAINT_MARKER, MARKER, faint
+from radarviz.viz_app.rerun.track_recording import ARROW_SECONDS, TrackRecorder
+
+#: Seconds of the session between two path chunks.
+PATH_S = 1.0
+#: Tracks whose time series a flush sends.
+SERIES_TRACKS = 4
+#: A flush draws the path of one in this many tracks with buffered rows.
+PATH_SPREAD = 5
+
+_POS, _VEL = list(position_index(3)), list(velocity_index(3))
+
+
+class LiveTrackRecorder(TrackRecorder):
+    """``TrackRecorder``'s plots, inset and layout; the tracks as the module docstring says."""
+
+    chunk_plots = None
+
+    def __init__(
+        self,
+        rec: rr.RecordingStream,
+        radars: Iterable[Radar],
+        monitor: ConsistencyMonitor | None = None,
+        clock: Callable[[], float] = time.monotonic,
+    ):
+        super().__init__(rec, radars, monitor)
+        self.clock = clock
+        # Each live track's (target, method) latest state and whether it is tentative.
+        self._now: dict[tuple[str, str], tuple[np.ndarray, np.ndarray, bool]] = {}
+        # The path strips drawn since the last path chunk, by method: strips, colours, radii.
+        self._strips: dict[str, tuple[list, list, list]] = {}
+        self._last_path = clock()
+        self._at: tuple[int, float] = (0, 0.0)
+        # Confirmed rows waiting for their time series, by track entity name (its target,
+        # method, colour; rows of plot, time_s, covariance, velocity), oldest first.
+        self._waiting: dict[str, tuple[str, str, tuple, list]] = {}
+
+    def add(self, plot: Plot, rows: list[StateRow], status: str = "") -> None:
+        super().add(plot, rows, status)
+        self._at = (self.count, plot.time_s)
+        tentative = status == TENTATIVE
+        for method, x, P in rows:
+            self._now[(plot.target, method)] = (x, P, tentative)
+
+    def end_scan(self, deleted: list[str]) -> None:
+        """The scan's plots become rows (``TrackRecorder.end_scan``); the tracks ``deleted``
+        at it leave the current state."""
+        super().end_scan([])
+        for target in deleted:
+            self._deleted.add(target)
+            for key in [k for k in self._now if k[0] == target]:
+                del self._now[key]
+
+    def flush(self) -> None:
+        """Send the buffered plots, every method's current tracks (one row each) and the
+        inset; draw a share of the paths, send a few tracks' time series, and the path chunk
+        once ``PATH_S`` has passed since the last."""
+        self._send_measurements()
+        self._send_now()
+        self._send_inset()
+        self._draw_paths(-(-len(self._tracks) // PATH_SPREAD))
+        if self.clock() - self._last_path >= PATH_S:
+            self._send_paths()
+        self._send_waiting(SERIES_TRACKS)
+
+    def close(self) -> None:
+        self.end_scan([])
+        self.flush()
+        self._draw_paths(len(self._tracks))
+        self._send_paths()
+        self._send_waiting(len(self._waiting))
+        super().close()  # nothing left buffered: its log lines and the layout
+
+    def _send_now(self) -> None:
+        """One row per method of every live track: position, 1σ ellipsoid, velocity."""
+        by_method: dict[str, list[tuple[str, tuple]]] = {m: [] for m in self._methods}
+        for (target, method), state in self._now.items():
+            by_method[method].append((target, state))
+        n, t = self._at
+        idx = self.indexes([n], [t])
+        for method, tracks in by_method.items():
+            k = len(tracks)
+            if k:
+                x = np.array([s[0] for _, s in tracks])
+                P = np.array([s[1] for _, s in tracks])
+                pos, vel, cov = x[:, _POS], x[:, _VEL], P[:, _POS][:, :, _POS]
+            else:
+                pos, vel, cov = np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3, 3))
+            rgbs, radii, labels = [], [], []
+            for target, (*_, tentative) in tracks:
+                rgb = self._track_colour(target, self._entity_name(target, method), method)
+                rgbs.append(faint(rgb) if tentative else rgb)
+                radii.append(FAINT_MARKER if tentative else MARKER)
+                # A confirmed track's id beside it (tentative ones are too many to name).
+                labels.append("" if tentative else track_name(target, method))
+            base = f"world/tracks/{method}"
+            self.rec.send_columns(
+                f"{base}/position",
+                indexes=idx,
+                columns=rr.Points3D.columns(
+                    positions=pos, colors=rgbs, radii=radii, labels=labels
+                ).partition([k]),
+            )
+            half, quat = ellipsoid_axes(cov) if k else (np.zeros((0, 3)), np.zeros((0, 4)))
+            self.rec.send_columns(
+                f"{base}/covariance",
+                indexes=idx,
+                columns=rr.Ellipsoids3D.columns(
+                    centers=pos, half_sizes=np.maximum(half, 1.0), quaternions=quat, colors=rgbs
+                ).partition([k]),
+            )
+            self.rec.send_columns(
+                f"{base}/velocity",
+                indexes=idx,
+                columns=rr.Arrows3D.columns(
+                    origins=pos, vectors=vel * ARROW_SECONDS, colors=rgbs
+                ).partition([k]),
+            )
+
+    def _draw_paths(self, tracks: int) -> None:
+        """The path strips of the buffered rows of the ``tracks`` tracks buffered longest
+        (kept for the next path chunk), their confirmed rows queued for the time series; the
+        tracks deleted whose rows are all drawn are forgotten."""
+        for key in list(self._tracks)[:tracks]:
+            items = self._tracks.pop(key)
+            if not items:
+                continue
+            target, method = key
+            name = self._entity_name(target, method)
+            n, t, xs, ps, statuses = zip(*items, strict=True)
+            x, P = np.array(xs), np.array(ps)
+            pos, vel, cov = x[:, _POS], x[:, _VEL], P[:, _POS][:, :, _POS]
+            tentative = np.array([s == TENTATIVE for s in statuses])
+            rgb = self._track_colour(target, name, method)
+            first, s, c, r = self._path_strips(name, pos, tentative, rgb)
+            if not s:
+                continue
+            got = self._strips.setdefault(method, ([], [], []))
+            got[0].extend(s)
+            got[1].extend(c)
+            got[2].extend(r)
+            rows = self._waiting.setdefault(name, (target, method, rgb, []))[3]
+            rows.extend(zip(n[first:], t[first:], cov[first:], vel[first:], strict=True))
+        self._forget_deleted(self._deleted - {target for target, _ in self._tracks})
+
+    def _send_paths(self) -> None:
+        """The strips drawn since the last path chunk: one static entity per method."""
+        self._last_path = self.clock()
+        for method, (s, c, r) in self._strips.items():
+            self.rec.log(
+                f"world/tracks/{method}/path/{self.chunk:06d}",
+                rr.LineStrips3D(s, colors=c, radii=r),
+                static=True,
+            )
+        self._strips.clear()
+        self.chunk += 1
+
+    def _send_waiting(self, tracks: int) -> None:
+        """The time series of the ``tracks`` tracks waiting longest."""
+        for name in list(self._waiting)[:tracks]:
+            target, method, rgb, rows = self._waiting.pop(name)
+            n, t, cov, vel = zip(*rows, strict=True)
+            at = self.indexes(list(n), list(t))
+            self._send_series(target, method, name, rgb, at, np.array(cov), np.array(vel))
