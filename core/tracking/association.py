@@ -93,6 +93,8 @@ plots come a few at a time (the ``rotating_*`` figures, plots per CPU-second).
 
 from __future__ import annotations
 
+import contextlib
+import gc
 import heapq
 import math
 from collections.abc import Iterable, Iterator, Mapping, Sequence
@@ -184,6 +186,25 @@ class AssociationOptions:
                 f"{self.confirm_m})",
                 "confirm_m",
             )
+
+
+@contextlib.contextmanager
+def cycle_collector_paused() -> Iterator[None]:
+    """Python's cycle collector paused for the block, and restored after it.
+
+    A call of ``add_batches`` builds and drops tens of thousands of small acyclic objects (a
+    plot's rows, a batch's results), which reference counting frees as they go; each of them
+    also counts towards the collector's next pass, and its passes over the older generations
+    walk every object the process holds (the modules of numba, scipy, Rerun): a third of the
+    association's time at 1000 targets, for no garbage.
+    """
+    enabled = gc.isenabled()
+    gc.disable()
+    try:
+        yield
+    finally:
+        if enabled:
+            gc.enable()
 
 
 def gate_threshold(gate_probability: float, dof: int) -> float:
@@ -918,6 +939,15 @@ class GNNTracker:
         fixed cost. ``measured_period_s``: per batch, its radar's antenna period as the feed
         measured it before the batch (``measured_period``), or None. A ``PlotError`` carries
         ``batch`` and ``index`` (the plot's position in it)."""
+        with cycle_collector_paused():
+            return self._add_batches(batches, measured_period_s, whole_scan)
+
+    def _add_batches(
+        self,
+        batches: Sequence[list[Plot]],
+        measured_period_s: Sequence[float | None] | None,
+        whole_scan: bool,
+    ) -> list[ScanResult]:
         measured = list(measured_period_s or [None] * len(batches))
         if self._compiled is None:
             out = []
