@@ -224,19 +224,38 @@ def rgb_int(name: str) -> int:
 
 
 def test_view_refuses_a_truncated_or_foreign_file(tmp_path: Path, capsys) -> None:
-    """``view`` reads the whole file first: a truncated recording or a file that is not one is a
-    one-line error (exit 2) naming it, and no viewer starts."""
+    """``view`` reads the whole file first: a truncated recording (cut anywhere, a message
+    boundary included: such a prefix reads chunk by chunk like a whole file, and the viewer
+    then waits for the rest for ever) or a file that is not one is a one-line error (exit 2)
+    naming it, and no viewer starts."""
     good = tmp_path / "v.rrd"
     assert main(["record", "--preset", "velocity", "--out", str(good)]) == 0
-    truncated = tmp_path / "t.rrd"
-    truncated.write_bytes(good.read_bytes()[: good.stat().st_size // 2])
+    data = good.read_bytes()
     foreign = tmp_path / "notes.rrd"
     foreign.write_text("not a recording\n")
-    capsys.readouterr()
-    for path in (truncated, foreign):
-        assert main(["view", str(path)]) == 2
-        err = capsys.readouterr().err
-        assert err.count("\n") == 1 and f"{path} is not a" in err, err
+    cuts = [len(data) * k // 8 for k in range(1, 8)] + [len(data) - 1]
+    paths = [foreign]
+    for i, cut in enumerate(cuts):
+        paths.append(tmp_path / f"t{i}.rrd")
+        paths[-1].write_bytes(data[:cut])
+    # A stream still open: every message whole, the footer not yet written.
+    import rerun as rr
+
+    stream = rr.RecordingStream("radarviz-open-stream")
+    stream.save(str(tmp_path / "open.rrd"))
+    stream.log("x", rr.Points3D([[0.0, 0.0, 0.0]]))
+    stream.flush()
+    paths.append(tmp_path / "unfinished.rrd")
+    paths[-1].write_bytes((tmp_path / "open.rrd").read_bytes())
+    stream.disconnect()
+    exe = Path(sys.executable).with_name("radarviz")
+    for path in paths:
+        # A subprocess with a timeout: a file accepted by mistake would serve for ever.
+        done = subprocess.run(
+            [str(exe), "view", str(path)], capture_output=True, text=True, timeout=120
+        )
+        assert done.returncode == 2, (path, done.stderr)
+        assert done.stderr.count("\n") == 1 and f"{path} is not a" in done.stderr, done.stderr
 
 
 def test_prosov3d_scene_logs_every_method_in_the_3d_target_frame(tmp_path, rrd_contents) -> None:

@@ -118,22 +118,19 @@ def cmd_record(args: argparse.Namespace) -> int:
 
 
 def check_recording(path: str) -> None:
-    """Read every chunk of ``path`` (``rerun.chunk.RrdReader``): a truncated file or one that is
-    not a recording is a ParameterError naming it, before any viewer is started (the viewer
-    itself would say "serving" and show an empty page)."""
-    import warnings
-
-    from rerun.chunk import RrdReader
+    """``path`` must be a whole recording (``verify_recording``: every chunk decodes and the
+    footer a cleanly ended stream writes is there), else a ParameterError naming it, before any
+    viewer is started. A file cut short on a message boundary reads chunk by chunk like a whole
+    one, but the viewer then waits for the rest of it, one core busy, for ever."""
+    from radarviz.viz_app.rerun.recording import verify_recording
 
     try:
-        with warnings.catch_warnings():  # a file without its footer warns, then fails below
-            warnings.simplefilter("ignore")
-            chunks = sum(1 for _ in RrdReader(path).stream())
-    except Exception as exc:  # the reader raises plain exceptions for bad bytes
+        verify_recording(path)
+    except Exception as exc:  # the reader raises plain exceptions (and warnings) for bad bytes
         reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        raise ParameterError(f"{path} is not a readable Rerun recording: {reason}") from None
-    if chunks == 0:
-        raise ParameterError(f"{path} is not a Rerun recording: it holds no data")
+        if "no footer" in reason:
+            reason = "it has no footer (cut short, or still being written)"
+        raise ParameterError(f"{path} is not a whole Rerun recording: {reason}") from None
 
 
 def cmd_view(args: argparse.Namespace) -> int:
