@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
+import functools
 import http.client
 import ipaddress
 import os
@@ -163,16 +164,9 @@ def rerun_executable() -> str:
 _PR_SET_PDEATHSIG = 1
 
 
-def _parent_death_signal() -> None:
-    """A ``preexec_fn``: the child gets SIGTERM when the thread that started it ends (Linux;
-    the servers are started from the command's main thread, so: when the command dies), so a
-    command killed by SIGKILL leaves no viewer listening on its port. Elsewhere a no-op."""
-    if _PRCTL is not None:
-        _PRCTL(_PR_SET_PDEATHSIG, signal.SIGTERM)
-
-
+@functools.cache
 def _libc_prctl() -> Callable[..., int] | None:
-    """libc's ``prctl`` on Linux, else None."""
+    """libc's ``prctl`` on Linux, else None (looked up once, by the first server started)."""
     if not sys.platform.startswith("linux"):
         return None
     try:
@@ -181,14 +175,21 @@ def _libc_prctl() -> Callable[..., int] | None:
         return None
 
 
-# Looked up in the parent: a child between fork and exec should only make the call.
-_PRCTL = _libc_prctl()
-
-
 def popen_server(cmd: list[str], **kwargs) -> subprocess.Popen:
     """``subprocess.Popen`` of a server of ours: its own session (stopped as a group) that
-    ends when the command that started it dies."""
-    return subprocess.Popen(cmd, start_new_session=True, preexec_fn=_parent_death_signal, **kwargs)
+    ends when the command that started it dies.
+
+    The child gets SIGTERM when the thread that started it ends (Linux ``PR_SET_PDEATHSIG``;
+    the servers are started from the command's main thread, so: when the command dies), so a
+    command killed by SIGKILL leaves no viewer listening on its port. Elsewhere a plain
+    ``Popen``."""
+    prctl = _libc_prctl()  # looked up in the parent: the child only makes the call
+
+    def parent_death_signal() -> None:
+        if prctl is not None:
+            prctl(_PR_SET_PDEATHSIG, signal.SIGTERM)
+
+    return subprocess.Popen(cmd, start_new_session=True, preexec_fn=parent_death_signal, **kwargs)
 
 
 def serve_recording(path: str, host: str, grpc_port: int, web_port: int) -> subprocess.Popen:
