@@ -22,11 +22,20 @@ from radarviz.core.experiments.prosov import (
     prosov_target,
     run_tracking,
 )
+from radarviz.core.finite import ResultError
 from radarviz.core.finite_memory.fit import finite_memory_fit, preset
 from radarviz.core.params import ParameterError
 from radarviz.core.tracking.stream import StreamOptions
 from radarviz.viz_app.cli.main import main
-from radarviz.viz_app.io.plots import run_track, simulated_plots, state_from_row, write_measurements
+from radarviz.viz_app.io.plots import (
+    PLOT_FIELDS,
+    PlotField,
+    check_plots_finite,
+    run_track,
+    simulated_plots,
+    state_from_row,
+    write_measurements,
+)
 
 
 def test_all_names_resolve_and_core_and_viz_app_still_import() -> None:
@@ -122,6 +131,29 @@ def _plots(target: str = "") -> list[radarviz.Plot]:
 
 def _sites() -> list[radarviz.Radar]:
     return simulated_plots("prosov", 1, 1.0, 5)[1]
+
+
+@pytest.mark.parametrize("field", PLOT_FIELDS, ids=lambda f: f.name)
+def test_a_bad_plot_field_is_refused_alike_as_input_and_as_a_simulated_result(
+    tmp_path: Path, field: PlotField
+) -> None:
+    # One field table: the API's write_measurements refuses a user's value (ParameterError),
+    # the simulator's check a computed one (ResultError), each naming the same field.
+    bad = replace(_plots()[0], **{field.name: float("nan")})
+    meas, sites = tmp_path / "m.csv", tmp_path / "r.toml"
+    with pytest.raises(ParameterError, match=rf"^plots\[0\]\.{field.name} must be a finite"):
+        radarviz.write_measurements(meas, sites, [bad], _sites())
+    with pytest.raises(ResultError, match=rf"^simulate: {field.name} at plot 1 is NaN"):
+        check_plots_finite([bad])
+    assert not meas.exists() and not sites.exists()
+    if field.optional:  # None: the plot has no such value, which both accept
+        check_plots_finite([replace(bad, **{field.name: None})])
+    if field.positive:
+        negative = replace(bad, **{field.name: -1.0})
+        with pytest.raises(ParameterError, match=r"must be a finite number > 0 \(got -1.0\)"):
+            radarviz.write_measurements(meas, sites, [negative], _sites())
+        with pytest.raises(ResultError, match=rf"^simulate: {field.name} at plot 1 is -1"):
+            check_plots_finite([negative])
 
 
 @pytest.mark.parametrize(

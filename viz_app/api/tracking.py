@@ -24,6 +24,7 @@ from radarviz.viz_app.io.plots import (
     Radar,
     RowObserver,
     _open_input,
+    bad_plot_field,
     labels_refused,
     load_radars,
     radar_coverage,
@@ -469,28 +470,14 @@ def simulate(
     return simulated_plots(preset, seed, sigma_beta_deg, steps)
 
 
-#: A plot's numeric fields and whether each must be > 0 (else only finite); None is allowed
-#: for the optional elevation and radial velocity.
-_PLOT_VALUES = (
-    ("time_s", False),
-    ("range_m", True),
-    ("azimuth_rad", False),
-    ("sigma_r_m", True),
-    ("sigma_azimuth_rad", True),
-    ("elevation_rad", False),
-    ("radial_velocity_mps", False),
-)
-
-
 def _check_plot_values(i: int, plot: Plot) -> None:
-    """``ParameterError`` naming ``plots[i].field`` when a value could not be read back."""
-    for field, positive in _PLOT_VALUES:
-        v = getattr(plot, field)
-        if v is None and field in ("elevation_rad", "radial_velocity_mps"):
-            continue
-        if not isinstance(v, int | float) or not math.isfinite(v) or (positive and v <= 0):
-            want = "a finite number > 0" if positive else "a finite number"
-            raise ParameterError(f"plots[{i}].{field} must be {want} (got {v!r})", "plots")
+    """``ParameterError`` naming ``plots[i].field`` when a value could not be read back (the
+    fields of ``viz_app.io.plots.PLOT_FIELDS``)."""
+    field = bad_plot_field(plot)
+    if field is not None:
+        want = "a finite number > 0" if field.positive else "a finite number"
+        got = getattr(plot, field.name)
+        raise ParameterError(f"plots[{i}].{field.name} must be {want} (got {got!r})", "plots")
 
 
 def write_measurements(

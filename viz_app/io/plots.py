@@ -76,7 +76,7 @@ from collections.abc import Callable, Iterable, Iterator, Mapping
 from contextlib import AbstractContextManager, ExitStack
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import IO, Any, Protocol
+from typing import IO, Any, NamedTuple, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -1393,21 +1393,52 @@ def fusion_plots(seed: int = 1, steps: int = 60) -> tuple[list[Plot], list[Radar
     return plots, radars
 
 
+class PlotField(NamedTuple):
+    """One numeric field of a ``Plot`` that a measurement file's row is made of or checked
+    against: its name, whether it must be > 0 (a range, an accuracy; else only finite) and
+    whether it may be None (the plot has no elevation, no radial velocity)."""
+
+    name: str
+    positive: bool
+    optional: bool
+
+
+#: A plot's numeric fields, checked before plots are written (``PLOT_FIELDS`` is the one list:
+#: ``bad_plot_field`` finds a user's bad value, ``check_plots_finite`` a simulated one).
+PLOT_FIELDS: tuple[PlotField, ...] = (
+    PlotField("time_s", positive=False, optional=False),
+    PlotField("range_m", positive=True, optional=False),
+    PlotField("azimuth_rad", positive=False, optional=False),
+    PlotField("sigma_r_m", positive=True, optional=False),
+    PlotField("sigma_azimuth_rad", positive=True, optional=False),
+    PlotField("elevation_rad", positive=False, optional=True),
+    PlotField("radial_velocity_mps", positive=False, optional=True),
+)
+
+
+def bad_plot_field(plot: Plot) -> PlotField | None:
+    """The first of ``PLOT_FIELDS`` whose value in ``plot`` is not a finite number (or not > 0
+    where it must be), or None: a None is allowed for an optional field only."""
+    for field in PLOT_FIELDS:
+        v = getattr(plot, field.name)
+        if v is None and field.optional:
+            continue
+        if not isinstance(v, int | float) or not math.isfinite(v) or (field.positive and v <= 0):
+            return field
+    return None
+
+
 def check_plots_finite(plots: list[Plot]) -> None:
     """The finite-result check (``core.finite``) of plots about to be written (``simulate``):
-    times, ranges (> 0), angles and radial velocities finite."""
-    for column, values, positive in (
-        ("time_s", [p.time_s for p in plots], False),
-        ("range_m", [p.range_m for p in plots], True),
-        ("azimuth_rad", [p.azimuth_rad for p in plots], False),
-        ("elevation_rad", [p.elevation_rad for p in plots if p.elevation_rad is not None], False),
-        (
-            "radial_velocity_mps",
-            [p.radial_velocity_mps for p in plots if p.radial_velocity_mps is not None],
-            False,
-        ),
-    ):
-        check_finite_result("simulate", column, values, nonnegative=positive, index_name="plot")
+    every field of ``PLOT_FIELDS`` finite, the positive ones not below 0, an optional one
+    where the plot has it."""
+    for field in PLOT_FIELDS:
+        values = [getattr(p, field.name) for p in plots]
+        if field.optional:
+            values = [v for v in values if v is not None]
+        check_finite_result(
+            "simulate", field.name, values, nonnegative=field.positive, index_name="plot"
+        )
 
 
 def write_measurements(
