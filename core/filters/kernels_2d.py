@@ -30,10 +30,13 @@ from radarviz.core.filters.polar_ukf import SEMIDEFINITE_RTOL
 # nogil=True: blocks of runs filter in parallel threads (``core.experiments.prosov``).
 # fastmath: fused multiply-adds and reordered sums (results move by rounding only, far inside
 # the 1e-9 the tests hold the kernel to); never "nnan"/"ninf", which NaN tracks rely on.
-# inline="always" on the small scalar functions: their tuples become registers.
+# _inline marks the small scalar functions the kernels call per step: each is typed and
+# compiled once and LLVM inlines it into its callers, where its tuples become registers.
+# numba's own inlining (inline="always") typed it again at every call site: the 2D IMM
+# tracker kernel alone took 30 s of CPU to compile, a first `radarviz track` 55 s (now 25 s).
 _FAST = {"contract", "reassoc", "nsz", "arcp"}
 _jit = numba.njit(cache=True, error_model="numpy", nogil=True, fastmath=_FAST)
-_inline = numba.njit(cache=True, error_model="numpy", nogil=True, inline="always", fastmath=_FAST)
+_inline = _jit
 
 
 _TWO_PI = 2.0 * math.pi
