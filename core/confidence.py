@@ -61,14 +61,30 @@ VERDICTS: tuple[Verdict, ...] = ("holds", "does not hold", "not resolved")
 
 
 def student_t_quantile(dof: int | NDArray[np.int64], level: float = BAND_LEVEL) -> NDArray:
-    """The two-sided ``level`` quantile t_{dof, (1 + level)/2} of Student's t.
+    """The two-sided ``level`` quantile t_{dof, (1 + level)/2} of Student's t (NaN where
+    dof ≤ 0).
 
-    ``scipy.stats`` is imported here, not at module level: it costs most of a command's
-    start-up and only the bands need it.
+    ``scipy.stats.t.ppf``'s own function, ``scipy.special.stdtrit``, called directly:
+    ``scipy.stats`` adds about 50 MB to a process and scipy.special alone 14 MB; imported
+    here, not at module level, as only the bands need it.
     """
-    from scipy import stats
+    from scipy.special import stdtrit
 
-    return np.asarray(stats.t.ppf(0.5 + level / 2.0, dof), dtype=np.float64)
+    d = np.asarray(dof, dtype=np.float64)
+    with np.errstate(invalid="ignore"):
+        return np.asarray(np.where(d > 0, stdtrit(d, 0.5 + level / 2.0), np.nan), np.float64)
+
+
+def chi2_ppf(p: ArrayLike, dof: ArrayLike) -> NDArray[np.float64]:
+    """The p-quantiles of χ² with ``dof`` degrees of freedom, broadcast (NaN where dof ≤ 0):
+    ``scipy.stats.chi2.ppf``'s own arithmetic, 2 · gammaincinv(dof / 2, p), without importing
+    ``scipy.stats`` (``student_t_quantile``)."""
+    from scipy.special import gammaincinv
+
+    d = np.asarray(dof, dtype=np.float64)
+    with np.errstate(invalid="ignore"):
+        q = 2 * gammaincinv(d / 2, np.asarray(p, dtype=np.float64))
+    return np.asarray(np.where(d > 0, q, np.nan), dtype=np.float64)
 
 
 def group_counts(offset: int, runs: int, groups: int = BAND_GROUPS) -> NDArray[np.int64]:
@@ -140,12 +156,10 @@ def sigma_band(
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """The χ² band (lo, hi) of a σ estimated as the sample std (ddof = 1) of ``samples``
     independent Gaussian errors (module docstring)."""
-    from scipy import stats
-
     s = np.asarray(sigma, dtype=np.float64)
     dof = samples - 1
     tail = (1.0 - level) / 2.0
-    chi_hi, chi_lo = stats.chi2.ppf([1.0 - tail, tail], dof)
+    chi_hi, chi_lo = chi2_ppf([1.0 - tail, tail], dof)
     return s * np.sqrt(dof / chi_hi), s * np.sqrt(dof / chi_lo)
 
 

@@ -16,14 +16,16 @@ import pytest
 
 from radarviz.core.confidence import (
     BAND_GROUPS,
+    chi2_ppf,
     claim_verdict,
     group_counts,
     group_sums,
     jackknife_band,
     sigma_band,
+    student_t_quantile,
 )
 from radarviz.core.experiments.prosov import TrackingConfig, run_tracking
-from radarviz.core.metrics import delta_percent
+from radarviz.core.metrics import delta_percent, nees_band
 from radarviz.core.scenarios.planar import prosov_target
 
 
@@ -141,3 +143,22 @@ def test_sigma_band_covers_at_95_percent() -> None:
     s = rng.standard_normal((replicates, n)).std(axis=1, ddof=1) * 3.0
     lo, hi = sigma_band(s, n)
     _check_coverage(_covered(lo, hi, 3.0), replicates, "sigma_band")
+
+
+def test_the_quantiles_are_scipy_stats_bit_for_bit_without_importing_it() -> None:
+    # The bands' t and χ² quantiles call scipy.stats' own special functions (scipy.stats
+    # itself weighs ~50 MB): equal to the last bit, NaN where scipy.stats gives NaN (dof 0).
+    from scipy import stats
+
+    dof = np.array([0, 1, 2, 3, 7, 19, 99, 1000, 60_000])
+    for level in (0.9, 0.95, 0.99):
+        tail = (1.0 - level) / 2.0
+        np.testing.assert_array_equal(
+            student_t_quantile(dof, level), stats.t.ppf(0.5 + level / 2.0, dof)
+        )
+        for d in dof:
+            np.testing.assert_array_equal(
+                chi2_ppf([tail, 1.0 - tail], d), stats.chi2.ppf([tail, 1.0 - tail], d)
+            )
+    lo, hi = stats.chi2.ppf([0.025, 0.975], 500 * 2) / 500
+    assert nees_band(2, 500) == (lo, hi)
