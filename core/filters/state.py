@@ -305,25 +305,29 @@ def factored_joseph(
     """
     n, d = len(K), len(HL)
     Pc = cov_components(out_P)
-    Z: list[list[Vec]] = []
-    for i in range(n):
-        row = []
-        for k in range(n):
-            z = K[i][0] * HL[0][k]
-            for a in range(1, d):
-                z = z + K[i][a] * HL[a][k]
-            row.append(L[i, k] - z if i >= k else -z)
-        Z.append(row)
+    # K R Kᵀ first, then one column z = Z[:, k] at a time added as z zᵀ: the working memory
+    # is L, K R and one column, not Z whole.
     KR = [[sum(K[i][a] * sym(R, a, b) for a in range(d)) for b in range(d)] for i in range(n)]
     for i in range(n):
         for j in range(i, n):
             acc = KR[i][0] * K[j][0]
             for b in range(1, d):
-                acc = acc + KR[i][b] * K[j][b]
-            for k in range(n):
-                acc = acc + Z[i][k] * Z[j][k]
+                acc += KR[i][b] * K[j][b]
             Pc[i, j] = acc
-            Pc[j, i] = acc
+    del KR
+    for k in range(n):
+        z = []
+        for i in range(n):
+            v = K[i][0] * HL[0][k]
+            for a in range(1, d):
+                v = v + K[i][a] * HL[a][k]
+            z.append(L[i, k] - v if i >= k else -v)
+        for i in range(n):
+            for j in range(i, n):
+                Pc[i, j] += z[i] * z[j]
+    for i in range(n):
+        for j in range(i + 1, n):
+            Pc[j, i] = Pc[i, j]
 
 
 #: Batches of at most this many tracks take the dense path (``dense_joseph_update``): below it
