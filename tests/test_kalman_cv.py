@@ -60,13 +60,12 @@ def test_joseph_identity_holds_for_any_gain(dims: int) -> None:
     R = _random_spd(rng, m, dims, 1e3)
     K = rng.normal(size=(m, n, dims)) * 0.1
     state = as_batch(rng.normal(size=(m, n)), P)
-    S = H @ P @ H.T + R
     nu = rng.normal(size=(m, dims))
     out = joseph_update_position(
         state,
         [nu[:, i] for i in range(dims)],
         np.ascontiguousarray(K.transpose(1, 2, 0)),
-        {(i, j): S[:, i, j] for i in range(dims) for j in range(i, dims)},
+        {(i, j): R[:, i, j] for i in range(dims) for j in range(i, dims)},
     )
     A = np.eye(n) - K @ H
     expected = A @ P @ A.transpose(0, 2, 1) + K @ R @ K.transpose(0, 2, 1)

@@ -74,9 +74,32 @@ def _sym(P: dict, i: int, j: int):
     return P[(i, j) if i <= j else (j, i)]
 
 
-def _joseph(x: list, P: dict, h: list, nu: list, R: dict) -> tuple[list, dict]:
-    """x⁺ = x + K ν, P⁺ = P − K Uᵀ + (K S − U) Kᵀ for a measurement H = rows ``h`` of unit
-    vectors on the state (index lists), noise R (upper entries): the position update of
+def _cholesky(xp: Any, P: dict, c: float, null_negative: bool = False) -> dict:
+    """The lower Cholesky factor of c·P, semi-definite (``core.filters.state.
+    semidefinite_cholesky``, with its ``null_negative``): entries (i, k), i >= k."""
+    L = {}
+    for j in range(4):
+        d = c * P[j, j]
+        for k in range(j):
+            d = d - L[j, k] * L[j, k]
+        tol = SEMIDEFINITE_RTOL * c * P[j, j]
+        null = d <= 0.0  # a pivot above 0 is a variance, however small
+        if not null_negative:
+            null = null & (d >= -tol)
+        d = xp.where(null, 0.0, xp.where(d < -tol, xp.nan, d))
+        L[j, j] = xp.sqrt(d)
+        for i in range(j + 1, 4):
+            e = c * _sym(P, i, j)
+            for k in range(j):
+                e = e - L[i, k] * L[j, k]
+            L[i, j] = xp.where(null, 0.0, e / xp.where(null, 1.0, L[j, j]))
+    return L
+
+
+def _joseph(xp: Any, x: list, P: dict, h: list, nu: list, R: dict) -> tuple[list, dict]:
+    """x⁺ = x + K ν and the Joseph form on P's Cholesky factor L, P⁺ = Z Zᵀ + K R Kᵀ with
+    Z = L − K (H L) (``core.filters.state.factored_joseph``), for a measurement H = rows ``h``
+    of weighted state indexes, noise R (upper entries): the position update of
     ``core.filters.position`` (d = 2) and Doppler's scalar one (d = 1) alike."""
     d = len(h)
     U = [[sum(_sym(P, i, k) * w for k, w in h[a]) for a in range(d)] for i in range(4)]
@@ -90,19 +113,18 @@ def _joseph(x: list, P: dict, h: list, nu: list, R: dict) -> tuple[list, dict]:
         det = S[0, 0] * S[1, 1] - S[0, 1] * S[0, 1]
         inv = {(0, 0): S[1, 1] / det, (0, 1): -S[0, 1] / det, (1, 1): S[0, 0] / det}
     K = [[sum(U[i][c] * _sym(inv, c, a) for c in range(d)) for a in range(d)] for i in range(4)]
-    V = [
-        [sum(K[i][c] * _sym(S, c, a) for c in range(d)) - U[i][a] for a in range(d)]
+    x_new = [x[i] + sum(K[i][a] * nu[a] for a in range(d)) for i in range(4)]
+    L = _cholesky(xp, P, 1.0, True)
+    HL = [[sum(L[i, k] * w for i, w in h[a] if i >= k) for k in range(4)] for a in range(d)]
+    Z = [
+        [(L[i, k] if i >= k else 0.0) - sum(K[i][a] * HL[a][k] for a in range(d)) for k in range(4)]
         for i in range(4)
     ]
-    x_new = [x[i] + sum(K[i][a] * nu[a] for a in range(d)) for i in range(4)]
     P_new = {}
     for i in range(4):
         for j in range(i, 4):
-            P_new[i, j] = (
-                P[i, j]
-                - sum(K[i][a] * U[j][a] for a in range(d))
-                + sum(V[i][a] * K[j][a] for a in range(d))
-            )
+            krk = sum(K[i][a] * _sym(R, a, b) * K[j][b] for a in range(d) for b in range(d))
+            P_new[i, j] = krk + sum(Z[i][k] * Z[j][k] for k in range(4))
     return x_new, P_new
 
 
@@ -112,20 +134,7 @@ _POSITION = [[(0, 1.0)], [(2, 1.0)]]  # H_pos: x and y picked out of (x, ẋ, y,
 def _ukf(xp, x, P, r, b, vr, vb, sx, sy, prm):
     """``core.filters.polar_ukf.ukf_update`` on components."""
     c, wm0, wc0, w = prm
-    L = {}
-    for j in range(4):  # semi-definite Cholesky of c·P (polar_ukf.semidefinite_cholesky)
-        d = c * P[j, j]
-        for k in range(j):
-            d = d - L[j, k] * L[j, k]
-        tol = SEMIDEFINITE_RTOL * c * P[j, j]
-        null = (d <= 0.0) & (d >= -tol)  # a pivot above 0 is a variance, however small
-        d = xp.where(null, 0.0, xp.where(d < -tol, xp.nan, d))
-        L[j, j] = xp.sqrt(d)
-        for i in range(j + 1, 4):
-            e = c * _sym(P, i, j)
-            for k in range(j):
-                e = e - L[i, k] * L[j, k]
-            L[i, j] = xp.where(null, 0.0, e / xp.where(null, 1.0, L[j, j]))
+    L = _cholesky(xp, P, c)
     px, py = x[0] - sx, x[2] - sy
     r0, b0 = xp.hypot(px, py), xp.atan2(py, px)
     pts = []  # (range, bearing) of +column k, −column k; columns touching x or y only
@@ -236,20 +245,20 @@ def filter_history_xp(
                 (0, 1): cb * sb * sr2 - px * py * vb,
                 (1, 1): sb * sb * sr2 + px * px * vb,
             }
-            x, P = _joseph(x, P, _POSITION, nu, R)
+            x, P = _joseph(xp, x, P, _POSITION, nu, R)
         elif code == 6:
             x, P = _ukf(xp, x, P, r, b, sr2, s, sx, sy, prm)
         else:
             zx, zy, r00, r01, r11 = _convert(xp, code, r, b, sr2, s, co, x[0] - sx, x[2] - sy)
             nu = [zx + sx - x[0], zy + sy - x[2]]
-            x, P = _joseph(x, P, _POSITION, nu, {(0, 0): r00, (0, 1): r01, (1, 1): r11})
+            x, P = _joseph(xp, x, P, _POSITION, nu, {(0, 0): r00, (0, 1): r01, (1, 1): r11})
         if radial_velocity_mps is not None:
             u0, u1 = xp.cos(b), xp.sin(b)
             gv = -u1 * x[1] + u0 * x[3]
             gpg = u1 * u1 * P[1, 1] + u0 * u0 * P[3, 3] - 2.0 * u0 * u1 * P[1, 3]
             r_e = s_.sigma_vr_mps**2 + s * (gv * gv + gpg)
             nu = [radial_velocity_mps[:, n] - (u0 * x[1] + u1 * x[3])]
-            x, P = _joseph(x, P, [[(1, u0), (3, u1)]], nu, {(0, 0): r_e})
+            x, P = _joseph(xp, x, P, [[(1, u0), (3, u1)]], nu, {(0, 0): r_e})
         xs.append(x)
         Ps.append(P)
     x_out = xp.stack([xp.stack(v, axis=-1) for v in xs])

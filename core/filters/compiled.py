@@ -12,7 +12,7 @@ kind       the lines it mirrors
 start      ``Method.start`` → ``start_from_parts`` → ``cv_init``
 predict    ``core.filters.predict.cv_predict`` (F P Fᵀ + Q, white-noise acceleration)
 converted  ``core.conversion.planar`` (the five conversions) →
-           ``core.filters.position.innovation_update`` (Joseph form multiplied out)
+           ``core.filters.position.innovation_update`` (Joseph form as products)
 ekf        ``core.filters.polar_ekf.ekf_update`` (ν' = J ν, R' = J R Jᵀ, then Joseph)
 ukf        ``core.filters.polar_ukf.ukf_update`` (Van der Merwe points, Cholesky of P⁻)
 doppler    ``core.filters.doppler.doppler_update`` (after any of them, when V̂r is given)

@@ -13,10 +13,14 @@ In 2D (no elevation) ε = 0 and the σε term is absent. The Kalman update is th
 that variance; it needs no predicted position, which is what makes the textbook EKF row
 ∂Vr/∂x fail when σVr is small (its position derivative is (tangential speed)/r, taken as 0
 at a start where the cross-range velocity is unobserved; see ``docs/finite_memory.md``).
-Joseph form, written out for the scalar measurement::
+Joseph form, for the scalar measurement::
 
     U = P hᵀ,  S = h U + var e,  K = U / S,  x⁺ = x + K (V̂r − û·v̂),
-    P⁺ = P − K Uᵀ + (K S − U) Kᵀ          (symmetrised)
+    P⁺ = (I − K h) P (I − K h)ᵀ + K var e Kᵀ
+
+evaluated on a Cholesky factor of P (``core.filters.state.factored_joseph``): never
+P − K S Kᵀ, whose subtraction leaves rounding of either sign when P_vv is large against
+var e.
 """
 
 from __future__ import annotations
@@ -27,6 +31,8 @@ from numpy.typing import ArrayLike, NDArray
 from radarviz.core.filters.state import (
     CVBatch,
     dense_joseph_update,
+    factored_joseph,
+    semidefinite_cholesky,
     target_batch,
     use_dense,
     velocity_index,
@@ -99,17 +105,15 @@ def doppler_update(
     out = target_batch(state, out)
     for i in range(n):
         out.x[..., i] = x[..., i] + K[i] * nu
-    # P⁺ = P − K Uᵀ + (K S − U) Kᵀ, symmetrised: average of entries (i, j) and (j, i).
-    V = [K[i] * S - U[i] for i in range(n)]
-    oP = out.P
-    for i in range(n):
-        for j in range(i, n):
-            a = P[..., i, j] - K[i] * U[j] + V[i] * K[j]
-            if i != j:
-                b = P[..., j, i] - K[j] * U[i] + V[j] * K[i]
-                a = 0.5 * (a + b)
-                oP[..., j, i] = a
-            oP[..., i, j] = a
+    L = semidefinite_cholesky(P, null_negative=True)
+    hL = []
+    for k in range(n):
+        acc = 0.0
+        for a, i in enumerate(vel):
+            if i >= k:
+                acc = acc + u[a] * L[i, k]
+        hL.append(acc)
+    factored_joseph(L, [[k] for k in K], [hL], {(0, 0): r_e}, out.P)
     return out
 
 

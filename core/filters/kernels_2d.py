@@ -172,19 +172,30 @@ def predict_s(xt, p, T: float, q: float):
 
 
 @_inline
-def _joseph_entry(p_ij, ki0, ki1, kj0, kj1, ui0, ui1, uj0, uj1, s00, s01, s11):
-    # (P − K Uᵀ + (K S − U) Kᵀ)_ij with U = P Hᵀ: the Joseph form multiplied out
-    vi0 = ki0 * s00 + ki1 * s01 - ui0
-    vi1 = ki0 * s01 + ki1 * s11 - ui1
-    return p_ij - (ki0 * uj0 + ki1 * uj1) + (vi0 * kj0 + vi1 * kj1)
+def _z_col(col, k0, k1, h0: float, h1: float):
+    # column k of Z = L − K (H L): L's column ``col`` less the gain's columns k0, k1 times
+    # that column's (H L) entries h0, h1
+    return (
+        col[0] - (k0[0] * h0 + k1[0] * h1),
+        col[1] - (k0[1] * h0 + k1[1] * h1),
+        col[2] - (k0[2] * h0 + k1[2] * h1),
+        col[3] - (k0[3] * h0 + k1[3] * h1),
+    )
+
+
+@_inline
+def _krk(ki0: float, ki1: float, kj0: float, kj1: float, r00: float, r01: float, r11: float):
+    # (K R Kᵀ)_ij for a two-column gain
+    return ki0 * (r00 * kj0 + r01 * kj1) + ki1 * (r01 * kj0 + r11 * kj1)
 
 
 @_inline
 def position_update_s(xt, p, nx: float, ny: float, r00: float, r01: float, r11: float):
-    # core.filters.position: S = H P Hᵀ + R, K = P Hᵀ S⁻¹, x⁺ = x + K ν,
-    # P⁺ = P − K Uᵀ + (K S − U) Kᵀ with U = P Hᵀ (Joseph form multiplied out).
+    # core.filters.position: S = H P Hᵀ + R, K = P Hᵀ S⁻¹, x⁺ = x + K ν, and the Joseph form
+    # on P's Cholesky factor L, P⁺ = Z Zᵀ + K R Kᵀ with Z = L − K (H L): a sum of squares,
+    # never P − K S Kᵀ (``core.filters.state.factored_joseph``).
     x0, x1, x2, x3 = xt
-    p00, p01, p02, p03, p11, p12, p13, p22, p23, p33 = p
+    p00, p01, p02, p03, _, p12, _, p22, p23, _ = p
     s00, s01, s11 = p00 + r00, p02 + r01, p22 + r11
     det = s00 * s11 - s01 * s01
     i00, i01, i11 = s11 / det, -s01 / det, s00 / det
@@ -200,18 +211,26 @@ def position_update_s(xt, p, nx: float, ny: float, r00: float, r01: float, r11: 
         x2 + (k20 * nx + k21 * ny),
         x3 + (k30 * nx + k31 * ny),
     )
-    return xn, (
-        _joseph_entry(p00, k00, k01, k00, k01, u00, u01, u00, u01, s00, s01, s11),
-        _joseph_entry(p01, k00, k01, k10, k11, u00, u01, u10, u11, s00, s01, s11),
-        _joseph_entry(p02, k00, k01, k20, k21, u00, u01, u20, u21, s00, s01, s11),
-        _joseph_entry(p03, k00, k01, k30, k31, u00, u01, u30, u31, s00, s01, s11),
-        _joseph_entry(p11, k10, k11, k10, k11, u10, u11, u10, u11, s00, s01, s11),
-        _joseph_entry(p12, k10, k11, k20, k21, u10, u11, u20, u21, s00, s01, s11),
-        _joseph_entry(p13, k10, k11, k30, k31, u10, u11, u30, u31, s00, s01, s11),
-        _joseph_entry(p22, k20, k21, k20, k21, u20, u21, u20, u21, s00, s01, s11),
-        _joseph_entry(p23, k20, k21, k30, k31, u20, u21, u30, u31, s00, s01, s11),
-        _joseph_entry(p33, k30, k31, k30, k31, u30, u31, u30, u31, s00, s01, s11),
+    L0, L1, L2, L3 = semidefinite_cholesky_s(p, 1.0, True)
+    k0, k1 = (k00, k10, k20, k30), (k01, k11, k21, k31)
+    pn = (
+        _krk(k00, k01, k00, k01, r00, r01, r11),
+        _krk(k00, k01, k10, k11, r00, r01, r11),
+        _krk(k00, k01, k20, k21, r00, r01, r11),
+        _krk(k00, k01, k30, k31, r00, r01, r11),
+        _krk(k10, k11, k10, k11, r00, r01, r11),
+        _krk(k10, k11, k20, k21, r00, r01, r11),
+        _krk(k10, k11, k30, k31, r00, r01, r11),
+        _krk(k20, k21, k20, k21, r00, r01, r11),
+        _krk(k20, k21, k30, k31, r00, r01, r11),
+        _krk(k30, k31, k30, k31, r00, r01, r11),
     )
+    # (H L)'s columns: L's x and y rows (L3 has neither)
+    pn = _add_outer(pn, 1.0, _z_col(L0, k0, k1, L0[0], L0[2]))
+    pn = _add_outer(pn, 1.0, _z_col(L1, k0, k1, 0.0, L1[2]))
+    pn = _add_outer(pn, 1.0, _z_col(L2, k0, k1, 0.0, L2[2]))
+    pn = _add_outer(pn, 1.0, L3)
+    return xn, pn
 
 
 @_inline
@@ -234,9 +253,10 @@ def ekf_update_s(xt, p, r: float, b: float, vr: float, vb: float, sx: float, sy:
 
 
 @_inline
-def _pivot(d: float, tol: float):
-    # A pivot in [−tol, 0] is a null direction (0); below −tol: NaN; above 0: a variance
-    null = -tol <= d <= 0.0
+def _pivot(d: float, tol: float, null_negative: bool):
+    # A pivot in [−tol, 0] (with null_negative: any pivot <= 0) is a null direction (0); below
+    # −tol: NaN; above 0: a variance
+    null = d <= 0.0 if null_negative else -tol <= d <= 0.0
     if null:
         d = 0.0
     elif d < -tol:
@@ -250,19 +270,19 @@ def _below(e: float, d: float, null: bool) -> float:
 
 
 @_inline
-def semidefinite_cholesky_s(p, c: float):
-    """The lower Cholesky factor of c·P (``polar_ukf.semidefinite_cholesky``) as its columns
-    (L[:, 0], …, L[:, 3]), 4-tuples each."""
+def semidefinite_cholesky_s(p, c: float, null_negative: bool = False):
+    """The lower Cholesky factor of c·P (``core.filters.state.semidefinite_cholesky``, with
+    its ``null_negative``) as its columns (L[:, 0], …, L[:, 3]), 4-tuples each."""
     p00, p01, p02, p03, p11, p12, p13, p22, p23, p33 = p
-    rt = SEMIDEFINITE_RTOL
-    l00, n0 = _pivot(c * p00, rt * c * p00)
+    rt, nn = SEMIDEFINITE_RTOL, null_negative
+    l00, n0 = _pivot(c * p00, rt * c * p00, nn)
     l10, l20, l30 = _below(c * p01, l00, n0), _below(c * p02, l00, n0), _below(c * p03, l00, n0)
-    l11, n1 = _pivot(c * p11 - l10 * l10, rt * c * p11)
+    l11, n1 = _pivot(c * p11 - l10 * l10, rt * c * p11, nn)
     l21 = _below(c * p12 - l20 * l10, l11, n1)
     l31 = _below(c * p13 - l30 * l10, l11, n1)
-    l22, n2 = _pivot(c * p22 - l20 * l20 - l21 * l21, rt * c * p22)
+    l22, n2 = _pivot(c * p22 - l20 * l20 - l21 * l21, rt * c * p22, nn)
     l32 = _below(c * p23 - l30 * l20 - l31 * l21, l22, n2)
-    l33, _ = _pivot(c * p33 - l30 * l30 - l31 * l31 - l32 * l32, rt * c * p33)
+    l33, _ = _pivot(c * p33 - l30 * l30 - l31 * l31 - l32 * l32, rt * c * p33, nn)
     return (l00, l10, l20, l30), (0.0, l11, l21, l31), (0.0, 0.0, l22, l32), (0.0, 0.0, 0.0, l33)
 
 
@@ -367,18 +387,12 @@ def ukf_update_s(xt, p, r, b, vr, vb, sx, sy, c, wm0, wc0, w):
 
 
 @_inline
-def _doppler_entry(pij, ki, kj, ui, uj, S):
-    # (P − k Uᵀ − U kᵀ + S k kᵀ)_ij
-    return pij - (ki * uj + ui * kj) + S * ki * kj
-
-
-@_inline
 def doppler_update_s(xt, p, vr_hat: float, b: float, var_vr: float, vb: float):
     # core.filters.doppler: V̂r = û·v + e along the measured line of sight û = (cos β̂, sin β̂),
-    # var e = σVr² + σβ² ((g·v)² + gᵀ P_vv g), g = (−sin β̂, cos β̂); scalar Joseph form
-    # P − k Uᵀ − U kᵀ + S k kᵀ with U = P hᵀ, k = U / S.
+    # var e = σVr² + σβ² ((g·v)² + gᵀ P_vv g), g = (−sin β̂, cos β̂); U = P hᵀ, k = U / S and
+    # the scalar Joseph form on P's Cholesky factor (``core.filters.state.factored_joseph``).
     x0, x1, x2, x3 = xt
-    p00, p01, p02, p03, p11, p12, p13, p22, p23, p33 = p
+    _, p01, _, p03, p11, p12, p13, _, p23, p33 = p
     u0, u1 = cos(b), sin(b)
     g0, g1 = -u1, u0
     gv = g0 * x1 + g1 * x3
@@ -391,18 +405,15 @@ def doppler_update_s(xt, p, vr_hat: float, b: float, var_vr: float, vb: float):
     f = 1.0 / S
     k0, k1, k2, k3 = U0 * f, U1 * f, U2 * f, U3 * f
     xn = (x0 + k0 * nu, x1 + k1 * nu, x2 + k2 * nu, x3 + k3 * nu)
-    return xn, (
-        _doppler_entry(p00, k0, k0, U0, U0, S),
-        _doppler_entry(p01, k0, k1, U0, U1, S),
-        _doppler_entry(p02, k0, k2, U0, U2, S),
-        _doppler_entry(p03, k0, k3, U0, U3, S),
-        _doppler_entry(p11, k1, k1, U1, U1, S),
-        _doppler_entry(p12, k1, k2, U1, U2, S),
-        _doppler_entry(p13, k1, k3, U1, U3, S),
-        _doppler_entry(p22, k2, k2, U2, U2, S),
-        _doppler_entry(p23, k2, k3, U2, U3, S),
-        _doppler_entry(p33, k3, k3, U3, U3, S),
-    )
+    L0, L1, L2, L3 = semidefinite_cholesky_s(p, 1.0, True)
+    kk, zero = (k0, k1, k2, k3), (0.0, 0.0, 0.0, 0.0)
+    # Z = L − k (h L), h L's entries u0 L[1, c] + u1 L[3, c]; P⁺ = Z Zᵀ + var e k kᵀ
+    pn = _add_outer((0.0,) * 10, r_e, kk)
+    pn = _add_outer(pn, 1.0, _z_col(L0, kk, zero, u0 * L0[1] + u1 * L0[3], 0.0))
+    pn = _add_outer(pn, 1.0, _z_col(L1, kk, zero, u0 * L1[1] + u1 * L1[3], 0.0))
+    pn = _add_outer(pn, 1.0, _z_col(L2, kk, zero, u1 * L2[3], 0.0))
+    pn = _add_outer(pn, 1.0, _z_col(L3, kk, zero, u1 * L3[3], 0.0))
+    return xn, pn
 
 
 @_inline

@@ -271,9 +271,54 @@ def nis_3(S, nu) -> float:
 
 
 @_inline
-def position_update_3d(x, P, nu, R, S, Si, K, U):
-    # core.filters.position in 3D: S = H P Hᵀ + R, K = P Hᵀ S⁻¹, x⁺ = x + K ν,
-    # P⁺ = P − K Uᵀ + (K S − U) Kᵀ with U = P Hᵀ (Joseph form multiplied out), symmetric
+def semidefinite_cholesky_3d(P, c: float, L, null_negative: bool = False):
+    # The lower Cholesky factor of c·P (6, 6) into L, semi-definite
+    # (``core.filters.state.semidefinite_cholesky``): a pivot in [−tol, 0] (with
+    # null_negative: any pivot <= 0) is a null direction (its column 0), below −tol the track
+    # becomes NaN
+    for j in range(6):
+        d = c * P[j, j]
+        for k in range(j):
+            d -= L[j, k] * L[j, k]
+        tol = SEMIDEFINITE_RTOL * c * P[j, j]
+        # a pivot above 0 is a variance, however small
+        null = d <= 0.0 if null_negative else -tol <= d <= 0.0
+        if null:
+            d = 0.0
+        elif d < -tol:
+            d = math.nan  # indefinite beyond rounding: this track becomes NaN
+        d = sqrt(d)
+        L[j, j] = d
+        for i in range(j + 1, 6):
+            e = c * P[i, j]
+            for k in range(j):
+                e -= L[i, k] * L[j, k]
+            L[i, j] = 0.0 if null else e / d
+        for i in range(j):
+            L[i, j] = 0.0
+
+
+@_inline
+def factored_joseph_3d(P, L, K, m: int, R):
+    # core.filters.state.factored_joseph: P⁺ = Z Zᵀ + K R Kᵀ into P (6, 6), Z = L − K (H L)
+    # already in L, K's first m columns the gain, R (m, m) the noise
+    for i in range(6):
+        for j in range(i, 6):
+            acc = 0.0
+            for a in range(m):
+                for b in range(m):
+                    acc += K[i, a] * R[a, b] * K[j, b]
+            for k in range(6):
+                acc += L[i, k] * L[j, k]
+            P[i, j] = acc
+            P[j, i] = acc
+
+
+@_inline
+def position_update_3d(x, P, nu, R, S, Si, K, U, L):
+    # core.filters.position in 3D: S = H P Hᵀ + R, K = P Hᵀ S⁻¹, x⁺ = x + K ν, and the
+    # Joseph form on P's Cholesky factor L, P⁺ = Z Zᵀ + K R Kᵀ with Z = L − K (H L)
+    # (``core.filters.state.factored_joseph``); L (6, 6) scratch
     for a in range(3):
         for b in range(3):
             S[a, b] = P[2 * a, 2 * b] + R[a, b]
@@ -290,21 +335,14 @@ def position_update_3d(x, P, nu, R, S, Si, K, U):
     for i in range(6):
         for a in range(3):
             x[i] += K[i, a] * nu[a]
-    for i in range(6):  # U's columns in K's spare columns: V = K S − U
+    semidefinite_cholesky_3d(P, 1.0, L, True)
+    for k in range(6):  # H L into U: U[k, a] = L[2a, k]
         for a in range(3):
-            acc = 0.0
-            for b in range(3):
-                acc += K[i, b] * S[b, a]
-            K[i, 3 + a] = acc - U[i, a]
-    for i in range(6):
-        for j in range(i, 6):
-            acc = P[i, j]
-            for a in range(3):
-                acc += -K[i, a] * U[j, a] + K[i, 3 + a] * K[j, a]
-            P[i, j] = acc
-    for i in range(6):
-        for j in range(i):
-            P[i, j] = P[j, i]
+            U[k, a] = L[2 * a, k]
+    for i in range(6):  # Z = L − K (H L), in place
+        for k in range(6):
+            L[i, k] -= K[i, 0] * U[k, 0] + K[i, 1] * U[k, 1] + K[i, 2] * U[k, 2]
+    factored_joseph_3d(P, L, K, 3, R)
 
 
 @_inline
@@ -342,25 +380,7 @@ def ukf_update_3d(x, P, r, b, el, sr2, sb2, se2, sx, sy, sz, prm, L, Z, K, S, Si
     # polar map, unscented S and Pxz, K = Pxz S⁻¹, x⁺ = x + K ν, and P⁺ in Joseph form
     # Σ_p Wc_p e_p e_pᵀ + K R Kᵀ with e_p = (χ_p − x⁻) − K d_p.
     c, wm0, wc0, w = prm[0], prm[1], prm[2], prm[3]
-    for j in range(6):  # lower Cholesky factor of c·P, semi-definite (semidefinite_cholesky)
-        d = c * P[j, j]
-        for k in range(j):
-            d -= L[j, k] * L[j, k]
-        tol = SEMIDEFINITE_RTOL * c * P[j, j]
-        null = -tol <= d <= 0.0  # a pivot above 0 is a variance, however small
-        if null:
-            d = 0.0
-        elif d < -tol:
-            d = math.nan  # indefinite beyond rounding: this track becomes NaN
-        d = sqrt(d)
-        L[j, j] = d
-        for i in range(j + 1, 6):
-            e = c * P[i, j]
-            for k in range(j):
-                e -= L[i, k] * L[j, k]
-            L[i, j] = 0.0 if null else e / d
-        for i in range(j):
-            L[i, j] = 0.0
+    semidefinite_cholesky_3d(P, c, L)
     px, py, pz = x[0] - sx, x[2] - sy, x[4] - sz
     polar_3(px, py, pz, Z, 0)
     for k in range(6):  # Z[1 + 2k] = +column k, Z[2 + 2k] = −column k
@@ -514,7 +534,7 @@ def position_stage_3d(code, x, P, r, b, el, sr2, sb2, se2, sx, sy, sz, nu, R, pr
     if code == 6:
         ukf_update_3d(x, P, r, b, el, sr2, sb2, se2, sx, sy, sz, prm, L, Z, K, S, Si, E)
     else:
-        position_update_3d(x, P, nu, R, S, Si, K, U)
+        position_update_3d(x, P, nu, R, S, Si, K, U, L)
 
 
 @_jit
@@ -533,9 +553,10 @@ def scratch_3d():
 
 
 @_inline
-def doppler_update_3d(x, P, vr_hat, trig, var_vr, sb2, se2, u, U, K):
+def doppler_update_3d(x, P, vr_hat, trig, var_vr, sb2, se2, u, U, K, L):
     # core.filters.doppler.doppler_update in 3D: U = P hᵀ, S = h U + var e, K = U / S,
-    # x⁺ = x + K ν, P⁺ = P − K Uᵀ + (K S − U) Kᵀ, symmetrised
+    # x⁺ = x + K ν, and the Joseph form on P's Cholesky factor L (6, 6 scratch),
+    # P⁺ = Z Zᵀ + var e K Kᵀ with Z = L − K (h L) (``core.filters.state.factored_joseph``)
     r_e = doppler_terms_3d(x, P, trig, var_vr, sb2, se2, u)
     for i in range(6):
         U[i] = P[i, 1] * u[0] + P[i, 3] * u[1] + P[i, 5] * u[2]
@@ -545,15 +566,19 @@ def doppler_update_3d(x, P, vr_hat, trig, var_vr, sb2, se2, u, U, K):
     for i in range(6):
         K[i] = U[i] * inv_s
         x[i] += K[i] * nu
+    semidefinite_cholesky_3d(P, 1.0, L, True)
+    for k in range(6):  # h L into U
+        U[k] = u[0] * L[1, k] + u[1] * L[3, k] + u[2] * L[5, k]
+    for i in range(6):  # Z = L − K (h L), in place
+        for k in range(6):
+            L[i, k] -= K[i] * U[k]
     for i in range(6):
         for j in range(i, 6):
-            a = P[i, j] - K[i] * U[j] + (K[i] * S - U[i]) * K[j]
-            if i != j:
-                a = 0.5 * (a + P[j, i] - K[j] * U[i] + (K[j] * S - U[j]) * K[i])
-            P[i, j] = a
-    for i in range(6):
-        for j in range(i):
-            P[i, j] = P[j, i]
+            acc = r_e * K[i] * K[j]
+            for k in range(6):
+                acc += L[i, k] * L[j, k]
+            P[i, j] = acc
+            P[j, i] = acc
 
 
 @_jit
@@ -609,7 +634,7 @@ def track_plots_3d(
                 var_vr = sigma_vr[g] * sigma_vr[g]
                 if not new:
                     nis += doppler_nis_3d(x, P, vr_mps[i], trig, var_vr, sb2, se2, u)
-                doppler_update_3d(x, P, vr_mps[i], trig, var_vr, sb2, se2, u, Uv, Kv)
+                doppler_update_3d(x, P, vr_mps[i], trig, var_vr, sb2, se2, u, Uv, Kv, bufs[4])
             out_nis[i, j] = nis
             for a in range(6):
                 xs[k, j, a] = x[a]

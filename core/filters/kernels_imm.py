@@ -460,7 +460,7 @@ def track_plots_imm_3d(
                     start_codes[j], x, P, rr, b, el, sr2, sb2, se2, sx, sy, sz, v0, z, R, conv
                 )
                 if has_vr[i]:
-                    doppler_update_3d(x, P, vr, trig, var_vr, sb2, se2, u, Uv, Kv)
+                    doppler_update_3d(x, P, vr, trig, var_vr, sb2, se2, u, Uv, Kv, bufs[4])
                 _started(x, P, mu0, x0, P0, mu)
             else:
                 mu[:] = mus[k, j]
@@ -496,7 +496,7 @@ def track_plots_imm_3d(
                         xj, Pj = x0[m], P0[m]
                         st = doppler_stats_3d(xj, Pj, vr, trig, var_vr, sb2, se2, u)
                         ll[m] = log_likelihood(st[0], st[1], 1)
-                        doppler_update_3d(xj, Pj, vr, trig, var_vr, sb2, se2, u, Uv, Kv)
+                        doppler_update_3d(xj, Pj, vr, trig, var_vr, sb2, se2, u, Uv, Kv, bufs[4])
                     mode_probabilities(mu, ll, mu)
                 combine_3d(x0, P0, mu, x, P)
             out_nis[i, j] = nis

@@ -50,11 +50,13 @@ from numpy.typing import ArrayLike, NDArray
 
 from radarviz.core.filters.polar_ekf import polar_measurement_vectors, site_offsets
 from radarviz.core.filters.state import (
+    SEMIDEFINITE_RTOL,
     CVBatch,
     Vec,
     cov_components,
     mean_components,
     position_index,
+    semidefinite_cholesky,
     sym,
     symmetric_inverse,
     target_batch,
@@ -103,60 +105,6 @@ class UKFParams(NamedTuple):
 
 
 _DEFAULT_UKF = UKFParams()
-
-
-#: A negative Cholesky pivot (the variance of a component given the earlier ones) at most this
-#: fraction of its diagonal entry is taken as zero: that direction is known to rounding.
-#: P⁺ = P⁻ − K S Kᵀ is a subtraction that loses log₁₀(P⁻ᵢᵢ / P⁺ᵢᵢ) of the 16 digits (a start
-#: with σv0 = 1000 m/s and a scan later: 4 to 6 of them), so a null direction comes back as
-#: ± 10⁻¹⁶ to 10⁻¹¹ of its diagonal; 10⁻⁹ is above that. A positive pivot is a variance however
-#: small, and is kept: after two plots with σβ = 10⁻⁶° at 150 km and σv0 = 1000 m/s, T = 10 s,
-#: the cross-range velocity given the position has (rσβ / T)² = 7·10⁻⁸ m²/s², 7·10⁻¹⁴ of its
-#: marginal σv0², and zeroing it left P⁺ singular (NEES NaN). Keeping a positive pivot that is
-#: rounding of a true zero is harmless: the column below it is rounding over its square root,
-#: at most √(10⁻¹¹) of the marginal σ.
-SEMIDEFINITE_RTOL = 1e-9
-
-
-def semidefinite_cholesky(
-    P: NDArray[np.float64], columns: int | None = None
-) -> dict[tuple[int, int], Vec]:
-    """Entries (i, k), i >= k, k < ``columns``, of the lower Cholesky factor L of every
-    positive semi-definite P (..., n, n), L Lᵀ = P, as (...) vectors.
-
-    The column-by-column (Cholesky–Banachiewicz) recursion::
-
-        d_j = P_jj − Σ_{k<j} L_jk²,   L_jj = √d_j,   L_ij = (P_ij − Σ_{k<j} L_ik L_jk) / L_jj
-
-    A pivot with −``SEMIDEFINITE_RTOL`` · P_jj ≤ d_j ≤ 0 is a direction of zero variance (to
-    rounding): its column is zero, which is the exact factor of a semi-definite P (there the
-    P_ij − Σ L_ik L_jk vanish with d_j). A pivot below −``SEMIDEFINITE_RTOL`` · P_jj (P
-    indefinite beyond rounding) gives NaN for that track only. Where P is positive definite
-    this is the usual Cholesky factor, LAPACK's to rounding. ``columns`` None: all n.
-    """
-    n = P.shape[-1]
-    columns = n if columns is None else columns
-    Pc = cov_components(P)
-    L: dict[tuple[int, int], Vec] = {}
-    with np.errstate(invalid="ignore", divide="ignore"):
-        for j in range(columns):
-            d = Pc[j, j].copy()
-            for k in range(j):
-                d -= L[j, k] * L[j, k]
-            tol = SEMIDEFINITE_RTOL * Pc[j, j]
-            null = (d <= 0.0) & (d >= -tol)
-            d[null] = 0.0
-            d[d < -tol] = np.nan  # indefinite beyond rounding: this track becomes NaN
-            np.sqrt(d, out=d)
-            L[j, j] = d
-            for i in range(j + 1, n):
-                e = Pc[i, j].copy()
-                for k in range(j):
-                    e -= L[i, k] * L[j, k]
-                e /= d
-                e[null] = 0.0
-                L[i, j] = e
-    return L
 
 
 def cholesky_columns(P: NDArray[np.float64], scale: float) -> dict[tuple[int, int], Vec]:

@@ -176,6 +176,67 @@ def quad_form_inv(P: NDArray[np.float64], e: NDArray[np.float64]) -> NDArray[np.
     return total
 
 
+#: A negative Cholesky pivot (the variance of a component given the earlier ones) at most this
+#: fraction of its diagonal entry is taken as zero: that direction is known to rounding.
+#: P⁺ = P⁻ − K S Kᵀ is a subtraction that loses log₁₀(P⁻ᵢᵢ / P⁺ᵢᵢ) of the 16 digits (a start
+#: with σv0 = 1000 m/s and a scan later: 4 to 6 of them), so a null direction comes back as
+#: ± 10⁻¹⁶ to 10⁻¹¹ of its diagonal; 10⁻⁹ is above that. A positive pivot is a variance however
+#: small, and is kept: after two plots with σβ = 10⁻⁶° at 150 km and σv0 = 1000 m/s, T = 10 s,
+#: the cross-range velocity given the position has (rσβ / T)² = 7·10⁻⁸ m²/s², 7·10⁻¹⁴ of its
+#: marginal σv0², and zeroing it left P⁺ singular (NEES NaN). Keeping a positive pivot that is
+#: rounding of a true zero is harmless: the column below it is rounding over its square root,
+#: at most √(10⁻¹¹) of the marginal σ.
+SEMIDEFINITE_RTOL = 1e-9
+
+
+def semidefinite_cholesky(
+    P: NDArray[np.float64], columns: int | None = None, null_negative: bool = False
+) -> dict[tuple[int, int], Vec]:
+    """Entries (i, k), i >= k, k < ``columns``, of the lower Cholesky factor L of every
+    positive semi-definite P (..., n, n), L Lᵀ = P, as (...) vectors.
+
+    The column-by-column (Cholesky–Banachiewicz) recursion::
+
+        d_j = P_jj − Σ_{k<j} L_jk²,   L_jj = √d_j,   L_ij = (P_ij − Σ_{k<j} L_ik L_jk) / L_jj
+
+    A pivot with −``SEMIDEFINITE_RTOL`` · P_jj ≤ d_j ≤ 0 is a direction of zero variance (to
+    rounding): its column is zero, which is the exact factor of a semi-definite P (there the
+    P_ij − Σ L_ik L_jk vanish with d_j). A pivot below −``SEMIDEFINITE_RTOL`` · P_jj (P
+    indefinite beyond rounding) gives NaN for that track only. Where P is positive definite
+    this is the usual Cholesky factor, LAPACK's to rounding. ``columns`` None: all n.
+
+    ``null_negative``: every pivot <= 0 is a null direction (NaN only from a NaN in P). For
+    the Kalman updates' factor (``factored_joseph``), whose P is positive semi-definite in
+    exact arithmetic (a prediction F P Fᵀ + Q, an IMM mixing, an earlier update, each a sum
+    of positive semi-definite terms): a negative pivot there is rounding whatever its size
+    against P_jj, which in a nearly singular P (a long prediction: eigenvalues 10¹⁴ apart)
+    exceeds any fixed fraction (10⁻⁸ of P_jj measured after 10⁶ s steps).
+    """
+    n = P.shape[-1]
+    columns = n if columns is None else columns
+    Pc = cov_components(P)
+    L: dict[tuple[int, int], Vec] = {}
+    with np.errstate(invalid="ignore", divide="ignore"):
+        for j in range(columns):
+            d = Pc[j, j].copy()
+            for k in range(j):
+                d -= L[j, k] * L[j, k]
+            tol = SEMIDEFINITE_RTOL * Pc[j, j]
+            null = (d <= 0.0) if null_negative else (d <= 0.0) & (d >= -tol)
+            d[null] = 0.0
+            d[d < -tol] = np.nan  # indefinite beyond rounding: this track becomes NaN
+            np.sqrt(d, out=d)
+            L[j, j] = d
+            for i in range(j + 1, n):
+                e = Pc[i, j].copy()
+                for k in range(j):
+                    e -= L[i, k] * L[j, k]
+                e /= d
+                e[null] = 0.0
+                L[i, j] = e
+    return L
+
+
 def symmetric_inverse(
     S: dict[tuple[int, int], Vec], m: int, scale: float = 1.0
 ) -> dict[tuple[int, int], Vec]:
@@ -214,6 +275,61 @@ def sym(M: dict[tuple[int, int], Vec], i: int, j: int) -> Vec:
     return M[(i, j)] if i <= j else M[(j, i)]
 
 
+def factored_joseph(
+    L: dict[tuple[int, int], Vec],
+    K: list[list[Vec]],
+    HL: list[list[Vec | float]],
+    R: dict[tuple[int, int], Vec],
+    out_P: NDArray[np.float64],
+) -> None:
+    """The Joseph-form covariance P⁺ = (I − K H) P (I − K H)ᵀ + K R Kᵀ of a batch, on a factor
+    L of P (P = L Lᵀ, ``semidefinite_cholesky``), into ``out_P`` (..., n, n)::
+
+        Z = L − K (H L),   P⁺ = Z Zᵀ + K R Kᵀ
+
+    Why on a factor. P − K S Kᵀ, and the Joseph form multiplied out, P − K Uᵀ + (K S − U) Kᵀ,
+    subtract from P terms of P's size to leave P⁺: when P is large against R (a long time
+    step: P ≈ 10¹² R and more) what is left is rounding, of either sign, and so is M P Mᵀ
+    evaluated as products wherever P⁺ is small against P (a velocity known from Doppler under
+    a prediction of 10⁸ s). Here the subtraction is in Z, where an error is only an error:
+    P⁺ is a sum of squares (Z Zᵀ) and of K R Kᵀ, positive semi-definite for any gain, and its
+    entries stay within rounding of P⁺'s own size.
+
+    Args:
+        L: the entries (i, k), i >= k, of P's lower factor, each (...)
+            (``semidefinite_cholesky`` with ``null_negative``).
+        K: the gain, K[i][a] (...) for state i and measurement component a.
+        HL: H L, HL[a][k] (...) (or 0.0) for measurement component a and column k.
+        R: the upper entries (a, b), a <= b, of the measurement noise, each (...).
+        out_P: the (..., n, n) output, written whole (symmetric).
+    """
+    n, d = len(K), len(HL)
+    Pc = cov_components(out_P)
+    # K R Kᵀ first, then one column z = Z[:, k] at a time added as z zᵀ: the working memory
+    # is L, K R and one column, not Z whole.
+    KR = [[sum(K[i][a] * sym(R, a, b) for a in range(d)) for b in range(d)] for i in range(n)]
+    for i in range(n):
+        for j in range(i, n):
+            acc = KR[i][0] * K[j][0]
+            for b in range(1, d):
+                acc += KR[i][b] * K[j][b]
+            Pc[i, j] = acc
+    del KR
+    for k in range(n):
+        z = []
+        for i in range(n):
+            v = K[i][0] * HL[0][k]
+            for a in range(1, d):
+                v = v + K[i][a] * HL[a][k]
+            z.append(L[i, k] - v if i >= k else -v)
+        for i in range(n):
+            for j in range(i, n):
+                Pc[i, j] += z[i] * z[j]
+    for i in range(n):
+        for j in range(i + 1, n):
+            Pc[j, i] = Pc[i, j]
+
+
 #: Batches of at most this many tracks take the dense path (``dense_joseph_update``): below it
 #: numpy's per-call overhead, not arithmetic, is the cost, and a few matrix products beat a few
 #: hundred vector operations (measured crossover: between 16 and 64 tracks).
@@ -235,11 +351,15 @@ def dense_joseph_update(
     """The Joseph-form Kalman update as matrix products, for small batches.
 
         U = P Hᵀ,  S = H U + R,  K = U S⁻¹,  x⁺ = x + K ν,
-        P⁺ = P − K Uᵀ + (K S − U) Kᵀ        (= (I − K H) P (I − K H)ᵀ + K R Kᵀ; symmetrised)
+        P⁺ = M P Mᵀ + K R Kᵀ,   M = I − K H                        (symmetrised)
 
     The same equations as the component-wise updates (``core.filters.position``,
     ``core.filters.doppler``), evaluated with a handful of batched matrix products instead of
     one vector operation per entry; the tests check the two against each other.
+
+    P⁺ is the Joseph form on a factor of P (``factored_joseph``): M P Mᵀ = (M L)(M L)ᵀ with
+    L the (semi-definite) Cholesky factor of P, so P⁺ is a sum of squares, positive
+    semi-definite however large P is against R.
 
     Args:
         innovation: ν (..., k).  H: (..., k, n) or (k, n).  R: (..., k, k).
@@ -251,7 +371,11 @@ def dense_joseph_update(
         K = U / S
     else:
         K = np.linalg.solve(S, U.mT).mT  # U S⁻¹ (S symmetric)
-    P_new = P - K @ U.mT + (K @ S - U) @ K.mT
+    L = np.zeros(P.shape)
+    for (i, k), v in semidefinite_cholesky(P, null_negative=True).items():
+        L[..., i, k] = v
+    Z = L - K @ (H @ L)  # (I − K H) L
+    P_new = Z @ Z.mT + K @ R @ K.mT
     out = target_batch(state, out)
     out.x[...] = x + (K @ innovation[..., None])[..., 0]
     out.P[...] = 0.5 * (P_new + P_new.mT)

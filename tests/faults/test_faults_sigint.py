@@ -109,3 +109,46 @@ def test_ctrl_c_during_the_start_up_imports_is_one_line_and_status_130(
         130,
         ["radarviz: interrupted while starting, nothing done"],
     ), err
+
+
+class _HalfMadeImport:
+    """A finder for the command line's module that behaves as numpy's extension did when
+    Ctrl-C came during its initialisation: the interrupt is swallowed inside, and the import
+    ends in the ImportError of a second load. ``interrupt``: send the SIGINT first."""
+
+    NAME = "radarviz.viz_app.cli.main"
+
+    def __init__(self, interrupt: bool):
+        self.interrupt = interrupt
+
+    def find_spec(self, name: str, path: object = None, target: object = None) -> None:
+        if name != self.NAME:
+            return None
+        if self.interrupt:
+            try:
+                os.kill(os.getpid(), signal.SIGINT)
+                for _ in range(1000):  # the handler runs between two bytecodes
+                    pass
+            except KeyboardInterrupt:
+                pass
+        raise ImportError("cannot load module more than once per process")
+
+
+@pytest.mark.parametrize("interrupt", [True, False], ids=["interrupted", "not interrupted"])
+def test_an_import_that_fails_after_ctrl_c_at_start_up_is_the_interrupt(
+    monkeypatch, capsys, interrupt: bool
+) -> None:
+    """After a SIGINT the start-up's failure is the interrupt's: one line, status 130 (it was
+    the ImportError's traceback); without one the ImportError is the error, as it was."""
+    import radarviz_entry
+
+    monkeypatch.delitem(sys.modules, _HalfMadeImport.NAME, raising=False)
+    monkeypatch.setattr(sys, "meta_path", [_HalfMadeImport(interrupt), *sys.meta_path])
+    capsys.readouterr()
+    if interrupt:
+        assert radarviz_entry.main() == radarviz_entry.EXIT_INTERRUPTED
+        assert capsys.readouterr().err.splitlines() == [radarviz_entry.STARTUP_INTERRUPTED]
+    else:
+        with pytest.raises(ImportError, match="more than once"):
+            radarviz_entry.main()
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler

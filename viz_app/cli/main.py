@@ -32,6 +32,9 @@ from radarviz.viz_app.io.atomic import WriteError
 from radarviz_entry import EXIT_INTERRUPTED, STARTUP_INTERRUPTED
 
 EXIT_USAGE = 2
+#: The shell's status for a writer ended by SIGPIPE (128 + 13): standard output's reader
+#: stopped reading (``radarviz track --json | head -c 5``), as for any command of a pipeline.
+EXIT_PIPE = 141
 #: Exit status when an output could not be written (``viz_app.io.atomic.WriteError``).
 EXIT_WRITE = 1
 #: Exit status when a computed result is not finite (``core.finite.ResultError``).
@@ -606,6 +609,27 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     return 0
 
 
+def _stdout_closed() -> bool:
+    """Whether standard output is a pipe whose reader has gone (poll's POLLERR on its write
+    end); if so it is pointed at /dev/null, so the interpreter's last flush of what is still
+    buffered does not fail again ("Exception ignored … BrokenPipeError")."""
+    import os
+    import select
+
+    try:
+        fd = sys.stdout.fileno()
+        poller = select.poll()
+        poller.register(fd, select.POLLOUT)
+        closed = any(ev & select.POLLERR for _, ev in poller.poll(0))
+    except (AttributeError, OSError, ValueError):  # no file descriptor (a test's capture)
+        return False
+    if closed:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, fd)
+        os.close(devnull)
+    return closed
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``radarviz`` console script; returns the exit status."""
     try:
@@ -643,6 +667,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     except ResultError as exc:  # a NaN or a negative NEES: nothing printed, nothing written
         print(f"radarviz: error: {exc}", file=sys.stderr)
         return EXIT_RESULT
+    except BrokenPipeError as exc:
+        if _stdout_closed():  # nothing to say, and no one to say it to on standard output
+            return EXIT_PIPE
+        return _fail(f"{exc.strerror or exc}: {exc.filename}" if exc.filename else str(exc))
     except OSError as exc:
         return _fail(f"{exc.strerror or exc}: {exc.filename}" if exc.filename else str(exc))
     except KeyboardInterrupt:
