@@ -131,9 +131,9 @@ from radarviz.core.tracking.stream import (
     Plot,
     PlotError,
     StateRow,
+    StateRows,
     StreamOptions,
     polar_arrays,
-    state_rows,
 )
 from radarviz.core.tracking.targets import TargetTracker
 
@@ -611,14 +611,15 @@ class ScanResult(NamedTuple):
     Attributes:
         track_ids: (P,) per plot of the batch, the id of the track it went to.
         statuses: (P,) that track's status after the batch.
-        rows: per plot, (method, x (6,), P (6, 6)) for every requested method.
+        rows: per plot, (method, x (6,), P (6, 6)) for every requested method (each plot's
+            row made when read, ``core.tracking.stream.StateRows``).
         confirmed: ids of the tracks confirmed at this batch.
         deleted: ids of the tracks deleted at this batch.
     """
 
     track_ids: list[str]
     statuses: list[str]
-    rows: list[list[StateRow]]
+    rows: Sequence[list[StateRow]]
     confirmed: list[str]
     deleted: list[str]
 
@@ -960,21 +961,31 @@ class GNNTracker:
                     exc.batch = b  # type: ignore[attr-defined]
                     raise
             return out
-        radar: list[int] = []
+        index = {name: i for i, name in enumerate(self.beams)}
+        radar = np.zeros(len(batches), np.int64)  # each batch's radar
         for b, plots in enumerate(batches):
-            try:
-                self._check_batch(plots)
-            except PlotError as exc:
-                exc.batch = b  # type: ignore[attr-defined]
-                raise
-            # The feed's period applies to a radar already seen (``measured_period``).
-            if not plots or plots[0].radar not in self.beams:
+            if not plots:
                 measured[b] = None
-            reg = self._radar(plots)
-            radar += [reg[0]] * len(plots) if reg is not None else []
-        starts = np.cumsum([0, *map(len, batches)])
+                continue
+            name = plots[0].radar
+            i = index.get(name)
+            # A 2D batch of one radar already seen (the compiled route is 2D): the checks of
+            # ``_check_batch`` and ``_radar`` without a call a batch.
+            if i is None or any(p.radar != name or p.elevation_rad is not None for p in plots):
+                measured[b] = measured[b] if i is not None else None  # ``measured_period``
+                try:
+                    self._check_batch(plots)
+                    reg = self._radar(plots)
+                except PlotError as exc:
+                    exc.batch = b  # type: ignore[attr-defined]
+                    raise
+                assert reg is not None
+                i = index[name] = reg[0]
+            radar[b] = i
+        sizes = np.fromiter(map(len, batches), np.int64, len(batches))
+        starts = np.concatenate([[0], np.cumsum(sizes)])
         res, bad = self._compiled.run(
-            batches, np.array(radar, np.int64), np.array(self._sites).reshape(-1, 2),
+            batches, np.repeat(radar, sizes), np.array(self._sites).reshape(-1, 2),
             whole_scan, measured,
         )  # fmt: skip
         if bad >= 0:  # the gating track's kernel found a plot out of order
@@ -988,7 +999,7 @@ class GNNTracker:
         self._started = self.book._started
         # The requested methods' tracks of the labelled plots, from the call's own arrays.
         owner = res.ids
-        ids = [str(i) for i in owner.tolist()]
+        ids = list(map(str, owner.tolist()))
         u, first, inv = np.unique(owner, return_index=True, return_inverse=True)
         order = np.argsort(first)  # labels in order of their first plot
         rank = np.empty_like(order)
@@ -997,7 +1008,7 @@ class GNNTracker:
             target=rank[inv.reshape(-1)].astype(np.intp), labels=tuple(str(t) for t in u[order])
         )
         try:
-            rows = state_rows(self.tracker.add_arrays(block), self.methods)
+            rows = StateRows(self.tracker.add_arrays(block), self.methods)
             if self._gate.tracker is not self.tracker:
                 self._gate.tracker.add_arrays(block)
         except PlotError as exc:
@@ -1012,12 +1023,16 @@ class GNNTracker:
         names = (TENTATIVE, CONFIRMED)
         status = [names[c] for c in res.status.tolist()]
         out = []
+        bounds = starts.tolist()
         for b in range(len(batches)):
-            lo, hi = int(starts[b]), int(starts[b + 1])
+            lo, hi = bounds[b], bounds[b + 1]
             self.ever_confirmed.extend(res.confirmed[b])
             out.append(
-                ScanResult(ids[lo:hi], status[lo:hi], rows[lo:hi], res.confirmed[b], res.deleted[b])
-            )
+                ScanResult(
+                    ids[lo:hi], status[lo:hi], rows.slice(lo, hi), res.confirmed[b],
+                    res.deleted[b],
+                )
+            )  # fmt: skip
         return out
 
     def add_scan(self, plots: list[Plot]) -> ScanResult:
