@@ -304,8 +304,9 @@ def _root(parent, a):
 
 @_jit
 def sparse_assign(rows, cols, d2, gate, n_tracks, n_plots, out_r, out_c):
-    """``core.tracking.association.sparse_gnn_assign`` of N scored pairs (rows into the
-    tracks, columns into the plots, d²): the pairs inside the gate form a bipartite graph,
+    """The sparse GNN assignment of N scored pairs (rows into the tracks, columns into the
+    plots, d²; ``core.tracking.association.sparse_gnn_assign`` calls it, and has the
+    reasoning): the pairs inside the gate form a bipartite graph,
     each connected component's assignment is solved on its own (``lsap`` on its small dense
     matrix of d² − γ, a missing pair costing 0), a component of one edge is assigned.
     Writes the assigned pairs into out_r, out_c; returns how many."""
