@@ -19,6 +19,7 @@ from radarviz.core.tracking.association import (
     AssociationOptions,
     GNNTracker,
     ScanResult,
+    gnn_assign,
     plot_batches,
     sparse_gnn_assign,
 )
@@ -168,6 +169,17 @@ def test_sparse_assign_is_the_components_optimum() -> None:
         d2 = rng.uniform(0.0, 12.0, size=n)
         out_r, out_c = np.empty(n, np.int64), np.empty(n, np.int64)
         m = sparse_assign(rows, cols, d2, gate, int(k), int(p), out_r, out_c)
-        want_r, want_c = sparse_gnn_assign(rows, cols, d2, gate, (int(k), int(p)))
-        got = sorted(zip(out_r[:m].tolist(), out_c[:m].tolist(), strict=True))
-        assert got == sorted(zip(want_r.tolist(), want_c.tolist(), strict=True))
+        # The dense matrix's optimum (scipy's assignment): the same objective; a pair at
+        # most once per track and per plot, every pair inside the gate.
+        dense = np.full((int(k), int(p)), np.inf)
+        dense[rows, cols] = d2
+        want_r, want_c = gnn_assign(dense, gate)
+        got_r, got_c = out_r[:m], out_c[:m]
+        assert np.unique(got_r).size == m and np.unique(got_c).size == m
+        assert np.all(dense[got_r, got_c] < gate)
+        got, want = np.sum(dense[got_r, got_c] - gate), np.sum(dense[want_r, want_c] - gate)
+        assert got == pytest.approx(want, rel=1e-12, abs=1e-12)  # the sums' order only
+        r2, c2 = sparse_gnn_assign(rows, cols, d2, gate, (int(k), int(p)))
+        assert sorted(zip(r2.tolist(), c2.tolist(), strict=True)) == sorted(
+            zip(got_r.tolist(), got_c.tolist(), strict=True)
+        )

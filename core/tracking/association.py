@@ -49,9 +49,9 @@ the engine's own (prediction, update, IMM), nothing is filtered here.
   Either way each candidate is predicted to its plot's own time (``TargetTracker.predicted``)
   and scored (``mahalanobis_pairs``). The pairs inside the gate form a bipartite graph;
   Σ (γ − d²) is a sum over its connected components and no feasible assignment links two of
-  them, so the global optimum is each component's own: one ``linear_sum_assignment`` per
-  component, none for a pair that shares no track and no plot (``sparse_gnn_assign``), the
-  same optimum as the dense matrix's.
+  them, so the global optimum is each component's own: one dense assignment per
+  component, none for a pair that shares no track and no plot (``sparse_gnn_assign``, the
+  compiled route's own function), the same optimum as the dense matrix's.
 * **Engines.** The filters and the gate's predictions run on the engine the options ask
   for (``StreamOptions.engine``): the compiled one by default, whose
   ``core.tracking.compiled.CompiledTracks`` predicts a list of tracks with the tracker
@@ -131,9 +131,9 @@ from radarviz.core.tracking.stream import (
     Plot,
     PlotError,
     StateRow,
+    StateRows,
     StreamOptions,
     polar_arrays,
-    state_rows,
 )
 from radarviz.core.tracking.targets import TargetTracker
 
@@ -517,7 +517,8 @@ def sparse_gnn_assign(
     gate: float,
     shape: tuple[int, int],
 ) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
-    """``gnn_assign`` of a sparse d² matrix: (track rows, plot columns) of the assignment.
+    """``gnn_assign`` of a sparse d² matrix: (track rows, plot columns) of the assignment,
+    in increasing row order.
 
     Args:
         rows, cols, d2: (N,) the scored pairs, each (track, plot) at most once; a pair not
@@ -527,82 +528,26 @@ def sparse_gnn_assign(
 
     The pairs inside the gate are the edges of a bipartite graph of K tracks and P plots.
     The objective Σ (γ − d²) over the assigned pairs is a sum over the graph's connected
-    components (``scipy.sparse.csgraph.connected_components``), and an assignment is
-    feasible if and only if it is feasible within each component (no edge joins two), so the
-    global optimum is the union of each component's own optimum: one
-    ``linear_sum_assignment`` on each component's small dense matrix (a missing pair
+    components, and an assignment is feasible if and only if it is feasible within each
+    component (no edge joins two), so the global optimum is the union of each component's
+    own optimum: one assignment on each component's small dense matrix (a missing pair
     costs 0, as in ``gnn_assign``), and none for a component of one edge (its pair is
     assigned). The optimum is ``gnn_assign``'s; where the optimum is not unique (ties) the
-    two may pick different optimal assignments.
+    two may pick different optimal assignments. Computed by the compiled route's own
+    function (``core.tracking.kernels_associate.sparse_assign``: the components by a
+    union-find, each one's assignment by ``lsap``), so that both routes assign alike.
     """
-    from scipy.optimize import linear_sum_assignment
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
+    from radarviz.core.tracking.kernels_associate import sparse_assign
 
-    inside = d2 < gate
-    rows, cols, cost = rows[inside], cols[inside], d2[inside] - gate
-    if not rows.size:
-        empty = np.zeros(0, dtype=np.intp)
-        return empty, empty
-    if rows.size <= SMALL_GRAPH_EDGES:
-        r_l, c_l = rows.tolist(), cols.tolist()
-        if len(set(r_l)) == len(r_l) and len(set(c_l)) == len(c_l):
-            # Every track and every plot on one edge at most: each edge is a component of
-            # its own, and assigned (the usual batch of a few plots among separated tracks).
-            order = np.argsort(rows, kind="stable")
-            return rows[order].astype(np.intp), cols[order].astype(np.intp)
-        comp = _components(r_l, c_l)
-    else:
-        k, p = shape
-        graph = coo_matrix((np.ones(rows.size), (rows, k + cols)), shape=(k + p, k + p))
-        _, label = connected_components(graph, directed=False)
-        comp = label[rows]
-    order = np.argsort(comp, kind="stable")
-    rows, cols, cost, comp = rows[order], cols[order], cost[order], comp[order]
-    starts = np.flatnonzero(np.r_[True, comp[1:] != comp[:-1]])
-    ends = np.r_[starts[1:], comp.size]
-    single = ends - starts == 1
-    out_r, out_c = [rows[starts[single]]], [cols[starts[single]]]
-    for s, e in zip(starts[~single].tolist(), ends[~single].tolist(), strict=True):
-        r_u, r_i = np.unique(rows[s:e], return_inverse=True)
-        c_u, c_i = np.unique(cols[s:e], return_inverse=True)
-        m = np.zeros((r_u.size, c_u.size))
-        m[r_i, c_i] = cost[s:e]
-        a, b = linear_sum_assignment(m)
-        keep = m[a, b] < 0.0
-        out_r.append(r_u[a[keep]])
-        out_c.append(c_u[b[keep]])
-    r, c = np.concatenate(out_r), np.concatenate(out_c)
-    order = np.argsort(r, kind="stable")
-    return r[order].astype(np.intp), c[order].astype(np.intp)
-
-
-#: Edges up to which ``sparse_gnn_assign`` finds the components by a union-find in Python
-#: (a few microseconds an edge) instead of building a scipy sparse graph (about half a
-#: millisecond a call, whatever its size): a batch of a few plots has a few edges.
-SMALL_GRAPH_EDGES = 64
-
-
-def _components(rows: list[int], cols: list[int]) -> NDArray[np.intp]:
-    """Each edge's connected component, (N,) labels, of the bipartite graph of tracks
-    ``rows`` and plots ``cols`` (N,) each: a union-find of the nodes (a track r is node
-    (0, r), a plot c node (1, c)), the label of an edge its root's first edge. Only the
-    partition matters to ``sparse_gnn_assign`` (each component is sorted out by its label,
-    its assignment solved on its own), not the labels' values."""
-    parent: dict[tuple[int, int], tuple[int, int]] = {}
-
-    def root(a: tuple[int, int]) -> tuple[int, int]:
-        while parent.setdefault(a, a) != a:
-            parent[a] = parent[parent[a]]  # path halving
-            a = parent[a]
-        return a
-
-    for r, c in zip(rows, cols, strict=True):
-        a, b = root((0, r)), root((1, c))
-        if a != b:
-            parent[a] = b
-    first: dict[tuple[int, int], int] = {}
-    return np.array([first.setdefault(root((0, r)), i) for i, r in enumerate(rows)], dtype=np.intp)
+    n = int(rows.size)
+    out_r, out_c = np.empty(n, np.int64), np.empty(n, np.int64)
+    found = sparse_assign(
+        np.ascontiguousarray(rows, dtype=np.int64), np.ascontiguousarray(cols, dtype=np.int64),
+        np.ascontiguousarray(d2, dtype=np.float64), float(gate), int(shape[0]),
+        int(shape[1]), out_r, out_c,
+    )  # fmt: skip
+    order = np.argsort(out_r[:found], kind="stable")
+    return out_r[:found][order].astype(np.intp), out_c[:found][order].astype(np.intp)
 
 
 class ScanResult(NamedTuple):
@@ -611,14 +556,15 @@ class ScanResult(NamedTuple):
     Attributes:
         track_ids: (P,) per plot of the batch, the id of the track it went to.
         statuses: (P,) that track's status after the batch.
-        rows: per plot, (method, x (6,), P (6, 6)) for every requested method.
+        rows: per plot, (method, x (6,), P (6, 6)) for every requested method (each plot's
+            row made when read, ``core.tracking.stream.StateRows``).
         confirmed: ids of the tracks confirmed at this batch.
         deleted: ids of the tracks deleted at this batch.
     """
 
     track_ids: list[str]
     statuses: list[str]
-    rows: list[list[StateRow]]
+    rows: Sequence[list[StateRow]]
     confirmed: list[str]
     deleted: list[str]
 
@@ -960,21 +906,31 @@ class GNNTracker:
                     exc.batch = b  # type: ignore[attr-defined]
                     raise
             return out
-        radar: list[int] = []
+        index = {name: i for i, name in enumerate(self.beams)}
+        radar = np.zeros(len(batches), np.int64)  # each batch's radar
         for b, plots in enumerate(batches):
-            try:
-                self._check_batch(plots)
-            except PlotError as exc:
-                exc.batch = b  # type: ignore[attr-defined]
-                raise
-            # The feed's period applies to a radar already seen (``measured_period``).
-            if not plots or plots[0].radar not in self.beams:
+            if not plots:
                 measured[b] = None
-            reg = self._radar(plots)
-            radar += [reg[0]] * len(plots) if reg is not None else []
-        starts = np.cumsum([0, *map(len, batches)])
+                continue
+            name = plots[0].radar
+            i = index.get(name)
+            # A 2D batch of one radar already seen (the compiled route is 2D): the checks of
+            # ``_check_batch`` and ``_radar`` without a call a batch.
+            if i is None or any(p.radar != name or p.elevation_rad is not None for p in plots):
+                measured[b] = measured[b] if i is not None else None  # ``measured_period``
+                try:
+                    self._check_batch(plots)
+                    reg = self._radar(plots)
+                except PlotError as exc:
+                    exc.batch = b  # type: ignore[attr-defined]
+                    raise
+                assert reg is not None
+                i = index[name] = reg[0]
+            radar[b] = i
+        sizes = np.fromiter(map(len, batches), np.int64, len(batches))
+        starts = np.concatenate([[0], np.cumsum(sizes)])
         res, bad = self._compiled.run(
-            batches, np.array(radar, np.int64), np.array(self._sites).reshape(-1, 2),
+            batches, np.repeat(radar, sizes), np.array(self._sites).reshape(-1, 2),
             whole_scan, measured,
         )  # fmt: skip
         if bad >= 0:  # the gating track's kernel found a plot out of order
@@ -988,7 +944,7 @@ class GNNTracker:
         self._started = self.book._started
         # The requested methods' tracks of the labelled plots, from the call's own arrays.
         owner = res.ids
-        ids = [str(i) for i in owner.tolist()]
+        ids = list(map(str, owner.tolist()))
         u, first, inv = np.unique(owner, return_index=True, return_inverse=True)
         order = np.argsort(first)  # labels in order of their first plot
         rank = np.empty_like(order)
@@ -997,7 +953,7 @@ class GNNTracker:
             target=rank[inv.reshape(-1)].astype(np.intp), labels=tuple(str(t) for t in u[order])
         )
         try:
-            rows = state_rows(self.tracker.add_arrays(block), self.methods)
+            rows = StateRows(self.tracker.add_arrays(block), self.methods)
             if self._gate.tracker is not self.tracker:
                 self._gate.tracker.add_arrays(block)
         except PlotError as exc:
@@ -1012,12 +968,16 @@ class GNNTracker:
         names = (TENTATIVE, CONFIRMED)
         status = [names[c] for c in res.status.tolist()]
         out = []
+        bounds = starts.tolist()
         for b in range(len(batches)):
-            lo, hi = int(starts[b]), int(starts[b + 1])
+            lo, hi = bounds[b], bounds[b + 1]
             self.ever_confirmed.extend(res.confirmed[b])
             out.append(
-                ScanResult(ids[lo:hi], status[lo:hi], rows[lo:hi], res.confirmed[b], res.deleted[b])
-            )
+                ScanResult(
+                    ids[lo:hi], status[lo:hi], rows.slice(lo, hi), res.confirmed[b],
+                    res.deleted[b],
+                )
+            )  # fmt: skip
         return out
 
     def add_scan(self, plots: list[Plot]) -> ScanResult:

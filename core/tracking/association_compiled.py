@@ -86,6 +86,7 @@ class CompiledAssociation:
         beams: BeamTable,
     ):
         from radarviz.core.tracking import kernels_associate as ka
+        from radarviz.core.tracking import kernels_gate
 
         self._k = ka
         imm = options.motion()
@@ -108,6 +109,8 @@ class CompiledAssociation:
         self._xs, self._Ps = np.zeros((0, 1, r, 4)), np.zeros((0, 1, r, 4, 4))
         self._mus = np.zeros((0, 1, r))
         self._started, self._last_t = np.zeros(0, np.bool_), np.zeros(0)
+        #: Each slot's box of the prefilter (``core.tracking.kernels_gate.track_box``).
+        self._boxes = np.zeros((0, kernels_gate.BOX_COLUMNS))
         a = association
         self.rules = ka.Rules(
             gate, scale, q_max, omega_max, float(a.max_speed_mps), int(a.confirm_m),  # type: ignore[attr-defined]
@@ -132,6 +135,7 @@ class CompiledAssociation:
 
             self._xs, self._Ps, self._mus = more(self._xs), more(self._Ps), more(self._mus)
             self._started, self._last_t = more(self._started, False), more(self._last_t)
+            self._boxes = more(self._boxes, -math.inf)  # none drawn yet
             self.live = more(self.live, -1)
 
     def run(
@@ -183,7 +187,7 @@ class CompiledAssociation:
         events = np.zeros((3 * n + c[ka.C_LIVE] + 1, 4), np.int64)
         bad = ka.associate_2d(
             pl, self.beams.arrays, np.ascontiguousarray(sites[:, :2]), arrays, gf, self.rules,
-            self.live, c, self.since, owner, status, events,
+            self.live, c, self.since, owner, status, events, self._boxes,
         )  # fmt: skip
         book.free_top = int(c[ka.C_FREE])
         out = CallResult(len(batches))

@@ -31,7 +31,7 @@ from numpy.typing import NDArray
 
 from radarviz.core.filters.kernels_2d import _jit
 from radarviz.core.filters.kernels_imm import pair_nis_2d, track_plots_imm_2d
-from radarviz.core.tracking.kernels_gate import near_pairs, plot_points_2d
+from radarviz.core.tracking.kernels_gate import BOX_UNTIL_S, boxes_near, near_pairs, plot_points_2d
 
 TWO_PI = 2.0 * math.pi
 
@@ -304,8 +304,9 @@ def _root(parent, a):
 
 @_jit
 def sparse_assign(rows, cols, d2, gate, n_tracks, n_plots, out_r, out_c):
-    """``core.tracking.association.sparse_gnn_assign`` of N scored pairs (rows into the
-    tracks, columns into the plots, d²): the pairs inside the gate form a bipartite graph,
+    """The sparse GNN assignment of N scored pairs (rows into the tracks, columns into the
+    plots, d²; ``core.tracking.association.sparse_gnn_assign`` calls it, and has the
+    reasoning): the pairs inside the gate form a bipartite graph,
     each connected component's assignment is solved on its own (``lsap`` on its small dense
     matrix of d² − γ, a missing pair costing 0), a component of one edge is assigned.
     Writes the assigned pairs into out_r, out_c; returns how many."""
@@ -460,14 +461,16 @@ TENTATIVE_CODE, CONFIRMED_CODE = 0, 1
 
 @_jit
 def associate_2d(pl, beams, radar_site, book, gf, rules, live, counters, since, owner,
-                 status_out, events):  # fmt: skip
+                 status_out, events, boxes):  # fmt: skip
     """Associate every batch of ``pl`` (``PlotArrays``) in order (module docstring): the
     beams (``BeamArrays``, R rows), the radars' sites (R, 2), the book (``BookArrays``) and
     the gating tracks (``GateFilter``) changed in place; live (K,) the live slots in order of
     initiation (their number in counters); since (1,) a lower bound of their last plot
     times. Writes per plot the id of its track (owner (B,))
     and that track's status after its batch (status_out (B,)), and the events in order
-    (events (E, 4): batch, kind, slot, id). Returns −1, or the index of a plot earlier than
+    (events (E, 4): batch, kind, slot, id); boxes (K, ``BOX_COLUMNS``) each slot's box of the
+    prefilter (``core.tracking.kernels_gate.track_box``; a box whose times are −∞ is drawn
+    when next needed). Returns −1, or the index of a plot earlier than
     its track's previous one (nothing from its batch on is done). The book must have a free
     slot per plot (``C_FREE`` ≥ B)."""
     n_plots = pl.time_s.shape[0]
@@ -487,8 +490,8 @@ def associate_2d(pl, beams, radar_site, book, gf, rules, live, counters, since, 
     for b in range(n_batches):
         lo, hi = pl.batch_start[b], pl.batch_start[b + 1]
         bad = _batch(pl, beams, radar_site, book, gf, rules, live, counters, since, owner,
-                     status_out, events, b, lo, hi, points, r_ii, nx, x0, P0, mu, cc, w, xp,
-                     Pp)  # fmt: skip
+                     status_out, events, boxes, b, lo, hi, points, r_ii, nx, x0, P0, mu, cc, w,
+                     xp, Pp)  # fmt: skip
         if bad >= 0:
             return bad
     return -1
@@ -496,7 +499,7 @@ def associate_2d(pl, beams, radar_site, book, gf, rules, live, counters, since, 
 
 @_jit
 def _batch(pl, beams, radar_site, book, gf, rules, live, counters, since, owner, status_out,
-           events, b, lo, hi, points, r_ii, nx, x0, P0, mu, cc, w, xp, Pp):  # fmt: skip
+           events, boxes, b, lo, hi, points, r_ii, nx, x0, P0, mu, cc, w, xp, Pp):  # fmt: skip
     """One batch, plots lo:hi (``GNNTracker._add`` and ``_manage``)."""
     n = hi - lo
     counters[C_BATCHES] += 1
@@ -524,13 +527,23 @@ def _batch(pl, beams, radar_site, book, gf, rules, live, counters, since, owner,
     own = np.full(n, -1, np.int64)  # each plot's slot
     free = np.arange(n)  # plots (of the batch) not yet assigned
     n_free = n
+    # The tracks that may gate one of the batch's plots, in order of initiation: a few
+    # comparisons a track against its box (``boxes_near``), so that the rest below visits
+    # only those.
+    near = np.empty(n_live, np.int64)
+    n_near = 0
+    if n:
+        n_near = boxes_near(
+            before, book.x, book.P, book.last_s, times[0], times[n - 1], rules.q_max,
+            rules.omega_max, points[lo:hi], r_ii[lo:hi], rules.scale, boxes, near,
+        )  # fmt: skip
     for code in (CONFIRMED_CODE, TENTATIVE_CODE):  # confirmed tracks choose first
         if n_free == 0:
             continue
-        slots = np.empty(n_live, np.int64)
+        slots = np.empty(n_near, np.int64)
         k = 0
-        for q in range(n_live):
-            s = before[q]
+        for q in range(n_near):
+            s = near[q]
             if book.status[s] != code:
                 continue
             # A track takes at most one plot per sweep of a radar.
@@ -577,6 +590,7 @@ def _batch(pl, beams, radar_site, book, gf, rules, live, counters, since, owner,
             book.last_s[s] = times[j]
             book.hit_s[s, g] = times[j]
             book.plots[s, g] += 1
+            boxes[s, BOX_UNTIL_S] = -np.inf  # its box is of its previous state
     for q in range(n_free):  # unassigned plots start tentative tracks (``TrackBook.start``)
         j = free[q]
         counters[C_FREE] -= 1
@@ -588,6 +602,7 @@ def _batch(pl, beams, radar_site, book, gf, rules, live, counters, since, owner,
         book.status[s] = CONFIRMED_CODE if rules.confirm_m <= 1 else TENTATIVE_CODE
         book.hits[s], book.expected[s], book.misses[s] = 1, 1, 0
         book.born_s[s] = book.last_s[s] = times[j]
+        boxes[s, BOX_UNTIL_S] = -np.inf
         book.hit_s[s, :] = -np.inf
         book.judged_s[s, :] = -np.inf
         book.hit_s[s, g] = times[j]

@@ -69,6 +69,81 @@ def near_pairs(slots, x, P, last_s, time_s, q_max, omega_max, points, r_ii, scal
     return found
 
 
+#: How long a track's box (``track_box``) serves, s: past it, or after the track's next
+#: plot, the box is drawn again. Longer boxes are drawn less often and admit more tracks.
+BOX_HORIZON_S = 1.0
+#: The columns of a box row: its x and y bounds (m), and the plot times it holds for (s).
+BOX_X_LO, BOX_X_HI, BOX_Y_LO, BOX_Y_HI, BOX_FROM_S, BOX_UNTIL_S = 0, 1, 2, 3, 4, 5
+BOX_COLUMNS = 6
+
+
+@_jit
+def track_box(x, P, last_s, s, t_from, t_until, q_max, omega_max, scale, boxes):
+    """Draw row s of boxes (K, ``BOX_COLUMNS``): a horizontal box holding, for every plot
+    time in [t_from, t_until], every 2D point that ``near_pairs``' bound admits for slot s
+    (x (K, n), P (K, n, n), last_s (K,) as there) once the box is widened on each axis by
+    √(scale R_ii) of the plot (``boxes_near``).
+
+    With T between T₀ = t_from − last and T₁ = t_until − last, the mean c_i(T) = x_i + T ẋ_i
+    lies between c_i(T₀) and c_i(T₁) (it is linear in T); δ (∝ T²) and q_max T⁴/4 are at
+    most their values at T̄ = max(|T₀|, |T₁|), and P_pp + 2T P_pv + T² P_vv (convex in T)
+    at most V̄, its larger end value. A pair that passes ``near_pairs``' looser test,
+    (|z_i − c_i| − δ)₊² < scale · (2 (V + δ²) + q_max T⁴/4 + R_ii), then has
+    |z_i − c_i| < δ̄ + √(scale · (2 (V̄ + δ̄²) + q_max T̄⁴/4)) + √(scale R_ii) (as
+    √(a + b) ≤ √a + √b): inside [min c_i − w_i, max c_i + w_i] widened by √(scale R_ii),
+    w_i the first two terms, plus an allowance of 10⁻⁹ for rounding. A NaN state gives a
+    NaN box, which ``boxes_near`` keeps (the exact test then rejects it)."""
+    speed2 = x[s, 1] ** 2 + x[s, 3] ** 2 + P[s, 1, 1] + P[s, 3, 3]
+    t0, t1 = t_from - last_s[s], t_until - last_s[s]
+    tt = max(t0 * t0, t1 * t1)
+    delta = 0.5 * omega_max * math.sqrt(speed2) * tt
+    for a in range(2):
+        p, v = 2 * a, 2 * a + 1
+        c0, c1 = x[s, p] + t0 * x[s, v], x[s, p] + t1 * x[s, v]
+        v0 = P[s, p, p] + 2.0 * t0 * P[s, p, v] + t0 * t0 * P[s, v, v]
+        v1 = P[s, p, p] + 2.0 * t1 * P[s, p, v] + t1 * t1 * P[s, v, v]
+        var = max(v0, v1, 0.0)
+        w = delta + math.sqrt(scale * (2.0 * (var + delta * delta) + 0.25 * q_max * tt * tt))
+        w += 1e-9 * (w + abs(c0) + abs(c1) + 1.0)
+        boxes[s, 2 * a] = min(c0, c1) - w
+        boxes[s, 2 * a + 1] = max(c0, c1) + w
+    boxes[s, BOX_FROM_S], boxes[s, BOX_UNTIL_S] = t_from, t_until
+
+
+@_jit
+def boxes_near(slots, x, P, last_s, t_lo, t_hi, q_max, omega_max, points, r_ii, scale,
+               boxes, out):  # fmt: skip
+    """Write into out (N at most) the tracks of ``slots`` (N,) whose box (``track_box``)
+    meets a batch's 2D plots, points (B, 2) and r_ii (B, 2) as ``near_pairs`` takes them,
+    times from t_lo to t_hi: each plot's point inside the box widened by √(scale R_ii); in
+    ``slots`` order; returns how many. A box that does not hold for the batch's times (the
+    track has had a plot since, or it was drawn for earlier times) is drawn again first,
+    for [t_lo, t_lo + ``BOX_HORIZON_S``] (at least to t_hi). A track left out has no pair in
+    ``near_pairs`` (``track_box``), so ``near_pairs`` over the tracks kept finds the same
+    pairs; the test costs a few comparisons a track, whatever the batch's size."""
+    lo_x, lo_y, hi_x, hi_y = math.inf, math.inf, -math.inf, -math.inf
+    for j in range(points.shape[0]):
+        ex = math.sqrt(scale * r_ii[j, 0]) * (1.0 + 1e-9)
+        ey = math.sqrt(scale * r_ii[j, 1]) * (1.0 + 1e-9)
+        lo_x, hi_x = min(lo_x, points[j, 0] - ex), max(hi_x, points[j, 0] + ex)
+        lo_y, hi_y = min(lo_y, points[j, 1] - ey), max(hi_y, points[j, 1] + ey)
+    until = max(t_lo + BOX_HORIZON_S, t_hi)
+    kept = 0
+    for k in range(slots.shape[0]):
+        s = slots[k]
+        if not (boxes[s, BOX_FROM_S] <= t_lo and t_hi <= boxes[s, BOX_UNTIL_S]):
+            track_box(x, P, last_s, s, t_lo, until, q_max, omega_max, scale, boxes)
+        far = (
+            boxes[s, BOX_X_HI] < lo_x
+            or boxes[s, BOX_X_LO] > hi_x
+            or boxes[s, BOX_Y_HI] < lo_y
+            or boxes[s, BOX_Y_LO] > hi_y
+        )
+        out[kept] = s
+        kept += 0 if far else 1
+    return kept
+
+
 @_jit
 def plot_points_2d(code: int, r_m, az_rad, sigma_r, sigma_b, site, points, r_ii):
     """The converted plots of ``near_pairs`` in 2D: plot j's point z + s into points[j]

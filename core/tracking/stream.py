@@ -47,7 +47,9 @@ State rows are always in the 3D layout (x, ẋ, y, ẏ, z, ż), z = ż = 0 for 2
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import overload
 
 import numpy as np
 from numpy.typing import NDArray
@@ -709,12 +711,47 @@ def block_plots(block: PlotBlock) -> list[Plot]:
 def state_rows(tb: TrackBlock, methods: tuple[str, ...]) -> list[list[StateRow]]:
     """A ``TrackBlock`` as rows: per plot, (method, x (6,), P (6, 6)) per method (the 3D
     layout, z = ż = 0 for 2D), as ``TargetTracker.add_block`` returns them."""
-    b, m, n = tb.x.shape
-    x6 = np.zeros((b, m, 6))
-    P6 = np.zeros((b, m, 6, 6))
-    x6[..., :n] = tb.x
-    P6[..., :n, :n] = tb.P
-    return [[(meth, x6[i, j], P6[i, j]) for j, meth in enumerate(methods)] for i in range(b)]
+    return list(StateRows(tb, methods))
+
+
+class StateRows(Sequence[list[StateRow]]):
+    """``state_rows`` of plots lo:hi of a ``TrackBlock``, each plot's row made when it is
+    read: a caller that reads a few rows of a large block (or none) does not pay for the
+    others. The 3D layout (``as_6``) is made once, at the first row read, for the block's
+    rows that all its slices share."""
+
+    def __init__(
+        self, tb: TrackBlock, methods: tuple[str, ...], lo: int = 0, hi: int | None = None
+    ):
+        self._tb, self._methods = tb, methods
+        self._lo, self._hi = lo, tb.x.shape[0] if hi is None else hi
+        self._six: list[tuple[NDArray[np.float64], NDArray[np.float64]]] = []
+
+    def __len__(self) -> int:
+        return self._hi - self._lo
+
+    def slice(self, lo: int, hi: int) -> StateRows:
+        """Rows lo:hi of these (sharing the 3D layout)."""
+        out = StateRows(self._tb, self._methods, self._lo + lo, self._lo + hi)
+        out._six = self._six
+        return out
+
+    @overload
+    def __getitem__(self, i: int) -> list[StateRow]: ...
+
+    @overload
+    def __getitem__(self, i: slice) -> list[list[StateRow]]: ...
+
+    def __getitem__(self, i: int | slice) -> list[StateRow] | list[list[StateRow]]:
+        if isinstance(i, slice):
+            return [self[k] for k in range(*i.indices(len(self)))]
+        if not -len(self) <= i < len(self):
+            raise IndexError("row index out of range")
+        if not self._six:
+            self._six.append(as_6(CVBatch(self._tb.x, self._tb.P)))
+        x6, P6 = self._six[0]
+        k = self._lo + i % len(self)
+        return [(m, x6[k, j], P6[k, j]) for j, m in enumerate(self._methods)]
 
 
 def as_6(st: CVBatch) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
