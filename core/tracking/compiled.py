@@ -164,6 +164,14 @@ class CompiledTracks:
         self.name = name or (lambda target, method: method)
         self._track_names: list[str] = []
 
+    def retune(self, sigma_a_mps2: float, motion: object) -> None:
+        """The cv model's σa, or (``motion`` an IMM of as many models) each model's σa, from
+        the next block on; the tracks keep their states."""
+        self.sigma_a = float(sigma_a_mps2)
+        if self.imm is not None and isinstance(motion, IMMModel):
+            self.imm = motion
+            self.sigma_a_models = np.array(motion.sigma_a_mps2, dtype=np.float64)
+
     @property
     def targets(self) -> tuple[str, ...]:
         return tuple(self.slots)

@@ -222,6 +222,16 @@ class TargetTracker:
                 imm=motion if isinstance(motion, IMMModel) else None,
             )
 
+    def retune(self, options: StreamOptions) -> None:
+        """The motion model's σa of ``options`` from the next block on (``GNNTracker.retune``
+        checks that nothing else changed): the tracks keep their states."""
+        motion = options.motion()
+        self.options = options
+        for bank in self._banks:
+            bank.motion = motion
+        if self._compiled is not None:
+            self._compiled.retune(options.sigma_a_mps2, motion)
+
     @property
     def targets(self) -> tuple[str, ...]:
         """The targets seen so far, in order of their first plot."""

@@ -123,6 +123,15 @@ def _add_live(sub: argparse._SubParsersAction) -> None:
     lv.add_argument(
         "--viewer-port", type=integer, default=0, help="web viewer port (default: a free one)"
     )
+    lv.add_argument(
+        "--panel",
+        action="store_true",
+        help="also serve the panel that changes the tracker while it runs (motion model, σa, "
+        "gate, confirmation, deletion, methods shown; on --host, guarded as tune's)",
+    )
+    lv.add_argument(
+        "--panel-port", type=integer, default=0, help="panel port (default: a free one)"
+    )
 
 
 def cmd_live(args: argparse.Namespace) -> int:

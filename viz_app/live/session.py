@@ -39,7 +39,7 @@ import threading
 import time
 from collections import Counter
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import IO, Any
 
 import numpy as np
@@ -49,6 +49,7 @@ from radarviz.core.tracking.association import GNNTracker, plot_batches, time_or
 from radarviz.core.tracking.stream import Plot
 from radarviz.viz_app.io.asterix import AsterixReader, tiled_blocks
 from radarviz.viz_app.io.plots import READ_BLOCK, BatchRunner, Radar
+from radarviz.viz_app.live.control import LiveControl
 from radarviz.viz_app.live.replay import Address
 
 #: Seconds a blocking receive or file read waits before looking at the stop flag.
@@ -239,7 +240,7 @@ class LiveResult:
 
 def track_feed(
     plots: queue.Queue,
-    tracker: GNNTracker,
+    tracker: GNNTracker | LiveControl,
     counts: FeedCounts,
     sector_deg: float,
     horizon_s: float,
@@ -249,12 +250,32 @@ def track_feed(
     after_run: Callable[[], None] | None,
 ) -> list[float]:
     """The tracker (module docstring): until the reader's end mark, associate the queue's
-    plots in runs at most ``budget_s`` apart; returns each plot's latency (s)."""
-    runner = BatchRunner(tracker, "live", lambda key, column: f"plot {key[1]}", on_rows, on_scan)
+    plots in runs at most ``budget_s`` apart; returns each plot's latency (s).
+
+    Given a ``LiveControl`` (``viz_app.live.control``) instead of a tracker, the settings
+    the panel left there are taken before every run (a new tracker, if the change asks for
+    one, gets the held plots), and track ids are the control's (``LiveControl.track_id``)."""
+    control = tracker if isinstance(tracker, LiveControl) else None
+
+    def rows_named(plot: Plot, rows: list, status: str = "") -> None:
+        if control is not None and control.generation:
+            plot = replace(plot, target=control.track_id(plot.target))
+        on_rows(plot, rows, status)
+
+    def scan_named(deleted: list[str]) -> None:
+        if on_scan is not None:
+            on_scan([control.track_id(t) for t in deleted] if control is not None else deleted)
+
+    first = control.tracker if control is not None else tracker
+    assert isinstance(first, GNNTracker)
+    locate = lambda key, column: f"plot {key[1]}"  # noqa: E731
+    runner = BatchRunner(first, "live", locate, rows_named, scan_named)
     latencies: list[float] = []
     first_held = [0.0]
 
     def run() -> None:
+        if control is not None and control.apply(on_scan):
+            runner.tracker = control.tracker
         keys = runner.run()
         if not keys:
             return
