@@ -160,7 +160,7 @@ def run_live(args: argparse.Namespace) -> int:
             ids.update(plot.target.encode() + b"\n")
             log_rows(plot, rows, status)
 
-        latencies: list[float] = []
+        latencies: Any = []
         try:
             latencies = track_feed(
                 plots,
@@ -307,7 +307,7 @@ def _serve_panel(
 
 
 def _summary(
-    source: str, counts: FeedCounts, tracker: Any, latencies: list[float], seconds: float, left: int
+    source: str, counts: FeedCounts, tracker: Any, latencies: Any, seconds: float, left: int
 ) -> dict[str, Any]:
     report = tracker.report()
     doc = {"source": source, "seconds": seconds, **counts.document()}

@@ -234,8 +234,33 @@ class LiveResult:
 
     counts: FeedCounts
     tracker: GNNTracker
-    latencies_s: list[float]
+    latencies_s: np.ndarray
     seconds: float
+
+
+class Latencies:
+    """The newest ``LATENCIES_KEPT`` latencies (s), in a ring allocated (and touched) at the
+    start, so a session's memory does not grow with the plots it has tracked."""
+
+    def __init__(self, kept: int = LATENCIES_KEPT):
+        self._ring = np.full(kept, np.nan)
+        self._n = 0
+
+    def add(self, values: np.ndarray) -> None:
+        ring, k = self._ring, self._ring.shape[0]
+        values = values[-k:]
+        at = self._n % k
+        head = min(values.shape[0], k - at)
+        ring[at : at + head] = values[:head]
+        ring[: values.shape[0] - head] = values[head:]
+        self._n += values.shape[0]
+
+    def values(self) -> np.ndarray:
+        """The latencies kept (a copy; in no particular order once the ring has wrapped)."""
+        return self._ring[: min(self._n, self._ring.shape[0])].copy()
+
+    def __len__(self) -> int:
+        return min(self._n, self._ring.shape[0])
 
 
 def track_feed(
@@ -250,7 +275,8 @@ def track_feed(
     after_run: Callable[[], None] | None,
 ) -> list[float]:
     """The tracker (module docstring): until the reader's end mark, associate the queue's
-    plots in runs at most ``budget_s`` apart; returns each plot's latency (s).
+    plots in runs at most ``budget_s`` apart; returns the latencies (s) of the newest
+    ``LATENCIES_KEPT`` plots.
 
     Given a ``LiveControl`` (``viz_app.live.control``) instead of a tracker, the settings
     the panel left there are taken before every run (a new tracker, if the change asks for
@@ -270,7 +296,7 @@ def track_feed(
     assert isinstance(first, GNNTracker)
     locate = lambda key, column: f"plot {key[1]}"  # noqa: E731
     runner = BatchRunner(first, "live", locate, rows_named, scan_named)
-    latencies: list[float] = []
+    latencies = Latencies()
     first_held = [0.0]
 
     def run() -> None:
@@ -282,9 +308,7 @@ def track_feed(
         if after_run is not None:
             after_run()
         now = time.monotonic()
-        latencies.extend(now - k[0] for k in keys)
-        if len(latencies) > LATENCIES_KEPT:
-            del latencies[: len(latencies) - LATENCIES_KEPT]
+        latencies.add(now - np.array([k[0] for k in keys]))
         counts.tracked += len(keys)
 
     def due() -> bool:
@@ -311,12 +335,12 @@ def track_feed(
             first_held[0] = time.monotonic()
         runner.hold(batch)
     run()
-    return latencies
+    return latencies.values()
 
 
-def latency_ms(latencies_s: list[float]) -> dict[str, float | None]:
+def latency_ms(latencies_s: np.ndarray | list[float]) -> dict[str, float | None]:
     """Median and 99th percentile of the latencies, ms (None without any)."""
-    if not latencies_s:
+    if len(latencies_s) == 0:
         return {"median": None, "p99": None}
     a = np.asarray(latencies_s) * 1e3
     return {"median": float(np.median(a)), "p99": float(np.percentile(a, 99))}
