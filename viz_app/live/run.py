@@ -60,7 +60,8 @@ def _options(args: argparse.Namespace) -> tuple[Any, Any, Any, tuple[str, ...]]:
 
     given = {n: getattr(args, n) for n, _ in LIVE_ASSOCIATION_FLAGS}
     association = AssociationOptions(**{k: v for k, v in given.items() if v is not None})
-    monitor = ConsistencyMonitor()
+    # Hours of a feed start millions of tracks: the monitor keeps the live ones.
+    monitor = ConsistencyMonitor(keep_deleted=False)
     options = StreamOptions(monitor=monitor, **motion_fields())
     methods = tuple(args.method) if args.method else ALL_METHODS
     return association, monitor, options, methods
