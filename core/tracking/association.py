@@ -97,7 +97,7 @@ import contextlib
 import gc
 import heapq
 import math
-from collections.abc import Iterable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import NamedTuple, TypeVar
 
@@ -242,11 +242,14 @@ class LatePlotError(PlotError):
 
 
 def time_ordered(
-    items: Iterable[tuple[T, Plot]], horizon_s: float = REORDER_S
+    items: Iterable[tuple[T, Plot]], horizon_s: float | Callable[[], float] = REORDER_S
 ) -> Iterator[tuple[T, Plot]]:
     """(key, plot) pairs put back in time order: each is held until a plot ``horizon_s``
     later has come, then released earliest first (ties in arrival order). A plot earlier
-    than one already released is a ``LatePlotError``: it came more than ``horizon_s`` late."""
+    than one already released is a ``LatePlotError``: it came more than ``horizon_s`` late.
+    ``horizon_s`` may be a function, read at every plot (a horizon that adapts to the feed,
+    ``radarviz live``'s; it must never shrink, or a plot let in could be refused)."""
+    horizon = horizon_s if callable(horizon_s) else lambda: horizon_s
     heap: list[tuple[float, int, tuple[T, Plot]]] = []
     released = -math.inf
     for n, item in enumerate(items):
@@ -255,10 +258,11 @@ def time_ordered(
             raise LatePlotError(
                 item[0],
                 f"a plot {released - t:.3g} s earlier than one already tracked: more than "
-                f"{horizon_s:g} s out of time order",
+                f"{horizon():g} s out of time order",
             )
         heapq.heappush(heap, (t, n, item))
-        while heap and heap[0][0] <= t - horizon_s:
+        h = horizon()
+        while heap and heap[0][0] <= t - h:
             released, _, out = heapq.heappop(heap)
             yield out
     while heap:

@@ -15,7 +15,9 @@ unless ``viewer`` is False. The figures are the session's own summary (``--summa
   and ``untracked_at_stop``: every plot accounted for;
 * ``latency_median_ms`` and ``latency_p99_ms``: from a datagram's arrival to its plots'
   rows handed to the recording and flushed, the viewer's logging included;
-* ``peak_rss_mb``: the live process's peak resident set (the viewer's server apart).
+* ``peak_rss_mb``: the live process's peak resident set (the viewer's server apart);
+* ``latency_parts_median_ms``: the median of each part of the latency
+  (``viz_app.live.session.LATENCY_PARTS``: queue, order, wait, run, flush).
 
 The soak (``radarviz bench --only live --live-soak-s 600``, not in CI) is the same run made
 ``soak_s`` long, with the live process's resident set read every ``SOAK_SAMPLE_S`` (its
@@ -105,9 +107,44 @@ def memory_trend(
     }
 
 
-def live_scene(tmp: str, targets: int, plots: int, seed: int = 5) -> tuple[str, str, int, float]:
+#: Half the side of the soak's square of traffic (m): the four radars' sites and a margin.
+SOAK_HALF_WIDTH_M = 70e3
+
+
+def bouncing_traffic(
+    rng: np.random.Generator,
+    targets: int,
+    duration_s: float,
+    half_width_m: float = SOAK_HALF_WIDTH_M,
+    speed_mps: tuple[float, float] = (150.0, 250.0),
+    step_s: float = 1.0,
+) -> Any:
+    """The soak's traffic: ``targets`` straight flights at constant speed that turn back at
+    the sides of a square (a reflection), so the scene keeps its density for hours where the
+    section's air traffic, flying across the radars' disc, has left it after ten minutes.
+    Sampled every ``step_s``: between two samples a flight is straight but at a reflection,
+    where ``Traffic.at`` cuts the corner (a turn of a second)."""
+    from radarviz.core.scenarios.rotating import Traffic
+
+    t = np.arange(math.ceil(duration_s / step_s) + 1) * step_s
+    start = rng.uniform(-half_width_m, half_width_m, (targets, 2))
+    heading = rng.uniform(0.0, 2 * math.pi, targets)
+    v = rng.uniform(*speed_mps, targets)[:, None] * np.stack([np.cos(heading), np.sin(heading)], -1)
+    # Unfolded straight line, folded into [-w, w] by a triangle wave (period 4w).
+    w = half_width_m
+    u = start[None, :, :] + v[None, :, :] * t[:, None, None] + w
+    phase = np.mod(u, 4 * w)
+    position = np.where(phase < 2 * w, phase, 4 * w - phase) - w
+    velocity = np.where(phase < 2 * w, 1.0, -1.0) * v[None, :, :]
+    return Traffic(t, position, velocity)
+
+
+def live_scene(
+    tmp: str, targets: int, plots: int, seed: int = 5, soak: bool = False
+) -> tuple[str, str, int, float]:
     """The section's file (module docstring) with at least ``plots`` plots where the scene
-    has them: its path, the radars file, the plots written and their span of feed time (s)."""
+    has them: its path, the radars file, the plots written and their span of feed time (s).
+    ``soak``: the traffic of ``bouncing_traffic``, which keeps the plots coming for hours."""
     from radarviz.core.experiments.association import rotating_scene_plots
     from radarviz.core.scenarios.rotating import RotatingRadar, air_traffic, rotating_plots
     from radarviz.viz_app.bench.association import ROTATING_SITES
@@ -123,7 +160,12 @@ def live_scene(tmp: str, targets: int, plots: int, seed: int = 5) -> tuple[str, 
     per_s = max(0.2 * targets, 1.0)
     duration_s = 1.2 * plots / per_s + 10.0
     rng = np.random.default_rng(seed)
-    traffic = air_traffic(rng, targets, duration_s, turn_deg=60.0, turn_rate_dps=1.5)
+    if soak:
+        # Measured: about 0.45 plots a second per target of the square, clutter included.
+        duration_s = 1.2 * plots / max(0.4 * targets, 1.0) + 10.0
+        traffic = bouncing_traffic(rng, targets, duration_s)
+    else:
+        traffic = air_traffic(rng, targets, duration_s, turn_deg=60.0, turn_rate_dps=1.5)
     scene = rotating_scene_plots(sites, rotating_plots(rng, sites, traffic, duration_s))
     scene = scene[:plots]
     radars = [
@@ -160,7 +202,7 @@ def bench_live(
 
     wanted = max(round(rate_plots_per_s * seconds), 1)
     with tempfile.TemporaryDirectory(prefix="radarviz-bench-live-") as tmp:
-        ast, toml, plots, span_s = live_scene(tmp, targets, wanted)
+        ast, toml, plots, span_s = live_scene(tmp, targets, wanted, soak=soak)
         speed = rate_plots_per_s * span_s / max(plots, 1) if span_s > 0 else 1.0
         port = free_udp_port("127.0.0.1")
         summary = os.path.join(tmp, "live.json")
@@ -226,6 +268,7 @@ def bench_live(
         "latency_median_ms": lat["median"],
         "latency_p99_ms": lat["p99"],
         "peak_rss_mb": doc["peak_rss_mb"],
+        "latency_parts_median_ms": doc["latency_parts_ms"],
     }
     if soak:
         out["memory"] = memory_trend(*samples, SOAK_WARMUP_FRACTION * replay_s)
@@ -246,8 +289,14 @@ def format_live(doc: dict[str, Any]) -> str:
         f"into radarviz live --method ucm {where}: {doc['tracked']} tracked, "
         f"{doc['dropped']} dropped, {doc['out_of_order']} out of order, {doc['malformed']} "
         f"malformed, {doc['untracked_at_stop']} untracked at the stop; {lat}; peak RSS "
-        f"{doc['peak_rss_mb']:.0f} MiB"
+        f"{doc['peak_rss_mb']:.0f} MiB{format_parts(doc['latency_parts_median_ms'])}"
     ) + (format_memory(doc["memory"]) if "memory" in doc else "")
+
+
+def format_parts(parts: dict[str, float | None]) -> str:
+    """Where the latency goes (``viz_app.live.session.LATENCY_PARTS``), medians in ms."""
+    shown = [f"{k} {v:.0f}" for k, v in parts.items() if v is not None]
+    return f" (median ms of its parts: {', '.join(shown)})" if shown else ""
 
 
 def format_memory(m: dict[str, Any]) -> str:

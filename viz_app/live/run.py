@@ -32,10 +32,12 @@ from radarviz.viz_app.live.session import (
     QUEUE_PLOTS,
     FeedCounts,
     FollowedFile,
+    Horizon,
     UdpFeed,
     latency_ms,
     read_feed,
     track_feed,
+    warm_up,
     warn_line,
 )
 from radarviz.viz_app.rerun.viewer import is_loopback
@@ -128,9 +130,11 @@ def run_live(args: argparse.Namespace) -> int:
 
             control.listeners.append(show)
         plots: queue.Queue = queue.Queue(QUEUE_PLOTS)
+        horizon = Horizon(args.reorder_s)
+        warm_up(make, options, association, radars)
         reader = threading.Thread(
             target=read_feed,
-            args=(feed, source, radars, plots, args.reorder_s, args.max_plots, warn_line),
+            args=(feed, source, radars, plots, horizon, args.max_plots, warn_line),
             name="live-reader",
             daemon=True,
         )
@@ -162,13 +166,14 @@ def run_live(args: argparse.Namespace) -> int:
             log_rows(plot, rows, status)
 
         latencies: Any = []
+        parts: dict[str, Any] = {}
         try:
-            latencies = track_feed(
+            latencies, parts = track_feed(
                 plots,
                 control,
                 counts,
                 association.batch_sector_deg,
-                args.reorder_s,
+                horizon,
                 args.budget_ms / 1e3,
                 on_rows,
                 recorder.end_scan if recorder is not None else None,
@@ -188,6 +193,7 @@ def run_live(args: argparse.Namespace) -> int:
         finish()
     doc = _summary(source, counts, tracker, latencies, seconds, left)
     doc["settings"] = control.document()
+    doc["latency_parts_ms"] = {k: latency_ms(v)["median"] for k, v in parts.items()}
     doc["track_ids_sha256"] = ids.hexdigest()
     check_finite_document("live", doc, nonnegative=True)
     if args.summary:
