@@ -268,7 +268,7 @@ def bench_live(
         "latency_median_ms": lat["median"],
         "latency_p99_ms": lat["p99"],
         "peak_rss_mb": doc["peak_rss_mb"],
-        "latency_parts_median_ms": doc["latency_parts_ms"],
+        "latency_parts_median_ms": doc.get("latency_parts_ms", {}),
     }
     if soak:
         out["memory"] = memory_trend(*samples, SOAK_WARMUP_FRACTION * replay_s)
