@@ -31,6 +31,7 @@ from radarviz.core.tracking.association import (
     mahalanobis_pairs,
     plot_batches,
 )
+from radarviz.core.tracking.consistency import ConsistencyMonitor
 from radarviz.core.tracking.stream import Plot, StreamOptions, polar_arrays
 from radarviz.core.tracking.targets import TargetTracker
 
@@ -194,3 +195,40 @@ def test_bench_rotating_figures_are_consistent() -> None:
         doc["rotating_labelled_plots_per_cpu_s"] / doc["rotating_plots_per_cpu_s"], rel=1e-12
     )
     assert doc["rotating_same_as_numpy"] and doc["rotating_purity"] > 0.9
+
+
+def test_a_monitor_sees_the_same_on_both_engines_with_rows_reused() -> None:
+    """With a consistency monitor, the compiled engine reuses a deleted track's row (its
+    monitor state written to the monitor's records first): every track's figures and the
+    events equal the numpy engine's. A monitor that does not ``keep_deleted`` keeps only
+    tracks not deleted, with the same figures, and the rows follow the live tracks."""
+    sites = radars()
+    plots = rotating_scene_plots(sites, scene(7, sites, targets=12, duration_s=90.0))
+    monitors: dict[str, ConsistencyMonitor] = {}
+    peak_live, rows, longest, started = 0, 0, 0, 0
+    for engine, keep in (("numpy", True), ("compiled", True), ("compiled-forgetting", False)):
+        monitor = ConsistencyMonitor(keep_deleted=keep)
+        options = StreamOptions(model="imm", engine=engine.split("-")[0], monitor=monitor)
+        gnn = GNNTracker(("ucm",), False, options, AssociationOptions())
+        for b in plot_batches(enumerate(plots), gnn.association.batch_sector_deg):
+            gnn.add_batch([p for _, p in b])
+            peak_live, longest = max(peak_live, len(gnn.live())), max(longest, len(b))
+        monitors[engine] = monitor
+        compiled = gnn.tracker._compiled
+        if compiled is not None:
+            rows, started = len(compiled._labels), gnn.report().started
+    ref, got, kept = (monitors[k].results() for k in ("numpy", "compiled", "compiled-forgetting"))
+    assert list(ref) == list(got) and len(ref) > len(kept) > 0
+    for name, r in ref.items():
+        for a, b in ((r, got[name]), *(((r, kept[name]),) if name in kept else ())):
+            assert (a.updates, a.windows, a.above, a.below) == (
+                b.updates,
+                b.windows,
+                b.above,
+                b.below,
+            )
+            assert a.mean_nis_per_dof == pytest.approx(b.mean_nis_per_dof, rel=1e-9)
+    assert monitors["numpy"].events == monitors["compiled"].events
+    # A row serves one live track at a time: at most the live tracks at a batch's end, and
+    # the tracks its plots started (each plot starts at most one) before the deleted went.
+    assert rows <= peak_live + longest < started

@@ -350,3 +350,30 @@ def test_bench_live_accounts_for_every_plot_sent(capsys: pytest.CaptureFixture) 
     assert 0.0 < doc["latency_median_ms"] <= doc["latency_p99_ms"]
     assert doc["peak_rss_mb"] > 0.0
     assert main(["bench", "--only", "live", "--live-rate", "0"]) == 2
+
+
+def test_the_horizon_waits_little_on_an_ordered_feed_and_grows_on_a_late_plot() -> None:
+    """``Horizon`` as the reader uses it, then ``time_ordered`` with it: an ordered feed
+    waits only the floor; a plot later than the horizon is passed over and the horizon
+    grows to twice its lateness, so the next one as late is taken; the cap holds; what is
+    let in comes out in time order, never refused."""
+    from radarviz.core.tracking.association import time_ordered
+    from radarviz.core.tracking.stream import Plot
+    from radarviz.viz_app.live.session import Horizon
+
+    h = Horizon(1.0)
+    assert h() == Horizon.FLOOR_S
+    times = [0.0, 0.1, 0.2, 0.03, 0.3, 0.25, 0.4, 0.15, 0.5, 2.0, 0.2, 2.1]
+    latest, admitted, refused = -math.inf, [], []
+    for k, t in enumerate(times):
+        late = latest - t
+        if late > 0 and not h.admits(late):
+            refused.append(k)
+            continue
+        latest = max(latest, t)
+        admitted.append((k, Plot(t, 1e4, 0.0, 10.0, 0.01)))
+    # 0.03 comes 0.17 s late (beyond 0.05): refused, horizon 0.34; 0.25 (0.05 late) and
+    # 0.15 (0.25 late) are then let in; 0.2 after 2.0 (1.8 late) is beyond the 1 s cap.
+    assert refused == [3, 10] and h() == 1.0
+    out = [p.time_s for _, p in time_ordered(iter(admitted), h)]
+    assert out == sorted(out) and len(out) == len(times) - 2

@@ -2,10 +2,10 @@
 
 Loopback keeps other machines out, not other programs or other web pages in the user's
 browser. Each test plays the attacker against the real service: the ``radarviz tune`` panel
-(foreign WebSocket Origin, DNS-rebinding Host, no token), the sweep's local Dask scheduler
-(a client without the run's TLS certificate), and ``radarviz view`` / ``tune`` on a port that
-another program holds. Each also checks that the legitimate request still works, so a service
-that refused everything would fail too.
+and the ``radarviz live --panel`` one (foreign WebSocket Origin, DNS-rebinding Host, no
+token), the sweep's local Dask scheduler (a client without the run's TLS certificate), and
+``radarviz view`` / ``tune`` on a port that another program holds. Each also checks that the
+legitimate request still works, so a service that refused everything would fail too.
 """
 
 from __future__ import annotations
@@ -44,15 +44,29 @@ def _lines(proc: subprocess.Popen) -> queue.Queue[str]:
     return out
 
 
-@pytest.fixture(scope="module")
-def panel() -> Iterator[urllib.parse.SplitResult]:
-    """A running ``radarviz tune`` and the panel address it printed."""
-    proc = subprocess.Popen(
-        [str(EXE), "tune", "--no-browser"],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.DEVNULL,
-        text=True,
-    )
+def _free_udp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+        sock.bind(("127.0.0.1", 0))
+        return int(sock.getsockname()[1])
+
+
+@pytest.fixture(scope="module", params=["tune", "live"])
+def panel(
+    request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory
+) -> Iterator[urllib.parse.SplitResult]:
+    """A running ``radarviz tune``, or ``radarviz live --panel`` (a feed with its viewer),
+    and the panel address it printed."""
+    command = request.param
+    if command == "tune":
+        argv, stop = [str(EXE), "tune", "--no-browser"], signal.SIGTERM
+    else:
+        tmp = tmp_path_factory.mktemp("live")
+        radars = tmp / "r.toml"
+        sim = [str(EXE), "simulate", "--preset", "crossing", "--out", str(tmp / "m.ast")]
+        subprocess.run([*sim, "--radars-out", str(radars)], check=True, capture_output=True)
+        argv = [str(EXE), "live", "--udp", f"127.0.0.1:{_free_udp_port()}", "--radars"]
+        argv, stop = [*argv, str(radars), "--panel"], signal.SIGINT  # Ctrl-C ends a session
+    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
     try:
         lines = _lines(proc)
         end = time.monotonic() + 60
@@ -61,13 +75,13 @@ def panel() -> Iterator[urllib.parse.SplitResult]:
             try:
                 m = re.match(r"^panel (\S+)", lines.get(timeout=1))
             except queue.Empty:
-                assert proc.poll() is None, "radarviz tune exited"
+                assert proc.poll() is None, f"radarviz {command} exited"
                 continue
             url = m.group(1) if m else None
-        assert url, "radarviz tune printed no panel address"
+        assert url, f"radarviz {command} printed no panel address"
         yield urllib.parse.urlsplit(url)
     finally:
-        proc.send_signal(signal.SIGTERM)
+        proc.send_signal(stop)
         try:
             proc.wait(timeout=15)
         except subprocess.TimeoutExpired:
@@ -101,7 +115,7 @@ def test_panel_needs_its_token(panel: urllib.parse.SplitResult) -> None:
     token = panel.path.strip("/")
     assert len(token) >= 40, f"the printed address carries no token: {panel.geturl()}"
     status, page = _get(panel, panel.path)  # the page: the controls' and the viewer's frames
-    assert status == 200 and b"<title>radarviz tune</title>" in page and b"./?controls" in page
+    assert status == 200 and b"<title>radarviz " in page and b"./?controls" in page
     status, page = _get(panel, panel.path + "?controls")
     assert status == 200 and b"<title>Viser</title>" in page
     for path in (

@@ -97,7 +97,7 @@ import contextlib
 import gc
 import heapq
 import math
-from collections.abc import Iterable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import NamedTuple, TypeVar
 
@@ -242,11 +242,14 @@ class LatePlotError(PlotError):
 
 
 def time_ordered(
-    items: Iterable[tuple[T, Plot]], horizon_s: float = REORDER_S
+    items: Iterable[tuple[T, Plot]], horizon_s: float | Callable[[], float] = REORDER_S
 ) -> Iterator[tuple[T, Plot]]:
     """(key, plot) pairs put back in time order: each is held until a plot ``horizon_s``
     later has come, then released earliest first (ties in arrival order). A plot earlier
-    than one already released is a ``LatePlotError``: it came more than ``horizon_s`` late."""
+    than one already released is a ``LatePlotError``: it came more than ``horizon_s`` late.
+    ``horizon_s`` may be a function, read at every plot (a horizon that adapts to the feed,
+    ``radarviz live``'s; it must never shrink, or a plot let in could be refused)."""
+    horizon = horizon_s if callable(horizon_s) else lambda: horizon_s
     heap: list[tuple[float, int, tuple[T, Plot]]] = []
     released = -math.inf
     for n, item in enumerate(items):
@@ -255,10 +258,11 @@ def time_ordered(
             raise LatePlotError(
                 item[0],
                 f"a plot {released - t:.3g} s earlier than one already tracked: more than "
-                f"{horizon_s:g} s out of time order",
+                f"{horizon():g} s out of time order",
             )
         heapq.heappush(heap, (t, n, item))
-        while heap and heap[0][0] <= t - horizon_s:
+        h = horizon()
+        while heap and heap[0][0] <= t - h:
             released, _, out = heapq.heappop(heap)
             yield out
     while heap:
@@ -663,6 +667,57 @@ class GNNTracker:
                 a.method, options, self.gate, self.gate * PREFILTER_MARGIN, self._q_max,
                 self._omega_max, a, self.book, self._table,
             )  # fmt: skip
+
+    def retune(self, options: StreamOptions, association: AssociationOptions) -> None:
+        """Take ``options`` and ``association`` from the next batch on, every track kept.
+
+        What can change so: the gate probability P_G (γ and the prefilter's scale follow),
+        the M-of-N confirmation and the deletion rule (a track's counts so far are kept and
+        judged by the new rule), the fastest target, and the motion model's σa (``cv``: its
+        σa; ``imm``: each model's σa, as many models as before: the tracks' states keep their
+        shapes, the next prediction uses the new process noise). Anything else (another
+        motion model, another number of IMM models, their turn rates or transitions, the
+        gating method, the batches, σv0, the Doppler, the engine) changes what a track holds
+        or how plots are batched: ParameterError naming it, nothing changed (a new tracker
+        is then the way).
+        """
+        old, a = self.tracker.options, self.association
+        if options.model != old.model:
+            raise ParameterError(
+                f"model: the tracks of {old.model!r} cannot continue as {options.model!r} "
+                "(a new tracker starts them again)",
+                "model",
+            )
+        if len(options.imm_sigma_a_mps2) != len(old.imm_sigma_a_mps2):
+            raise ParameterError(
+                f"imm_sigma_a_mps2: the IMM has {len(old.imm_sigma_a_mps2)} models; a σa per "
+                "model keeps its tracks (another number of models starts them again)",
+                "imm_sigma_a_mps2",
+            )
+        same = replace(
+            options, sigma_a_mps2=old.sigma_a_mps2, imm_sigma_a_mps2=old.imm_sigma_a_mps2
+        )
+        for name in ("method", "scan_window_s", "batch_sector_deg"):
+            if getattr(association, name) != getattr(a, name):
+                raise ParameterError(f"{name}: cannot change while tracking", name)
+        if same != old:
+            raise ParameterError(
+                "options: only σa changes while tracking (the rest of the filters' options "
+                "is what the tracks hold)",
+                "options",
+            )
+        threshold = gate_threshold(association.gate_probability, self.dims)
+        q_max = float(np.max(np.square(options.motion().sigma_a_mps2)))
+        self.tracker.retune(options)
+        if self._gate.tracker is not self.tracker:
+            self._gate.tracker.retune(_without_monitor(options))
+        self._gate.threshold, self._q_max, self.association = threshold, q_max, association
+        book = self.book
+        book.m, book.n = association.confirm_m, association.confirm_n
+        book.kdel = association.delete_misses
+        if self._compiled is not None:
+            scale = threshold * PREFILTER_MARGIN
+            self._compiled.retune(options, threshold, scale, q_max, association)
 
     @property
     def gate(self) -> float:

@@ -123,6 +123,23 @@ class CompiledAssociation:
         #: A lower bound of the live tracks' last plot times (the coasting pass's skip).
         self.since = np.full(1, -np.inf)
 
+    def retune(
+        self, options: StreamOptions, gate: float, scale: float, q_max: float, association: object
+    ) -> None:
+        """The IMM's σa per model, γ, the prefilter's scale and bound, the fastest target and
+        the M-of-N and deletion rules of ``GNNTracker.retune``, from the next call on."""
+        imm = options.motion()
+        assert isinstance(imm, IMMModel) and imm.models == self.imm.models
+        self.imm = imm
+        sigma_a = np.array(imm.sigma_a_mps2, dtype=np.float64)
+        self._model = (*self._model[:2], sigma_a, *self._model[3:])
+        a = association
+        self.rules = self.rules._replace(
+            gate=gate, scale=scale, q_max=q_max, max_speed_mps=float(a.max_speed_mps),  # type: ignore[attr-defined]
+            confirm_m=int(a.confirm_m), confirm_n=int(a.confirm_n),  # type: ignore[attr-defined]
+            delete_misses=int(a.delete_misses),  # type: ignore[attr-defined]
+        )  # fmt: skip
+
     def _fit(self) -> None:
         """The gating tracks' and the live list's arrays as large as the book's."""
         cap = self.book.alive.shape[0]

@@ -164,6 +164,14 @@ class CompiledTracks:
         self.name = name or (lambda target, method: method)
         self._track_names: list[str] = []
 
+    def retune(self, sigma_a_mps2: float, motion: object) -> None:
+        """The cv model's σa, or (``motion`` an IMM of as many models) each model's σa, from
+        the next block on; the tracks keep their states."""
+        self.sigma_a = float(sigma_a_mps2)
+        if self.imm is not None and isinstance(motion, IMMModel):
+            self.imm = motion
+            self.sigma_a_models = np.array(motion.sigma_a_mps2, dtype=np.float64)
+
     @property
     def targets(self) -> tuple[str, ...]:
         return tuple(self.slots)
@@ -180,11 +188,15 @@ class CompiledTracks:
         slots = self.slots
         for t in labels:
             if t not in slots:
-                # The monitor keeps its records by row (track t·M + j), so with a monitor a
-                # freed row is never handed to another label.
-                if self._free and self.feed is None:
-                    slots[t] = self._free.pop()
-                    self._labels[slots[t]] = t
+                # A freed row's monitor state went to the monitor's records (``forget``).
+                if self._free:
+                    k = slots[t] = self._free.pop()
+                    self._labels[k] = t
+                    m = len(self.methods)
+                    if len(self._track_names) > k * m:
+                        self._track_names[k * m : (k + 1) * m] = [
+                            self.name(t, method) for method in self.methods
+                        ]
                 else:
                     slots[t] = len(self._labels)
                     self._labels.append(t)
@@ -347,13 +359,17 @@ class CompiledTracks:
         return out
 
     def forget(self, labels: list[str]) -> None:
-        """Drop the tracks of ``labels``: a label seen again starts a new track, and (without
-        a monitor, which keeps its records by row) the rows go to new labels, so memory
-        follows the live tracks."""
+        """Drop the tracks of ``labels``: a label seen again starts a new track, and the rows
+        go to new labels (the monitor's state of their tracks written into its records
+        first), so memory follows the live tracks."""
+        rows = []
         for t in labels:
             k = self.slots.pop(t)
             self.started[k] = False
-            self._free.append(k)
+            rows.append(k)
+        if self.feed is not None and rows:
+            self.feed.release(rows)
+        self._free.extend(rows)
 
 
 @functools.cache
@@ -466,9 +482,12 @@ class MonitorFeed:
         self.lo = np.array([b[0] for b in bands])
         self.hi = np.array([b[1] for b in bands])
         self.arrays: dict[str, NDArray[Any]] = {}
-        self.order: list[int] = []
+        #: Tracks with a record in the monitor, in order of their first update.
+        self.order: dict[int, None] = {}
         self.names: list[str] = []
         self.dirty = False
+        # Tracks updated since the last ``store`` (first-updated ones in order), as arrays.
+        self._touched: list[NDArray[np.intp]] = []
         self.grow(0)
         monitor.feeds.append(self)
 
@@ -520,7 +539,9 @@ class MonitorFeed:
             new = uniq[np.argsort(first, kind="stable")]
             a["seen"][new] = True
             self._load(new, names)
-            self.order.extend(new.tolist())
+            self.order.update(dict.fromkeys(new.tolist()))
+            self._touched.append(new)
+        self._touched.append(track)
         u = track.size
         ev = (np.empty(u, np.int64), np.empty(u), np.empty(u, np.int64), np.empty(u))
         ev = (*ev, np.empty(u), np.empty(u))
@@ -573,9 +594,21 @@ class MonitorFeed:
             if mon.on_event is not None:
                 mon.on_event(event)
 
+    def release(self, targets: list[int]) -> None:
+        """The rows of ``targets`` (deleted) go to new targets: their tracks' state is written
+        into the monitor's records first, then the rows start empty."""
+        self.store()
+        m, a = self.m, self.arrays
+        tracks = (np.asarray(targets, np.intp)[:, None] * m + np.arange(m)).ravel()
+        for k, v in a.items():
+            v[tracks] = np.nan if k == "first_exit" else 0
+        for t in tracks.tolist():
+            self.order.pop(t, None)
+
     def store(self) -> None:
-        """Write every track's state into the monitor's records (``ConsistencyMonitor``
-        calls this before it reads them)."""
+        """Write the state of every track updated since the last call into the monitor's
+        records (``ConsistencyMonitor`` calls this before it reads them): the cost follows
+        the tracks updated, not every track the feed has seen."""
         from collections import deque
 
         from radarviz.core.tracking.consistency import _Track
@@ -584,8 +617,13 @@ class MonitorFeed:
             return
         self.dirty = False
         mon, a, names = self.monitor, self.arrays, self.names
-        cols = {k: a[k][self.order].tolist() for k in self._FLOAT + self._INT + ("left",)}
-        for i, t in enumerate(self.order):
+        # New records first, in order of first update (the monitor lists its tracks so).
+        rows = np.concatenate(self._touched) if self._touched else np.zeros(0, np.intp)
+        self._touched = []
+        _, first = np.unique(rows, return_index=True)
+        touched = rows[np.sort(first)].tolist()
+        cols = {k: a[k][touched].tolist() for k in self._FLOAT + self._INT + ("left",)}
+        for i, t in enumerate(touched):
             rec = mon._tracks.setdefault(names[t], _Track())
             c = cols["count"][i]
             rec.window = deque(

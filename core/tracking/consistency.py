@@ -129,6 +129,9 @@ class ConsistencyMonitor:
         on_event: called with each event as it happens (e.g. a warning printer).
         sustain: successive out-of-band windows that make an exit (default 2w).
         keep_history: keep every window's (time, q, lo, hi) (``history``; for recordings).
+        keep_deleted: keep the records of tracks the tracker deleted (``forget``), for a
+            run's final figures; False for a session that runs for hours (``radarviz
+            live``), whose memory must follow the live tracks (the events are kept).
     """
 
     def __init__(
@@ -138,12 +141,14 @@ class ConsistencyMonitor:
         on_event: Callable[[ConsistencyEvent], None] | None = None,
         sustain: int | None = None,
         keep_history: bool = False,
+        keep_deleted: bool = True,
     ) -> None:
         self.window = int(check("nis_window", window))
         self.sustain = 2 * self.window if sustain is None else int(check("nis_window", sustain))
         self.level = check_real("level", level, low=0.0, high=1.0, high_open=True)
         self.on_event = on_event
         self.keep_history = keep_history
+        self.keep_deleted = keep_deleted
         self.events: list[ConsistencyEvent] = []
         self._tracks: dict[str, _Track] = {}
         #: Feeds that hold some tracks' state in arrays (``core.tracking.compiled``): their
@@ -197,6 +202,14 @@ class ConsistencyMonitor:
             self.events.append(event)
             if self.on_event is not None:
                 self.on_event(event)
+
+    def forget(self, tracks: list[str]) -> None:
+        """Drop the records of ``tracks`` (deleted by the tracker), unless ``keep_deleted``."""
+        if self.keep_deleted:
+            return
+        self._sync()
+        for track in tracks:
+            self._tracks.pop(track, None)
 
     def result(self, track: str) -> TrackConsistency:
         """The figures of ``track`` so far."""

@@ -222,6 +222,16 @@ class TargetTracker:
                 imm=motion if isinstance(motion, IMMModel) else None,
             )
 
+    def retune(self, options: StreamOptions) -> None:
+        """The motion model's σa of ``options`` from the next block on (``GNNTracker.retune``
+        checks that nothing else changed): the tracks keep their states."""
+        motion = options.motion()
+        self.options = options
+        for bank in self._banks:
+            bank.motion = motion
+        if self._compiled is not None:
+            self._compiled.retune(options.sigma_a_mps2, motion)
+
     @property
     def targets(self) -> tuple[str, ...]:
         """The targets seen so far, in order of their first plot."""
@@ -426,13 +436,16 @@ class TargetTracker:
     def forget(self, targets: list[str]) -> None:
         """Drop the tracks of ``targets`` (a deleted track): their rows go to new targets, so
         memory follows the live tracks, not every track ever started. A label forgotten and
-        seen again starts a new track. (On the compiled engine with a consistency monitor,
-        whose records are per row, a forgotten row is not reused: ``CompiledTracks.forget``.)"""
+        seen again starts a new track. A consistency monitor that does not ``keep_deleted``
+        drops their records too."""
         if self._compiled is not None:
             self._compiled.forget(targets)
-            return
-        for t in targets:
-            self._free.append(self._slot.pop(t))
+        else:
+            for t in targets:
+                self._free.append(self._slot.pop(t))
+        monitor = self.options.monitor
+        if monitor is not None and not getattr(monitor, "keep_deleted", True):
+            monitor.forget([track_name(t, m) for t in targets for m in self.methods])
 
 
 #: The methods whose position measurement converts the plot alone (``gate_distances``).

@@ -15,8 +15,10 @@ from collections.abc import Callable
 from radarviz.viz_app.cli.args import integer, number
 from radarviz.viz_app.cli.params import add_parameter, map_flag
 
-#: Default time order horizon of ``live`` (s): a merged feed is out of order by a packet or
-#: two; every plot waits this long (of the feed's time) before it is tracked.
+#: Default longest time order horizon of ``live`` (s): a merged feed is out of order by a
+#: packet or two. The horizon starts short and grows to twice the largest lateness seen, up
+#: to this (``viz_app.live.session.Horizon``); every plot waits that long (of the feed's
+#: time) before it is tracked.
 REORDER_S = 1.0
 #: Default time budget of ``live`` (ms): held batches are associated at least this often.
 BUDGET_MS = 100.0
@@ -99,13 +101,16 @@ def _add_live(sub: argparse._SubParsersAction) -> None:
         "--reorder-s",
         type=number,
         default=REORDER_S,
-        help=f"how late a plot may come and be put back in time order, s (default {REORDER_S:g})",
+        help="how late a plot may come and be put back in time order, s: the horizon starts "
+        "at 0.05 s and grows to twice the largest lateness seen, up to this (default "
+        f"{REORDER_S:g})",
     )
     lv.add_argument(
         "--budget-ms",
         type=number,
         default=BUDGET_MS,
-        help=f"associate held plots at least this often, ms (default {BUDGET_MS:g})",
+        help="associate held plots once the tracker has caught up with the feed, and at the "
+        f"latest this long after the first was held, ms (default {BUDGET_MS:g})",
     )
     lv.add_argument("--duration-s", type=number, default=None, help="stop after this long")
     lv.add_argument("--max-plots", type=integer, default=None, help="stop after this many plots")
@@ -122,6 +127,15 @@ def _add_live(sub: argparse._SubParsersAction) -> None:
     )
     lv.add_argument(
         "--viewer-port", type=integer, default=0, help="web viewer port (default: a free one)"
+    )
+    lv.add_argument(
+        "--panel",
+        action="store_true",
+        help="also serve the panel that changes the tracker while it runs (motion model, σa, "
+        "gate, confirmation, deletion, methods shown; on --host, guarded as tune's)",
+    )
+    lv.add_argument(
+        "--panel-port", type=integer, default=0, help="panel port (default: a free one)"
     )
 
 

@@ -277,6 +277,14 @@ def build_parser() -> argparse.ArgumentParser:
         help="seconds of the live section's replay (default 20)",
     )
     bench.add_argument(
+        "--live-soak-s",
+        type=number,
+        default=None,
+        help="with --only live: a soak this long (e.g. 600) at --live-rate instead of "
+        "--live-seconds, the live process's memory sampled and its trend per hour said "
+        "(not in CI)",
+    )
+    bench.add_argument(
         "--live-targets",
         type=integer,
         default=300,
@@ -536,6 +544,10 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     check_real("--live-rate", args.live_rate, low=1.0, high=100_000.0, low_open=False)
     check_real("--live-seconds", args.live_seconds, low=1.0, high=3600.0, low_open=False)
     check_int("--live-targets", args.live_targets, low=1, high=4095)
+    if args.live_soak_s is not None:
+        check_real("--live-soak-s", args.live_soak_s, low=60.0, high=86_400.0, low_open=False)
+        if args.only != "live":
+            raise ParameterError("--live-soak-s needs --only live", "--live-soak-s")
     if args.markdown is not None:
         from radarviz.viz_app.bench.markdown import check_markdown_target
 
@@ -555,7 +567,9 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     if args.only == "live":
         from radarviz.viz_app.bench.live import bench_live, format_live
 
-        doc = {"live": bench_live(args.live_rate, args.live_seconds, args.live_targets)}
+        soak = args.live_soak_s is not None
+        seconds = args.live_soak_s if soak else args.live_seconds
+        doc = {"live": bench_live(args.live_rate, seconds, args.live_targets, soak=soak)}
         check_finite_document("bench", doc, nonnegative=True)
         print_report(doc, args.json, lambda d: format_live(d["live"]))
         return 0

@@ -19,26 +19,32 @@ import sys
 import threading
 import time
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from radarviz.core.finite import check_finite_document
 from radarviz.core.params import ParameterError, check_int, check_real
 from radarviz.core.tracking.stream import Plot
 from radarviz.viz_app.io.atomic import Stage, atomic_write, check_outputs
 from radarviz.viz_app.io.plots import load_radars, radar_coverage
+from radarviz.viz_app.live.control import LiveControl
 from radarviz.viz_app.live.replay import parse_address
 from radarviz.viz_app.live.session import (
     QUEUE_PLOTS,
     FeedCounts,
     FollowedFile,
+    Horizon,
     UdpFeed,
     latency_ms,
     read_feed,
     track_feed,
+    warm_up,
     warn_line,
 )
 from radarviz.viz_app.rerun.viewer import is_loopback
 from radarviz.viz_app.runtime import peak_rss_mb
+
+if TYPE_CHECKING:
+    from radarviz.viz_app.live.panel import LivePanel
 
 #: How long a saved recording may take to read back whole after the stream ends (s).
 SETTLE_S = 10.0
@@ -56,7 +62,8 @@ def _options(args: argparse.Namespace) -> tuple[Any, Any, Any, tuple[str, ...]]:
 
     given = {n: getattr(args, n) for n, _ in LIVE_ASSOCIATION_FLAGS}
     association = AssociationOptions(**{k: v for k, v in given.items() if v is not None})
-    monitor = ConsistencyMonitor()
+    # Hours of a feed start millions of tracks: the monitor keeps the live ones.
+    monitor = ConsistencyMonitor(keep_deleted=False)
     options = StreamOptions(monitor=monitor, **motion_fields())
     methods = tuple(args.method) if args.method else ALL_METHODS
     return association, monitor, options, methods
@@ -70,6 +77,7 @@ def run_live(args: argparse.Namespace) -> int:
     if args.max_plots is not None:
         check_int("--max-plots", args.max_plots, low=1, high=10**12)
     check_int("--viewer-port", args.viewer_port, low=0, high=65535)
+    check_int("--panel-port", args.panel_port, low=0, high=65535)
     inputs = [("--radars", args.radars)] + ([("--follow", args.follow)] if args.follow else [])
     check_outputs([("--rrd", args.rrd), ("--summary", args.summary)], inputs)
     address = parse_address("--udp", args.udp) if args.udp else None
@@ -88,18 +96,18 @@ def run_live(args: argparse.Namespace) -> int:
     association, monitor, options, methods = _options(args)
     from radarviz.core.tracking.association import GNNTracker
 
+    coverage = {n: radar_coverage(r) for n, r in radars.items()}
+
+    def make(options: Any, association: Any) -> GNNTracker:
+        return GNNTracker(methods, False, options, association, coverage=coverage)
+
     try:
-        tracker = GNNTracker(
-            methods,
-            False,
-            options,
-            association,
-            coverage={n: radar_coverage(r) for n, r in radars.items()},
-        )
+        tracker = make(options, association)
     except ParameterError as exc:
         if exc.parameter:
             raise
         raise ParameterError(f"--{exc}") from None
+    control = LiveControl(tracker, options, association, make)
 
     counts = FeedCounts()
     stop = threading.Event()
@@ -112,11 +120,21 @@ def run_live(args: argparse.Namespace) -> int:
         source = args.follow
     with contextlib.ExitStack() as stack:
         stack.callback(feed.close)
-        recorder, finish = _recording(args, radars, monitor, stack)
+        recorder, finish, viewer = _recording(args, radars, monitor, stack)
+        if args.panel:
+            _serve_panel(args, control, viewer, stack)
+        if recorder is not None:
+
+            def show(c: LiveControl) -> None:
+                recorder.shown = frozenset(c.settings.shown)
+
+            control.listeners.append(show)
         plots: queue.Queue = queue.Queue(QUEUE_PLOTS)
+        horizon = Horizon(args.reorder_s)
+        warm_up(make, options, association, radars)
         reader = threading.Thread(
             target=read_feed,
-            args=(feed, source, radars, plots, args.reorder_s, args.max_plots, warn_line),
+            args=(feed, source, radars, plots, horizon, args.max_plots, warn_line),
             name="live-reader",
             daemon=True,
         )
@@ -147,14 +165,15 @@ def run_live(args: argparse.Namespace) -> int:
             ids.update(plot.target.encode() + b"\n")
             log_rows(plot, rows, status)
 
-        latencies: list[float] = []
+        latencies: Any = []
+        parts: dict[str, Any] = {}
         try:
-            latencies = track_feed(
+            latencies, parts = track_feed(
                 plots,
-                tracker,
+                control,
                 counts,
                 association.batch_sector_deg,
-                args.reorder_s,
+                horizon,
                 args.budget_ms / 1e3,
                 on_rows,
                 recorder.end_scan if recorder is not None else None,
@@ -168,10 +187,13 @@ def run_live(args: argparse.Namespace) -> int:
         # time order or their batch): still accounted for, as untracked.
         left = counts.plots - counts.tracked - counts.out_of_order - counts.dropped
         seconds = time.monotonic() - start
+        tracker = control.tracker
         if recorder is not None:
             recorder.report(tracker.report())
         finish()
     doc = _summary(source, counts, tracker, latencies, seconds, left)
+    doc["settings"] = control.document()
+    doc["latency_parts_ms"] = {k: latency_ms(v)["median"] for k, v in parts.items()}
     doc["track_ids_sha256"] = ids.hexdigest()
     check_finite_document("live", doc, nonnegative=True)
     if args.summary:
@@ -192,10 +214,11 @@ def _discard(*_: object) -> None:
 
 def _recording(
     args: argparse.Namespace, radars: dict, monitor: Any, stack: contextlib.ExitStack
-) -> tuple[Any, Any]:
-    """The recorder (None without viewer and ``--rrd``) and the function ending it."""
+) -> tuple[Any, Any, str | None]:
+    """The recorder (None without viewer and ``--rrd``), the function ending it, and the
+    viewer's address for the panel's page (None without viewer)."""
     if args.no_viewer and args.rrd is None:
-        return None, lambda: None
+        return None, lambda: None, None
     import rerun as rr
 
     from radarviz.viz_app.rerun.live_recording import LiveTrackRecorder
@@ -208,8 +231,10 @@ def _recording(
         stack.callback(stage.abort)  # a no-op once renamed
         stage.close_fd()
         sinks.append(rr.FileSink(str(stage.path)))
+    viewer = None
     if not args.no_viewer:
-        sinks.append(rr.GrpcSink(_serve_viewer(args, stack)))
+        grpc, viewer = _serve_viewer(args, stack)
+        sinks.append(rr.GrpcSink(grpc))
     rec = new_recording()
     rec.set_sinks(*sinks)
     recorder = LiveTrackRecorder(rec, radars.values(), monitor)
@@ -235,11 +260,12 @@ def _recording(
                     raise
                 time.sleep(0.2)
 
-    return recorder, finish
+    return recorder, finish, viewer
 
 
-def _serve_viewer(args: argparse.Namespace, stack: contextlib.ExitStack) -> str:
-    """Start the web viewer (``tune``'s), print its address; the gRPC address to log to."""
+def _serve_viewer(args: argparse.Namespace, stack: contextlib.ExitStack) -> tuple[str, str]:
+    """Start the web viewer (``tune``'s), print its address; the gRPC address to log to and
+    the viewer's address for the panel's page."""
     from radarviz.viz_app.rerun.viewer import (
         bind_address,
         check_port_free,
@@ -248,6 +274,7 @@ def _serve_viewer(args: argparse.Namespace, stack: contextlib.ExitStack) -> str:
         viewer_url,
         wait_viewer,
     )
+    from radarviz.viz_app.tune.page import embedded_viewer_url
     from radarviz.viz_app.tune.serve import grpc_uri, start_rerun, stop_process_group, wait_port
 
     bind = bind_address("--host", args.host)
@@ -260,11 +287,34 @@ def _serve_viewer(args: argparse.Namespace, stack: contextlib.ExitStack) -> str:
     wait_port(bind, grpc_port, proc=proc)
     wait_viewer(proc, "--viewer-port", bind, web_port)
     print(f"viewer {viewer_url(connect, web_port, grpc_port)}", flush=True)
-    return grpc_uri(bind, grpc_port)
+    return grpc_uri(bind, grpc_port), embedded_viewer_url(connect, web_port, grpc_port)
+
+
+def _serve_panel(
+    args: argparse.Namespace, control: LiveControl, viewer: str | None, stack: contextlib.ExitStack
+) -> LivePanel:
+    """Start the panel (``tune``'s guarded Viser server, with the viewer beside the controls
+    when there is one) on ``--host``, print its address."""
+    from radarviz.viz_app.live.panel import LivePanel
+    from radarviz.viz_app.rerun.viewer import bind_address, check_port_free, connect_address
+    from radarviz.viz_app.tune.guard import PanelGuard, guarded_viser_server
+    from radarviz.viz_app.tune.page import panel_page, serve_page
+
+    bind = bind_address("--host", args.host)
+    check_port_free("--panel-port", bind, args.panel_port)
+    guard = PanelGuard(host=args.host, bind=bind)
+    page = panel_page(viewer, title="radarviz live") if viewer is not None else None
+    wrap = (lambda inner: serve_page(inner, page)) if page is not None else None
+    server = guarded_viser_server(guard, args.panel_port, wrap=wrap, verbose=False)
+    stack.callback(server.stop)
+    panel = LivePanel(server, control)
+    stack.callback(panel.close)
+    print(f"panel {guard.url(connect_address(bind), server.get_port())}", flush=True)
+    return panel
 
 
 def _summary(
-    source: str, counts: FeedCounts, tracker: Any, latencies: list[float], seconds: float, left: int
+    source: str, counts: FeedCounts, tracker: Any, latencies: Any, seconds: float, left: int
 ) -> dict[str, Any]:
     report = tracker.report()
     doc = {"source": source, "seconds": seconds, **counts.document()}

@@ -11,16 +11,21 @@ Two threads and a bounded queue between them:
   refuses, are counted as malformed, each kind reported once on stderr, and the feed goes
   on (the reader starts again on the next datagram; its duplicate window restarts with it).
 * **the tracker** (the calling thread) takes the plots from the queue, puts them in time
-  order (``core.tracking.association.time_ordered``, with a short horizon: it adds its
-  length to every plot's latency), cuts them into batches (``plot_batches``) and runs the
-  held batches in one compiled call (``viz_app.io.plots.BatchRunner``, the runner of
-  ``track --associate``) whenever ``budget_s`` has passed since the first of them was held,
-  or ``READ_BLOCK`` plots are held. Results go to a ``LiveTrackRecorder``
-  (``viz_app.rerun.live_recording``: ``track --rrd``'s plots, one row of every live track per
-  method), flushed after every run, so the viewer shows each run as it is done.
+  order (``core.tracking.association.time_ordered``, with the session's ``Horizon``: short
+  while the feed comes in order, as it adds its length to every plot's latency), cuts them
+  into batches (``plot_batches``) and runs the held batches in one compiled call
+  (``viz_app.io.plots.BatchRunner``, the runner of ``track --associate``) as soon as the
+  queue is empty (the tracker has caught up; at most every ``MIN_RUN_S``), and at the latest
+  when ``budget_s`` has passed since the first of them was held, or ``READ_BLOCK`` plots are
+  held: a light feed's plots are tracked as they come, a heavy one's in larger runs. The
+  kernels are loaded before the feed starts (``warm_up``), not by its first plots. Results
+  go to a ``LiveTrackRecorder`` (``viz_app.rerun.live_recording``: ``track --rrd``'s plots,
+  one row of every live track per method), flushed after every run, so the viewer shows each
+  run as it is done. Where the latency goes is counted too (``LATENCY_PARTS``).
 
 A plot earlier than the latest received by more than the horizon cannot be put back in
-order; it is counted as out of order and passed over (``time_ordered`` would refuse it).
+order; it is counted as out of order and passed over (``time_ordered`` would refuse it), and
+the horizon grows so that the next one as late is taken.
 
 Every plot the reader decodes is counted once: tracked, out of order, or dropped; every
 datagram: delivered to the reader or malformed. Records the reader passes over are counted
@@ -39,7 +44,7 @@ import threading
 import time
 from collections import Counter
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import IO, Any
 
 import numpy as np
@@ -49,6 +54,7 @@ from radarviz.core.tracking.association import GNNTracker, plot_batches, time_or
 from radarviz.core.tracking.stream import Plot
 from radarviz.viz_app.io.asterix import AsterixReader, tiled_blocks
 from radarviz.viz_app.io.plots import READ_BLOCK, BatchRunner, Radar
+from radarviz.viz_app.live.control import LiveControl
 from radarviz.viz_app.live.replay import Address
 
 #: Seconds a blocking receive or file read waits before looking at the stop flag.
@@ -59,6 +65,16 @@ QUEUE_PLOTS = 65_536
 MAX_DATAGRAM = 65_535
 #: Latencies kept for the percentiles (the newest).
 LATENCIES_KEPT = 1_000_000
+#: Where a plot's latency goes (s each): from its datagram's arrival to the tracker taking it
+#: from the queue (decoding, the queue), from there to its batch held (the time order
+#: horizon, the batch waiting for its last plot), to the run starting, the run (association),
+#: and the recording's flush after it.
+LATENCY_PARTS = ("queue", "order", "wait", "run", "flush")
+#: Latencies kept per part.
+PARTS_KEPT = 100_000
+#: Shortest time between two runs of the tracker (s): a run as soon as the queue is empty
+#: would otherwise make a run, and a flush to the viewer, of every datagram of a light feed.
+MIN_RUN_S = 0.02
 #: The queue's end mark.
 _END = None
 
@@ -183,12 +199,42 @@ def note(counts: FeedCounts, kind: str, warn: Callable[[str], None]) -> None:
         warn(f"malformed input skipped (counted, said once): {kind}")
 
 
+class Horizon:
+    """The time order horizon (s of feed time) of a session: ``FLOOR_S`` at the start, then
+    ``MARGIN`` times the largest lateness seen (how much earlier a plot came than the latest
+    before it), at most ``cap_s`` (``--reorder-s``). It never shrinks, so a plot the reader
+    lets in is never refused by ``time_ordered`` later. A feed in time order waits only the
+    floor; the first plot of a feed later than the horizon is passed over (counted out of
+    order) and the horizon grows to take the next one like it."""
+
+    #: Horizon at the start (s): a few of the records' time-of-day steps (1/128 s).
+    FLOOR_S = 0.05
+    #: The horizon over the largest lateness seen.
+    MARGIN = 2.0
+
+    def __init__(self, cap_s: float):
+        self.cap_s = cap_s
+        self.s = min(self.FLOOR_S, cap_s)
+
+    def admits(self, lateness_s: float) -> bool:
+        """Whether a plot ``lateness_s`` earlier than the latest before it (> 0) is let in
+        (within the horizon); the horizon grows by it either way."""
+        admitted = lateness_s <= self.s
+        grown = min(self.cap_s, self.MARGIN * lateness_s)
+        if grown > self.s:
+            self.s = grown
+        return admitted
+
+    def __call__(self) -> float:
+        return self.s
+
+
 def read_feed(
     feed: _Feed,
     source: str,
     radars: dict[str, Radar],
     out: queue.Queue,
-    horizon_s: float,
+    horizon: Horizon,
     max_plots: int | None,
     warn: Callable[[str], None],
 ) -> None:
@@ -202,7 +248,8 @@ def read_feed(
                 reader = AsterixReader(feed, source, radars)  # type: ignore[arg-type]
                 for position, plot in reader:
                     counts.plots += 1
-                    if plot.time_s < latest - horizon_s:
+                    late = latest - plot.time_s
+                    if late > 0 and not horizon.admits(late):
                         counts.out_of_order += 1
                     else:
                         latest = max(latest, plot.time_s)
@@ -233,69 +280,158 @@ class LiveResult:
 
     counts: FeedCounts
     tracker: GNNTracker
-    latencies_s: list[float]
+    latencies_s: np.ndarray
     seconds: float
+
+
+class Latencies:
+    """The newest ``LATENCIES_KEPT`` latencies (s), in a ring allocated (and touched) at the
+    start, so a session's memory does not grow with the plots it has tracked."""
+
+    def __init__(self, kept: int = LATENCIES_KEPT):
+        self._ring = np.full(kept, np.nan)
+        self._n = 0
+
+    def add(self, values: np.ndarray) -> None:
+        ring, k = self._ring, self._ring.shape[0]
+        values = values[-k:]
+        at = self._n % k
+        head = min(values.shape[0], k - at)
+        ring[at : at + head] = values[:head]
+        ring[: values.shape[0] - head] = values[head:]
+        self._n += values.shape[0]
+
+    def values(self) -> np.ndarray:
+        """The latencies kept (a copy; in no particular order once the ring has wrapped)."""
+        return self._ring[: min(self._n, self._ring.shape[0])].copy()
+
+    def __len__(self) -> int:
+        return min(self._n, self._ring.shape[0])
 
 
 def track_feed(
     plots: queue.Queue,
-    tracker: GNNTracker,
+    tracker: GNNTracker | LiveControl,
     counts: FeedCounts,
     sector_deg: float,
-    horizon_s: float,
+    horizon_s: float | Callable[[], float],
     budget_s: float,
     on_rows: Callable[..., None],
     on_scan: Callable[[list[str]], None] | None,
     after_run: Callable[[], None] | None,
 ) -> list[float]:
     """The tracker (module docstring): until the reader's end mark, associate the queue's
-    plots in runs at most ``budget_s`` apart; returns each plot's latency (s)."""
-    runner = BatchRunner(tracker, "live", lambda key, column: f"plot {key[1]}", on_rows, on_scan)
-    latencies: list[float] = []
+    plots whenever the queue is empty (the tracker has caught up with the feed; at most every
+    ``MIN_RUN_S``), and at the latest ``budget_s`` after the first held plot; returns the
+    latencies (s) of the newest ``LATENCIES_KEPT`` plots, and their parts
+    (``LATENCY_PARTS``) for the newest ``PARTS_KEPT``.
+
+    Given a ``LiveControl`` (``viz_app.live.control``) instead of a tracker, the settings
+    the panel left there are taken before every run (a new tracker, if the change asks for
+    one, gets the held plots), and track ids are the control's (``LiveControl.track_id``)."""
+    control = tracker if isinstance(tracker, LiveControl) else None
+
+    def rows_named(plot: Plot, rows: list, status: str = "") -> None:
+        if control is not None and control.generation:
+            plot = replace(plot, target=control.track_id(plot.target))
+        on_rows(plot, rows, status)
+
+    def scan_named(deleted: list[str]) -> None:
+        if on_scan is not None:
+            on_scan([control.track_id(t) for t in deleted] if control is not None else deleted)
+
+    first = control.tracker if control is not None else tracker
+    assert isinstance(first, GNNTracker)
+    locate = lambda key, column: f"plot {key[1]}"  # noqa: E731
+    runner = BatchRunner(first, "live", locate, rows_named, scan_named)
+    latencies = Latencies()
+    parts = {name: Latencies(PARTS_KEPT) for name in LATENCY_PARTS}
     first_held = [0.0]
+    last_run = [0.0]
+    held_at: list[tuple[int, float]] = []  # (plots, when) of every batch held
 
     def run() -> None:
+        if control is not None and control.apply(on_scan):
+            runner.tracker = control.tracker
+        start = last_run[0] = time.monotonic()
         keys = runner.run()
         if not keys:
             return
+        ran = time.monotonic()
         if after_run is not None:
             after_run()
         now = time.monotonic()
-        latencies.extend(now - k[0] for k in keys)
-        if len(latencies) > LATENCIES_KEPT:
-            del latencies[: len(latencies) - LATENCIES_KEPT]
+        k = np.array([(key[0], key[2]) for key in keys])
+        n, at = zip(*held_at, strict=True)
+        held = np.repeat(np.array(at), n)
+        held_at.clear()
+        latencies.add(now - k[:, 0])
+        parts["queue"].add(k[:, 1] - k[:, 0])
+        parts["order"].add(held - k[:, 1])
+        parts["wait"].add(start - held)
+        parts["run"].add(np.full(len(keys), ran - start))
+        parts["flush"].add(np.full(len(keys), now - ran))
         counts.tracked += len(keys)
 
     def due() -> bool:
-        return runner.held > 0 and (
-            runner.held >= READ_BLOCK or time.monotonic() - first_held[0] >= budget_s
+        if runner.held == 0:
+            return False
+        now = time.monotonic()
+        return (
+            runner.held >= READ_BLOCK
+            or now - first_held[0] >= budget_s
+            or (plots.empty() and now - last_run[0] >= MIN_RUN_S)
         )
 
-    def arrivals() -> Iterator[tuple[tuple[float, int], Plot]]:
+    def arrivals() -> Iterator[tuple[tuple[float, int, float], Plot]]:
         while True:
             try:
-                item = plots.get(timeout=budget_s / 2)
+                item = plots.get(timeout=MIN_RUN_S if runner.held else budget_s / 2)
             except queue.Empty:
                 item = False
             if item is _END:
                 return
             if item:
                 arrived, position, plot = item
-                yield (arrived, position), plot
+                yield (arrived, position, time.monotonic()), plot
             if due():
                 run()
 
     for batch in plot_batches(time_ordered(arrivals(), horizon_s), sector_deg):
+        now = time.monotonic()
         if runner.held == 0:
-            first_held[0] = time.monotonic()
+            first_held[0] = now
         runner.hold(batch)
+        held_at.append((len(batch), now))
     run()
-    return latencies
+    return latencies.values(), {name: ring.values() for name, ring in parts.items()}
 
 
-def latency_ms(latencies_s: list[float]) -> dict[str, float | None]:
+def warm_up(make: Callable[..., GNNTracker], options: Any, association: Any, radars: dict) -> None:
+    """Load the tracker's compiled kernels (from the cache, or compiled) before the feed's clock
+    starts: a throwaway tracker of the same options (a monitor of its own) takes a target
+    seen four times by every radar, so the first plots of the feed do not wait for them."""
+    from radarviz.core.tracking.consistency import ConsistencyMonitor
+
+    tracker = make(replace(options, monitor=ConsistencyMonitor(keep_deleted=False)), association)
+    batches = []
+    for k in range(4):
+        for radar in radars.values():
+            period_s = radar.rotation_period_s or 4.0
+            site = (radar.x_m, radar.y_m, radar.z_m)
+            x, y = radar.x_m + 20e3 + 50.0 * period_s * k, radar.y_m + 20e3
+            r = math.hypot(x - radar.x_m, y - radar.y_m)
+            az = math.atan2(x - radar.x_m, y - radar.y_m) % (2 * math.pi)
+            sigma_r, sigma_az = radar.sigma_range_m, math.radians(radar.sigma_azimuth_deg)
+            t = period_s * k
+            batches.append([Plot(t, r, az, sigma_r, sigma_az, site, radar.name)])
+    batches.sort(key=lambda b: b[0].time_s)
+    tracker.add_batches(batches, [None] * len(batches))
+
+
+def latency_ms(latencies_s: np.ndarray | list[float]) -> dict[str, float | None]:
     """Median and 99th percentile of the latencies, ms (None without any)."""
-    if not latencies_s:
+    if len(latencies_s) == 0:
         return {"median": None, "p99": None}
     a = np.asarray(latencies_s) * 1e3
     return {"median": float(np.median(a)), "p99": float(np.percentile(a, 99))}

@@ -18,8 +18,10 @@ session draws the tracks' current state instead, one row per flush per method::
                                  tracks, oldest first, so no flush pays for them all
 
 A deleted track leaves the row at the flush after its scan (nothing to clear); its path,
-static, stays. The time series (per confirmed track, as ``TrackRecorder``'s) are one call
-per track and series, a millisecond each: their rows wait in a queue of tracks,
+static, stays. A method left out of ``shown`` (the live panel's boxes) gets empty rows and no
+new path strips until it is shown again; it is still tracked. The time series (per confirmed
+track, as ``TrackRecorder``'s) are one call per
+track and series, a millisecond each: their rows wait in a queue of tracks,
 ``SERIES_TRACKS`` of which are sent per flush, so a flush's cost stays bounded however many
 tracks are confirmed; a track's series lags by the queue's length over that (seconds for a
 few hundred confirmed tracks). The plots, the inset, the log and the layout are
@@ -77,6 +79,8 @@ class LiveTrackRecorder(TrackRecorder):
         # Confirmed rows waiting for their time series, by track entity name (its target,
         # method, colour; rows of plot, time_s, covariance, velocity), oldest first.
         self._waiting: dict[str, tuple[str, str, tuple, list]] = {}
+        #: The methods drawn (None: every one).
+        self.shown: frozenset[str] | None = None
 
     def add(self, plot: Plot, rows: list[StateRow], status: str = "") -> None:
         super().add(plot, rows, status)
@@ -122,6 +126,8 @@ class LiveTrackRecorder(TrackRecorder):
         n, t = self._at
         idx = self.indexes([n], [t])
         for method, tracks in by_method.items():
+            if self.shown is not None and method not in self.shown:
+                tracks = []
             k = len(tracks)
             if k:
                 x = np.array([s[0] for _, s in tracks])
@@ -190,6 +196,8 @@ class LiveTrackRecorder(TrackRecorder):
         """The strips drawn since the last path chunk: one static entity per method."""
         self._last_path = self.clock()
         for method, (s, c, r) in self._strips.items():
+            if self.shown is not None and method not in self.shown:
+                continue
             self.rec.log(
                 f"world/tracks/{method}/path/{self.chunk:06d}",
                 rr.LineStrips3D(s, colors=c, radii=r),
