@@ -144,7 +144,7 @@ def test_record_refuses_to_overwrite_and_leaves_no_temporary(
     assert main(["record", "--preset", "gorshkov", "--out", str(out), "--overwrite"]) == 0
     rows, _ = rrd_contents(out)
     # The six radars' gains against k: one static curve each.
-    assert rows["/charts/gorshkov/gain_r_percent/curves/5"] == 0
+    assert rows["/charts/gorshkov/gain_r_percent"] == 0
     assert sorted(p.name for p in tmp_path.iterdir()) == ["g.rrd"]
 
 
@@ -165,7 +165,7 @@ def test_demo_writes_a_recording_headless(tmp_path: Path, capsys, rrd_contents) 
         assert rows.get(path) == n, (path, rows.get(path))
     # Gorshkov's curves are functions of the window length: static charts, no timeline of
     # their own (every tab shows whichever timeline is active).
-    assert rows["/charts/gorshkov/gain_r_percent/curves/5"] == 0
+    assert rows["/charts/gorshkov/gain_r_percent"] == 0
     assert not any("window_k" in c for entity in cols.values() for c in entity)
     scene = prosov_scene(TrackingConfig(sigma_beta_deg=2.0, runs=500, seed=1))
     np.testing.assert_array_equal(
