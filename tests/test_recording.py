@@ -18,7 +18,7 @@ from radarviz.core.experiments.prosov import (
 )
 from radarviz.viz_app.cli.main import main
 from radarviz.viz_app.palette import rgb
-from radarviz.viz_app.rerun.prosov_scene import log_prosov
+from radarviz.viz_app.rerun.prosov_scene import CLOUD_SHOWN, log_prosov
 from radarviz.viz_app.rerun.recording import ellipsoid_axes, recording_file
 
 
@@ -36,14 +36,11 @@ def test_documented_entity_paths_exist_with_one_row_per_scan(
     rows, _ = rrd_contents(prosov_rrd)
     scans = 60
     per_scan = ["/prosov/map/truth/position", "/prosov/map/measurements"]
-    per_scan += [f"/prosov/bias/{c}/{part}" for c in SHOWN_CONVERSIONS for part in ("mean", "ci95")]
+    per_scan += ["/prosov/bias/scan"]
     for m in ALL_METHODS:
         per_scan.append(f"/prosov/map/tracks/{m}/position")
-        per_scan += [f"/prosov/target/{m}/{part}" for part in ("covariance", "estimate")]
-    for c in (*SHOWN_CONVERSIONS, "polar"):
-        per_scan += [
-            f"/prosov/target/{c}/{part}" for part in ("measurement", "cloud", "cloud_mean")
-        ]
+    for c in (*ALL_METHODS, "polar"):
+        per_scan.append(f"/prosov/target/{c}/scan")
     for m in ALL_METHODS:
         per_scan += [
             f"/plots/prosov/{name}/{m}" for name in ("bias_range_m", "rmse_x_m", "nees_pos")
@@ -55,8 +52,8 @@ def test_documented_entity_paths_exist_with_one_row_per_scan(
     for static in (
         "/prosov/map",
         "/prosov/map/radar",
-        "/prosov/map/truth/path",
-        "/prosov/map/tracks/ducm/path",
+        "/prosov/map/paths",
+        "/prosov/bias",
         "/prosov/target",
         "/prosov/target/naive/truth",
         "/prosov/legend/swatches",
@@ -94,12 +91,18 @@ def test_target_frame_is_the_estimate_seen_from_the_radar(prosov_rrd: Path, rrd_
         track = scene.tracks[m]
         d = track.x[:, [0, 2]] - truth
         expected = np.stack([-s * d[:, 0] + c * d[:, 1], c * d[:, 0] + s * d[:, 1]], -1)
-        got = np.array([p[0] for p in cols[f"/prosov/target/{m}/estimate"]["Points2D:positions"]])
+        # Each scan's last point is the estimate (drawn over the cloud and the measurement).
+        points = cols[f"/prosov/target/{m}/scan"]["Points2D:positions"]
+        got = np.array([p[-1] for p in points])
         np.testing.assert_allclose(got, expected, rtol=1e-5, atol=1e-2)
         rot = np.stack([np.stack([-s, c], -1), np.stack([c, s], -1)], -2)
         pos = track.P[:, [0, 2]][:, :, [0, 2]]
         cov = rot @ pos @ rot.transpose(0, 2, 1)
-        strips = cols[f"/prosov/target/{m}/covariance"]["LineStrips2D:strips"]
+        strips = cols[f"/prosov/target/{m}/scan"]["LineStrips2D:strips"]
+        # A conversion's scan also holds its × (two strokes) and its cloud and converted point.
+        own = m in SHOWN_CONVERSIONS
+        assert {len(row) for row in strips} == {3 if own else 1}, m
+        assert {len(row) for row in points} == {CLOUD_SHOWN + 2 if own else 1}, m
         for n in (0, 30, 59):
             pts = np.array(strips[n][0]) - expected[n]
             q = np.einsum("si,ij,sj->s", pts, np.linalg.inv(cov[n]), pts)
@@ -158,7 +161,7 @@ def test_demo_writes_a_recording_headless(tmp_path: Path, capsys, rrd_contents) 
     assert out.stat().st_size < 40e6
     rows, cols = rrd_contents(out)
     per_scan = {"/prosov/map/truth/position": 60, "/plots/prosov/nees_pos/band95_hi": 60}
-    per_scan |= {f"/prosov/target/{m}/covariance": 60 for m in ALL_METHODS}
+    per_scan |= {f"/prosov/target/{m}/scan": 60 for m in ALL_METHODS}
     per_scan |= {"/velocity/map/fused/position": 50, "/velocity/error/covariance": 50}
     per_scan |= {"/plots/doppler_start/rmse_vr_mps/range_doppler": 58}
     for path, n in per_scan.items():
@@ -190,8 +193,15 @@ def test_velocity_preset_logs_the_fused_velocity_and_flags_bad_geometry(
     scans = 50
     for r in ("R1", "R2", "R3"):
         assert f"/velocity/map/radars/{r}" in rows
-        assert rows[f"/velocity/map/lines_of_sight/{r}"] == scans
-        assert rows[f"/velocity/vector/radial/{r}"] == scans
+    # Every radar's line of sight and radial velocity, per scan, in one entity each.
+    for entity in ("/velocity/map/lines_of_sight", "/velocity/vector/radial"):
+        assert rows[entity] == scans
+        assert {
+            len(v)
+            for v in cols[entity][
+                "Arrows3D:vectors" if "radial" in entity else "LineStrips3D:strips"
+            ]
+        } == {3}
     assert rows["/velocity/map/fused/position"] == scans
     m_col = cols["/plots/velocity/geometry_metric/m"]
     m = np.array([v[0] for v in m_col["Scalars:scalars"]])

@@ -96,7 +96,7 @@ def test_tune_shows_the_run_record_shows(tmp_path: Path, rrd_contents) -> None:
     _, tune_cols = rrd_contents(tuned)
     entities = ["/prosov/map/truth/position", "/prosov/map/measurements"]
     entities += [f"/prosov/map/tracks/{m}/position" for m in ALL_METHODS]
-    entities += ["/prosov/target/ukf/covariance", "/plots/prosov/nees_pos/ducm"]
+    entities += ["/prosov/target/ukf/scan", "/plots/prosov/nees_pos/ducm"]
     entities += ["/plots/prosov/rmse_x_m/naive"]
     for entity in entities:
         for column in rec_cols[entity]:

@@ -62,16 +62,18 @@ def log_gorshkov_results(
     result: GorshkovResult,
     tracking: DopplerTrackingResult,
     analytic: bool = False,
+    series: bool = True,
 ) -> None:
     """Finite-memory σ and gains against k per radar and variant as charts (Monte Carlo;
     with ``analytic`` also √R_ii and the analytic gain, pale: ``log_k_charts``), and the
-    Doppler-aided track start's radial-velocity errors per scan."""
+    Doppler-aided track start's radial-velocity errors per scan (as charts, and with
+    ``series`` their values under ``plots/``, which no view draws)."""
     names = tuple(rad.preset.name for rad in result.radars)
     log_legend(rec, f"{ROOT}/legend", list(names), [radar_rgb(j) for j in range(len(names))])
     log_k_charts(rec, result, analytic)
     n = tracking.n
     times = (n - 1) * tracking.config.scenario().period_s
-    for var in tracking.rmse_vr_mps:
+    for var in tracking.rmse_vr_mps if series else ():
         label = VARIANTS.get(var, var)
         for entity, values, what in (
             ("rmse_vr_mps", tracking.rmse_vr_mps[var], "RMSE"),

@@ -140,10 +140,16 @@ def send_blueprint(rec: rr.RecordingStream, scene: str) -> None:
             stream.disconnect()
 
 
-def log_tuning_scene(rec: rr.RecordingStream, params: TuneParams) -> TuneResult:
-    """Simulate ``params`` and log its scene (the viewer's scene module) and blueprint."""
+def log_tuning_scene(
+    rec: rr.RecordingStream, params: TuneParams, series: bool = True
+) -> TuneResult:
+    """Simulate ``params`` and log its scene (the viewer's scene module) and blueprint.
+
+    ``series``: with the statistics' values under ``plots/`` as well as their charts. The
+    panel's runs leave them out: no view draws them, and the viewer's time to a run's first
+    complete frame grows with the chunks it must take in (a saved run keeps them)."""
     result = simulate(params)
-    log_result(rec, result)
+    log_result(rec, result, series)
     send_blueprint(rec, params.scene)
     p = params
     log_text(
@@ -201,7 +207,7 @@ class TuneSession:
                 rec.connect_grpc(self.grpc_uri)
             else:
                 rec.set_sinks()  # no sink: the data are dropped (tests, benchmarks)
-            result = log_tuning_scene(rec, params)
+            result = log_tuning_scene(rec, params, series=False)
             rec.flush()
         finally:
             with contextlib.suppress(Exception):
