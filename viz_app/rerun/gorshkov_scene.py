@@ -105,14 +105,16 @@ def log_k_charts(rec: rr.RecordingStream, result: GorshkovResult, analytic: bool
     ks = np.asarray(result.ks, dtype=np.float64)
 
     def curves(values) -> list[plot2d.Curve]:
-        out = []
+        # The pale analytic curves first: a chart draws its curves in order, so the Monte
+        # Carlo values lie on top where the two meet.
+        pale_curves, out = [], []
         for j, rad in enumerate(result.radars):
             mc, exact = values(rad)
             out.append(plot2d.Curve(rad.preset.name, ks, mc, radar_rgb(j)))
             if analytic:
                 tone = pale(radar_rgb(j), 0.5)
-                out.append(plot2d.Curve(f"{rad.preset.name} analytic", ks, exact, tone))
-        return out
+                pale_curves.append(plot2d.Curve(f"{rad.preset.name} analytic", ks, exact, tone))
+        return pale_curves + out
 
     for var in VARIANTS:
         for i, (_, entity, _) in enumerate(COMPONENTS):
