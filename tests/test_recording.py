@@ -35,10 +35,8 @@ def test_documented_entity_paths_exist_with_one_row_per_scan(
 ) -> None:
     rows, _ = rrd_contents(prosov_rrd)
     scans = 60
-    per_scan = ["/prosov/map/truth/position", "/prosov/map/measurements"]
+    per_scan = ["/prosov/map/scan"]
     per_scan += ["/prosov/bias/scan"]
-    for m in ALL_METHODS:
-        per_scan.append(f"/prosov/map/tracks/{m}/position")
     for c in (*ALL_METHODS, "polar"):
         per_scan.append(f"/prosov/target/{c}/scan")
     for m in ALL_METHODS:
@@ -55,8 +53,7 @@ def test_documented_entity_paths_exist_with_one_row_per_scan(
         "/prosov/map/paths",
         "/prosov/bias",
         "/prosov/target",
-        "/prosov/target/naive/truth",
-        "/prosov/legend/swatches",
+        "/prosov/legend",
         "/log",
     ):
         assert static in rows, static
@@ -102,7 +99,8 @@ def test_target_frame_is_the_estimate_seen_from_the_radar(prosov_rrd: Path, rrd_
         # A conversion's scan also holds its × (two strokes) and its cloud and converted point.
         own = m in SHOWN_CONVERSIONS
         assert {len(row) for row in strips} == {3 if own else 1}, m
-        assert {len(row) for row in points} == {CLOUD_SHOWN + 2 if own else 1}, m
+        # The truth, the scale (and a note), the cloud and the converted point, the estimate.
+        assert {len(row) for row in points} == {CLOUD_SHOWN + 5 if own else 3}, m
         for n in (0, 30, 59):
             pts = np.array(strips[n][0]) - expected[n]
             q = np.einsum("si,ij,sj->s", pts, np.linalg.inv(cov[n]), pts)
@@ -160,7 +158,7 @@ def test_demo_writes_a_recording_headless(tmp_path: Path, capsys, rrd_contents) 
     assert f"wrote {out}" in printed and "radarviz view" in printed
     assert out.stat().st_size < 40e6
     rows, cols = rrd_contents(out)
-    per_scan = {"/prosov/map/truth/position": 60, "/plots/prosov/nees_pos/band95_hi": 60}
+    per_scan = {"/prosov/map/scan": 60, "/plots/prosov/nees_pos/band95_hi": 60}
     per_scan |= {f"/prosov/target/{m}/scan": 60 for m in ALL_METHODS}
     per_scan |= {"/velocity/map/fused/position": 50, "/velocity/error/covariance": 50}
     per_scan |= {"/plots/doppler_start/rmse_vr_mps/range_doppler": 58}
@@ -175,9 +173,13 @@ def test_demo_writes_a_recording_headless(tmp_path: Path, capsys, rrd_contents) 
         [v[0] for v in cols["/plots/prosov/rmse_x_m/naive"]["Scalars:scalars"]],
         scene.result.metrics["naive"].rmse_x_m,
     )
+    pts = cols["/prosov/map/scan"]["Points2D:positions"]
+    np.testing.assert_array_equal(
+        np.array([p[-1] for p in pts]), scene.truth[:, [0, 2]].astype(np.float32)
+    )
     for m in ("seed", "ukf"):
-        pts = cols[f"/prosov/map/tracks/{m}/position"]["Points2D:positions"]
-        logged = np.array([p[0] for p in pts])
+        # The plot first, then the estimates in the methods' order, the truth last.
+        logged = np.array([p[1 + list(scene.tracks).index(m)] for p in pts])
         np.testing.assert_array_equal(logged, scene.tracks[m].x[:, [0, 2]].astype(np.float32))
 
 

@@ -7,20 +7,21 @@ Entity paths (``{m}`` a method: naive, seed, cmkf_d, ucm, ducm, ekf, ukf)::
                                        the distance at the end, the scale bar's length
     prosov/map/paths                   the whole true trajectory, the scale bar and the
                                        displayed run's tracks (static strips)
-    prosov/map/truth/position          the true target per scan
-    prosov/map/measurements            the displayed run's plots, converted naively, per scan
-    prosov/map/tracks/{m}/position     its estimate per scan
+    prosov/map/scan                    per scan: the displayed run's plot (converted naively,
+                                       the first point), each method's estimate (then, in
+                                       the order of the legend) and the true target (last)
     prosov/target                      static transform: the target frame (below), drawn with
                                        down-range up and exaggerated RANGE ×k (k in view names)
-    prosov/target/{m}/truth            the true target: the frame's origin, and the note on
-                                       the measurements drawn (static)
     prosov/target/{m}/scan             per scan, in one entity: the method's 1σ position
                                        ellipse (the first strip) and estimate (the last
-                                       point); for a conversion c (naive, seed, cmkf_d, ucm)
-                                       also the Monte Carlo cloud of c's converted points
+                                       point), the true target at the frame's origin (the
+                                       first point) and the view's scale (a label); for a
+                                       conversion c (naive, seed, cmkf_d, ucm) a note, the
+                                       Monte Carlo cloud of c's converted points
                                        (pale), the scan's converted point and the cloud's
                                        mean (an ×, the next two strips)
-    prosov/target/polar/scan           the same marks of the naive points in grey, shown in
+    prosov/target/polar/scan           the same marks of the naive points in grey (and a note),
+                                       shown in
                                        the views of the filters fed polar plots (ducm, ekf,
                                        ukf)
     prosov/bias                        the bias forest plot (``plot2d.forest_plot``): its axis in m
@@ -39,7 +40,7 @@ in every view, plot and figure (``viz_app.palette``).
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import rerun as rr
@@ -241,31 +242,21 @@ def log_map(rec: rr.RecordingStream, scene: ProsovScene, frame: TargetFrame, lab
         ),
         static=True,
     )
+    # Per scan, one entity: the displayed run's plots (converted naively), each method's
+    # estimate, and the true target last (on top).
+    tracks = [track.x[:, [0, 2]] for track in scene.tracks.values()]
+    points = np.stack([scene.converted_xy_m["naive"], *tracks, truth], 1)  # (n, 2 + tracks, 2)
+    tones = [rgb("measurement")] + [rgb(m) for m in scene.tracks] + [rgb("truth")]
+    sizes = [SMALL_MARKER] * (1 + len(tracks)) + [MARKER]
     rec.send_columns(
-        f"{base}/truth/position",
+        f"{base}/scan",
         indexes=idx,
         columns=rr.Points2D.columns(
-            positions=truth, radii=radii(MARKER, n), colors=colours(rgb("truth"), n)
-        ),
+            positions=points.reshape(-1, 2),
+            radii=np.tile(np.asarray(sizes, dtype=np.float32), n),
+            colors=np.tile(np.asarray(tones, dtype=np.uint8), (n, 1)),
+        ).partition([points.shape[1]] * n),
     )
-    rec.send_columns(
-        f"{base}/measurements",
-        indexes=idx,
-        columns=rr.Points2D.columns(
-            positions=scene.converted_xy_m["naive"],
-            radii=radii(SMALL_MARKER, n),
-            colors=colours(rgb("measurement"), n),
-        ),
-    )
-    for m, track in scene.tracks.items():
-        xy = track.x[:, [0, 2]]
-        rec.send_columns(
-            f"{base}/tracks/{m}/position",
-            indexes=idx,
-            columns=rr.Points2D.columns(
-                positions=xy, radii=radii(SMALL_MARKER, n), colors=colours(rgb(m), n)
-            ),
-        )
 
 
 def log_target_frame(
@@ -291,13 +282,10 @@ def log_target_frame(
     )
     k = frame.exaggeration
     stretch = f", down-range ×{k}" if k != 1 else ""
-    scale_label = rr.Points2D(
-        # Centred at the top: a label as wide as half a small view stays inside it.
-        [[0.0, 0.36 * frame.cross_half_m / k]],
-        radii=[0.0],
-        labels=[f"view ±{frame.cross_half_m / 1e3:g} km across{stretch}"],
-        show_labels=True,
-    )
+    # Centred at the top: a label as wide as half a small view stays inside it.
+    scale_at = [0.0, 0.36 * frame.cross_half_m / k]
+    scale_text = f"view ±{frame.cross_half_m / 1e3:g} km across{stretch}"
+    note_at = [0.0, -0.3 * frame.cross_half_m / k]
     measured = {c: _to_frame(scene, scene.converted_xy_m[c]) for c in SHOWN_CONVERSIONS}
     clouds = {c: _to_frame(scene, cloud.points[c][:, :shown]) for c in SHOWN_CONVERSIONS}
     means = cloud.offset_mean_m
@@ -305,25 +293,14 @@ def log_target_frame(
         base = f"{ROOT}/target/{m}"
         colour = rgb(m)
         own = m in SHOWN_CONVERSIONS
-        # The truth and, for a conversion, the note on its points: one static entity.
-        marks, tones, texts, sizes = [[0.0, 0.0]], [rgb("truth")], [""], [MARKER]
+        # The same in every scan: the truth at the origin, the view's scale and, for a
+        # conversion, the note on its points (labels of points of no size).
+        fixed = _Fixed([[0.0, 0.0], scale_at], [rgb("truth"), plot2d.AXIS], [MARKER, 0.0])
+        fixed.labels[1] = scale_text
         if own:
-            marks.append([0.0, -0.3 * frame.cross_half_m / k])
-            tones.append(pale(colour, 0.2))
-            texts.append("pale: converted plots (Monte Carlo), × their mean")
-            sizes.append(0.0)
-        rec.log(
-            f"{base}/truth",
-            rr.Points2D(
-                marks,
-                radii=np.array(sizes, dtype=np.float32),
-                colors=np.array(tones, dtype=np.uint8),
-                labels=texts,
-                show_labels=True,
-            ),
-            static=True,
-        )
-        rec.log(f"{base}/scale", scale_label, static=True)
+            fixed.add(
+                note_at, pale(colour, 0.2), "pale: converted plots (Monte Carlo), × their mean"
+            )
         est = _to_frame(scene, track.x[:, [0, 2]])
         cov = _frame_cov(scene, track.P)
         # Per scan, one entity (one chunk for the viewer): the ellipse (and the ×), the
@@ -353,6 +330,7 @@ def log_target_frame(
             points,
             point_colours,
             point_radii,
+            fixed,
         )
     # Filters fed polar plots (ducm, ekf, ukf) share one grey copy of the naive points.
     if any(m not in SHOWN_CONVERSIONS for m in scene.tracks):
@@ -360,18 +338,9 @@ def log_target_frame(
         polar = f"{ROOT}/target/polar"
         naive = (measured["naive"], clouds["naive"], means["naive"])
         x, lc, lr, p, pc, pr = _measured_marks(*naive, grey, frame)
-        _send_scan(rec, f"{polar}/scan", idx, x, lc, lr, p, pc, pr)
-        rec.log(
-            f"{polar}/note",
-            rr.Points2D(
-                [[0.0, -0.3 * frame.cross_half_m / k]],
-                radii=[0.0],
-                colors=[grey],
-                labels=["grey: plots converted naively, × their mean (fed polar plots)"],
-                show_labels=True,
-            ),
-            static=True,
-        )
+        fixed = _Fixed([], [], [])
+        fixed.add(note_at, grey, "grey: plots converted naively, × their mean (fed polar plots)")
+        _send_scan(rec, f"{polar}/scan", idx, x, lc, lr, p, pc, pr, fixed)
     _log_bias(rec, cloud, frame, idx)
 
 
@@ -400,6 +369,28 @@ def _measured_marks(
     )
 
 
+@dataclass
+class _Fixed:
+    """Points drawn at every scan before the scan's own (a view at a scan draws one row of an
+    entity: marks that never change are repeated in each row rather than kept in a static
+    entity of their own, which would be one more chunk for the viewer to take in)."""
+
+    positions: list[list[float]]
+    colours: list[tuple[int, int, int]]
+    radii: list[float]
+    labels: list[str] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        self.labels = self.labels or [""] * len(self.positions)
+
+    def add(self, position: list[float], colour: tuple[int, int, int], label: str) -> None:
+        """A label (a point of no size) at ``position``."""
+        self.positions.append(position)
+        self.colours.append(colour)
+        self.radii.append(0.0)
+        self.labels.append(label)
+
+
 def _send_scan(
     rec: rr.RecordingStream,
     entity: str,
@@ -410,10 +401,11 @@ def _send_scan(
     points: NDArray[np.float64],
     point_colours: NDArray,
     point_radii: NDArray,
+    fixed: _Fixed,
 ) -> None:
-    """Per scan ``k``, the strips ``lines[k]`` and the points ``points[k]`` at ``entity``, in
-    one chunk; colours and radii per scan, (n, strips or points, ...) (the points' instance
-    order is the drawing order: the last on top)."""
+    """Per scan ``k``, the strips ``lines[k]``, the ``fixed`` points then the points
+    ``points[k]`` at ``entity``, in one chunk; colours and radii per scan, (n, strips or
+    points, ...) (the points' instance order is the drawing order: the last on top)."""
     strips = [np.asarray(s, dtype=np.float64) for row in lines for s in row]
     per_scan = [len(row) for row in lines]
     columns = list(
@@ -423,12 +415,24 @@ def _send_scan(
             radii=np.asarray(line_radii, dtype=np.float32).ravel(),
         ).partition(per_scan)
     )
-    n, count = points.shape[0], points.shape[1]
+    n, f = points.shape[0], len(fixed.positions)
+    if f:
+        points = np.concatenate([np.tile(np.asarray(fixed.positions), (n, 1, 1)), points], 1)
+        point_colours = np.concatenate(
+            [np.tile(np.asarray(fixed.colours, dtype=np.uint8), (n, 1, 1)), point_colours], 1
+        )
+        point_radii = np.concatenate(
+            [np.tile(np.asarray(fixed.radii, dtype=np.float32), (n, 1)), point_radii], 1
+        )
+    count = points.shape[1]
+    labels = (fixed.labels + [""] * (count - f)) * n
     columns += list(
         rr.Points2D.columns(
             positions=points.reshape(-1, 2),
             colors=np.asarray(point_colours, dtype=np.uint8).reshape(-1, 3),
             radii=np.asarray(point_radii, dtype=np.float32).ravel(),
+            labels=labels,
+            show_labels=[True] * (n * count),
         ).partition([count] * n)
     )
     rec.send_columns(entity, indexes=idx, columns=columns)
