@@ -79,14 +79,24 @@ def test_a_chart_draws_its_curves_ticks_band_and_cursor(tmp_path: Path, rrd_cont
         )
     rows, cols = rrd_contents(path)
     assert (plot.y.lo, plot.y.hi) == (1.0, 100.0)
-    for part in ("grid/box", "grid/lines", "ticks", "band/fill", "band/edges", "curves/0"):
-        assert f"/charts/t/q/{part}" in rows, part
-    assert rows["/charts/t/q/cursor/labels"] == 10
-    labels = [v[0] for v in cols["/charts/t/q/cursor/labels"]["Points2D:labels"]]
-    assert labels[0] == "q 1 m" and labels[-1] == "q 100 m"
-    dots = np.array([v[0] for v in cols["/charts/t/q/cursor/values"]["Points2D:positions"]])
+    # Two entities: the static drawing (grid, band, curve and numbers) and the cursor.
+    assert sorted(r for r in rows if r != "/__properties") == ["/charts/t/q", "/charts/t/q/cursor"]
+    drawn = _static(path, "/charts/t/q")
+    strips = drawn["LineStrips2D:strips"][0]
+    curve = np.array(strips[-1])  # the curve is drawn last, over the grid and the band
+    np.testing.assert_allclose(curve[:, 0], (x - 1.0) / 9.0 * 200.0, rtol=1e-5)
+    np.testing.assert_allclose(curve[:, 1], np.linspace(0.0, 100.0, 10), atol=1e-3)
+    assert drawn["LineStrips2D:colors"][0][-1] == 0x0072B2FF
+    texts = drawn["Points2D:labels"][0]
+    assert {"1", "10", "100", "95% band"} <= set(texts)
+    assert rows["/charts/t/q/cursor"] == 10
+    labels = [[t for t in v if t] for v in cols["/charts/t/q/cursor"]["Points2D:labels"]]
+    assert labels[0] == ["q 1 m"] and labels[-1] == ["q 100 m"]
+    points = cols["/charts/t/q/cursor"]["Points2D:positions"]
+    dots = np.array([v[0] for v in points])  # each scan: the dot, then its label
     np.testing.assert_allclose(dots[:, 0], (x - 1.0) / 9.0 * 200.0, rtol=1e-5)
     np.testing.assert_allclose(dots[:, 1], np.linspace(0.0, 100.0, 10), atol=1e-3)
+    assert all(v[0] == "" for v in cols["/charts/t/q/cursor"]["Points2D:labels"])
 
 
 def test_a_forest_plot_draws_its_rows_on_a_numbered_axis(tmp_path: Path, rrd_contents) -> None:
@@ -114,24 +124,34 @@ def test_a_forest_plot_draws_its_rows_on_a_numbered_axis(tmp_path: Path, rrd_con
             reference="truth",
         )
     rows, cols = rrd_contents(path)
-    assert rows["/f/bias/naive/mean"] == rows["/f/bias/ucm/ci95"] == rows["/f/bias/values"] == n
-    for static in ("/f/bias/grid/box", "/f/bias/ticks", "/f/bias/rows", "/f/bias/reference"):
-        assert static in rows, static
-    dots = np.array([v[0] for v in cols["/f/bias/naive/mean"]["Points2D:positions"]])
+    assert sorted(r for r in rows if r != "/__properties") == ["/f/bias", "/f/bias/scan"]
+    assert rows["/f/bias/scan"] == n
+    # Each scan: the rows' dots (naive, ucm), then their values.
+    points = [np.array(v) for v in cols["/f/bias/scan"]["Points2D:positions"]]
+    dots = np.array([v[0] for v in points])
     np.testing.assert_allclose(dots[:, 0], (centre[:, 0] + 500.0) / 1000.0 * 200.0, rtol=1e-5)
     assert np.all(dots[:, 1] > 0.5 * plot2d.HEIGHT)  # the first row above the second
-    ucm = np.array([v[0] for v in cols["/f/bias/ucm/mean"]["Points2D:positions"]])
+    ucm = np.array([v[1] for v in points])
     assert np.all(ucm[:, 1] < 0.5 * plot2d.HEIGHT)
     # An interval beyond the axis is drawn to the box's edge only.
-    ends = np.array(cols["/f/bias/ucm/ci95"]["LineStrips2D:strips"][2][0])
+    ends = np.array(cols["/f/bias/scan"]["LineStrips2D:strips"][2][1])
     np.testing.assert_allclose(ends[:, 0], [0.0, 200.0], atol=1e-4)
-    values = cols["/f/bias/values"]["Points2D:labels"]
-    assert values[0] == ["-157 ± 10 m", "6 ± 11 m"] and values[2][1] == "-20 ± 900 m"
+    values = cols["/f/bias/scan"]["Points2D:labels"]
+    assert values[0] == ["", "", "-157 ± 10 m", "6 ± 11 m"] and values[2][3] == "-20 ± 900 m"
     assert plot.x_unit == "m"
-    names = _static(path, "/f/bias/rows")
-    assert names["Points2D:labels"][0] == ["naive", "ucm"]
-    ticks = _static(path, "/f/bias/ticks")["Points2D:labels"][0]
+    drawn = _static(path, "/f/bias")
+    texts = drawn["Points2D:labels"][0]
+    at = {t: p for t, p in zip(texts, drawn["Points2D:positions"][0], strict=True)}
+    assert {"naive", "ucm", "truth"} <= set(texts)
+    ticks = [t for t in texts if t not in ("naive", "ucm", "truth")]
     assert ticks[0] == "-500" and ticks[-1] == "500 m" and "0" in ticks
+    # The reference line at x = 0, in the middle of the box.
+    reference = np.array(drawn["LineStrips2D:strips"][0][-1])
+    np.testing.assert_allclose(reference[:, 0], [100.0, 100.0], atol=1e-4)
+    names = {
+        "Points2D:positions": [[at["naive"], at["ucm"]]],
+        "Points2D:labels": [["naive", "ucm"]],
+    }
     # The names fit the room the view leaves left of the box (about 0.06 HEIGHT a character,
     # centred on their point).
     for (x, _), name in zip(

@@ -18,7 +18,7 @@ from radarviz.core.experiments.prosov import (
 )
 from radarviz.viz_app.cli.main import main
 from radarviz.viz_app.palette import rgb
-from radarviz.viz_app.rerun.prosov_scene import log_prosov
+from radarviz.viz_app.rerun.prosov_scene import CLOUD_SHOWN, log_prosov
 from radarviz.viz_app.rerun.recording import ellipsoid_axes, recording_file
 
 
@@ -35,15 +35,10 @@ def test_documented_entity_paths_exist_with_one_row_per_scan(
 ) -> None:
     rows, _ = rrd_contents(prosov_rrd)
     scans = 60
-    per_scan = ["/prosov/map/truth/position", "/prosov/map/measurements"]
-    per_scan += [f"/prosov/bias/{c}/{part}" for c in SHOWN_CONVERSIONS for part in ("mean", "ci95")]
-    for m in ALL_METHODS:
-        per_scan.append(f"/prosov/map/tracks/{m}/position")
-        per_scan += [f"/prosov/target/{m}/{part}" for part in ("covariance", "estimate")]
-    for c in (*SHOWN_CONVERSIONS, "polar"):
-        per_scan += [
-            f"/prosov/target/{c}/{part}" for part in ("measurement", "cloud", "cloud_mean")
-        ]
+    per_scan = ["/prosov/map/scan"]
+    per_scan += ["/prosov/bias/scan"]
+    for c in (*ALL_METHODS, "polar"):
+        per_scan.append(f"/prosov/target/{c}/scan")
     for m in ALL_METHODS:
         per_scan += [
             f"/plots/prosov/{name}/{m}" for name in ("bias_range_m", "rmse_x_m", "nees_pos")
@@ -55,11 +50,10 @@ def test_documented_entity_paths_exist_with_one_row_per_scan(
     for static in (
         "/prosov/map",
         "/prosov/map/radar",
-        "/prosov/map/truth/path",
-        "/prosov/map/tracks/ducm/path",
+        "/prosov/map/paths",
+        "/prosov/bias",
         "/prosov/target",
-        "/prosov/target/naive/truth",
-        "/prosov/legend/swatches",
+        "/prosov/legend",
         "/log",
     ):
         assert static in rows, static
@@ -94,12 +88,19 @@ def test_target_frame_is_the_estimate_seen_from_the_radar(prosov_rrd: Path, rrd_
         track = scene.tracks[m]
         d = track.x[:, [0, 2]] - truth
         expected = np.stack([-s * d[:, 0] + c * d[:, 1], c * d[:, 0] + s * d[:, 1]], -1)
-        got = np.array([p[0] for p in cols[f"/prosov/target/{m}/estimate"]["Points2D:positions"]])
+        # Each scan's last point is the estimate (drawn over the cloud and the measurement).
+        points = cols[f"/prosov/target/{m}/scan"]["Points2D:positions"]
+        got = np.array([p[-1] for p in points])
         np.testing.assert_allclose(got, expected, rtol=1e-5, atol=1e-2)
         rot = np.stack([np.stack([-s, c], -1), np.stack([c, s], -1)], -2)
         pos = track.P[:, [0, 2]][:, :, [0, 2]]
         cov = rot @ pos @ rot.transpose(0, 2, 1)
-        strips = cols[f"/prosov/target/{m}/covariance"]["LineStrips2D:strips"]
+        strips = cols[f"/prosov/target/{m}/scan"]["LineStrips2D:strips"]
+        # A conversion's scan also holds its × (two strokes) and its cloud and converted point.
+        own = m in SHOWN_CONVERSIONS
+        assert {len(row) for row in strips} == {3 if own else 1}, m
+        # The truth, the scale (and a note), the cloud and the converted point, the estimate.
+        assert {len(row) for row in points} == {CLOUD_SHOWN + 5 if own else 3}, m
         for n in (0, 30, 59):
             pts = np.array(strips[n][0]) - expected[n]
             q = np.einsum("si,ij,sj->s", pts, np.linalg.inv(cov[n]), pts)
@@ -144,7 +145,7 @@ def test_record_refuses_to_overwrite_and_leaves_no_temporary(
     assert main(["record", "--preset", "gorshkov", "--out", str(out), "--overwrite"]) == 0
     rows, _ = rrd_contents(out)
     # The six radars' gains against k: one static curve each.
-    assert rows["/charts/gorshkov/gain_r_percent/curves/5"] == 0
+    assert rows["/charts/gorshkov/gain_r_percent"] == 0
     assert sorted(p.name for p in tmp_path.iterdir()) == ["g.rrd"]
 
 
@@ -157,24 +158,28 @@ def test_demo_writes_a_recording_headless(tmp_path: Path, capsys, rrd_contents) 
     assert f"wrote {out}" in printed and "radarviz view" in printed
     assert out.stat().st_size < 40e6
     rows, cols = rrd_contents(out)
-    per_scan = {"/prosov/map/truth/position": 60, "/plots/prosov/nees_pos/band95_hi": 60}
-    per_scan |= {f"/prosov/target/{m}/covariance": 60 for m in ALL_METHODS}
+    per_scan = {"/prosov/map/scan": 60, "/plots/prosov/nees_pos/band95_hi": 60}
+    per_scan |= {f"/prosov/target/{m}/scan": 60 for m in ALL_METHODS}
     per_scan |= {"/velocity/map/fused/position": 50, "/velocity/error/covariance": 50}
     per_scan |= {"/plots/doppler_start/rmse_vr_mps/range_doppler": 58}
     for path, n in per_scan.items():
         assert rows.get(path) == n, (path, rows.get(path))
     # Gorshkov's curves are functions of the window length: static charts, no timeline of
     # their own (every tab shows whichever timeline is active).
-    assert rows["/charts/gorshkov/gain_r_percent/curves/5"] == 0
+    assert rows["/charts/gorshkov/gain_r_percent"] == 0
     assert not any("window_k" in c for entity in cols.values() for c in entity)
     scene = prosov_scene(TrackingConfig(sigma_beta_deg=2.0, runs=500, seed=1))
     np.testing.assert_array_equal(
         [v[0] for v in cols["/plots/prosov/rmse_x_m/naive"]["Scalars:scalars"]],
         scene.result.metrics["naive"].rmse_x_m,
     )
+    pts = cols["/prosov/map/scan"]["Points2D:positions"]
+    np.testing.assert_array_equal(
+        np.array([p[-1] for p in pts]), scene.truth[:, [0, 2]].astype(np.float32)
+    )
     for m in ("seed", "ukf"):
-        pts = cols[f"/prosov/map/tracks/{m}/position"]["Points2D:positions"]
-        logged = np.array([p[0] for p in pts])
+        # The plot first, then the estimates in the methods' order, the truth last.
+        logged = np.array([p[1 + list(scene.tracks).index(m)] for p in pts])
         np.testing.assert_array_equal(logged, scene.tracks[m].x[:, [0, 2]].astype(np.float32))
 
 
@@ -190,8 +195,15 @@ def test_velocity_preset_logs_the_fused_velocity_and_flags_bad_geometry(
     scans = 50
     for r in ("R1", "R2", "R3"):
         assert f"/velocity/map/radars/{r}" in rows
-        assert rows[f"/velocity/map/lines_of_sight/{r}"] == scans
-        assert rows[f"/velocity/vector/radial/{r}"] == scans
+    # Every radar's line of sight and radial velocity, per scan, in one entity each.
+    for entity in ("/velocity/map/lines_of_sight", "/velocity/vector/radial"):
+        assert rows[entity] == scans
+        assert {
+            len(v)
+            for v in cols[entity][
+                "Arrows3D:vectors" if "radial" in entity else "LineStrips3D:strips"
+            ]
+        } == {3}
     assert rows["/velocity/map/fused/position"] == scans
     m_col = cols["/plots/velocity/geometry_metric/m"]
     m = np.array([v[0] for v in m_col["Scalars:scalars"]])

@@ -94,20 +94,19 @@ def test_tune_shows_the_run_record_shows(tmp_path: Path, rrd_contents) -> None:
     release_streams()
     _, rec_cols = rrd_contents(recorded)
     _, tune_cols = rrd_contents(tuned)
-    entities = ["/prosov/map/truth/position", "/prosov/map/measurements"]
-    entities += [f"/prosov/map/tracks/{m}/position" for m in ALL_METHODS]
-    entities += ["/prosov/target/ukf/covariance", "/plots/prosov/nees_pos/ducm"]
+    # The map's scan: the plot, every method's estimate and the truth.
+    entities = ["/prosov/map/scan", "/prosov/target/ukf/scan", "/plots/prosov/nees_pos/ducm"]
     entities += ["/plots/prosov/rmse_x_m/naive"]
     for entity in entities:
         for column in rec_cols[entity]:
             if column != "rerun.controls.RowId":
                 assert tune_cols[entity][column] == rec_cols[entity][column], (entity, column)
-    assert len(rec_cols["/prosov/map/tracks/ukf/position"]["Points2D:positions"]) == 60
+    scans = rec_cols["/prosov/map/scan"]["Points2D:positions"]
+    assert len(scans) == 60 and {len(p) for p in scans} == {len(ALL_METHODS) + 2}
     # A different seed is a different run: the comparison above can fail.
     other = simulate(TuneParams(sigma_beta_deg=2.0, seed=4, runs=20)).scene.tracks["ukf"].x
-    first = np.array(
-        [p[0] for p in rec_cols["/prosov/map/tracks/ukf/position"]["Points2D:positions"]]
-    )
+    ukf = 1 + ALL_METHODS.index("ukf")
+    first = np.array([p[ukf] for p in scans])
     assert not np.allclose(first[:, :2], other[:, [0, 2]].astype(np.float32))
 
 

@@ -62,16 +62,18 @@ def log_gorshkov_results(
     result: GorshkovResult,
     tracking: DopplerTrackingResult,
     analytic: bool = False,
+    series: bool = True,
 ) -> None:
     """Finite-memory σ and gains against k per radar and variant as charts (Monte Carlo;
     with ``analytic`` also √R_ii and the analytic gain, pale: ``log_k_charts``), and the
-    Doppler-aided track start's radial-velocity errors per scan."""
+    Doppler-aided track start's radial-velocity errors per scan (as charts, and with
+    ``series`` their values under ``plots/``, which no view draws)."""
     names = tuple(rad.preset.name for rad in result.radars)
     log_legend(rec, f"{ROOT}/legend", list(names), [radar_rgb(j) for j in range(len(names))])
     log_k_charts(rec, result, analytic)
     n = tracking.n
     times = (n - 1) * tracking.config.scenario().period_s
-    for var in tracking.rmse_vr_mps:
+    for var in tracking.rmse_vr_mps if series else ():
         label = VARIANTS.get(var, var)
         for entity, values, what in (
             ("rmse_vr_mps", tracking.rmse_vr_mps[var], "RMSE"),
@@ -103,14 +105,16 @@ def log_k_charts(rec: rr.RecordingStream, result: GorshkovResult, analytic: bool
     ks = np.asarray(result.ks, dtype=np.float64)
 
     def curves(values) -> list[plot2d.Curve]:
-        out = []
+        # The pale analytic curves first: a chart draws its curves in order, so the Monte
+        # Carlo values lie on top where the two meet.
+        pale_curves, out = [], []
         for j, rad in enumerate(result.radars):
             mc, exact = values(rad)
             out.append(plot2d.Curve(rad.preset.name, ks, mc, radar_rgb(j)))
             if analytic:
                 tone = pale(radar_rgb(j), 0.5)
-                out.append(plot2d.Curve(f"{rad.preset.name} analytic", ks, exact, tone))
-        return out
+                pale_curves.append(plot2d.Curve(f"{rad.preset.name} analytic", ks, exact, tone))
+        return pale_curves + out
 
     for var in VARIANTS:
         for i, (_, entity, _) in enumerate(COMPONENTS):

@@ -12,19 +12,23 @@ is ``[0, width] × [0, HEIGHT]``; y tick numbers sit left of it, x tick numbers 
 curves' labels right of it. ``plot_view`` frames the box with room for all three, for a view of
 about ``width / HEIGHT`` times wider than high.
 
-Entities under a plot's root ``{p}``::
+A plot is two entities, so that a viewer has few chunks to take in before it can draw it
+(its ingestion, not the drawing, sets how soon a new recording shows)::
 
-    {p}                static transform (y up)
-    {p}/grid           box and grid lines (static)
-    {p}/ticks          tick numbers (static)
-    {p}/band           a shaded band, e.g. a χ² 95% band (static)
-    {p}/curves/{i}     curve i's line (static)
-    {p}/labels         each curve's name and last value at its right end (static)
-    {p}/cursor         per scan: the cursor line and each curve's value, labelled
+    {p}         static: the transform (y up); one ``LineStrips2D`` holding, bottom to top,
+                the grid lines and box, a shaded band (e.g. a χ² 95% band) and its edges, and
+                the curves (strip colours per line); one ``Points2D`` of text: the tick
+                numbers, the band's name and each curve's name and last value at its right end
+    {p}/cursor  per scan: the cursor line (``LineStrips2D``) and, in one ``Points2D``, a dot
+                on each curve and each curve's value, labelled (the dots' labels are empty)
+
+Within one batch a later strip is drawn over an earlier one, hence the order above.
 
 A *forest plot* (``forest_plot``) uses the same box and x axis for a few rows of per-scan
 estimates, each a mean with its confidence interval: the rows' names sit left of the box
-where a plot has its y numbers, and each row's value at the scan right of it.
+where a plot has its y numbers, and each row's value at the scan right of it. Its entities:
+``{p}`` static (transform; grid, box and the reference line; tick numbers, row names and
+the reference's name) and ``{p}/scan`` per scan (the intervals; the means and their values).
 """
 
 from __future__ import annotations
@@ -226,6 +230,54 @@ def _segments(pos: NDArray[np.float64]) -> list[NDArray[np.float64]]:
     return [pos[a:b] for a, b in itertools.pairwise(bounds) if ok[a] and b - a > 1]
 
 
+@dataclass
+class _Layer:
+    """Marks gathered for one static batch: line strips (each with its colour and radius) and
+    text points (each with its label and colour), drawn in the order added."""
+
+    strips: list[NDArray[np.float64]] = field(default_factory=list)
+    strip_colours: list[tuple[int, int, int]] = field(default_factory=list)
+    strip_radii: list[float] = field(default_factory=list)
+    text_pos: list[list[float]] = field(default_factory=list)
+    texts: list[str] = field(default_factory=list)
+    text_colours: list[tuple[int, int, int]] = field(default_factory=list)
+
+    def lines(
+        self, strips: Sequence[NDArray[np.float64]], colour: tuple[int, int, int], radius: float
+    ) -> None:
+        self.strips.extend(np.asarray(s, dtype=np.float64) for s in strips)
+        self.strip_colours.extend([colour] * len(strips))
+        self.strip_radii.extend([float(radius)] * len(strips))
+
+    def text(self, pos: Sequence[float], label: str, colour: tuple[int, int, int]) -> None:
+        self.text_pos.append([float(pos[0]), float(pos[1])])
+        self.texts.append(label)
+        self.text_colours.append(colour)
+
+    def log(self, rec: rr.RecordingStream, entity: str) -> None:
+        """The transform (y up), the strips and the text at ``entity``: one static chunk."""
+        parts: list = [flip_y(1.0)]
+        if self.strips:
+            parts.append(
+                rr.LineStrips2D(
+                    self.strips,
+                    colors=np.array(self.strip_colours, dtype=np.uint8),
+                    radii=np.array(self.strip_radii, dtype=np.float32),
+                )
+            )
+        if self.texts:
+            parts.append(
+                rr.Points2D(
+                    self.text_pos,
+                    radii=[0.0],
+                    colors=np.array(self.text_colours, dtype=np.uint8),
+                    labels=self.texts,
+                    show_labels=True,
+                )
+            )
+        rec.log(entity, *parts, static=True)
+
+
 def log_plot(
     rec: rr.RecordingStream,
     entity: str,
@@ -289,23 +341,17 @@ def log_plot(
                 lo, hi = (float(flat.min()), float(flat.max())) if flat.size else (0.0, 1.0)
             y_axis = linear_axis(lo, hi, 4, include_zero)
     plot = Plot(width, x_axis, y_axis, x_label)
-    rec.log(entity, flip_y(1.0), static=True)
-    _log_grid(rec, entity, plot)
+    layer = _Layer()
+    _grid(layer, plot)
     if band is not None:
-        _log_band(rec, entity, plot, band)
+        _band(layer, plot, band)
     ends, end_labels, end_colours = [], [], []
-    for i, c in enumerate(curves):
+    for c in curves:
         pos = plot.to_drawn(c.x, c.y)
         pos[~(np.isfinite(np.asarray(c.x, dtype=float)) & np.isfinite(np.asarray(c.y, float)))] = (
             np.nan
         )
-        strips = _segments(pos)
-        if strips:
-            rec.log(
-                f"{entity}/curves/{i}",
-                rr.LineStrips2D(strips, colors=[c.colour], radii=[CURVE_LINE]),
-                static=True,
-            )
+        layer.lines(_segments(pos), c.colour, CURVE_LINE)
         ok = np.flatnonzero(np.isfinite(np.asarray(c.y, dtype=float)))
         if ok.size:
             last = ok[-1]
@@ -314,13 +360,15 @@ def log_plot(
             end_labels.append(f"{c.label}{value}")
             end_colours.append(c.colour)
     if ends and cursor is None:
-        _log_labels(rec, f"{entity}/labels", plot, np.array(ends), end_labels, end_colours)
+        _end_labels(layer, plot, np.array(ends), end_labels, end_colours)
+    layer.log(rec, entity)
     if cursor is not None and cursor_x is not None:
         _log_cursor(rec, entity, plot, curves, cursor, np.asarray(cursor_x), unit)
     return plot
 
 
-def _log_grid(rec: rr.RecordingStream, entity: str, plot: Plot) -> None:
+def _grid(layer: _Layer, plot: Plot) -> None:
+    """The grid lines, the box over them, and the axes' numbers."""
     w = plot.width
     box = np.array([[0, 0], [w, 0], [w, HEIGHT], [0, HEIGHT], [0, 0]], dtype=np.float64)
     grid = []
@@ -332,45 +380,31 @@ def _log_grid(rec: rr.RecordingStream, entity: str, plot: Plot) -> None:
         x = float(plot.x.to_unit(t)) * w
         if 0.5 < x < w - 0.5:
             grid.append(np.array([[x, 0.0], [x, HEIGHT]]))
-    if grid:
-        rec.log(
-            f"{entity}/grid/lines",
-            rr.LineStrips2D(grid, colors=[GRID], radii=[GRID_LINE]),
-            static=True,
-        )
-    rec.log(
-        f"{entity}/grid/box", rr.LineStrips2D([box], colors=[AXIS], radii=[GRID_LINE]), static=True
-    )
+    layer.lines(grid, GRID, GRID_LINE)
+    layer.lines([box], AXIS, GRID_LINE)
     y_step = np.diff(plot.y.ticks).min() if plot.y.ticks.size > 1 and not plot.y.log else None
     x_step = np.diff(plot.x.ticks).min() if plot.x.ticks.size > 1 else None
-    pos, labels = [], []
     for t in plot.y.ticks:
         u = float(plot.y.to_unit(t))
         if -1e-6 <= u <= 1 + 1e-6:
             text = format_value(float(t), y_step)
             # Labels are centred on their point: a number's centre half its width left of
             # the box (about 0.045 HEIGHT per character at the views' sizes).
-            pos.append([-0.03 * HEIGHT - 0.024 * HEIGHT * len(text), u * HEIGHT])
-            labels.append(text)
+            layer.text([-0.03 * HEIGHT - 0.024 * HEIGHT * len(text), u * HEIGHT], text, AXIS)
     shown = [t for t in plot.x.ticks if -1e-6 <= float(plot.x.to_unit(t)) <= 1 + 1e-6]
     for i, t in enumerate(shown):
         text = format_value(float(t), x_step)
         if plot.x_unit and i == len(shown) - 1:
             text += f" {plot.x_unit}"
-        pos.append([float(plot.x.to_unit(t)) * plot.width, -0.1 * HEIGHT])
-        labels.append(text)
+        layer.text([float(plot.x.to_unit(t)) * plot.width, -0.1 * HEIGHT], text, AXIS)
     if plot.x_label:
-        pos.append([-0.03 * HEIGHT - 0.024 * HEIGHT * len(plot.x_label), -0.1 * HEIGHT])
-        labels.append(plot.x_label)
-    rec.log(
-        f"{entity}/ticks",
-        rr.Points2D(pos, radii=[0.0], colors=[AXIS], labels=labels, show_labels=True),
-        static=True,
-    )
+        left = -0.03 * HEIGHT - 0.024 * HEIGHT * len(plot.x_label)
+        layer.text([left, -0.1 * HEIGHT], plot.x_label, AXIS)
 
 
-def _log_band(rec: rr.RecordingStream, entity: str, plot: Plot, band: Band) -> None:
-    """The band shaded by vertical strokes (Rerun's 2D views fill no polygons) and its edges."""
+def _band(layer: _Layer, plot: Plot, band: Band) -> None:
+    """The band shaded by vertical strokes (Rerun's 2D views fill no polygons), its edges and
+    its name."""
     x = np.asarray(band.x, dtype=np.float64)
     if x.size == 2:  # a constant band: densify so the strokes fill it
         x = np.linspace(x[0], x[1], 200)
@@ -385,28 +419,12 @@ def _log_band(rec: rr.RecordingStream, entity: str, plot: Plot, band: Band) -> N
     ok = np.all(np.isfinite(a), -1) & np.all(np.isfinite(b), -1)
     strokes = np.stack([a[ok], b[ok]], axis=1)
     spacing = plot.width / max(ok.sum(), 1)
-    rec.log(
-        f"{entity}/band/fill",
-        rr.LineStrips2D(strokes, colors=[pale(band.colour, 0.6)], radii=[max(0.6 * spacing, 0.3)]),
-        static=True,
-    )
-    rec.log(
-        f"{entity}/band/edges",
-        rr.LineStrips2D(_segments(a) + _segments(b), colors=[band.colour], radii=[GRID_LINE]),
-        static=True,
-    )
+    layer.lines(list(strokes), pale(band.colour, 0.6), max(0.6 * spacing, 0.3))
+    layer.lines(_segments(a) + _segments(b), band.colour, GRID_LINE)
     if ok.any():
         top = float(b[ok][0, 1])
-        rec.log(
-            f"{entity}/band/label",
-            rr.Points2D(
-                [[0.2 * plot.width, min(top + 0.1 * HEIGHT, 0.93 * HEIGHT)]],
-                radii=[0.0],
-                colors=[band.colour],
-                labels=[band.label],
-                show_labels=True,
-            ),
-            static=True,
+        layer.text(
+            [0.2 * plot.width, min(top + 0.1 * HEIGHT, 0.93 * HEIGHT)], band.label, band.colour
         )
 
 
@@ -416,9 +434,8 @@ def label_x(plot: Plot, text: str) -> float:
     return plot.width + 0.04 * HEIGHT + 0.024 * HEIGHT * len(text)
 
 
-def _log_labels(
-    rec: rr.RecordingStream,
-    entity: str,
+def _end_labels(
+    layer: _Layer,
     plot: Plot,
     ends: NDArray[np.float64],
     labels: list[str],
@@ -426,12 +443,8 @@ def _log_labels(
 ) -> None:
     """Curve labels right of the box at their curves' last heights, spread apart."""
     y = spread(ends, LABEL_GAP, 0.0, HEIGHT)
-    pos = np.stack([[label_x(plot, t) for t in labels], y], -1)
-    rec.log(
-        entity,
-        rr.Points2D(pos, radii=[0.0], colors=tones, labels=labels, show_labels=True),
-        static=True,
-    )
+    for text, yy, tone in zip(labels, y, tones, strict=True):
+        layer.text([label_x(plot, text), yy], text, tone)
 
 
 def _log_cursor(
@@ -443,58 +456,48 @@ def _log_cursor(
     cursor_x: NDArray,
     unit: str,
 ) -> None:
-    """Per scan: a vertical line at the scan and, right of the box, each curve's value there
-    ("name value"), spread apart, with a dot on the curve."""
+    """Per scan, at ``{entity}/cursor`` (one chunk): a vertical line at the scan and, right of
+    the box, each curve's value there ("name value"), spread apart, with a dot on the curve."""
     n = cursor_x.size
     u = np.clip(plot.x.to_unit(cursor_x), 0.0, 1.0) * plot.width
     lines = np.stack([np.stack([u, np.zeros(n)], -1), np.stack([u, np.full(n, HEIGHT)], -1)], 1)
-    rec.send_columns(
-        f"{entity}/cursor/line",
-        indexes=cursor,
-        columns=rr.LineStrips2D.columns(
-            strips=lines, colors=colours(AXIS, n), radii=radii(GRID_LINE, n)
-        ),
+    columns = list(
+        rr.LineStrips2D.columns(strips=lines, colors=colours(AXIS, n), radii=radii(GRID_LINE, n))
     )
     values = np.stack([np.asarray(c.y, dtype=np.float64) for c in curves], 1)  # (n, curves)
     heights = np.clip(plot.y.to_unit(values), 0.0, 1.0) * HEIGHT
     tones = [c.colour for c in curves]
-    dots, dot_colours, label_pos, label_text, label_colours, counts = [], [], [], [], [], []
+    # Per scan: the dots (no label), then the labels (no radius).
+    pos, point_colours, point_radii, texts, counts = [], [], [], [], []
     for k in range(n):
         ok = np.flatnonzero(np.isfinite(values[k]) & np.isfinite(heights[k]))
-        counts.append(ok.size)
+        counts.append(2 * ok.size)
         if not ok.size:
             continue
         y = spread(heights[k, ok], LABEL_GAP, 0.0, HEIGHT)
+        for j in ok:
+            pos.append([u[k], heights[k, j]])
+            point_colours.append(tones[j])
+            point_radii.append(SMALL_MARKER)
+            texts.append("")
         for j, yy in zip(ok, y, strict=True):
-            dots.append([u[k], heights[k, j]])
-            dot_colours.append(tones[j])
             text = f"{curves[j].label} {format_value(float(values[k, j]))}{unit}"
-            label_pos.append([label_x(plot, text), yy])
-            label_text.append(text)
-            label_colours.append(tones[j])
-    if not dots:
-        return
-    total = len(dots)
-    rec.send_columns(
-        f"{entity}/cursor/values",
-        indexes=cursor,
-        columns=rr.Points2D.columns(
-            positions=np.array(dots),
-            colors=np.array(dot_colours, dtype=np.uint8),
-            radii=radii(SMALL_MARKER, total),
-        ).partition(counts),
-    )
-    rec.send_columns(
-        f"{entity}/cursor/labels",
-        indexes=cursor,
-        columns=rr.Points2D.columns(
-            positions=np.array(label_pos),
-            colors=np.array(label_colours, dtype=np.uint8),
-            radii=radii(0.0, total),
-            labels=label_text,
-            show_labels=[True] * total,
-        ).partition(counts),
-    )
+            pos.append([label_x(plot, text), yy])
+            point_colours.append(tones[j])
+            point_radii.append(0.0)
+            texts.append(text)
+    if pos:
+        total = len(pos)
+        columns += list(
+            rr.Points2D.columns(
+                positions=np.array(pos),
+                colors=np.array(point_colours, dtype=np.uint8),
+                radii=np.array(point_radii, dtype=np.float32),
+                labels=texts,
+                show_labels=[True] * total,
+            ).partition(counts)
+        )
+    rec.send_columns(f"{entity}/cursor", indexes=cursor, columns=columns)
 
 
 def forest_plot(
@@ -516,103 +519,70 @@ def forest_plot(
     """Per scan, each row's estimate ``centre`` ± ``half_width`` (both (N, rows)) as a dot on
     a horizontal interval, one row per name, over a numbered x axis (module docstring).
 
-    Entities: ``{entity}/{row}/mean`` and ``{entity}/{row}/ci95`` per scan, each row's
-    "centre ± half-width unit" at ``{entity}/values`` right of the box, the names at
-    ``{entity}/rows`` left of it. ``x_unit``: the axis' unit, written after its last
-    number. ``reference``: a labelled vertical line at x = 0 (e.g. the truth, when the
-    estimates are offsets from it). Values beyond the axis are drawn at its
-    edge, so ``x_axis`` should hold every interval (the labels still give the true values).
+    Entities: ``{entity}`` static (grid, numbers, the rows' names left of the box) and
+    ``{entity}/scan`` per scan: the rows' intervals (``LineStrips2D``, one per row) and, in
+    one ``Points2D``, their means (dots, unlabelled) then each row's "centre ± half-width
+    unit" right of the box. ``x_unit``: the axis' unit, written after its last number.
+    ``reference``: a labelled vertical line at x = 0 (e.g. the truth, when the estimates are
+    offsets from it). Values beyond the axis are drawn at its edge, so ``x_axis`` should hold
+    every interval (the labels still give the true values).
     """
     count = len(rows)
     # One row per unit, the first at the top; above the rows, room for the reference's label.
     plot = Plot(width, x_axis, Axis(0.0, count + 0.7), x_unit=x_unit)
-    rec.log(entity, flip_y(1.0), static=True)
-    _log_grid(rec, entity, plot)
+    layer = _Layer()
+    _grid(layer, plot)
     heights = count - np.arange(count) - 0.5
     drawn_y = plot.to_drawn(np.zeros(count), heights)[:, 1]
     # A label is centred across on its point but drawn below it: the names and values are
     # raised by LABEL_DROP to stand level with their rows' dots. A name's centre sits half its
     # width (about 0.06 HEIGHT per character with its background) left of the box.
-    left = [
-        [-0.05 * HEIGHT - 0.03 * HEIGHT * len(r), y + LABEL_DROP]
-        for r, y in zip(rows, drawn_y, strict=True)
-    ]
-    rec.log(
-        f"{entity}/rows",
-        rr.Points2D(left, radii=[0.0], colors=list(tones), labels=list(rows), show_labels=True),
-        static=True,
-    )
+    for r, y, tone in zip(rows, drawn_y, tones, strict=True):
+        layer.text([-0.05 * HEIGHT - 0.03 * HEIGHT * len(r), y + LABEL_DROP], r, tone)
     if reference:
         line = plot.to_drawn(np.zeros(2), np.array([0.0, count]))
-        rec.log(
-            f"{entity}/reference",
-            rr.LineStrips2D([line], colors=[reference_colour], radii=[CURVE_LINE]),
-            static=True,
-        )
-        rec.log(
-            f"{entity}/reference/label",
-            rr.Points2D(
-                plot.to_drawn(np.zeros(1), np.array([count + 0.35])),
-                radii=[0.0],
-                colors=[reference_colour],
-                labels=[reference],
-                show_labels=True,
-            ),
-            static=True,
-        )
+        layer.lines([line], reference_colour, CURVE_LINE)
+        top = plot.to_drawn(np.zeros(1), np.array([count + 0.35]))[0]
+        layer.text(top, reference, reference_colour)
+    layer.log(rec, entity)
     centre = np.asarray(centre, dtype=np.float64)
     half_width = np.asarray(half_width, dtype=np.float64)
     n = centre.shape[0]
-    texts, label_pos = [], []
-    for i, (row, tone) in enumerate(zip(rows, tones, strict=True)):
-        y = np.full(n, heights[i])
-        mid = plot.to_drawn(centre[:, i], y)
-        ends = np.stack(
-            [
-                plot.to_drawn(centre[:, i] - half_width[:, i], y),
-                plot.to_drawn(centre[:, i] + half_width[:, i], y),
-            ],
-            1,
-        )
-        rec.send_columns(
-            f"{entity}/{row}/mean",
-            indexes=cursor,
-            columns=rr.Points2D.columns(
-                positions=mid, radii=radii(MARKER, n), colors=colours(tone, n)
-            ),
-        )
-        rec.send_columns(
-            f"{entity}/{row}/ci95",
-            indexes=cursor,
-            columns=rr.LineStrips2D.columns(
-                strips=ends, colors=colours(tone, n), radii=radii(CURVE_LINE, n)
-            ),
-        )
-        texts.append(
-            [
-                f"{format_value(float(c))} ± {format_value(float(h))}{unit}"
-                for c, h in zip(centre[:, i], half_width[:, i], strict=True)
-            ]
-        )
-        label_pos.append(mid[:, 1])
-    # Per scan, row after row: (n · rows) labels, ``rows`` per scan.
-    text = [texts[i][k] for k in range(n) for i in range(count)]
-    pos = [
-        [label_x(plot, text[k * count + i]), label_pos[i][k] + LABEL_DROP]
-        for k in range(n)
-        for i in range(count)
-    ]
-    rec.send_columns(
-        f"{entity}/values",
-        indexes=cursor,
-        columns=rr.Points2D.columns(
-            positions=np.array(pos),
-            colors=np.array([tones[i] for _ in range(n) for i in range(count)], dtype=np.uint8),
-            radii=radii(0.0, n * count),
-            labels=text,
-            show_labels=[True] * (n * count),
-        ).partition([count] * n),
+    y = np.broadcast_to(heights, (n, count))
+    mid = plot.to_drawn(centre, y)  # (n, rows, 2)
+    ends = np.stack(
+        [plot.to_drawn(centre - half_width, y), plot.to_drawn(centre + half_width, y)], 2
+    )  # (n, rows, 2, 2)
+    tone_rows = np.tile(np.asarray(tones, dtype=np.uint8), (n, 1))
+    columns = list(
+        rr.LineStrips2D.columns(
+            strips=ends.reshape(-1, 2, 2), colors=tone_rows, radii=radii(CURVE_LINE, n * count)
+        ).partition([count] * n)
     )
+    # Per scan, the rows' dots then their values: (n · 2 rows) points, 2 rows per scan.
+    texts = [
+        [
+            f"{format_value(float(c))} ± {format_value(float(h))}{unit}"
+            for c, h in zip(centre[k], half_width[k], strict=True)
+        ]
+        for k in range(n)
+    ]
+    pos, labels = [], []
+    for k in range(n):
+        pos += [list(p) for p in mid[k]]
+        labels += [""] * count
+        pos += [[label_x(plot, texts[k][i]), mid[k, i, 1] + LABEL_DROP] for i in range(count)]
+        labels += texts[k]
+    columns += list(
+        rr.Points2D.columns(
+            positions=np.array(pos),
+            colors=np.tile(np.asarray(tones, dtype=np.uint8), (2 * n, 1)),
+            radii=np.tile(np.r_[np.full(count, MARKER), np.zeros(count)].astype(np.float32), n),
+            labels=labels,
+            show_labels=[True] * (2 * n * count),
+        ).partition([2 * count] * n)
+    )
+    rec.send_columns(f"{entity}/scan", indexes=cursor, columns=columns)
     return plot
 
 

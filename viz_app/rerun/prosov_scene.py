@@ -3,25 +3,29 @@
 Entity paths (``{m}`` a method: naive, seed, cmkf_d, ucm, ducm, ekf, ukf)::
 
     prosov/map                         static transform: metres drawn as km, north up
-    prosov/map/radar                   the radar site
-    prosov/map/truth/path              the whole true trajectory (static)
-    prosov/map/truth/position          the true target per scan
-    prosov/map/measurements            the displayed run's plots, converted naively, per scan
-    prosov/map/tracks/{m}/path         the displayed run's track (static strip)
-    prosov/map/tracks/{m}/position     its estimate per scan
+    prosov/map/radar                   the radar site, and the labels: where the radar is,
+                                       the distance at the end, the scale bar's length
+    prosov/map/paths                   the whole true trajectory, the scale bar and the
+                                       displayed run's tracks (static strips)
+    prosov/map/scan                    per scan: the displayed run's plot (converted naively,
+                                       the first point), each method's estimate (then, in
+                                       the order of the legend) and the true target (last)
     prosov/target                      static transform: the target frame (below), drawn with
                                        down-range up and exaggerated RANGE ×k (k in view names)
-    prosov/target/{m}/truth            the true target: the frame's origin (static)
-    prosov/target/{m}/covariance       the method's 1σ position ellipse per scan
-    prosov/target/{m}/estimate         the method's estimate per scan
-    prosov/target/{c}/measurement      the scan's converted point of conversion c (naive,
-                                       seed, cmkf_d, ucm)
-    prosov/target/{c}/cloud            Monte Carlo cloud of c's converted points per scan
-    prosov/target/{c}/cloud_mean       the cloud's mean per scan
-    prosov/target/polar/…              the same for the naive points in grey, shown in the
-                                       views of the filters fed polar plots (ducm, ekf, ukf)
+    prosov/target/{m}/scan             per scan, in one entity: the method's 1σ position
+                                       ellipse (the first strip) and estimate (the last
+                                       point), the true target at the frame's origin (the
+                                       first point) and the view's scale (a label); for a
+                                       conversion c (naive, seed, cmkf_d, ucm) a note, the
+                                       Monte Carlo cloud of c's converted points
+                                       (pale), the scan's converted point and the cloud's
+                                       mean (an ×, the next two strips)
+    prosov/target/polar/scan           the same marks of the naive points in grey (and a note),
+                                       shown in
+                                       the views of the filters fed polar plots (ducm, ekf,
+                                       ukf)
     prosov/bias                        the bias forest plot (``plot2d.forest_plot``): its axis in m
-    prosov/bias/{c}/mean, /ci95        conversion c's mean down-range offset ± 95% CI per scan
+    prosov/bias/scan                   each conversion's mean down-range offset ± 95% CI per scan
     prosov/legend                      one labelled swatch per method (static)
     plots/prosov/{metric}/{m}          per-scan Monte Carlo statistics (names carry units)
     plots/prosov/delta_x_percent/{reading}   Prosov's Δx(n), seed against naive
@@ -36,7 +40,7 @@ in every view, plot and figure (``viz_app.palette``).
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import rerun as rr
@@ -194,11 +198,6 @@ def log_map(rec: rr.RecordingStream, scene: ProsovScene, frame: TargetFrame, lab
         ),
         static=True,
     )
-    rec.log(
-        f"{base}/radar",
-        rr.Points2D([[0.0, 0.0]], radii=[MARKER], colors=[rgb("truth")], labels=[label]),
-        static=True,
-    )
     truth = scene.truth[:, [0, 2]]
     end = truth[-1]
     width = x1 - x0
@@ -208,17 +207,21 @@ def log_map(rec: rr.RecordingStream, scene: ProsovScene, frame: TargetFrame, lab
     bar = plot2d.nice_step(width, 5)
     bottom = cy - 0.8 * MAP_HALF_HEIGHT / scale
     start = cx - 0.45 * width
+    # The static marks in two entities (few chunks for the viewer to take in): the radar and
+    # the labels; the lines, the true path first, then the scale bar and each track's path.
     rec.log(
-        f"{base}/scale",
+        f"{base}/radar",
         rr.Points2D(
             [
+                [0.0, 0.0],
                 [left + 0.25 * width, top],
                 [end[0], cy - 0.35 * MAP_HALF_HEIGHT / scale],
                 [start + bar / 2.0, bottom + 0.12 * MAP_HALF_HEIGHT / scale],
             ],
-            radii=[0.0],
+            radii=np.array([MARKER, 0.0, 0.0, 0.0], dtype=np.float32),
             colors=[rgb("truth")],
             labels=[
+                label,
                 f"← radar at {np.hypot(*truth[0]) / 1e3:.0f} km from the start: {label}",
                 f"end: {np.hypot(*end) / 1e3:.0f} km from the radar",
                 f"{bar / 1e3:g} km",
@@ -227,48 +230,33 @@ def log_map(rec: rr.RecordingStream, scene: ProsovScene, frame: TargetFrame, lab
         ),
         static=True,
     )
+    paths = [truth, np.array([[start, bottom], [start + bar, bottom]])]
+    paths += [track.x[:, [0, 2]] for track in scene.tracks.values()]
+    tones = [rgb("truth"), rgb("truth")] + [rgb(m) for m in scene.tracks]
     rec.log(
-        f"{base}/scale/bar",
+        f"{base}/paths",
         rr.LineStrips2D(
-            [[[start, bottom], [start + bar, bottom]]], colors=[rgb("truth")], radii=[LINE]
+            paths,
+            colors=np.array(tones, dtype=np.uint8),
+            radii=np.array([THIN_LINE, LINE] + [THIN_LINE] * len(scene.tracks), dtype=np.float32),
         ),
         static=True,
     )
-    rec.log(
-        f"{base}/truth/path",
-        rr.LineStrips2D([truth], colors=[rgb("truth")], radii=[THIN_LINE]),
-        static=True,
-    )
+    # Per scan, one entity: the displayed run's plots (converted naively), each method's
+    # estimate, and the true target last (on top).
+    tracks = [track.x[:, [0, 2]] for track in scene.tracks.values()]
+    points = np.stack([scene.converted_xy_m["naive"], *tracks, truth], 1)  # (n, 2 + tracks, 2)
+    tones = [rgb("measurement")] + [rgb(m) for m in scene.tracks] + [rgb("truth")]
+    sizes = [SMALL_MARKER] * (1 + len(tracks)) + [MARKER]
     rec.send_columns(
-        f"{base}/truth/position",
+        f"{base}/scan",
         indexes=idx,
         columns=rr.Points2D.columns(
-            positions=truth, radii=radii(MARKER, n), colors=colours(rgb("truth"), n)
-        ),
+            positions=points.reshape(-1, 2),
+            radii=np.tile(np.asarray(sizes, dtype=np.float32), n),
+            colors=np.tile(np.asarray(tones, dtype=np.uint8), (n, 1)),
+        ).partition([points.shape[1]] * n),
     )
-    rec.send_columns(
-        f"{base}/measurements",
-        indexes=idx,
-        columns=rr.Points2D.columns(
-            positions=scene.converted_xy_m["naive"],
-            radii=radii(SMALL_MARKER, n),
-            colors=colours(rgb("measurement"), n),
-        ),
-    )
-    for m, track in scene.tracks.items():
-        xy = track.x[:, [0, 2]]
-        rec.log(
-            f"{base}/tracks/{m}/path",
-            rr.LineStrips2D([xy], colors=[rgb(m)], radii=[THIN_LINE]),
-            static=True,
-        )
-        rec.send_columns(
-            f"{base}/tracks/{m}/position",
-            indexes=idx,
-            columns=rr.Points2D.columns(
-                positions=xy, radii=radii(SMALL_MARKER, n), colors=colours(rgb(m), n)
-            ),
-        )
 
 
 def log_target_frame(
@@ -294,13 +282,10 @@ def log_target_frame(
     )
     k = frame.exaggeration
     stretch = f", down-range ×{k}" if k != 1 else ""
-    scale_label = rr.Points2D(
-        # Centred at the top: a label as wide as half a small view stays inside it.
-        [[0.0, 0.36 * frame.cross_half_m / k]],
-        radii=[0.0],
-        labels=[f"view ±{frame.cross_half_m / 1e3:g} km across{stretch}"],
-        show_labels=True,
-    )
+    # Centred at the top: a label as wide as half a small view stays inside it.
+    scale_at = [0.0, 0.36 * frame.cross_half_m / k]
+    scale_text = f"view ±{frame.cross_half_m / 1e3:g} km across{stretch}"
+    note_at = [0.0, -0.3 * frame.cross_half_m / k]
     measured = {c: _to_frame(scene, scene.converted_xy_m[c]) for c in SHOWN_CONVERSIONS}
     clouds = {c: _to_frame(scene, cloud.points[c][:, :shown]) for c in SHOWN_CONVERSIONS}
     means = cloud.offset_mean_m
@@ -308,99 +293,149 @@ def log_target_frame(
         base = f"{ROOT}/target/{m}"
         colour = rgb(m)
         own = m in SHOWN_CONVERSIONS
-        rec.log(
-            f"{base}/truth",
-            rr.Points2D([[0.0, 0.0]], radii=[MARKER], colors=[rgb("truth")]),
-            static=True,
-        )
-        rec.log(f"{base}/scale", scale_label, static=True)
+        # The same in every scan: the truth at the origin, the view's scale and, for a
+        # conversion, the note on its points (labels of points of no size).
+        fixed = _Fixed([[0.0, 0.0], scale_at], [rgb("truth"), plot2d.AXIS], [MARKER, 0.0])
+        fixed.labels[1] = scale_text
+        if own:
+            fixed.add(
+                note_at, pale(colour, 0.2), "pale: converted plots (Monte Carlo), × their mean"
+            )
         est = _to_frame(scene, track.x[:, [0, 2]])
         cov = _frame_cov(scene, track.P)
-        rec.send_columns(
-            f"{base}/covariance",
-            indexes=idx,
-            columns=rr.LineStrips2D.columns(
-                strips=ellipse_outline(est, cov), colors=colours(colour, n), radii=radii(LINE, n)
-            ),
-        )
-        rec.send_columns(
-            f"{base}/estimate",
-            indexes=idx,
-            columns=rr.Points2D.columns(
-                positions=est, radii=radii(MARKER, n), colors=colours(colour, n)
-            ),
-        )
+        # Per scan, one entity (one chunk for the viewer): the ellipse (and the ×), the
+        # estimate drawn last, over the cloud and the measurement.
+        # Arrays per scan: (n, strips or points, ...).
+        lines = [[e] for e in ellipse_outline(est, cov)]
+        line_colours = colours(colour, n)[:, None]
+        line_radii = radii(LINE, n)[:, None]
+        points = est[:, None]
+        point_colours = colours(colour, n)[:, None]
+        point_radii = radii(MARKER, n)[:, None]
         if own:
-            _log_measured(rec, base, idx, measured[m], clouds[m], means[m], colour, frame)
-            rec.log(
-                f"{base}/note",
-                rr.Points2D(
-                    [[0.0, -0.3 * frame.cross_half_m / k]],
-                    radii=[0.0],
-                    colors=[pale(colour, 0.2)],
-                    labels=["pale: converted plots (Monte Carlo), × their mean"],
-                    show_labels=True,
-                ),
-                static=True,
-            )
+            x, xc, xr, p, pc, pr = _measured_marks(measured[m], clouds[m], means[m], colour, frame)
+            lines = [[*row, *strokes] for row, strokes in zip(lines, x, strict=True)]
+            line_colours = np.concatenate([line_colours, xc], 1)
+            line_radii = np.concatenate([line_radii, xr], 1)
+            points = np.concatenate([p, points], 1)
+            point_colours = np.concatenate([pc, point_colours], 1)
+            point_radii = np.concatenate([pr, point_radii], 1)
+        _send_scan(
+            rec,
+            f"{base}/scan",
+            idx,
+            lines,
+            line_colours,
+            line_radii,
+            points,
+            point_colours,
+            point_radii,
+            fixed,
+        )
     # Filters fed polar plots (ducm, ekf, ukf) share one grey copy of the naive points.
     if any(m not in SHOWN_CONVERSIONS for m in scene.tracks):
         grey = rgb("measurement")
         polar = f"{ROOT}/target/polar"
         naive = (measured["naive"], clouds["naive"], means["naive"])
-        _log_measured(rec, polar, idx, *naive, grey, frame)
-        rec.log(
-            f"{polar}/note",
-            rr.Points2D(
-                [[0.0, -0.3 * frame.cross_half_m / k]],
-                radii=[0.0],
-                colors=[grey],
-                labels=["grey: plots converted naively, × their mean (fed polar plots)"],
-                show_labels=True,
-            ),
-            static=True,
-        )
+        x, lc, lr, p, pc, pr = _measured_marks(*naive, grey, frame)
+        fixed = _Fixed([], [], [])
+        fixed.add(note_at, grey, "grey: plots converted naively, × their mean (fed polar plots)")
+        _send_scan(rec, f"{polar}/scan", idx, x, lc, lr, p, pc, pr, fixed)
     _log_bias(rec, cloud, frame, idx)
 
 
-def _log_measured(
-    rec: rr.RecordingStream,
-    base: str,
-    idx: list[rr.TimeColumn],
+def _measured_marks(
     measured: NDArray[np.float64],
     pts: NDArray[np.float64],
     means: NDArray[np.float64],
     tone: tuple[int, int, int],
     frame: TargetFrame,
+) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray, NDArray]:
+    """Per scan, the converted points' marks: the two strokes of the cloud mean's × (strips
+    (n, 2, 2, 2), colours (n, 2, 3), radii (n, 2)), and the pale Monte Carlo cloud then the
+    scan's converted measurement (points (n, shown + 1, 2), colours (n, shown + 1, 3), radii
+    (n, shown + 1))."""
+    n, shown = pts.shape[0], pts.shape[1]
+    points = np.concatenate([pts, measured[:, None]], 1)
+    per_scan_colours = np.r_[colours(pale(tone, 0.55), shown), colours(tone, 1)]
+    per_scan_radii = np.r_[radii(CLOUD_MARKER, shown), radii(SMALL_MARKER, 1)]
+    return (
+        _crosses(means, frame),
+        np.tile(colours(rgb("truth"), 2), (n, 1, 1)),
+        np.tile(radii(LINE, 2), (n, 1)),
+        points,
+        np.tile(per_scan_colours, (n, 1, 1)),
+        np.tile(per_scan_radii, (n, 1)),
+    )
+
+
+@dataclass
+class _Fixed:
+    """Points drawn at every scan before the scan's own (a view at a scan draws one row of an
+    entity: marks that never change are repeated in each row rather than kept in a static
+    entity of their own, which would be one more chunk for the viewer to take in)."""
+
+    positions: list[list[float]]
+    colours: list[tuple[int, int, int]]
+    radii: list[float]
+    labels: list[str] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        self.labels = self.labels or [""] * len(self.positions)
+
+    def add(self, position: list[float], colour: tuple[int, int, int], label: str) -> None:
+        """A label (a point of no size) at ``position``."""
+        self.positions.append(position)
+        self.colours.append(colour)
+        self.radii.append(0.0)
+        self.labels.append(label)
+
+
+def _send_scan(
+    rec: rr.RecordingStream,
+    entity: str,
+    idx: list[rr.TimeColumn],
+    lines: Sequence,
+    line_colours: NDArray,
+    line_radii: NDArray,
+    points: NDArray[np.float64],
+    point_colours: NDArray,
+    point_radii: NDArray,
+    fixed: _Fixed,
 ) -> None:
-    """The scan's converted measurement, the Monte Carlo cloud (pale) and its mean (×) at
-    ``base``/measurement, /cloud, /cloud_mean."""
-    n = len(measured)
-    rec.send_columns(
-        f"{base}/measurement",
-        indexes=idx,
-        columns=rr.Points2D.columns(
-            positions=measured, radii=radii(SMALL_MARKER, n), colors=colours(tone, n)
-        ),
+    """Per scan ``k``, the strips ``lines[k]``, the ``fixed`` points then the points
+    ``points[k]`` at ``entity``, in one chunk; colours and radii per scan, (n, strips or
+    points, ...) (the points' instance order is the drawing order: the last on top)."""
+    strips = [np.asarray(s, dtype=np.float64) for row in lines for s in row]
+    per_scan = [len(row) for row in lines]
+    columns = list(
+        rr.LineStrips2D.columns(
+            strips=strips,
+            colors=np.asarray(line_colours, dtype=np.uint8).reshape(-1, 3),
+            radii=np.asarray(line_radii, dtype=np.float32).ravel(),
+        ).partition(per_scan)
     )
-    rec.send_columns(
-        f"{base}/cloud",
-        indexes=idx,
-        columns=rr.Points2D.columns(
-            positions=pts.reshape(-1, 2),
-            radii=radii(CLOUD_MARKER, pts.shape[0] * pts.shape[1]),
-            colors=colours(pale(tone, 0.55), pts.shape[0] * pts.shape[1]),
-        ).partition([pts.shape[1]] * n),
+    n, f = points.shape[0], len(fixed.positions)
+    if f:
+        points = np.concatenate([np.tile(np.asarray(fixed.positions), (n, 1, 1)), points], 1)
+        point_colours = np.concatenate(
+            [np.tile(np.asarray(fixed.colours, dtype=np.uint8), (n, 1, 1)), point_colours], 1
+        )
+        point_radii = np.concatenate(
+            [np.tile(np.asarray(fixed.radii, dtype=np.float32), (n, 1)), point_radii], 1
+        )
+    count = points.shape[1]
+    labels = (fixed.labels + [""] * (count - f)) * n
+    columns += list(
+        rr.Points2D.columns(
+            positions=points.reshape(-1, 2),
+            colors=np.asarray(point_colours, dtype=np.uint8).reshape(-1, 3),
+            radii=np.asarray(point_radii, dtype=np.float32).ravel(),
+            labels=labels,
+            show_labels=[True] * (n * count),
+        ).partition([count] * n)
     )
-    rec.send_columns(
-        f"{base}/cloud_mean",
-        indexes=idx,
-        columns=rr.LineStrips2D.columns(
-            strips=_crosses(means, frame).reshape(-1, 2, 2),
-            colors=colours(rgb("truth"), 2 * n),
-            radii=radii(LINE, 2 * n),
-        ).partition([2] * n),
-    )
+    rec.send_columns(entity, indexes=idx, columns=columns)
 
 
 def _crosses(centre: NDArray[np.float64], frame: TargetFrame) -> NDArray[np.float64]:
@@ -445,9 +480,14 @@ def _log_bias(
     )
 
 
-def log_statistics(rec: rr.RecordingStream, scene: ProsovScene, root: str = ROOT) -> None:
+def log_statistics(
+    rec: rr.RecordingStream, scene: ProsovScene, root: str = ROOT, series: bool = True
+) -> None:
     """Each method's per-scan Monte Carlo statistics, the NEES band and Prosov's Δx(n), under
-    ``plots/{root}``."""
+    ``plots/{root}`` (the values; left out when not ``series``), and as charts (``log_charts``)."""
+    if not series:
+        log_charts(rec, scene, root)
+        return
     scans, times = _scan_axes(scene)
     result = scene.result
     for name, m in result.metrics.items():
@@ -593,15 +633,21 @@ def log_prosov(
 
 
 def log_scene(
-    rec: rr.RecordingStream, scene: ProsovScene, cloud_points: int, cloud_shown: int = CLOUD_SHOWN
+    rec: rr.RecordingStream,
+    scene: ProsovScene,
+    cloud_points: int,
+    cloud_shown: int = CLOUD_SHOWN,
+    series: bool = True,
 ) -> TargetFrame:
-    """Everything of one Prosov scene: the map, the target frame, the legend, the plots."""
+    """Everything of one Prosov scene: the map, the target frame, the legend, the charts, and
+    (``series``) the statistics' values under ``plots/`` (no view draws them: the panel,
+    whose viewer must take in a run fast, leaves them out)."""
     cloud = conversion_cloud(scene.config, cloud_points)
     frame = target_frame(scene, cloud)
     log_map(rec, scene, frame, radar_label(scene.config))
     log_target_frame(rec, scene, frame, cloud, min(cloud_shown, cloud_points))
     log_legend(rec, f"{ROOT}/legend", list(scene.tracks), [rgb(m) for m in scene.tracks])
-    log_statistics(rec, scene)
+    log_statistics(rec, scene, series=series)
     return frame
 
 

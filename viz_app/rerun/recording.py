@@ -237,6 +237,22 @@ def log_series(
     rec.send_columns(entity, indexes=at, columns=rr.Scalars.columns(scalars=v[ok]))
 
 
+def log_texts(
+    rec: rr.RecordingStream, entries: list[tuple[int, str, str]], timeline: str = "scan"
+) -> None:
+    """Lines ``(scan, text, level)`` in the text log, in one chunk (one ``log_text`` per line
+    would be one chunk each for the viewer to take in)."""
+    if not entries:
+        return
+    rec.send_columns(
+        "log",
+        indexes=[rr.TimeColumn(timeline, sequence=[scan for scan, _, _ in entries])],
+        columns=rr.TextLog.columns(
+            text=[text for _, text, _ in entries], level=[level for _, _, level in entries]
+        ),
+    )
+
+
 def log_text(
     rec: rr.RecordingStream, text: str, level: str = "INFO", scan: int = 1, timeline: str = "scan"
 ) -> None:

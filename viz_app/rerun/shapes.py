@@ -90,11 +90,12 @@ def log_legend(
     labels: list[str],
     colours_: list[tuple[int, int, int]],
 ) -> None:
-    """A legend as entities of its own: one labelled swatch per label, in a row, so a view of
-    it (``legend_view``) names the colours without covering any data."""
-    rec.log(entity, flip_y(1.0), static=True)
+    """A legend as an entity of its own (with its y-up transform: one chunk): one labelled
+    swatch per label, in a row, so a view of it (``legend_view``) names the colours without
+    covering any data."""
     rec.log(
-        f"{entity}/swatches",
+        entity,
+        flip_y(1.0),
         rr.Points2D(
             [[i * LEGEND_STEP, 0.0] for i in range(len(labels))],
             radii=[MARKER],

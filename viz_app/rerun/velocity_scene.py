@@ -7,12 +7,12 @@ Entity paths (``{r}`` a radar: R1, R2, R3)::
     velocity/map/truth/path             the true trajectory (static)
     velocity/map/truth/position         the true target per scan
     velocity/map/fused/position         the fused position per scan
-    velocity/map/lines_of_sight/{r}     radar → fused position per scan
+    velocity/map/lines_of_sight         radar → fused position per scan, every radar
     velocity/vector/truth               the true velocity V (m/s, from the origin) per scan
     velocity/vector/fused               the estimate V̂ per scan
-    velocity/vector/radial/{r}          each radar's measured radial velocity along its line of
+    velocity/vector/radial              each radar's measured radial velocity along its line of
                                         sight, V̂r u: the projections V̂ is solved from
-    velocity/vector/line_of_sight/{r}   that line of sight through the origin
+    velocity/vector/line_of_sight       that line of sight through the origin
     velocity/error/estimate             V̂ − V per scan (m/s), about the origin
     velocity/error/covariance           its 1σ ellipsoid (first order)
     velocity/error/axes                 reference axes ±1 m/s … (static)
@@ -41,7 +41,13 @@ from radarviz.core.velocity.estimate import M_WARN
 from radarviz.core.velocity.scans import VelocityScans, estimate_scans
 from radarviz.viz_app.palette import OKABE_ITO, radar_rgb, rgb
 from radarviz.viz_app.rerun import plot2d
-from radarviz.viz_app.rerun.recording import ellipsoid_axes, indexes, log_series, log_text
+from radarviz.viz_app.rerun.recording import (
+    ellipsoid_axes,
+    indexes,
+    log_series,
+    log_text,
+    log_texts,
+)
 from radarviz.viz_app.rerun.shapes import (
     LINE,
     MARKER,
@@ -86,8 +92,11 @@ def log_velocity_scene(
     return log_velocity_run(rec, estimate_scans(scenario or fusion_scenario(), scans, seed))
 
 
-def log_velocity_run(rec: rr.RecordingStream, run: VelocityScans) -> VelocityFrame:
-    """Log one ``VelocityScans``: flagged scans grey and in the text log."""
+def log_velocity_run(
+    rec: rr.RecordingStream, run: VelocityScans, series: bool = True
+) -> VelocityFrame:
+    """Log one ``VelocityScans``: flagged scans grey and in the text log. ``series``: also
+    the charts' values under ``plots/`` (no view draws them)."""
     radars = run.scenario.radars
     names = tuple(r.name for r in radars)
     sites = run.sites
@@ -97,8 +106,7 @@ def log_velocity_run(rec: rr.RecordingStream, run: VelocityScans) -> VelocityFra
     radial_mps = run.stacked("radial_velocity")
     fused = run.fused
     vel, cov, m, flagged = run.velocity, run.covariance.copy(), run.m, run.flagged
-    for scan, text in run.messages:
-        log_text(rec, text, level="WARN", scan=scan)
+    log_texts(rec, [(scan, text, "WARN") for scan, text in run.messages])
     # --- the situation, km ---
     base = f"{ROOT}/map"
     rec.log(base, rr.Transform3D(scale=1e-3), static=True)
@@ -127,15 +135,25 @@ def log_velocity_run(rec: rr.RecordingStream, run: VelocityScans) -> VelocityFra
             positions=fused.position, radii=[SMALL_MARKER] * k, colors=[rgb("fused")] * k
         ),
     )
-    for j, r in enumerate(radars):
-        strips = np.stack([np.broadcast_to(sites[j], fused.position.shape), fused.position], 1)
-        rec.send_columns(
-            f"{base}/lines_of_sight/{r.name}",
-            indexes=idx,
-            columns=rr.LineStrips3D.columns(
-                strips=list(strips), colors=[radar_rgb(j)] * k, radii=[THIN_LINE] * k
-            ),
-        )
+    # Every radar's line of sight in one entity (few chunks for the viewer to take in).
+    strips = np.stack(
+        [
+            np.broadcast_to(sites[None], (k, *sites.shape)),
+            np.broadcast_to(fused.position[:, None], (k, *sites.shape)),
+        ],
+        2,
+    )
+    tones = np.array([radar_rgb(j) for j in range(len(radars))], dtype=np.uint8)
+    per_scan = [len(radars)] * k
+    rec.send_columns(
+        f"{base}/lines_of_sight",
+        indexes=idx,
+        columns=rr.LineStrips3D.columns(
+            strips=list(strips.reshape(-1, 2, 3)),
+            colors=np.tile(tones, (k, 1)),
+            radii=[THIN_LINE] * (k * len(radars)),
+        ).partition(per_scan),
+    )
 
     # --- the velocity vector, m/s ---
     base = f"{ROOT}/vector"
@@ -174,23 +192,27 @@ def log_velocity_run(rec: rr.RecordingStream, run: VelocityScans) -> VelocityFra
     speed = float(np.linalg.norm(run.true_velocity, axis=-1).max())
     u = fused.position[:, None, :] - sites[None]  # (k, radars, 3)
     u /= np.linalg.norm(u, axis=-1, keepdims=True)
-    for j, r in enumerate(radars):
-        radial = radial_mps[:, j, None] * u[:, j]
-        rec.send_columns(
-            f"{base}/radial/{r.name}",
-            indexes=idx,
-            columns=rr.Arrows3D.columns(
-                origins=zeros, vectors=radial, colors=[radar_rgb(j)] * k, radii=[LINE] * k
-            ),
-        )
-        line = np.stack([-1.2 * speed * u[:, j], 1.2 * speed * u[:, j]], 1)
-        rec.send_columns(
-            f"{base}/line_of_sight/{r.name}",
-            indexes=idx,
-            columns=rr.LineStrips3D.columns(
-                strips=list(line), colors=[radar_rgb(j)] * k, radii=[THIN_LINE] * k
-            ),
-        )
+    radial = radial_mps[:, :, None] * u  # (k, radars, 3)
+    line = np.stack([-1.2 * speed * u, 1.2 * speed * u], 2)  # (k, radars, 2, 3)
+    rec.send_columns(
+        f"{base}/radial",
+        indexes=idx,
+        columns=rr.Arrows3D.columns(
+            origins=np.zeros((k * len(radars), 3)),
+            vectors=radial.reshape(-1, 3),
+            colors=np.tile(tones, (k, 1)),
+            radii=[LINE] * (k * len(radars)),
+        ).partition(per_scan),
+    )
+    rec.send_columns(
+        f"{base}/line_of_sight",
+        indexes=idx,
+        columns=rr.LineStrips3D.columns(
+            strips=list(line.reshape(-1, 2, 3)),
+            colors=np.tile(tones, (k, 1)),
+            radii=[THIN_LINE] * (k * len(radars)),
+        ).partition(per_scan),
+    )
 
     # --- the error V̂ − V, m/s ---
     err = vel - run.true_velocity
@@ -235,24 +257,33 @@ def log_velocity_run(rec: rr.RecordingStream, run: VelocityScans) -> VelocityFra
     # --- plots (flagged scans left out) ---
     err[flagged] = np.nan
     cov[flagged] = np.nan
-    for j, axis in enumerate(("vx", "vy", "vz")):
-        c = AXIS_COLOURS[axis]
+    if series:
+        for j, axis in enumerate(("vx", "vy", "vz")):
+            c = AXIS_COLOURS[axis]
+            log_series(
+                rec,
+                f"plots/{ROOT}/error_mps/{axis}",
+                n,
+                t,
+                err[:, j],
+                c,
+                f"V̂{axis[1]} − V{axis[1]}",
+            )
+            log_series(
+                rec, f"plots/{ROOT}/sigma_mps/{axis}", n, t, np.sqrt(cov[:, j, j]), c, f"σ {axis}"
+            )
         log_series(
-            rec, f"plots/{ROOT}/error_mps/{axis}", n, t, err[:, j], c, f"V̂{axis[1]} − V{axis[1]}"
+            rec, f"plots/{ROOT}/geometry_metric/m", n, t, m, rgb("fused"), "geometry metric m"
         )
         log_series(
-            rec, f"plots/{ROOT}/sigma_mps/{axis}", n, t, np.sqrt(cov[:, j, j]), c, f"σ {axis}"
+            rec,
+            f"plots/{ROOT}/geometry_metric/m_warn",
+            n,
+            t,
+            np.full(k, M_WARN),
+            rgb("band"),
+            "warning level",
         )
-    log_series(rec, f"plots/{ROOT}/geometry_metric/m", n, t, m, rgb("fused"), "geometry metric m")
-    log_series(
-        rec,
-        f"plots/{ROOT}/geometry_metric/m_warn",
-        n,
-        t,
-        np.full(k, M_WARN),
-        rgb("band"),
-        "warning level",
-    )
     _log_charts(rec, n, t, err, cov, m)
     log_text(rec, f"velocity fusion: {len(radars)} radars, {k} scans")
     return geometry_frame(

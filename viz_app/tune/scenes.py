@@ -119,14 +119,19 @@ def simulate(p: TuneParams) -> TuneResult:
     return TuneResult(p, velocity=run, figures=figures, alerts=alerts)
 
 
-def log_result(rec: rr.RecordingStream, result: TuneResult) -> None:
-    """Log the run's scene with the viewer's scene module (no blueprint)."""
+def log_result(rec: rr.RecordingStream, result: TuneResult, series: bool = True) -> None:
+    """Log the run's scene with the viewer's scene module (no blueprint); ``series``: with
+    the statistics' values under ``plots/``, which no view draws (the charts show them)."""
     if result.prosov is not None:
-        prosov_views.log_scene(rec, result.prosov, TUNE_CLOUD_POINTS, TUNE_CLOUD_SHOWN)
+        prosov_views.log_scene(
+            rec, result.prosov, TUNE_CLOUD_POINTS, TUNE_CLOUD_SHOWN, series=series
+        )
     elif result.gorshkov is not None and result.tracking is not None:
-        gorshkov_scene.log_gorshkov_results(rec, result.gorshkov, result.tracking, analytic=True)
+        gorshkov_scene.log_gorshkov_results(
+            rec, result.gorshkov, result.tracking, analytic=True, series=series
+        )
     elif result.velocity is not None:
-        velocity_scene.log_velocity_run(rec, result.velocity)
+        velocity_scene.log_velocity_run(rec, result.velocity, series=series)
 
 
 # --- headline figures ------------------------------------------------------------------------

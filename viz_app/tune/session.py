@@ -27,7 +27,7 @@ from rerun.chunk import Chunk
 from radarviz.core.finite import ResultError
 from radarviz.core.params import ParameterError
 from radarviz.viz_app.rerun import gorshkov_scene, prosov_scene, velocity_scene
-from radarviz.viz_app.rerun.recording import APPLICATION_ID, log_text, recording_file
+from radarviz.viz_app.rerun.recording import APPLICATION_ID, log_texts, recording_file
 from radarviz.viz_app.rerun.scenes import blueprint, text_log_view
 from radarviz.viz_app.tune.params import SCENES, TuneParams
 from radarviz.viz_app.tune.scenes import (
@@ -140,20 +140,26 @@ def send_blueprint(rec: rr.RecordingStream, scene: str) -> None:
             stream.disconnect()
 
 
-def log_tuning_scene(rec: rr.RecordingStream, params: TuneParams) -> TuneResult:
-    """Simulate ``params`` and log its scene (the viewer's scene module) and blueprint."""
+def log_tuning_scene(
+    rec: rr.RecordingStream, params: TuneParams, series: bool = True
+) -> TuneResult:
+    """Simulate ``params`` and log its scene (the viewer's scene module) and blueprint.
+
+    ``series``: with the statistics' values under ``plots/`` as well as their charts. The
+    panel's runs leave them out: no view draws them, and the viewer's time to a run's first
+    complete frame grows with the chunks it must take in (a saved run keeps them)."""
     result = simulate(params)
-    log_result(rec, result)
+    log_result(rec, result, series)
     send_blueprint(rec, params.scene)
     p = params
-    log_text(
-        rec,
+    head = (
         f"tune {p.scene}: {p.runs} runs × {p.steps} scans, σr = {p.sigma_r_m:g} m, "
         f"σβ = {p.sigma_beta_deg:g}°, T = {p.period_s:g} s, C0 = {p.c0:.4g} "
-        f"(σVr = {p.sigma_vr_mps:.3g} m/s), seed {p.seed}",
+        f"(σVr = {p.sigma_vr_mps:.3g} m/s), seed {p.seed}"
     )
-    for alert in result.alerts:
-        log_text(rec, alert, level="WARN", scan=max(p.steps, 1))
+    # One chunk for the lot (each is one more message for the viewer to take in).
+    alerts = [(max(p.steps, 1), alert, "WARN") for alert in result.alerts]
+    log_texts(rec, [(1, head, "INFO"), *alerts])
     return result
 
 
@@ -201,7 +207,7 @@ class TuneSession:
                 rec.connect_grpc(self.grpc_uri)
             else:
                 rec.set_sinks()  # no sink: the data are dropped (tests, benchmarks)
-            result = log_tuning_scene(rec, params)
+            result = log_tuning_scene(rec, params, series=False)
             rec.flush()
         finally:
             with contextlib.suppress(Exception):
