@@ -13,15 +13,13 @@ tracked on (``viz_app.live.control`` says which changes keep the tracks).
 
 from __future__ import annotations
 
-import contextlib
 import threading
 from typing import Any
 
 from radarviz.core.filters.models import MOTION_MODELS
 from radarviz.core.params import PARAMETERS
 from radarviz.viz_app.live.control import LiveControl
-from radarviz.viz_app.tune.page import CONTROLS_MIN_PX
-from radarviz.viz_app.tune.panel import SETTLE_S
+from radarviz.viz_app.tune.panel import SETTLE_S, lay_out_panel, parameter_label
 
 #: The number inputs, in panel order: setting → step.
 NUMBERS: dict[str, float] = {
@@ -33,11 +31,6 @@ NUMBERS: dict[str, float] = {
 }
 
 
-def _label(name: str) -> str:
-    p = PARAMETERS[name]
-    return f"{p.symbol} ({p.unit})" if p.unit else p.symbol
-
-
 class LivePanel:
     """The controls of one live session (module docstring), on Viser ``server``'s GUI."""
 
@@ -45,10 +38,7 @@ class LivePanel:
         self.server, self.control = server, control
         s = control.settings
         gui = server.gui
-        with contextlib.suppress(Exception):
-            gui.configure_theme(control_width="large", show_logo=False, show_share_button=False)
-            gui.main_panel.dock_left()
-            gui.main_panel.set_width(CONTROLS_MIN_PX)
+        lay_out_panel(server)
         gui.add_markdown(
             "## radarviz live\nA change applies from the next plot tracked on. σa, P_G, the "
             "confirmation and the deletion keep every track; **another motion model starts "
@@ -62,7 +52,7 @@ class LivePanel:
         initial = {n: getattr(s, n) for n in NUMBERS}
         self.numbers = {
             n: gui.add_number(
-                _label(n),
+                parameter_label(n),
                 initial[n],
                 step=step,
                 hint=PARAMETERS[n].help(),
@@ -72,7 +62,7 @@ class LivePanel:
             for n, step in NUMBERS.items()
         }
         self.imm_sigmas = gui.add_text(
-            f"{_label('imm_sigma_a_mps2')}, per model",
+            f"{parameter_label('imm_sigma_a_mps2')}, per model",
             ", ".join(f"{v:g}" for v in s.imm_sigma_a_mps2),
             hint=PARAMETERS["imm_sigma_a_mps2"].help(),
         )
@@ -89,8 +79,6 @@ class LivePanel:
         self._show_model()
         control.listeners.append(self.refresh)
         self.refresh(control)
-        with contextlib.suppress(Exception):  # the scene lives in the viewer, not here
-            server.scene.world_axes.visible = False
 
     def raw(self) -> dict[str, Any]:
         """The controls' values, for ``LiveControl.submit``."""

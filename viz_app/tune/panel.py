@@ -45,6 +45,25 @@ SETTLE_S = 0.5
 DOPPLER_INPUTS: dict[str, str] = {"σVr (m/s)": "sigma_vr_mps", "C0": "c0"}
 
 
+def parameter_label(name: str) -> str:
+    """The panel label of table parameter ``name``: its symbol and unit (``σβ (deg)``)."""
+    p = PARAMETERS[name]
+    return f"{p.symbol} ({p.unit})" if p.unit else p.symbol
+
+
+def lay_out_panel(server: Any) -> None:
+    """Dock a Viser panel's controls at the left of its page, at the width the page gives
+    them (``page.CONTROLS_MIN_PX``), and hide its 3D scene's axes (the scene lives in the
+    viewer, not here); a Viser without these settings keeps its own layout."""
+    gui = server.gui
+    with contextlib.suppress(Exception):
+        server.scene.world_axes.visible = False
+    with contextlib.suppress(Exception):
+        gui.configure_theme(control_width="large", show_logo=False, show_share_button=False)
+        gui.main_panel.dock_left()
+        gui.main_panel.set_width(CONTROLS_MIN_PX)
+
+
 def control_spec(name: str) -> dict[str, Any]:
     """Label, bounds, step and hint of the panel input for table parameter ``name``.
 
@@ -57,7 +76,7 @@ def control_spec(name: str) -> dict[str, Any]:
     high = TUNE_LIMITS.get(name, p.high)
     return {
         "kind": kind,
-        "label": label or (f"{p.symbol} ({p.unit})" if p.unit else p.symbol),
+        "label": label or parameter_label(name),
         "min": p.low,
         "max": high,
         "step": step,
@@ -104,10 +123,7 @@ class TunePanel:
         p = initial or TuneParams()
         self.server, self.session, self.worker = server, session, worker
         gui = server.gui
-        with contextlib.suppress(Exception):
-            gui.configure_theme(control_width="large", show_logo=False, show_share_button=False)
-            gui.main_panel.dock_left()
-            gui.main_panel.set_width(CONTROLS_MIN_PX)
+        lay_out_panel(server)
         gui.add_markdown(
             "## radarviz tune\nEach change re-runs the chosen scene; the Rerun viewer beside "
             f"these controls switches to the new run. Typed numbers apply after a {SETTLE_S:g} s "
@@ -149,8 +165,6 @@ class TunePanel:
         self.save_button.on_click(self._save)
         session.listeners.append(self.refresh)
         self._show_scene_controls()
-        with contextlib.suppress(Exception):  # the scene lives in the viewer, not here
-            server.scene.world_axes.visible = False
 
     # --- what is shown ---------------------------------------------------------------------
 
