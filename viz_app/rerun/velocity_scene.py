@@ -92,6 +92,27 @@ def log_velocity_scene(
     return log_velocity_run(rec, estimate_scans(scenario or fusion_scenario(), scans, seed))
 
 
+def _send_radar_strips(
+    rec: rr.RecordingStream,
+    entity: str,
+    idx: list[rr.TimeColumn],
+    strips: NDArray[np.float64],
+    tones: NDArray[np.uint8],
+) -> None:
+    """Per scan, one thin 2-point strip per radar in the radar's colour, as one entity:
+    ``strips`` (scans, radars, 2, 3), ``tones`` (radars, 3)."""
+    k, count = strips.shape[:2]
+    rec.send_columns(
+        entity,
+        indexes=idx,
+        columns=rr.LineStrips3D.columns(
+            strips=list(strips.reshape(-1, 2, 3)),
+            colors=np.tile(tones, (k, 1)),
+            radii=[THIN_LINE] * (k * count),
+        ).partition([count] * k),
+    )
+
+
 def log_velocity_run(
     rec: rr.RecordingStream, run: VelocityScans, series: bool = True
 ) -> VelocityFrame:
@@ -145,15 +166,7 @@ def log_velocity_run(
     )
     tones = np.array([radar_rgb(j) for j in range(len(radars))], dtype=np.uint8)
     per_scan = [len(radars)] * k
-    rec.send_columns(
-        f"{base}/lines_of_sight",
-        indexes=idx,
-        columns=rr.LineStrips3D.columns(
-            strips=list(strips.reshape(-1, 2, 3)),
-            colors=np.tile(tones, (k, 1)),
-            radii=[THIN_LINE] * (k * len(radars)),
-        ).partition(per_scan),
-    )
+    _send_radar_strips(rec, f"{base}/lines_of_sight", idx, strips, tones)
 
     # --- the velocity vector, m/s ---
     base = f"{ROOT}/vector"
@@ -189,7 +202,7 @@ def log_velocity_run(
                 labels=[f"V̂ {v:.0f} m/s" for v in np.linalg.norm(vel[ok], axis=-1)],
             ).partition(rows),
         )
-    speed = float(np.linalg.norm(run.true_velocity, axis=-1).max())
+    speed = float(true_speed.max())
     u = fused.position[:, None, :] - sites[None]  # (k, radars, 3)
     u /= np.linalg.norm(u, axis=-1, keepdims=True)
     radial = radial_mps[:, :, None] * u  # (k, radars, 3)
@@ -204,15 +217,7 @@ def log_velocity_run(
             radii=[LINE] * (k * len(radars)),
         ).partition(per_scan),
     )
-    rec.send_columns(
-        f"{base}/line_of_sight",
-        indexes=idx,
-        columns=rr.LineStrips3D.columns(
-            strips=list(line.reshape(-1, 2, 3)),
-            colors=np.tile(tones, (k, 1)),
-            radii=[THIN_LINE] * (k * len(radars)),
-        ).partition(per_scan),
-    )
+    _send_radar_strips(rec, f"{base}/line_of_sight", idx, line, tones)
 
     # --- the error V̂ − V, m/s ---
     err = vel - run.true_velocity
