@@ -31,12 +31,15 @@ from radarviz.core.filters.polar_ukf import SEMIDEFINITE_RTOL
 # fastmath: fused multiply-adds and reordered sums (results move by rounding only, far inside
 # the 1e-9 the tests hold the kernel to); never "nnan"/"ninf", which NaN tracks rely on.
 # _inline marks the small scalar functions the kernels call per step: each is typed and
-# compiled once and LLVM inlines it into its callers, where its tuples become registers.
-# numba's own inlining (inline="always") typed it again at every call site: the 2D IMM
-# tracker kernel alone took 30 s of CPU to compile, a first `radarviz track` 55 s (now 25 s).
+# compiled once, and marked for LLVM to inline into every caller (forceinline: the LLVM
+# attribute alwaysinline), where its tuples become registers. numba's own inlining
+# (inline="always") types a function again at every call site (the 2D IMM tracker kernel
+# alone took 30 s of CPU to compile); left to LLVM's cost model, the larger steps (the
+# Joseph update, the UKF) stay calls that pass their tuples through memory, and the Monte
+# Carlo kernel took 1.8x the time per track-step (docs/performance.md, section 10).
 _FAST = {"contract", "reassoc", "nsz", "arcp"}
 _jit = numba.njit(cache=True, error_model="numpy", nogil=True, fastmath=_FAST)
-_inline = _jit
+_inline = numba.njit(cache=True, error_model="numpy", nogil=True, fastmath=_FAST, forceinline=True)
 
 
 _TWO_PI = 2.0 * math.pi
