@@ -40,7 +40,7 @@ from numpy.typing import NDArray
 from radarviz.core.confidence import BAND_GROUPS
 from radarviz.core.filters.polar_ukf import UKFParams
 from radarviz.core.filters.state import CVBatch
-from radarviz.core.metrics import SUM_NAMES
+from radarviz.core.filters.terms import SUM_NAMES
 
 #: Kernel codes of the 2D methods (``core.filters.methods.METHODS`` names).
 METHOD_CODES: dict[str, int] = {
