@@ -24,6 +24,12 @@ from radarviz.core.conversion.elementwise import conversion_coefficients, conver
 # A Cholesky pivot within this fraction of its diagonal is a direction of zero variance (a
 # zero column); below it the track is NaN (numba reads it as a compile-time constant).
 from radarviz.core.filters.polar_ukf import SEMIDEFINITE_RTOL
+from radarviz.core.filters.predict import (
+    add_process_noise,
+    predict_2d,
+    predict_components,
+    white_acceleration,
+)
 
 # error_model="numpy": a division by zero or a negative pivot gives inf / NaN for that track,
 # as the numpy engine does, instead of raising. cache=True: compiled once per machine.
@@ -152,26 +158,18 @@ def start_s(zx: float, zy: float, r00: float, r01: float, r11: float, v0: float)
     return (zx, 0.0, zy, 0.0), (r00, 0.0, r01, 0.0, v, 0.0, 0.0, r11, 0.0, v)
 
 
+# The prediction's arithmetic lives in ``core.filters.predict`` (the numpy engine and the
+# array-API path call the same functions), compiled here once for every kernel module.
+_predict_2d = _inline(predict_2d)
+white_acceleration_c = _inline(white_acceleration)
+predict_components_c = _inline(predict_components)
+add_process_noise_c = _inline(add_process_noise)
+
+
 @_inline
 def predict_s(xt, p, T: float, q: float):
-    # cv_predict: x⁻ = F x, P⁻ = F P Fᵀ + Q (per axis F = [[1, T], [0, 1]], Q = σa² g gᵀ,
-    # g = (T²/2, T))
-    x0, x1, x2, x3 = xt
-    p00, p01, p02, p03, p11, p12, p13, p22, p23, p33 = p
-    T2 = T * T
-    qa, qb, qc = q * T2 * T2 / 4.0, q * T2 * T / 2.0, q * T2
-    return (x0 + T * x1, x1, x2 + T * x3, x3), (
-        (p00 + T * p01) + T * (p01 + T * p11) + qa,
-        p01 + T * p11 + qb,
-        (p02 + T * p12) + T * (p03 + T * p13),
-        p03 + T * p13,
-        p11 + qc,
-        p12 + T * p13,
-        p13,
-        (p22 + T * p23) + T * (p23 + T * p33) + qa,
-        p23 + T * p33 + qb,
-        p33 + qc,
-    )
+    # cv_predict: x⁻ = F x, P⁻ = F P Fᵀ + Q, σa² = q (``core.filters.predict.predict_2d``)
+    return _predict_2d(xt, p, T, white_acceleration_c(T, q))
 
 
 @_inline

@@ -27,7 +27,14 @@ from math import atan2, cos, exp, expm1, hypot, log, sin, sqrt
 
 import numpy as np
 
-from radarviz.core.filters.kernels_2d import _inline, _jit, wrap
+from radarviz.core.filters.kernels_2d import (
+    _inline,
+    _jit,
+    add_process_noise_c,
+    predict_components_c,
+    white_acceleration_c,
+    wrap,
+)
 from radarviz.core.filters.kernels_track import time_step
 from radarviz.core.filters.polar_ukf import SEMIDEFINITE_RTOL
 
@@ -212,24 +219,10 @@ def start_3d(x, P, z, R, sx, sy, sz, v0):
 
 @_inline
 def predict_3d(x, P, T: float, q: float):
-    # cv_predict in 3D: x⁻ = F x, P⁻ = F P Fᵀ + Q, F per axis [[1, T], [0, 1]]
-    for a in range(3):
-        p = 2 * a
-        x[p] += T * x[p + 1]
-        for j in range(6):
-            P[p, j] += T * P[p + 1, j]
-    for i in range(6):
-        for a in range(3):
-            p = 2 * a
-            P[i, p] += T * P[i, p + 1]
-    if q != 0.0:
-        T2 = T * T
-        for a in range(3):
-            p = 2 * a
-            P[p, p] += q * T2 * T2 / 4.0
-            P[p, p + 1] += q * T2 * T / 2.0
-            P[p + 1, p] += q * T2 * T / 2.0
-            P[p + 1, p + 1] += q * T2
+    # cv_predict in 3D: x⁻ = F x, P⁻ = F P Fᵀ + Q, σa² = q, in place
+    # (``core.filters.predict.predict_components``, ``add_process_noise``)
+    predict_components_c(x, P, 6, T)
+    add_process_noise_c(P, 6, white_acceleration_c(T, q))
 
 
 @_inline
