@@ -52,6 +52,7 @@ STEP_KINDS: dict[str, StepKind] = {
             "core/filters/kernels_imm.py:_predicted": "the IMM's predicted model probabilities",
             "core/filters/methods.py:_predicted": "a method's predicted measurement",
             "core/tracking/compiled.py:_predicted_kernel": "loads a compiled kernel",
+            "core/filters/codes.py:reads_prediction": "whether a conversion reads the prediction",
         },
     ),
 }

@@ -25,7 +25,8 @@ import math
 from typing import Any
 
 from radarviz.core.conversion.elementwise import DUCM, conversion_coefficients, converted_point
-from radarviz.core.filters.compiled import METHOD_CODES, START_CODES, FilterSettings
+from radarviz.core.filters.codes import EKF, METHOD_CODES, START_CODES, UKF
+from radarviz.core.filters.compiled import FilterSettings
 from radarviz.core.filters.polar_ukf import SEMIDEFINITE_RTOL
 from radarviz.core.filters.predict import UPPER_2D, predict_2d, white_acceleration
 
@@ -218,7 +219,7 @@ def filter_history_xp(
     for n in range(1, steps):
         r, b = r_hat[:, n], beta_hat[:, n]
         x, P = _predict(x, P, T, q)
-        if code == 5:  # ekf: ν' = J ν, R' = J R Jᵀ at the prediction, then the position update
+        if code == EKF:  # ekf: ν' = J ν, R' = J R Jᵀ at the prediction, then the position update
             px, py = x[0] - sx, x[2] - sy
             rp = xp.hypot(px, py)
             cb, sb = px / rp, py / rp
@@ -231,7 +232,7 @@ def filter_history_xp(
                 (1, 1): sb * sb * sr2 + px * px * vb,
             }
             x, P = _joseph(xp, x, P, _POSITION, nu, R)
-        elif code == 6:
+        elif code == UKF:
             x, P = _ukf(xp, x, P, r, b, sr2, s, sx, sy, prm)
         else:
             zx, zy, r00, r01, r11 = _convert(xp, code, r, b, sr2, s, co, x[0] - sx, x[2] - sy)

@@ -19,7 +19,8 @@ from math import atan2, ceil, cos, sin, sqrt
 import numba
 import numpy as np
 
-from radarviz.core.conversion.elementwise import conversion_coefficients, converted_point
+from radarviz.core.conversion.elementwise import DUCM, conversion_coefficients, converted_point
+from radarviz.core.filters.codes import EKF, UKF, is_polar, reads_prediction
 
 # A Cholesky pivot within this fraction of its diagonal is a direction of zero variance (a
 # zero column); below it the track is NaN (numba reads it as a compile-time constant).
@@ -87,7 +88,7 @@ def convert(code: int, r: float, b: float, sr2: float, s: float, px: float, py: 
     # The five conversions of core.conversion.planar: point and covariance (radar-centred);
     # ``co``: ``coefficients(code, s, sr2)``; (px, py) the radar-centred prediction (ducm).
     rp = cp = sp = 0.0
-    if code == 4:  # ducm: the covariance at the predicted position
+    if code == DUCM:  # the covariance at the predicted position
         rp = norm(px, py)
         cp, sp = px / rp, py / rp
     return _converted_point(code, r, cos(b), sin(b), sr2, s, co, rp, cp, sp)
@@ -164,6 +165,9 @@ _predict_2d = _inline(predict_2d)
 white_acceleration_c = _inline(white_acceleration)
 predict_components_c = _inline(predict_components)
 add_process_noise_c = _inline(add_process_noise)
+# The method codes' tests (``core.filters.codes``), for the kernel modules.
+is_polar_c = _inline(is_polar)
+reads_prediction_c = _inline(reads_prediction)
 
 
 @_inline
@@ -509,9 +513,9 @@ def track_terms(x, P, t, c, s, out, k, m, L, y, e):
 def _step(code, xt, p, r, b, vr_hat, doppler, sr2, s, svr2, T, q, sx, sy, co, c, wm0, wc0, w):
     # one scan of a track: predict, the method's update, then Doppler's when V̂r is given
     xt, p = predict_s(xt, p, T, q)
-    if code == 5:
+    if code == EKF:
         xt, p = ekf_update_s(xt, p, r, b, sr2, s, sx, sy)
-    elif code == 6:
+    elif code == UKF:
         xt, p = ukf_update_s(xt, p, r, b, sr2, s, sx, sy, c, wm0, wc0, w)
     else:
         zx, zy, r00, r01, r11 = convert(code, r, b, sr2, s, xt[0] - sx, xt[2] - sy, co)
