@@ -47,21 +47,8 @@ from radarviz.core.confidence import (
     jackknife_band,
 )
 from radarviz.core.filters.state import CVBatch, quad_form_inv
+from radarviz.core.filters.terms import SUM_NAMES
 from radarviz.core.geometry import polar_coordinates
-
-#: Names of the running sums, in the row order of ``MetricsAccumulator.to_arrays``.
-SUM_NAMES: tuple[str, ...] = (
-    "ex",
-    "ex2",
-    "ey",
-    "ey2",
-    "er",
-    "ec",
-    "pxx",
-    "pyy",
-    "nees_pos",
-    "nees_state",
-)
 
 
 class TrackMetrics(NamedTuple):

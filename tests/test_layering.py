@@ -53,6 +53,16 @@ FORBIDDEN_IMPORTS: tuple[tuple[str, tuple[str, ...], str], ...] = (
         ("radarviz.core.experiments",),
         "the estimation engine must not depend on the experiments built on it",
     ),
+    (
+        "core/filters/",
+        ("radarviz.core.metrics", "radarviz.core.tracking", "radarviz.core.scenarios"),
+        "the estimation engine sits below the statistics, trackers and scenes built on it",
+    ),
+    (
+        "core/velocity/",
+        ("radarviz.core.scenarios", "radarviz.core.experiments"),
+        "the velocity estimator sits below the scenes that simulate it",
+    ),
     ("core/geometry.py", ("radarviz.core",), "geometry is a leaf of core"),
     ("core/params.py", ("radarviz.core",), "params is a leaf of core"),
     ("core/cores.py", ("radarviz.core",), "cores is a leaf of core"),

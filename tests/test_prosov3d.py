@@ -14,7 +14,8 @@ from radarviz.core.experiments.prosov import (
     run_tracking,
     track_history,
 )
-from radarviz.core.metrics import SUM_NAMES, nees_dof, scan_terms
+from radarviz.core.filters.terms import SUM_NAMES
+from radarviz.core.metrics import nees_dof, scan_terms
 from radarviz.core.params import ParameterError
 from radarviz.core.scenarios.planar import prosov_target
 from radarviz.core.scenarios.spatial import prosov_target_3d

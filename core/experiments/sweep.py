@@ -37,7 +37,8 @@ from radarviz.core.experiments.prosov import (
     run_block,
     tracking_result,
 )
-from radarviz.core.metrics import SUM_NAMES, MetricsAccumulator
+from radarviz.core.filters.terms import SUM_NAMES
+from radarviz.core.metrics import MetricsAccumulator
 from radarviz.core.params import PARAMETERS, ParameterError, check, check_int, check_real, default
 from radarviz.core.scenarios.planar import ConstantVelocityTarget2D
 from radarviz.core.scenarios.spatial import ConstantVelocityTarget3D, prosov_target_3d

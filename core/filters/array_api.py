@@ -25,8 +25,10 @@ import math
 from typing import Any
 
 from radarviz.core.conversion.elementwise import DUCM, conversion_coefficients, converted_point
-from radarviz.core.filters.compiled import METHOD_CODES, START_CODES, FilterSettings
+from radarviz.core.filters.codes import EKF, METHOD_CODES, START_CODES, UKF
+from radarviz.core.filters.compiled import FilterSettings
 from radarviz.core.filters.polar_ukf import SEMIDEFINITE_RTOL
+from radarviz.core.filters.predict import UPPER_2D, predict_2d, white_acceleration
 
 Array = Any  # an array of the caller's namespace
 _TWO_PI = 2.0 * math.pi
@@ -48,26 +50,10 @@ def _convert(xp: Any, code: int, r, b, sr2: float, s: float, co, px=None, py=Non
 
 
 def _predict(x: list, P: dict, T: float, q: float) -> tuple[list, dict]:
-    """x⁻ = F x, P⁻ = F P Fᵀ + Q (``core.filters.predict``); P as its upper entries."""
-
-    def p(i, j):
-        return P[(i, j) if i <= j else (j, i)]
-
-    fp = {}  # rows of F P: row 0 = P0 + T P1, row 2 = P2 + T P3
-    for i in range(4):
-        for j in range(4):
-            fp[i, j] = p(i, j) + T * p(i + 1, j) if i in (0, 2) else p(i, j)
-    out = {}
-    for i in range(4):
-        for j in range(i, 4):
-            out[i, j] = fp[i, j] + T * fp[i, j + 1] if j in (0, 2) else fp[i, j]
-    if q:
-        T2 = T * T
-        for a in (0, 2):
-            out[a, a] = out[a, a] + q * T2 * T2 / 4.0
-            out[a, a + 1] = out[a, a + 1] + q * T2 * T / 2.0
-            out[a + 1, a + 1] = out[a + 1, a + 1] + q * T2
-    return [x[0] + T * x[1], x[1], x[2] + T * x[3], x[3]], out
+    """x⁻ = F x, P⁻ = F P Fᵀ + Q (``core.filters.predict.predict_2d``); P as its upper
+    entries."""
+    xn, pn = predict_2d(tuple(x), tuple(P[k] for k in UPPER_2D), T, white_acceleration(T, q))
+    return list(xn), dict(zip(UPPER_2D, pn, strict=True))
 
 
 def _sym(P: dict, i: int, j: int):
@@ -233,7 +219,7 @@ def filter_history_xp(
     for n in range(1, steps):
         r, b = r_hat[:, n], beta_hat[:, n]
         x, P = _predict(x, P, T, q)
-        if code == 5:  # ekf: ν' = J ν, R' = J R Jᵀ at the prediction, then the position update
+        if code == EKF:  # ekf: ν' = J ν, R' = J R Jᵀ at the prediction, then the position update
             px, py = x[0] - sx, x[2] - sy
             rp = xp.hypot(px, py)
             cb, sb = px / rp, py / rp
@@ -246,7 +232,7 @@ def filter_history_xp(
                 (1, 1): sb * sb * sr2 + px * px * vb,
             }
             x, P = _joseph(xp, x, P, _POSITION, nu, R)
-        elif code == 6:
+        elif code == UKF:
             x, P = _ukf(xp, x, P, r, b, sr2, s, sx, sy, prm)
         else:
             zx, zy, r00, r01, r11 = _convert(xp, code, r, b, sr2, s, co, x[0] - sx, x[2] - sy)

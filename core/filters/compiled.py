@@ -38,31 +38,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from radarviz.core.confidence import BAND_GROUPS
+from radarviz.core.filters.codes import METHOD_CODES, START_CODES
 from radarviz.core.filters.polar_ukf import UKFParams
 from radarviz.core.filters.state import CVBatch
-from radarviz.core.metrics import SUM_NAMES
+from radarviz.core.filters.terms import SUM_NAMES
 
-#: Kernel codes of the 2D methods (``core.filters.methods.METHODS`` names).
-METHOD_CODES: dict[str, int] = {
-    "naive": 0,
-    "seed": 1,
-    "cmkf_d": 2,
-    "ucm": 3,
-    "ducm": 4,
-    "ekf": 5,
-    "ukf": 6,
-}
-#: Each method's start conversion (``Method.start_conversion``): ducm starts like ucm, the
-#: polar filters from the naive point.
-START_CODES: dict[str, int] = {
-    "naive": 0,
-    "seed": 1,
-    "cmkf_d": 2,
-    "ucm": 3,
-    "ducm": 3,
-    "ekf": 0,
-    "ukf": 0,
-}
 COMPILED_METHODS: tuple[str, ...] = tuple(METHOD_CODES)
 #: Chunks of fewer scans read the measurements scan-major (``filter_scans``).
 SCAN_MAJOR_BELOW = 8

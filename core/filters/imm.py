@@ -32,7 +32,7 @@ from numpy.typing import NDArray
 
 from radarviz.core.filters.innovation import InnovationStats
 from radarviz.core.filters.models import IMMModel
-from radarviz.core.filters.predict import cv_predict
+from radarviz.core.filters.predict import add_process_noise, cv_predict, white_acceleration
 from radarviz.core.filters.state import CVBatch
 from radarviz.core.filters.step import Stage, moves
 from radarviz.core.filters.turn import turn_factors, turn_predict
@@ -101,7 +101,8 @@ def imm_predict(mixed: CVBatch, dt_s: float | NDArray[np.float64], model: IMMMod
             k = turn_factors(omega, np.sin(theta), np.sin(0.5 * theta))
             x_c = np.moveaxis(pred.x, -1, 0)  # components first: x_c[i], P_c[i, j]
             P_c = np.moveaxis(pred.P, (-2, -1), (0, 1))
-            turn_predict(x_c, P_c, n, T, k, float(sigma_a) ** 2)
+            turn_predict(x_c, P_c, n, T, k)
+            add_process_noise(P_c, n, white_acceleration(T, float(sigma_a) ** 2))
         xs.append(pred.x)
         Ps.append(pred.P)
     return CVBatch(np.stack(xs, axis=-2), np.stack(Ps, axis=-3))

@@ -19,11 +19,16 @@ from math import atan2, ceil, cos, sin, sqrt
 import numba
 import numpy as np
 
-from radarviz.core.conversion.elementwise import conversion_coefficients, converted_point
-
-# A Cholesky pivot within this fraction of its diagonal is a direction of zero variance (a
-# zero column); below it the track is NaN (numba reads it as a compile-time constant).
-from radarviz.core.filters.polar_ukf import SEMIDEFINITE_RTOL
+from radarviz.core.conversion.elementwise import DUCM, conversion_coefficients, converted_point
+from radarviz.core.filters import position_2d
+from radarviz.core.filters.codes import EKF, UKF, is_polar, reads_prediction
+from radarviz.core.filters.predict import (
+    add_process_noise,
+    predict_2d,
+    predict_components,
+    white_acceleration,
+)
+from radarviz.core.filters.rebind import rebind
 
 # error_model="numpy": a division by zero or a negative pivot gives inf / NaN for that track,
 # as the numpy engine does, instead of raising. cache=True: compiled once per machine.
@@ -31,12 +36,15 @@ from radarviz.core.filters.polar_ukf import SEMIDEFINITE_RTOL
 # fastmath: fused multiply-adds and reordered sums (results move by rounding only, far inside
 # the 1e-9 the tests hold the kernel to); never "nnan"/"ninf", which NaN tracks rely on.
 # _inline marks the small scalar functions the kernels call per step: each is typed and
-# compiled once and LLVM inlines it into its callers, where its tuples become registers.
-# numba's own inlining (inline="always") typed it again at every call site: the 2D IMM
-# tracker kernel alone took 30 s of CPU to compile, a first `radarviz track` 55 s (now 25 s).
+# compiled once, and marked for LLVM to inline into every caller (forceinline: the LLVM
+# attribute alwaysinline), where its tuples become registers. numba's own inlining
+# (inline="always") types a function again at every call site (the 2D IMM tracker kernel
+# alone took 30 s of CPU to compile); left to LLVM's cost model, the larger steps (the
+# Joseph update, the UKF) stay calls that pass their tuples through memory, and the Monte
+# Carlo kernel took 1.8x the time per track-step (docs/performance.md, section 10).
 _FAST = {"contract", "reassoc", "nsz", "arcp"}
 _jit = numba.njit(cache=True, error_model="numpy", nogil=True, fastmath=_FAST)
-_inline = _jit
+_inline = numba.njit(cache=True, error_model="numpy", nogil=True, fastmath=_FAST, forceinline=True)
 
 
 _TWO_PI = 2.0 * math.pi
@@ -78,7 +86,7 @@ def convert(code: int, r: float, b: float, sr2: float, s: float, px: float, py: 
     # The five conversions of core.conversion.planar: point and covariance (radar-centred);
     # ``co``: ``coefficients(code, s, sr2)``; (px, py) the radar-centred prediction (ducm).
     rp = cp = sp = 0.0
-    if code == 4:  # ducm: the covariance at the predicted position
+    if code == DUCM:  # the covariance at the predicted position
         rp = norm(px, py)
         cp, sp = px / rp, py / rp
     return _converted_point(code, r, cos(b), sin(b), sr2, s, co, rp, cp, sp)
@@ -149,88 +157,48 @@ def start_s(zx: float, zy: float, r00: float, r01: float, r11: float, v0: float)
     return (zx, 0.0, zy, 0.0), (r00, 0.0, r01, 0.0, v, 0.0, 0.0, r11, 0.0, v)
 
 
+# The prediction's arithmetic lives in ``core.filters.predict`` (the numpy engine and the
+# array-API path call the same functions), compiled here once for every kernel module.
+_predict_2d = _inline(predict_2d)
+white_acceleration_c = _inline(white_acceleration)
+predict_components_c = _inline(predict_components)
+add_process_noise_c = _inline(add_process_noise)
+# The method codes' tests (``core.filters.codes``), for the kernel modules.
+is_polar_c = _inline(is_polar)
+reads_prediction_c = _inline(reads_prediction)
+
+
 @_inline
 def predict_s(xt, p, T: float, q: float):
-    # cv_predict: x⁻ = F x, P⁻ = F P Fᵀ + Q (per axis F = [[1, T], [0, 1]], Q = σa² g gᵀ,
-    # g = (T²/2, T))
-    x0, x1, x2, x3 = xt
-    p00, p01, p02, p03, p11, p12, p13, p22, p23, p33 = p
-    T2 = T * T
-    qa, qb, qc = q * T2 * T2 / 4.0, q * T2 * T / 2.0, q * T2
-    return (x0 + T * x1, x1, x2 + T * x3, x3), (
-        (p00 + T * p01) + T * (p01 + T * p11) + qa,
-        p01 + T * p11 + qb,
-        (p02 + T * p12) + T * (p03 + T * p13),
-        p03 + T * p13,
-        p11 + qc,
-        p12 + T * p13,
-        p13,
-        (p22 + T * p23) + T * (p23 + T * p33) + qa,
-        p23 + T * p33 + qb,
-        p33 + qc,
-    )
+    # cv_predict: x⁻ = F x, P⁻ = F P Fᵀ + Q, σa² = q (``core.filters.predict.predict_2d``)
+    return _predict_2d(xt, p, T, white_acceleration_c(T, q))
 
 
 @_inline
-def _z_col(col, k0, k1, h0: float, h1: float):
-    # column k of Z = L − K (H L): L's column ``col`` less the gain's columns k0, k1 times
-    # that column's (H L) entries h0, h1
-    return (
-        col[0] - (k0[0] * h0 + k1[0] * h1),
-        col[1] - (k0[1] * h0 + k1[1] * h1),
-        col[2] - (k0[2] * h0 + k1[2] * h1),
-        col[3] - (k0[3] * h0 + k1[3] * h1),
-    )
+def _select(c: bool, a: float, b: float) -> float:
+    # ``where`` for numbers
+    return a if c else b
 
 
-@_inline
-def _krk(ki0: float, ki1: float, kj0: float, kj1: float, r00: float, r01: float, r11: float):
-    # (K R Kᵀ)_ij for a two-column gain
-    return ki0 * (r00 * kj0 + r01 * kj1) + ki1 * (r01 * kj0 + r11 * kj1)
-
-
-@_inline
-def position_update_s(xt, p, nx: float, ny: float, r00: float, r01: float, r11: float):
-    # core.filters.position: S = H P Hᵀ + R, K = P Hᵀ S⁻¹, x⁺ = x + K ν, and the Joseph form
-    # on P's Cholesky factor L, P⁺ = Z Zᵀ + K R Kᵀ with Z = L − K (H L): a sum of squares,
-    # never P − K S Kᵀ (``core.filters.state.factored_joseph``).
-    x0, x1, x2, x3 = xt
-    p00, p01, p02, p03, _, p12, _, p22, p23, _ = p
-    s00, s01, s11 = p00 + r00, p02 + r01, p22 + r11
-    det = s00 * s11 - s01 * s01
-    i00, i01, i11 = s11 / det, -s01 / det, s00 / det
-    # U's columns: P's x and y columns
-    u00, u01, u10, u11, u20, u21, u30, u31 = p00, p02, p01, p12, p02, p22, p03, p23
-    k00, k01 = u00 * i00 + u01 * i01, u00 * i01 + u01 * i11
-    k10, k11 = u10 * i00 + u11 * i01, u10 * i01 + u11 * i11
-    k20, k21 = u20 * i00 + u21 * i01, u20 * i01 + u21 * i11
-    k30, k31 = u30 * i00 + u31 * i01, u30 * i01 + u31 * i11
-    xn = (
-        x0 + (k00 * nx + k01 * ny),
-        x1 + (k10 * nx + k11 * ny),
-        x2 + (k20 * nx + k21 * ny),
-        x3 + (k30 * nx + k31 * ny),
-    )
-    L0, L1, L2, L3 = semidefinite_cholesky_s(p, 1.0, True)
-    k0, k1 = (k00, k10, k20, k30), (k01, k11, k21, k31)
-    pn = (
-        _krk(k00, k01, k00, k01, r00, r01, r11),
-        _krk(k00, k01, k10, k11, r00, r01, r11),
-        _krk(k00, k01, k20, k21, r00, r01, r11),
-        _krk(k00, k01, k30, k31, r00, r01, r11),
-        _krk(k10, k11, k10, k11, r00, r01, r11),
-        _krk(k10, k11, k20, k21, r00, r01, r11),
-        _krk(k10, k11, k30, k31, r00, r01, r11),
-        _krk(k20, k21, k20, k21, r00, r01, r11),
-        _krk(k20, k21, k30, k31, r00, r01, r11),
-        _krk(k30, k31, k30, k31, r00, r01, r11),
-    )
-    # (H L)'s columns: L's x and y rows (L3 has neither)
-    pn = _add_outer(pn, 1.0, _z_col(L0, k0, k1, L0[0], L0[2]))
-    pn = _add_outer(pn, 1.0, _z_col(L1, k0, k1, 0.0, L1[2]))
-    pn = _add_outer(pn, 1.0, _z_col(L2, k0, k1, 0.0, L2[2]))
-    pn = _add_outer(pn, 1.0, L3)
-    return xn, pn
+# The position update and the semi-definite Cholesky factor: ``core.filters.position_2d``'s
+# functions (the numpy engine's too), compiled here with the scalar sqrt and select.
+_position_2d = rebind(
+    [
+        position_2d._pivot,
+        position_2d._below,
+        position_2d.semidefinite_cholesky_2d,
+        position_2d._add_outer,
+        position_2d._z_col,
+        position_2d._krk,
+        position_2d.position_update_2d,
+    ],
+    {"sqrt": sqrt, "where": _select},
+    _inline,
+)
+semidefinite_cholesky_s = _position_2d["semidefinite_cholesky_2d"]
+_add_outer = _position_2d["_add_outer"]
+_z_col = _position_2d["_z_col"]
+position_update_s = _position_2d["position_update_2d"]
 
 
 @_inline
@@ -250,52 +218,6 @@ def ekf_update_s(xt, p, r: float, b: float, vr: float, vb: float, sx: float, sy:
         cb * sb_ * vr - px * py * vb,
         sb_ * sb_ * vr + px * px * vb,
     )
-
-
-@_inline
-def _pivot(d: float, tol: float, null_negative: bool):
-    # A pivot in [−tol, 0] (with null_negative: any pivot <= 0) is a null direction (0); below
-    # −tol: NaN; above 0: a variance
-    null = d <= 0.0 if null_negative else -tol <= d <= 0.0
-    if null:
-        d = 0.0
-    elif d < -tol:
-        d = math.nan  # indefinite beyond rounding: this track becomes NaN
-    return sqrt(d), null
-
-
-@_inline
-def _below(e: float, d: float, null: bool) -> float:
-    return 0.0 if null else e / d
-
-
-@_inline
-def semidefinite_cholesky_s(p, c: float, null_negative: bool = False):
-    """The lower Cholesky factor of c·P (``core.filters.state.semidefinite_cholesky``, with
-    its ``null_negative``) as its columns (L[:, 0], …, L[:, 3]), 4-tuples each."""
-    p00, p01, p02, p03, p11, p12, p13, p22, p23, p33 = p
-    rt, nn = SEMIDEFINITE_RTOL, null_negative
-    l00, n0 = _pivot(c * p00, rt * c * p00, nn)
-    l10, l20, l30 = _below(c * p01, l00, n0), _below(c * p02, l00, n0), _below(c * p03, l00, n0)
-    l11, n1 = _pivot(c * p11 - l10 * l10, rt * c * p11, nn)
-    l21 = _below(c * p12 - l20 * l10, l11, n1)
-    l31 = _below(c * p13 - l30 * l10, l11, n1)
-    l22, n2 = _pivot(c * p22 - l20 * l20 - l21 * l21, rt * c * p22, nn)
-    l32 = _below(c * p23 - l30 * l20 - l31 * l21, l22, n2)
-    l33, _ = _pivot(c * p33 - l30 * l30 - l31 * l31 - l32 * l32, rt * c * p33, nn)
-    return (l00, l10, l20, l30), (0.0, l11, l21, l31), (0.0, 0.0, l22, l32), (0.0, 0.0, 0.0, l33)
-
-
-@_inline
-def _add_outer(p, w: float, e):
-    # P + w e eᵀ (upper entries)
-    e0, e1, e2, e3 = e
-    return (
-        p[0] + w * e0 * e0, p[1] + w * e0 * e1, p[2] + w * e0 * e2, p[3] + w * e0 * e3,
-        p[4] + w * e1 * e1, p[5] + w * e1 * e2, p[6] + w * e1 * e3,
-        p[7] + w * e2 * e2, p[8] + w * e2 * e3,
-        p[9] + w * e3 * e3,
-    )  # fmt: skip
 
 
 @_inline
@@ -508,9 +430,9 @@ def track_terms(x, P, t, c, s, out, k, m, L, y, e):
 def _step(code, xt, p, r, b, vr_hat, doppler, sr2, s, svr2, T, q, sx, sy, co, c, wm0, wc0, w):
     # one scan of a track: predict, the method's update, then Doppler's when V̂r is given
     xt, p = predict_s(xt, p, T, q)
-    if code == 5:
+    if code == EKF:
         xt, p = ekf_update_s(xt, p, r, b, sr2, s, sx, sy)
-    elif code == 6:
+    elif code == UKF:
         xt, p = ukf_update_s(xt, p, r, b, sr2, s, sx, sy, c, wm0, wc0, w)
     else:
         zx, zy, r00, r01, r11 = convert(code, r, b, sr2, s, xt[0] - sx, xt[2] - sy, co)

@@ -27,7 +27,18 @@ from math import atan2, cos, exp, expm1, hypot, log, sin, sqrt
 
 import numpy as np
 
-from radarviz.core.filters.kernels_2d import _inline, _jit, wrap
+from radarviz.core.conversion.elementwise import CMKF_D, NAIVE, SEED, UCM
+from radarviz.core.filters.codes import UKF
+from radarviz.core.filters.kernels_2d import (
+    _inline,
+    _jit,
+    add_process_noise_c,
+    is_polar_c,
+    predict_components_c,
+    reads_prediction_c,
+    white_acceleration_c,
+    wrap,
+)
 from radarviz.core.filters.kernels_track import time_step
 from radarviz.core.filters.polar_ukf import SEMIDEFINITE_RTOL
 
@@ -155,7 +166,7 @@ def convert_3d(code, r, sr2, sb2, se2, px, py, pz, z, R, conv):
     cb, sb, ce, se = trig[0], trig[1], trig[2], trig[3]
     u0, u1, u2 = ce * cb, ce * sb, se
     s_xy, s_z = sb2 + se2, se2
-    if code == 0:  # naive: J diag(σr², sβ, sε) Jᵀ, J = [u, r ∂u/∂β, r ∂u/∂ε]
+    if code == NAIVE:  # naive: J diag(σr², sβ, sε) Jᵀ, J = [u, r ∂u/∂β, r ∂u/∂ε]
         z[0], z[1], z[2] = r * u0, r * u1, r * u2
         jb0, jb1 = r * (-ce * sb), r * (ce * cb)
         je0, je1, je2 = r * (-se * cb), r * (-se * sb), r * ce
@@ -167,8 +178,8 @@ def convert_3d(code, r, sr2, sb2, se2, px, py, pz, z, R, conv):
                 R[i, j] = sr2 * uu[i] * uu[j] + sb2 * jb[i] * jb[j] + se2 * je[i] * je[j]
                 R[j, i] = R[i, j]  # exactly symmetric (products in one order)
         return
-    if code == 1 or code == 2:
-        if code == 1:  # seed: the naive point + Prosov's second-order term (eq. 10's sign)
+    if code == SEED or code == CMKF_D:
+        if code == SEED:  # seed: the naive point + Prosov's second-order term (eq. 10's sign)
             k_xy, k_z = 1.0 - s_xy / 2.0, 1.0 - s_z / 2.0
         else:  # cmkf_d: κ(s) = 1 − (e^(−s) − e^(−s/2)) per axis (``noise_table``)
             k_xy, k_z = ex[4, 0], ex[4, 1]
@@ -182,7 +193,7 @@ def convert_3d(code, r, sr2, sb2, se2, px, py, pz, z, R, conv):
     # at the measurement (ucm) or at the prediction (ducm)
     k_xy, k_z = ex[4, 2], ex[4, 3]  # e^(s/2) (``noise_table``)
     z[0], z[1], z[2] = k_xy * (r * u0), k_xy * (r * u1), k_z * (r * u2)
-    if code == 3:
+    if code == UCM:
         given_truth_cov(r, cb, sb, ce, se, sr2, ex, R, mb, me)
     else:
         rho = hypot(px, py)
@@ -212,24 +223,10 @@ def start_3d(x, P, z, R, sx, sy, sz, v0):
 
 @_inline
 def predict_3d(x, P, T: float, q: float):
-    # cv_predict in 3D: x⁻ = F x, P⁻ = F P Fᵀ + Q, F per axis [[1, T], [0, 1]]
-    for a in range(3):
-        p = 2 * a
-        x[p] += T * x[p + 1]
-        for j in range(6):
-            P[p, j] += T * P[p + 1, j]
-    for i in range(6):
-        for a in range(3):
-            p = 2 * a
-            P[i, p] += T * P[i, p + 1]
-    if q != 0.0:
-        T2 = T * T
-        for a in range(3):
-            p = 2 * a
-            P[p, p] += q * T2 * T2 / 4.0
-            P[p, p + 1] += q * T2 * T / 2.0
-            P[p + 1, p] += q * T2 * T / 2.0
-            P[p + 1, p + 1] += q * T2
+    # cv_predict in 3D: x⁻ = F x, P⁻ = F P Fᵀ + Q, σa² = q, in place
+    # (``core.filters.predict.predict_components``, ``add_process_noise``)
+    predict_components_c(x, P, 6, T)
+    add_process_noise_c(P, 6, white_acceleration_c(T, q))
 
 
 @_inline
@@ -493,11 +490,11 @@ def position_measurement_3d(
     EKF's ν' = J ν, R' = J R Jᵀ at the prediction. ``conv`` (``conversion_scratch``, the
     plot's ``plot_factors`` in it) is
     scratch. ``converted``: z and R hold this plot's conversion already (a conversion that
-    does not read the prediction, ``code`` < 4, made for another state of the same track)."""
-    if code >= 5:
+    does not read the prediction, not ducm, made for another state of the same track)."""
+    if is_polar_c(code):
         ekf_measurement_3d(x, r, b, el, sr2, sb2, se2, sx, sy, sz, nu, R)
     else:
-        if not (converted and code < 4):
+        if not (converted and not reads_prediction_c(code)):
             px, py, pz = x[0] - sx, x[2] - sy, x[4] - sz
             convert_3d(code, r, sr2, sb2, se2, px, py, pz, z, R, conv)
         nu[0], nu[1], nu[2] = z[0] + sx - x[0], z[1] + sy - x[2], z[2] + sz - x[4]
@@ -528,10 +525,10 @@ def position_stats_3d(P, nu, R, S, Si):
 
 @_inline
 def position_stage_3d(code, x, P, r, b, el, sr2, sb2, se2, sx, sy, sz, nu, R, prm, bufs):
-    """The method's update of x (6,), P (6, 6) in place: the UKF (``code`` 6) or the position
+    """The method's update of x (6,), P (6, 6) in place: the UKF (``code`` ``UKF``) or the position
     update by (ν, R); ``bufs`` the scratch (S, Si, K, U, L, Z, E) of ``scratch_3d``."""
     S, Si, K, U, L, Z, E = bufs
-    if code == 6:
+    if code == UKF:
         ukf_update_3d(x, P, r, b, el, sr2, sb2, se2, sx, sy, sz, prm, L, Z, K, S, Si, E)
     else:
         position_update_3d(x, P, nu, R, S, Si, K, U, L)

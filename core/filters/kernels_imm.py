@@ -39,11 +39,13 @@ from radarviz.core.filters.kernels_2d import (
     _add_outer,
     _inline,
     _jit,
+    add_process_noise_c,
     coefficients,
     doppler_update,
     load,
     predict,
     store,
+    white_acceleration_c,
 )
 from radarviz.core.filters.kernels_3d import (
     conversion_scratch,
@@ -82,9 +84,11 @@ _turn_predict = _inline(turn_predict)
 @_inline
 def turn_model_predict(x, P, n: int, T: float, omega: float, q: float):
     """The coordinated-turn prediction over T at ω ≠ 0 (rad/s) of one model's x (n,),
-    P (n, n) in place, σa² = q (``core.filters.turn.turn_predict``)."""
+    P (n, n) in place, σa² = q (``core.filters.turn.turn_predict``, then the process noise
+    of ``core.filters.predict.add_process_noise``)."""
     theta = omega * T
-    _turn_predict(x, P, n, T, _turn_factors(omega, sin(theta), sin(0.5 * theta)), q)
+    _turn_predict(x, P, n, T, _turn_factors(omega, sin(theta), sin(0.5 * theta)))
+    add_process_noise_c(P, n, white_acceleration_c(T, q))
 
 
 @_inline

@@ -21,12 +21,14 @@ from math import atan2, cos, hypot, log, sin
 
 import numpy as np
 
+from radarviz.core.filters.codes import UKF
 from radarviz.core.filters.kernels_2d import (
     _inline,
     _jit,
     coefficients,
     convert,
     doppler_update,
+    is_polar_c,
     position_update,
     predict,
     start,
@@ -90,7 +92,7 @@ def position_measurement(code, x, r, b, sr2, s, sx, sy, co):
     and ``ukf``: ν' = J ν and R' = J R Jᵀ at the prediction (the UKF's statistics are the
     EKF's, as the numpy engine's)."""
     px, py = x[0] - sx, x[2] - sy
-    if code >= 5:
+    if is_polar_c(code):
         rp = hypot(px, py)
         cb, sb_ = px / rp, py / rp
         nr, nb = r - rp, wrap(b - atan2(py, px))
@@ -107,11 +109,11 @@ def position_measurement(code, x, r, b, sr2, s, sx, sy, co):
 
 @_inline
 def position_stage(code, x, P, r, b, sr2, s, sx, sy, prm, meas, bufs):
-    """The method's update of x (4,), P (4, 4) in place: the UKF's sigma points (``code`` 6)
+    """The method's update of x (4,), P (4, 4) in place: the UKF's sigma points (``code`` ``UKF``)
     or the position update by ``meas``, ``position_measurement``'s (νx, νy, R00, R01, R11);
     ``bufs`` the scratch of ``scratch_2d``."""
     K, L, Z, E = bufs
-    if code == 6:
+    if code == UKF:
         ukf_update(x, P, r, b, sr2, s, sx, sy, prm, L, Z, K, E)
     else:
         position_update(x, P, meas[0], meas[1], meas[2], meas[3], meas[4], K, L)

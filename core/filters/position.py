@@ -14,11 +14,14 @@ change of variables in ``core.filters.polar_ekf``, of the polar EKF too: one imp
 from __future__ import annotations
 
 import functools
+import math
 from collections.abc import Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from radarviz.core.filters.position_2d import position_update_2d
+from radarviz.core.filters.predict import UPPER_2D
 from radarviz.core.filters.state import (
     CVBatch,
     Vec,
@@ -26,6 +29,7 @@ from radarviz.core.filters.state import (
     dense_joseph_update,
     factored_joseph,
     mean_components,
+    mirror_upper,
     position_index,
     semidefinite_cholesky,
     sym,
@@ -82,6 +86,50 @@ def joseph_update_position(
     return out
 
 
+#: Tracks per block of the 2D update (``_update_2d``): its tuple arithmetic holds about sixty
+#: temporaries of a block at once, so blocks bound the working memory (and stay in cache).
+BLOCK_TRACKS = 8192
+
+
+def _update_2d(
+    state: CVBatch,
+    innovation: Sequence[Vec],
+    R: dict[tuple[int, int], Vec],
+    out: CVBatch | None,
+) -> CVBatch:
+    """``innovation_update`` of a 2D batch by ``position_update_2d`` on its components, in
+    blocks along the batch's last axis."""
+    out = target_batch(state, out)
+    xc, Pc = mean_components(state.x), cov_components(state.P)
+    ox, oP = mean_components(out.x), cov_components(out.P)
+    shape = state.batch_shape
+    last = shape[-1] if shape else 1
+    step = max(1, BLOCK_TRACKS // max(1, math.prod(shape[:-1])))
+    for start in range(0, last, step):
+        cut = (Ellipsis, slice(start, start + step)) if shape else ()
+
+        def part(v: Vec, cut: tuple = cut) -> Vec:
+            # a term that varies along the last axis is cut with it; one that broadcasts is not
+            return v[cut] if cut and np.ndim(v) and np.shape(v)[-1] == last else v
+
+        with np.errstate(invalid="ignore", divide="ignore"):  # a singular S: NaN, as compiled
+            xn, pn = position_update_2d(
+                tuple(xc[i][cut] for i in range(4)),
+                tuple(Pc[i, j][cut] for i, j in UPPER_2D),
+                part(innovation[0]),
+                part(innovation[1]),
+                part(R[0, 0]),
+                part(R[0, 1]),
+                part(R[1, 1]),
+            )
+        for i in range(4):
+            ox[i][cut] = xn[i]
+        for (i, j), v in zip(UPPER_2D, pn, strict=True):
+            oP[i, j][cut] = v
+    mirror_upper(out.P)
+    return out
+
+
 def position_gain(state: CVBatch, S: dict[tuple[int, int], Vec]) -> NDArray[np.float64]:
     """K = P Hᵀ S⁻¹ (n, d, ...) component-major, S⁻¹ written out (``symmetric_inverse``)."""
     Pc = cov_components(state.P)
@@ -121,8 +169,12 @@ def innovation_update(
         S = H P Hᵀ + R,   K = P Hᵀ S⁻¹   (S⁻¹ written out),   then the Joseph form
         (``joseph_update_position``).
 
-    Small batches take the dense path (``core.filters.state.dense_joseph_update``).
+    In 2D the arithmetic is ``core.filters.position_2d.position_update_2d`` on the batch's
+    components, the compiled kernels' own function; in 3D small batches take the dense path
+    (``core.filters.state.dense_joseph_update``).
     """
+    if state.dims == 2:
+        return _update_2d(state, innovation, R, out)
     P = state.P
     pos = position_index(state.dims)
     d = len(pos)

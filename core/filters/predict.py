@@ -7,11 +7,22 @@ discrete white-noise acceleration with std σa on each axis (filterpy's
     F = blockdiag([[1, T], [0, 1]] per axis)
     Q = σa² blockdiag(g gᵀ per axis),   g = (T²/2, T)      (σa = 0: the papers' Q = 0)
     x⁻ = F x,   P⁻ = F P Fᵀ + Q
+
+The step is written once per dimension as plain arithmetic, for any number type: Python
+floats in numba-compiled code and arrays of a batch (numpy, or any array-API namespace).
+``predict_2d`` takes and returns the 2D state as tuples (x and the ten upper entries of P),
+which compiled code keeps in registers (``core.filters.kernels_2d`` compiles it; the array-API
+path calls it on arrays); ``predict_components`` updates the components x[i], P[i, j] of any
+n in place (the 3D kernels compile it; the numpy engine calls it on a batch's component-major
+views), and ``add_process_noise`` adds Q to them, after this prediction or the
+coordinated turn's (``core.filters.turn``). ``white_acceleration`` is the one home of Q's
+entries. A function here calls no other (compiled code compiles each one and composes
+them), so each takes what it needs as arguments.
 """
 
 from __future__ import annotations
 
-import functools
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -22,8 +33,78 @@ from radarviz.core.filters.state import (
     mean_components,
     mirror_upper,
     target_batch,
-    use_dense,
 )
+
+#: A number or an array of numbers (the step functions are written for either).
+Num = Any
+#: The (i, j) of the ten upper entries of a 2D P, in ``predict_2d``'s tuple order.
+UPPER_2D: tuple[tuple[int, int], ...] = tuple((i, j) for i in range(4) for j in range(i, 4))
+
+
+def white_acceleration(T: Num, q: float) -> tuple[Num, Num, Num]:
+    """One axis's Q = σa² g gᵀ, g = (T²/2, T), as (Q_pp, Q_pv, Q_vv); q = σa² (m²/s⁴)."""
+    T2 = T * T
+    return q * T2 * T2 / 4.0, q * T2 * T / 2.0, q * T2
+
+
+def predict_2d(x: tuple, p: tuple, T: Num, Q: tuple[Num, Num, Num]) -> tuple[tuple, tuple]:
+    """x⁻ = F x, P⁻ = F P Fᵀ + Q of the 2D state (x, ẋ, y, ẏ), as new tuples.
+
+    Args:
+        x: the four components of the state.
+        p: the ten upper entries of P in ``UPPER_2D`` order,
+            (p00, p01, p02, p03, p11, p12, p13, p22, p23, p33).
+        T: the step (s), one number or an array broadcasting against the components.
+        Q: each axis's process noise, ``white_acceleration(T, σa²)``.
+    """
+    x0, x1, x2, x3 = x
+    p00, p01, p02, p03, p11, p12, p13, p22, p23, p33 = p
+    qa, qb, qc = Q
+    return (x0 + T * x1, x1, x2 + T * x3, x3), (
+        (p00 + T * p01) + T * (p01 + T * p11) + qa,
+        p01 + T * p11 + qb,
+        (p02 + T * p12) + T * (p03 + T * p13),
+        p03 + T * p13,
+        p11 + qc,
+        p12 + T * p13,
+        p13,
+        (p22 + T * p23) + T * (p23 + T * p33) + qa,
+        p23 + T * p33 + qb,
+        p33 + qc,
+    )
+
+
+def predict_components(x: Any, P: Any, n: int, T: Num) -> None:
+    """x⁻ = F x, F P Fᵀ in place, for an n-component state (n = 4 or 6); Q is added by
+    ``add_process_noise`` (a separate step, shared with the coordinated-turn models).
+
+    ``x[i]`` and ``P[i, j]`` must be the state's components (both triangles of P): a
+    track's arrays x (n,), P (n, n) in compiled code, or a batch's component-major views
+    x (n, ...), P (n, n, ...), whose components broadcast against ``T``. F P is formed
+    row by row (a position row gains T times its velocity row), then (F P) Fᵀ column by
+    column.
+    """
+    for a in range(n // 2):
+        p = 2 * a
+        x[p] = x[p] + T * x[p + 1]
+        for j in range(n):
+            P[p, j] = P[p, j] + T * P[p + 1, j]
+    for i in range(n):
+        for a in range(n // 2):
+            p = 2 * a
+            P[i, p] = P[i, p] + T * P[i, p + 1]
+
+
+def add_process_noise(P: Any, n: int, Q: tuple[Num, Num, Num]) -> None:
+    """P += Q in place on every axis block of the n-component state, Q the per-axis entries
+    ``white_acceleration(T, σa²)`` (components as in ``predict_components``)."""
+    qa, qb, qc = Q
+    for a in range(n // 2):
+        p = 2 * a
+        P[p, p] = P[p, p] + qa
+        P[p, p + 1] = P[p, p + 1] + qb
+        P[p + 1, p] = P[p + 1, p] + qb
+        P[p + 1, p + 1] = P[p + 1, p + 1] + qc
 
 
 def transition_matrix(period_s: float, dims: int = 2) -> NDArray[np.float64]:
@@ -44,16 +125,6 @@ def process_noise(period_s: float, sigma_a_mps2: float, dims: int = 2) -> NDArra
     return out
 
 
-@functools.lru_cache(maxsize=64)
-def _dense_model(period_s: float, sigma_a_mps2: float, dims: int) -> tuple[NDArray, NDArray]:
-    """F and Q for the dense path; a track's steps repeat (a few scan periods), so they are
-    made once (read-only)."""
-    F = transition_matrix(period_s, dims)
-    Q = process_noise(period_s, sigma_a_mps2, dims)
-    F.flags.writeable = Q.flags.writeable = False
-    return F, Q
-
-
 def cv_predict(
     state: CVBatch,
     period_s: float | NDArray[np.float64],
@@ -65,64 +136,28 @@ def cv_predict(
     ``period_s`` is one period T for the whole batch, or an array of periods, one per track,
     broadcasting against the batch shape from its end (many targets, each with its own time
     since its last plot: T (K,) for a batch (M, K) of M methods × K targets); T = 0 leaves a
-    track as it is.
-
-    Written component by component with explicit output buffers: each line is one pass over
-    the batch with no temporary to allocate (1.5× faster than the same formulas as plain
-    expressions at 10⁴ tracks). Within an axis block (p, v) → (p + T v, v); between axes a and
-    b the four entries follow from the same rule on both sides.
+    track as it is. The arithmetic is ``predict_2d`` (2D) or ``predict_components`` and
+    ``add_process_noise`` (3D) on the batch's components, the compiled kernels' own steps.
     """
     per_track = np.ndim(period_s) > 0
     T = np.asarray(period_s, dtype=np.float64) if per_track else float(period_s)
-    x, P = state.x, state.P
+    Q = white_acceleration(T, float(sigma_a_mps2) ** 2)
     out = target_batch(state, out)
-    if use_dense(state) and not per_track:
-        F, Q = _dense_model(T, float(sigma_a_mps2), state.dims)
-        P_new = F @ P @ F.T + Q
-        out.x[...] = x @ F.T
-        out.P[...] = 0.5 * (P_new + P_new.mT)
-        return out
-    xc, Pc = mean_components(x), cov_components(P)
     ox, oP = mean_components(out.x), cov_components(out.P)
-    T2 = T * T
-    tmp = np.empty(state.batch_shape)
-    dims = state.dims
-    for a in range(dims):
-        p, v = 2 * a, 2 * a + 1
-        np.multiply(xc[v], T, out=ox[p])
-        ox[p] += xc[p]
-        ox[v] = xc[v]
-        ppv, pvv = Pc[p, v], Pc[v, v]
-        d = oP[p, p]
-        np.multiply(ppv, 2.0 * T, out=d)
-        d += Pc[p, p]
-        np.multiply(pvv, T2, out=tmp)
-        d += tmp
-        d = oP[p, v]
-        np.multiply(pvv, T, out=d)
-        d += ppv
-        oP[v, v] = pvv
-    for a in range(dims):
-        for b in range(a + 1, dims):
-            pa, va, pb, vb = 2 * a, 2 * a + 1, 2 * b, 2 * b + 1
-            vv = Pc[va, vb]
-            d = oP[pa, pb]
-            np.add(Pc[va, pb], Pc[pa, vb], out=d)
-            d *= T
-            d += Pc[pa, pb]
-            np.multiply(vv, T2, out=tmp)
-            d += tmp
-            np.multiply(vv, T, out=oP[pa, vb])
-            oP[pa, vb] += Pc[pa, vb]
-            np.multiply(vv, T, out=oP[va, pb])
-            oP[va, pb] += Pc[va, pb]
-            oP[va, vb] = vv
-    if sigma_a_mps2:
-        q = sigma_a_mps2**2
-        for a in range(dims):
-            p, v = 2 * a, 2 * a + 1
-            oP[p, p] += q * T2 * T2 / 4.0
-            oP[p, v] += q * T2 * T / 2.0
-            oP[v, v] += q * T2
-    mirror_upper(out.P)
+    if state.dims == 2:
+        xc, Pc = mean_components(state.x), cov_components(state.P)
+        xn, pn = predict_2d(
+            tuple(xc[i] for i in range(4)), tuple(Pc[i, j] for i, j in UPPER_2D), T, Q
+        )
+        for i in range(4):
+            ox[i] = xn[i]
+        for (i, j), v in zip(UPPER_2D, pn, strict=True):
+            oP[i, j] = v
+        mirror_upper(out.P)
+        return out
+    out.x[...] = state.x
+    out.P[...] = state.P
+    n = state.x.shape[-1]
+    predict_components(ox, oP, n, T)
+    add_process_noise(oP, n, Q)
     return out

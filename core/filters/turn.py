@@ -15,10 +15,10 @@ sec. 11.7.1)::
 
 and the vertical axis (z, ż) of a 3D state is constant velocity. At a fixed ω this F is
 linear in the state, so the prediction is x⁻ = F x, P⁻ = F P Fᵀ + Q with no Jacobian, Q the
-white-noise acceleration of ``core.filters.predict`` (σa² g gᵀ per axis, g = (T²/2, T)),
-which here absorbs the difference between the model's ω and the target's. As ω → 0, S → T,
-C → 0 and F → the constant-velocity one; ω = 0 itself is the constant-velocity model
-(``core.filters.predict``), never passed here.
+white-noise acceleration of ``core.filters.predict`` (σa² g gᵀ per axis, g = (T²/2, T),
+added by ``add_process_noise``), which here absorbs the difference between the model's ω
+and the target's. As ω → 0, S → T, C → 0 and F → the constant-velocity one; ω = 0
+itself is the constant-velocity model (``core.filters.predict``), never passed here.
 
 The half-angle forms keep C and c free of the cancellation of 1 − cos θ at small θ. The
 caller evaluates sin θ and sin(θ/2) in its own namespace (``math`` for scalars, numpy for a
@@ -43,9 +43,10 @@ def turn_factors(omega: float, sin_theta: Num, sin_half: Num) -> tuple[Num, Num,
     return sin_theta / omega, h2 / omega, 1.0 - h2, sin_theta
 
 
-def turn_predict(x: Any, P: Any, n: int, T: Num, k: tuple[Num, Num, Num, Num], q: float) -> None:
-    """x⁻ = F x, P⁻ = F P Fᵀ + Q in place, F the turn (factors k over T) on (x, ẋ, y, ẏ) and
-    constant velocity on (z, ż) when n = 6; Q of σa² = q on every axis.
+def turn_predict(x: Any, P: Any, n: int, T: Num, k: tuple[Num, Num, Num, Num]) -> None:
+    """x⁻ = F x, F P Fᵀ in place, F the turn (factors k over T) on (x, ẋ, y, ẏ) and
+    constant velocity on (z, ż) when n = 6; the caller adds Q
+    (``core.filters.predict.add_process_noise``, the constant-velocity model's own).
 
     ``x[i]`` and ``P[i, j]`` must be the state's components: a track's arrays x (n,),
     P (n, n) in compiled code, or a batch's with the state axes first, x (n, ...),
@@ -68,14 +69,6 @@ def turn_predict(x: Any, P: Any, n: int, T: Num, k: tuple[Num, Num, Num, Num], q
         P[i, 0], P[i, 1], P[i, 2], P[i, 3] = turn(P[i, 0], P[i, 1], P[i, 2], P[i, 3])
         if n == 6:
             P[i, 4] = P[i, 4] + T * P[i, 5]
-    if q != 0.0:
-        T2 = T * T
-        for a in range(n // 2):
-            p = 2 * a
-            P[p, p] = P[p, p] + q * T2 * T2 / 4.0
-            P[p, p + 1] = P[p, p + 1] + q * T2 * T / 2.0
-            P[p + 1, p] = P[p + 1, p] + q * T2 * T / 2.0
-            P[p + 1, p + 1] = P[p + 1, p + 1] + q * T2
 
 
 def turn_transition_matrix(omega: float, T: float, dims: int = 2) -> NDArray[np.float64]:
@@ -86,5 +79,5 @@ def turn_transition_matrix(omega: float, T: float, dims: int = 2) -> NDArray[np.
     k = turn_factors(omega, math.sin(theta), math.sin(0.5 * theta))
     F = np.eye(n)
     for j in range(n):
-        turn_predict(F[:, j], np.zeros((n, n)), n, T, k, 0.0)
+        turn_predict(F[:, j], np.zeros((n, n)), n, T, k)
     return F

@@ -51,10 +51,10 @@ from numba import types
 from numba.extending import intrinsic
 
 _jit = numba.njit(cache=True, nogil=True, error_model="numpy")
-#: The per-number helpers, each compiled once and inlined into its callers by LLVM (a call
-#: per number would cost as much as the digits); numba's own inlining (inline="always")
-#: typed them again at every call site, seconds of compiling on a first run.
-_inline = _jit
+#: The per-number helpers, each compiled once and always inlined into its callers by LLVM
+#: (forceinline; a call per number would cost as much as the digits); numba's own inlining
+#: (inline="always") typed them again at every call site, seconds of compiling on a first run.
+_inline = numba.njit(cache=True, nogil=True, error_model="numpy", forceinline=True)
 
 if sys.byteorder != "little":  # the 8-digit words put the first digit in the lowest byte
     raise ImportError("viz_app.io.csv_text writes digits for little-endian machines only")

@@ -36,9 +36,9 @@ import rerun as rr
 import rerun.blueprint as rrb
 from numpy.typing import NDArray
 
+from radarviz.core.experiments.velocity_scans import VelocityScans, estimate_scans
 from radarviz.core.scenarios.multi_radar import Scenario3D, fusion_scenario
 from radarviz.core.velocity.estimate import M_WARN
-from radarviz.core.velocity.scans import VelocityScans, estimate_scans
 from radarviz.viz_app.palette import OKABE_ITO, radar_rgb, rgb
 from radarviz.viz_app.rerun import plot2d
 from radarviz.viz_app.rerun.recording import (
@@ -88,7 +88,7 @@ def log_velocity_scene(
     rec: rr.RecordingStream, seed: int = 1, scans: int = 50, scenario: Scenario3D | None = None
 ) -> VelocityFrame:
     """Several radars, one target (``fusion_scenario`` unless given): the fused position and
-    the full velocity vector per scan (``core.velocity.scans.estimate_scans``)."""
+    the full velocity vector per scan (``core.experiments.velocity_scans.estimate_scans``)."""
     return log_velocity_run(rec, estimate_scans(scenario or fusion_scenario(), scans, seed))
 
 

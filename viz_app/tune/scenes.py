@@ -31,12 +31,12 @@ from radarviz.core.experiments.doppler_start import (
     run_doppler_tracking,
 )
 from radarviz.core.experiments.prosov import ProsovScene, TrackingConfig, prosov_scene
+from radarviz.core.experiments.velocity_scans import VelocityScans, estimate_scans
 from radarviz.core.finite import check_finite_figures
 from radarviz.core.finite_memory.fit import GorshkovResult, RadarPreset, run_gorshkov
 from radarviz.core.scenarios.multi_radar import fusion_scenario
 from radarviz.core.scenarios.planar import prosov_target
 from radarviz.core.velocity.estimate import M_WARN
-from radarviz.core.velocity.scans import VelocityScans, estimate_scans
 from radarviz.viz_app.reports.gorshkov import check_gorshkov_result
 from radarviz.viz_app.reports.prosov import check_tracking_result
 from radarviz.viz_app.rerun import gorshkov_scene, velocity_scene

@@ -1,0 +1,186 @@
+"""Each estimation step written once: every function of ``core/`` that implements a step kind
+is the kind's one plain-arithmetic implementation, or is built on it.
+
+A step kind is declared by the pattern its function names follow and by the functions that
+implement it (``core/filters/predict.py``: numbers or arrays alike, compiled by the kernels,
+called by the numpy engine and the array-API path). The test reads every function of
+``core/`` with ``ast`` and follows calls, including a kernel module's compiled aliases
+(``_predict_2d = _inline(predict_2d)``): a function whose name matches a kind must reach one
+of its implementations, so a second hand-written prediction (a kernel's own F P Fᵀ, a "fast
+path" re-deriving Q) fails here, naming its file. A kind's copies that are still to be
+replaced are listed as such (``not_yet``), and the test holds that list to the tree. The
+other update kinds (EKF, UKF, Doppler, the IMM's mixing and combination) are not yet written
+once (docs/architecture.md, section 3) and are not listed.
+"""
+
+from __future__ import annotations
+
+import ast
+import re
+from dataclasses import dataclass, field
+from functools import cache
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@dataclass(frozen=True)
+class StepKind:
+    """A kind of step: the names its functions carry, its implementations ("file:function")
+    and the functions whose name matches without implementing it (with why)."""
+
+    pattern: str
+    implementations: frozenset[str]
+    not_this_step: dict[str, str] = field(default_factory=dict)
+    #: copies not yet replaced by the implementation (each with what remains to do); the
+    #: test holds the list to the tree, so it can only shrink
+    not_yet: dict[str, str] = field(default_factory=dict)
+
+
+STEP_KINDS: dict[str, StepKind] = {
+    "constant-velocity prediction": StepKind(
+        pattern=r"predict",
+        implementations=frozenset(
+            {
+                "core/filters/predict.py:predict_2d",
+                "core/filters/predict.py:predict_components",
+                "core/filters/predict.py:add_process_noise",
+                "core/filters/predict.py:white_acceleration",
+                # The coordinated-turn models' F (the IMM's other prediction), its own kind.
+                "core/filters/turn.py:turn_predict",
+            }
+        ),
+        not_this_step={
+            "core/filters/kernels_imm.py:_predicted": "the IMM's predicted model probabilities",
+            "core/filters/methods.py:_predicted": "a method's predicted measurement",
+            "core/tracking/compiled.py:_predicted_kernel": "loads a compiled kernel",
+            "core/filters/codes.py:reads_prediction": "whether a conversion reads the prediction",
+        },
+    ),
+    "position update (Joseph form on a factor)": StepKind(
+        pattern=r"position_update|joseph",
+        implementations=frozenset({"core/filters/position_2d.py:position_update_2d"}),
+        not_this_step={"core/filters/position.py:_update_2d": "calls it on a batch in blocks"},
+        not_yet={
+            "core/filters/kernels_3d.py:position_update_3d": "the 3D kernels' update",
+            "core/filters/kernels_3d.py:factored_joseph_3d": "the 3D kernels' Joseph form",
+            "core/filters/position.py:joseph_update_position": "the numpy 3D update",
+            "core/filters/state.py:dense_joseph_update": "the numpy dense form (3D, Doppler)",
+            "core/filters/state.py:factored_joseph": "the numpy form of any size (3D, Doppler)",
+            "core/filters/array_api.py:_joseph": "the array-API path's update",
+        },
+    ),
+}
+
+
+@dataclass
+class Function:
+    key: str  # "file:function"
+    name: str
+    calls: set[str]
+
+
+@cache
+def core_functions() -> tuple[tuple[Function, ...], dict[str, str]]:
+    """Every function of core/ with the names it calls, and the module-level aliases
+    ``name = wrapper(function)`` and ``name = rebound["function"]`` (a kernel module compiling
+    a plain function, ``core.filters.rebind``)."""
+    functions: list[Function] = []
+    aliases: dict[str, str] = {}
+    for path in sorted((ROOT / "core").rglob("*.py")):
+        rel = path.relative_to(ROOT).as_posix()
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        for node in ast.walk(tree):
+            if isinstance(node, ast.FunctionDef):
+                calls = {
+                    c.func.id if isinstance(c.func, ast.Name) else c.func.attr
+                    for c in ast.walk(node)
+                    if isinstance(c, ast.Call) and isinstance(c.func, ast.Name | ast.Attribute)
+                }
+                functions.append(Function(f"{rel}:{node.name}", node.name, calls))
+        for node in tree.body:
+            if not isinstance(node, ast.Assign):
+                continue
+            value, target = node.value, None
+            if isinstance(value, ast.Call) and value.args and isinstance(value.args[0], ast.Name):
+                target = value.args[0].id  # name = wrapper(function)
+            elif isinstance(value, ast.Subscript) and isinstance(value.slice, ast.Constant):
+                target = str(value.slice.value)  # name = rebound["function"]
+            for name in node.targets:
+                if target is not None and isinstance(name, ast.Name):
+                    aliases[name.id] = target
+    return tuple(functions), aliases
+
+
+def built_on(kind: StepKind, functions: tuple[Function, ...], aliases: dict[str, str]) -> set[str]:
+    """The names that reach an implementation of ``kind``: its functions, their compiled
+    aliases, and every function calling one of those (to a fixed point)."""
+    names = {key.split(":")[1] for key in kind.implementations}
+    while True:
+        grown = names | {a for a, target in aliases.items() if target in names}
+        grown |= {f.name for f in functions if f.calls & grown}
+        if grown == names:
+            return names
+        names = grown
+
+
+def copies(kind: StepKind, functions: tuple[Function, ...], aliases: dict[str, str]) -> list:
+    """The functions named like ``kind`` that neither implement it nor call into it."""
+    reach = built_on(kind, functions, aliases)
+    pattern = re.compile(kind.pattern)
+    return [
+        f.key
+        for f in functions
+        if pattern.search(f.name)
+        and f.key not in kind.implementations
+        and f.key not in kind.not_this_step
+        and f.key not in kind.not_yet
+        and not (f.calls & reach)
+    ]
+
+
+@pytest.mark.parametrize("kind_name", sorted(STEP_KINDS))
+def test_each_implementation_defined_once(kind_name: str) -> None:
+    functions, _ = core_functions()
+    keys = [f.key for f in functions]
+    for impl in STEP_KINDS[kind_name].implementations:
+        assert keys.count(impl) == 1, f"{impl}: defined {keys.count(impl)} times"
+        name = impl.split(":")[1]
+        same = [f.key for f in functions if f.name == name]
+        assert same == [impl], f"{name} defined elsewhere too: {same}"
+
+
+@pytest.mark.parametrize("kind_name", sorted(STEP_KINDS))
+def test_every_step_function_is_built_on_the_one_implementation(kind_name: str) -> None:
+    kind = STEP_KINDS[kind_name]
+    functions, aliases = core_functions()
+    found = copies(kind, functions, aliases)
+    assert not found, (
+        f"{kind_name}: these functions do its work without calling its implementation "
+        f"({sorted(kind.implementations)}): {found}"
+    )
+    keys = {f.key for f in functions}
+    stale = [key for key in (*kind.not_this_step, *kind.not_yet) if key not in keys]
+    assert not stale, f"{kind_name}: listed but gone (update the table): {stale}"
+
+
+def test_every_engine_reaches_the_prediction() -> None:
+    """The numpy engine, the array-API path and the 2D and 3D kernels all predict through
+    the one implementation."""
+    reach = built_on(STEP_KINDS["constant-velocity prediction"], *core_functions())
+    for name in ("cv_predict", "_predict", "predict_s", "predict_3d", "predict_models"):
+        assert name in reach, name
+
+
+def test_a_hand_written_copy_is_found() -> None:
+    """The check itself: beside the real functions, a prediction that re-derives F P Fᵀ is
+    reported, and a wrapper calling the compiled alias of the implementation is not."""
+    kind = STEP_KINDS["constant-velocity prediction"]
+    functions, aliases = core_functions()
+    fake = (
+        Function("core/filters/fast.py:predict_fast", "predict_fast", {"sqrt"}),
+        Function("core/filters/fast.py:predict_wrapped", "predict_wrapped", {"_predict_2d"}),
+    )
+    assert copies(kind, functions + fake, aliases) == ["core/filters/fast.py:predict_fast"]
