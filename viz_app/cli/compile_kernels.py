@@ -39,11 +39,10 @@ class Job:
     commands: tuple[tuple[str, ...], ...]
 
 
-def _simulate(preset: str, scans: int, *extra: str) -> tuple[str, ...]:
+def _simulate(preset: str, *extra: str) -> tuple[str, ...]:
     return (
-        "simulate", "--preset", preset, "--scans", str(scans), "--out", f"{{d}}/{preset}.csv",
-        "--radars-out", f"{{d}}/{preset}.toml", "--truth-out", f"{{d}}/{preset}_truth.csv",
-        *extra,
+        "simulate", "--preset", preset, "--out", f"{{d}}/{preset}.csv",
+        "--radars-out", f"{{d}}/{preset}.toml", *extra,
     )  # fmt: skip
 
 
@@ -54,6 +53,8 @@ def _track(preset: str, out: str, *extra: str) -> tuple[str, ...]:
     )  # fmt: skip
 
 
+_TRUTH = ("--truth", "{d}/truth.csv")
+
 #: The warm-ups, longest first (they are started in this order). Together they reach every
 #: kernel of ``demo`` and of ``track`` in 2D and 3D, with and without Doppler, the IMM and
 #: the cv model, labelled and associated plots, the recording's.
@@ -61,17 +62,16 @@ JOBS: tuple[Job, ...] = (
     Job(
         "track --associate gnn (2D, IMM and cv, --rrd)",
         (
-            _simulate("crossing", 30),
-            _track("crossing", "gnn", "--associate", "gnn", "--rrd", "{d}/gnn.rrd", "--truth",
-                   "{d}/crossing_truth.csv"),  # fmt: skip
+            _simulate("crossing", "--scans", "30", "--truth-out", "{d}/truth.csv"),
+            _track("crossing", "gnn", "--associate", "gnn", "--rrd", "{d}/gnn.rrd", *_TRUTH),
             _track("crossing", "gnn_cv", "--associate", "gnn", "--model", "cv"),
         ),
     ),
     Job(
         "track 3D, Doppler (IMM and cv, --rrd)",
         (
-            _simulate("manoeuvre", 40),
-            _track("manoeuvre", "m", "--rrd", "{d}/m.rrd", "--truth", "{d}/manoeuvre_truth.csv"),
+            _simulate("manoeuvre", "--scans", "40"),
+            _track("manoeuvre", "m", "--rrd", "{d}/m.rrd"),
             _track("manoeuvre", "m_cv", "--model", "cv", "--doppler", "converted"),
             _track("manoeuvre", "m_fm", "--doppler", "ignore", "--init", "finite-memory"),
         ),
@@ -79,8 +79,8 @@ JOBS: tuple[Job, ...] = (
     Job(
         "track 2D (IMM and cv, --rrd)",
         (
-            _simulate("prosov", 40),
-            _track("prosov", "p", "--rrd", "{d}/p.rrd", "--truth", "{d}/prosov_truth.csv"),
+            _simulate("prosov"),
+            _track("prosov", "p", "--rrd", "{d}/p.rrd"),
             _track("prosov", "p_cv", "--model", "cv", "--init", "finite-memory"),
         ),
     ),
@@ -107,22 +107,20 @@ def _run(job: Job, folder: Path) -> Done:
     folder.mkdir()
     for command in job.commands:
         argv = [a.replace("{d}", str(folder)) for a in command]
-        proc = subprocess.Popen(
-            [sys.executable, "-c", _ENTRY, *argv],
-            stdout=subprocess.DEVNULL,
-            stderr=subprocess.PIPE,
-            text=True,
-        )
-        _, err = proc.communicate()
-        # The child's own CPU time (its rusage, read when it is reaped): a thread of ours
-        # per job, so RUSAGE_CHILDREN of this process would mix the jobs.
-        _, status, usage = os.wait4(proc.pid, 0) if proc.returncode is None else (0, 0, None)
-        del status
-        if usage is not None:
+        with tempfile.TemporaryFile("w+") as err:
+            proc = subprocess.Popen(
+                [sys.executable, "-c", _ENTRY, *argv], stdout=subprocess.DEVNULL, stderr=err
+            )
+            # Reaped here to read its own CPU time (RUSAGE_CHILDREN would mix the jobs, each
+            # run by a thread of this process).
+            _, status, usage = os.wait4(proc.pid, 0)
+            proc.returncode = os.waitstatus_to_exitcode(status)
             cpu += usage.ru_utime + usage.ru_stime
-        if proc.returncode:
-            tail = "\n".join(err.strip().splitlines()[-5:])
-            return Done(job, time.perf_counter() - t0, cpu, f"radarviz {' '.join(argv)}: {tail}")
+            if proc.returncode:
+                err.seek(0)
+                tail = "\n".join(err.read().strip().splitlines()[-5:])
+                wall = time.perf_counter() - t0
+                return Done(job, wall, cpu, f"radarviz {' '.join(argv)}: {tail}")
     return Done(job, time.perf_counter() - t0, cpu, None)
 
 
@@ -173,10 +171,10 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
 
 
 def cmd_compile(args: argparse.Namespace) -> int:
-    from radarviz.core.cores import usable_cores
+    from radarviz.core.cores import available_cores
     from radarviz.core.params import check_int
 
-    jobs = usable_cores() if args.jobs is None else args.jobs
+    jobs = available_cores() if args.jobs is None else args.jobs
     check_int("--jobs", jobs, low=1, high=256)
     print(f"compiling the kernels of {len(JOBS)} workloads, {jobs} at a time:", flush=True)
     return 1 if compile_all(jobs, lambda line: print(line, flush=True)) else 0
