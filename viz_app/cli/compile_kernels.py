@@ -18,12 +18,10 @@ from __future__ import annotations
 
 import argparse
 import os
-import subprocess
 import sys
 import tempfile
 import time
 from collections.abc import Callable
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -102,6 +100,8 @@ _ENTRY = "import sys; from radarviz_entry import main; sys.exit(main())"
 
 
 def _run(job: Job, folder: Path) -> Done:
+    import subprocess
+
     t0 = time.perf_counter()
     cpu = 0.0
     folder.mkdir()
@@ -134,6 +134,9 @@ def cached_kernels() -> int:
 
 def compile_all(jobs: int, report: Callable[[str], None] = print) -> int:
     """Run ``JOBS``, ``jobs`` at a time; report each as it ends; the number that failed."""
+    # Here, not at the top: the parser imports this module for every command.
+    from concurrent.futures import ThreadPoolExecutor
+
     before = cached_kernels()
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="radarviz-compile-") as tmp:

@@ -22,7 +22,7 @@ import sys
 from collections.abc import Callable, Sequence
 from typing import Any, NoReturn
 
-from radarviz.core.experiments.prosov import ALL_METHODS
+from radarviz.core.filters.methods import ALL_METHODS
 from radarviz.core.finite import ResultError, check_finite_document
 from radarviz.core.params import ParameterError, check_int, check_real
 from radarviz.viz_app.cli import compile_kernels, live, recording, score, sweep, track
