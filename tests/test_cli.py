@@ -440,3 +440,27 @@ def test_reproduce_gorshkov_plot(tmp_path: Path, capsys) -> None:
     assert "range gain peaks at" in capsys.readouterr().out
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert [p.name for p in tmp_path.iterdir()] == ["g.png"]
+
+
+def test_compile_runs_only_command_lines_the_parser_accepts() -> None:
+    """Each warm-up of ``radarviz compile`` is a command line of this parser (a renamed flag
+    would otherwise leave its kernels to the first run), and they reach both commands the
+    set-up promises to prepare."""
+    from radarviz.viz_app.cli.compile_kernels import JOBS
+    from radarviz.viz_app.cli.main import build_parser
+
+    parser = build_parser()
+    seen = set()
+    for job in JOBS:
+        for command in job.commands:
+            args = parser.parse_args([a.replace("{d}", "/nowhere") for a in command])
+            seen.add((args.command, getattr(args, "associate", None), getattr(args, "rrd", None)))
+    commands = {c for c, _, _ in seen}
+    assert {"demo", "track", "simulate"} <= commands
+    assert any(a == "gnn" for _, a, _ in seen) and any(r for _, _, r in seen)
+
+
+def test_compile_bad_jobs_is_one_line(capsys) -> None:
+    assert main(["compile", "--jobs", "0"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--jobs" in err and "Traceback" not in err

@@ -158,3 +158,13 @@ def test_references_name_each_work(work: tuple[str, tuple[str, ...]]) -> None:
     assert any(all(n in e for n in needles) for e in entries), (
         f"docs/references.md has no entry naming {label} (looked for {needles})"
     )
+
+
+def test_ci_runs_the_readme_test_command() -> None:
+    """``.ci/run`` ends with the README's test command, character for character (the README
+    says it runs exactly that)."""
+    readme = (ROOT / "README.md").read_text(encoding="utf-8").splitlines()
+    shown = [line.strip() for line in readme if line.startswith("    ") and "pytest" in line]
+    assert len(shown) == 1, shown
+    ci = [line for line in (ROOT / ".ci" / "run").read_text().splitlines() if line.strip()]
+    assert ci[-1].strip() == shown[0]

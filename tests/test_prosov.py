@@ -209,6 +209,21 @@ def test_conversion_cloud_is_centred_where_each_conversion_puts_it() -> None:
     assert conversion_cloud(cfg, 10).points["ucm"].shape == (steps, 10, 2)
 
 
+def test_a_kept_cloud_is_the_full_clouds_first_draws() -> None:
+    """``keep`` holds the first draws of the full cloud, bit for bit, and leaves the means
+    and half-widths (of every draw) as they are: the recording's cloud is the same."""
+    cfg = TrackingConfig(sigma_beta_deg=2.0, seed=3)
+    full, kept = conversion_cloud(cfg, 400), conversion_cloud(cfg, 400, keep=25)
+    for method in full.points:
+        np.testing.assert_array_equal(kept.points[method], full.points[method][:, :25])
+        np.testing.assert_array_equal(kept.offset_mean_m[method], full.offset_mean_m[method])
+        np.testing.assert_array_equal(
+            kept.offset_half_width95_m[method], full.offset_half_width95_m[method]
+        )
+    with pytest.raises(ParameterError, match="keep must be an integer in"):
+        conversion_cloud(cfg, 400, keep=401)
+
+
 def test_bands_and_claim_verdicts_in_the_document() -> None:
     """The report's bands bracket its series, and its verdicts follow from the bands: the
     P-based reading is many band widths outside both bounds (does not hold), the std reading

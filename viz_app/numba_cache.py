@@ -10,16 +10,26 @@ package's modules that use numba, so an edit of any of them recompiles them all 
 use; numba's own locations (its cache directory if set, the module's ``__pycache__``, the
 user-wide cache) are kept.
 
-``install`` registers the locators with numba, and importing this module calls it
-(``INSTALLED``); ``radarviz`` (the package) imports it before any kernel module, since numba
-chooses a function's locator when the function is decorated.
+``install`` registers the locators with numba. numba chooses a function's locator when the
+function is decorated, so they must be in place before any kernel module runs; but importing
+numba costs about a third of a second, which a command that compiles nothing (``--help``,
+``view``, ``import radarviz``) should not pay. So importing this module (``radarviz``, the
+package, does it first) calls :func:`install_before_kernels`, which imports nothing: it puts
+a finder first on ``sys.meta_path`` that, when one of ``NUMBA_IMPORTERS`` (the modules that
+import numba themselves; every other kernel module imports one of them first) is about to be
+imported, calls ``install`` (which imports numba) and steps aside. If numba is already
+imported (a program imported it before radarviz) ``install`` runs at once.
 """
 
 from __future__ import annotations
 
 import functools
 import hashlib
+import sys
+from collections.abc import Sequence
+from importlib.machinery import ModuleSpec
 from pathlib import Path
+from types import ModuleType
 from typing import Any
 
 #: The package's folders (the installed ``radarviz`` maps them: ``core``, ``viz_app``).
@@ -94,5 +104,46 @@ def install() -> bool:
     return True
 
 
-#: Whether the locators are installed (importing the module installs them).
-INSTALLED = install()
+#: The package's modules that import numba at their top: each decorates kernels (or is the
+#: first import of one that does), so the locators go in before any of them runs.
+#: ``tests/test_numba_cache.py`` checks this against the sources.
+NUMBA_IMPORTERS = frozenset(
+    {
+        "radarviz.core.filters.kernels_2d",
+        "radarviz.viz_app.io.csv_text",
+        "radarviz.viz_app.bench.scalar_reference",
+    }
+)
+
+
+class _BeforeKernels:
+    """A ``sys.meta_path`` finder that finds nothing: on the first import of one of
+    ``NUMBA_IMPORTERS`` it installs the locators and removes itself."""
+
+    def find_spec(
+        self, fullname: str, path: Sequence[str] | None, target: ModuleType | None = None
+    ) -> ModuleSpec | None:
+        if fullname in NUMBA_IMPORTERS:
+            _remove_finder()
+            install()
+        return None  # the ordinary finders import the module
+
+
+_FINDER = _BeforeKernels()
+
+
+def _remove_finder() -> None:
+    while _FINDER in sys.meta_path:
+        sys.meta_path.remove(_FINDER)
+
+
+def install_before_kernels() -> None:
+    """Have ``install`` run before the first kernel module is imported, without importing
+    numba now (module docstring); at once if numba is already imported."""
+    if "numba" in sys.modules:
+        install()
+    elif not install.cache_info().currsize and _FINDER not in sys.meta_path:
+        sys.meta_path.insert(0, _FINDER)
+
+
+install_before_kernels()

@@ -58,10 +58,12 @@ def _log(rec: rr.RecordingStream, what: Recordable, seed: int, narrow: bool = Fa
             "what",
         )
     from radarviz.viz_app.rerun.scenes import log_preset
-    from radarviz.viz_app.runtime import tune_allocator
 
     check_choice("preset", what, PRESETS)
-    tune_allocator()
+    # glibc's default allocator, not viz_app.runtime.tune_allocator's: the presets' Monte
+    # Carlos are a few hundred runs, whose speed the kept memory does not change (the demo's
+    # CPU time the same within 0.1 s), while keeping what the Prosov scene's conversion
+    # cloud freed held the demo's peak about 25 MB higher (docs/performance.md, section 10).
     layout = log_preset(rec, what, seed=seed)
     rec.send_blueprint(blueprint_of(narrow_layout(layout) if narrow else layout))
 

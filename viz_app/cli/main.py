@@ -22,10 +22,10 @@ import sys
 from collections.abc import Callable, Sequence
 from typing import Any, NoReturn
 
-from radarviz.core.experiments.prosov import ALL_METHODS
+from radarviz.core.filters.methods import ALL_METHODS
 from radarviz.core.finite import ResultError, check_finite_document
 from radarviz.core.params import ParameterError, check_int, check_real
-from radarviz.viz_app.cli import live, recording, score, sweep, track
+from radarviz.viz_app.cli import compile_kernels, live, recording, score, sweep, track
 from radarviz.viz_app.cli.args import integer, number, print_report
 from radarviz.viz_app.cli.params import add_parameter, cli_message, map_flag
 from radarviz.viz_app.io.atomic import WriteError
@@ -200,7 +200,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     _add_association(rep_sub)
 
-    for module in (recording, track, sweep, score, live):
+    for module in (recording, track, sweep, score, live, compile_kernels):
         module.add_commands(sub)
 
     tune = sub.add_parser(
@@ -670,7 +670,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             from radarviz.viz_app.tune.serve import cmd_tune
 
             return cmd_tune(args.host, args.port, args.viewer_port, args.no_browser)
-        for module in (recording, track, sweep, score, live):
+        for module in (recording, track, sweep, score, live, compile_kernels):
             if args.command in module.COMMANDS:
                 return module.COMMANDS[args.command](args)
     except ParameterError as exc:

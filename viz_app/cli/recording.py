@@ -11,8 +11,8 @@ import time
 from pathlib import Path
 
 from radarviz.core.params import ParameterError, check_choice, check_int
-from radarviz.viewer import PRESETS
 from radarviz.viz_app.io.atomic import check_outputs
+from radarviz.viz_app.rerun.preset_names import PRESETS
 from radarviz.viz_app.rerun.viewer import (
     LOOPBACK,
     ServiceError,

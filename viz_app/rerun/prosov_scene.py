@@ -642,7 +642,7 @@ def log_scene(
     """Everything of one Prosov scene: the map, the target frame, the legend, the charts, and
     (``series``) the statistics' values under ``plots/`` (no view draws them: the panel,
     whose viewer must take in a run fast, leaves them out)."""
-    cloud = conversion_cloud(scene.config, cloud_points)
+    cloud = conversion_cloud(scene.config, cloud_points, keep=min(cloud_shown, cloud_points))
     frame = target_frame(scene, cloud)
     log_map(rec, scene, frame, radar_label(scene.config))
     log_target_frame(rec, scene, frame, cloud, min(cloud_shown, cloud_points))
