@@ -28,7 +28,8 @@ from radarviz.core.conversion.elementwise import DUCM, conversion_coefficients, 
 from radarviz.core.filters.codes import EKF, METHOD_CODES, START_CODES, UKF
 from radarviz.core.filters.compiled import FilterSettings
 from radarviz.core.filters.polar_ukf import SEMIDEFINITE_RTOL
-from radarviz.core.filters.predict import UPPER_2D, predict_2d, white_acceleration
+from radarviz.core.filters.predict import predict_2d, white_acceleration
+from radarviz.core.filters.state import UPPER_2D
 
 Array = Any  # an array of the caller's namespace
 _TWO_PI = 2.0 * math.pi

@@ -21,7 +21,6 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from radarviz.core.filters.position_2d import position_update_2d
-from radarviz.core.filters.predict import UPPER_2D
 from radarviz.core.filters.state import (
     CVBatch,
     Vec,
@@ -32,9 +31,11 @@ from radarviz.core.filters.state import (
     mirror_upper,
     position_index,
     semidefinite_cholesky,
+    store_tuples_2d,
     sym,
     symmetric_inverse,
     target_batch,
+    tuples_2d,
     use_dense,
 )
 
@@ -100,8 +101,6 @@ def _update_2d(
     """``innovation_update`` of a 2D batch by ``position_update_2d`` on its components, in
     blocks along the batch's last axis."""
     out = target_batch(state, out)
-    xc, Pc = mean_components(state.x), cov_components(state.P)
-    ox, oP = mean_components(out.x), cov_components(out.P)
     shape = state.batch_shape
     last = shape[-1] if shape else 1
     step = max(1, BLOCK_TRACKS // max(1, math.prod(shape[:-1])))
@@ -114,18 +113,14 @@ def _update_2d(
 
         with np.errstate(invalid="ignore", divide="ignore"):  # a singular S: NaN, as compiled
             xn, pn = position_update_2d(
-                tuple(xc[i][cut] for i in range(4)),
-                tuple(Pc[i, j][cut] for i, j in UPPER_2D),
+                *tuples_2d(state, cut),
                 part(innovation[0]),
                 part(innovation[1]),
                 part(R[0, 0]),
                 part(R[0, 1]),
                 part(R[1, 1]),
             )
-        for i in range(4):
-            ox[i][cut] = xn[i]
-        for (i, j), v in zip(UPPER_2D, pn, strict=True):
-            oP[i, j][cut] = v
+        store_tuples_2d(xn, pn, out, cut)
     mirror_upper(out.P)
     return out
 

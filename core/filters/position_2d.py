@@ -2,7 +2,7 @@
 arithmetic over numbers or arrays alike.
 
 The state is (x, ẋ, y, ẏ) as a 4-tuple and P as its ten upper entries
-(``core.filters.predict.UPPER_2D``); each entry is a number (one track, in numba-compiled
+(``core.filters.state.UPPER_2D``); each entry is a number (one track, in numba-compiled
 code: ``core.filters.kernels_2d`` compiles these functions) or an array (a batch, in the
 numpy engine: ``core.filters.position.innovation_update``). The update, with H picking the
 position and ν = z − H x⁻::

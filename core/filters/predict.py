@@ -32,13 +32,13 @@ from radarviz.core.filters.state import (
     cov_components,
     mean_components,
     mirror_upper,
+    store_tuples_2d,
     target_batch,
+    tuples_2d,
 )
 
 #: A number or an array of numbers (the step functions are written for either).
 Num = Any
-#: The (i, j) of the ten upper entries of a 2D P, in ``predict_2d``'s tuple order.
-UPPER_2D: tuple[tuple[int, int], ...] = tuple((i, j) for i in range(4) for j in range(i, 4))
 
 
 def white_acceleration(T: Num, q: float) -> tuple[Num, Num, Num]:
@@ -52,7 +52,7 @@ def predict_2d(x: tuple, p: tuple, T: Num, Q: tuple[Num, Num, Num]) -> tuple[tup
 
     Args:
         x: the four components of the state.
-        p: the ten upper entries of P in ``UPPER_2D`` order,
+        p: the ten upper entries of P in ``core.filters.state.UPPER_2D`` order,
             (p00, p01, p02, p03, p11, p12, p13, p22, p23, p33).
         T: the step (s), one number or an array broadcasting against the components.
         Q: each axis's process noise, ``white_acceleration(T, σa²)``.
@@ -143,18 +143,11 @@ def cv_predict(
     T = np.asarray(period_s, dtype=np.float64) if per_track else float(period_s)
     Q = white_acceleration(T, float(sigma_a_mps2) ** 2)
     out = target_batch(state, out)
-    ox, oP = mean_components(out.x), cov_components(out.P)
     if state.dims == 2:
-        xc, Pc = mean_components(state.x), cov_components(state.P)
-        xn, pn = predict_2d(
-            tuple(xc[i] for i in range(4)), tuple(Pc[i, j] for i, j in UPPER_2D), T, Q
-        )
-        for i in range(4):
-            ox[i] = xn[i]
-        for (i, j), v in zip(UPPER_2D, pn, strict=True):
-            oP[i, j] = v
+        store_tuples_2d(*predict_2d(*tuples_2d(state), T, Q), out)
         mirror_upper(out.P)
         return out
+    ox, oP = mean_components(out.x), cov_components(out.P)
     out.x[...] = state.x
     out.P[...] = state.P
     n = state.x.shape[-1]

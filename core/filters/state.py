@@ -139,6 +139,28 @@ def cov_components(P: NDArray[np.float64]) -> NDArray[np.float64]:
     return P.transpose(nd - 2, nd - 1, *range(nd - 2))
 
 
+#: The (i, j) of the ten upper entries of a 2D P: the order of the plain-arithmetic steps'
+#: tuples (``core.filters.predict.predict_2d``, ``core.filters.position_2d``).
+UPPER_2D: tuple[tuple[int, int], ...] = tuple((i, j) for i in range(4) for j in range(i, 4))
+
+
+def tuples_2d(state: CVBatch, cut: tuple = ()) -> tuple[tuple, tuple]:
+    """A 2D batch (or its part ``cut`` of every component) as the steps' tuples: the four
+    components of x and P's upper entries in ``UPPER_2D`` order, each a view."""
+    xc, Pc = mean_components(state.x), cov_components(state.P)
+    return tuple(xc[i][cut] for i in range(4)), tuple(Pc[i, j][cut] for i, j in UPPER_2D)
+
+
+def store_tuples_2d(x: tuple, p: tuple, out: CVBatch, cut: tuple = ()) -> None:
+    """Write the steps' tuples (``tuples_2d``'s layout) into ``out`` (or its part ``cut``);
+    P's upper triangle only: the caller mirrors it (``mirror_upper``) once written whole."""
+    ox, oP = mean_components(out.x), cov_components(out.P)
+    for i in range(4):
+        ox[i][cut] = x[i]
+    for (i, j), v in zip(UPPER_2D, p, strict=True):
+        oP[i, j][cut] = v
+
+
 def mirror_upper(P: NDArray[np.float64]) -> None:
     """Copy the upper triangle of (..., n, n) into the lower one, in place."""
     n = P.shape[-1]
