@@ -71,6 +71,8 @@ C0_MIN, C0_MAX = 1e-12, 1e12
 METHODS: tuple[str, ...] = ("closed", "numeric")
 #: Monte Carlo trials per block of :func:`run_gorshkov` (bounds the working set).
 BLOCK_TRIALS = 65_536
+#: Trials of a block whose errors :func:`run_gorshkov` forms at once (bounds the errors' array).
+ERROR_SLICE_TRIALS = 8_192
 
 
 # --------------------------------------------------------------------------------------------
@@ -877,11 +879,15 @@ def run_gorshkov(
             z = rng.standard_normal((2 * n_points, size))
             z *= scale
             z += clean
-            for dop in (False, True):
-                err = weights[dop] @ z
-                err -= target
-                groups[dop].add(err)
-                moments[dop].add(err)
+            # The errors a slice of trials at a time: (3K, size) at once would be the peak of
+            # the whole run; the moments merge slice by slice to the same figures.
+            for lo in range(0, size, ERROR_SLICE_TRIALS):
+                z_slice = z[:, lo : lo + ERROR_SLICE_TRIALS]
+                for dop in (False, True):
+                    err = weights[dop] @ z_slice
+                    err -= target
+                    groups[dop].add(err)
+                    moments[dop].add(err)
         stats = {}
         loo_sigma = {}  # (G, K, 3) leave-one-group-out σ, NaN where not fitted
         for dop in (False, True):
