@@ -464,3 +464,29 @@ def test_compile_bad_jobs_is_one_line(capsys) -> None:
     assert main(["compile", "--jobs", "0"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "--jobs" in err and "Traceback" not in err
+
+
+def test_top_level_help_imports_no_command_module() -> None:
+    """``radarviz --help`` lists every command from ``viz_app.cli.commands`` without importing
+    a command's module (their imports reach the engine); ``radarviz track --help`` imports
+    ``track``'s (and its presets) alone."""
+    script = """
+import sys, contextlib, io
+from radarviz.viz_app.cli.commands import COMMANDS
+from radarviz.viz_app.cli.main import main
+with contextlib.redirect_stdout(io.StringIO()) as out, contextlib.suppress(SystemExit):
+    main(sys.argv[1:])
+cli = {m.rsplit(".", 1)[1] for m in sys.modules if m.startswith("radarviz.viz_app.cli.")}
+print(sorted(cli - {"main", "commands", "args", "params"}))
+if len(sys.argv) == 2:
+    assert all(name in out.getvalue() for name in COMMANDS), out.getvalue()
+"""
+
+    def imported(*argv: str) -> str:
+        done = subprocess.run(
+            [sys.executable, "-c", script, *argv], capture_output=True, text=True, check=True
+        )
+        return done.stdout.strip()
+
+    assert imported("--help") == "[]"
+    assert imported("track", "--help") == "['presets', 'track']"  # track's presets

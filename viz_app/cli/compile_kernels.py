@@ -26,6 +26,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from radarviz.viz_app.cli.args import integer
+from radarviz.viz_app.cli.commands import Registrar
 
 
 @dataclass(frozen=True)
@@ -158,13 +159,9 @@ def compile_all(jobs: int, report: Callable[[str], None] = print) -> int:
     return failed
 
 
-def add_commands(sub: argparse._SubParsersAction) -> None:
+def add_commands(sub: Registrar) -> None:
     """Register ``compile`` on the ``radarviz`` parser."""
-    comp = sub.add_parser(
-        "compile",
-        help="compile the numba kernels of demo and track now (set-up), so that their "
-        "first runs load cached code",
-    )
+    comp = sub.add_parser("compile")
     comp.add_argument(
         "--jobs",
         type=integer,

@@ -13,6 +13,7 @@ import sys
 from collections.abc import Callable
 
 from radarviz.viz_app.cli.args import integer, number
+from radarviz.viz_app.cli.commands import Registrar
 from radarviz.viz_app.cli.params import add_parameter, map_flag
 
 #: Default longest time order horizon of ``live`` (s): a merged feed is out of order by a
@@ -24,13 +25,10 @@ REORDER_S = 1.0
 BUDGET_MS = 100.0
 
 
-def add_commands(sub: argparse._SubParsersAction) -> None:
+def add_commands(sub: Registrar) -> None:
     """Register ``replay`` and ``live`` on the ``radarviz`` parser."""
     _add_live(sub)
-    rp = sub.add_parser(
-        "replay",
-        help="send a capture's or .ast file's ASTERIX datagrams to a UDP address at its pace",
-    )
+    rp = sub.add_parser("replay")
     rp.add_argument("capture", metavar="CAPTURE", help="pcap, pcapng or .ast file of data blocks")
     rp.add_argument(
         "--to",
@@ -75,9 +73,7 @@ def _add_live(sub: argparse._SubParsersAction) -> None:
     from radarviz.core.params import parameter
     from radarviz.viz_app.cli.track import LIVE_ASSOCIATION_FLAGS
 
-    lv = sub.add_parser(
-        "live", help="track an ASTERIX feed as it arrives (UDP or a growing .ast file)"
-    )
+    lv = sub.add_parser("live")
     src = lv.add_mutually_exclusive_group(required=True)
     src.add_argument(
         "--udp",

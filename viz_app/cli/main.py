@@ -11,7 +11,9 @@ A result that is not finite (a NaN figure, a negative NEES or variance; ``core.f
 line naming where it appeared, exit status 1, and nothing is printed or written.
 
 Only numpy-level modules are imported to build the parser: matplotlib, Rerun, Viser, Dask and
-scipy.stats load when a command needs them (``tests/test_cli.py`` checks this).
+scipy.stats load when a command needs them (``tests/test_cli.py`` checks this). A command's
+module is imported only when that command is run or asked for its ``--help``: ``radarviz
+--help`` lists the commands from ``viz_app.cli.commands`` alone.
 """
 
 from __future__ import annotations
@@ -25,8 +27,8 @@ from typing import Any, NoReturn
 from radarviz.core.filters.methods import ALL_METHODS
 from radarviz.core.finite import ResultError, check_finite_document
 from radarviz.core.params import ParameterError, check_int, check_real
-from radarviz.viz_app.cli import compile_kernels, live, recording, score, sweep, track
 from radarviz.viz_app.cli.args import integer, number, print_report
+from radarviz.viz_app.cli.commands import COMMANDS, command_of
 from radarviz.viz_app.cli.params import add_parameter, cli_message, map_flag
 from radarviz.viz_app.io.atomic import WriteError
 from radarviz_entry import EXIT_INTERRUPTED, STARTUP_INTERRUPTED
@@ -55,14 +57,47 @@ def _fail(message: str) -> int:
     return EXIT_USAGE
 
 
-def build_parser() -> argparse.ArgumentParser:
+class _Registrar:
+    """The subparsers action as a command module's ``add_commands`` sees it: the parser it
+    asks for by name is the one already listed (with its help from ``COMMANDS``), or, for a
+    command whose flags are not wanted, a parser of its own that nothing parses."""
+
+    def __init__(self, parsers: dict[str, argparse.ArgumentParser], wanted: set[str]) -> None:
+        self.parsers, self.wanted = parsers, wanted
+
+    def add_parser(self, name: str, **settings: Any) -> argparse.ArgumentParser:
+        if "help" in settings:
+            raise TypeError(f"{name}: a command's help lives in viz_app.cli.commands.COMMANDS")
+        parser = self.parsers[name] if name in self.wanted else _Parser(prog=name)
+        for key, value in settings.items():  # description, epilog, …
+            setattr(parser, key, value)
+        return parser
+
+
+def build_parser(flags_of: Sequence[str] | None = None) -> argparse.ArgumentParser:
+    """The ``radarviz`` parser: every command listed with its help, and the flags of the
+    commands ``flags_of`` (None: of every command; the others are parsed as no command)."""
     parser = _Parser(
         prog="radarviz",
         description="Radar target-tracking research: converted measurements, Doppler, fusion.",
     )
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    parsers = {name: sub.add_parser(name, help=c.help) for name, c in COMMANDS.items()}
+    wanted = set(COMMANDS) if flags_of is None else set(flags_of) & set(COMMANDS)
+    registrar = _Registrar(parsers, wanted)
+    for module in dict.fromkeys(COMMANDS[name].module for name in wanted):
+        if module != "main":
+            importlib.import_module(f"radarviz.viz_app.cli.{module}").add_commands(registrar)
+    if "reproduce" in wanted:
+        _add_reproduce(parsers["reproduce"])
+    if "tune" in wanted:
+        _add_tune(parsers["tune"])
+    if "bench" in wanted:
+        _add_bench(parsers["bench"])
+    return parser
 
-    rep = sub.add_parser("reproduce", help="reproduce a paper's experiment")
+
+def _add_reproduce(rep: argparse.ArgumentParser) -> None:
     rep_sub = rep.add_subparsers(dest="experiment", required=True, parser_class=_Parser)
     pro = rep_sub.add_parser(
         "prosov", help="converted-measurement Kalman filters (Prosov), Monte Carlo"
@@ -200,12 +235,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     _add_association(rep_sub)
 
-    for module in (recording, track, sweep, score, live, compile_kernels):
-        module.add_commands(sub)
 
-    tune = sub.add_parser(
-        "tune", help="Viser panel that re-runs a scene (Prosov, Gorshkov, velocity) into Rerun"
-    )
+def _add_tune(tune: argparse.ArgumentParser) -> None:
     tune.add_argument(
         "--host",
         default="127.0.0.1",
@@ -217,7 +248,8 @@ def build_parser() -> argparse.ArgumentParser:
     )
     tune.add_argument("--no-browser", action="store_true", help="do not open a browser")
 
-    bench = sub.add_parser("bench", help="speed of the batched filters vs filterpy")
+
+def _add_bench(bench: argparse.ArgumentParser) -> None:
     bench.add_argument("--json", action="store_true", help="print only JSON")
     bench.add_argument(
         "--runs",
@@ -303,7 +335,6 @@ def build_parser() -> argparse.ArgumentParser:
         help="also write the figures, the machine and the load average into PAGE.md between "
         "its marker comments (docs/performance.md holds them); the full CPU bench only",
     )
-    return parser
 
 
 def _add_association(rep_sub: argparse._SubParsersAction) -> None:
@@ -318,6 +349,8 @@ def _add_association(rep_sub: argparse._SubParsersAction) -> None:
     add_parameter(aso, "runs", default=20, high=MAX_RUNS)
     add_parameter(aso, "seed")
     add_parameter(aso, "steps", "--scans", default=40, note="per run")
+    from radarviz.viz_app.cli import track  # its crossing and association flags
+
     track.add_crossing_flags(aso)
     for name, flag in track.ASSOCIATION_FLAGS[:-1]:  # one radar, one time per scan: no window
         add_parameter(aso, name, flag)
@@ -344,6 +377,7 @@ def _add_association(rep_sub: argparse._SubParsersAction) -> None:
 def _cmd_reproduce_association(args: argparse.Namespace) -> int:
     from radarviz.core.experiments.association import AssociationConfig, run_association
     from radarviz.core.tracking.association import AssociationOptions
+    from radarviz.viz_app.cli import track
 
     scene = track.crossing_scene(args, args.steps)
     cfg = AssociationConfig(
@@ -647,7 +681,9 @@ def _stdout_closed() -> bool:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``radarviz`` console script; returns the exit status."""
     try:
-        args = build_parser().parse_args(argv)
+        arguments = sys.argv[1:] if argv is None else list(argv)
+        command = command_of(arguments)
+        args = build_parser(flags_of=[command] if command else []).parse_args(arguments)
     except KeyboardInterrupt:
         print(STARTUP_INTERRUPTED, file=sys.stderr)
         return EXIT_INTERRUPTED
@@ -670,9 +706,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             from radarviz.viz_app.tune.serve import cmd_tune
 
             return cmd_tune(args.host, args.port, args.viewer_port, args.no_browser)
-        for module in (recording, track, sweep, score, live, compile_kernels):
-            if args.command in module.COMMANDS:
-                return module.COMMANDS[args.command](args)
+        module = COMMANDS[args.command].module
+        if module != "main":
+            run = importlib.import_module(f"radarviz.viz_app.cli.{module}").COMMANDS
+            return run[args.command](args)
     except ParameterError as exc:
         return _fail(cli_message(args, exc))
     except WriteError as exc:  # an output could not be written; the previous file is intact

@@ -11,6 +11,7 @@ import time
 from pathlib import Path
 
 from radarviz.core.params import ParameterError, check_choice, check_int
+from radarviz.viz_app.cli.commands import Registrar
 from radarviz.viz_app.io.atomic import check_outputs
 from radarviz.viz_app.rerun.preset_names import PRESETS
 from radarviz.viz_app.rerun.viewer import (
@@ -30,9 +31,9 @@ from radarviz.viz_app.rerun.viewer import (
 DEFAULT_DEMO_PATH = "recordings/demo.rrd"
 
 
-def add_commands(sub: argparse._SubParsersAction) -> None:
+def add_commands(sub: Registrar) -> None:
     """Register the three subcommands on the ``radarviz`` parser."""
-    demo = sub.add_parser("demo", help="headless demo: write a recording of every estimator")
+    demo = sub.add_parser("demo")
     demo.add_argument(
         "--out",
         default=DEFAULT_DEMO_PATH,
@@ -45,13 +46,13 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     )
     demo.add_argument("--seed", type=int, default=1, help="random seed (default 1)")
 
-    rec = sub.add_parser("record", help="write one preset's recording")
+    rec = sub.add_parser("record")
     rec.add_argument("--preset", required=True, help=f"one of {', '.join(PRESETS)}")
     rec.add_argument("--out", required=True, help="path of the .rrd to write")
     rec.add_argument("--overwrite", action="store_true", help="replace an existing file")
     rec.add_argument("--seed", type=int, default=1, help="random seed (default 1)")
 
-    view = sub.add_parser("view", help="serve the Rerun web viewer for a recording")
+    view = sub.add_parser("view")
     view.add_argument(
         "path",
         nargs="?",

@@ -15,16 +15,13 @@ from collections.abc import Callable
 from radarviz.core.finite import check_finite_document
 from radarviz.core.params import check_choice
 from radarviz.viz_app.cli.args import print_report
+from radarviz.viz_app.cli.commands import Registrar
 from radarviz.viz_app.cli.params import add_parameter, map_flag
 
 
-def add_commands(sub: argparse._SubParsersAction) -> None:
+def add_commands(sub: Registrar) -> None:
     """Register ``score`` on the ``radarviz`` parser."""
-    sc = sub.add_parser(
-        "score",
-        help="score a track file against the truth: GOSPA, purity, fragmentation, swaps, "
-        "RMSE, NEES",
-    )
+    sc = sub.add_parser("score")
     sc.add_argument(
         "tracks",
         metavar="TRACKS",

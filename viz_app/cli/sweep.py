@@ -24,6 +24,7 @@ from radarviz.core.finite import check_finite_document
 from radarviz.core.params import ParameterError, check_choice, check_int
 from radarviz.viz_app.bench.sweep import DEFAULT_GRID, DEFAULT_RUNS, format_bench, run_bench
 from radarviz.viz_app.cli.args import integer, number, print_report
+from radarviz.viz_app.cli.commands import Registrar
 from radarviz.viz_app.cli.params import add_parameter, map_flag, parameter_flags
 from radarviz.viz_app.io.atomic import check_outputs, commit_together
 from radarviz.viz_app.runtime import tune_allocator
@@ -38,12 +39,11 @@ from radarviz.viz_app.sweep.run import (
 )
 
 
-def add_commands(sub: argparse._SubParsersAction) -> None:
+def add_commands(sub: Registrar) -> None:
     """Register ``sweep`` and ``bench-sweep`` on the ``radarviz`` parser."""
     _add_bench_command(sub)
     sw = sub.add_parser(
         "sweep",
-        help="the Prosov Monte Carlo over a parameter grid, on Dask (resumable)",
         description="Monte Carlo of every method at every grid point; chunks run on Dask and "
         "are kept beside the output so a re-run resumes. Results are identical whatever the "
         "scheduler or number of workers.",
@@ -150,7 +150,7 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
 
 
 def _add_bench_command(sub: argparse._SubParsersAction) -> None:
-    b = sub.add_parser("bench-sweep", help="scaling of a sweep over 1, 2, … local Dask workers")
+    b = sub.add_parser("bench-sweep")
     b.add_argument(
         "--grid",
         nargs="+",

@@ -28,6 +28,7 @@ from radarviz.core.tracking.stream import (
     motion_fields,
 )
 from radarviz.viz_app.cli.args import integer, number
+from radarviz.viz_app.cli.commands import Registrar
 from radarviz.viz_app.cli.params import add_parameter, map_flag, parameter_flags
 from radarviz.viz_app.cli.presets import (
     ALL_PRESETS,
@@ -62,9 +63,9 @@ from radarviz.viz_app.reports.plot_account import (
 from radarviz.viz_app.runtime import peak_rss_mb
 
 
-def add_commands(sub: argparse._SubParsersAction) -> None:
+def add_commands(sub: Registrar) -> None:
     """Register ``track`` and ``simulate`` on the ``radarviz`` parser."""
-    tr = sub.add_parser("track", help="track a measurement file into a track CSV file")
+    tr = sub.add_parser("track")
     tr.add_argument(
         "--input",
         required=True,
@@ -200,7 +201,7 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     )
     _add_association_flags(tr)
 
-    sim = sub.add_parser("simulate", help="write a preset's measurements and radars files")
+    sim = sub.add_parser("simulate")
     sim.add_argument(
         "--preset",
         required=True,
