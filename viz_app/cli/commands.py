@@ -10,6 +10,8 @@ its own ``--help`` is asked for (``viz_app.cli.main.build_parser``).
 from __future__ import annotations
 
 import argparse
+import importlib
+from types import ModuleType
 from typing import Any, NamedTuple, Protocol
 
 
@@ -55,6 +57,13 @@ COMMANDS: dict[str, Command] = {
     ),
     "bench": Command("speed of the batched filters vs filterpy", "main"),
 }
+
+
+def command_module(name: str) -> ModuleType | None:
+    """The module building and running command ``name``, imported now; None for the commands
+    of ``viz_app.cli.main`` itself."""
+    module = COMMANDS[name].module
+    return None if module == "main" else importlib.import_module(f"radarviz.viz_app.cli.{module}")
 
 
 class Registrar(Protocol):

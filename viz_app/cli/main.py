@@ -28,7 +28,7 @@ from radarviz.core.filters.methods import ALL_METHODS
 from radarviz.core.finite import ResultError, check_finite_document
 from radarviz.core.params import ParameterError, check_int, check_real
 from radarviz.viz_app.cli.args import integer, number, print_report
-from radarviz.viz_app.cli.commands import COMMANDS, command_of
+from radarviz.viz_app.cli.commands import COMMANDS, command_module, command_of
 from radarviz.viz_app.cli.params import add_parameter, cli_message, map_flag
 from radarviz.viz_app.io.atomic import WriteError
 from radarviz_entry import EXIT_INTERRUPTED, STARTUP_INTERRUPTED
@@ -85,9 +85,9 @@ def build_parser(flags_of: Sequence[str] | None = None) -> argparse.ArgumentPars
     parsers = {name: sub.add_parser(name, help=c.help) for name, c in COMMANDS.items()}
     wanted = set(COMMANDS) if flags_of is None else set(flags_of) & set(COMMANDS)
     registrar = _Registrar(parsers, wanted)
-    for module in dict.fromkeys(COMMANDS[name].module for name in wanted):
-        if module != "main":
-            importlib.import_module(f"radarviz.viz_app.cli.{module}").add_commands(registrar)
+    for module in dict.fromkeys(command_module(name) for name in wanted):
+        if module is not None:
+            module.add_commands(registrar)
     if "reproduce" in wanted:
         _add_reproduce(parsers["reproduce"])
     if "tune" in wanted:
@@ -706,10 +706,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             from radarviz.viz_app.tune.serve import cmd_tune
 
             return cmd_tune(args.host, args.port, args.viewer_port, args.no_browser)
-        module = COMMANDS[args.command].module
-        if module != "main":
-            run = importlib.import_module(f"radarviz.viz_app.cli.{module}").COMMANDS
-            return run[args.command](args)
+        module = command_module(args.command)
+        if module is not None:
+            return module.COMMANDS[args.command](args)
     except ParameterError as exc:
         return _fail(cli_message(args, exc))
     except WriteError as exc:  # an output could not be written; the previous file is intact
