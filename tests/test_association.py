@@ -418,13 +418,17 @@ def test_track_recording_has_every_track(tmp_path: Path, rrd_contents) -> None:
     assert main([*argv, "--associate", "gnn", "--method", "ucm"]) == 0
     with out.open() as fh:
         ids = {row["target"] for row in csv.DictReader(fh)}
+    with out.open() as fh:
+        confirmed = {row["target"] for row in csv.DictReader(fh) if row["status"] == CONFIRMED}
     rows, _ = rrd_contents(rrd)
-    # /world/tracks/{id}/{method}/position, one entity per track (and /world/tracks/{id} the
-    # clear of a deleted one).
+    # /world/tracks/{id}/{method}/position, one entity per confirmed track (and
+    # /world/tracks/{id} the clear of a deleted one); the tentative ones share
+    # /world/tentative/{method}.
     parts = [p.split("/") for p in rows if p.startswith("/world/tracks/")]
     recorded = {q[3] for q in parts}
     assert {q[4] for q in parts if len(q) > 4} == {"ucm"}
-    assert len(ids) >= 2 and ids <= recorded, (ids, sorted(rows)[:20])
+    assert len(confirmed) >= 2 and recorded == confirmed, (confirmed, sorted(rows)[:20])
+    assert len(ids - confirmed) >= 1 and "/world/tentative/ucm/position" in rows
 
 
 def _packed(rgb: tuple[int, int, int]) -> int:
@@ -434,10 +438,11 @@ def _packed(rgb: tuple[int, int, int]) -> int:
 
 def test_track_recording_draws_the_status(tmp_path: Path, rrd_contents) -> None:
     """The association's recording against the tracker's own account of the same plots
-    (``GNNTracker.add_batch`` batch by batch): every track row coloured by its status (faint while
-    tentative), a recursive clear of exactly the deleted tracks at the last plot of the scan
-    that deleted them, paths and time series for confirmed tracks only, and each scan's plots
-    as one row per status."""
+    (``GNNTracker.add_batch`` batch by batch): a confirmed track's rows from its confirmation
+    on in its own entities, bright; each scan's tentative rows as one faint row per method; a
+    recursive clear of exactly the deleted confirmed tracks at the last plot of the scan that
+    deleted them, paths and time series for confirmed tracks only, and each scan's plots as
+    one row per status."""
     from radarviz.viz_app.io.plots import PlotReader, load_radars
     from radarviz.viz_app.palette import rgb
     from radarviz.viz_app.rerun.shapes import faint
@@ -473,21 +478,32 @@ def test_track_recording_draws_the_status(tmp_path: Path, rrd_contents) -> None:
     assert len(confirmed) >= 2 and len(never) >= 5 and len(deleted) >= 5
 
     rows, cols = rrd_contents(rrd)
-    for method, t in itertools.product(("ucm", "ekf"), set(ids)):
+    assert not any(p.startswith("/world/tracks/") and p.split("/")[3] in never for p in rows)
+    scan_first = list(itertools.accumulate([1] + [len(s) for s in scans[:-1]]))
+    for method in ("ucm", "ekf"):
         bright, dim = _packed(rgb(method)), _packed(faint(rgb(method)))
         assert bright != dim
-        c = cols[f"/world/tracks/{t}/{method}/position"]
-        want = [dim if statuses[n - 1] == TENTATIVE else bright for n in c["plot"]]
-        assert [x[0] for x in c["Points3D:colors"]] == want, (t, method)
-        assert c["plot"] == [n + 1 for n, u in enumerate(ids) if u == t]
-        ellipsoids = cols[f"/world/tracks/{t}/{method}/covariance"]["Ellipsoids3D:colors"]
-        assert [x[0] for x in ellipsoids] == want
+        for t in confirmed:
+            c = cols[f"/world/tracks/{t}/{method}/position"]
+            mine = [n + 1 for n, (u, s) in enumerate(zip(ids, statuses, strict=True)) if u == t]
+            assert c["plot"] == [n for n in mine if statuses[n - 1] == CONFIRMED], (t, method)
+            assert {x[0] for x in c["Points3D:colors"]} == {bright}
+            ellipsoids = cols[f"/world/tracks/{t}/{method}/covariance"]["Ellipsoids3D:colors"]
+            assert {x[0] for x in ellipsoids} == {bright}
+        # One row per scan at its first plot, holding the scan's tentative rows, all faint.
+        for part, kind in (("position", "Points3D"), ("covariance", "Ellipsoids3D")):
+            c = cols[f"/world/tentative/{method}/{part}"]
+            assert c["plot"] == scan_first
+            assert [len(x) for x in c[f"{kind}:colors"]] == [s.count(TENTATIVE) for s in scans]
+            assert {x for row in c[f"{kind}:colors"] for x in row} == {dim}
     clears = {
         p.split("/")[3]: c
         for p, c in cols.items()
         if p.count("/") == 3 and p.startswith("/world/tracks/")
     }
-    assert {t: c["plot"] for t, c in clears.items()} == {t: [n] for t, n in deleted.items()}
+    want_clears = {t: [n] for t, n in deleted.items() if t in confirmed}
+    assert {t: c["plot"] for t, c in clears.items()} == want_clears
+    assert len(deleted.keys() - confirmed) >= 5  # tentative tracks died: no clear of theirs
     assert all(c["Clear:is_recursive"] == [[True]] for c in clears.values())
     paths = {tuple(p.split("/")[3:5]) for p in rows if "/path/" in p}
     assert paths == set(itertools.product(confirmed, ("ucm", "ekf")))
@@ -529,8 +545,10 @@ def test_api_recording_of_associated_tracks_is_the_commands(tmp_path: Path, rrd_
     # Not a vacuous equality: the scene has deleted tracks, their clears and faint rows.
     clears = [p for p in cli_rows if p.count("/") == 3 and p.startswith("/world/tracks/")]
     deleted = {t for s in tracks.scans for t in s.deleted}
-    assert len(deleted) >= 5 and {p.split("/")[3] for p in clears} == deleted
+    confirmed = {s.target for s in tracks.steps if s.status == CONFIRMED}
+    assert len(deleted) >= 5 and {p.split("/")[3] for p in clears} == deleted & confirmed
     assert "/world/measurements/radar/tentative" in cli_rows
+    assert "/world/tentative/ucm/position" in cli_rows
     assert set(api_rows) == set(cli_rows)
     for entity in cli_rows:
         if entity == "/log":

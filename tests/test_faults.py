@@ -141,17 +141,32 @@ def test_a_write_error_names_the_target_and_keeps_it(tmp_path: Path) -> None:
     assert out.read_text() == "keep" and temporaries(tmp_path) == []
 
 
-def test_a_recording_that_does_not_read_back_is_not_renamed(tmp_path: Path) -> None:
-    """Verification before the rename: a recording cut short by one byte is refused."""
+@pytest.mark.parametrize(
+    "damage", ["cut short by one byte", "a byte flipped in a compressed chunk"]
+)
+def test_a_recording_that_does_not_read_back_is_not_renamed(tmp_path: Path, damage: str) -> None:
+    """Verification before the rename: a recording cut short by one byte (no footer) or with
+    one byte of a compressed chunk flipped (its codec fails, the footer intact) is refused."""
+    import numpy as np
+    import rerun as rr
+
     good = tmp_path / "good.rrd"
     with recording_file(good) as rec:
-        rec.log("log", __import__("rerun").TextLog("hello"))
-    data = good.read_bytes()
+        rec.log("log", rr.TextLog("hello"))
+        # A compressible chunk (lz4) filling the middle of the file. (Chunks carry no
+        # checksum: a flipped byte of an uncompressed payload would go unseen.)
+        rec.log("points", rr.Points3D(np.repeat(np.arange(20.0), 300).reshape(-1, 3)))
+    data = bytearray(good.read_bytes())
+    verify_recording(good)
+    if damage.startswith("cut"):
+        data = data[:-1]
+    else:
+        data[len(data) // 2] ^= 0xFF
     out = tmp_path / "x.rrd"
     out.write_bytes(b"previous")
     with pytest.raises(WriteError, match="does not read back whole"):
         with atomic_write(out, verify=verify_recording) as fh:
-            fh.write(data[:-1])
+            fh.write(bytes(data))
     assert out.read_bytes() == b"previous" and temporaries(tmp_path) == []
 
 

@@ -167,9 +167,12 @@ def is_recording(path: str | os.PathLike) -> bool:
 def verify_recording(path: str | os.PathLike) -> None:
     """Raise unless ``path`` is a whole recording: the equivalent of ``rerun rrd verify``.
 
-    Every store (recordings and blueprints) is listed, every chunk of each decodes, and each
-    store opens from the footer's manifest, which only a cleanly ended stream has (a file cut
-    short anywhere, even by one byte, fails one of these).
+    The reader opens the file from its footer's manifest, which only a cleanly ended stream
+    has (a file cut short anywhere, even by one byte, has none), and every chunk of every
+    store (recordings and blueprints) decodes (a flipped byte of a compressed chunk fails its
+    codec; chunks carry no checksum, so one of an uncompressed payload goes unseen). The
+    stores are not built: that held a second copy of the recording in memory (the largest
+    part of a ``track --rrd`` run's peak after the tracking) and finds nothing more.
     """
     from rerun.chunk import RrdReader
 
@@ -182,7 +185,6 @@ def verify_recording(path: str | os.PathLike) -> None:
         for store in stores:
             for _chunk in reader.stream(store=store):
                 pass
-            reader.store(store=store)
 
 
 def indexes(scans: NDArray, times: NDArray) -> list[rr.TimeColumn]:

@@ -25,14 +25,25 @@ that an entity path reserves are escaped), coloured by method.
 With the association (``track --associate gnn``) ``{t}`` is the track id and the recording
 carries each track's status (``core.tracking.association``):
 
-* a row of a *tentative* track (not yet M of N hits) is drawn faint (``shapes.faint``: the
-  method's hue mixed with the 3D view's light background, set in the blueprint) with a
-  smaller marker; a *confirmed* track's rows as above. The status is per row, in the track's
-  one entity: a track changes status once.
+* a *confirmed* track (M of N hits) has the entities above, from the scan that confirms it.
+* the rows of *tentative* tracks (not yet M of N hits) are one row per scan and method, all
+  the scan's tentative tracks at once, at the scan's first plot::
+
+      world/tentative/{m}/position     their positions, faint (``shapes.faint``: the method's
+                                       hue mixed with the 3D view's light background, set in
+                                       the blueprint) and small
+      world/tentative/{m}/covariance   their 1σ ellipsoids, faint
+
+  A scan with none gets an empty row, so the view shows the current scan's only. (Most
+  tracks a file starts are clutter that lives a few scans: an entity per track and part made
+  thousands of entities, and the recording's index of them, built when it is closed, was the
+  run's peak memory.) Tentative tracks have no velocity arrows and take no colour of the
+  palette, so the confirmed tracks' colours are the palette's first.
 * a track's path is drawn once it is confirmed, its tentative start faint and thin; a track
   deleted while tentative has no path (dozens of clutter tracks live for a few scans).
-* a deleted track is cleared (a recursive ``rr.Clear`` of ``world/tracks/{t}``) at the scan
-  that deletes it, so its last position does not stay on screen; its path, static, stays.
+* a deleted confirmed track is cleared (a recursive ``rr.Clear`` of ``world/tracks/{t}``) at
+  the scan that deletes it, so its last position does not stay on screen; its path, static,
+  stays.
 * the time series carry confirmed rows only.
 * plots are logged per scan, one row of all the scan's plots at its first plot, split by the
   status of the track each went to::
@@ -119,6 +130,7 @@ def measured_point(p: Plot) -> tuple[float, float, float]:
 
 
 Row = tuple[int, float, np.ndarray, np.ndarray, str]
+_POS, _VEL = list(position_index(3)), list(velocity_index(3))
 
 
 class TrackRecorder:
@@ -126,6 +138,9 @@ class TrackRecorder:
 
     #: Plots after which ``add`` flushes by itself (None: only when asked).
     chunk_plots: int | None = RRD_CHUNK
+    #: Whether tentative tracks' rows go to ``world/tentative/{m}``, one row per scan (a
+    #: subclass drawing the tracks its own way says False).
+    groups_tentative = True
 
     def __init__(
         self,
@@ -178,6 +193,15 @@ class TrackRecorder:
         self._pending: dict[str, np.ndarray] = {}
         # Targets deleted since the last flush: a tentative one's path is never drawn.
         self._deleted: set[str] = set()
+        # Targets with a confirmed row (their own entities, cleared when deleted).
+        self._confirmed: set[str] = set()
+        # The current scan's tentative rows, by method: position (3,), covariance (3, 3).
+        self._scan_tentative: dict[str, list[tuple[np.ndarray, np.ndarray]]] = defaultdict(list)
+        # The scans' tentative rows, by method: (plot, time_s, positions (k, 3), covariances
+        # (k, 3, 3)), one per scan.
+        self._tentative: dict[str, list[tuple[int, float, np.ndarray, np.ndarray]]] = defaultdict(
+            list
+        )
         self._styled: set[str] = set()
         # Each track's colour, by method, or by track id when one method tracks many.
         self._colours: dict[str, tuple[int, int, int]] = {}
@@ -336,9 +360,13 @@ class TrackRecorder:
             if status != TENTATIVE:  # the inset follows a confirmed track (or the only one)
                 self._inset_target = plot.target
                 self._add_inset(rows)
+        if status == CONFIRMED:
+            self._confirmed.add(plot.target)
         for method, x, P in rows:
             self._methods.add(method)
             self._tracks[(plot.target, method)].append((self.count, plot.time_s, x, P, status))
+            if status == TENTATIVE and self.groups_tentative:
+                self._scan_tentative[method].append((x[_POS], np.asarray(P)[np.ix_(_POS, _POS)]))
         if self.chunk_plots is not None and self.count % self.chunk_plots == 0:
             self.flush()
 
@@ -449,12 +477,20 @@ class TrackRecorder:
             for status in (CONFIRMED, TENTATIVE):
                 pts = [p for *_, s, p in self._scan if s == status]
                 self._meas[f"{radar}/{status}"].append((n, t, np.array(pts).reshape(-1, 3)))
+            if self.groups_tentative:
+                for method in self._methods:
+                    got = self._scan_tentative.pop(method, [])
+                    pos = np.array([p for p, _ in got]).reshape(-1, 3)
+                    cov = np.array([c for _, c in got]).reshape(-1, 3, 3)
+                    self._tentative[method].append((n, t, pos, cov))
             end_n, end_t = self._scan[-1][0], self._scan[-1][1]
             self._scan.clear()
         else:
             end_n, end_t = self.count, self._time_s
         for target in deleted:
             self._deleted.add(target)
+            if target not in self._confirmed:
+                continue  # a tentative track has no entity of its own
             self.rec.send_columns(
                 f"world/tracks/{rr.escape_entity_path_part(target)}",
                 indexes=self.indexes([end_n], [end_t]),
@@ -482,6 +518,7 @@ class TrackRecorder:
     def flush(self) -> None:
         """Send everything buffered (one ``send_columns`` per entity) and empty the buffers."""
         self._send_measurements()
+        self._send_tentative()
         for (target, method), items in self._tracks.items():
             if items:
                 self._send_track(target, method, items)
@@ -514,6 +551,38 @@ class TrackRecorder:
             )
         self._meas.clear()
 
+    def _send_tentative(self) -> None:
+        """The buffered scans' tentative rows, one ``send_columns`` per method and part."""
+        for method, items in self._tentative.items():
+            if not items:
+                continue
+            n, t, pos, cov = zip(*items, strict=True)
+            sizes = [len(p) for p in pos]
+            allpos, allcov = np.concatenate(pos), np.concatenate(cov)
+            m = len(allpos)
+            dim = faint(colour(method))
+            idx = self.indexes(list(n), list(t))
+            base = f"world/tentative/{method}"
+            self.rec.send_columns(
+                f"{base}/position",
+                indexes=idx,
+                columns=rr.Points3D.columns(
+                    positions=allpos, colors=[dim] * m, radii=[FAINT_MARKER] * m
+                ).partition(sizes),
+            )
+            half, quat = ellipsoid_axes(allcov)
+            self.rec.send_columns(
+                f"{base}/covariance",
+                indexes=idx,
+                columns=rr.Ellipsoids3D.columns(
+                    centers=allpos,
+                    half_sizes=np.maximum(half, 1.0),
+                    quaternions=quat,
+                    colors=[dim] * m,
+                ).partition(sizes),
+            )
+        self._tentative.clear()
+
     def _forget_deleted(self, targets: set[str] | None = None) -> None:
         """Deleted tracks (``targets``, or all deleted since the last flush) have no more
         rows: forget their path's state (a tentative one has no path)."""
@@ -523,6 +592,7 @@ class TrackRecorder:
             for book in (self._pending, self._last):
                 for name in [k for k in book if k.startswith(prefix)]:
                     del book[name]
+            self._confirmed.discard(target)
         self._deleted -= targets
 
     def _entity_name(self, target: str, method: str) -> str:
@@ -538,17 +608,23 @@ class TrackRecorder:
         return rgb
 
     def _path_strips(
-        self, name: str, pos: np.ndarray, tentative: np.ndarray, rgb: tuple[int, int, int]
+        self,
+        name: str,
+        pos: np.ndarray,
+        tentative: np.ndarray,
+        rgb: tuple[int, int, int] | None,
     ) -> tuple[int, list[np.ndarray], list, list[float]]:
         """A track's path for its buffered positions ``pos``: the index of its first
         confirmed row (``len(pos)``: still tentative, the positions kept until it is
-        confirmed) and the strips to draw, their colours and radii (none while tentative)."""
+        confirmed) and the strips to draw, their colours and radii (none while tentative:
+        ``rgb``, the track's colour, may then be None)."""
         # Statuses only go tentative → confirmed: the chunk's confirmed rows are a suffix.
         first = int(np.argmin(tentative)) if not tentative.all() else len(pos)
         start = self._pending.pop(name, np.zeros((0, 3)))
         if first == len(pos):  # still tentative: its path waits for the confirmation
             self._pending[name] = np.vstack([start, pos])
             return first, [], [], []
+        assert rgb is not None, "a confirmed track is drawn in its colour"
         strips, colours_, radii = [], [], []
         early = np.vstack([start, pos[:first]])
         if len(early):  # the tentative start, faint, joined to the first confirmed row
@@ -593,54 +669,54 @@ class TrackRecorder:
             self._series[series].append(values.astype(np.float32))
 
     def _send_track(self, target: str, method: str, items: list[Row]) -> None:
-        """One track's buffered rows: position, covariance, velocity (tentative rows faint),
-        its path strip(s) and its confirmed rows' time series."""
+        """One track's buffered rows: its confirmed rows' position, covariance and velocity
+        (its tentative ones are the scans' rows of ``world/tentative/{m}``), its path
+        strip(s) and its confirmed rows' time series."""
         rec = self.rec
         name = self._entity_name(target, method)
         n, t, xs, ps, statuses = zip(*items, strict=True)
         x, P = np.array(xs), np.array(ps)
-        POS, VEL = list(position_index(3)), list(velocity_index(3))
-        pos, vel = x[:, POS], x[:, VEL]
-        cov = P[:, POS][:, :, POS]
-        label = track_name(target, method) if target else method
-        rgb = self._track_colour(target, name, method)
-        dim = faint(rgb)
+        pos, vel = x[:, _POS], x[:, _VEL]
+        cov = P[:, _POS][:, :, _POS]
         tentative = np.array([s == TENTATIVE for s in statuses])
-        rgbs = [dim if s else rgb for s in tentative]
-        idx = self.indexes(list(n), list(t))
+        if tentative.all():  # no entity yet: the positions wait for the path's start
+            self._path_strips(name, pos, tentative, None)
+            return
+        rgb = self._track_colour(target, name, method)
+        first, strips, colours_, radii = self._path_strips(name, pos, tentative, rgb)
+        sel = slice(first, None)  # statuses only go tentative → confirmed: a suffix
+        pos_c, vel_c, cov_c = pos[sel], vel[sel], cov[sel]
+        k = len(pos_c)
+        at = self.indexes(list(n[sel]), list(t[sel]))
         base = f"world/tracks/{name}"
         rec.send_columns(
             f"{base}/position",
-            indexes=idx,
+            indexes=at,
             columns=rr.Points3D.columns(
-                positions=pos,
-                colors=rgbs,
-                radii=[FAINT_MARKER if s else MARKER for s in tentative],
-                # A confirmed track's id beside it (tentative ones are too many to name).
-                labels=["" if s else label for s in tentative],
+                positions=pos_c,
+                colors=[rgb] * k,
+                radii=[MARKER] * k,
+                labels=[track_name(target, method) if target else method] * k,
             ),
         )
-        half, quat = ellipsoid_axes(cov)
+        half, quat = ellipsoid_axes(cov_c)
         rec.send_columns(
             f"{base}/covariance",
-            indexes=idx,
+            indexes=at,
             columns=rr.Ellipsoids3D.columns(
-                centers=pos, half_sizes=np.maximum(half, 1.0), quaternions=quat, colors=rgbs
+                centers=pos_c, half_sizes=np.maximum(half, 1.0), quaternions=quat, colors=[rgb] * k
             ),
         )
         rec.send_columns(
             f"{base}/velocity",
-            indexes=idx,
-            columns=rr.Arrows3D.columns(origins=pos, vectors=vel * ARROW_SECONDS, colors=rgbs),
+            indexes=at,
+            columns=rr.Arrows3D.columns(
+                origins=pos_c, vectors=vel_c * ARROW_SECONDS, colors=[rgb] * k
+            ),
         )
-        first, strips, colours_, radii = self._path_strips(name, pos, tentative, rgb)
-        if not strips:
-            return
         rec.log(
             f"{base}/path/{self.chunk:06d}",
             rr.LineStrips3D(strips, colors=colours_, radii=radii),
             static=True,
         )
-        sel = slice(first, None)
-        at = self.indexes(list(n[sel]), list(t[sel]))
-        self._send_series(target, method, name, rgb, at, cov[sel], vel[sel])
+        self._send_series(target, method, name, rgb, at, cov_c, vel_c)
