@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import gc
 import hashlib
 import json
 import queue
@@ -132,6 +133,11 @@ def run_live(args: argparse.Namespace) -> int:
         plots: queue.Queue = queue.Queue(QUEUE_PLOTS)
         horizon = Horizon(args.reorder_s)
         warm_up(make, options, association, radars)
+        # What is made by now (the modules of numba, scipy and Rerun, the kernels) lives to
+        # the end: frozen out of the cycle collector's reach, so its full passes walk only
+        # what the session makes, not the pauses of a second a plot's latency would take.
+        gc.collect()
+        gc.freeze()
         reader = threading.Thread(
             target=read_feed,
             args=(feed, source, radars, plots, horizon, args.max_plots, warn_line),
