@@ -11,8 +11,9 @@ targets of air traffic, written (not timed) as an ASTERIX file of data blocks of
 unless ``viewer`` is False. The figures are the session's own summary (``--summary``):
 
 * ``sent_plots`` and ``sent_datagrams`` (what the replay sent), ``tracked``, ``dropped``
-  (the bounded queue full), ``out_of_order``, ``malformed`` (datagrams and records refused)
-  and ``untracked_at_stop``: every plot accounted for;
+  (the bounded queue full), ``out_of_order``, ``malformed`` (datagrams and records refused),
+  ``duplicates`` (byte-identical records passed over) and ``untracked_at_stop``: every plot
+  accounted for;
 * ``latency_median_ms`` and ``latency_p99_ms``: from a datagram's arrival to its plots'
   rows handed to the recording and flushed, the viewer's logging included;
 * ``peak_rss_mb``: the live process's peak resident set (the viewer's server apart);
