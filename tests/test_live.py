@@ -271,7 +271,7 @@ def test_live_counts_malformed_datagrams_once_and_goes_on(tmp_path: Path) -> Non
     live = subprocess.Popen(
         [
             RADARVIZ, "live", "--udp", f"127.0.0.1:{port}", "--radars", str(toml),
-            "--method", "ucm", "--no-viewer", "--max-plots", str(n_plots),
+            "--method", "ucm", "--no-viewer", "--max-plots", str(n_plots + 1),
             "--duration-s", "120", "--summary", str(summary),
         ],
         stderr=subprocess.PIPE,
@@ -293,6 +293,7 @@ def test_live_counts_malformed_datagrams_once_and_goes_on(tmp_path: Path) -> Non
     assert doc["malformed"] == {"a datagram that is not a run of ASTERIX data blocks": 2}, err
     assert err.count("not a run of ASTERIX data blocks") == 1
     assert doc["duplicate_records"] == 1
+    # The duplicate counts toward --max-plots: the session stops at the feed's last plot.
     assert doc["tracked"] == doc["plots"] == n_plots
 
 
@@ -344,7 +345,7 @@ def test_bench_live_accounts_for_every_plot_sent(capsys: pytest.CaptureFixture) 
     assert main([*argv, "--live-targets", "100", "--json"]) == 0
     doc = json.loads(capsys.readouterr().out)["live"]
     assert doc["viewer"] and doc["sent_plots"] == 1200
-    parts = ("tracked", "dropped", "out_of_order", "untracked_at_stop")
+    parts = ("tracked", "dropped", "out_of_order", "untracked_at_stop", "duplicates")
     assert sum(doc[k] for k in parts) == doc["sent_plots"]
     assert doc["malformed"] == 0
     assert 0.0 < doc["latency_median_ms"] <= doc["latency_p99_ms"]
@@ -377,3 +378,52 @@ def test_the_horizon_waits_little_on_an_ordered_feed_and_grows_on_a_late_plot() 
     assert refused == [3, 10] and h() == 1.0
     out = [p.time_s for _, p in time_ordered(iter(admitted), h)]
     assert out == sorted(out) and len(out) == len(times) - 2
+
+
+def test_the_feeds_cat034_period_holds_its_batches_and_a_duplicate_counts_to_max_plots(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The reader keeps the antennas' timing its CAT034 messages give (``timing``), which the
+    tracker's batches are held with (their radar's I034/041 period, as ``track`` holds a
+    file's); a duplicate record counts toward ``max_plots`` with the plots, so a feed of
+    three records, one a duplicate, ends at ``max_plots`` 3 without waiting for more."""
+    import io
+    import queue
+
+    from test_asterix import RADARS, block, rec
+    from test_pcap import north
+
+    from radarviz.viz_app.io.plots import BatchRunner, parse_radars
+    from radarviz.viz_app.live import session
+
+    radars = parse_radars(RADARS, "r.toml")
+    data = north(25, 201, 0.5, 4.5) + block(rec(128)) + block(rec(128)) + block(rec(256))
+    counts, stop, out = session.FeedCounts(), threading.Event(), queue.Queue()
+    feed = session.FollowedFile(io.BytesIO(data), stop, counts)
+    timing: dict = {}
+    reader = threading.Thread(
+        target=session.read_feed,
+        args=(feed, "f", radars, out, session.Horizon(1.0), 3, session.warn_line, timing),
+    )
+    reader.start()
+    reader.join(timeout=30.0)
+    assert not reader.is_alive() and stop.is_set()  # ended by the account, not the poll
+    assert (counts.plots, counts.duplicates) == (2, 1)
+    assert timing["north"].rotation_period_s == 4.5
+
+    held: list[float | None] = []
+
+    class Runner(BatchRunner):
+        def hold(self, batch: list, period: float | None = None) -> None:
+            held.append(period)
+            super().hold(batch, period)
+
+    monkeypatch.setattr(session, "BatchRunner", Runner)
+    from radarviz.core.tracking.association import AssociationOptions, GNNTracker
+    from radarviz.core.tracking.stream import StreamOptions, motion_fields
+
+    tracker = GNNTracker(("ucm",), False, StreamOptions(**motion_fields()), AssociationOptions())
+    tracked: list[str] = []
+    session.track_feed(out, tracker, counts, 30.0, 0.0, 1e-3, lambda p, r, s="": tracked.append(
+        p.target), None, None, timing)  # fmt: skip
+    assert len(tracked) == 2 and held and set(held) == {4.5}

@@ -11,8 +11,9 @@ targets of air traffic, written (not timed) as an ASTERIX file of data blocks of
 unless ``viewer`` is False. The figures are the session's own summary (``--summary``):
 
 * ``sent_plots`` and ``sent_datagrams`` (what the replay sent), ``tracked``, ``dropped``
-  (the bounded queue full), ``out_of_order``, ``malformed`` (datagrams and records refused)
-  and ``untracked_at_stop``: every plot accounted for;
+  (the bounded queue full), ``out_of_order``, ``malformed`` (datagrams and records refused),
+  ``duplicates`` (byte-identical records passed over) and ``untracked_at_stop``: every plot
+  accounted for;
 * ``latency_median_ms`` and ``latency_p99_ms``: from a datagram's arrival to its plots'
   rows handed to the recording and flushed, the viewer's logging included;
 * ``peak_rss_mb``: the live process's peak resident set (the viewer's server apart);
@@ -264,6 +265,7 @@ def bench_live(
         "dropped": doc["dropped"],
         "out_of_order": doc["out_of_order"],
         "malformed": sum(doc["malformed"].values()),
+        "duplicates": doc["duplicate_records"],
         "untracked_at_stop": doc["untracked_at_stop"],
         "latency_median_ms": lat["median"],
         "latency_p99_ms": lat["p99"],
@@ -288,7 +290,8 @@ def format_live(doc: dict[str, Any]) -> str:
         f"to 127.0.0.1 at {doc['rate_plots_per_s']:.0f} plots/s ({doc['replay_s']:.1f} s) "
         f"into radarviz live --method ucm {where}: {doc['tracked']} tracked, "
         f"{doc['dropped']} dropped, {doc['out_of_order']} out of order, {doc['malformed']} "
-        f"malformed, {doc['untracked_at_stop']} untracked at the stop; {lat}; peak RSS "
+        f"malformed, {doc.get('duplicates', 0)} duplicate, {doc['untracked_at_stop']} "
+        f"untracked at the stop; {lat}; peak RSS "
         f"{doc['peak_rss_mb']:.0f} MiB{format_parts(doc['latency_parts_median_ms'])}"
     ) + (format_memory(doc["memory"]) if "memory" in doc else "")
 

@@ -1115,10 +1115,7 @@ def _associate_plots(
             break
         except LatePlotError as exc:
             raise ParameterError(f"{_place(source, locate(exc.key, exc.column))}: {exc}") from None
-        period = None
-        if timing:
-            period = getattr(timing.get(scan[0][1].radar), "rotation_period_s", None)
-        runner.hold(scan, period)
+        runner.hold(scan, scan_period(timing, scan))
         plots += len(scan)
         if runner.held >= READ_BLOCK:
             runner.run()
@@ -1126,6 +1123,15 @@ def _associate_plots(
     if on_report is not None:
         on_report(tracker.report())
     return plots, reader.three_d, methods, tuple(tracker.ever_confirmed)
+
+
+def scan_period(timing: Mapping[str, Any] | None, scan: list[tuple[Any, Plot]]) -> float | None:
+    """The antenna period of a batch's radar that CAT034 messages give (``timing``: radar →
+    ``ScanTiming``, as ``AsterixReader.scan_timing``), None without: the one the batch is
+    held with (``BatchRunner.hold``), replacing the one estimated from the plots."""
+    if not timing:
+        return None
+    return getattr(timing.get(scan[0][1].radar), "rotation_period_s", None)
 
 
 class BatchRunner:

@@ -12,12 +12,15 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import gc
 import hashlib
 import json
 import queue
+import signal
 import sys
 import threading
 import time
+from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -131,10 +134,17 @@ def run_live(args: argparse.Namespace) -> int:
             control.listeners.append(show)
         plots: queue.Queue = queue.Queue(QUEUE_PLOTS)
         horizon = Horizon(args.reorder_s)
+        # The antennas' timing the feed's CAT034 messages give, for the batches' periods.
+        timing: dict = {}
         warm_up(make, options, association, radars)
+        # What is made by now (the imported modules, the compiled kernels) lives to
+        # the end: frozen out of the cycle collector's reach, so its full passes walk only
+        # what the session makes, not the pauses of a second a plot's latency would take.
+        gc.collect()
+        gc.freeze()
         reader = threading.Thread(
             target=read_feed,
-            args=(feed, source, radars, plots, horizon, args.max_plots, warn_line),
+            args=(feed, source, radars, plots, horizon, args.max_plots, warn_line, timing),
             name="live-reader",
             daemon=True,
         )
@@ -145,8 +155,8 @@ def run_live(args: argparse.Namespace) -> int:
             stack.callback(timer.cancel)
         start = time.monotonic()
         reader.start()
+        stack.enter_context(_ctrl_c_ends(feed))
         print(f"radarviz: live: tracking {source}; stop with Ctrl-C", file=sys.stderr, flush=True)
-        interrupted = False
         laid_out = [False]
 
         def after_run() -> None:
@@ -178,9 +188,11 @@ def run_live(args: argparse.Namespace) -> int:
                 on_rows,
                 recorder.end_scan if recorder is not None else None,
                 after_run,
+                timing,
             )
-        except KeyboardInterrupt:
-            interrupted = True
+        except KeyboardInterrupt:  # a second Ctrl-C (``_ctrl_c_ends``)
+            feed.interrupts += 1
+        interrupted = feed.interrupts > 0
         stop.set()
         reader.join(timeout=5.0)
         # Plots the tracker had not finished at an interrupt (in the queue, waiting for their
@@ -206,6 +218,31 @@ def run_live(args: argparse.Namespace) -> int:
         print(f"radarviz: interrupted: live stopped{saved}", file=sys.stderr)
         return 130
     return 0
+
+
+@contextlib.contextmanager
+def _ctrl_c_ends(feed: UdpFeed | FollowedFile) -> Iterator[None]:
+    """Ctrl-C (SIGINT) ends the session as the end of its feed does: the handler only
+    counts it (``feed.interrupts``), the reader's thread sees the count within ``POLL_S``
+    and ends the feed, the tracker tracks what is queued and returns, and the recording is
+    finished whole. Nothing is raised into the tracker, the recorder or a finalizer running
+    on the main thread (a ``KeyboardInterrupt`` raised inside a ``__del__`` or a callback of
+    the cycle collector is printed and dropped, and the session went on for ever). A second
+    Ctrl-C raises ``KeyboardInterrupt`` as usual. Outside the main thread (no signals
+    there), nothing is installed."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def handler(signum: int, frame: Any) -> None:
+        feed.interrupts += 1
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+
+    previous = signal.signal(signal.SIGINT, handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def _discard(*_: object) -> None:

@@ -52,8 +52,8 @@ import numpy as np
 from radarviz.core.params import ParameterError
 from radarviz.core.tracking.association import GNNTracker, plot_batches, time_ordered
 from radarviz.core.tracking.stream import Plot
-from radarviz.viz_app.io.asterix import AsterixReader, tiled_blocks
-from radarviz.viz_app.io.plots import READ_BLOCK, BatchRunner, Radar
+from radarviz.viz_app.io.asterix import AsterixReader, ScanTiming, tiled_blocks
+from radarviz.viz_app.io.plots import READ_BLOCK, BatchRunner, Radar, scan_period
 from radarviz.viz_app.live.control import LiveControl
 from radarviz.viz_app.live.replay import Address
 
@@ -123,6 +123,18 @@ class _Feed:
         self.stop = stop
         self.counts = counts
         self.arrived = time.monotonic()
+        #: Whether the session has read all it was asked for (``read_feed``): ``read``
+        #: then ends the feed, as it does once ``interrupts`` (``radarviz live``'s Ctrl-C,
+        #: counted by its signal handler) is not 0.
+        self.enough: Callable[[], bool] = lambda: False
+        self.interrupts = 0
+
+    def ended(self) -> bool:
+        """Whether the feed is over (stopped, read as far as asked, or interrupted): the
+        reader's thread sets ``stop`` then, so a signal handler never has to."""
+        if not self.stop.is_set() and (self.interrupts or self.enough()):
+            self.stop.set()
+        return self.stop.is_set()
 
     def read(self, n: int = -1) -> bytes:
         raise NotImplementedError
@@ -153,7 +165,7 @@ class UdpFeed(_Feed):
         self.sock = sock
 
     def read(self, n: int = -1) -> bytes:
-        while not self.stop.is_set():
+        while not self.ended():
             try:
                 data = self.sock.recv(MAX_DATAGRAM)
             except TimeoutError:
@@ -179,7 +191,7 @@ class FollowedFile(_Feed):
         self.fh = fh
 
     def read(self, n: int = -1) -> bytes:
-        while not self.stop.is_set():
+        while not self.ended():
             data = self.fh.read(1 << 16)
             if data:
                 self.counts.octets += len(data)
@@ -237,17 +249,35 @@ def read_feed(
     horizon: Horizon,
     max_plots: int | None,
     warn: Callable[[str], None],
+    timing: dict[str, ScanTiming] | None = None,
 ) -> None:
-    """The reader thread (module docstring): decode ``feed`` into ``out`` until it ends."""
+    """The reader thread (module docstring): decode ``feed`` into ``out`` until it ends,
+    or until ``max_plots`` plots and duplicate records have come (a duplicate is a plot the
+    feed sent, passed over). ``timing``: each radar's antenna timing as the feed's CAT034
+    messages tell it so far (``AsterixReader.scan_timing``), kept up to date for the tracker
+    (``track_feed``), across the reader's restarts."""
     counts, stop = feed.counts, feed.stop
     latest = -math.inf
+    reader: AsterixReader | None = None
+
+    def enough() -> bool:
+        if max_plots is None:
+            return False
+        now = reader.counts.duplicates_dropped if reader is not None else 0
+        return counts.plots + counts.duplicates + now >= max_plots
+
+    feed.enough = enough  # a duplicate last record stops the feed too
     try:
         while not stop.is_set():
             reader = None
             try:
                 reader = AsterixReader(feed, source, radars)  # type: ignore[arg-type]
+                services = 0
                 for position, plot in reader:
                     counts.plots += 1
+                    if timing is not None and reader.counts.cat034_messages != services:
+                        services = reader.counts.cat034_messages
+                        timing.update(reader.scan_timing)
                     late = latest - plot.time_s
                     if late > 0 and not horizon.admits(late):
                         counts.out_of_order += 1
@@ -257,7 +287,7 @@ def read_feed(
                             out.put_nowait((feed.arrived, position, plot))
                         except queue.Full:
                             counts.dropped += 1
-                    if max_plots is not None and counts.plots >= max_plots:
+                    if enough():
                         stop.set()
                         break
                 if not stop.is_set():  # the feed ended by itself
@@ -319,6 +349,7 @@ def track_feed(
     on_rows: Callable[..., None],
     on_scan: Callable[[list[str]], None] | None,
     after_run: Callable[[], None] | None,
+    timing: dict[str, ScanTiming] | None = None,
 ) -> list[float]:
     """The tracker (module docstring): until the reader's end mark, associate the queue's
     plots whenever the queue is empty (the tracker has caught up with the feed; at most every
@@ -401,7 +432,7 @@ def track_feed(
         now = time.monotonic()
         if runner.held == 0:
             first_held[0] = now
-        runner.hold(batch)
+        runner.hold(batch, scan_period(timing, batch))
         held_at.append((len(batch), now))
     run()
     return latencies.values(), {name: ring.values() for name, ring in parts.items()}

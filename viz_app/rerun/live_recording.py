@@ -17,10 +17,12 @@ session draws the tracks' current state instead, one row per flush per method::
                                  the buffered rows of a ``1 / PATH_SPREAD`` share of the
                                  tracks, oldest first, so no flush pays for them all
 
-A deleted track leaves the row at the flush after its scan (nothing to clear); its path,
-static, stays. A method left out of ``shown`` (the live panel's boxes) gets empty rows and no
-new path strips until it is shown again; it is still tracked. The time series (per confirmed
-track, as ``TrackRecorder``'s) are one call per
+A deleted track leaves the row at the flush after its scan (nothing to clear), and the
+recorder forgets it (its colour, its path's and series' state); its path, static, stays
+until its chunk's entity is reused (``PATH_CHUNKS``), so neither the recorder's memory nor
+the viewer's grows with the tracks ever started. A method left out of ``shown`` (the live
+panel's boxes) gets empty rows and no new path strips until it is shown again; it is still
+tracked. The time series (per confirmed track, as ``TrackRecorder``'s) are one call per
 track and series, a millisecond each: their rows wait in a queue of tracks,
 ``SERIES_TRACKS`` of which are sent per flush, so a flush's cost stays bounded however many
 tracks are confirmed; a track's series lags by the queue's length over that (seconds for a
@@ -52,6 +54,12 @@ PATH_S = 1.0
 SERIES_TRACKS = 4
 #: A flush draws the path of one in this many tracks with buffered rows.
 PATH_SPREAD = 5
+#: Path chunks kept: the chunk after the last reuses the first's entity (a static row
+#: replaces the one before), so the viewer holds the paths of the last ten minutes, not
+#: every path ever drawn.
+PATH_CHUNKS = 600
+#: The newest values the layout's frames are drawn from (``TrackRecorder.layout_kept``).
+LAYOUT_KEPT = 100_000
 
 _POS, _VEL = list(position_index(3)), list(velocity_index(3))
 
@@ -60,6 +68,7 @@ class LiveTrackRecorder(TrackRecorder):
     """``TrackRecorder``'s plots, inset and layout; the tracks as the module docstring says."""
 
     chunk_plots = None
+    layout_kept = LAYOUT_KEPT
 
     def __init__(
         self,
@@ -95,8 +104,8 @@ class LiveTrackRecorder(TrackRecorder):
         super().end_scan([])
         for target in deleted:
             self._deleted.add(target)
-            for key in [k for k in self._now if k[0] == target]:
-                del self._now[key]
+            for method in self._methods:
+                self._now.pop((target, method), None)
 
     def flush(self) -> None:
         """Send the buffered plots, every method's current tracks (one row each) and the
@@ -199,7 +208,7 @@ class LiveTrackRecorder(TrackRecorder):
             if self.shown is not None and method not in self.shown:
                 continue
             self.rec.log(
-                f"world/tracks/{method}/path/{self.chunk:06d}",
+                f"world/tracks/{method}/path/{self.chunk % PATH_CHUNKS:06d}",
                 rr.LineStrips3D(s, colors=c, radii=r),
                 static=True,
             )
@@ -213,3 +222,5 @@ class LiveTrackRecorder(TrackRecorder):
             n, t, cov, vel = zip(*rows, strict=True)
             at = self.indexes(list(n), list(t))
             self._send_series(target, method, name, rgb, at, np.array(cov), np.array(vel))
+            if (target, method) not in self._now:  # deleted: no series rows after these
+                self._styled.discard(name)

@@ -141,6 +141,10 @@ class TrackRecorder:
     #: Whether tentative tracks' rows go to ``world/tentative/{m}``, one row per scan (a
     #: subclass drawing the tracks its own way says False).
     groups_tentative = True
+    #: The newest values the layout's frames are drawn from (the inset's reaches, the time
+    #: series' values) that are kept; None: every one (a file's whole run frames its views; a
+    #: feed that never ends keeps a bounded number, ``live_recording``).
+    layout_kept: int | None = None
 
     def __init__(
         self,
@@ -151,9 +155,9 @@ class TrackRecorder:
     ):
         self.rec = rec
         self.truth = truth
-        # Each plot's time: where the truth's times fall on the ``plot`` timeline. (Packed
-        # doubles, not a list of floats: this and the inset's reaches are what the recorder
-        # keeps per plot to the end, and a list costs four times the memory.)
+        # Each plot's time, with a truth: where the truth's times fall on the ``plot``
+        # timeline. (Packed doubles, not a list of floats: this and the inset's reaches are
+        # what the recorder keeps per plot to the end, and a list costs four times the memory.)
         self._plot_times = array("d")
         self.monitor = monitor
         self._events_logged = 0
@@ -203,11 +207,15 @@ class TrackRecorder:
             list
         )
         self._styled: set[str] = set()
-        # Each track's colour, by method, or by track id when one method tracks many.
+        # Each track's colour, by method, or by track id when one method tracks many (the
+        # ``_coloured``-th colour of the palette); a deleted track's is forgotten.
         self._colours: dict[str, tuple[int, int, int]] = {}
+        self._coloured = 0
         self._methods: set[str] = set()
-        # The confirmed rows' series values, for axes that ignore their outliers.
+        # The confirmed rows' series values, for axes that ignore their outliers (the newest
+        # ``layout_kept`` of each series; ``_series_n``: how many those are).
         self._series: dict[str, list[np.ndarray]] = defaultdict(list)
+        self._series_n: dict[str, int] = defaultdict(int)
         self._time_s = 0.0
         # The inset: the first target's estimates and 1σ ellipses about the methods' mean
         # (``_inset_rows``: plot, time_s, method, offset (2,), covariance (2, 2)).
@@ -336,7 +344,8 @@ class TrackRecorder:
         plot's track after its scan, ``tentative`` or ``confirmed`` ("" without)."""
         self.count += 1
         self._time_s = plot.time_s
-        self._plot_times.append(plot.time_s)
+        if self.truth is not None:
+            self._plot_times.append(plot.time_s)
         if status and not self.statuses:
             self.statuses = True
             log_text(self.rec, STATUS_LEGEND, scan=self.count, timeline="plot")
@@ -415,6 +424,9 @@ class TrackRecorder:
             if np.isfinite(reach):
                 self._inset_reach_m.append(reach)
             self._inset_rows.append((self.count, self._time_s, method, off, cov))
+        kept = self.layout_kept
+        if kept is not None and len(self._inset_reach_m) > 2 * kept:
+            del self._inset_reach_m[:-kept]  # the newest kept (trimmed by halves: no cost a row)
 
     def _send_inset(self) -> None:
         """The buffered inset rows, one ``send_columns`` per method and part."""
@@ -585,13 +597,16 @@ class TrackRecorder:
 
     def _forget_deleted(self, targets: set[str] | None = None) -> None:
         """Deleted tracks (``targets``, or all deleted since the last flush) have no more
-        rows: forget their path's state (a tentative one has no path)."""
+        rows: forget their path's state (a tentative one has no path), colour and series
+        style (the inset's track keeps its colour: the inset's rows name it)."""
         targets = set(self._deleted) if targets is None else targets
         for target in targets:
-            prefix = f"{rr.escape_entity_path_part(target)}/"
-            for book in (self._pending, self._last):
-                for name in [k for k in book if k.startswith(prefix)]:
-                    del book[name]
+            for name in [self._entity_name(target, m) for m in self._methods]:
+                self._pending.pop(name, None)
+                self._last.pop(name, None)
+                self._styled.discard(name)
+                if target != self._inset_target:
+                    self._colours.pop(name, None)
             self._confirmed.discard(target)
         self._deleted -= targets
 
@@ -604,7 +619,8 @@ class TrackRecorder:
         rgb = self._colours.get(name)
         if rgb is None:
             by_id = bool(target) and len(self._methods) == 1
-            rgb = self._colours[name] = track_rgb(len(self._colours)) if by_id else colour(method)
+            rgb = self._colours[name] = track_rgb(self._coloured) if by_id else colour(method)
+            self._coloured += 1
         return rgb
 
     def _path_strips(
@@ -666,7 +682,18 @@ class TrackRecorder:
             rec.send_columns(
                 f"plots/{series}/{name}", indexes=at, columns=rr.Scalars.columns(scalars=values)
             )
-            self._series[series].append(values.astype(np.float32))
+            self._keep_series(series, values.astype(np.float32))
+
+    def _keep_series(self, series: str, values: np.ndarray) -> None:
+        """Keep a series' values for its axis (``_robust_axis``), the newest ``layout_kept``."""
+        got = self._series[series]
+        got.append(values)
+        self._series_n[series] += len(values)
+        kept = self.layout_kept
+        if kept is None or self._series_n[series] <= 2 * kept:
+            return
+        while self._series_n[series] - len(got[0]) >= kept:  # trimmed by halves, as the inset
+            self._series_n[series] -= len(got.pop(0))
 
     def _send_track(self, target: str, method: str, items: list[Row]) -> None:
         """One track's buffered rows: its confirmed rows' position, covariance and velocity
