@@ -101,6 +101,9 @@ class FirstFrame:
     views: np.ndarray
     frames: list[Frame]
     jpeg: bytes
+    #: s from the change to the line of its run (the panel's settling pause, the run and
+    #: its flush to the viewer's server): the rest of ``seconds`` is the viewer's.
+    server_s: float | None = None
 
 
 class Screencast:
@@ -171,7 +174,10 @@ class Screencast:
                 drawn = coloured(last) > MIN_COLOURED_VIEW
                 new = before is None or changed_share(last, before) >= SAME_FRAME
                 first = len(since) - 1
-                while first > 0 and changed_share(self._views(since[first - 1], box), last) < SAME_FRAME:
+                while (
+                    first > 0
+                    and changed_share(self._views(since[first - 1], box), last) < SAME_FRAME
+                ):
                     first -= 1
                 if drawn and new and time.time() - since[first].t >= STILL_S:
                     if probed == since[first].t:
@@ -206,7 +212,7 @@ class Screencast:
 def _reader(proc: subprocess.Popen, lines: queue.Queue) -> None:
     assert proc.stdout is not None
     for line in proc.stdout:
-        lines.put(line.rstrip("\n"))
+        lines.put((time.time(), line.rstrip("\n")))
 
 
 @dataclass
@@ -218,6 +224,8 @@ class TunePage:
     lines: queue.Queue
     log: list[str] = field(default_factory=list)
     runs: list[str] = field(default_factory=list)
+    #: When each line of ``runs`` was read (s since the epoch).
+    run_times: list[float] = field(default_factory=list)
     page: Any = None
     cast: Screencast | None = None
     previous: np.ndarray | None = None
@@ -245,7 +253,7 @@ class TunePage:
         end = time.monotonic() + timeout
         while time.monotonic() < end:
             try:
-                line = self.lines.get(timeout=0.2)
+                _, line = self.lines.get(timeout=0.2)
             except queue.Empty:
                 if self.proc.poll() is not None:
                     break
@@ -259,12 +267,13 @@ class TunePage:
     def _drain(self) -> None:
         while True:
             try:
-                line = self.lines.get_nowait()
+                t, line = self.lines.get_nowait()
             except queue.Empty:
                 return
             self.log.append(line)
             if line.startswith(("run ", "error ")):
                 self.runs.append(line)
+                self.run_times.append(t)
 
     def ran(self, scene: str):
         """A ``ready`` for :meth:`Screencast.first_frame`: a run of ``scene`` has finished
@@ -294,13 +303,25 @@ class TunePage:
     def switch(self, scene: str) -> FirstFrame:
         """Choose ``scene`` in the scene box; timed from the click on its option."""
         assert self.cast is not None
+        self._drain()
         self.runs.clear()
+        self.run_times.clear()
         self.controls.get_by_label("scene").first.click()
         option = self.controls.get_by_role("option", name=scene)
         option.wait_for()
         t0 = time.time()
         option.click()
+        return self._timed(scene, t0)
+
+    def _timed(self, scene: str, t0: float) -> FirstFrame:
+        """The first complete frame of the run of ``scene`` after the change at ``t0``, with
+        the time its run's line came (``server_s``)."""
+        assert self.cast is not None
         got = self.cast.first_frame(t0, self.previous, self.ran(scene))
+        mine = [
+            t for r, t in zip(self.runs, self.run_times, strict=True) if f" scene={scene} " in r
+        ]
+        got.server_s = mine[-1] - t0 if mine else None
         self.previous = got.views
         return got
 
@@ -309,7 +330,9 @@ class TunePage:
         into the scene's box (σβ's for prosov, C0 for gorshkov), timed from the keypress (the
         last keystroke)."""
         assert self.cast is not None
+        self._drain()
         self.runs.clear()
+        self.run_times.clear()
         if typed is None:
             slider = self.controls.get_by_role("slider").first
             slider.focus()
@@ -324,9 +347,7 @@ class TunePage:
             box.press("Control+a")
             box.type(typed, delay=80)  # a quick typist: 80 ms between keys
             t0 = time.time()
-        got = self.cast.first_frame(t0, self.previous, self.ran(scene))
-        self.previous = got.views
-        return got
+        return self._timed(scene, t0)
 
     def stop(self) -> None:
         """Stop ``radarviz tune`` and its servers (its process group)."""
@@ -346,9 +367,22 @@ class TunePage:
 BENCH_CHANGES = {"prosov": None, "velocity": None, "gorshkov": ("25", "5", "40")}
 
 
+def spread(values: list[float]) -> dict[str, float | int | None]:
+    """n, median, min and max of ``values`` (None where there are none)."""
+    if not values:
+        return {"n": 0, "median": None, "min": None, "max": None}
+    return {
+        "n": len(values),
+        "median": statistics.median(values),
+        "min": min(values),
+        "max": max(values),
+    }
+
+
 def bench_tune_frames(changes: int = DEFAULT_CHANGES, artifacts: Path | None = None) -> dict:
     """Per scene, s from a switch and from each change to the first complete frame, and the
-    medians (see the module's doc); ``artifacts``: each scene's settled frame saved there."""
+    part of it until the run's line came (``server_s``: settling, run, flush); their medians
+    and ranges (see the module's doc); ``artifacts``: each scene's settled frame saved there."""
     from playwright.sync_api import sync_playwright
 
     from radarviz.viz_app.runtime import machine
@@ -361,42 +395,53 @@ def bench_tune_frames(changes: int = DEFAULT_CHANGES, artifacts: Path | None = N
             browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
             tune.open(browser)
             for scene in SCENE_ORDER[1:]:
-                fig = figures.setdefault(scene, {"switch_s": [], "change_s": []})
+                fig = figures.setdefault(
+                    scene, {"switch_s": [], "change_s": [], "change_server_s": []}
+                )
                 fig["switch_s"].append(tune.switch(scene).seconds)
                 for k in range(changes):
                     typed = BENCH_CHANGES[scene]
                     got = tune.change(scene, None if typed is None else typed[k % len(typed)])
                     fig["change_s"].append(got.seconds)
+                    if got.server_s is not None:
+                        fig["change_server_s"].append(got.server_s)
                 if artifacts is not None:
                     artifacts.mkdir(parents=True, exist_ok=True)
                     (artifacts / f"tune_frame_{scene}.jpg").write_bytes(got.jpeg)
+            assert tune.cast is not None
             tune.cast.stop()
             browser.close()
     finally:
         tune.stop()
-    medians = {
-        scene: {k: statistics.median(v) if v else None for k, v in fig.items()}
-        for scene, fig in figures.items()
-    }
     return {
         "changes_per_scene": changes,
         "viewport": f"{VIEWPORT['width']}x{VIEWPORT['height']}",
         "budget_s": FIRST_FRAME_BUDGET_S,
         "seconds": figures,
-        "median_s": medians,
+        "summary_s": {
+            scene: {k: spread(v) for k, v in fig.items()} for scene, fig in figures.items()
+        },
         "machine": {**host, "load_avg_1min_after": machine()["load_avg_1min"]},
     }
 
 
 def format_tune_frames(doc: dict) -> str:
-    per = []
-    for scene, fig in doc["seconds"].items():
-        sw = " ".join(f"{s:.2f}" for s in fig["switch_s"])
-        ch = " ".join(f"{s:.2f}" for s in fig["change_s"])
-        per.append(f"{scene}: switch {sw or '-'} s, changes {ch} s")
+    """One line per scene: the change's median first frame [min … max] over n, within the
+    budget or not, its server part, and the switches."""
     load = doc["machine"]
-    return (
+    out = [
         f"tune: change → first complete frame in headless Chromium ({doc['viewport']}, "
         f"budget {doc['budget_s']:g} s; load {load['load_avg_1min']} → "
-        f"{load['load_avg_1min_after']}): " + "; ".join(per)
-    )
+        f"{load['load_avg_1min_after']})"
+    ]
+    for scene, fig in doc["summary_s"].items():
+        ch, sv = fig["change_s"], fig["change_server_s"]
+        verdict = "within" if ch["median"] <= doc["budget_s"] else "OVER"
+        sw = " ".join(f"{s:.2f}" for s in doc["seconds"][scene]["switch_s"])
+        server = f"{sv['median']:.2f}" if sv["median"] is not None else "-"
+        out.append(
+            f"  {scene:9s} change {ch['median']:.2f} s median [{ch['min']:.2f} … "
+            f"{ch['max']:.2f}] over {ch['n']} ({verdict} budget; of it to the run's line "
+            f"{server} s); switch {sw} s"
+        )
+    return "\n".join(out)
