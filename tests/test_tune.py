@@ -803,3 +803,16 @@ def test_first_frame_bench_summarises_each_scene() -> None:
     assert "prosov    change 1.20 s median [1.00 … 1.40] over 3 (within budget" in text
     assert "velocity  change 3.00 s median [2.00 … 4.00] over 2 (OVER budget" in text
     assert "to the run's line 0.60 s" in text and "to the run's line - s" in text
+
+
+def test_blueprint_is_sent_only_when_the_scene_changes(monkeypatch) -> None:
+    """A run of the scene on screen sends no blueprint (the viewer keeps its layout instead
+    of building it anew); the first run and every switch send the new scene's."""
+    from radarviz.viz_app.tune import session as session_module
+
+    sent: list[str] = []
+    monkeypatch.setattr(session_module, "send_blueprint", lambda rec, scene: sent.append(scene))
+    session = TuneSession(None)
+    for scene in ("prosov", "prosov", "gorshkov", "gorshkov", "prosov"):
+        session.run(replace(SMALL, scene=scene))
+    assert sent == ["prosov", "gorshkov", "prosov"]
