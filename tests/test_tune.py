@@ -651,74 +651,6 @@ def test_rerun_server_memory_stays_bounded_over_many_runs(tmp_path: Path) -> Non
 
 # --- one page: the controls and the viewer; switching scenes; time to the first frame -------
 
-#: The viewer's chrome that changes by itself (its top bar shows a live latency; the time panel
-#: at the bottom): rows left out when frames are compared.
-VIEWER_TOP_PX, VIEWER_BOTTOM_PX = 40, 60
-#: Share of pixels that may differ between two frames of the same drawn run.
-SAME_FRAME = 0.002
-#: A drawn run holds still this long (s) before its frame counts as the final one.
-STILL_S = 2.0
-#: The σβ slider's number box (the input beside the slider).
-SLIDER_BOX = "xpath=ancestor::*[.//input[@type='text']][1]//input[@type='text']"
-#: The budget from a change to the first complete frame, s.
-FIRST_FRAME_BUDGET_S = 1.5
-
-
-def _viewer_frame(page) -> np.ndarray:
-    """The viewer's frame inside the panel page, as RGB floats (its chrome rows cut off)."""
-    import io
-
-    from matplotlib.image import imread
-
-    png = page.locator("#viewer").screenshot(timeout=60_000)
-    img = imread(io.BytesIO(png))[..., :3]
-    return img[VIEWER_TOP_PX : img.shape[0] - VIEWER_BOTTOM_PX]
-
-
-def _changed_share(a: np.ndarray, b: np.ndarray) -> float:
-    return float((np.abs(a - b).max(axis=-1) > 0.1).mean())
-
-
-def _first_complete_frame(page, t0: float, run_done, before=None, timeout: float = 60.0):
-    """Screenshot the viewer until the run (``run_done()`` true) is drawn (not blank, as the
-    viewer is while it loads a run), differs from the frame ``before`` the change and holds
-    still for ``STILL_S``; the final frame, and the
-    seconds from ``t0`` to the end of the first screenshot that already looked like it (an
-    upper bound: the frame was complete at the latest when that screenshot ended)."""
-    shots: list[tuple[float, float, np.ndarray]] = []  # (started, ended, frame)
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        started = time.monotonic()
-        frame = _viewer_frame(page)
-        shots.append((started, time.monotonic(), frame))
-        if not run_done() or (before is not None and _changed_share(frame, before) < SAME_FRAME):
-            continue
-        if _coloured(frame) <= MIN_COLOURED_VIEW:  # a blank viewer (loading) is not complete
-            continue
-        still = [s for s in shots if s[1] >= shots[-1][1] - STILL_S]
-        if shots[-1][1] - shots[0][1] > STILL_S and still[0] is not shots[-1]:
-            if all(_changed_share(s[2], frame) < SAME_FRAME for s in still) and (
-                shots[-1][1] - still[0][0] >= STILL_S
-            ):
-                break
-    else:
-        raise AssertionError(f"the viewer did not settle on a new frame within {timeout} s")
-    final = shots[-1][2]
-    first = len(shots) - 1
-    while first > 0 and _changed_share(shots[first - 1][2], final) < SAME_FRAME:
-        first -= 1
-    return final, shots[first][1] - t0, len(shots)
-
-
-#: Share of saturated pixels above which the viewer's frame shows data (its chrome and empty
-#: views are grey: a blank viewer shows 0).
-MIN_COLOURED_VIEW = 0.002
-
-
-def _coloured(frame: np.ndarray) -> float:
-    saturation = frame.max(axis=-1) - frame.min(axis=-1)
-    return float((saturation > 0.3).mean())
-
 
 def test_tune_page_switches_scenes_and_each_is_drawn(chromium: tuple[str, list[str]]) -> None:
     """The panel's one page holds the controls and the viewer. Switching prosov → velocity →
@@ -730,6 +662,16 @@ def test_tune_page_switches_scenes_and_each_is_drawn(chromium: tuple[str, list[s
     import json
 
     from playwright.sync_api import sync_playwright
+
+    from radarviz.viz_app.bench.tune_frame import (
+        FIRST_FRAME_BUDGET_S,
+        MIN_COLOURED_VIEW,
+        SAME_FRAME,
+        SLIDER_BOX,
+        Screencast,
+        changed_share,
+        coloured,
+    )
 
     proc, _, lines = _start_tune()
     log: list[str] = []
@@ -763,20 +705,24 @@ def test_tune_page_switches_scenes_and_each_is_drawn(chromium: tuple[str, list[s
             controls = page.frame_locator("#controls")
             controls.get_by_label("scene").first.wait_for(timeout=90_000)
             runs.append("run initial scene=prosov ")
-            previous, _, _ = _first_complete_frame(
-                page, time.monotonic(), runs_of("prosov"), timeout=120
-            )
-            assert _coloured(previous) > MIN_COLOURED_VIEW, _coloured(previous)
+            # The viewer's frames as the compositor swaps them in, each timed to itself (the
+            # bench's measurement: ``radarviz bench --only tune``).
+            cast = Screencast(page)
+            previous = cast.first_frame(time.time(), ready=runs_of("prosov"), timeout=120).views
+            assert coloured(previous) > MIN_COLOURED_VIEW, coloured(previous)
             for i, scene in enumerate(("velocity", "gorshkov", "prosov")):
                 runs.clear()
                 controls.get_by_label("scene").first.click()
-                t0 = time.monotonic()
-                controls.get_by_role("option", name=scene).click()
-                frame, switch_s, _ = _first_complete_frame(page, t0, runs_of(scene), previous)
+                option = controls.get_by_role("option", name=scene)
+                option.wait_for()
+                t0 = time.time()
+                option.click()
+                got = cast.first_frame(t0, previous, runs_of(scene))
+                frame, switch_s = got.views, got.seconds
                 shot = ARTIFACTS / f"tune_page_{i + 1}_{scene}.png"
                 page.screenshot(path=str(shot))
-                assert _coloured(frame) > MIN_COLOURED_VIEW, (scene, _coloured(frame), shot)
-                assert _changed_share(frame, previous) > 0.05, (scene, shot)
+                assert coloured(frame) > MIN_COLOURED_VIEW, (scene, coloured(frame), shot)
+                assert changed_share(frame, previous) > 0.05, (scene, shot)
                 # A change the scene's views show: a σβ slider step (velocity), a typed C0
                 # (Gorshkov: its first tab is the finite memory, which σβ does not enter) or a
                 # typed σβ (Prosov). Typed values are run once, whole: never "2" before "25",
@@ -785,6 +731,7 @@ def test_tune_page_switches_scenes_and_each_is_drawn(chromium: tuple[str, list[s
                 if scene == "velocity":
                     slider = controls.get_by_role("slider").first
                     slider.focus()
+                    t0 = time.time()
                     slider.press("ArrowRight")
                     want, half = r"sigma_beta_deg=2\.1 ", None
                 else:
@@ -797,13 +744,14 @@ def test_tune_page_switches_scenes_and_each_is_drawn(chromium: tuple[str, list[s
                     box.click()
                     box.press("Control+a")
                     box.type(typed, delay=80)  # a quick typist: 80 ms between keys
-                t0 = time.monotonic()
-                after, step_s, _ = _first_complete_frame(page, t0, runs_of(scene), frame)
+                    t0 = time.time()  # from the last keystroke
+                got = cast.first_frame(t0, frame, runs_of(scene))
+                after, step_s = got.views, got.seconds
                 assert re.search(want, runs[-1]), (want, runs)
                 if half is not None:
                     assert not [r for r in runs[:-1] if re.search(half, r)], runs
                     assert not [r for r in runs if r.startswith("error ")], runs
-                assert _coloured(after) > MIN_COLOURED_VIEW, (scene, "after the change")
+                assert coloured(after) > MIN_COLOURED_VIEW, (scene, "after the change")
                 figures[f"{i + 1}_{scene}"] = {"switch_s": switch_s, "change_s": step_s}
                 previous = after
             # Bad input: σβ typed as 0 is one error line in the panel, and the viewer keeps
@@ -815,9 +763,11 @@ def test_tune_page_switches_scenes_and_each_is_drawn(chromium: tuple[str, list[s
             error = _expect(lines, r"^error (.*)", 60, log).group(1)
             assert error.startswith("sigma_beta_deg must be"), error
             controls.get_by_text("showing the last good run").first.wait_for(timeout=60_000)
-            time.sleep(3.0)
-            still = _viewer_frame(page)
-            assert _changed_share(still, previous) < SAME_FRAME, "the last good run is gone"
+            page.wait_for_timeout(3000)  # frames keep coming (a sleep would stall them)
+            still = cast.latest_views()
+            assert still is not None
+            assert changed_share(still, previous) < SAME_FRAME, "the last good run is gone"
+            cast.stop()
             page.screenshot(path=str(ARTIFACTS / "tune_page.png"))
             browser.close()
     finally:
@@ -829,3 +779,40 @@ def test_tune_page_switches_scenes_and_each_is_drawn(chromium: tuple[str, list[s
     if os.environ.get("RADARVIZ_CHECK_FIRST_FRAME") == "1":
         slow = {k: v for k, v in figures.items() if max(v.values()) > FIRST_FRAME_BUDGET_S}
         assert not slow, slow
+
+
+def test_first_frame_bench_summarises_each_scene() -> None:
+    """``radarviz bench --only tune``'s figures: per scene the median and range of the
+    changes' first frames, said against the budget, with the server's part."""
+    from radarviz.viz_app.bench.tune_frame import format_tune_frames, spread
+
+    assert spread([]) == {"n": 0, "median": None, "min": None, "max": None}
+    assert spread([3.0, 1.0, 2.0]) == {"n": 3, "median": 2.0, "min": 1.0, "max": 3.0}
+    seconds = {
+        "prosov": {"switch_s": [2.5], "change_s": [1.0, 1.2, 1.4], "change_server_s": [0.6]},
+        "velocity": {"switch_s": [3.0], "change_s": [2.0, 4.0], "change_server_s": []},
+    }
+    doc = {
+        "viewport": "1600x1000",
+        "budget_s": 1.5,
+        "seconds": seconds,
+        "summary_s": {s: {k: spread(v) for k, v in f.items()} for s, f in seconds.items()},
+        "machine": {"load_avg_1min": 1.0, "load_avg_1min_after": 1.5},
+    }
+    text = format_tune_frames(doc)
+    assert "prosov    change 1.20 s median [1.00 … 1.40] over 3 (within budget" in text
+    assert "velocity  change 3.00 s median [2.00 … 4.00] over 2 (OVER budget" in text
+    assert "to the run's line 0.60 s" in text and "to the run's line - s" in text
+
+
+def test_blueprint_is_sent_only_when_the_scene_changes(monkeypatch) -> None:
+    """A run of the scene on screen sends no blueprint (the viewer keeps its layout instead
+    of building it anew); the first run and every switch send the new scene's."""
+    from radarviz.viz_app.tune import session as session_module
+
+    sent: list[str] = []
+    monkeypatch.setattr(session_module, "send_blueprint", lambda rec, scene: sent.append(scene))
+    session = TuneSession(None)
+    for scene in ("prosov", "prosov", "gorshkov", "gorshkov", "prosov"):
+        session.run(replace(SMALL, scene=scene))
+    assert sent == ["prosov", "gorshkov", "prosov"]

@@ -290,11 +290,19 @@ def _add_bench(bench: argparse.ArgumentParser) -> None:
     )
     bench.add_argument(
         "--only",
-        choices=("asterix", "association", "live"),
+        choices=("asterix", "association", "live", "tune"),
         default=None,
         help="run one section: asterix (ASTERIX CAT048 reading vs CSV, track end to end), "
-        "association (GNN at --targets targets, sparse vs dense route) or live (a feed "
-        "replayed into radarviz live with its viewer: counts, latency); default all",
+        "association (GNN at --targets targets, sparse vs dense route), live (a feed "
+        "replayed into radarviz live with its viewer: counts, latency) or tune (radarviz "
+        "tune in headless Chromium: each scene's change to its first complete frame, median "
+        "and spread over --tune-changes changes); default all but tune",
+    )
+    bench.add_argument(
+        "--tune-changes",
+        type=integer,
+        default=5,
+        help="with --only tune: changes timed per scene (default 5)",
     )
     bench.add_argument(
         "--live-rate",
@@ -606,6 +614,14 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         doc = {"live": bench_live(args.live_rate, seconds, args.live_targets, soak=soak)}
         check_finite_document("bench", doc, nonnegative=True)
         print_report(doc, args.json, lambda d: format_live(d["live"]))
+        return 0
+    if args.only == "tune":
+        from radarviz.viz_app.bench.tune_frame import bench_tune_frames, format_tune_frames
+
+        check_int("--tune-changes", args.tune_changes, low=1, high=50)
+        doc = {"tune": bench_tune_frames(args.tune_changes)}
+        check_finite_document("bench", doc, nonnegative=True)
+        print_report(doc, args.json, lambda d: format_tune_frames(d["tune"]))
         return 0
     if args.only == "association":
         from radarviz.viz_app.bench.association import bench_association, format_association

@@ -5,6 +5,7 @@ Entity paths (timeline ``scan`` = plot number 1, 2, …, and ``time``)::
 
     manoeuvre/map/radars                  radar sites (static)
     manoeuvre/map/truth/path              the flight (static strip)
+    manoeuvre/map/scale                   the scale bar and its length (static)
     manoeuvre/map/truth/position          the aircraft, per plot
     manoeuvre/map/plots                   each plot's naive converted point, per plot
     manoeuvre/map/tracks/{model}/position the model's track position, per plot
@@ -60,6 +61,8 @@ def log_manoeuvre(rec: rr.RecordingStream, seed: int = 1) -> FlightTracks:
         rr.LineStrips3D([ft.truth_m], colors=[rgb("truth")], radii=[THIN_LINE]),
         static=True,
     )
+    sites = np.array([r.position for r in MANOEUVRE_RADARS], dtype=float)
+    plot2d.log_scale_bar_3d(rec, f"{ROOT}/map/scale", np.concatenate([sites, ft.truth_m]))
     rec.send_columns(
         f"{ROOT}/map/truth/position",
         indexes=at,

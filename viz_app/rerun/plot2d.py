@@ -42,7 +42,15 @@ import rerun as rr
 import rerun.blueprint as rrb
 from numpy.typing import NDArray
 
-from radarviz.viz_app.rerun.shapes import MARKER, SMALL_MARKER, colours, flip_y, pale, radii
+from radarviz.viz_app.rerun.shapes import (
+    LINE,
+    MARKER,
+    SMALL_MARKER,
+    colours,
+    flip_y,
+    pale,
+    radii,
+)
 
 #: Height of every plot box, drawn units (its width is given per plot).
 HEIGHT = 100.0
@@ -103,6 +111,44 @@ def nice_step(span: float, count: int = 5) -> float:
     raw = span / max(count, 1)
     exp = 10.0 ** np.floor(np.log10(raw))
     return float(min(m * exp for m in (1.0, 2.0, 5.0, 10.0) if m * exp >= raw * 0.999))
+
+
+@dataclass(frozen=True)
+class ScaleBar:
+    """A map's distance scale: the bar's two ends (m, along +x from its start), where its
+    label goes and the label ("50 km")."""
+
+    ends: NDArray[np.float64]
+    label_at: NDArray[np.float64]
+    text: str
+
+
+def scale_bar(start: Sequence[float], span_m: float, label_offset: Sequence[float]) -> ScaleBar:
+    """The scale bar of a map ``span_m`` wide: ``nice_step(span_m, 5)`` long from ``start``
+    (2D or 3D, m) along +x, its label ``label_offset`` from the bar's middle. One function
+    for every map (2D or 3D), so each draws the same bar."""
+    bar = nice_step(span_m, 5)
+    a = np.asarray(start, dtype=float)
+    b = a.copy()
+    b[0] += bar
+    return ScaleBar(np.stack([a, b]), (a + b) / 2.0 + np.asarray(label_offset), f"{bar / 1e3:g} km")
+
+
+def log_scale_bar_3d(rec: rr.RecordingStream, entity: str, points_m: NDArray[np.float64]) -> None:
+    """A 3D map's scale bar (:func:`scale_bar`, static, one entity): on the ground (z = 0)
+    below the south-west corner of ``points_m`` (N, 3, m: the sites and paths the map
+    frames), sized to their east–north extent, labelled south of it."""
+    lo, hi = points_m.min(0), points_m.max(0)
+    span = float(max(hi[0] - lo[0], hi[1] - lo[1]))
+    bar = scale_bar([lo[0], lo[1] - 0.08 * span, 0.0], span, [0.0, -0.04 * span, 0.0])
+    rec.log(
+        entity,
+        rr.LineStrips3D([bar.ends], colors=[AXIS], radii=[LINE]),
+        rr.Points3D(
+            [bar.label_at], radii=[0.0], colors=[AXIS], labels=[bar.text], show_labels=True
+        ),
+        static=True,
+    )
 
 
 def linear_axis(lo: float, hi: float, count: int = 4, include_zero: bool = False) -> Axis:

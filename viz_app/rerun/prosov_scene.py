@@ -204,9 +204,10 @@ def log_map(rec: rr.RecordingStream, scene: ProsovScene, frame: TargetFrame, lab
     # The radar is usually far off the framed path: a label at the map's left edge says where.
     left = cx - MAP_HALF_WIDTH / scale
     top = cy + 0.8 * MAP_HALF_HEIGHT / scale
-    bar = plot2d.nice_step(width, 5)
     bottom = cy - 0.8 * MAP_HALF_HEIGHT / scale
-    start = cx - 0.45 * width
+    bar = plot2d.scale_bar(
+        [cx - 0.45 * width, bottom], width, [0.0, 0.12 * MAP_HALF_HEIGHT / scale]
+    )
     # The static marks in two entities (few chunks for the viewer to take in): the radar and
     # the labels; the lines, the true path first, then the scale bar and each track's path.
     rec.log(
@@ -216,7 +217,7 @@ def log_map(rec: rr.RecordingStream, scene: ProsovScene, frame: TargetFrame, lab
                 [0.0, 0.0],
                 [left + 0.25 * width, top],
                 [end[0], cy - 0.35 * MAP_HALF_HEIGHT / scale],
-                [start + bar / 2.0, bottom + 0.12 * MAP_HALF_HEIGHT / scale],
+                bar.label_at,
             ],
             radii=np.array([MARKER, 0.0, 0.0, 0.0], dtype=np.float32),
             colors=[rgb("truth")],
@@ -224,13 +225,13 @@ def log_map(rec: rr.RecordingStream, scene: ProsovScene, frame: TargetFrame, lab
                 label,
                 f"← radar at {np.hypot(*truth[0]) / 1e3:.0f} km from the start: {label}",
                 f"end: {np.hypot(*end) / 1e3:.0f} km from the radar",
-                f"{bar / 1e3:g} km",
+                bar.text,
             ],
             show_labels=True,
         ),
         static=True,
     )
-    paths = [truth, np.array([[start, bottom], [start + bar, bottom]])]
+    paths = [truth, bar.ends]
     paths += [track.x[:, [0, 2]] for track in scene.tracks.values()]
     tones = [rgb("truth"), rgb("truth")] + [rgb(m) for m in scene.tracks]
     rec.log(

@@ -5,6 +5,7 @@ Entity paths (``{r}`` a radar: R1, R2, R3)::
     velocity/map                        static transform: metres drawn as km
     velocity/map/radars/{r}             radar site (static, the radar's colour)
     velocity/map/truth/path             the true trajectory (static)
+    velocity/map/scale                  the scale bar and its length (static)
     velocity/map/truth/position         the true target per scan
     velocity/map/fused/position         the fused position per scan
     velocity/map/lines_of_sight         radar → fused position per scan, every radar
@@ -142,6 +143,7 @@ def log_velocity_run(
         rr.LineStrips3D([run.true_position], colors=[rgb("truth")], radii=[THIN_LINE]),
         static=True,
     )
+    plot2d.log_scale_bar_3d(rec, f"{base}/scale", np.concatenate([sites, run.true_position]))
     rec.send_columns(
         f"{base}/truth/position",
         indexes=idx,

@@ -141,16 +141,19 @@ def send_blueprint(rec: rr.RecordingStream, scene: str) -> None:
 
 
 def log_tuning_scene(
-    rec: rr.RecordingStream, params: TuneParams, series: bool = True
+    rec: rr.RecordingStream, params: TuneParams, series: bool = True, blueprint: bool = True
 ) -> TuneResult:
-    """Simulate ``params`` and log its scene (the viewer's scene module) and blueprint.
+    """Simulate ``params`` and log its blueprint and scene (the viewer's scene module).
 
     ``series``: with the statistics' values under ``plots/`` as well as their charts. The
     panel's runs leave them out: no view draws them, and the viewer's time to a run's first
-    complete frame grows with the chunks it must take in (a saved run keeps them)."""
+    complete frame grows with the chunks it must take in (a saved run keeps them).
+    ``blueprint``: send the scene's blueprint first (a saved run, and a panel run that
+    switches scene); without it the viewer keeps the layout it shows."""
     result = simulate(params)
+    if blueprint:
+        send_blueprint(rec, params.scene)
     log_result(rec, result, series)
-    send_blueprint(rec, params.scene)
     p = params
     head = (
         f"tune {p.scene}: {p.runs} runs × {p.steps} scans, σr = {p.sigma_r_m:g} m, "
@@ -195,6 +198,9 @@ class TuneSession:
         self.last_good: RunReport | None = None
         self.last_error: str | None = None
         self.runs_done = 0
+        #: The scene whose blueprint the viewer was last sent (runs of the same scene send
+        #: none: the viewer keeps its layout instead of building it anew).
+        self.blueprint_scene: str | None = None
         self.listeners: list[Callable[[TuneSession], None]] = []
         self._lock = threading.Lock()
 
@@ -207,8 +213,10 @@ class TuneSession:
                 rec.connect_grpc(self.grpc_uri)
             else:
                 rec.set_sinks()  # no sink: the data are dropped (tests, benchmarks)
-            result = log_tuning_scene(rec, params, series=False)
+            switch = params.scene != self.blueprint_scene
+            result = log_tuning_scene(rec, params, series=False, blueprint=switch)
             rec.flush()
+            self.blueprint_scene = params.scene
         finally:
             with contextlib.suppress(Exception):
                 rec.disconnect()
