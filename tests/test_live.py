@@ -28,6 +28,7 @@ import subprocess
 import sys
 import threading
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -427,3 +428,36 @@ def test_the_feeds_cat034_period_holds_its_batches_and_a_duplicate_counts_to_max
     session.track_feed(out, tracker, counts, 30.0, 0.0, 1e-3, lambda p, r, s="": tracked.append(
         p.target), None, None, timing)  # fmt: skip
     assert len(tracked) == 2 and held and set(held) == {4.5}
+
+
+def test_the_live_recorder_draws_tentative_tracks_in_its_current_state(
+    tmp_path: Path, rrd_contents
+) -> None:
+    """A live session's tentative tracks are rows of its current state (faint, in
+    ``world/tracks/{m}/position``), never the per-scan rows ``track --rrd`` groups them into:
+    those would pile up unsent in a session that never ends."""
+    import numpy as np
+
+    from radarviz.core.tracking.stream import Plot
+    from radarviz.viz_app.io.plots import Radar
+    from radarviz.viz_app.rerun.live_recording import LiveTrackRecorder
+    from radarviz.viz_app.rerun.recording import recording_file
+
+    radar = Radar("r", 0.0, 0.0, 0.0, 50.0, 0.3)
+    x, P = np.zeros(6), np.eye(6)
+    out = tmp_path / "live.rrd"
+    with recording_file(out) as rec:
+        recorder = LiveTrackRecorder(rec, [radar])
+        for scan in range(3):
+            for k, status in enumerate(("tentative", "confirmed")):
+                plot = Plot(5.0 * scan + k, 1e4 + k, 0.1 * k, 50.0, 0.005, radar="r")
+                recorder.add(replace(plot, target=str(k)), [("ucm", x + k, P)], status)
+            recorder.end_scan([])
+            recorder.flush()
+            assert not recorder._tentative and not recorder._scan_tentative
+        recorder.close()
+    rows, cols = rrd_contents(out)
+    assert not any(p.startswith("/world/tentative") for p in rows)
+    # Each flush's row holds both tracks, the tentative one with the confirmed one.
+    sizes = [len(c) for c in cols["/world/tracks/ucm/position"]["Points3D:positions"]]
+    assert len(sizes) >= 3 and set(sizes) == {2}

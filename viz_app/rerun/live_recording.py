@@ -68,6 +68,8 @@ class LiveTrackRecorder(TrackRecorder):
     """``TrackRecorder``'s plots, inset and layout; the tracks as the module docstring says."""
 
     chunk_plots = None
+    # Its tentative tracks are rows of the current state, as its confirmed ones.
+    groups_tentative = False
     layout_kept = LAYOUT_KEPT
 
     def __init__(
