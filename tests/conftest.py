@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import io
 import os
-import shutil
 import time
 from collections import defaultdict
 from collections.abc import Callable
@@ -14,6 +13,8 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 import pytest
+
+from radarviz.viz_app.bench.tune_frame import CHROMIUM, CHROMIUM_ARGS
 
 RrdContents = tuple[dict[str, int], dict[str, dict[str, list]]]
 
@@ -47,18 +48,6 @@ def rrd_contents() -> Callable[[Path], RrdContents]:
 
 
 # --- headless Chromium ----------------------------------------------------------------------
-
-CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
-CHROMIUM_ARGS = [
-    "--headless",
-    "--no-sandbox",
-    "--disable-gpu",
-    "--disable-quic",
-    "--no-first-run",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-]
 
 
 @pytest.fixture

@@ -26,6 +26,7 @@ import io
 import os
 import queue
 import re
+import shutil
 import signal
 import statistics
 import subprocess
@@ -40,8 +41,9 @@ import numpy as np
 
 #: The page's size in the browser (CSS px).
 VIEWPORT = {"width": 1600, "height": 1000}
-#: Debian Chromium, and its headless arguments (no GPU: software WebGL).
-CHROMIUM = "/usr/bin/chromium"
+#: Debian Chromium, and its headless arguments (no GPU: software WebGL); the browser tests
+#: launch it the same way (``tests/conftest.py``).
+CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
 CHROMIUM_ARGS = [
     "--headless",
     "--no-sandbox",
