@@ -44,7 +44,7 @@ from radarviz.core.tracking.consistency import ConsistencyMonitor
 from radarviz.core.tracking.stream import Plot, StateRow
 from radarviz.core.tracking.targets import track_name
 from radarviz.viz_app.io.plots import Radar
-from radarviz.viz_app.rerun.recording import ellipsoid_axes
+from radarviz.viz_app.rerun.recording import ellipsoid_columns
 from radarviz.viz_app.rerun.shapes import FAINT_MARKER, MARKER, faint
 from radarviz.viz_app.rerun.track_recording import ARROW_SECONDS, TrackRecorder
 
@@ -161,13 +161,10 @@ class LiveTrackRecorder(TrackRecorder):
                     positions=pos, colors=rgbs, radii=radii, labels=labels
                 ).partition([k]),
             )
-            half, quat = ellipsoid_axes(cov) if k else (np.zeros((0, 3)), np.zeros((0, 4)))
             self.rec.send_columns(
                 f"{base}/covariance",
                 indexes=idx,
-                columns=rr.Ellipsoids3D.columns(
-                    centers=pos, half_sizes=np.maximum(half, 1.0), quaternions=quat, colors=rgbs
-                ).partition([k]),
+                columns=ellipsoid_columns(pos, cov, rgbs).partition([k]),
             )
             self.rec.send_columns(
                 f"{base}/velocity",

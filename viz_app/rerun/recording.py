@@ -211,6 +211,24 @@ def ellipsoid_axes(cov: NDArray[np.float64]) -> tuple[NDArray, NDArray]:
     return half, quat.reshape(*v.shape[:-2], 4)
 
 
+#: An ellipsoid's smallest drawn half axis (m): a collapsed axis stays visible.
+MIN_HALF_SIZE_M = 1.0
+
+
+def ellipsoid_columns(
+    centers: NDArray[np.float64], cov: NDArray[np.float64], colors: list
+) -> rr.ComponentColumnList:
+    """The 1σ ellipsoids of covariances ``cov`` (k, 3, 3) about ``centers`` (k, 3) as
+    ``Ellipsoids3D`` columns, one per row (``.partition`` them for rows of several)."""
+    half, quat = ellipsoid_axes(cov)
+    return rr.Ellipsoids3D.columns(
+        centers=centers,
+        half_sizes=np.maximum(half, MIN_HALF_SIZE_M),
+        quaternions=quat,
+        colors=colors,
+    )
+
+
 def log_series(
     rec: rr.RecordingStream,
     entity: str,

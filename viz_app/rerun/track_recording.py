@@ -84,7 +84,7 @@ from radarviz.viz_app.palette import RADAR_GREYS, track_rgb
 from radarviz.viz_app.rerun.recording import (
     colour,
     drain,
-    ellipsoid_axes,
+    ellipsoid_columns,
     log_text,
     recording_file,
 )
@@ -582,16 +582,10 @@ class TrackRecorder:
                     positions=allpos, colors=[dim] * m, radii=[FAINT_MARKER] * m
                 ).partition(sizes),
             )
-            half, quat = ellipsoid_axes(allcov)
             self.rec.send_columns(
                 f"{base}/covariance",
                 indexes=idx,
-                columns=rr.Ellipsoids3D.columns(
-                    centers=allpos,
-                    half_sizes=np.maximum(half, 1.0),
-                    quaternions=quat,
-                    colors=[dim] * m,
-                ).partition(sizes),
+                columns=ellipsoid_columns(allpos, allcov, [dim] * m).partition(sizes),
             )
         self._tentative.clear()
 
@@ -726,13 +720,8 @@ class TrackRecorder:
                 labels=[track_name(target, method) if target else method] * k,
             ),
         )
-        half, quat = ellipsoid_axes(cov_c)
         rec.send_columns(
-            f"{base}/covariance",
-            indexes=at,
-            columns=rr.Ellipsoids3D.columns(
-                centers=pos_c, half_sizes=np.maximum(half, 1.0), quaternions=quat, colors=[rgb] * k
-            ),
+            f"{base}/covariance", indexes=at, columns=ellipsoid_columns(pos_c, cov_c, [rgb] * k)
         )
         rec.send_columns(
             f"{base}/velocity",
