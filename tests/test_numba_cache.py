@@ -118,3 +118,24 @@ print(len(cached))
         )
         assert done.returncode == 0, done.stderr
         assert int(done.stdout) >= 1
+
+
+def test_console_script_help_leaves_numba_and_the_engines() -> None:
+    """``radarviz --help`` as the console script runs it (``radarviz_entry.main``, which also
+    installs the start-up SIGINT handler) imports neither numba nor the heavy engines: the
+    parser alone is checked above, and this is the path a user's ``--help`` takes."""
+    script = """
+import contextlib, io, sys
+sys.argv = ["radarviz", "--help"]
+import radarviz_entry
+with contextlib.redirect_stdout(io.StringIO()) as out, contextlib.suppress(SystemExit):
+    radarviz_entry.main()
+assert "usage:" in out.getvalue(), out.getvalue()
+heavy = {"numba", "llvmlite", "scipy", "rerun", "viser", "matplotlib", "dask"}
+print(sorted(heavy & {m.partition(".")[0] for m in sys.modules}))
+"""
+    done = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, check=False
+    )
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "[]"
