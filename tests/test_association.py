@@ -560,6 +560,10 @@ def test_api_recording_of_associated_tracks_is_the_commands(tmp_path: Path, rrd_
     cli_log, api_log = cli_cols["/log"]["TextLog:text"], api_cols["/log"]["TextLog:text"]
     assert api_log[0] == [STATUS_LEGEND] and api_log[0] == cli_log[0]
     assert api_log[-1] == cli_log[-1]  # the summary line
+    # Every line is on both timelines: the log view lists only the active timeline's lines.
+    for log in (cli_cols["/log"], api_cols["/log"]):
+        assert len(log["plot"]) == len(log["time"]) == len(log["TextLog:text"])
+        assert None not in log["plot"] and None not in log["time"]
 
 
 # ------------------------------------------------------------------------------------------

@@ -4,9 +4,10 @@ Each recording is served once and opened in headless Chromium at 1600 × 1000; t
 sends the viewer blueprints (over the viewer's gRPC port, as the Python SDK does) opening
 each tab on each timeline in turn, which is what clicking the tab and the timeline menu does.
 Where each view sits is computed from the blueprint's containers and shares; a view whose
-frame (below its title bar) holds fewer than ``MIN_DATA_PIXELS`` coloured pixels is empty
-and fails the test. The viewer's chrome, the grids of the 3D views, the charts' boxes and
-"No data available." are all grey, so only drawn data counts.
+frame (below its title bar, and a text log's column header) holds fewer than
+``MIN_DATA_PIXELS`` coloured pixels is empty and fails the test. The viewer's chrome, the
+grids of the 3D views, the charts' boxes and "No data available." are all grey, so only drawn
+data counts.
 
 Required in CI (``CI=true``), like the other browser tests.
 """
@@ -39,6 +40,9 @@ VIEWPORT = {"width": 1600, "height": 1000}
 CONTENT_TOP, CONTENT_BOTTOM, TITLE_BAR = 62, 972, 30
 #: A view with fewer coloured pixels than this inside its frame shows no data.
 MIN_DATA_PIXELS = 40
+#: A text-log view's column header (below its title bar), px: left out of its frame, since
+#: the header's active-timeline column is highlighted in colour even when no entry is listed.
+LOG_HEADER = 36
 #: Rows that change when the active tab (the tab bar) or the timeline (the time panel) does.
 TAB_BAR = slice(36, 60)
 TIME_PANEL = slice(975, 1000)
@@ -85,14 +89,20 @@ def view_rects(node: object, rect: Rect) -> list[tuple[str, Rect]]:
     return out
 
 
-def data_pixels(shot: np.ndarray, rect: Rect) -> int:
-    """Coloured pixels (saturation above 0.25) inside a view's frame, its title bar and a
-    margin for the separators left out."""
+def data_pixels(shot: np.ndarray, rect: Rect, header: int = 0) -> int:
+    """Coloured pixels (saturation above 0.25) inside a view's frame, its title bar, a
+    ``header`` below it (``frame_header``) and a margin for the separators left out."""
     x0, y0, x1, y1 = rect
-    region = shot[y0 + TITLE_BAR : y1 - 6, x0 + 6 : x1 - 6, :3]
+    region = shot[y0 + TITLE_BAR + header : y1 - 6, x0 + 6 : x1 - 6, :3]
     if region.size == 0:
         return 0
     return int(((region.max(axis=-1) - region.min(axis=-1)) > 0.25).sum())
+
+
+def frame_header(view: object) -> int:
+    """Rows below a view's title bar that are chrome, not data: a text log's column header
+    (a log view with no entry on the active timeline is otherwise taken for one with data)."""
+    return LOG_HEADER if isinstance(view, rrb.TextLogView) else 0
 
 
 def timelines(path: Path) -> list[str]:
@@ -148,6 +158,7 @@ def check_every_tab(
                         ctl.send_blueprint(blueprint_of(layout, i, timeline))
                         ctl.flush()
                     rects = view_rects(tab, content)
+                    headers = [frame_header(v) for v in _views(tab)]
                     end = time.monotonic() + (SETTLE_S if previous is not None else FIRST_SETTLE_S)
                     last, empty, shot = None, None, None
                     while time.monotonic() < end:
@@ -156,7 +167,10 @@ def check_every_tab(
                             np.abs(shot[rows] - previous[rows]).max() > 0.1
                             for rows in (TAB_BAR, TIME_PANEL)
                         )
-                        counts = [data_pixels(shot, r) for _, r in rects]
+                        counts = [
+                            data_pixels(shot, r, h)
+                            for (_, r), h in zip(rects, headers, strict=True)
+                        ]
                         empty = [
                             name
                             for (name, _), c in zip(rects, counts, strict=True)

@@ -274,12 +274,19 @@ def log_texts(
 
 
 def log_text(
-    rec: rr.RecordingStream, text: str, level: str = "INFO", scan: int = 1, timeline: str = "scan"
+    rec: rr.RecordingStream,
+    text: str,
+    level: str = "INFO",
+    scan: int = 1,
+    timeline: str = "scan",
+    at: list[rr.TimeColumn] | None = None,
 ) -> None:
-    """A line in the text log at ``scan`` on ``timeline`` (the text-log view lists timed
-    entries of the active timeline)."""
+    """A line in the text log at ``scan`` on ``timeline``, or at ``at`` (one time on each of
+    several timelines). The text-log view lists only the entries timed on the active
+    timeline: a recording with two timelines logs its lines on both (``at``), or its log
+    view is empty on the other one."""
     rec.send_columns(
         "log",
-        indexes=[rr.TimeColumn(timeline, sequence=[scan])],
+        indexes=at if at is not None else [rr.TimeColumn(timeline, sequence=[scan])],
         columns=rr.TextLog.columns(text=[text], level=[level]),
     )

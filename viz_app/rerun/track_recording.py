@@ -242,12 +242,9 @@ class TrackRecorder:
         self.flush()
         if self.truth is not None:
             self._log_truth(self.truth)
-        log_text(
-            self.rec,
+        self._log_text(
             f"{self.count} plots from {len(self.radars)} radar(s): "
-            + ", ".join(r.name for r in self.radars),
-            scan=max(self.count, 1),
-            timeline="plot",
+            + ", ".join(r.name for r in self.radars)
         )
         self.send_layout()
 
@@ -348,7 +345,7 @@ class TrackRecorder:
             self._plot_times.append(plot.time_s)
         if status and not self.statuses:
             self.statuses = True
-            log_text(self.rec, STATUS_LEGEND, scan=self.count, timeline="plot")
+            self._log_text(STATUS_LEGEND)
         if self.monitor is not None:
             # The tracker runs ahead by a block of plots: log the events up to this plot's time.
             events = self.monitor.events
@@ -358,7 +355,7 @@ class TrackRecorder:
             ):
                 event = events[self._events_logged]
                 level = "WARN" if event.kind == "leaves" else "INFO"
-                log_text(self.rec, event.message(), level, scan=self.count, timeline="plot")
+                self._log_text(event.message(), level)
                 self._events_logged += 1
         point = measured_point(plot)
         if status:
@@ -514,12 +511,18 @@ class TrackRecorder:
         when too many never reached a confirmed track (``viz_app.reports.plot_account``)."""
         from radarviz.viz_app.reports.plot_account import association_lines, untracked_warning
 
-        at = max(self.count, 1)
         for line in association_lines(account):
-            log_text(self.rec, line, scan=at, timeline="plot")
+            self._log_text(line)
         warning = untracked_warning(account)
         if warning is not None:
-            log_text(self.rec, warning, level="WARN", scan=at, timeline="plot")
+            self._log_text(warning, "WARN")
+
+    def _log_text(self, text: str, level: str = "INFO") -> None:
+        """A line in the log at the current plot, on both timelines (``plot`` and ``time``):
+        the log view lists only entries timed on the active timeline, so a line on ``plot``
+        alone leaves it empty when the viewer is on ``time``."""
+        at = self.indexes([max(self.count, 1)], [self._time_s])
+        log_text(self.rec, text, level, at=at)
 
     def indexes(self, n: list[int], t: list[float]) -> list[rr.TimeColumn]:
         return [
