@@ -99,7 +99,8 @@ def log_manoeuvre(rec: rr.RecordingStream, seed: int = 1) -> FlightTracks:
         log_series(rec, f"plots/{ROOT}/nis/{label}", idx, w[:, 0], w[:, 1], c, label)
         for e in ft.events[label]:
             k = int(np.searchsorted(ft.time_s, e.time_s)) + 1
-            log_text(rec, f"{label}: {e.message()}", "WARN" if e.kind == "leaves" else "INFO", k)
+            level = "WARN" if e.kind == "leaves" else "INFO"
+            log_text(rec, f"{label}: {e.message()}", level, k, float(e.time_s))
     w = ft.windows["imm"]
     idx = np.searchsorted(ft.time_s, w[:, 0]) + 1
     for j, part in ((2, "band_lo"), (3, "band_hi")):
@@ -110,6 +111,7 @@ def log_manoeuvre(rec: rr.RecordingStream, seed: int = 1) -> FlightTracks:
         f"manoeuvre: flight {FLIGHTS[FLIGHT].name}, {n} plots from 3 radars; ucm tracked with "
         "Q = 0 (cv-q0) and the IMM (imm); the monitor's windowed NIS against its 95% band",
         scan=1,
+        time_s=float(ft.time_s[0]),
     )
     return ft
 

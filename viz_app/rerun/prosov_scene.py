@@ -629,6 +629,7 @@ def log_prosov(
                 f"95% band [{lo:.2f}, {hi:.2f}]: its covariance is not credible",
                 level="WARN",
                 scan=len(scene.times_s),
+                time_s=float(scene.times_s[-1]),
             )
     return frame
 

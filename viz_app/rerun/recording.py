@@ -257,19 +257,16 @@ def log_series(
     rec.send_columns(entity, indexes=at, columns=rr.Scalars.columns(scalars=v[ok]))
 
 
-def log_texts(
-    rec: rr.RecordingStream, entries: list[tuple[int, str, str]], timeline: str = "scan"
-) -> None:
-    """Lines ``(scan, text, level)`` in the text log, in one chunk (one ``log_text`` per line
-    would be one chunk each for the viewer to take in)."""
+def log_texts(rec: rr.RecordingStream, entries: list[tuple[int, float, str, str]]) -> None:
+    """Lines ``(scan, time_s, text, level)`` in the text log on the ``scan`` and ``time``
+    timelines, in one chunk (one ``log_text`` per line would be one chunk each for the
+    viewer to take in)."""
     if not entries:
         return
     rec.send_columns(
         "log",
-        indexes=[rr.TimeColumn(timeline, sequence=[scan for scan, _, _ in entries])],
-        columns=rr.TextLog.columns(
-            text=[text for _, text, _ in entries], level=[level for _, _, level in entries]
-        ),
+        indexes=indexes([e[0] for e in entries], [e[1] for e in entries]),
+        columns=rr.TextLog.columns(text=[e[2] for e in entries], level=[e[3] for e in entries]),
     )
 
 
@@ -278,15 +275,15 @@ def log_text(
     text: str,
     level: str = "INFO",
     scan: int = 1,
-    timeline: str = "scan",
+    time_s: float = 0.0,
     at: list[rr.TimeColumn] | None = None,
 ) -> None:
-    """A line in the text log at ``scan`` on ``timeline``, or at ``at`` (one time on each of
-    several timelines). The text-log view lists only the entries timed on the active
-    timeline: a recording with two timelines logs its lines on both (``at``), or its log
-    view is empty on the other one."""
+    """A line in the text log at ``scan`` and ``time_s`` (the ``scan`` and ``time``
+    timelines), or at ``at`` (one time on each timeline of another recording). The text-log
+    view lists only the entries timed on the active timeline: a line on one timeline alone
+    leaves the log view empty on the other one."""
     rec.send_columns(
         "log",
-        indexes=at if at is not None else [rr.TimeColumn(timeline, sequence=[scan])],
+        indexes=at if at is not None else indexes([scan], [time_s]),
         columns=rr.TextLog.columns(text=[text], level=[level]),
     )

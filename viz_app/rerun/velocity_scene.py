@@ -128,7 +128,8 @@ def log_velocity_run(
     radial_mps = run.stacked("radial_velocity")
     fused = run.fused
     vel, cov, m, flagged = run.velocity, run.covariance.copy(), run.m, run.flagged
-    log_texts(rec, [(scan, text, "WARN") for scan, text in run.messages])
+    at_scan = dict(zip(n.tolist(), t.tolist(), strict=True))
+    log_texts(rec, [(scan, at_scan[scan], text, "WARN") for scan, text in run.messages])
     # --- the situation, km ---
     base = f"{ROOT}/map"
     rec.log(base, rr.Transform3D(scale=1e-3), static=True)
@@ -292,7 +293,7 @@ def log_velocity_run(
             "warning level",
         )
     _log_charts(rec, n, t, err, cov, m)
-    log_text(rec, f"velocity fusion: {len(radars)} radars, {k} scans")
+    log_text(rec, f"velocity fusion: {len(radars)} radars, {k} scans", time_s=float(t[0]))
     return geometry_frame(
         run, float(1.1 * np.nanmax(np.abs(err))) if np.isfinite(err).any() else None
     )

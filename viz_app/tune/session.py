@@ -161,8 +161,9 @@ def log_tuning_scene(
         f"(σVr = {p.sigma_vr_mps:.3g} m/s), seed {p.seed}"
     )
     # One chunk for the lot (each is one more message for the viewer to take in).
-    alerts = [(max(p.steps, 1), alert, "WARN") for alert in result.alerts]
-    log_texts(rec, [(1, head, "INFO"), *alerts])
+    last = max(p.steps, 1)
+    alerts = [(last, (last - 1) * p.period_s, alert, "WARN") for alert in result.alerts]
+    log_texts(rec, [(1, 0.0, head, "INFO"), *alerts])
     return result
 
 
