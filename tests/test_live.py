@@ -461,3 +461,41 @@ def test_the_live_recorder_draws_tentative_tracks_in_its_current_state(
     # Each flush's row holds both tracks, the tentative one with the confirmed one.
     sizes = [len(c) for c in cols["/world/tracks/ucm/position"]["Points3D:positions"]]
     assert len(sizes) >= 3 and set(sizes) == {2}
+
+
+def test_the_live_recorder_reuses_series_slots_so_its_entities_stay_bounded(
+    tmp_path: Path, rrd_contents
+) -> None:
+    """The Rerun SDK keeps a few kilobytes per entity path for the recording's life: a live
+    session's entities must not grow with the tracks ever started. Forty tracks, at most two
+    alive at once: their time series share two slots, and a slot's next track starts with a
+    ``Clear`` (its line does not join the last one's); the path entities are made at once."""
+    import numpy as np
+
+    from radarviz.core.tracking.stream import Plot
+    from radarviz.viz_app.io.plots import Radar
+    from radarviz.viz_app.rerun.live_recording import PATH_CHUNKS, LiveTrackRecorder
+    from radarviz.viz_app.rerun.recording import recording_file
+
+    radar = Radar("r", 0.0, 0.0, 0.0, 50.0, 0.3)
+    x, P = np.zeros(6), np.eye(6)
+    out = tmp_path / "live.rrd"
+    with recording_file(out) as rec:
+        recorder = LiveTrackRecorder(rec, [radar], clock=iter(range(10**6)).__next__)
+        for track in range(40):
+            for scan in range(4):  # two tracks overlap: this one and the one before
+                plot = Plot(10.0 * track + scan, 1e4, 0.1, 50.0, 0.005, radar="r")
+                recorder.add(replace(plot, target=str(track)), [("ucm", x + track, P)], "confirmed")
+                recorder.end_scan([str(track - 1)] if scan == 3 and track else [])
+                recorder.flush()
+        recorder.end_scan([str(39)])
+        recorder.close()
+    rows, cols = rrd_contents(out)
+    series = {p for p in rows if p.startswith("/plots/sigma_pos_m/")}
+    assert series == {"/plots/sigma_pos_m/0000", "/plots/sigma_pos_m/0001"}
+    paths = {p for p in rows if p.startswith("/world/tracks/ucm/path/")}
+    assert len(paths) == PATH_CHUNKS
+    clears = sum(
+        1 for c in cols["/plots/sigma_pos_m/0000"].get("Clear:is_recursive", []) if c is not None
+    )
+    assert clears >= 10  # the slot held about half the forty tracks, one after another

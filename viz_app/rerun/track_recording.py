@@ -107,6 +107,8 @@ from radarviz.viz_app.rerun.shapes import (
 RRD_CHUNK = 2048
 #: Velocity arrows show this many seconds of motion.
 ARROW_SECONDS = 10.0
+#: The time series of every confirmed track, ``plots/{series}/...``.
+SERIES = ("sigma_pos_m", "speed_mps")
 #: What the association's recording says about its drawing (the log's first line).
 STATUS_LEGEND = (
     "faint, small: tentative tracks (fewer than M of N hits yet) and the plots that went to "
@@ -660,15 +662,18 @@ class TrackRecorder:
         at: list[rr.TimeColumn],
         cov: np.ndarray,
         vel: np.ndarray,
+        entity: str | None = None,
     ) -> None:
         """A track's confirmed rows' time series (√trace of the position covariance, speed)
-        at the indexes ``at``; the series are styled at the track's first call."""
+        at the indexes ``at``, in ``plots/{series}/{entity}`` (``entity`` defaults to the
+        track's ``name``); the series are styled at the track's first call."""
         rec = self.rec
+        entity = name if entity is None else entity
         if name not in self._styled:  # a track's first confirmed chunk
             self._styled.add(name)
-            for series in ("sigma_pos_m", "speed_mps"):
+            for series in SERIES:
                 rec.log(
-                    f"plots/{series}/{name}",
+                    f"plots/{series}/{entity}",
                     rr.SeriesLines(colors=[rgb], names=[track_name(target, method)]),
                     static=True,
                 )
@@ -677,7 +682,7 @@ class TrackRecorder:
             ("speed_mps", np.linalg.norm(vel, axis=1)),
         ):
             rec.send_columns(
-                f"plots/{series}/{name}", indexes=at, columns=rr.Scalars.columns(scalars=values)
+                f"plots/{series}/{entity}", indexes=at, columns=rr.Scalars.columns(scalars=values)
             )
             self._keep_series(series, values.astype(np.float32))
 
