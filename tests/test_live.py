@@ -8,7 +8,8 @@
   order, and at the capture's pace: the arrival times' span is the capture's span over the
   speed, within a loose margin (the machine is shared: this checks the pacing is applied,
   not its precision).
-* ``live``: the capture replayed at about 2000 plots/s into ``live --udp … --no-viewer``:
+* ``live``: the capture replayed at 2000 plots/s for over a minute into
+  ``live --udp … --no-viewer``:
   every plot accounted for (tracked, out of order, dropped: here all tracked), and the
   plots' track ids, in order, those of ``track --associate gnn`` on the capture itself
   (compared by the summary's hash of them); the latency is in the summary, finite.
@@ -21,6 +22,7 @@ import csv
 import hashlib
 import json
 import math
+import re
 import signal
 import socket
 import struct
@@ -101,14 +103,14 @@ def capture(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path, int, 
     return write_capture(tmp_path_factory.mktemp("live"), duration_s=LIVE_SCENE_S)
 
 
-#: The scene's length (s of feed time) and the replay's speed: about 150 plots/s of feed
-#: time, so about 2000 plots/s for some 15 s.
-LIVE_SCENE_S, LIVE_SPEED = 200.0, 13.0
+#: The scene's length (s of feed time: about 160 plots/s, 130 000 plots) and the rate its
+#: replay into ``live`` is sped up to (plots/s), so the feed lasts over a minute.
+LIVE_SCENE_S, LIVE_RATE = 800.0, 2000.0
 
 
 def test_replay_sends_every_datagram_in_order_at_the_capture_pace(capture) -> None:
     cap, _, _, times = capture
-    speed = 40.0
+    speed = 160.0
     sock, port = listen()
     got: list[tuple[float, bytes]] = []
     sock.settimeout(5.0)
@@ -175,8 +177,13 @@ def test_replay_of_an_ast_file_paces_by_time_of_day(tmp_path: Path) -> None:
         clock[0] += s
 
     sent: list[bytes] = []
+
+    def send(payload: bytes) -> bool:
+        sent.append(payload)
+        return True
+
     with open(ast, "rb") as fh:
-        counts = paced(recorded_feed(fh, "feed.ast"), 2.0, sent.append, lambda: clock[0], sleep)
+        counts = paced(recorded_feed(fh, "feed.ast"), 2.0, send, lambda: clock[0], sleep)
     with open(ast, "rb") as fh:
         blocks = [b for _, _, b in ax.data_blocks(fh, "feed.ast")]
     assert sent == blocks
@@ -220,8 +227,10 @@ def test_live_tracks_a_replayed_feed_as_track_does_the_capture(capture, tmp_path
         assert live.stderr is not None
         line = live.stderr.readline()
         assert "tracking udp" in line, line
+        speed = LIVE_RATE * (times[-1] - times[0]) / n_plots
+        assert (times[-1] - times[0]) / speed >= 60.0
         replay = [RADARVIZ, "replay", str(cap), "--to", f"127.0.0.1:{port}"]
-        replay += ["--speed", str(LIVE_SPEED)]
+        replay += ["--speed", f"{speed:.6f}"]
         done = subprocess.run(replay, capture_output=True, timeout=300)
         assert done.returncode == 0, done.stderr
         err = live.stderr.read()
@@ -258,6 +267,49 @@ def test_live_bad_input_is_one_line_exit_2(
     assert main(["live", "--radars", str(capture[1]), "--no-viewer", *extra]) == 2
     err = capsys.readouterr().err
     assert words in err and err.count("\n") == 1, err
+
+
+def test_live_on_a_port_in_use_is_one_line_exit_2(capture, capsys: pytest.CaptureFixture) -> None:
+    """A port another socket holds (even one that allows reuse) is refused in one line: a
+    second listener on a unicast port would take the feed from the first without a word."""
+    holder = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    holder.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    holder.bind(("127.0.0.1", 0))
+    port = holder.getsockname()[1]
+    with holder:
+        argv = ["live", "--radars", str(capture[1]), "--no-viewer", "--udp", f"127.0.0.1:{port}"]
+        argv += ["--duration-s", "2"]  # a run that shared the port would end, exit 0
+        assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert f"--udp 127.0.0.1:{port}: cannot listen (Address already in use)" in err, err
+    assert err.count("\n") == 1, err
+
+
+def test_replay_to_a_closed_port_says_so_and_exits_1(capture) -> None:
+    """Nothing listens at the address: the host's "port unreachable" answers come back as
+    refused sends (the sending socket is connected), said when the first comes and counted at
+    the end, exit 1, no traceback; the replay goes on meanwhile (a receiver may start late)."""
+    cap, _, _, times = capture
+    port = free_udp_port()
+    done = subprocess.run(
+        [RADARVIZ, "replay", str(cap), "--to", f"127.0.0.1:{port}", "--speed", "2000"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert done.returncode == 1, done.stderr
+    lines = done.stderr.splitlines()
+    assert len(lines) == 2 and "Traceback" not in done.stderr, done.stderr
+    to = f"127.0.0.1:{port}"
+    assert (
+        lines[0] == f"radarviz: replay: {to} refuses datagrams (nothing listens there); sending on"
+    )
+    said = re.fullmatch(
+        rf"radarviz: error: replay to {to}: (\d+) of (\d+) datagrams refused .*", lines[1]
+    )
+    assert said is not None, lines[1]
+    refused, sent = int(said[1]), int(said[2])
+    assert sent == len(times) and 0 < refused < sent, lines[1]
 
 
 def test_live_counts_malformed_datagrams_once_and_goes_on(tmp_path: Path) -> None:

@@ -10,7 +10,8 @@ targets of air traffic, written (not timed) as an ASTERIX file of data blocks of
 ``rerun --serve-web`` server on loopback the recording streams to, no browser attached)
 unless ``viewer`` is False. The figures are the session's own summary (``--summary``):
 
-* ``sent_plots`` and ``sent_datagrams`` (what the replay sent), ``tracked``, ``dropped``
+* ``sent_plots`` and ``sent_datagrams`` (what the replay sent; ``refused_datagrams``: sends
+  the port refused, 0 unless the live process stopped listening), ``tracked``, ``dropped``
   (the bounded queue full), ``out_of_order``, ``malformed`` (datagrams and records refused),
   ``duplicates`` (byte-identical records passed over) and ``untracked_at_stop``: every plot
   accounted for;
@@ -260,6 +261,7 @@ def bench_live(
         "replay_s": replay_s,
         "speed": speed,
         "sent_datagrams": sent.datagrams,
+        "refused_datagrams": sent.refused,
         "sent_plots": plots,
         "tracked": doc["tracked"],
         "dropped": doc["dropped"],
@@ -285,9 +287,11 @@ def format_live(doc: dict[str, Any]) -> str:
         if doc["latency_median_ms"] is not None
         else "no plot tracked"
     )
+    n_refused = doc.get("refused_datagrams", 0)
+    refused = f", {n_refused} datagrams refused" if n_refused else ""
     return (
         f"live: {doc['sent_plots']} plots of {doc['targets']} targets and 4 radars replayed "
-        f"to 127.0.0.1 at {doc['rate_plots_per_s']:.0f} plots/s ({doc['replay_s']:.1f} s) "
+        f"to 127.0.0.1 at {doc['rate_plots_per_s']:.0f} plots/s ({doc['replay_s']:.1f} s{refused}) "
         f"into radarviz live --method ucm {where}: {doc['tracked']} tracked, "
         f"{doc['dropped']} dropped, {doc['out_of_order']} out of order, {doc['malformed']} "
         f"malformed, {doc.get('duplicates', 0)} duplicate, {doc['untracked_at_stop']} "

@@ -53,12 +53,26 @@ def cmd_replay(args: argparse.Namespace) -> int:
     to = parse_address("--to", args.to)
     if not to.loopback:
         print(f"radarviz: replay: sending to {to}: the feed leaves this machine", file=sys.stderr)
+
+    def refused() -> None:
+        print(
+            f"radarviz: replay: {to} refuses datagrams (nothing listens there); sending on",
+            file=sys.stderr,
+        )
+
     try:
-        counts = replay(args.capture, to, args.speed)
+        counts = replay(args.capture, to, args.speed, on_refused=refused)
     except OSError as exc:
         if exc.filename:  # the recording itself: bad input
             raise
         print(f"radarviz: error: replay to {to}: {exc.strerror or exc}", file=sys.stderr)
+        return 1
+    if counts.refused:
+        print(
+            f"radarviz: error: replay to {to}: {counts.refused} of {counts.datagrams} "
+            "datagrams refused (nothing listened there for part of the replay or all of it)",
+            file=sys.stderr,
+        )
         return 1
     print(
         f"replayed {counts.datagrams} datagrams ({counts.octets} octets, {counts.span_s:.3f} s "

@@ -132,22 +132,27 @@ def recorded_feed(fh: IO[bytes], source: str) -> Iterator[Record]:
 
 @dataclass
 class ReplayCounts:
-    """What a replay sent: ``datagrams``, ``octets``, and the recording's time span (s)."""
+    """What a replay sent: ``datagrams``, ``octets``, the recording's time span (s), and
+    ``refused``: sends the address answered with "port unreachable" (nothing listens there)."""
 
     datagrams: int = 0
     octets: int = 0
     span_s: float = 0.0
+    refused: int = 0
 
 
 def paced(
     records: Iterator[Record],
     speed: float,
-    send: Callable[[bytes], None],
+    send: Callable[[bytes], bool],
     clock: Callable[[], float] = time.monotonic,
     sleep: Callable[[float], None] = time.sleep,
+    on_refused: Callable[[], None] = lambda: None,
 ) -> ReplayCounts:
     """Hand each record's payload to ``send`` at ``start + (t − t₀) / speed`` (module
-    docstring); returns the counts."""
+    docstring); returns the counts. ``send`` returns False when the address refused it:
+    counted, ``on_refused`` called on the first, and the replay goes on (a receiver may
+    start late)."""
     check_real("--speed", speed, low=0.0, high=MAX_SPEED)
     counts = ReplayCounts()
     start = clock()
@@ -164,31 +169,50 @@ def paced(
                 sleep(wait)
             last = t
             counts.span_s = max(counts.span_s, t - first)
-        send(record.payload)
+        if not send(record.payload):
+            counts.refused += 1
+            if counts.refused == 1:
+                on_refused()
         counts.datagrams += 1
         counts.octets += len(record.payload)
     return counts
 
 
-def udp_sender(to: Address) -> tuple[socket.socket, Callable[[bytes], None]]:
-    """A UDP socket and its ``send`` of one datagram to ``to`` (multicast: ``MULTICAST_TTL``
-    hops, and looped back so a receiver on this machine hears it)."""
+def udp_sender(to: Address) -> tuple[socket.socket, Callable[[bytes], bool]]:
+    """A UDP socket and its ``send`` of one datagram to ``to``, False when refused
+    (multicast: ``MULTICAST_TTL`` hops, and looped back so a receiver on this machine hears
+    it). A unicast socket is connected, so the "port unreachable" a host answers to a
+    datagram for a closed port comes back as a refusal of a later send instead of being
+    dropped unseen, as it is for an unconnected socket."""
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    target = (to.host, to.port)
     if to.multicast:
         sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, MULTICAST_TTL)
         sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_LOOP, 1)
-    target = (to.host, to.port)
 
-    def send(payload: bytes) -> None:
-        sock.sendto(payload, target)
+        def send(payload: bytes) -> bool:
+            sock.sendto(payload, target)
+            return True
 
-    return sock, send
+        return sock, send
+    sock.connect(target)
+
+    def send_connected(payload: bytes) -> bool:
+        try:
+            sock.send(payload)
+        except ConnectionRefusedError:
+            return False
+        return True
+
+    return sock, send_connected
 
 
-def replay(path: str, to: Address, speed: float = 1.0) -> ReplayCounts:
+def replay(
+    path: str, to: Address, speed: float = 1.0, on_refused: Callable[[], None] = lambda: None
+) -> ReplayCounts:
     """Send the recording ``path`` to ``to`` at ``speed`` × its pace (module docstring)."""
     check_real("--speed", speed, low=0.0, high=MAX_SPEED)
     with open(path, "rb") as fh:
         sock, send = udp_sender(to)
         with sock:
-            return paced(recorded_feed(fh, path), speed, send)
+            return paced(recorded_feed(fh, path), speed, send, on_refused=on_refused)

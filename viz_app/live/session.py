@@ -148,7 +148,11 @@ class UdpFeed(_Feed):
         super().__init__(stop, counts)
         self.warn = warn
         sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        if address.multicast:
+            # Several listeners of one group on a machine is how multicast feeds are used.
+            # Not for a unicast port: with SO_REUSEADDR Linux lets a second socket bind a
+            # port in use and takes its datagrams from the first without a word.
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         # A burst of a whole scan must not overflow the kernel's buffer while the reader
         # decodes: ask for a large one (the kernel caps it).
         sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 24)
