@@ -27,7 +27,7 @@ Radars file (TOML, read with ``tomllib``)::
     [radars.NAME]
     x_m = 0.0; y_m = 0.0; z_m = 0.0          # site, m
     sigma_range_m = 250.0                    # > 0
-    sigma_azimuth_deg = 1.0                  # in (0, 20]
+    sigma_beta_deg = 1.0                  # in (0, 20]
     sigma_elevation_deg = 0.5                # in (0, 20]; needed by plots with an elevation
     sigma_radial_velocity_mps = 1.0          # > 0; needed by plots with a radial velocity
     sac = 25; sic = 201                      # ASTERIX data source, integers in [0, 255]; both
@@ -116,7 +116,7 @@ from radarviz.viz_app.io.atomic import atomic_write, commit_together
 
 REQUIRED_COLUMNS = ("time_s", "radar", "range_m", "azimuth_deg")
 OPTIONAL_COLUMNS = ("elevation_deg", "radial_velocity_mps", "target")
-RADAR_KEYS = ("x_m", "y_m", "z_m", "sigma_range_m", "sigma_azimuth_deg")
+RADAR_KEYS = ("x_m", "y_m", "z_m", "sigma_range_m", "sigma_beta_deg")
 OPTIONAL_RADAR_KEYS = (
     "sigma_elevation_deg",
     "sigma_radial_velocity_mps",
@@ -202,7 +202,7 @@ class Radar:
     y_m: float
     z_m: float
     sigma_range_m: float
-    sigma_azimuth_deg: float
+    sigma_beta_deg: float
     sigma_elevation_deg: float | None = None
     sigma_radial_velocity_mps: float | None = None
     #: The antenna's revolution (s) and the coverage (m, degrees) the association's misses
@@ -230,7 +230,7 @@ def _bad(where: str, column: str, what: str, got: object) -> ParameterError:
 #: The ``core.params`` entry bounding each radars-file key (site coordinates: ``site_m``).
 RADAR_KEY_PARAMETERS: dict[str, str] = {
     "sigma_range_m": "sigma_r_m",
-    "sigma_azimuth_deg": "sigma_beta_deg",
+    "sigma_beta_deg": "sigma_beta_deg",
     "sigma_elevation_deg": "sigma_elevation_deg",
     "sigma_radial_velocity_mps": "sigma_vr_mps",
     "rotation_period_s": "rotation_period_s",
@@ -459,15 +459,15 @@ class PlotReader:
                 raise _bad(
                     where, "azimuth_deg", "must be a finite number in [-360, 360]", row[i_az]
                 )
-            el = sigma_el = None
+            el = sigma_elevation_deg = None
             if i_el is not None:
                 el = _number(row[i_el])
                 if el is None or abs(el) > 90:
                     raise _bad(
                         where, "elevation_deg", "must be a finite number in [-90, 90]", row[i_el]
                     )
-                sigma_el = radar.sigma_elevation_deg
-                if sigma_el is None:
+                sigma_elevation_deg = radar.sigma_elevation_deg
+                if sigma_elevation_deg is None:
                     raise _bad(
                         where,
                         "elevation_deg",
@@ -504,11 +504,11 @@ class PlotReader:
                     r,
                     math.radians(az),
                     radar.sigma_range_m,
-                    math.radians(radar.sigma_azimuth_deg),
+                    math.radians(radar.sigma_beta_deg),
                     (radar.x_m, radar.y_m, radar.z_m),
                     name,
                     None if el is None else math.radians(el),
-                    0.0 if sigma_el is None else math.radians(sigma_el),
+                    0.0 if sigma_elevation_deg is None else math.radians(sigma_elevation_deg),
                     vr,
                     0.0 if sigma_vr is None else sigma_vr,
                     target,
@@ -777,7 +777,7 @@ def radar_table(radars: dict[str, Radar]) -> RadarTable:
     return RadarTable(
         np.array([(r.x_m, r.y_m, r.z_m) for r in rs], dtype=np.float64).reshape(-1, 3),
         np.array([r.sigma_range_m for r in rs], dtype=np.float64),
-        np.radians([r.sigma_azimuth_deg for r in rs]),
+        np.radians([r.sigma_beta_deg for r in rs]),
         np.radians([r.sigma_elevation_deg or 0.0 for r in rs]),
         np.array([r.sigma_radial_velocity_mps or 0.0 for r in rs], dtype=np.float64),
     )
@@ -1366,7 +1366,7 @@ def fusion_plots(seed: int = 1, steps: int = 60) -> tuple[list[Plot], list[Radar
             s.name,
             *map(float, s.position),
             s.sigma_r_m,
-            math.degrees(s.sigma_azimuth_rad),
+            math.degrees(s.sigma_beta_rad),
             math.degrees(s.sigma_elevation_rad),
             s.sigma_vr_mps,
         )
@@ -1376,8 +1376,8 @@ def fusion_plots(seed: int = 1, steps: int = 60) -> tuple[list[Plot], list[Radar
     for s in sites:
         m = meas[s.name]
         # Angles and σ through degrees and back, exactly as the file will give them.
-        sb, se = (
-            math.radians(math.degrees(v)) for v in (s.sigma_azimuth_rad, s.sigma_elevation_rad)
+        sigma_beta_rad, sigma_elevation_rad = (
+            math.radians(math.degrees(v)) for v in (s.sigma_beta_rad, s.sigma_elevation_rad)
         )
         for k in range(min(steps, m.t.size)):
             plots.append(
@@ -1386,11 +1386,11 @@ def fusion_plots(seed: int = 1, steps: int = 60) -> tuple[list[Plot], list[Radar
                     float(m.range[k]),
                     math.radians(math.degrees(float(m.azimuth[k]))),
                     s.sigma_r_m,
-                    sb,
+                    sigma_beta_rad,
                     tuple(map(float, s.position)),
                     s.name,
                     math.radians(math.degrees(float(m.elevation[k]))),
-                    se,
+                    sigma_elevation_rad,
                     float(m.radial_velocity[k]),
                     s.sigma_vr_mps,
                 )
@@ -1416,7 +1416,7 @@ PLOT_FIELDS: tuple[PlotField, ...] = (
     PlotField("range_m", positive=True, optional=False),
     PlotField("azimuth_rad", positive=False, optional=False),
     PlotField("sigma_r_m", positive=True, optional=False),
-    PlotField("sigma_azimuth_rad", positive=True, optional=False),
+    PlotField("sigma_beta_rad", positive=True, optional=False),
     PlotField("elevation_rad", positive=False, optional=True),
     PlotField("radial_velocity_mps", positive=False, optional=True),
 )
