@@ -70,6 +70,7 @@ import csv
 import math
 import os
 import re
+import sys
 import time
 import tomllib
 from collections.abc import Callable, Iterable, Iterator, Mapping
@@ -127,6 +128,10 @@ OPTIONAL_RADAR_KEYS = (
     "min_elevation_deg",
     "max_elevation_deg",
 )
+#: Former names of radars-file keys, still read as the key they map to: each file using one
+#: gets one deprecation line on standard error (``load_radars``); a table giving both names
+#: is an error. Files are written with the new names only.
+DEPRECATED_RADAR_KEYS: dict[str, str] = {"sigma_azimuth_deg": "sigma_beta_deg"}
 #: The ASTERIX data source identifier of a radar (I048/010): integers in [0, 255], both or
 #: neither; no two radars may share a pair.
 SOURCE_KEYS = ("sac", "sic")
@@ -250,8 +255,11 @@ def radar_coverage(radar: Radar) -> RadarCoverage:
     return RadarCoverage(radar.rotation_period_s, radar.min_range_m, radar.max_range_m, *el)
 
 
-def parse_radars(text: str, source: str) -> dict[str, Radar]:
-    """Radars from TOML text; errors name ``source``, the radar and the key."""
+def parse_radars(text: str, source: str, deprecated: list[str] | None = None) -> dict[str, Radar]:
+    """Radars from TOML text; errors name ``source``, the radar and the key.
+
+    A key of ``DEPRECATED_RADAR_KEYS`` is read as its new name; each such name used adds one
+    line to ``deprecated`` (when given), however many radars use it."""
     try:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
@@ -274,10 +282,24 @@ def parse_radars(text: str, source: str) -> dict[str, Radar]:
             raise ParameterError(f"{where}: must be a table [radars.{name}]")
         known = RADAR_KEYS + OPTIONAL_RADAR_KEYS + SOURCE_KEYS
         for key in table:
-            if key not in known:
+            if key not in known and key not in DEPRECATED_RADAR_KEYS:
                 raise ParameterError(
                     f"{where}, key {key}: unknown key (expected {', '.join(known)})"
                 )
+        # The key each value is read as -> the key the file gave it under (for the errors).
+        spelled: dict[str, str] = {}
+        for old, new in DEPRECATED_RADAR_KEYS.items():
+            if old not in table:
+                continue
+            if new in table:
+                raise ParameterError(
+                    f"{where}, key {old}: both {old} (deprecated) and {new} given; give only {new}"
+                )
+            table = {(new if k == old else k): v for k, v in table.items()}
+            spelled[new] = old
+            line = f"{source}: key {old} is deprecated, read as {new}"
+            if deprecated is not None and line not in deprecated:
+                deprecated.append(line)
         vals: dict[str, float] = {}
         for key in RADAR_KEYS + OPTIONAL_RADAR_KEYS:
             if key not in table:
@@ -285,6 +307,7 @@ def parse_radars(text: str, source: str) -> dict[str, Radar]:
                     raise ParameterError(f"{where}, key {key}: missing")
                 continue
             v = table[key]
+            given = spelled.get(key, key)
             # Each key's physically meaningful range is its parameter's (``core.params``).
             entry = PARAMETERS[RADAR_KEY_PARAMETERS.get(key, "site_m")]
             low, high = entry.low, entry.high
@@ -292,7 +315,8 @@ def parse_radars(text: str, source: str) -> dict[str, Radar]:
             ok = _is_real(v) and math.isfinite(v) and low <= v <= high
             if not ok:
                 raise ParameterError(
-                    f"{where}, key {key}: must be a finite number {rng}".rstrip() + f" (got {v!r})"
+                    f"{where}, key {given}: must be a finite number {rng}".rstrip()
+                    + f" (got {v!r})"
                 )
             vals[key] = float(v)
         for lo, hi in (("min_range_m", "max_range_m"), ("min_elevation_deg", "max_elevation_deg")):
@@ -767,7 +791,11 @@ def load_radars(path: str) -> dict[str, Radar]:
     except UnicodeDecodeError as exc:
         line = raw[: exc.start].count(b"\n") + 1
         raise ParameterError(f"{path} line {line}: not UTF-8 text") from None
-    return parse_radars(text, path)
+    deprecated: list[str] = []
+    radars = parse_radars(text, path, deprecated)
+    for line in deprecated:
+        print(f"radarviz: {line}", file=sys.stderr)
+    return radars
 
 
 def radar_table(radars: dict[str, Radar]) -> RadarTable:
