@@ -55,8 +55,8 @@ def kernels() -> dict[str, Callable[..., None]]:
         P[1, 1] = P[3, 3] = v0 * v0
 
     @jit
-    def ucm(r_hat, b_hat, sr, sb, T, v0, out):
-        s = sb * sb
+    def ucm(r_hat, b_hat, sr, sigma_beta_rad, T, v0, out):
+        s = sigma_beta_rad * sigma_beta_rad
         es = math.exp(s)
         x, P, H, R, nu = (
             np.empty(4),
@@ -86,29 +86,29 @@ def kernels() -> dict[str, Callable[..., None]]:
             out[m] = x
 
     @jit
-    def ekf_step(x, P, r, b, sr, sb, H, R, nu):
+    def ekf_step(x, P, r, b, sr, sigma_beta_rad, H, R, nu):
         px, py = x[0], x[2]
         rp = math.hypot(px, py)
         H[:, :] = 0.0
         H[0, 0], H[0, 2] = px / rp, py / rp
         H[1, 0], H[1, 2] = -py / (rp * rp), px / (rp * rp)
         R[:, :] = 0.0
-        R[0, 0], R[1, 1] = sr * sr, sb * sb
+        R[0, 0], R[1, 1] = sr * sr, sigma_beta_rad * sigma_beta_rad
         nu[0] = r - rp
         d = b - math.atan2(py, px)
         nu[1] = d - 2 * math.pi * math.floor((d + math.pi) / (2 * math.pi))
         update(x, P, H, nu, R, 2)
 
     @jit
-    def naive_start(x, P, r, b, sr, sb, v0, R):
+    def naive_start(x, P, r, b, sr, sigma_beta_rad, v0, R):
         c, sn = math.cos(b), math.sin(b)
-        rs = r * r * sb * sb
+        rs = r * r * sigma_beta_rad * sigma_beta_rad
         R[0, 0], R[1, 1] = sr * sr * c * c + rs * sn * sn, sr * sr * sn * sn + rs * c * c
         R[0, 1] = R[1, 0] = (sr * sr - rs) * sn * c
         start(x, P, r * c, r * sn, R, v0)
 
     @jit
-    def ekf(r_hat, b_hat, vr_hat, sr, sb, svr, T, v0, doppler, out):
+    def ekf(r_hat, b_hat, vr_hat, sr, sigma_beta_rad, svr, T, v0, doppler, out):
         x, P, H, R, nu = (
             np.empty(4),
             np.empty((4, 4)),
@@ -120,10 +120,10 @@ def kernels() -> dict[str, Callable[..., None]]:
             for n in range(r_hat.shape[1]):
                 r, b = r_hat[m, n], b_hat[m, n]
                 if n == 0:
-                    naive_start(x, P, r, b, sr, sb, v0, R)
+                    naive_start(x, P, r, b, sr, sigma_beta_rad, v0, R)
                     continue
                 predict(x, P, T)
-                ekf_step(x, P, r, b, sr, sb, H, R, nu)
+                ekf_step(x, P, r, b, sr, sigma_beta_rad, H, R, nu)
                 if doppler:
                     # V̂r along the measured line of sight; angle error inflates its variance
                     c, sn = math.cos(b), math.sin(b)
@@ -131,13 +131,13 @@ def kernels() -> dict[str, Callable[..., None]]:
                     H[0, 1], H[0, 3] = c, sn
                     gv = -sn * x[1] + c * x[3]
                     gpg = sn * sn * P[1, 1] + c * c * P[3, 3] - 2 * sn * c * P[1, 3]
-                    R[0, 0] = svr * svr + sb * sb * (gv * gv + gpg)
+                    R[0, 0] = svr * svr + sigma_beta_rad * sigma_beta_rad * (gv * gv + gpg)
                     nu[0] = vr_hat[m, n] - (c * x[1] + sn * x[3])
                     update(x, P, H, nu, R, 1)
             out[m] = x
 
     @jit
-    def ukf(r_hat, b_hat, sr, sb, T, v0, out):
+    def ukf(r_hat, b_hat, sr, sigma_beta_rad, T, v0, out):
         # Van der Merwe points with α = 1, β = 2, κ = 0: ±√4 · Cholesky columns, W = 1/8, Wc₀ = 2
         x, P, R = np.empty(4), np.empty((4, 4)), np.zeros((2, 2))
         chi, zeta = np.empty((9, 4)), np.empty((9, 2))
@@ -149,7 +149,7 @@ def kernels() -> dict[str, Callable[..., None]]:
             for n in range(r_hat.shape[1]):
                 r, b = r_hat[m, n], b_hat[m, n]
                 if n == 0:
-                    naive_start(x, P, r, b, sr, sb, v0, R)
+                    naive_start(x, P, r, b, sr, sigma_beta_rad, v0, R)
                     continue
                 predict(x, P, T)
                 L = np.linalg.cholesky(4.0 * P)
@@ -169,7 +169,7 @@ def kernels() -> dict[str, Callable[..., None]]:
                 dx = chi - x
                 S = (dz.T * wc) @ dz
                 S[0, 0] += sr * sr
-                S[1, 1] += sb * sb
+                S[1, 1] += sigma_beta_rad * sigma_beta_rad
                 K = ((dx.T * wc) @ dz) @ np.linalg.inv(S)
                 nu = np.array([r - zm[0], b - zm[1]])
                 nu[1] -= 2 * math.pi * math.floor((nu[1] + math.pi) / (2 * math.pi))
@@ -186,7 +186,7 @@ def reference_final_states(
     b_hat: NDArray[np.float64],
     *,
     sigma_r_m: float,
-    sigma_azimuth_rad: float,
+    sigma_beta_rad: float,
     period_s: float,
     sigma_v0_mps: float,
     radial_velocity_mps: NDArray[np.float64] | None = None,
@@ -197,13 +197,13 @@ def reference_final_states(
     k = kernels()
     out = np.empty((r_hat.shape[0], 4))
     r, b = np.ascontiguousarray(r_hat), np.ascontiguousarray(b_hat)
-    sr, sb, T, v0 = sigma_r_m, sigma_azimuth_rad, period_s, sigma_v0_mps
+    sr, T, v0 = sigma_r_m, period_s, sigma_v0_mps
     if kind == "ucm":
-        k["ucm"](r, b, sr, sb, T, v0, out)
+        k["ucm"](r, b, sr, sigma_beta_rad, T, v0, out)
     elif kind == "ukf":
-        k["ukf"](r, b, sr, sb, T, v0, out)
+        k["ukf"](r, b, sr, sigma_beta_rad, T, v0, out)
     else:
         doppler = kind == "ekf+doppler"
         vr = np.ascontiguousarray(radial_velocity_mps) if doppler else np.zeros((1, 1))
-        k["ekf"](r, b, vr, sr, sb, sigma_vr_mps, T, v0, doppler, out)
+        k["ekf"](r, b, vr, sr, sigma_beta_rad, sigma_vr_mps, T, v0, doppler, out)
     return out

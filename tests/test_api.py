@@ -74,8 +74,8 @@ def test_convert_and_finite_memory_are_the_core_functions() -> None:
     r = np.array([150e3, 90e3])
     b = np.array([0.1, -0.3])
     for method in ("naive", "seed", "cmkf_d", "ucm"):
-        a = radarviz.convert(method, r, b, sigma_r_m=250.0, sigma_azimuth_rad=0.03)
-        c = core_convert(method, r, b, sigma_r_m=250.0, sigma_azimuth_rad=0.03)
+        a = radarviz.convert(method, r, b, sigma_r_m=250.0, sigma_beta_rad=0.03)
+        c = core_convert(method, r, b, sigma_r_m=250.0, sigma_beta_rad=0.03)
         np.testing.assert_array_equal(a.z, c.z)
         np.testing.assert_array_equal(a.R, c.R)
     p = preset("RLS3")
@@ -100,7 +100,7 @@ def test_estimate_velocity_recovers_the_true_velocity_without_noise() -> None:
         az,
         el,
         sigma_vr_mps=[1.0, 3.0, 5.0],
-        sigma_azimuth_rad=np.deg2rad([0.1, 0.3, 0.5]),
+        sigma_beta_rad=np.deg2rad([0.1, 0.3, 0.5]),
         sigma_elevation_rad=np.deg2rad([0.2, 0.5, 1.0]),
     )
     np.testing.assert_allclose(est.velocity, v, atol=1e-9)
@@ -112,14 +112,14 @@ def test_estimate_velocity_recovers_the_true_velocity_without_noise() -> None:
 
 def _convert(method: str = "ucm", **values: object) -> object:
     """``radarviz.convert`` of a plot at 10 km, with ``values`` replacing its own."""
-    args = {"range_m": 1e4, "azimuth_rad": 0.3, "sigma_r_m": 50.0, "sigma_azimuth_rad": 0.01}
+    args = {"range_m": 1e4, "azimuth_rad": 0.3, "sigma_r_m": 50.0, "sigma_beta_rad": 0.01}
     args |= values
     return radarviz.convert(
         method,
         args["range_m"],
         args["azimuth_rad"],
         sigma_r_m=args["sigma_r_m"],
-        sigma_azimuth_rad=args["sigma_azimuth_rad"],
+        sigma_beta_rad=args["sigma_beta_rad"],
     )
 
 
@@ -171,7 +171,7 @@ def test_a_bad_plot_field_is_refused_alike_as_input_and_as_a_simulated_result(
         (lambda: _convert(sigma_r_m=-1.0), "sigma_r_m must be finite numbers in [2,"),
         (lambda: _convert(range_m=[1e4, np.nan]), "range_m must be finite numbers in (0,"),
         (lambda: _convert(range_m=[1e4, -5.0]), "range_m must be finite numbers in (0,"),
-        (lambda: _convert(sigma_azimuth_rad=-0.01), "sigma_azimuth_rad must be finite number"),
+        (lambda: _convert(sigma_beta_rad=-0.01), "sigma_beta_rad must be finite number"),
         (lambda: _convert(azimuth_rad=np.inf), "azimuth_rad must be finite numbers"),
         (lambda: _convert("ducm"), "predicted_xy_m is needed by ducm"),
         (lambda: radarviz.track([], model="imm", sigma_a_mps2=1.0), "sigma_a_mps2 is the cv"),
@@ -232,7 +232,7 @@ BAD_VALUE: dict[str, tuple[str, object]] = {
             [0.0, 1.0, 2.0],
             [0.1, 0.2, 0.3],
             sigma_vr_mps=1.0,
-            sigma_azimuth_rad=0.01,
+            sigma_beta_rad=0.01,
             sigma_elevation_rad=0.01,
         ),
     ),

@@ -22,7 +22,7 @@ TOL = 1e-9
 
 def numpy_history(method, r_hat, beta_hat, s, vr_hat=None):
     m = METHODS[method]
-    noise = PolarNoise(s.sigma_r_m, s.sigma_azimuth_rad)
+    noise = PolarNoise(s.sigma_r_m, s.sigma_beta_rad)
     st = m.start(PolarPlot(r_hat[:, 0], beta_hat[:, 0]), noise, sigma_v0_mps=s.sigma_v0_mps)
     xs, Ps = [st.x.copy()], [st.P.copy()]
     for n in range(1, r_hat.shape[1]):
@@ -37,7 +37,7 @@ def numpy_history(method, r_hat, beta_hat, s, vr_hat=None):
                 vr_hat[:, n],
                 beta_hat[:, n],
                 sigma_vr_mps=s.sigma_vr_mps,
-                sigma_azimuth_rad=s.sigma_azimuth_rad,
+                sigma_beta_rad=s.sigma_beta_rad,
             )
         xs.append(st.x.copy())
         Ps.append(st.P.copy())

@@ -210,7 +210,7 @@ def test_distance_matrix_equals_pair_by_pair(method: str) -> None:
                 method,
                 CVBatch(x[i : i + 1], P[i : i + 1]),
                 PolarPlot(r[j : j + 1], b[j : j + 1]),
-                PolarNoise(noise.sigma_r_m[j : j + 1], noise.sigma_azimuth_rad[j : j + 1]),
+                PolarNoise(noise.sigma_r_m[j : j + 1], noise.sigma_beta_rad[j : j + 1]),
                 site[j : j + 1],
             )[0, 0]
             assert d2[i, j] == pytest.approx(one, rel=1e-10)
@@ -729,7 +729,7 @@ def test_associate_refuses_a_labelled_file(tmp_path: Path, capsys: pytest.Captur
     r = tmp_path / "r.toml"
     r.write_text(
         "[radars.radar]\nx_m = 0.0\ny_m = 0.0\nz_m = 0.0\nsigma_range_m = 50.0\n"
-        "sigma_azimuth_deg = 0.3\n"
+        "sigma_beta_deg = 0.3\n"
     )
     out = tmp_path / "t.csv"
     argv = ["track", "--input", str(m), "--radars", str(r), "--out", str(out), "--associate", "gnn"]
@@ -989,7 +989,7 @@ def test_gate_box_keeps_every_pair_inside_the_gate(method: str, dims: int, span_
             method,
             cv_predict(state, times[j], 5.0),
             one,
-            PolarNoise(noise.sigma_r_m[j : j + 1], noise.sigma_azimuth_rad[j : j + 1], 2e-3),
+            PolarNoise(noise.sigma_r_m[j : j + 1], noise.sigma_beta_rad[j : j + 1], 2e-3),
             site[j : j + 1],
         )[:, 0]
     early = cv_predict(state, float(times.min()), 5.0)
@@ -1005,7 +1005,7 @@ def test_gate_box_keeps_every_pair_inside_the_gate(method: str, dims: int, span_
         method,
         pred,
         PolarPlot(r[cols], b[cols], None if el is None else el[cols]),
-        PolarNoise(noise.sigma_r_m[cols], noise.sigma_azimuth_rad[cols], 2e-3),
+        PolarNoise(noise.sigma_r_m[cols], noise.sigma_beta_rad[cols], 2e-3),
         site[cols],
     )
     assert np.allclose(pairs, d2[rows, cols], rtol=1e-9, atol=0)  # the same statistic

@@ -41,7 +41,7 @@ x_m = 0.0
 y_m = 0.0
 z_m = 120.0
 sigma_range_m = 50.0
-sigma_azimuth_deg = 0.1
+sigma_beta_deg = 0.1
 sigma_elevation_deg = 0.2
 sigma_radial_velocity_mps = 1.0
 sac = 25
@@ -52,7 +52,7 @@ x_m = 30000.0
 y_m = 5000.0
 z_m = 0.0
 sigma_range_m = 100.0
-sigma_azimuth_deg = 0.3
+sigma_beta_deg = 0.3
 sac = 25
 sic = 7
 """
@@ -270,8 +270,8 @@ def test_simulate_asterix_then_track_equals_the_rounded_csv(
         decoded = [p for _, p in ax.AsterixReader(fh, str(ast), rad)]
     assert len(decoded) == len(plots)
     for q, p in zip(decoded, plots, strict=True):
-        assert (q.radar, q.site, q.sigma_r_m, q.sigma_azimuth_rad) == (
-            p.radar, p.site, p.sigma_r_m, p.sigma_azimuth_rad
+        assert (q.radar, q.site, q.sigma_r_m, q.sigma_beta_rad) == (
+            p.radar, p.site, p.sigma_r_m, p.sigma_beta_rad
         )  # fmt: skip
         assert abs(q.time_s - p.time_s) <= ax.TIME_LSB_S / 2
         assert abs(q.range_m - p.range_m) <= ax.RHO_LSB_NM * ax.NM_M / 2 * (1 + 1e-12)

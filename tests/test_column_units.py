@@ -177,7 +177,7 @@ def test_api_tables(prosov: list[Any], gorshkov: radarviz.GorshkovRun) -> None:
         [0.6, 2.4, -1.7],
         [0.2, 0.2, 0.2],
         sigma_vr_mps=1.0,
-        sigma_azimuth_rad=0.01,
+        sigma_beta_rad=0.01,
         sigma_elevation_rad=0.01,
     )
     for result in (prosov, gorshkov, radarviz.track(plots), velocity):

@@ -33,7 +33,7 @@ TOL = 1e-9
 def numpy_history(method, r_hat, beta_hat, s: FilterSettings, site=None):
     """Every scan's states by the numpy engine: ``Method.start``, ``cv_predict``, update."""
     m = METHODS[method]
-    noise = PolarNoise(s.sigma_r_m, s.sigma_azimuth_rad)
+    noise = PolarNoise(s.sigma_r_m, s.sigma_beta_rad)
     st = m.start(
         PolarPlot(r_hat[:, 0], beta_hat[:, 0]), noise, sigma_v0_mps=s.sigma_v0_mps, site=site
     )
@@ -83,10 +83,10 @@ def test_kernel_matches_numpy_engine_off_the_origin(method: str) -> None:
     d = target - site
     r = np.hypot(d[:, 0], d[:, 1])
     b = np.arctan2(d[:, 1], d[:, 0])
-    sr, sb = 80.0, np.deg2rad(1.5)
+    sr, sigma_beta_rad = 80.0, np.deg2rad(1.5)
     r_hat = r + sr * rng.standard_normal((runs, steps))
-    beta_hat = np.angle(np.exp(1j * (b + sb * rng.standard_normal((runs, steps)))))
-    s = FilterSettings(sr, sb, 5.0, 2.0, 300.0, site_m=(float(site[0]), float(site[1])))
+    beta_hat = np.angle(np.exp(1j * (b + sigma_beta_rad * rng.standard_normal((runs, steps)))))
+    s = FilterSettings(sr, sigma_beta_rad, 5.0, 2.0, 300.0, site_m=(float(site[0]), float(site[1])))
     x, P = filter_history(method, r_hat, beta_hat, s)
     assert np.any(b > 3.0) and np.any(b < -3.0)  # the bearing does cross ±π
     assert_close(x, P, *numpy_history(method, r_hat, beta_hat, s, site=site))
@@ -140,11 +140,11 @@ def test_kernel_doppler_update_matches_numpy_engine(method: str) -> None:
     pos = np.stack([60e3 - 150.0 * t, 20e3 + 90.0 * t], -1)
     r, b = np.hypot(pos[:, 0], pos[:, 1]), np.arctan2(pos[:, 1], pos[:, 0])
     vr_true = (pos[:, 0] * -150.0 + pos[:, 1] * 90.0) / r
-    sr, sb, svr = 40.0, np.deg2rad(0.8), 0.5
+    sr, sigma_beta_rad, svr = 40.0, np.deg2rad(0.8), 0.5
     r_hat = r + sr * rng.standard_normal((runs, steps))
-    b_hat = b + sb * rng.standard_normal((runs, steps))
+    b_hat = b + sigma_beta_rad * rng.standard_normal((runs, steps))
     vr_hat = vr_true + svr * rng.standard_normal((runs, steps))
-    s = FilterSettings(sr, sb, T, 1.0, 200.0, sigma_vr_mps=svr)
+    s = FilterSettings(sr, sigma_beta_rad, T, 1.0, 200.0, sigma_vr_mps=svr)
     k = 3
     x0 = np.zeros((runs, 4))
     x0[:, 0], x0[:, 2] = r_hat[:, k] * np.cos(b_hat[:, k]), r_hat[:, k] * np.sin(b_hat[:, k])
@@ -152,12 +152,14 @@ def test_kernel_doppler_update_matches_numpy_engine(method: str) -> None:
     start = as_batch(x0, P0)
     x, P = filter_history(method, r_hat, b_hat, s, radial_velocity_mps=vr_hat, start=(k, start))
     m = METHODS[method]
-    noise = PolarNoise(sr, sb)
+    noise = PolarNoise(sr, sigma_beta_rad)
     st, xs, Ps = start, [], []
     for n in range(k + 1, steps):
         pred = cv_predict(st, T, s.sigma_a_mps2)
         st = m.update(pred, PolarPlot(r_hat[:, n], b_hat[:, n]), noise)
-        st = doppler_update(st, vr_hat[:, n], b_hat[:, n], sigma_vr_mps=svr, sigma_azimuth_rad=sb)
+        st = doppler_update(
+            st, vr_hat[:, n], b_hat[:, n], sigma_vr_mps=svr, sigma_beta_rad=sigma_beta_rad
+        )
         xs.append(st.x.copy())
         Ps.append(st.P.copy())
     assert x.shape == (steps - k - 1, runs, 4)
@@ -293,7 +295,7 @@ def test_bench_references_compute_what_the_engine_computes(kind: str) -> None:
         r_hat,
         beta_hat,
         sigma_r_m=s.sigma_r_m,
-        sigma_azimuth_rad=s.sigma_azimuth_rad,
+        sigma_beta_rad=s.sigma_beta_rad,
         period_s=s.period_s,
         sigma_v0_mps=s.sigma_v0_mps,
         radial_velocity_mps=vr_hat,

@@ -118,9 +118,9 @@ def rel_entrywise(a: np.ndarray, ref: np.ndarray) -> float:
 
 
 def _polar_draws(
-    rng: np.random.Generator, n: int, r: float, beta: float, sr: float, sb: float
+    rng: np.random.Generator, n: int, r: float, beta: float, sr: float, sigma_beta_rad: float
 ) -> tuple[np.ndarray, np.ndarray]:
-    return r + sr * rng.standard_normal(n), beta + sb * rng.standard_normal(n)
+    return r + sr * rng.standard_normal(n), beta + sigma_beta_rad * rng.standard_normal(n)
 
 
 def _polar_point_3d(r, az, el) -> np.ndarray:
@@ -130,9 +130,9 @@ def _polar_point_3d(r, az, el) -> np.ndarray:
     )
 
 
-def _naive_mean_3d(r, az, el, sb, se) -> np.ndarray:
+def _naive_mean_3d(r, az, el, sigma_beta_rad, se) -> np.ndarray:
     """E[naive 3D point | truth] from the one-angle moments E[cos θ̂] = e^(−s/2) cos θ etc."""
-    ea, ee = math.exp(-(sb**2) / 2), math.exp(-(se**2) / 2)
+    ea, ee = math.exp(-(sigma_beta_rad**2) / 2), math.exp(-(se**2) / 2)
     return r * np.array(
         [
             ee * math.cos(el) * ea * math.cos(az),
@@ -142,9 +142,9 @@ def _naive_mean_3d(r, az, el, sb, se) -> np.ndarray:
     )
 
 
-def _ucm_3d_scales(sb: float, se: float) -> np.ndarray:
+def _ucm_3d_scales(sigma_beta_rad: float, se: float) -> np.ndarray:
     """D = (e^((sβ+sε)/2), e^((sβ+sε)/2), e^(sε/2)): one e^(s/2) per angle in each coordinate."""
-    kxy = math.exp((sb**2 + se**2) / 2)
+    kxy = math.exp((sigma_beta_rad**2 + se**2) / 2)
     return np.array([kxy, kxy, math.exp(se**2 / 2)])
 
 
@@ -156,13 +156,13 @@ MOMENT_BETAS = (0.0, 0.7, 2.5)
 MOMENT_SIGMAS = (1 * DEG, 2 * DEG, 5 * DEG, 0.3)
 
 
-@pytest.mark.parametrize("sb", MOMENT_SIGMAS, ids=lambda v: f"sb={v:.4f}")
+@pytest.mark.parametrize("sigma_beta_rad", MOMENT_SIGMAS, ids=lambda v: f"sigma_beta_rad={v:.4f}")
 @pytest.mark.parametrize("beta", MOMENT_BETAS)
-def test_exact_moments_match_monte_carlo(beta: float, sb: float) -> None:
-    rng = np.random.default_rng([1, MOMENT_BETAS.index(beta), MOMENT_SIGMAS.index(sb)])
+def test_exact_moments_match_monte_carlo(beta: float, sigma_beta_rad: float) -> None:
+    rng = np.random.default_rng([1, MOMENT_BETAS.index(beta), MOMENT_SIGMAS.index(sigma_beta_rad)])
     n, r, sr = 400_000, 150e3, 250.0
-    rh, bh = _polar_draws(rng, n, r, beta, sr, sb)
-    s = sb * sb
+    rh, bh = _polar_draws(rng, n, r, beta, sr, sigma_beta_rad)
+    s = sigma_beta_rad * sigma_beta_rad
     cb, snb = np.cos(bh), np.sin(bh)
     cases = {
         "E[cos b]": (cb, math.exp(-s / 2) * math.cos(beta)),
@@ -173,7 +173,7 @@ def test_exact_moments_match_monte_carlo(beta: float, sb: float) -> None:
         "E[r^2]": (rh * rh, r * r + sr * sr),
     }
     for name, (samples, exact) in cases.items():
-        check_mean(samples, exact, f"{name} beta={beta} sb={sb}")
+        check_mean(samples, exact, f"{name} beta={beta} sigma_beta_rad={sigma_beta_rad}")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -196,14 +196,19 @@ N_MC = 1_000_000
 
 @pytest.mark.parametrize("cfg", CONFIGS_2D, ids=str)
 def test_naive_moments_given_truth_2d(cfg: tuple[float, ...]) -> None:
-    r, beta, sr, sb = cfg
+    r, beta, sr, sigma_beta_rad = cfg
     rng = np.random.default_rng([2, CONFIGS_2D.index(cfg)])
-    rh, bh = _polar_draws(rng, N_MC, r, beta, sr, sb)
+    rh, bh = _polar_draws(rng, N_MC, r, beta, sr, sigma_beta_rad)
     pts = np.stack([rh * np.cos(bh), rh * np.sin(bh)], axis=-1)
     m, m_se = mean_se(pts)
-    check_mc(m, cv.naive_mean_given_truth(r, beta, sigma_azimuth_rad=sb), m_se, f"naive mean {cfg}")
+    check_mc(
+        m,
+        cv.naive_mean_given_truth(r, beta, sigma_beta_rad=sigma_beta_rad),
+        m_se,
+        f"naive mean {cfg}",
+    )
     c, c_se = cov_se(pts)
-    exact = cv.naive_cov_given_truth(r, beta, sigma_r_m=sr, sigma_azimuth_rad=sb)
+    exact = cv.naive_cov_given_truth(r, beta, sigma_r_m=sr, sigma_beta_rad=sigma_beta_rad)
     check_mc(upper(c), upper(exact), upper(c_se), f"naive cov {cfg}")
 
 
@@ -218,7 +223,7 @@ def test_naive_cov_given_truth_3d(cfg: tuple[float, ...]) -> None:
     check_mc(m, _naive_mean_3d(r, az, el, sa, se), m_se, f"naive 3D mean {cfg}")
     c, c_se = cov_se(pts)
     exact = cv3.naive_cov_given_truth_3d(
-        r, az, el, sigma_r_m=sr, sigma_azimuth_rad=sa, sigma_elevation_rad=se
+        r, az, el, sigma_r_m=sr, sigma_beta_rad=sa, sigma_elevation_rad=se
     )
     assert exact.shape == (3, 3)
     check_mc(upper(c), upper(exact), upper(c_se), f"naive 3D cov {cfg}")
@@ -239,8 +244,8 @@ BIAS_CONFIGS = (
 def test_quoted_naive_bias() -> None:
     """docs/conversion.md: 'pulled towards the radar by about r·s/2 (23 m at 150 km and σβ = 1°,
     91 m at 2°)'."""
-    for sb, quoted in ((1 * DEG, 23), (2 * DEG, 91)):
-        s = sb * sb
+    for sigma_beta_rad, quoted in ((1 * DEG, 23), (2 * DEG, 91)):
+        s = sigma_beta_rad * sigma_beta_rad
         pull = 150e3 * (1 - math.exp(-s / 2))  # exact, from E[cos β̂] = e^(−s/2) cos β
         assert round(pull) == quoted
         assert abs(pull - 150e3 * s / 2) <= 150e3 * s * s / 8  # ≈ r s/2 to second order
@@ -248,21 +253,23 @@ def test_quoted_naive_bias() -> None:
 
 @pytest.mark.parametrize("cfg", BIAS_CONFIGS, ids=str)
 def test_conversion_bias_given_truth(cfg: tuple[float, ...]) -> None:
-    r, beta, sr, sb = cfg
-    s = sb * sb
+    r, beta, sr, sigma_beta_rad = cfg
+    s = sigma_beta_rad * sigma_beta_rad
     rng = np.random.default_rng([4, BIAS_CONFIGS.index(cfg)])
-    rh, bh = _polar_draws(rng, N_MC, r, beta, sr, sb)
+    rh, bh = _polar_draws(rng, N_MC, r, beta, sr, sigma_beta_rad)
     truth = r * np.array([math.cos(beta), math.sin(beta)])
     radial = truth / r
-    naive_mean = cv.naive_mean_given_truth(r, beta, sigma_azimuth_rad=sb)
+    naive_mean = cv.naive_mean_given_truth(r, beta, sigma_beta_rad=sigma_beta_rad)
 
     rad_bias: dict[str, np.ndarray] = {}  # per-draw radial error, per method
     exact_rad: dict[str, float] = {}
     for method in cv.METHODS_2D:
-        z = cv.convert(method, rh, bh, sigma_r_m=sr, sigma_azimuth_rad=sb, predicted_xy=truth).z
+        z = cv.convert(
+            method, rh, bh, sigma_r_m=sr, sigma_beta_rad=sigma_beta_rad, predicted_xy=truth
+        ).z
         assert z.shape == (N_MC, 2)
         expected = (
-            cv.scale_factor(method, sigma_azimuth_rad=sb) * naive_mean
+            cv.scale_factor(method, sigma_beta_rad=sigma_beta_rad) * naive_mean
         )  # closed form κ·E[naive]
         check_mean(z, expected, f"{method} mean {cfg}")
         rad_bias[method] = (z - truth) @ radial
@@ -285,7 +292,7 @@ def test_conversion_bias_given_truth(cfg: tuple[float, ...]) -> None:
     # ucm / ducm: exactly unbiased, so their MC check above was a check against the truth.
     for method in ("ucm", "ducm"):
         np.testing.assert_allclose(
-            cv.scale_factor(method, sigma_azimuth_rad=sb) * naive_mean,
+            cv.scale_factor(method, sigma_beta_rad=sigma_beta_rad) * naive_mean,
             truth,
             rtol=1e-14,
             atol=1e-9 * r,
@@ -305,28 +312,37 @@ UCM_CONFIGS = (
 
 @pytest.mark.parametrize("cfg", UCM_CONFIGS, ids=str)
 def test_ucm_covariance_given_truth(cfg: tuple[float, ...]) -> None:
-    r, beta, sr, sb = cfg
-    s = sb * sb
+    r, beta, sr, sigma_beta_rad = cfg
+    s = sigma_beta_rad * sigma_beta_rad
     rng = np.random.default_rng([5, UCM_CONFIGS.index(cfg)])
-    rh, bh = _polar_draws(rng, N_MC, r, beta, sr, sb)
+    rh, bh = _polar_draws(rng, N_MC, r, beta, sr, sigma_beta_rad)
     truth = r * np.array([math.cos(beta), math.sin(beta)])
-    exact = math.exp(s) * cv.naive_cov_given_truth(r, beta, sigma_r_m=sr, sigma_azimuth_rad=sb)
+    exact = math.exp(s) * cv.naive_cov_given_truth(
+        r, beta, sigma_r_m=sr, sigma_beta_rad=sigma_beta_rad
+    )
 
-    c, c_se = cov_se(cv.convert("ucm", rh, bh, sigma_r_m=sr, sigma_azimuth_rad=sb).z)
+    c, c_se = cov_se(cv.convert("ucm", rh, bh, sigma_r_m=sr, sigma_beta_rad=sigma_beta_rad).z)
     check_mc(upper(c), upper(exact), upper(c_se), f"ucm cov {cfg}")
-    if sb >= 0.3:  # power: without the e^s factor the covariance is rejected
-        wrong = cv.naive_cov_given_truth(r, beta, sigma_r_m=sr, sigma_azimuth_rad=sb)
+    if sigma_beta_rad >= 0.3:  # power: without the e^s factor the covariance is rejected
+        wrong = cv.naive_cov_given_truth(r, beta, sigma_r_m=sr, sigma_beta_rad=sigma_beta_rad)
         assert np.any(np.abs(upper(c) - upper(wrong)) > Z * upper(c_se))
 
     # ducm evaluated at the true position: exactly the true-conditioned covariance, for every
     # measurement (it does not depend on r̂, β̂).
     ducm = cv.convert(
-        "ducm", rh[:1000], bh[:1000], sigma_r_m=sr, sigma_azimuth_rad=sb, predicted_xy=truth
+        "ducm",
+        rh[:1000],
+        bh[:1000],
+        sigma_r_m=sr,
+        sigma_beta_rad=sigma_beta_rad,
+        predicted_xy=truth,
     )
     assert rel_entrywise(np.broadcast_to(ducm.R, (1000, 2, 2)), exact) < 1e-13
     # ... and ucm evaluated at the truth gives the same matrix.
     assert (
-        rel_entrywise(cv.convert("ucm", r, beta, sigma_r_m=sr, sigma_azimuth_rad=sb).R, exact)
+        rel_entrywise(
+            cv.convert("ucm", r, beta, sigma_r_m=sr, sigma_beta_rad=sigma_beta_rad).R, exact
+        )
         < 1e-13
     )
 
@@ -337,7 +353,7 @@ def test_ucm_3d_unbiased_with_exact_covariance(cfg: tuple[float, ...]) -> None:
     rng = np.random.default_rng([6, CONFIGS_3D.index(cfg)])
     rh, ah = _polar_draws(rng, N_MC, r, az, sr, sa)
     eh = el + se * rng.standard_normal(N_MC)
-    z = cv3.convert_ucm_3d(rh, ah, eh, sigma_r_m=sr, sigma_azimuth_rad=sa, sigma_elevation_rad=se).z
+    z = cv3.convert_ucm_3d(rh, ah, eh, sigma_r_m=sr, sigma_beta_rad=sa, sigma_elevation_rad=se).z
     truth = _polar_point_3d(r, az, el)
     check_mean(z, truth, f"ucm 3D mean {cfg}")
 
@@ -347,14 +363,14 @@ def test_ucm_3d_unbiased_with_exact_covariance(cfg: tuple[float, ...]) -> None:
     exact = (
         d[:, None]
         * cv3.naive_cov_given_truth_3d(
-            r, az, el, sigma_r_m=sr, sigma_azimuth_rad=sa, sigma_elevation_rad=se
+            r, az, el, sigma_r_m=sr, sigma_beta_rad=sa, sigma_elevation_rad=se
         )
         * d[None, :]
     )
     c, c_se = cov_se(z)
     check_mc(upper(c), upper(exact), upper(c_se), f"ucm 3D cov {cfg}")
     at_truth = cv3.convert_ucm_3d(
-        r, az, el, sigma_r_m=sr, sigma_azimuth_rad=sa, sigma_elevation_rad=se
+        r, az, el, sigma_r_m=sr, sigma_beta_rad=sa, sigma_elevation_rad=se
     )
     assert rel_entrywise(at_truth.R, exact) < 1e-13
     np.testing.assert_allclose(at_truth.z, d * truth, rtol=1e-14)
@@ -376,23 +392,28 @@ QUAD_CONFIGS = (  # r̂, β̂, σr, σβ
 
 @pytest.mark.parametrize("cfg", QUAD_CONFIGS, ids=str)
 def test_averaged_cov_is_posterior_average(cfg: tuple[float, ...]) -> None:
-    r_hat, b_hat, sr, sb = cfg
+    r_hat, b_hat, sr, sigma_beta_rad = cfg
     x, w = hermegauss(40)  # probabilists' Hermite: weight e^(−x²/2)
     w = w / math.sqrt(2 * math.pi)  # -> expectation over a standard normal
     r = r_hat + sr * x[:, None]
-    b = b_hat + sb * x[None, :]
+    b = b_hat + sigma_beta_rad * x[None, :]
     avg = np.einsum(
-        "i,j,ijkl->kl", w, w, cv.naive_cov_given_truth(r, b, sigma_r_m=sr, sigma_azimuth_rad=sb)
+        "i,j,ijkl->kl",
+        w,
+        w,
+        cv.naive_cov_given_truth(r, b, sigma_r_m=sr, sigma_beta_rad=sigma_beta_rad),
     )
     assert (
-        rel_entrywise(cv.averaged_cov(r_hat, b_hat, sigma_r_m=sr, sigma_azimuth_rad=sb), avg)
+        rel_entrywise(
+            cv.averaged_cov(r_hat, b_hat, sigma_r_m=sr, sigma_beta_rad=sigma_beta_rad), avg
+        )
         < 1e-10
     )
     # seed and cmkf_d both report exactly this matrix.
     for method in ("seed", "cmkf_d"):
         np.testing.assert_array_equal(
-            cv.convert(method, r_hat, b_hat, sigma_r_m=sr, sigma_azimuth_rad=sb).R,
-            cv.averaged_cov(r_hat, b_hat, sigma_r_m=sr, sigma_azimuth_rad=sb),
+            cv.convert(method, r_hat, b_hat, sigma_r_m=sr, sigma_beta_rad=sigma_beta_rad).R,
+            cv.averaged_cov(r_hat, b_hat, sigma_r_m=sr, sigma_beta_rad=sigma_beta_rad),
         )
 
 
@@ -415,17 +436,20 @@ def _num_jacobian(f, x: np.ndarray, h: np.ndarray) -> np.ndarray:
     "cfg", [(150e3, 0.0, 250.0, 1 * DEG), (10e3, 2.5, 30.0, 0.3), (50.0, -1.9, 0.5, 1e-3)]
 )
 def test_linearized_cov_is_j_diag_jt(cfg: tuple[float, ...]) -> None:
-    r, beta, sr, sb = cfg
+    r, beta, sr, sigma_beta_rad = cfg
     jac = _num_jacobian(
         lambda p: np.array([p[0] * np.cos(p[1]), p[0] * np.sin(p[1])]),
         np.array([r, beta]),
         np.array([1e-3 * r, 1e-5]),
     )
-    ref = jac @ np.diag([sr**2, sb**2]) @ jac.T
-    assert rel_entrywise(cv.linearized_cov(r, beta, sigma_r_m=sr, sigma_azimuth_rad=sb), ref) < 1e-6
-    naive = cv.convert("naive", r, beta, sigma_r_m=sr, sigma_azimuth_rad=sb)
+    ref = jac @ np.diag([sr**2, sigma_beta_rad**2]) @ jac.T
+    assert (
+        rel_entrywise(cv.linearized_cov(r, beta, sigma_r_m=sr, sigma_beta_rad=sigma_beta_rad), ref)
+        < 1e-6
+    )
+    naive = cv.convert("naive", r, beta, sigma_r_m=sr, sigma_beta_rad=sigma_beta_rad)
     np.testing.assert_array_equal(
-        naive.R, cv.linearized_cov(r, beta, sigma_r_m=sr, sigma_azimuth_rad=sb)
+        naive.R, cv.linearized_cov(r, beta, sigma_r_m=sr, sigma_beta_rad=sigma_beta_rad)
     )
     np.testing.assert_allclose(naive.z, [r * math.cos(beta), r * math.sin(beta)], rtol=1e-15)
 
@@ -439,9 +463,7 @@ def test_naive_3d_cov_is_j_diag_jt(cfg: tuple[float, ...]) -> None:
         np.array([1e-3 * r, 1e-5, 1e-5]),
     )
     ref = jac @ np.diag([sr**2, sa**2, se**2]) @ jac.T
-    out = cv3.convert_naive_3d(
-        r, az, el, sigma_r_m=sr, sigma_azimuth_rad=sa, sigma_elevation_rad=se
-    )
+    out = cv3.convert_naive_3d(r, az, el, sigma_r_m=sr, sigma_beta_rad=sa, sigma_elevation_rad=se)
     assert rel_entrywise(out.R, ref) < 1e-6
     np.testing.assert_allclose(out.z, _polar_point_3d(r, az, el), rtol=1e-15, atol=1e-12 * r)
 
@@ -467,8 +489,8 @@ def test_exact_covariances_high_precision(cfg: tuple[float, ...]) -> None:
     ~σr² + r² s²/2; float64 loses eps·r²/σr² of it (once 56 %, and negative in 3D, here).
     """
     getcontext().prec = 50
-    r, sr, sb = cfg
-    R, SR, S = Decimal(r), Decimal(sr), Decimal(sb) ** 2
+    r, sr, sigma_beta_rad = cfg
+    R, SR, S = Decimal(r), Decimal(sr), Decimal(sigma_beta_rad) ** 2
     m2 = R * R + SR * SR
 
     def ex(v: Decimal) -> Decimal:
@@ -491,11 +513,16 @@ def test_exact_covariances_high_precision(cfg: tuple[float, ...]) -> None:
     naive3 = [m2 * ecc * ecc - R * R * ex(-S) * ex(-S), m2 * ecc * ess, m2 * ess]
 
     for got, ref in (
-        (cv.naive_cov_given_truth(r, 0.0, sigma_r_m=sr, sigma_azimuth_rad=sb), naive),
-        (cv.averaged_cov(r, 0.0, sigma_r_m=sr, sigma_azimuth_rad=sb), avg),
+        (cv.naive_cov_given_truth(r, 0.0, sigma_r_m=sr, sigma_beta_rad=sigma_beta_rad), naive),
+        (cv.averaged_cov(r, 0.0, sigma_r_m=sr, sigma_beta_rad=sigma_beta_rad), avg),
         (
             cv3.naive_cov_given_truth_3d(
-                r, 0.0, 0.0, sigma_r_m=sr, sigma_azimuth_rad=sb, sigma_elevation_rad=sb
+                r,
+                0.0,
+                0.0,
+                sigma_r_m=sr,
+                sigma_beta_rad=sigma_beta_rad,
+                sigma_elevation_rad=sigma_beta_rad,
             ),
             naive3,
         ),
@@ -542,20 +569,22 @@ def assert_symmetric_pd(cov: np.ndarray, what: str) -> None:
 
 
 @settings(max_examples=300, deadline=None)
-@given(r=radius, beta=angle, sr=sigma_r, sb=sigma_angle, rp=radius, bp=angle)
-@example(r=1e7, beta=0.0, sr=0.1, sb=1e-5, rp=1e7, bp=0.0)  # negative variance before the fix
-@example(r=1e7, beta=math.pi / 4, sr=0.1, sb=0.3, rp=1.0, bp=-math.pi)  # cond ≈ 1e15
-def test_2d_covariances_symmetric_pd(r, beta, sr, sb, rp, bp) -> None:
+@given(r=radius, beta=angle, sr=sigma_r, sigma_beta_rad=sigma_angle, rp=radius, bp=angle)
+@example(
+    r=1e7, beta=0.0, sr=0.1, sigma_beta_rad=1e-5, rp=1e7, bp=0.0
+)  # negative variance before the fix
+@example(r=1e7, beta=math.pi / 4, sr=0.1, sigma_beta_rad=0.3, rp=1.0, bp=-math.pi)  # cond ≈ 1e15
+def test_2d_covariances_symmetric_pd(r, beta, sr, sigma_beta_rad, rp, bp) -> None:
     predicted = np.array([rp * math.cos(bp), rp * math.sin(bp)])
     for method in cv.METHODS_2D:
         out = cv.convert(
-            method, r, beta, sigma_r_m=sr, sigma_azimuth_rad=sb, predicted_xy=predicted
+            method, r, beta, sigma_r_m=sr, sigma_beta_rad=sigma_beta_rad, predicted_xy=predicted
         )
         assert out.z.shape == (2,) and out.R.shape == (2, 2)
         assert np.all(np.isfinite(out.z))
         assert_symmetric_pd(out.R, method)
     assert_symmetric_pd(
-        cv.naive_cov_given_truth(r, beta, sigma_r_m=sr, sigma_azimuth_rad=sb),
+        cv.naive_cov_given_truth(r, beta, sigma_r_m=sr, sigma_beta_rad=sigma_beta_rad),
         "naive_cov_given_truth",
     )
 
@@ -565,12 +594,12 @@ def test_2d_covariances_symmetric_pd(r, beta, sr, sb, rp, bp) -> None:
 @example(r=1e7, az=0.0, el=0.0, sr=0.1, sa=1e-5, se=1e-5)  # negative variance before the fix
 def test_3d_covariances_symmetric_pd(r, az, el, sr, sa, se) -> None:
     for name, fn in (("naive_3d", cv3.convert_naive_3d), ("ucm_3d", cv3.convert_ucm_3d)):
-        out = fn(r, az, el, sigma_r_m=sr, sigma_azimuth_rad=sa, sigma_elevation_rad=se)
+        out = fn(r, az, el, sigma_r_m=sr, sigma_beta_rad=sa, sigma_elevation_rad=se)
         assert out.z.shape == (3,) and out.R.shape == (3, 3)
         assert_symmetric_pd(out.R, name)
     assert_symmetric_pd(
         cv3.naive_cov_given_truth_3d(
-            r, az, el, sigma_r_m=sr, sigma_azimuth_rad=sa, sigma_elevation_rad=se
+            r, az, el, sigma_r_m=sr, sigma_beta_rad=sa, sigma_elevation_rad=se
         ),
         "naive_cov_given_truth_3d",
     )
@@ -585,7 +614,7 @@ def _valid_batch(rng: np.random.Generator, shape: tuple[int, ...]) -> dict[str, 
         "beta": rng.uniform(-math.pi, math.pi, shape),
         "el": rng.uniform(-1.4, 1.4, shape),
         "sr": log_uniform(0.1, 1e4),
-        "sb": log_uniform(1e-5, 0.3),
+        "sigma_beta_rad": log_uniform(1e-5, 0.3),
         "se": log_uniform(1e-5, 0.3),
         "pred": log_uniform(1.0, 1e7)[..., None]
         * np.stack([np.cos(b := rng.uniform(-math.pi, math.pi, shape)), np.sin(b)], axis=-1),
@@ -613,7 +642,7 @@ def _assert_batch_matches(batched: cv.Converted, single, shape, d: int, what: st
 def test_broadcasting_equals_elementwise(shape, seed, scalar_sigmas) -> None:
     v = _valid_batch(np.random.default_rng(seed), shape)
     if scalar_sigmas:  # the common case: one (σr, σβ, σε) for the whole batch
-        for k in ("sr", "sb", "se"):
+        for k in ("sr", "sigma_beta_rad", "se"):
             v[k] = np.asarray(v[k].flat[0])
 
     def at(k: str, idx: tuple[int, ...]):
@@ -625,7 +654,7 @@ def test_broadcasting_equals_elementwise(shape, seed, scalar_sigmas) -> None:
             v["r"],
             v["beta"],
             sigma_r_m=v["sr"],
-            sigma_azimuth_rad=v["sb"],
+            sigma_beta_rad=v["sigma_beta_rad"],
             predicted_xy=v["pred"],
         )
         _assert_batch_matches(
@@ -635,7 +664,7 @@ def test_broadcasting_equals_elementwise(shape, seed, scalar_sigmas) -> None:
                 v["r"][i],
                 v["beta"][i],
                 sigma_r_m=at("sr", i),
-                sigma_azimuth_rad=at("sb", i),
+                sigma_beta_rad=at("sigma_beta_rad", i),
                 predicted_xy=v["pred"][i],
             ),
             shape,
@@ -644,10 +673,10 @@ def test_broadcasting_equals_elementwise(shape, seed, scalar_sigmas) -> None:
         )
 
     def sig(i: tuple[int, ...] | None = None) -> dict:
-        names = ("sigma_r_m", "sigma_azimuth_rad", "sigma_elevation_rad")
+        names = ("sigma_r_m", "sigma_beta_rad", "sigma_elevation_rad")
         if i is None:
-            return {n: v[k] for n, k in zip(names, ("sr", "sb", "se"), strict=True)}
-        return {n: at(k, i) for n, k in zip(names, ("sr", "sb", "se"), strict=True)}
+            return {n: v[k] for n, k in zip(names, ("sr", "sigma_beta_rad", "se"), strict=True)}
+        return {n: at(k, i) for n, k in zip(names, ("sr", "sigma_beta_rad", "se"), strict=True)}
 
     for name, fn in (("naive_3d", cv3.convert_naive_3d), ("ucm_3d", cv3.convert_ucm_3d)):
         args = (v["r"], v["beta"], v["el"])
@@ -668,12 +697,16 @@ def test_broadcasting_equals_elementwise(shape, seed, scalar_sigmas) -> None:
             f"{name} scalar elevation",
         )
     # The helper functions carry the batch shape too.
-    assert cv.naive_mean_given_truth(v["r"], v["beta"], sigma_azimuth_rad=v["sb"]).shape == (
+    assert cv.naive_mean_given_truth(
+        v["r"], v["beta"], sigma_beta_rad=v["sigma_beta_rad"]
+    ).shape == (
         *shape,
         2,
     )
     for fn2 in (cv.naive_cov_given_truth, cv.linearized_cov, cv.averaged_cov):
-        assert fn2(v["r"], v["beta"], sigma_r_m=v["sr"], sigma_azimuth_rad=v["sb"]).shape == (
+        assert fn2(
+            v["r"], v["beta"], sigma_r_m=v["sr"], sigma_beta_rad=v["sigma_beta_rad"]
+        ).shape == (
             *shape,
             2,
             2,
@@ -683,7 +716,7 @@ def test_broadcasting_equals_elementwise(shape, seed, scalar_sigmas) -> None:
         v["beta"],
         v["el"],
         sigma_r_m=v["sr"],
-        sigma_azimuth_rad=v["sb"],
+        sigma_beta_rad=v["sigma_beta_rad"],
         sigma_elevation_rad=v["se"],
     ).shape == (*shape, 3, 3)
 
@@ -695,8 +728,8 @@ def test_broadcasting_equals_elementwise(shape, seed, scalar_sigmas) -> None:
 
 def test_unknown_method_names_the_allowed_ones() -> None:
     for call in (
-        lambda: cv.convert("bogus", 1e3, 0.1, sigma_r_m=10.0, sigma_azimuth_rad=0.01),
-        lambda: cv.scale_factor("bogus", sigma_azimuth_rad=0.01),
+        lambda: cv.convert("bogus", 1e3, 0.1, sigma_r_m=10.0, sigma_beta_rad=0.01),
+        lambda: cv.scale_factor("bogus", sigma_beta_rad=0.01),
     ):
         with pytest.raises(ValueError) as info:
             call()
@@ -708,21 +741,19 @@ def test_unknown_method_names_the_allowed_ones() -> None:
 
 def test_ducm_needs_predicted_position() -> None:
     with pytest.raises(ValueError, match="predicted_xy"):
-        cv.convert("ducm", 1e3, 0.1, sigma_r_m=10.0, sigma_azimuth_rad=0.01)
+        cv.convert("ducm", 1e3, 0.1, sigma_r_m=10.0, sigma_beta_rad=0.01)
 
 
 def test_point_and_covariance_share_the_batch_shape() -> None:
     """Scalar measurement, batched σ (or one prediction, batched measurements): z and R agree."""
-    c = cv.convert(
-        "naive", 1e5, 0.3, sigma_r_m=250.0, sigma_azimuth_rad=np.array([0.01, 0.02, 0.03])
-    )
+    c = cv.convert("naive", 1e5, 0.3, sigma_r_m=250.0, sigma_beta_rad=np.array([0.01, 0.02, 0.03]))
     assert c.z.shape == (3, 2) and c.R.shape == (3, 2, 2)
     d = cv.convert(
         "ducm",
         np.array([1e5, 2e5]),
         0.1,
         sigma_r_m=250.0,
-        sigma_azimuth_rad=0.01,
+        sigma_beta_rad=0.01,
         predicted_xy=np.array([1e5, 1e4]),
     )
     assert d.z.shape == (2, 2) and d.R.shape == (2, 2, 2)

@@ -153,7 +153,7 @@ def draws_3d(rng, n: int, r, az, el, sr, sa, se) -> tuple[np.ndarray, ...]:
 
 def convert(method: str, r, az, el, sr, sa, se, predicted=None):
     """Every 3D conversion by name (mucm lives beside the registered five)."""
-    sig = {"sigma_r_m": sr, "sigma_azimuth_rad": sa, "sigma_elevation_rad": se}
+    sig = {"sigma_r_m": sr, "sigma_beta_rad": sa, "sigma_elevation_rad": se}
     if method == "mucm":
         return mu.convert_mucm_3d(r, az, el, **sig)
     return cv3.convert_3d(method, r, az, el, **sig, predicted_xyz=predicted)
@@ -236,17 +236,19 @@ SEED_GRID = [
 def test_second_order_tool_reproduces_the_2d_seed() -> None:
     """Prosov eq. 7 applied to the polar map with the printed sign is ``seed``'s point (eq. 10)
     to 1e-12; the debiased sign is the opposite correction r̂ (1 + s/2)(cos β̂, sin β̂)."""
-    r, beta, sr, sb = (np.array(v) for v in zip(*SEED_GRID, strict=True))
+    r, beta, sr, sigma_beta_rad = (np.array(v) for v in zip(*SEED_GRID, strict=True))
     theta = np.stack([r, beta], axis=-1)  # a batch of five
     cov = np.zeros((len(r), 2, 2))
-    cov[:, 0, 0], cov[:, 1, 1] = sr**2, sb**2
+    cov[:, 0, 0], cov[:, 1, 1] = sr**2, sigma_beta_rad**2
     args = (so.polar_map(theta), so.polar_jacobian(theta), so.polar_hessians(theta), cov)
     printed = so.second_order_convert(*args, sign="printed")
-    seed = cv.convert("seed", r, beta, sigma_r_m=sr, sigma_azimuth_rad=sb)
+    seed = cv.convert("seed", r, beta, sigma_r_m=sr, sigma_beta_rad=sigma_beta_rad)
     assert np.max(np.abs(printed.point - seed.z) / r[:, None]) < 1e-12
     debiased = so.second_order_convert(*args, sign="debiased").point
     naive = r[:, None] * np.stack([np.cos(beta), np.sin(beta)], axis=-1)
-    np.testing.assert_allclose(debiased, naive * (1 + sb**2 / 2)[:, None], rtol=1e-12, atol=1e-9)
+    np.testing.assert_allclose(
+        debiased, naive * (1 + sigma_beta_rad**2 / 2)[:, None], rtol=1e-12, atol=1e-9
+    )
     with pytest.raises(ValueError, match="sign must be one of debiased, printed"):
         so.second_order_correction(args[2], cov, sign="plus")  # type: ignore[arg-type]
 
@@ -333,7 +335,7 @@ def test_3d_conversions_given_truth(cfg: tuple[float, ...]) -> None:
     # Covariance of the error given the truth: D C D with D = diag(κ) and C the naive point's
     # exact covariance (itself checked by Monte Carlo in tests/test_conversion.py).
     C = cv3.naive_cov_given_truth_3d(
-        r, az, el, sigma_r_m=sr, sigma_azimuth_rad=sa, sigma_elevation_rad=se
+        r, az, el, sigma_r_m=sr, sigma_beta_rad=sa, sigma_elevation_rad=se
     )
     for method in ("cmkf_d", "ucm"):
         d = scales(method, sa, se)
@@ -368,7 +370,7 @@ def test_averaged_cov_3d_is_the_posterior_average(cfg: tuple[float, ...]) -> Non
     mr, ma, me = draws_3d(rng, N_MC, 0.0, 0.0, 0.0, sr, sa, se)
     err = point_3d(tr + mr, ta + ma, te + me) - shrink(sa, se) * point_3d(tr, ta, te)
     m2, m2_se = moment_se(err, centred=False)
-    sig = {"sigma_r_m": sr, "sigma_azimuth_rad": sa, "sigma_elevation_rad": se}
+    sig = {"sigma_r_m": sr, "sigma_beta_rad": sa, "sigma_elevation_rad": se}
     avg = cv3.averaged_cov_3d(r, az, el, **sig)
     check_mc(m2, upper(avg), m2_se, f"averaged cov 3D {cfg}")
     # seed and cmkf_d report it.
@@ -406,9 +408,9 @@ def test_mucm_3d_is_the_posterior_mean_square_error(cfg: tuple[float, ...]) -> N
 def test_mucm_2d_is_duan_han_li() -> None:
     """The 2D mucm covariance equals Duan, Han and Li's printed form (1e-11: their form
     subtracts O(r̂²) terms, losing ~eps/s), and its Monte Carlo posterior check."""
-    for r, beta, sr, sb in [(150e3, 0.7, 250.0, 2 * DEG), (10e3, 2.5, 30.0, 0.3)]:
-        s = sb * sb
-        c = mu.convert_mucm(r, beta, sigma_r_m=sr, sigma_azimuth_rad=sb)
+    for r, beta, sr, sigma_beta_rad in [(150e3, 0.7, 250.0, 2 * DEG), (10e3, 2.5, 30.0, 0.3)]:
+        s = sigma_beta_rad * sigma_beta_rad
+        c = mu.convert_mucm(r, beta, sigma_r_m=sr, sigma_beta_rad=sigma_beta_rad)
         k = (math.exp(s) - 2) * r * r
         h = 0.5 * (r * r + sr * sr)
         e2 = math.exp(-2 * s)
@@ -424,10 +426,13 @@ def test_mucm_2d_is_duan_han_li() -> None:
         duan[1, 0] = duan[0, 1]
         assert rel_entrywise(c.R, duan) < 1e-11
         rng = np.random.default_rng(21)
-        tr, tb = r + sr * rng.standard_normal(N_MC), beta + sb * rng.standard_normal(N_MC)
+        tr, tb = (
+            r + sr * rng.standard_normal(N_MC),
+            beta + sigma_beta_rad * rng.standard_normal(N_MC),
+        )
         err = c.z - np.stack([tr * np.cos(tb), tr * np.sin(tb)], axis=-1)
         m2, m2_se = moment_se(err, centred=False)
-        check_mc(m2, upper(c.R), m2_se, f"mucm 2D R {r, beta, sr, sb}")
+        check_mc(m2, upper(c.R), m2_se, f"mucm 2D R {r, beta, sr, sigma_beta_rad}")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -439,15 +444,15 @@ def test_mucm_2d_is_duan_han_li() -> None:
 def test_3d_reduces_to_2d_at_zero_elevation(method: str) -> None:
     """ε̂ = 0 and σε = 0: the x–y part equals the 2D conversion to 1e-12, z and its rows are 0
     (a batch of five, including r/σr = 1e8, where only cancellation-free formulas pass)."""
-    r, beta, sr, sb = (np.array(v) for v in zip(*SEED_GRID, strict=True))
+    r, beta, sr, sigma_beta_rad = (np.array(v) for v in zip(*SEED_GRID, strict=True))
     pred = 1.01 * r[:, None] * np.stack([np.cos(beta + 0.01), np.sin(beta + 0.01)], axis=-1)
-    sig2 = {"sigma_r_m": sr, "sigma_azimuth_rad": sb}
+    sig2 = {"sigma_r_m": sr, "sigma_beta_rad": sigma_beta_rad}
     if method == "mucm":
         two = mu.convert_mucm(r, beta, **sig2)
     else:
         two = cv.convert(method, r, beta, **sig2, predicted_xy=pred)
     pred3 = np.concatenate([pred, np.zeros((len(r), 1))], axis=-1)
-    three = convert(method, r, beta, np.zeros_like(r), sr, sb, 0.0, predicted=pred3)
+    three = convert(method, r, beta, np.zeros_like(r), sr, sigma_beta_rad, 0.0, predicted=pred3)
     assert np.max(np.abs(three.z[:, :2] - two.z) / r[:, None]) < 1e-12
     assert rel_entrywise(three.R[:, :2, :2], two.R) < 1e-12
     assert np.all(three.z[:, 2] == 0) and np.all(three.R[:, 2, :] == 0)
@@ -466,9 +471,9 @@ def test_3d_conversions_broadcast_over_a_batch() -> None:
             np.testing.assert_allclose(grid.z[idx], one.z, rtol=1e-15)
             np.testing.assert_allclose(grid.R[idx], one.R, rtol=1e-14, atol=1e-9)
     with pytest.raises(ValueError, match="method ducm needs predicted_xyz"):
-        cv3.convert_3d("ducm", r, az, el, sigma_r_m=1, sigma_azimuth_rad=1, sigma_elevation_rad=1)
+        cv3.convert_3d("ducm", r, az, el, sigma_r_m=1, sigma_beta_rad=1, sigma_elevation_rad=1)
     with pytest.raises(ValueError, match="method must be one of naive, seed, cmkf_d, ucm, ducm"):
-        cv3.convert_3d("magic", r, az, el, sigma_r_m=1, sigma_azimuth_rad=1, sigma_elevation_rad=1)
+        cv3.convert_3d("magic", r, az, el, sigma_r_m=1, sigma_beta_rad=1, sigma_elevation_rad=1)
 
 
 # ---------------------------------------------------------------------------------------------

@@ -191,12 +191,12 @@ def _mc_converted_tracks(radar: str, runs: int, steps: int, seed: int = 3):
 
     cfg = DopplerTrackingConfig(radar=radar, runs=runs, steps=steps, seed=seed, engine="numpy")
     rp = cfg.radar_preset()
-    sb = float(np.deg2rad(cfg.sigma_beta_deg))
+    sigma_beta_rad = float(np.deg2rad(cfg.sigma_beta_deg))
     rng = np.random.default_rng(np.random.SeedSequence(seed))
     meas = polar_doppler_measurements(
         cfg.scenario().truth(),
         sigma_r_m=rp.sigma_r_m,
-        sigma_azimuth_rad=sb,
+        sigma_beta_rad=sigma_beta_rad,
         sigma_vr_mps=rp.sigma_vr_mps,
         runs=runs,
         rng=rng,
@@ -214,12 +214,12 @@ def _mc_converted_tracks(radar: str, runs: int, steps: int, seed: int = 3):
         meas.r[:, :k],
         meas.vr[:, :k],
         meas.beta[:, k - 1],
-        sigma_azimuth_rad=sb,
+        sigma_beta_rad=sigma_beta_rad,
         sigma_v0_mps=cfg.sigma_v0_mps,
     )
     settings = FilterSettings(
         rp.sigma_r_m,
-        sb,
+        sigma_beta_rad,
         rp.period_s,
         cfg.sigma_a_mps2,
         cfg.sigma_v0_mps,
@@ -241,7 +241,7 @@ def _plots_of_run(cfg, meas, j: int, target: str = ""):
             range_m=float(meas.r[j, n]),
             azimuth_rad=float(meas.beta[j, n]),
             sigma_r_m=rp.sigma_r_m,
-            sigma_azimuth_rad=float(np.deg2rad(cfg.sigma_beta_deg)),
+            sigma_beta_rad=float(np.deg2rad(cfg.sigma_beta_deg)),
             radar="a",
             radial_velocity_mps=float(meas.vr[j, n]),
             sigma_radial_velocity_mps=rp.sigma_vr_mps,

@@ -30,14 +30,14 @@ def test_los_doppler_update_is_the_kalman_update_of_its_linear_model(dims: int) 
     x = rng.normal(size=(m, n)) * np.tile([1e4, 100], dims)
     vr, beta = rng.normal(size=m) * 50, rng.uniform(-3, 3, size=m)
     eps = rng.uniform(-0.5, 0.5, size=m) if dims == 3 else np.zeros(m)
-    svr, sb, se = 2.0, 0.01, (0.02 if dims == 3 else 0.0)
+    svr, sigma_beta_rad, se = 2.0, 0.01, (0.02 if dims == 3 else 0.0)
     out = doppler_update(
         as_batch(x, P),
         vr,
         beta,
         eps,
         sigma_vr_mps=svr,
-        sigma_azimuth_rad=sb,
+        sigma_beta_rad=sigma_beta_rad,
         sigma_elevation_rad=se,
     )
     for i in range(m):
@@ -47,7 +47,7 @@ def test_los_doppler_update_is_the_kalman_update_of_its_linear_model(dims: int) 
         g_e = np.array([-s_e * cb, -s_e * sn, ce])[:dims]  # ∂u/∂ε
         h, wb, we = (np.zeros(n) for _ in range(3))
         h[1::2], wb[1::2], we[1::2] = u, g_b, g_e
-        var = svr**2 + ((wb @ x[i]) ** 2 + wb @ P[i] @ wb) * sb**2
+        var = svr**2 + ((wb @ x[i]) ** 2 + wb @ P[i] @ wb) * sigma_beta_rad**2
         var += ((we @ x[i]) ** 2 + we @ P[i] @ we) * se**2
         S = h @ P[i] @ h + var
         K = P[i] @ h / S
@@ -63,7 +63,7 @@ def test_finite_memory_start_covariance_matches_monte_carlo(doppler: bool) -> No
     radar = preset("RLS3")
     k, runs = 3, 200_000
     sr, svr, T = radar.sigma_r_m, radar.sigma_vr_mps, radar.period_s
-    sb = np.deg2rad(0.5)
+    sigma_beta_rad = np.deg2rad(0.5)
     # A radially moving target (no tangential motion): the fit is then exact in the mean.
     from radarviz.core.scenarios.planar import ConstantVelocityTarget2D
 
@@ -71,7 +71,7 @@ def test_finite_memory_start_covariance_matches_monte_carlo(doppler: bool) -> No
     meas = polar_doppler_measurements(
         truth,
         sigma_r_m=sr,
-        sigma_azimuth_rad=sb,
+        sigma_beta_rad=sigma_beta_rad,
         sigma_vr_mps=svr,
         runs=runs,
         rng=np.random.default_rng(3),
@@ -82,7 +82,7 @@ def test_finite_memory_start_covariance_matches_monte_carlo(doppler: bool) -> No
         meas.r,
         meas.vr if doppler else None,
         meas.beta[:, -1],
-        sigma_azimuth_rad=sb,
+        sigma_beta_rad=sigma_beta_rad,
         sigma_v0_mps=1000.0,
     )
     # Range and radial velocity of the start state are the fit's r̂ and V̂r (the measured line
@@ -165,11 +165,11 @@ def test_textbook_joint_doppler_ekf_diverges_where_the_line_of_sight_update_hold
 
     radar, runs, steps, k = preset("RLS6"), 40, 10, 3
     sr, svr, T = radar.sigma_r_m, radar.sigma_vr_mps, radar.period_s
-    sb = np.deg2rad(1.0)
+    sigma_beta_rad = np.deg2rad(1.0)
     truth = ConstantVelocityTarget2D(80e3, 60e3, -200.0, 100.0, T, steps).truth()
     rng = np.random.default_rng(12)
     meas = polar_doppler_measurements(
-        truth, sigma_r_m=sr, sigma_azimuth_rad=sb, sigma_vr_mps=svr, runs=runs, rng=rng
+        truth, sigma_r_m=sr, sigma_beta_rad=sigma_beta_rad, sigma_vr_mps=svr, runs=runs, rng=rng
     )
     fit = finite_memory_fit(k, sigma_r_m=sr, sigma_vr_mps=svr, period_s=T, with_doppler=True)
     start = finite_memory_start(
@@ -177,7 +177,7 @@ def test_textbook_joint_doppler_ekf_diverges_where_the_line_of_sight_update_hold
         meas.r[:, :k],
         meas.vr[:, :k],
         meas.beta[:, k - 1],
-        sigma_azimuth_rad=sb,
+        sigma_beta_rad=sigma_beta_rad,
         sigma_v0_mps=1000.0,
     )
     nees = []
@@ -185,7 +185,7 @@ def test_textbook_joint_doppler_ekf_diverges_where_the_line_of_sight_update_hold
         ekf = ExtendedKalmanFilter(dim_x=4, dim_z=3)
         ekf.x, ekf.P = start.x[m].copy(), start.P[m].copy()
         ekf.F, ekf.Q = transition_matrix(T), np.zeros((4, 4))
-        R = np.diag([sr**2, sb**2, svr**2])
+        R = np.diag([sr**2, sigma_beta_rad**2, svr**2])
         for n in range(k, steps):
             ekf.predict()
             z = np.array([meas.r[m, n], meas.beta[m, n], meas.vr[m, n]])

@@ -61,7 +61,7 @@ def _measurement(state: CVBatch, dims: int, seed: int) -> list[np.ndarray]:
     return out
 
 
-NOISE = {"sigma_r_m": 50.0, "sigma_azimuth_rad": 0.01, "sigma_elevation_rad": 0.012}
+NOISE = {"sigma_r_m": 50.0, "sigma_beta_rad": 0.01, "sigma_elevation_rad": 0.012}
 
 
 def _updates(dims: int):
@@ -89,7 +89,7 @@ def _updates(dims: int):
             meas[1][rows],
             el,
             sigma_vr_mps=1.5,
-            sigma_azimuth_rad=0.01,
+            sigma_beta_rad=0.01,
             sigma_elevation_rad=0.012 if dims == 3 else 0.0,
         )
 
@@ -127,7 +127,7 @@ def test_comparison_catches_a_wrong_term() -> None:
         meas[1][:1],
         meas[2][:1],
         sigma_vr_mps=1.5,
-        sigma_azimuth_rad=0.0,
+        sigma_beta_rad=0.0,
         sigma_elevation_rad=0.012,
     )
     assert np.abs(one.x[0] - big.x[0]).max() > 10 * 1e-9 * np.abs(big.x[0]).max()

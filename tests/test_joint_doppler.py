@@ -25,10 +25,10 @@ def test_angle_error_and_doppler_error_covariance_by_monte_carlo(dims: int) -> N
     m = 400_000
     p = np.array([80e3, 60e3, 20e3])[:dims]
     v = np.array([-200.0, 100.0, 30.0])[:dims]
-    sb, se, sv = np.deg2rad(1.0), np.deg2rad(0.7 if dims == 3 else 0.0), 1.0
+    sigma_beta_rad, se, sv = np.deg2rad(1.0), np.deg2rad(0.7 if dims == 3 else 0.0), 1.0
     r, beta, *el = polar_coordinates(list(p))
     eps = el[0] if dims == 3 else 0.0
-    db = sb * rng.standard_normal(m)
+    db = sigma_beta_rad * rng.standard_normal(m)
     de = se * rng.standard_normal(m)
     u_hat = direction_cosines(beta + db, eps + de)[:, :dims]
     vr = float(np.dot(p, v) / r)
@@ -39,9 +39,9 @@ def test_angle_error_and_doppler_error_covariance_by_monte_carlo(dims: int) -> N
     # Evaluated at the true angles (the first-order term is at the measured one, which
     # differs from it by one δ: averaged over the draws that is a higher-order effect).
     c_b, c_e = doppler_tilt_covariance(
-        state, beta, eps, sigma_vr_mps=sv, sigma_azimuth_rad=sb, sigma_elevation_rad=se
+        state, beta, eps, sigma_vr_mps=sv, sigma_beta_rad=sigma_beta_rad, sigma_elevation_rad=se
     )
-    for delta, sigma, c in ((db, sb, c_b[0]), (de, se, c_e[0])):
+    for delta, sigma, c in ((db, sigma_beta_rad, c_b[0]), (de, se, c_e[0])):
         if sigma == 0.0:
             assert c == 0.0
             continue
@@ -52,7 +52,7 @@ def test_angle_error_and_doppler_error_covariance_by_monte_carlo(dims: int) -> N
         assert abs(c) > 10 * se_got  # the covariance is resolved, not zero
 
 
-def _polar_reference(x, P, z, sr, sb, se, sv, dims):
+def _polar_reference(x, P, z, sr, sigma_beta_rad, se, sv, dims):
     """filterpy's KalmanFilter on (r̂, β̂[, ε̂], V̂r) with H the polar Jacobian at x and the
     line-of-sight row, R with the angle–Doppler covariance, z mapped to the linearised form."""
     n = 2 * dims
@@ -80,9 +80,9 @@ def _polar_reference(x, P, z, sr, sb, se, sv, dims):
         H[i, pos] = row
     H[dims, vel] = u
     R = np.zeros((k, k))
-    R[0, 0], R[1, 1] = sr**2, sb**2
-    var_e = sv**2 + sb**2 * ((g_b @ v) ** 2 + g_b @ Pvv @ g_b)
-    R[1, dims] = R[dims, 1] = -(g_b @ v) * sb**2
+    R[0, 0], R[1, 1] = sr**2, sigma_beta_rad**2
+    var_e = sv**2 + sigma_beta_rad**2 * ((g_b @ v) ** 2 + g_b @ Pvv @ g_b)
+    R[1, dims] = R[dims, 1] = -(g_b @ v) * sigma_beta_rad**2
     if dims == 3:
         R[2, 2] = se**2
         var_e += se**2 * ((g_e @ v) ** 2 + g_e @ Pvv @ g_e)
@@ -110,10 +110,10 @@ def test_joint_update_equals_filterpy_on_the_polar_measurement(dims: int) -> Non
         x[1::2] = np.array([-200.0, 100.0, 20.0])[:dims] + rng.normal(0, 20, dims)
         a = rng.standard_normal((n, n))
         P = a @ a.T + np.diag(np.tile([4e5, 400.0], dims))
-        sr, sb, se, sv = 50.0, np.deg2rad(1.0), np.deg2rad(0.5), 1.0
+        sr, sigma_beta_rad, se, sv = 50.0, np.deg2rad(1.0), np.deg2rad(0.5), 1.0
         truth = x + rng.multivariate_normal(np.zeros(n), P)
         r, beta, *el = polar_coordinates(list(truth[0::2]))
-        z = [r + sr * rng.standard_normal(), beta + sb * rng.standard_normal()]
+        z = [r + sr * rng.standard_normal(), beta + sigma_beta_rad * rng.standard_normal()]
         if dims == 3:
             z.append(el[0] + se * rng.standard_normal())
         u = np.array(direction_cosines(beta, el[0] if dims == 3 else 0.0))[:dims]
@@ -123,11 +123,13 @@ def test_joint_update_equals_filterpy_on_the_polar_measurement(dims: int) -> Non
             [np.array([c]) for c in z[:dims]],
             np.array([z[dims]]),
             sigma_r_m=sr,
-            sigma_azimuth_rad=sb,
+            sigma_beta_rad=sigma_beta_rad,
             sigma_elevation_rad=se if dims == 3 else 0.0,
             sigma_vr_mps=sv,
         )
-        x_ref, P_ref = _polar_reference(x, P, z, sr, sb, se if dims == 3 else 0.0, sv, dims)
+        x_ref, P_ref = _polar_reference(
+            x, P, z, sr, sigma_beta_rad, se if dims == 3 else 0.0, sv, dims
+        )
         sd = np.sqrt(np.diag(P_ref))
         np.testing.assert_allclose((got.x[0] - x_ref) / sd, 0.0, atol=1e-9)
         np.testing.assert_allclose((got.P[0] - P_ref) / np.outer(sd, sd), 0.0, atol=1e-9)

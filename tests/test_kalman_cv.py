@@ -24,12 +24,12 @@ def _random_spd(rng: np.random.Generator, m: int, n: int, scale: float) -> np.nd
 def test_batched_kf_equals_filterpy_step_by_step(method: str, sigma_a: float) -> None:
     rng = np.random.default_rng(7)
     runs, steps, T = 6, 40, 10.0
-    sr, sb = 250.0, np.deg2rad(2.0)
+    sr, sigma_beta_rad = 250.0, np.deg2rad(2.0)
     r_true = 150e3 + 200.0 * T * np.arange(steps)
     beta_true = 0.4 + 0.002 * np.arange(steps)
     r_hat = r_true + sr * rng.standard_normal((runs, steps))
-    b_hat = beta_true + sb * rng.standard_normal((runs, steps))
-    c = convert(method, r_hat, b_hat, sigma_r_m=sr, sigma_azimuth_rad=sb)
+    b_hat = beta_true + sigma_beta_rad * rng.standard_normal((runs, steps))
+    c = convert(method, r_hat, b_hat, sigma_r_m=sr, sigma_beta_rad=sigma_beta_rad)
     state = cv_init(c.z[:, 0], c.R[:, 0])
     ref = []
     for m in range(runs):

@@ -99,7 +99,7 @@ def test_raw_converted_rmse_matches_the_measurement_accuracy() -> None:
     e2 = (raw_converted_errors(mp) ** 2).sum(-1)  # (N, B)
     n, f, m = mp.range_m.shape
     sig = np.array(
-        [[r.sigma_r_m, r.sigma_azimuth_rad, r.sigma_elevation_rad] for r in MANOEUVRE_RADARS]
+        [[r.sigma_r_m, r.sigma_beta_rad, r.sigma_elevation_rad] for r in MANOEUVRE_RADARS]
     )[mp.schedule.radar]
     tp = mp.true_position_m
     sites = np.array([r.position for r in MANOEUVRE_RADARS])[mp.schedule.radar]
@@ -134,7 +134,7 @@ def _plots_of(mp, b: int, three_d: bool) -> list[Plot]:
                 rng if three_d else rng * math.cos(el),
                 float(mp.azimuth_rad[n, f, m]),
                 r.sigma_r_m,
-                r.sigma_azimuth_rad,
+                r.sigma_beta_rad,
                 r.position,
                 r.name,
                 el if three_d else None,
@@ -173,7 +173,7 @@ def test_batched_imm_equals_each_streamed_track(three_d: bool) -> None:
                 if three_d
                 else PolarPlot(rng * np.cos(el), mp.azimuth_rad[n].reshape(b))
             )
-            noise = PolarNoise(radar.sigma_r_m, radar.sigma_azimuth_rad, radar.sigma_elevation_rad)
+            noise = PolarNoise(radar.sigma_r_m, radar.sigma_beta_rad, radar.sigma_elevation_rad)
             pre = g.group.start_parts(plot, noise) if g.group.converted else None
             dop = None
             if mp.doppler[n]:
@@ -182,7 +182,7 @@ def test_batched_imm_equals_each_streamed_track(three_d: bool) -> None:
                     plot.azimuth_rad,
                     el if three_d else 0.0,
                     radar.sigma_vr_mps,
-                    radar.sigma_azimuth_rad,
+                    radar.sigma_beta_rad,
                     radar.sigma_elevation_rad,
                 )
             site = np.asarray(radar.position[:dims], dtype=np.float64)

@@ -45,13 +45,13 @@ def init_from_polar(r, b, sigma_r, sigma_beta, sigma_v=1000.0) -> CVBatch:
 
 def ekf_update(pred, r, b, sigma_r, sigma_beta, out=None) -> CVBatch:
     return ekf_module.ekf_update(
-        pred, (r, b), sigma_r_m=sigma_r, sigma_azimuth_rad=sigma_beta, out=out
+        pred, (r, b), sigma_r_m=sigma_r, sigma_beta_rad=sigma_beta, out=out
     )
 
 
 def ukf_update(pred, r, b, sigma_r, sigma_beta, params=DEFAULT_UKF, out=None) -> CVBatch:
     return ukf_module.ukf_update(
-        pred, (r, b), sigma_r_m=sigma_r, sigma_azimuth_rad=sigma_beta, params=params, out=out
+        pred, (r, b), sigma_r_m=sigma_r, sigma_beta_rad=sigma_beta, params=params, out=out
     )
 
 
@@ -193,7 +193,12 @@ def compare_with_filterpy(
 # Agreement with filterpy
 # --------------------------------------------------------------------------------------------
 
-CASES = [(beta0, sb, sa) for beta0 in (0.3, NEAR_PI) for sb in (1.0, 2.0) for sa in (0.0, 0.5)]
+CASES = [
+    (beta0, sigma_beta_deg, sa)
+    for beta0 in (0.3, NEAR_PI)
+    for sigma_beta_deg in (1.0, 2.0)
+    for sa in (0.0, 0.5)
+]
 
 
 @pytest.mark.parametrize(("beta0", "sigma_beta_deg", "sigma_a"), CASES)
@@ -290,9 +295,9 @@ def test_bias_and_nees_at_last_scan(kind: str, sigma_beta_deg: float) -> None:
 def test_init_from_polar() -> None:
     r = np.array([150e3, 80e3, 1e3])
     b = np.array([0.3, -3.1, math.pi])
-    sr, sb = 250.0, math.radians(2.0)
-    state = init_from_polar(r, b, sr, sb, sigma_v=300.0)
-    conv = convert("naive", r, b, sigma_r_m=sr, sigma_azimuth_rad=sb)
+    sr, sigma_beta_rad = 250.0, math.radians(2.0)
+    state = init_from_polar(r, b, sr, sigma_beta_rad, sigma_v=300.0)
+    conv = convert("naive", r, b, sigma_r_m=sr, sigma_beta_rad=sigma_beta_rad)
     ref = cv_init(conv.z, conv.R, 300.0)
     np.testing.assert_array_equal(state.x, ref.x)
     np.testing.assert_array_equal(state.P, ref.P)

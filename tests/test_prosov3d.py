@@ -89,12 +89,12 @@ def test_first_scan_bias_along_the_line_of_sight_matches_the_analytic_value() ->
     sight is r((λβ λε − 1) cos²E + (λε − 1) sin²E), λ = e^(−σ²/2), seed's twice that (its
     printed-sign correction), ucm's 0 — checked with the 95% band of 4000 runs, taking the
     difference to ucm so the common range noise cancels."""
-    sb, se, elev = 2.0, 2.0, 35.0
+    sigma_beta_deg, se, elev = 2.0, 2.0, 35.0
     (cfg,) = prosov_configs(
-        [sb], runs=4000, steps=2, dims=3, elevation_deg=elev, sigma_elevation_deg=se
+        [sigma_beta_deg], runs=4000, steps=2, dims=3, elevation_deg=elev, sigma_elevation_deg=se
     )
     res = run_tracking(cfg)
-    lb, le = np.exp(-(np.deg2rad(sb) ** 2) / 2), np.exp(-(np.deg2rad(se) ** 2) / 2)
+    lb, le = np.exp(-(np.deg2rad(sigma_beta_deg) ** 2) / 2), np.exp(-(np.deg2rad(se) ** 2) / 2)
     c2, s2 = np.cos(np.deg2rad(elev)) ** 2, np.sin(np.deg2rad(elev)) ** 2
     naive_bias = 150e3 * ((lb * le - 1) * c2 + (le - 1) * s2)
     ucm = res.metrics["ucm"].bias_range_m[0]

@@ -258,7 +258,7 @@ def write_files(tmp: Path, sites: list[RotatingRadar], pl: RotatingPlots, sigma_
             f"y_m = {s.y_m}",
             "z_m = 0.0",
             f"sigma_range_m = {s.sigma_r_m * sigma_scale}",
-            f"sigma_azimuth_deg = {math.degrees(s.sigma_beta_rad) * sigma_scale}",
+            f"sigma_beta_deg = {math.degrees(s.sigma_beta_rad) * sigma_scale}",
             "",
         ]
     r.write_text("\n".join(toml))
@@ -344,11 +344,13 @@ def test_prefilter_keeps_every_pair_inside_the_gate_of_a_turning_imm() -> None:
     some."""
     omega = math.radians(2.25)
     radius = 250.0 / omega  # 250 m/s
-    sigma_r, sigma_b = 20.0, math.radians(0.05)
+    sigma_r, sigma_beta_rad = 20.0, math.radians(0.05)
     rng = np.random.default_rng(4)
 
     def plot(t: float, xy: NDArray[np.float64]) -> Plot:
-        return Plot(t, float(np.hypot(*xy)), float(np.arctan2(xy[1], xy[0])), sigma_r, sigma_b)
+        return Plot(
+            t, float(np.hypot(*xy)), float(np.arctan2(xy[1], xy[0])), sigma_r, sigma_beta_rad
+        )
 
     options = StreamOptions(model="imm", imm_sigma_a_mps2=(0.1, 0.3, 0.3, 0.3))
     gnn = GNNTracker(("ucm",), False, options, AssociationOptions())
@@ -356,7 +358,7 @@ def test_prefilter_keeps_every_pair_inside_the_gate_of_a_turning_imm() -> None:
     for t in np.arange(0.0, 80.1, 4.0):
         xy = np.array([30e3 + radius * math.sin(omega * t), radius * (1 - math.cos(omega * t))])
         noisy = plot(float(t), xy)
-        gnn.add_batch([replace_polar(noisy, rng, sigma_r, sigma_b)])
+        gnn.add_batch([replace_polar(noisy, rng, sigma_r, sigma_beta_rad)])
     assert len(gnn.live()) == 1
     slots = gnn.book.live_slots()
     last = float(gnn.book.last_s[slots[0]])
@@ -365,7 +367,7 @@ def test_prefilter_keeps_every_pair_inside_the_gate_of_a_turning_imm() -> None:
         _, pred = gnn.states("ucm", last + ahead, status=gnn.status(gnn.live()[0]))
         centre = pred.x[0, [0, 2]]
         # The innovation's σ per axis, about: the prediction's and the plot's own.
-        sd = np.sqrt(np.diag(pred.P[0])[[0, 2]] + sigma_r**2 + (3e4 * sigma_b) ** 2)
+        sd = np.sqrt(np.diag(pred.P[0])[[0, 2]] + sigma_r**2 + (3e4 * sigma_beta_rad) ** 2)
         u = np.linspace(-8.0, 8.0, 25)
         grid = [centre + sd * (a, b) for a in u for b in u]
         grid += [centre + np.array([a, b]) for a in (-1e5, 1e5) for b in (-1e5, 0.0, 1e5)]  # far
@@ -383,10 +385,10 @@ def test_prefilter_keeps_every_pair_inside_the_gate_of_a_turning_imm() -> None:
     assert missed_straight > 0
 
 
-def replace_polar(p: Plot, rng: np.random.Generator, sigma_r: float, sigma_b: float) -> Plot:
+def replace_polar(p: Plot, rng: np.random.Generator, sigma_r: float, sigma_beta_rad: float) -> Plot:
     """``p`` with its range and azimuth perturbed by their noise."""
     return replace(
         p,
         range_m=p.range_m + sigma_r * rng.normal(),
-        azimuth_rad=p.azimuth_rad + sigma_b * rng.normal(),
+        azimuth_rad=p.azimuth_rad + sigma_beta_rad * rng.normal(),
     )

@@ -46,7 +46,7 @@ def test_reference_ends_where_the_engine_ends(
         r,
         b,
         sigma_r_m=s.sigma_r_m,
-        sigma_azimuth_rad=s.sigma_azimuth_rad,
+        sigma_beta_rad=s.sigma_beta_rad,
         period_s=s.period_s,
         sigma_a_mps2=sigma_a_mps2,
         sigma_v0_mps=s.sigma_v0_mps,

@@ -24,7 +24,7 @@ DEG = math.pi / 180.0
 def _sigmas(r_m: float, az_deg: float, el_deg: float, vr_mps: float) -> dict[str, float]:
     return {
         "sigma_r_m": r_m,
-        "sigma_azimuth_rad": az_deg * DEG,
+        "sigma_beta_rad": az_deg * DEG,
         "sigma_elevation_rad": el_deg * DEG,
         "sigma_vr_mps": vr_mps,
     }
@@ -64,7 +64,7 @@ def test_noise_free_measurements_invert_to_the_truth() -> None:
         [a.azimuth[rows[0]], b.azimuth[rows[1]], azc],
         [a.elevation[rows[0]], b.elevation[rows[1]], elc],
         sigma_vr_mps=1.0,
-        sigma_azimuth_rad=0.01,
+        sigma_beta_rad=0.01,
         sigma_elevation_rad=0.01,
     )
     np.testing.assert_allclose(est.velocity, c_vel[0], atol=1e-8)

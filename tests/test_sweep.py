@@ -140,8 +140,10 @@ def test_sweep_point_equals_reproduce_prosov_json(tmp_path: Path, capsys) -> Non
     table = pq.read_table(out).to_pydict()
     rows = [
         i
-        for i, (sb, m) in enumerate(zip(table["sigma_beta_deg"], table["method"], strict=True))
-        if sb == 2.0
+        for i, (sigma_beta_deg, m) in enumerate(
+            zip(table["sigma_beta_deg"], table["method"], strict=True)
+        )
+        if sigma_beta_deg == 2.0
     ]
     case = doc["cases"][0]
     for method in ("naive", "ekf"):
@@ -649,8 +651,10 @@ def test_3d_sweep_point_equals_reproduce_prosov_dims_3_json(tmp_path: Path, caps
     for method in ("naive", "ukf"):
         idx = [
             i
-            for i, (sb, m) in enumerate(zip(d["sigma_beta_deg"], d["method"], strict=True))
-            if sb == 1.0 and m == method
+            for i, (sigma_beta_deg, m) in enumerate(
+                zip(d["sigma_beta_deg"], d["method"], strict=True)
+            )
+            if sigma_beta_deg == 1.0 and m == method
         ]
         for key in ("rmse_x_m", "bias_range_m", "nees_pos", "nees_state", "sigma_x_filter_m"):
             assert [d[key][i] for i in idx] == case["methods"][method][key], (method, key)

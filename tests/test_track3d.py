@@ -68,7 +68,7 @@ def radars_toml(sites: dict = SITES, skip: tuple[tuple[str, str], ...] = ()) -> 
     """The radars file; ``skip`` drops (radar, key) pairs."""
     keys = (
         "sigma_range_m",
-        "sigma_azimuth_deg",
+        "sigma_beta_deg",
         "sigma_elevation_deg",
         "sigma_radial_velocity_mps",
     )
@@ -100,7 +100,7 @@ def write_meas(
     header += ["elevation_deg"] * elevation + ["radial_velocity_mps"] * doppler
     lines = [",".join(header) + "\n"]
     for t, name in zip(times, names, strict=True):
-        (sx, sy, sz), sr, sb, se, svr = sites[name]
+        (sx, sy, sz), sr, sigma_beta_deg, se, svr = sites[name]
         e = rng.standard_normal(4).tolist()
         d = [p0[0] + v[0] * t - sx, p0[1] + v[1] * t - sy, p0[2] + v[2] * t - sz]
         rho = math.hypot(d[0], d[1])
@@ -109,7 +109,7 @@ def write_meas(
             repr(float(t)),
             name,
             repr(r + sr * e[0]),
-            repr(math.degrees(math.atan2(d[1], d[0])) + sb * e[1]),
+            repr(math.degrees(math.atan2(d[1], d[0])) + sigma_beta_deg * e[1]),
         ]
         if elevation:
             el = math.degrees(math.atan2(d[2], rho)) + se * e[2]
@@ -159,7 +159,7 @@ def transition(dt: float) -> np.ndarray:
 
 def plot_values(plot: dict[str, str]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Site (3,), z = (r, β, ε) in rad, σ = (σr, σβ, σε) in rad of one measurement row."""
-    site, sr, sb, se, _ = SITES[plot["radar"]]
+    site, sr, sigma_beta_deg, se, _ = SITES[plot["radar"]]
     z = np.array(
         [
             float(plot["range_m"]),
@@ -167,7 +167,7 @@ def plot_values(plot: dict[str, str]) -> tuple[np.ndarray, np.ndarray, np.ndarra
             math.radians(float(plot["elevation_deg"])),
         ]
     )
-    return np.array(site), z, np.array([sr, math.radians(sb), math.radians(se)])
+    return np.array(site), z, np.array([sr, math.radians(sigma_beta_deg), math.radians(se)])
 
 
 def first_plot_start(
@@ -175,16 +175,16 @@ def first_plot_start(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Naive 3D point, covariance J diag(σ²) Jᵀ, velocity 0 ± σv0 on each axis."""
     r, b, e = z
-    cb, sb, ce, se = math.cos(b), math.sin(b), math.cos(e), math.sin(e)
+    cb, sigma_beta_deg, ce, se = math.cos(b), math.sin(b), math.cos(e), math.sin(e)
     J = np.array(
         [
-            [ce * cb, -r * ce * sb, -r * se * cb],
-            [ce * sb, r * ce * cb, -r * se * sb],
+            [ce * cb, -r * ce * sigma_beta_deg, -r * se * cb],
+            [ce * sigma_beta_deg, r * ce * cb, -r * se * sigma_beta_deg],
             [se, 0.0, r * ce],
         ]
     )
     x = np.zeros(6)
-    x[POS] = site + r * np.array([ce * cb, ce * sb, se])
+    x[POS] = site + r * np.array([ce * cb, ce * sigma_beta_deg, se])
     P = np.zeros((6, 6))
     P[np.ix_(POS, POS)] = J @ np.diag(sig**2) @ J.T
     P[VEL, VEL] = sigma_v0**2
@@ -229,13 +229,13 @@ def doppler_reference(
     _, _, sb_deg, se_deg, svr = SITES[plot["radar"]]
     b = math.radians(float(plot["azimuth_deg"]))
     e = math.radians(float(plot["elevation_deg"]))
-    sb, se = math.radians(sb_deg), math.radians(se_deg)
+    sigma_beta_deg, se = math.radians(sb_deg), math.radians(se_deg)
     u = np.array([math.cos(e) * math.cos(b), math.cos(e) * math.sin(b), math.sin(e)])
     du_db = np.array([-math.cos(e) * math.sin(b), math.cos(e) * math.cos(b), 0.0])
     du_de = np.array([-math.sin(e) * math.cos(b), -math.sin(e) * math.sin(b), math.cos(e)])
     v, Pvv = x[VEL], P[np.ix_(VEL, VEL)]
     var = svr**2
-    for g, s in ((du_db, sb), (du_de, se)):
+    for g, s in ((du_db, sigma_beta_deg), (du_de, se)):
         var += s * s * (float(g @ v) ** 2 + float(g @ Pvv @ g))
     H = np.zeros((1, 6))
     H[0, VEL] = u
@@ -463,7 +463,7 @@ def check_start_in_los_frame(
     e: float,
     theta: np.ndarray,
     R: np.ndarray,
-    sb: float,
+    sigma_beta_deg: float,
     se: float,
     sigma_v0: float,
     rtol: float = RTOL,
@@ -478,7 +478,11 @@ def check_start_in_los_frame(
     Lpp = G.T @ P[np.ix_(POS, POS)] @ G
     Lvv = G.T @ P[np.ix_(VEL, VEL)] @ G
     Lpv = G.T @ P[np.ix_(POS, VEL)] @ G
-    close(Lpp, np.diag([R[0, 0], (theta[0] * math.cos(e) * sb) ** 2, (theta[0] * se) ** 2]), rtol)
+    close(
+        Lpp,
+        np.diag([R[0, 0], (theta[0] * math.cos(e) * sigma_beta_deg) ** 2, (theta[0] * se) ** 2]),
+        rtol,
+    )
     close(Lvv, np.diag([R[1, 1], sigma_v0**2, sigma_v0**2]), rtol)
     expected_pv = np.zeros((3, 3))
     expected_pv[0, 0] = R[0, 1]
@@ -488,7 +492,14 @@ def check_start_in_los_frame(
 @pytest.mark.parametrize("k,doppler", [(2, True), (5, True), (4, False), (7, False)])
 def test_finite_memory_start_3d_vs_lstsq(k: int, doppler: bool) -> None:
     rng = np.random.default_rng(41 + k)
-    T, sr, svr, sb, se, sigma_v0 = 4.0, 120.0, 1.5, math.radians(0.4), math.radians(0.7), 500.0
+    T, sr, svr, sigma_beta_deg, se, sigma_v0 = (
+        4.0,
+        120.0,
+        1.5,
+        math.radians(0.4),
+        math.radians(0.7),
+        500.0,
+    )
     site = np.array([1000.0, -2000.0, 300.0])
     tt = T * np.arange(k)
     # A range with curvature (so a ≠ 0 is fitted) plus noise.
@@ -505,7 +516,7 @@ def test_finite_memory_start_3d_vs_lstsq(k: int, doppler: bool) -> None:
         vrs,
         b,
         e,
-        sigma_azimuth_rad=sb,
+        sigma_beta_rad=sigma_beta_deg,
         sigma_elevation_rad=se,
         sigma_v0_mps=sigma_v0,
         site=site,
@@ -521,7 +532,7 @@ def test_finite_memory_start_3d_vs_lstsq(k: int, doppler: bool) -> None:
     np.testing.assert_allclose(
         theta_fit / np.sqrt(np.diag(R)), theta / np.sqrt(np.diag(R)), rtol=RTOL, atol=RTOL
     )
-    check_start_in_los_frame(start.x, start.P, site, b, e, theta, R, sb, se, sigma_v0)
+    check_start_in_los_frame(start.x, start.P, site, b, e, theta, R, sigma_beta_deg, se, sigma_v0)
 
 
 @pytest.mark.parametrize("doppler", ["use", "ignore"])
@@ -559,7 +570,7 @@ def test_finite_memory_start_on_the_file(tmp_path: Path, doppler: str) -> None:
     assert [r["method"] for r in rows[:2]] == ["ukf", "ekf"]
     assert float(rows[0]["time_s"]) == float(plots[kth]["time_s"])
     win = [plots[2 * i] for i in range(k)]
-    site, sr, sb, se, svr = SITES["c"]
+    site, sr, sigma_beta_deg, se, svr = SITES["c"]
     ranges = np.array([float(p["range_m"]) for p in win])
     vrs = np.array([float(p["radial_velocity_mps"]) for p in win]) if doppler == "use" else None
     theta, R = wls(k, T, ranges, vrs, sr, svr)
@@ -568,7 +579,16 @@ def test_finite_memory_start_on_the_file(tmp_path: Path, doppler: str) -> None:
     for row in rows[:2]:
         x, P = state_from_row(row)
         check_start_in_los_frame(
-            x, P, np.array(site), b, e, theta, R, math.radians(sb), math.radians(se), 700.0
+            x,
+            P,
+            np.array(site),
+            b,
+            e,
+            theta,
+            R,
+            math.radians(sigma_beta_deg),
+            math.radians(se),
+            700.0,
         )
 
 

@@ -53,14 +53,14 @@ x_m = 0.0
 y_m = 0.0
 z_m = 0.0
 sigma_range_m = 250.0
-sigma_azimuth_deg = 1.0
+sigma_beta_deg = 1.0
 
 [radars.b]
 x_m = 60000.0
 y_m = -20000.0
 z_m = 15.0
 sigma_range_m = 100.0
-sigma_azimuth_deg = 0.5
+sigma_beta_deg = 0.5
 """
 
 HEADER = "time_s,radar,range_m,azimuth_deg\n"
@@ -314,10 +314,10 @@ def write_two_radar_file(path: Path) -> None:
     lines = [HEADER]
     for k, t in enumerate(times.tolist()):
         name = "ab"[k % 2]
-        sx, sy, sr, sb = sites[name]
+        sx, sy, sr, sigma_beta_deg = sites[name]
         px, py = 140e3 + 150.0 * t, 10e3 - 80.0 * t
         r = math.hypot(px - sx, py - sy) + sr * rng.standard_normal()
-        az = math.degrees(math.atan2(py - sy, px - sx)) + sb * rng.standard_normal()
+        az = math.degrees(math.atan2(py - sy, px - sx)) + sigma_beta_deg * rng.standard_normal()
         lines.append(f"{t!r},{name},{r!r},{az!r}\n")
     path.write_text("".join(lines))
 
@@ -355,15 +355,15 @@ def test_ekf_matches_filterpy_on_the_file(tmp_path: Path) -> None:
     last_t = None
     for row, plot in zip(rows, plots, strict=True):
         t = float(plot["time_s"])
-        sx, sy, sr, sb_deg = sites[plot["radar"]]
-        sb = math.radians(sb_deg)
+        sx, sy, sr, sigma_beta_deg = sites[plot["radar"]]
+        sigma_beta_rad = math.radians(sigma_beta_deg)
         r, b = float(plot["range_m"]), math.radians(float(plot["azimuth_deg"]))
         z = np.array([r, b])
         if last_t is None:
             # The first-plot start: naive point, linearized covariance, velocity 0 ± 1000 m/s.
             c, s = math.cos(b), math.sin(b)
             J = np.array([[c, -r * s], [s, r * c]])
-            Rxy = J @ np.diag([sr**2, sb**2]) @ J.T
+            Rxy = J @ np.diag([sr**2, sigma_beta_rad**2]) @ J.T
             f.x = np.array([sx + r * c, 0.0, sy + r * s, 0.0])
             P = np.zeros((4, 4))
             P[np.ix_([0, 2], [0, 2])] = Rxy
@@ -392,7 +392,7 @@ def test_ekf_matches_filterpy_on_the_file(tmp_path: Path) -> None:
                 y[1] = math.remainder(y[1], 2.0 * math.pi)
                 return y
 
-            f.update(z, jac, hx, R=np.diag([sr**2, sb**2]), residual=residual)
+            f.update(z, jac, hx, R=np.diag([sr**2, sigma_beta_rad**2]), residual=residual)
         last_t = t
         x, P = state_of(row)
         close(x, f.x)
@@ -557,7 +557,7 @@ def test_rrd_recording_of_a_tracked_file(tmp_path: Path, rrd_contents) -> None:
 
 
 MIXED_RADARS = GOOD_RADARS.replace(
-    "sigma_azimuth_deg = 1.0\n", "sigma_azimuth_deg = 1.0\nsigma_radial_velocity_mps = 2.0\n"
+    "sigma_beta_deg = 1.0\n", "sigma_beta_deg = 1.0\nsigma_radial_velocity_mps = 2.0\n"
 )
 
 

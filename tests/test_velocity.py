@@ -43,10 +43,10 @@ VEL = np.array([216.5, 125.0, 0.0])
 S_VR = np.array([1.0, 3.0, 5.0])
 S_EL = np.array([0.2, 0.5, 1.0]) * DEG
 S_AZ = np.array([0.1, 0.3, 0.5]) * DEG
-ANGLES = {"sigma_azimuth_rad": S_AZ, "sigma_elevation_rad": S_EL}
+ANGLES = {"sigma_beta_rad": S_AZ, "sigma_elevation_rad": S_EL}
 SIGMAS = {"sigma_vr_mps": S_VR, **ANGLES}
 #: One σ for every radar: σVr 1 m/s, both angles 0.01 rad.
-SIG1 = {"sigma_vr_mps": 1.0, "sigma_azimuth_rad": 0.01, "sigma_elevation_rad": 0.01}
+SIG1 = {"sigma_vr_mps": 1.0, "sigma_beta_rad": 0.01, "sigma_elevation_rad": 0.01}
 
 
 def _problem4(scale: float = 1.0, s4: tuple[float, float, float] = (2.0, 0.4, 0.2)):
@@ -55,7 +55,7 @@ def _problem4(scale: float = 1.0, s4: tuple[float, float, float] = (2.0, 0.4, 0.
         TARGET,
         VEL,
         sigma_vr_mps=[*S_VR, s4[0]],
-        sigma_azimuth_rad=np.r_[S_AZ, s4[2] * DEG] * scale,
+        sigma_beta_rad=np.r_[S_AZ, s4[2] * DEG] * scale,
         sigma_elevation_rad=np.r_[S_EL, s4[1] * DEG] * scale,
     )
 
@@ -72,7 +72,7 @@ def _antithetic_bias(problem, pairs: int, seed: int) -> tuple[np.ndarray, np.nda
     d = {
         "d_vr_mps": z[0] * problem.sigma_vr_mps,
         "d_elevation_rad": z[1] * problem.sigma_elevation_rad,
-        "d_azimuth_rad": z[2] * problem.sigma_azimuth_rad,
+        "d_azimuth_rad": z[2] * problem.sigma_beta_rad,
     }
     e1 = perturbed_velocity(problem, **d) - problem.velocity
     e2 = perturbed_velocity(problem, **{k: -x for k, x in d.items()}) - problem.velocity
@@ -134,9 +134,7 @@ def test_second_order_bias_matches_monte_carlo(weighted: bool) -> None:
     """
     scale = 2.0
     pb = (
-        baseline_problem()._replace(
-            sigma_elevation_rad=S_EL * scale, sigma_azimuth_rad=S_AZ * scale
-        )
+        baseline_problem()._replace(sigma_elevation_rad=S_EL * scale, sigma_beta_rad=S_AZ * scale)
         if not weighted
         else _problem4(scale)
     )
@@ -242,9 +240,7 @@ def test_duplicate_sites_and_target_at_site_raise() -> None:
     _one_line(exc)
     # Four radars, two co-located: still three distinct lines of sight, so observable.
     dup4 = np.vstack([SITES3, SITES3[:1]])
-    assert diagnose_geometry(
-        dup4, TARGET, sigma_azimuth_rad=0.01, sigma_elevation_rad=0.01
-    ).observable
+    assert diagnose_geometry(dup4, TARGET, sigma_beta_rad=0.01, sigma_elevation_rad=0.01).observable
     with pytest.raises(GeometryError, match="target is at the site of radar 1"):
         velocity_statistics(velocity_problem(SITES3, SITES3[1], VEL, **SIGMAS))
 
@@ -277,7 +273,7 @@ def test_estimate_velocity_noise_free_is_exact(sites: np.ndarray) -> None:
     los = line_of_sight(sites, TARGET)
     vr = direction_cosines(los.azimuth, los.elevation) @ VEL
     n = sites.shape[0]
-    sig = {"sigma_vr_mps": np.ones(n), "sigma_azimuth_rad": 0.003, "sigma_elevation_rad": 0.005}
+    sig = {"sigma_vr_mps": np.ones(n), "sigma_beta_rad": 0.003, "sigma_elevation_rad": 0.005}
     est = estimate_velocity(sites, vr, los.azimuth, los.elevation, **sig)
     np.testing.assert_allclose(est.velocity, VEL, atol=1e-9)
     assert est.warning is None and est.m < M_WARN
@@ -287,20 +283,20 @@ def test_estimate_velocity_noise_free_is_exact(sites: np.ndarray) -> None:
 
 def test_fused_position_covariance_matches_monte_carlo() -> None:
     n = 100_000
-    sr, sb, se = np.array([50.0, 100.0, 150.0]), S_AZ, S_EL
+    sr, sigma_beta_rad, se = np.array([50.0, 100.0, 150.0]), S_AZ, S_EL
     los = line_of_sight(SITES3, TARGET)
     rng = np.random.default_rng(21)
     z = rng.standard_normal((3, n, 3))
     fused = fuse_positions(
         SITES3,
         los.range + z[0] * sr,
-        los.azimuth + z[1] * sb,
+        los.azimuth + z[1] * sigma_beta_rad,
         los.elevation + z[2] * se,
         sigma_r_m=sr,
-        sigma_azimuth_rad=sb,
+        sigma_beta_rad=sigma_beta_rad,
         sigma_elevation_rad=se,
     )
-    sig = {"sigma_r_m": sr, "sigma_azimuth_rad": sb, "sigma_elevation_rad": se}
+    sig = {"sigma_r_m": sr, "sigma_beta_rad": sigma_beta_rad, "sigma_elevation_rad": se}
     truth = fuse_positions(SITES3, los.range, los.azimuth, los.elevation, **sig)
     # Noise-free points are the target up to the debiasing scale e^(s/2) (≈ r σ²/2, metres).
     np.testing.assert_allclose(truth.points, np.broadcast_to(TARGET, (3, 3)), atol=10.0)
@@ -315,7 +311,7 @@ def test_fused_position_covariance_matches_monte_carlo() -> None:
     raw = fuse_positions(
         SITES3,
         los.range + z[0] * sr,
-        los.azimuth + z[1] * sb,
+        los.azimuth + z[1] * sigma_beta_rad,
         los.elevation + z[2] * se,
         **sig,
         refine=False,
@@ -327,7 +323,7 @@ def test_fused_position_covariance_matches_monte_carlo() -> None:
         los.azimuth,
         los.elevation,
         sigma_r_m=sr,
-        sigma_azimuth_rad=sb,
+        sigma_beta_rad=sigma_beta_rad,
         sigma_elevation_rad=se,
     ).R
     for R_k in single:

@@ -36,16 +36,16 @@ def _with_offset(cov: Arr, offset: Arr) -> Arr:
 
 
 def convert_mucm(
-    r: ArrayLike, beta: ArrayLike, *, sigma_r_m: ArrayLike, sigma_azimuth_rad: ArrayLike
+    r: ArrayLike, beta: ArrayLike, *, sigma_r_m: ArrayLike, sigma_beta_rad: ArrayLike
 ) -> Converted:
     """2D modified unbiased conversion: ucm's point e^(s/2) r̂ (cos β̂, sin β̂) and the
     measurement-conditioned covariance (module docstring).  z (..., 2), R (..., 2, 2)."""
     r, beta = np.broadcast_arrays(_f(r), _f(beta))
-    s = _f(sigma_azimuth_rad) ** 2
+    s = _f(sigma_beta_rad) ** 2
     naive = np.stack([r * np.cos(beta), r * np.sin(beta)], axis=-1)
     kappa = np.exp(s / 2.0)[..., None]
     gap = (2.0 * np.sinh(s / 2.0))[..., None] * naive  # κ − κ⁻¹ without cancellation
-    cov = naive_cov_given_truth(r, beta, sigma_r_m=sigma_r_m, sigma_azimuth_rad=sigma_azimuth_rad)
+    cov = naive_cov_given_truth(r, beta, sigma_r_m=sigma_r_m, sigma_beta_rad=sigma_beta_rad)
     return Converted(kappa * naive, _with_offset(cov, gap))
 
 
@@ -55,15 +55,15 @@ def convert_mucm_3d(
     elevation: ArrayLike,
     *,
     sigma_r_m: ArrayLike,
-    sigma_azimuth_rad: ArrayLike,
+    sigma_beta_rad: ArrayLike,
     sigma_elevation_rad: ArrayLike,
 ) -> Converted:
     """3D modified unbiased conversion: ucm's 3D point, covariance
     ``naive_cov_given_truth_3d`` at the measurement + d dᵀ, d = 2 sinh(s/2) ∘ r̂ û with
     s = (sβ + sε, sβ + sε, sε).  z (..., 3), R (..., 3, 3)."""
     r, az, el = np.broadcast_arrays(_f(r), _f(azimuth), _f(elevation))
-    sb, se = _f(sigma_azimuth_rad) ** 2, _f(sigma_elevation_rad) ** 2
-    s_xy, s_z = np.broadcast_arrays(sb + se, se)
+    var_beta, var_elevation = _f(sigma_beta_rad) ** 2, _f(sigma_elevation_rad) ** 2
+    s_xy, s_z = np.broadcast_arrays(var_beta + var_elevation, var_elevation)
     s = np.stack([s_xy, s_xy, s_z], axis=-1)
     naive = _point_3d(r, az, el)
     cov = naive_cov_given_truth_3d(
@@ -71,7 +71,7 @@ def convert_mucm_3d(
         az,
         el,
         sigma_r_m=sigma_r_m,
-        sigma_azimuth_rad=sigma_azimuth_rad,
+        sigma_beta_rad=sigma_beta_rad,
         sigma_elevation_rad=sigma_elevation_rad,
     )
     return Converted(np.exp(s / 2.0) * naive, _with_offset(cov, 2.0 * np.sinh(s / 2.0) * naive))

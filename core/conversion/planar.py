@@ -123,9 +123,9 @@ _SCALES = {
 }
 
 
-def scale_factor(method: str, *, sigma_azimuth_rad: ArrayLike) -> NDArray[np.float64]:
+def scale_factor(method: str, *, sigma_beta_rad: ArrayLike) -> NDArray[np.float64]:
     """The scale κ a 2D method applies to the naive point ``r̂ (cos β̂, sin β̂)``."""
-    return _SCALES[_method(method)](_f(sigma_azimuth_rad) ** 2)
+    return _SCALES[_method(method)](_f(sigma_beta_rad) ** 2)
 
 
 def _method(method: str) -> str:
@@ -135,16 +135,16 @@ def _method(method: str) -> str:
 
 
 def naive_mean_given_truth(
-    r: ArrayLike, beta: ArrayLike, *, sigma_azimuth_rad: ArrayLike
+    r: ArrayLike, beta: ArrayLike, *, sigma_beta_rad: ArrayLike
 ) -> NDArray[np.float64]:
     """E[r̂ (cos β̂, sin β̂) | r, β] = r e^(−s/2) (cos β, sin β).  Shape (..., 2)."""
-    r, beta, s = _f(r), _f(beta), _f(sigma_azimuth_rad) ** 2
+    r, beta, s = _f(r), _f(beta), _f(sigma_beta_rad) ** 2
     a = r * np.exp(-s / 2.0)
     return np.stack([a * np.cos(beta), a * np.sin(beta)], axis=-1)
 
 
 def naive_cov_given_truth(
-    r: ArrayLike, beta: ArrayLike, *, sigma_r_m: ArrayLike, sigma_azimuth_rad: ArrayLike
+    r: ArrayLike, beta: ArrayLike, *, sigma_r_m: ArrayLike, sigma_beta_rad: ArrayLike
 ) -> NDArray[np.float64]:
     """Exact covariance of the naive point given the true (r, β).  Shape (..., 2, 2).
 
@@ -161,16 +161,19 @@ def naive_cov_given_truth(
     ~eps·r²/σr² relative precision and can come out ≤ 0 once r/σr ≳ 5e7 at small s).
     """
     r, beta = _f(r), _f(beta)
-    return _sym2(
-        *_true_cov_parts(r, np.cos(beta), np.sin(beta), _f(sigma_r_m), _f(sigma_azimuth_rad))
-    )
+    return _sym2(*_true_cov_parts(r, np.cos(beta), np.sin(beta), _f(sigma_r_m), _f(sigma_beta_rad)))
 
 
 CovParts = tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]
 
 
 def _true_cov_parts(
-    r: NDArray, c: NDArray, sn: NDArray, sr: NDArray, sb: NDArray, scale: ArrayLike = 1.0
+    r: NDArray,
+    c: NDArray,
+    sn: NDArray,
+    sr: NDArray,
+    sigma_beta_rad: NDArray,
+    scale: ArrayLike = 1.0,
 ) -> CovParts:
     """(Cxx, Cxy, Cyy) of ``naive_cov_given_truth`` × ``scale``, bearing given by cos c, sin sn.
 
@@ -181,7 +184,7 @@ def _true_cov_parts(
         A = ½[σr² (1 + e^(−2s)) + r² (1 − e^(−s))²],   B = ½ (σr² + r²)(1 − e^(−2s))
         C = σr² e^(−2s) − r² e^(−s) (1 − e^(−s))
     """
-    s = sb * sb
+    s = sigma_beta_rad * sigma_beta_rad
     k = _f(scale)
     e1, e2 = np.exp(-s), np.exp(-2.0 * s)
     om1, om2 = -np.expm1(-s), -np.expm1(-2.0 * s)
@@ -209,7 +212,7 @@ def _true_cov_parts(
 
 
 def linearized_cov(
-    r: ArrayLike, beta: ArrayLike, *, sigma_r_m: ArrayLike, sigma_azimuth_rad: ArrayLike
+    r: ArrayLike, beta: ArrayLike, *, sigma_r_m: ArrayLike, sigma_beta_rad: ArrayLike
 ) -> NDArray[np.float64]:
     """First-order covariance J diag(σr², σβ²) Jᵀ of the naive point (Prosov eq. 9).
 
@@ -219,17 +222,19 @@ def linearized_cov(
     """
     r, beta = _f(r), _f(beta)
     return _sym2(
-        *_linearized_parts(r, np.cos(beta), np.sin(beta), _f(sigma_r_m), _f(sigma_azimuth_rad))
+        *_linearized_parts(r, np.cos(beta), np.sin(beta), _f(sigma_r_m), _f(sigma_beta_rad))
     )
 
 
-def _linearized_parts(r: NDArray, c: NDArray, sn: NDArray, sr: NDArray, sb: NDArray) -> CovParts:
-    sr2, rs = sr * sr, r * r * (sb * sb)
+def _linearized_parts(
+    r: NDArray, c: NDArray, sn: NDArray, sr: NDArray, sigma_beta_rad: NDArray
+) -> CovParts:
+    sr2, rs = sr * sr, r * r * (sigma_beta_rad * sigma_beta_rad)
     return sr2 * c * c + rs * sn * sn, (sr2 - rs) * sn * c, sr2 * sn * sn + rs * c * c
 
 
 def averaged_cov(
-    r: ArrayLike, beta: ArrayLike, *, sigma_r_m: ArrayLike, sigma_azimuth_rad: ArrayLike
+    r: ArrayLike, beta: ArrayLike, *, sigma_r_m: ArrayLike, sigma_beta_rad: ArrayLike
 ) -> NDArray[np.float64]:
     """Prosov eq. 11a–c, evaluated at the measurement (r, β) = (r̂, β̂).
 
@@ -243,13 +248,13 @@ def averaged_cov(
     that identity by quadrature.
     """
     r, beta = _f(r), _f(beta)
-    return _sym2(
-        *_averaged_parts(r, np.cos(beta), np.sin(beta), _f(sigma_r_m), _f(sigma_azimuth_rad))
-    )
+    return _sym2(*_averaged_parts(r, np.cos(beta), np.sin(beta), _f(sigma_r_m), _f(sigma_beta_rad)))
 
 
-def _averaged_parts(r: NDArray, c: NDArray, sn: NDArray, sr: NDArray, sb: NDArray) -> CovParts:
-    sr2, s = sr * sr, sb * sb
+def _averaged_parts(
+    r: NDArray, c: NDArray, sn: NDArray, sr: NDArray, sigma_beta_rad: NDArray
+) -> CovParts:
+    sr2, s = sr * sr, sigma_beta_rad * sigma_beta_rad
     c2, s2 = c * c, sn * sn
     e2 = np.exp(-2.0 * s)
     ch1, ch2, sh1, sh2 = np.cosh(s), np.cosh(2.0 * s), np.sinh(s), np.sinh(2.0 * s)
@@ -288,9 +293,9 @@ class ConvertedParts(NamedTuple):
         return Converted(np.stack([x, y], axis=-1), _sym2(r00, r01, r11))
 
 
-def _naive(r, c, sn, sr, sb, predicted) -> ConvertedParts:
+def _naive(r, c, sn, sr, sigma_beta_rad, predicted) -> ConvertedParts:
     """Naive conversion (eq. 8) with the linearized covariance (eq. 9)."""
-    return ConvertedParts(r * c, r * sn, *_linearized_parts(r, c, sn, sr, sb))
+    return ConvertedParts(r * c, r * sn, *_linearized_parts(r, c, sn, sr, sigma_beta_rad))
 
 
 def _averaged(method: str):
@@ -298,23 +303,23 @@ def _averaged(method: str):
     the converted point, see the module docstring) or Lerro & Bar-Shalom's (``cmkf_d``:
     κ = 1 − (e^(−s) − e^(−s/2))), both with the averaged covariance of eq. 11."""
 
-    def parts(r, c, sn, sr, sb, predicted) -> ConvertedParts:
-        kr = _SCALES[method](sb * sb) * r
-        return ConvertedParts(kr * c, kr * sn, *_averaged_parts(r, c, sn, sr, sb))
+    def parts(r, c, sn, sr, sigma_beta_rad, predicted) -> ConvertedParts:
+        kr = _SCALES[method](sigma_beta_rad * sigma_beta_rad) * r
+        return ConvertedParts(kr * c, kr * sn, *_averaged_parts(r, c, sn, sr, sigma_beta_rad))
 
     return parts
 
 
-def _ucm(r, c, sn, sr, sb, predicted) -> ConvertedParts:
+def _ucm(r, c, sn, sr, sigma_beta_rad, predicted) -> ConvertedParts:
     """Unbiased conversion (Mo, Song, Zhou, Sun, Bar-Shalom 1998): κ = e^(s/2); covariance the
     exact true-conditioned covariance of the unbiased point, e^s · ``naive_cov_given_truth``,
     evaluated at the measured (r̂, β̂)."""
-    es = np.exp(sb * sb)
+    es = np.exp(sigma_beta_rad * sigma_beta_rad)
     kr = np.sqrt(es) * r
-    return ConvertedParts(kr * c, kr * sn, *_true_cov_parts(r, c, sn, sr, sb, es))
+    return ConvertedParts(kr * c, kr * sn, *_true_cov_parts(r, c, sn, sr, sigma_beta_rad, es))
 
 
-def _ducm(r, c, sn, sr, sb, predicted) -> ConvertedParts:
+def _ducm(r, c, sn, sr, sigma_beta_rad, predicted) -> ConvertedParts:
     """Decorrelated unbiased conversion (Bordonaro, Willett, Bar-Shalom 2014): ucm's point,
     the covariance evaluated at the filter's predicted position (radar-centred), so the gain
     is independent of this measurement's error."""
@@ -322,9 +327,11 @@ def _ducm(r, c, sn, sr, sb, predicted) -> ConvertedParts:
         raise ValueError("method ducm needs predicted_xy (the filter's predicted position)")
     px, py = _f(predicted[0]), _f(predicted[1])
     r_p = polar_coordinates([px, py])[0]
-    es = np.exp(sb * sb)
+    es = np.exp(sigma_beta_rad * sigma_beta_rad)
     kr = np.sqrt(es) * r
-    return ConvertedParts(kr * c, kr * sn, *_true_cov_parts(r_p, px / r_p, py / r_p, sr, sb, es))
+    return ConvertedParts(
+        kr * c, kr * sn, *_true_cov_parts(r_p, px / r_p, py / r_p, sr, sigma_beta_rad, es)
+    )
 
 
 _CONVERSIONS = {
@@ -342,14 +349,14 @@ def convert_parts(
     beta: ArrayLike,
     *,
     sigma_r_m: ArrayLike,
-    sigma_azimuth_rad: ArrayLike,
+    sigma_beta_rad: ArrayLike,
     predicted_xy: ArrayLike | tuple[ArrayLike, ArrayLike] | None = None,
 ) -> ConvertedParts:
     """Any of ``METHODS_2D`` as components; ``ducm`` needs ``predicted_xy``.
 
     Args:
         r, beta: (...) measured range (m) and azimuth (rad).
-        sigma_r_m, sigma_azimuth_rad: σr and σβ, scalars or broadcastable to (...).
+        sigma_r_m, sigma_beta_rad: σr and σβ, scalars or broadcastable to (...).
         predicted_xy: the filter's predicted position, radar-centred: two (...) arrays, or one
             (..., 2) array.
     """
@@ -360,7 +367,7 @@ def convert_parts(
         p = _f(predicted)
         predicted = (p[..., 0], p[..., 1])
     fn = _CONVERSIONS[_method(method)]
-    return fn(r, c, sn, _f(sigma_r_m), _f(sigma_azimuth_rad), predicted)
+    return fn(r, c, sn, _f(sigma_r_m), _f(sigma_beta_rad), predicted)
 
 
 def convert(
@@ -369,7 +376,7 @@ def convert(
     beta: ArrayLike,
     *,
     sigma_r_m: ArrayLike,
-    sigma_azimuth_rad: ArrayLike,
+    sigma_beta_rad: ArrayLike,
     predicted_xy: ArrayLike | None = None,
 ) -> Converted:
     """``convert_parts`` stacked: z (..., 2) and R (..., 2, 2)."""
@@ -378,6 +385,6 @@ def convert(
         r,
         beta,
         sigma_r_m=sigma_r_m,
-        sigma_azimuth_rad=sigma_azimuth_rad,
+        sigma_beta_rad=sigma_beta_rad,
         predicted_xy=predicted_xy,
     ).stacked()

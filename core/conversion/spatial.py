@@ -53,7 +53,7 @@ def convert_naive_3d(
     elevation: ArrayLike,
     *,
     sigma_r_m: ArrayLike,
-    sigma_azimuth_rad: ArrayLike,
+    sigma_beta_rad: ArrayLike,
     sigma_elevation_rad: ArrayLike,
 ) -> Converted:
     """Naive 3D conversion with the first-order covariance J diag(σr², σβ², σε²) Jᵀ.
@@ -66,7 +66,7 @@ def convert_naive_3d(
     j_b = r[..., None] * g_b
     j_e = r[..., None] * g_e
     var_r = _f(sigma_r_m) ** 2
-    var_b = _f(sigma_azimuth_rad) ** 2
+    var_b = _f(sigma_beta_rad) ** 2
     var_e = _f(sigma_elevation_rad) ** 2
     cov = (
         var_r[..., None, None] * u[..., :, None] * u[..., None, :]
@@ -155,7 +155,7 @@ def naive_cov_given_truth_3d(
     elevation: ArrayLike,
     *,
     sigma_r_m: ArrayLike,
-    sigma_azimuth_rad: ArrayLike,
+    sigma_beta_rad: ArrayLike,
     sigma_elevation_rad: ArrayLike,
 ) -> NDArray[np.float64]:
     """Exact covariance (..., 3, 3) of the naive 3D point given the true (r, β, ε).
@@ -165,7 +165,7 @@ def naive_cov_given_truth_3d(
     evaluated as σr² E[u uᵀ] + r² Cov(u) (``_combined_cov``).
     """
     r = _f(r)
-    b = _given_truth(_f(azimuth), _f(sigma_azimuth_rad) ** 2)
+    b = _given_truth(_f(azimuth), _f(sigma_beta_rad) ** 2)
     e = _given_truth(_f(elevation), _f(sigma_elevation_rad) ** 2)
     return _combined_cov(r * r, _f(sigma_r_m) ** 2, e, b)
 
@@ -176,7 +176,7 @@ def averaged_cov_3d(
     elevation: ArrayLike,
     *,
     sigma_r_m: ArrayLike,
-    sigma_azimuth_rad: ArrayLike,
+    sigma_beta_rad: ArrayLike,
     sigma_elevation_rad: ArrayLike,
 ) -> NDArray[np.float64]:
     """Prosov's eq. 11 in 3D, at the measurement (r, β, ε) = (r̂, β̂, ε̂).  (..., 3, 3).
@@ -187,23 +187,23 @@ def averaged_cov_3d(
     """
     r = _f(r)
     var_r = _f(sigma_r_m) ** 2
-    b = _posterior_average(_f(azimuth), _f(sigma_azimuth_rad) ** 2)
+    b = _posterior_average(_f(azimuth), _f(sigma_beta_rad) ** 2)
     e = _posterior_average(_f(elevation), _f(sigma_elevation_rad) ** 2)
     return _combined_cov(r * r + var_r, var_r, e, b)
 
 
-def scale_3d(method: str, sigma_azimuth_rad: ArrayLike, sigma_elevation_rad: ArrayLike) -> NDArray:
+def scale_3d(method: str, sigma_beta_rad: ArrayLike, sigma_elevation_rad: ArrayLike) -> NDArray:
     """κ (..., 3): the 2D method's scale κ(s) (``planar``) per axis, s = sβ + sε on x and y,
     s = sε on z (the angle variances that enter each direction cosine)."""
-    sb, se = _f(sigma_azimuth_rad) ** 2, _f(sigma_elevation_rad) ** 2
+    var_beta, var_elevation = _f(sigma_beta_rad) ** 2, _f(sigma_elevation_rad) ** 2
     kappa = _SCALES[method]
-    kxy, kz = np.broadcast_arrays(kappa(sb + se), kappa(se))
+    kxy, kz = np.broadcast_arrays(kappa(var_beta + var_elevation), kappa(var_elevation))
     return np.stack([kxy, kxy, kz], axis=-1)
 
 
-def ucm_scale_3d(sigma_azimuth_rad: ArrayLike, sigma_elevation_rad: ArrayLike) -> NDArray:
+def ucm_scale_3d(sigma_beta_rad: ArrayLike, sigma_elevation_rad: ArrayLike) -> NDArray:
     """κ (..., 3) = (e^((sβ+sε)/2), e^((sβ+sε)/2), e^(sε/2)): the unbiasing factor per axis."""
-    return scale_3d("ucm", sigma_azimuth_rad, sigma_elevation_rad)
+    return scale_3d("ucm", sigma_beta_rad, sigma_elevation_rad)
 
 
 def ucm_cov_3d(
@@ -212,17 +212,17 @@ def ucm_cov_3d(
     elevation: ArrayLike,
     *,
     sigma_r_m: ArrayLike,
-    sigma_azimuth_rad: ArrayLike,
+    sigma_beta_rad: ArrayLike,
     sigma_elevation_rad: ArrayLike,
 ) -> NDArray[np.float64]:
     """Covariance D C D of the unbiased 3D point, C = ``naive_cov_given_truth_3d`` at the given
     (r, β, ε) (the measurement for ``ucm``, or any better estimate of the line of sight)."""
     sig = {
         "sigma_r_m": sigma_r_m,
-        "sigma_azimuth_rad": sigma_azimuth_rad,
+        "sigma_beta_rad": sigma_beta_rad,
         "sigma_elevation_rad": sigma_elevation_rad,
     }
-    kappa = ucm_scale_3d(sigma_azimuth_rad, sigma_elevation_rad)
+    kappa = ucm_scale_3d(sigma_beta_rad, sigma_elevation_rad)
     cov = naive_cov_given_truth_3d(r, azimuth, elevation, **sig)
     return kappa[..., :, None] * cov * kappa[..., None, :]
 
@@ -233,7 +233,7 @@ def convert_ucm_3d(
     elevation: ArrayLike,
     *,
     sigma_r_m: ArrayLike,
-    sigma_azimuth_rad: ArrayLike,
+    sigma_beta_rad: ArrayLike,
     sigma_elevation_rad: ArrayLike,
 ) -> Converted:
     """Unbiased 3D conversion: one factor e^(s/2) per angle in each coordinate.
@@ -242,13 +242,13 @@ def convert_ucm_3d(
     D = diag(κ), evaluated at the measurement (``ucm_cov_3d``).
     """
     r, az, el = np.broadcast_arrays(_f(r), _f(azimuth), _f(elevation))
-    kappa = ucm_scale_3d(sigma_azimuth_rad, sigma_elevation_rad)
+    kappa = ucm_scale_3d(sigma_beta_rad, sigma_elevation_rad)
     cov = ucm_cov_3d(
         r,
         az,
         el,
         sigma_r_m=sigma_r_m,
-        sigma_azimuth_rad=sigma_azimuth_rad,
+        sigma_beta_rad=sigma_beta_rad,
         sigma_elevation_rad=sigma_elevation_rad,
     )
     return Converted(kappa * _point_3d(r, az, el), cov)
@@ -260,7 +260,7 @@ def seed_correction_3d(
     elevation: ArrayLike,
     *,
     sigma_r_m: ArrayLike,
-    sigma_azimuth_rad: ArrayLike,
+    sigma_beta_rad: ArrayLike,
     sigma_elevation_rad: ArrayLike,
 ) -> NDArray[np.float64]:
     """Prosov's second-order term added to the naive 3D point, with eq. 10's sign.  (..., 3).
@@ -271,7 +271,7 @@ def seed_correction_3d(
     (1 − (sβ+sε)/2, 1 − (sβ+sε)/2, 1 − sε/2), twice the naive bias in the other direction.
     """
     r, az, el = np.broadcast_arrays(_f(r), _f(azimuth), _f(elevation))
-    variances = (_f(sigma_r_m) ** 2, _f(sigma_azimuth_rad) ** 2, _f(sigma_elevation_rad) ** 2)
+    variances = (_f(sigma_r_m) ** 2, _f(sigma_beta_rad) ** 2, _f(sigma_elevation_rad) ** 2)
     cov = np.zeros((*np.broadcast_shapes(r.shape, *(v.shape for v in variances)), 3, 3))
     for k, v in enumerate(variances):
         cov[..., k, k] = v
@@ -285,7 +285,7 @@ def convert_seed_3d(
     elevation: ArrayLike,
     *,
     sigma_r_m: ArrayLike,
-    sigma_azimuth_rad: ArrayLike,
+    sigma_beta_rad: ArrayLike,
     sigma_elevation_rad: ArrayLike,
 ) -> Converted:
     """Prosov's conversion in 3D: the naive point plus the second-order term as printed
@@ -293,7 +293,7 @@ def convert_seed_3d(
     ``seed`` pairs them."""
     sig = {
         "sigma_r_m": sigma_r_m,
-        "sigma_azimuth_rad": sigma_azimuth_rad,
+        "sigma_beta_rad": sigma_beta_rad,
         "sigma_elevation_rad": sigma_elevation_rad,
     }
     r, az, el = np.broadcast_arrays(_f(r), _f(azimuth), _f(elevation))
@@ -307,7 +307,7 @@ def convert_cmkf_d_3d(
     elevation: ArrayLike,
     *,
     sigma_r_m: ArrayLike,
-    sigma_azimuth_rad: ArrayLike,
+    sigma_beta_rad: ArrayLike,
     sigma_elevation_rad: ArrayLike,
 ) -> Converted:
     """Lerro and Bar-Shalom's debiased conversion in 3D: the naive point minus its average bias.
@@ -319,11 +319,11 @@ def convert_cmkf_d_3d(
     """
     sig = {
         "sigma_r_m": sigma_r_m,
-        "sigma_azimuth_rad": sigma_azimuth_rad,
+        "sigma_beta_rad": sigma_beta_rad,
         "sigma_elevation_rad": sigma_elevation_rad,
     }
     r, az, el = np.broadcast_arrays(_f(r), _f(azimuth), _f(elevation))
-    kappa = scale_3d("cmkf_d", sigma_azimuth_rad, sigma_elevation_rad)
+    kappa = scale_3d("cmkf_d", sigma_beta_rad, sigma_elevation_rad)
     return Converted(kappa * _point_3d(r, az, el), averaged_cov_3d(r, az, el, **sig))
 
 
@@ -333,7 +333,7 @@ def convert_ducm_3d(
     elevation: ArrayLike,
     *,
     sigma_r_m: ArrayLike,
-    sigma_azimuth_rad: ArrayLike,
+    sigma_beta_rad: ArrayLike,
     sigma_elevation_rad: ArrayLike,
     predicted_xyz: ArrayLike,
 ) -> Converted:
@@ -343,13 +343,13 @@ def convert_ducm_3d(
     measurement's error."""
     sig = {
         "sigma_r_m": sigma_r_m,
-        "sigma_azimuth_rad": sigma_azimuth_rad,
+        "sigma_beta_rad": sigma_beta_rad,
         "sigma_elevation_rad": sigma_elevation_rad,
     }
     r, az, el = np.broadcast_arrays(_f(r), _f(azimuth), _f(elevation))
     p = _f(predicted_xyz)
     r_p, az_p, el_p = polar_coordinates([p[..., 0], p[..., 1], p[..., 2]])
-    kappa = ucm_scale_3d(sigma_azimuth_rad, sigma_elevation_rad)
+    kappa = ucm_scale_3d(sigma_beta_rad, sigma_elevation_rad)
     return Converted(kappa * _point_3d(r, az, el), ucm_cov_3d(r_p, az_p, el_p, **sig))
 
 
@@ -360,7 +360,7 @@ def convert_3d(
     elevation: ArrayLike,
     *,
     sigma_r_m: ArrayLike,
-    sigma_azimuth_rad: ArrayLike,
+    sigma_beta_rad: ArrayLike,
     sigma_elevation_rad: ArrayLike,
     predicted_xyz: ArrayLike | None = None,
 ) -> Converted:
@@ -368,11 +368,11 @@ def convert_3d(
 
     Args:
         r, azimuth, elevation: (...) measured range (m) and angles (rad).
-        sigma_r_m, sigma_azimuth_rad, sigma_elevation_rad: σr, σβ, σε, scalars or (...).
+        sigma_r_m, sigma_beta_rad, sigma_elevation_rad: σr, σβ, σε, scalars or (...).
     """
     sig = {
         "sigma_r_m": sigma_r_m,
-        "sigma_azimuth_rad": sigma_azimuth_rad,
+        "sigma_beta_rad": sigma_beta_rad,
         "sigma_elevation_rad": sigma_elevation_rad,
     }
     if method not in CONVERSIONS_3D:

@@ -102,10 +102,10 @@ class AssociationResult(NamedTuple):
 
 def scan_plots(scene: CrossingScene, rng: np.random.Generator) -> list[list[Plot]]:
     """One run's scans as ``Plot`` records of the radar "radar" at the origin (2D)."""
-    sb = math.radians(scene.sigma_beta_deg)
+    sigma_beta_rad = math.radians(scene.sigma_beta_deg)
     return [
         [
-            Plot(float(t), float(r), float(b), scene.sigma_r_m, sb, radar="radar")
+            Plot(float(t), float(r), float(b), scene.sigma_r_m, sigma_beta_rad, radar="radar")
             for r, b in zip(s.range_m, s.azimuth_rad, strict=True)
         ]
         for t, s in zip(scene.times_s, crossing_scans(scene, rng), strict=True)

@@ -149,7 +149,7 @@ def polar_doppler_measurements(
     truth: NDArray[np.float64],
     *,
     sigma_r_m: float,
-    sigma_azimuth_rad: float,
+    sigma_beta_rad: float,
     sigma_vr_mps: float,
     runs: int,
     rng: np.random.Generator,
@@ -160,7 +160,7 @@ def polar_doppler_measurements(
     vr = radial_velocity(truth[:, 0::2], truth[:, 1::2])
     return PolarDopplerMeasurements(
         r + sigma_r_m * rng.standard_normal((runs, steps)),
-        beta + sigma_azimuth_rad * rng.standard_normal((runs, steps)),
+        beta + sigma_beta_rad * rng.standard_normal((runs, steps)),
         vr + sigma_vr_mps * rng.standard_normal((runs, steps)),
     )
 
@@ -251,14 +251,21 @@ def run_doppler_tracking(config: DopplerTrackingConfig) -> DopplerTrackingResult
     """Monte Carlo of both variants on the same measurements (common random numbers)."""
     radar = config.radar_preset()
     sr, svr, T = radar.sigma_r_m, radar.sigma_vr_mps, radar.period_s
-    sb = float(np.deg2rad(config.sigma_beta_deg))
+    sigma_beta_rad = float(np.deg2rad(config.sigma_beta_deg))
     truth = config.scenario().truth()
     steps, k = truth.shape[0], config.start_scans
     rng = np.random.default_rng(np.random.SeedSequence(config.seed))
     meas = polar_doppler_measurements(
-        truth, sigma_r_m=sr, sigma_azimuth_rad=sb, sigma_vr_mps=svr, runs=config.runs, rng=rng
+        truth,
+        sigma_r_m=sr,
+        sigma_beta_rad=sigma_beta_rad,
+        sigma_vr_mps=svr,
+        runs=config.runs,
+        rng=rng,
     )
-    settings = FilterSettings(sr, sb, T, config.sigma_a_mps2, config.sigma_v0_mps, sigma_vr_mps=svr)
+    settings = FilterSettings(
+        sr, sigma_beta_rad, T, config.sigma_a_mps2, config.sigma_v0_mps, sigma_vr_mps=svr
+    )
     fits: dict[str, FiniteMemoryFit] = {}
     fields: dict[str, dict[str, object]] = {}
     for variant in config.variants:
@@ -271,7 +278,7 @@ def run_doppler_tracking(config: DopplerTrackingConfig) -> DopplerTrackingResult
             meas.r[:, :k],
             meas.vr[:, :k] if doppler else None,
             meas.beta[:, k - 1],
-            sigma_azimuth_rad=sb,
+            sigma_beta_rad=sigma_beta_rad,
             sigma_v0_mps=config.sigma_v0_mps,
         )
         sums = _VariantSums(steps)
@@ -323,7 +330,7 @@ def _filter_numpy(
     EKF and the line-of-sight Doppler as one update with their errors' correlation), the
     update V̂r enters by."""
     s = settings
-    noise = {"sigma_r_m": s.sigma_r_m, "sigma_azimuth_rad": s.sigma_azimuth_rad}
+    noise = {"sigma_r_m": s.sigma_r_m, "sigma_beta_rad": s.sigma_beta_rad}
     state = start[1]
     buffers = (empty_batch(state.batch_shape), empty_batch(state.batch_shape))
     for n in range(start[0] + 1, r.shape[1]):
@@ -349,7 +356,7 @@ def _filter_numpy(
                 vr[:, n],
                 beta[:, n],
                 sigma_vr_mps=s.sigma_vr_mps,
-                sigma_azimuth_rad=s.sigma_azimuth_rad,
+                sigma_beta_rad=s.sigma_beta_rad,
             )
         yield n, state.x[None], state.P[None]
 

@@ -216,7 +216,7 @@ def flight_plots(
                 float(mp.range_m[n, 0, 0]),
                 angle(float(mp.azimuth_rad[n, 0, 0])),
                 r.sigma_r_m,
-                angle(r.sigma_azimuth_rad),
+                angle(r.sigma_beta_rad),
                 tuple(map(float, r.position)),
                 r.name,
                 angle(float(mp.elevation_rad[n, 0, 0])),
@@ -303,7 +303,7 @@ def _track_batch(
             plot = PolarPlot(
                 *(v[n].reshape(b) for v in (mp.range_m, mp.azimuth_rad, mp.elevation_rad))
             )
-            noise = PolarNoise(radar.sigma_r_m, radar.sigma_azimuth_rad, radar.sigma_elevation_rad)
+            noise = PolarNoise(radar.sigma_r_m, radar.sigma_beta_rad, radar.sigma_elevation_rad)
             pre = group.group.start_parts(plot, noise) if group.group.converted else None
             doppler = None
             if mp.doppler[n]:
@@ -312,7 +312,7 @@ def _track_batch(
                     plot.azimuth_rad,
                     plot.elevation_rad,
                     radar.sigma_vr_mps,
-                    radar.sigma_azimuth_rad,
+                    radar.sigma_beta_rad,
                     radar.sigma_elevation_rad,
                 )
             site = np.asarray(radar.position, dtype=np.float64)
@@ -344,7 +344,7 @@ def raw_converted_errors(mp: ManoeuvrePlots) -> NDArray[np.float64]:
     for n in range(n_plots):
         radar = mp.schedule.radars[int(mp.schedule.radar[n])]
         plot = PolarPlot(*(v[n].reshape(b) for v in (mp.range_m, mp.azimuth_rad, mp.elevation_rad)))
-        noise = PolarNoise(radar.sigma_r_m, radar.sigma_azimuth_rad, radar.sigma_elevation_rad)
+        noise = PolarNoise(radar.sigma_r_m, radar.sigma_beta_rad, radar.sigma_elevation_rad)
         z, _ = ucm.convert(plot, noise)
         for a in range(3):
             out[n, :, a] = z[a] + radar.position[a] - truth[n, :, a]
@@ -380,9 +380,9 @@ def straight_line_check(
     target = prosov_target()
     truth = target.truth()  # (N, 4)
     rng = np.random.default_rng(np.random.SeedSequence(seed).spawn(1)[0])
-    sigma_r, sigma_b = 250.0, np.radians(1.0)
+    sigma_r, sigma_beta_rad = 250.0, np.radians(1.0)
     r_hat, b_hat = polar_measurements(
-        truth, sigma_r_m=sigma_r, sigma_azimuth_rad=sigma_b, runs=runs, rng=rng
+        truth, sigma_r_m=sigma_r, sigma_beta_rad=sigma_beta_rad, runs=runs, rng=rng
     )
     e2: dict[str, dict[str, NDArray]] = {}
     for label, motion in zip(("cv", "imm"), models, strict=True):
@@ -392,7 +392,7 @@ def straight_line_check(
             acc = np.zeros((len(names), runs))
             for n in range(target.steps):
                 plot = PolarPlot(r_hat[:, n], b_hat[:, n])
-                noise = PolarNoise(sigma_r, sigma_b)
+                noise = PolarNoise(sigma_r, sigma_beta_rad)
                 pre = group.group.start_parts(plot, noise) if group.group.converted else None
                 st, _ = group.add_arrays(
                     n * target.period_s, plot, noise, np.zeros(2), pre, None, with_stats=False
@@ -446,7 +446,7 @@ def finite_memory_tracks(
             vrs[i - k + 1 : i + 1].T if doppler else None,
             mp.azimuth_rad[n].reshape(b),
             mp.elevation_rad[n].reshape(b),
-            sigma_azimuth_rad=site.sigma_azimuth_rad,
+            sigma_beta_rad=site.sigma_beta_rad,
             sigma_elevation_rad=site.sigma_elevation_rad,
             sigma_v0_mps=sigma_v0_mps,
             site=np.asarray(site.position, dtype=np.float64),

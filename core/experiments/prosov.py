@@ -324,13 +324,13 @@ def check_delta_x_claims(
     The verdict is from the 95% band of each scan of the window (``claim_verdict``): a claim
     is only said to hold, or not, when the Monte Carlo error of the curve cannot change it.
     """
-    sb = result.config.sigma_beta_deg
+    sigma_beta_deg = result.config.sigma_beta_deg
     if "seed" not in result.metrics or "naive" not in result.metrics:
         return []
     values, bands = result.delta_x_percent(), result.delta_x_ci95_percent()
     out = []
     for claim in claims:
-        if not np.isclose(claim.sigma_beta_deg, sb) or claim.scans > len(result.n):
+        if not np.isclose(claim.sigma_beta_deg, sigma_beta_deg) or claim.scans > len(result.n):
             continue
         w = slice(0, claim.scans)
         for reading, v in values.items():
@@ -446,7 +446,7 @@ def _measurements(
         return spherical_measurements(
             truth,
             sigma_r_m=config.sigma_r_m,
-            sigma_azimuth_rad=config.sigma_beta_rad,
+            sigma_beta_rad=config.sigma_beta_rad,
             sigma_elevation_rad=config.sigma_elevation_rad,
             runs=runs,
             rng=rng,
@@ -454,7 +454,7 @@ def _measurements(
     return polar_measurements(
         truth,
         sigma_r_m=config.sigma_r_m,
-        sigma_azimuth_rad=config.sigma_beta_rad,
+        sigma_beta_rad=config.sigma_beta_rad,
         runs=runs,
         rng=rng,
     )
@@ -705,7 +705,7 @@ def prosov_scene(
     shown = displayed_measurements(config, truth)
     r_hat, beta_hat = shown[:2]
     result, tracks = _monte_carlo(config, truth, progress, block, shown)
-    sr, sb = config.sigma_r_m, config.sigma_beta_rad
+    sr, sigma_beta_rad = config.sigma_r_m, config.sigma_beta_rad
     converted = {}
     for method in SHOWN_CONVERSIONS:
         if config.dims == 3:
@@ -715,12 +715,14 @@ def prosov_scene(
                 beta_hat[0],
                 shown[2][0],
                 sigma_r_m=sr,
-                sigma_azimuth_rad=sb,
+                sigma_beta_rad=sigma_beta_rad,
                 sigma_elevation_rad=config.sigma_elevation_rad,
             )
             converted[method] = c3.z
             continue
-        c = convert_parts(method, r_hat[0], beta_hat[0], sigma_r_m=sr, sigma_azimuth_rad=sb)
+        c = convert_parts(
+            method, r_hat[0], beta_hat[0], sigma_r_m=sr, sigma_beta_rad=sigma_beta_rad
+        )
         converted[method] = np.stack([c.x, c.y], -1)
     return ProsovScene(
         elevation_hat_rad=shown[2][0] if config.dims == 3 else None,
@@ -778,9 +780,11 @@ def conversion_cloud(
     true_xy = truth[:, [0, 2]]
     basis = range_cross_basis(np.zeros(2), true_xy)  # (N, 2, 2)
     rng = np.random.default_rng(np.random.SeedSequence([config.seed, CLOUD_STREAM]))
-    sr, sb = config.sigma_r_m, config.sigma_beta_rad
+    sr, sigma_beta_rad = config.sigma_r_m, config.sigma_beta_rad
     # (P, N): one row per draw, one column per scan.
-    r_c, b_c = polar_measurements(truth, sigma_r_m=sr, sigma_azimuth_rad=sb, runs=points, rng=rng)
+    r_c, b_c = polar_measurements(
+        truth, sigma_r_m=sr, sigma_beta_rad=sigma_beta_rad, runs=points, rng=rng
+    )
     scans = truth.shape[0]
     cloud = {m: np.empty((scans, kept, 2)) for m in SHOWN_CONVERSIONS}
     mean = {m: np.empty((scans, 2)) for m in SHOWN_CONVERSIONS}
@@ -791,7 +795,7 @@ def conversion_cloud(
         block = slice(lo, min(lo + CLOUD_BLOCK_SCANS, scans))
         r_b, b_b = r_c[:, block].T, b_c[:, block].T  # (n, P)
         for method in SHOWN_CONVERSIONS:
-            c = convert_parts(method, r_b, b_b, sigma_r_m=sr, sigma_azimuth_rad=sb)
+            c = convert_parts(method, r_b, b_b, sigma_r_m=sr, sigma_beta_rad=sigma_beta_rad)
             xy = np.stack([c.x, c.y], -1)  # (n, P, 2)
             # offsets[n, p] = B[n] (xy[n, p] − truth[n]), one batched matmul (einsum is slow).
             offsets = (xy - true_xy[block, None, :]) @ np.swapaxes(basis[block], -1, -2)
@@ -833,14 +837,14 @@ def prosov_configs(
     return [
         TrackingConfig(
             sigma_r_m=sigma_r_m,
-            sigma_beta_deg=float(sb),
+            sigma_beta_deg=float(sigma_deg),
             runs=runs,
             seed=seed,
             target=target,
             methods=tuple(methods),
             **extra,
         )
-        for sb in sigma_beta_deg
+        for sigma_deg in sigma_beta_deg
     ]
 
 

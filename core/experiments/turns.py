@@ -108,11 +108,11 @@ def _scene(
     b = np.arctan2(d[..., 1], d[..., 0])
     rng = np.random.default_rng(np.random.SeedSequence(seed).spawn(runs + 1)[runs])
     sr = np.array([radars[k].sigma_r_m for k in sched.radar])[:, None, None]
-    sb = np.array([radars[k].sigma_azimuth_rad for k in sched.radar])[:, None, None]
+    sigma_beta_rad = np.array([radars[k].sigma_beta_rad for k in sched.radar])[:, None, None]
     shape = (*r.shape, runs)
     meas = (
         r[..., None] + sr * rng.standard_normal(shape),
-        b[..., None] + sb * rng.standard_normal(shape),
+        b[..., None] + sigma_beta_rad * rng.standard_normal(shape),
     )
     return mp, flights, meas, truth
 
@@ -140,7 +140,7 @@ def _track(
     for i in range(n_plots):
         radar = sched.radars[int(sched.radar[i])]
         plot = PolarPlot(*(v[i].reshape(b) for v in meas))
-        sig = (radar.sigma_r_m, radar.sigma_azimuth_rad)
+        sig = (radar.sigma_r_m, radar.sigma_beta_rad)
         noise = PolarNoise(*sig, *((radar.sigma_elevation_rad,) if dims == 3 else ()))
         pre = group.group.start_parts(plot, noise) if group.group.converted else None
         doppler = None
@@ -150,7 +150,7 @@ def _track(
                 plot.azimuth_rad,
                 plot.elevation_rad,
                 radar.sigma_vr_mps,
-                radar.sigma_azimuth_rad,
+                radar.sigma_beta_rad,
                 radar.sigma_elevation_rad,
             )
         site = np.asarray(radar.position[:dims], dtype=np.float64)

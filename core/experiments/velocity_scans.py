@@ -90,7 +90,7 @@ def estimate_scans(scenario: Scenario3D, scans: int, seed: int | None) -> Veloci
         for f in ("range", "azimuth", "elevation", "radial_velocity")
     }
     sig = {f: np.array([getattr(r, f) for r in radars]) for f in SIGMA_FIELDS}
-    angle_sigmas = {f: sig[f] for f in ("sigma_azimuth_rad", "sigma_elevation_rad")}
+    angle_sigmas = {f: sig[f] for f in ("sigma_beta_rad", "sigma_elevation_rad")}
     fused = fuse_positions(
         sites,
         stack["range"],

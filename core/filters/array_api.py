@@ -203,7 +203,7 @@ def filter_history_xp(
         xp = array_namespace(r_hat)
     s_ = settings
     code, start_code = METHOD_CODES[method], START_CODES[method]
-    sr2, s = s_.sigma_r_m**2, s_.sigma_azimuth_rad**2
+    sr2, s = s_.sigma_r_m**2, s_.sigma_beta_rad**2
     co = conversion_coefficients(code, s, sr2)
     co_start = conversion_coefficients(start_code, s, sr2)
     sx, sy = s_.site_m
@@ -223,14 +223,14 @@ def filter_history_xp(
         if code == EKF:  # ekf: ν' = J ν, R' = J R Jᵀ at the prediction, then the position update
             px, py = x[0] - sx, x[2] - sy
             rp = xp.hypot(px, py)
-            cb, sb = px / rp, py / rp
+            cos_b, sin_b = px / rp, py / rp
             nr, nb = r - rp, _wrap(xp, b - xp.atan2(py, px))
-            nu = [cb * nr - py * nb, sb * nr + px * nb]
+            nu = [cos_b * nr - py * nb, sin_b * nr + px * nb]
             vb = s
             R = {
-                (0, 0): cb * cb * sr2 + py * py * vb,
-                (0, 1): cb * sb * sr2 - px * py * vb,
-                (1, 1): sb * sb * sr2 + px * px * vb,
+                (0, 0): cos_b * cos_b * sr2 + py * py * vb,
+                (0, 1): cos_b * sin_b * sr2 - px * py * vb,
+                (1, 1): sin_b * sin_b * sr2 + px * px * vb,
             }
             x, P = _joseph(xp, x, P, _POSITION, nu, R)
         elif code == UKF:

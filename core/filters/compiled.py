@@ -55,7 +55,7 @@ class FilterSettings(NamedTuple):
     """The scalars every track of a block shares.
 
     Attributes:
-        sigma_r_m, sigma_azimuth_rad: measurement noise std σr (m), σβ (rad).
+        sigma_r_m, sigma_beta_rad: measurement noise std σr (m), σβ (rad).
         period_s: scan period T (s).  sigma_a_mps2: process-noise acceleration std σa.
         sigma_v0_mps: initial velocity std of every track.
         site_m: the radar's (x, y) position, m.
@@ -64,7 +64,7 @@ class FilterSettings(NamedTuple):
     """
 
     sigma_r_m: float
-    sigma_azimuth_rad: float
+    sigma_beta_rad: float
     period_s: float
     sigma_a_mps2: float
     sigma_v0_mps: float
@@ -186,7 +186,7 @@ def filter_scans(
             first,
             last,
             float(s.sigma_r_m),
-            float(s.sigma_azimuth_rad),
+            float(s.sigma_beta_rad),
             float(s.sigma_vr_mps),
             float(s.period_s),
             float(s.sigma_a_mps2),

@@ -46,7 +46,7 @@ def doppler_update(
     elevation_rad: ArrayLike = 0.0,
     *,
     sigma_vr_mps: ArrayLike,
-    sigma_azimuth_rad: ArrayLike,
+    sigma_beta_rad: ArrayLike,
     sigma_elevation_rad: ArrayLike = 0.0,
     out: CVBatch | None = None,
 ) -> CVBatch:
@@ -56,14 +56,14 @@ def doppler_update(
         state: the batch after this plot's position update (or its prediction).
         radial_velocity_mps: measured V̂r, (...) or scalar.
         azimuth_rad, elevation_rad: the plot's measured angles (elevation 0 in 2D).
-        sigma_vr_mps, sigma_azimuth_rad, sigma_elevation_rad: the plot's noise std.
+        sigma_vr_mps, sigma_beta_rad, sigma_elevation_rad: the plot's noise std.
         out: optional preallocated batch to write into (must not alias ``state``).
     """
     x, P = state.x, state.P
     dims, n = state.dims, x.shape[-1]
     vel = velocity_index(dims)
     u, g_b, g_e, var_vr, var_b, var_e = _geometry(
-        dims, azimuth_rad, elevation_rad, sigma_vr_mps, sigma_azimuth_rad, sigma_elevation_rad
+        dims, azimuth_rad, elevation_rad, sigma_vr_mps, sigma_beta_rad, sigma_elevation_rad
     )
     if use_dense(state):  # the same update as matrix products (small batches)
         return _dense(state, radial_velocity_mps, u, g_b, g_e, var_vr, var_b, var_e, out)
@@ -141,13 +141,13 @@ def doppler_terms(
     elevation_rad: ArrayLike = 0.0,
     *,
     sigma_vr_mps: ArrayLike,
-    sigma_azimuth_rad: ArrayLike,
+    sigma_beta_rad: ArrayLike,
     sigma_elevation_rad: ArrayLike = 0.0,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """The Doppler measurement as a linear one: ν (..., 1), H (..., 1, n) and var e (..., 1, 1)
     (module docstring), for the innovation statistics (``core.filters.innovation``)."""
     geometry = _geometry(
-        state.dims, azimuth_rad, elevation_rad, sigma_vr_mps, sigma_azimuth_rad, sigma_elevation_rad
+        state.dims, azimuth_rad, elevation_rad, sigma_vr_mps, sigma_beta_rad, sigma_elevation_rad
     )
     return _dense_terms(state, radial_velocity_mps, *geometry)
 
@@ -158,7 +158,7 @@ def doppler_tilt_covariance(
     elevation_rad: ArrayLike = 0.0,
     *,
     sigma_vr_mps: ArrayLike,
-    sigma_azimuth_rad: ArrayLike,
+    sigma_beta_rad: ArrayLike,
     sigma_elevation_rad: ArrayLike = 0.0,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Cov(δβ, e) = −(g_β·v̂) σβ² and Cov(δε, e) = −(g_ε·v̂) σε², each (...): the covariance of
@@ -167,7 +167,7 @@ def doppler_tilt_covariance(
     independent of the angles); it is accepted so the keywords match ``doppler_terms``."""
     dims = state.dims
     _, g_b, g_e, _, var_b, var_e = _geometry(
-        dims, azimuth_rad, elevation_rad, sigma_vr_mps, sigma_azimuth_rad, sigma_elevation_rad
+        dims, azimuth_rad, elevation_rad, sigma_vr_mps, sigma_beta_rad, sigma_elevation_rad
     )
     v = [state.x[..., i] for i in velocity_index(dims)]
     gv_b = sum(g_b[a] * v[a] for a in range(min(dims, 2)))
@@ -180,7 +180,7 @@ def _geometry(
     azimuth_rad: ArrayLike,
     elevation_rad: ArrayLike,
     sigma_vr_mps: ArrayLike,
-    sigma_azimuth_rad: ArrayLike,
+    sigma_beta_rad: ArrayLike,
     sigma_elevation_rad: ArrayLike,
 ) -> tuple:
     """u, ∂u/∂β, ∂u/∂ε (first ``dims`` axes) and the variances σVr², σβ², σε²."""
@@ -193,7 +193,7 @@ def _geometry(
     g_b = (-ce * sa, ce * ca)
     g_e = (-se * ca, -se * sa, ce)
     var_vr = np.asarray(sigma_vr_mps, dtype=np.float64) ** 2
-    var_b = np.asarray(sigma_azimuth_rad, dtype=np.float64) ** 2
+    var_b = np.asarray(sigma_beta_rad, dtype=np.float64) ** 2
     var_e = np.asarray(sigma_elevation_rad, dtype=np.float64) ** 2
     return u, g_b, g_e, var_vr, var_b, var_e
 

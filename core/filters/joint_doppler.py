@@ -43,7 +43,7 @@ def joint_doppler_update(
     radial_velocity_mps: ArrayLike,
     *,
     sigma_r_m: ArrayLike,
-    sigma_azimuth_rad: ArrayLike,
+    sigma_beta_rad: ArrayLike,
     sigma_elevation_rad: ArrayLike = 0.0,
     sigma_vr_mps: ArrayLike,
     site: ArrayLike | None = None,
@@ -54,7 +54,7 @@ def joint_doppler_update(
         state: predicted batch (...), 2D or 3D.
         measurement: (r̂, β̂) or (r̂, β̂, ε̂), each (...), m and rad.
         radial_velocity_mps: V̂r (...), m/s.
-        sigma_r_m, sigma_azimuth_rad, sigma_elevation_rad, sigma_vr_mps: the noise std.
+        sigma_r_m, sigma_beta_rad, sigma_elevation_rad, sigma_vr_mps: the noise std.
         site: the radar's position (d,) (None: the origin).
     """
     dims, n = state.dims, state.x.shape[-1]
@@ -63,13 +63,13 @@ def joint_doppler_update(
         state,
         measurement,
         sigma_r_m=sigma_r_m,
-        sigma_azimuth_rad=sigma_azimuth_rad,
+        sigma_beta_rad=sigma_beta_rad,
         sigma_elevation_rad=sigma_elevation_rad,
         site=site,
     )
     angles = dict(
         sigma_vr_mps=sigma_vr_mps,
-        sigma_azimuth_rad=sigma_azimuth_rad,
+        sigma_beta_rad=sigma_beta_rad,
         sigma_elevation_rad=sigma_elevation_rad,
     )
     nu_d, H_d, var_d = doppler_terms(

@@ -444,7 +444,7 @@ def _step(code, xt, p, r, b, vr_hat, doppler, sr2, s, svr2, T, q, sx, sy, co, c,
 
 @_jit
 def filter_scans_2d(
-    code, start_code, r_hat, b_hat, vr_hat, doppler, first, last, sr, sb, svr, T, sa,
+    code, start_code, r_hat, b_hat, vr_hat, doppler, first, last, sr, sigma_beta_rad, svr, T, sa,
     v0, sx, sy, c, wm0, wc0, w, state, keep, xs, Ps, n_terms, truth, cos_los, sin_los,
     group_sums, group_offset,
 ):  # fmt: skip
@@ -461,7 +461,7 @@ def filter_scans_2d(
     Run-major: a run's state stays in registers over the chunk's scans; the state goes
     through memory once a chunk. (One loop, no call per run: a call's array arguments cost
     a reference count each.)"""
-    sr2, s, q = sr * sr, sb * sb, sa * sa
+    sr2, s, q = sr * sr, sigma_beta_rad * sigma_beta_rad, sa * sa
     svr2 = svr * svr
     co, co_start = coefficients(code, s, sr2), coefficients(start_code, s, sr2)
     groups = group_sums.shape[0]

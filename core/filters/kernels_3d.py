@@ -149,11 +149,11 @@ def combined_cov(range_sq: float, var_r: float, e, b, R):
 
 
 @_jit
-def given_truth_cov(r, cb, sb, ce, se, sr2: float, ex, R, mb, me):
-    # spatial.naive_cov_given_truth_3d at (r, β, ε), (cb, sb, ce, se) = (cos β, sin β, cos ε,
-    # sin ε); ex the radar's ``noise_table``
-    moments(cb, sb, ex[0], mb)
-    moments(ce, se, ex[1], me)
+def given_truth_cov(r, cos_b, sin_b, cos_e, sin_e, sr2: float, ex, R, mb, me):
+    # spatial.naive_cov_given_truth_3d at (r, β, ε), (cos_b, sin_b, cos_e, sin_e) =
+    # (cos β, sin β, cos ε, sin ε); ex the radar's ``noise_table``
+    moments(cos_b, sin_b, ex[0], mb)
+    moments(cos_e, sin_e, ex[1], me)
     combined_cov(r * r, sr2, me, mb, R)
 
 
@@ -163,13 +163,13 @@ def convert_3d(code, r, sr2, sb2, se2, px, py, pz, z, R, conv):
     # (r̂, β̂, ε̂), whose cosines, sines and radar's noise table ``plot_factors`` put in
     # ``conv``; (px, py, pz): the predicted position minus the site (ducm only)
     mb, me, tmp, trig, ex = conv
-    cb, sb, ce, se = trig[0], trig[1], trig[2], trig[3]
-    u0, u1, u2 = ce * cb, ce * sb, se
+    cos_b, sin_b, cos_e, sin_e = trig[0], trig[1], trig[2], trig[3]
+    u0, u1, u2 = cos_e * cos_b, cos_e * sin_b, sin_e
     s_xy, s_z = sb2 + se2, se2
     if code == NAIVE:  # naive: J diag(σr², sβ, sε) Jᵀ, J = [u, r ∂u/∂β, r ∂u/∂ε]
         z[0], z[1], z[2] = r * u0, r * u1, r * u2
-        jb0, jb1 = r * (-ce * sb), r * (ce * cb)
-        je0, je1, je2 = r * (-se * cb), r * (-se * sb), r * ce
+        jb0, jb1 = r * (-cos_e * sin_b), r * (cos_e * cos_b)
+        je0, je1, je2 = r * (-sin_e * cos_b), r * (-sin_e * sin_b), r * cos_e
         jb = (jb0, jb1, 0.0)
         je = (je0, je1, je2)
         uu = (u0, u1, u2)
@@ -185,8 +185,8 @@ def convert_3d(code, r, sr2, sb2, se2, px, py, pz, z, R, conv):
             k_xy, k_z = ex[4, 0], ex[4, 1]
         z[0], z[1], z[2] = k_xy * (r * u0), k_xy * (r * u1), k_z * (r * u2)
         # averaged_cov_3d: the posterior-averaged moments, E[r²] = r̂² + σr²
-        posterior_moments(cb, sb, ex[0], ex[2], mb, tmp)
-        posterior_moments(ce, se, ex[1], ex[3], me, tmp)
+        posterior_moments(cos_b, sin_b, ex[0], ex[2], mb, tmp)
+        posterior_moments(cos_e, sin_e, ex[1], ex[3], me, tmp)
         combined_cov(r * r + sr2, sr2, me, mb, R)
         return
     # ucm / ducm: κ = e^(s/2) per axis, covariance D C D with C the true-conditioned one,
@@ -194,7 +194,7 @@ def convert_3d(code, r, sr2, sb2, se2, px, py, pz, z, R, conv):
     k_xy, k_z = ex[4, 2], ex[4, 3]  # e^(s/2) (``noise_table``)
     z[0], z[1], z[2] = k_xy * (r * u0), k_xy * (r * u1), k_z * (r * u2)
     if code == UCM:
-        given_truth_cov(r, cb, sb, ce, se, sr2, ex, R, mb, me)
+        given_truth_cov(r, cos_b, sin_b, cos_e, sin_e, sr2, ex, R, mb, me)
     else:
         rho = hypot(px, py)
         rp = sqrt(rho * rho + pz * pz)
@@ -581,11 +581,11 @@ def doppler_update_3d(x, P, vr_hat, trig, var_vr, sb2, se2, u, U, K, L):
 @_jit
 def track_plots_3d(
     codes, start_codes, slot, time_s, r_m, az_rad, el_rad, vr_mps, has_vr, radar, site,
-    sigma_r, sigma_b, sigma_e, sigma_vr, sigma_a, v0, prm, xs, Ps, started, last_t, out_x,
-    out_P, out_nis,
+    sigma_r, sigma_beta_rad, sigma_elevation_rad, sigma_vr, sigma_a, v0, prm, xs, Ps, started,
+    last_t, out_x, out_P, out_nis,
 ):  # fmt: skip
     """``core.filters.kernels_track.track_plots_2d`` in 3D: plots with elevations el_rad
-    (B,), sites (R, 3), σε sigma_e (R,), states xs (K, M, 6), Ps (K, M, 6, 6), outputs
+    (B,), sites (R, 3), σε sigma_elevation_rad (R,), states xs (K, M, 6), Ps (K, M, 6, 6), outputs
     (B, M, 6), (B, M, 6, 6), (B, M); ``prm`` the UKF's weights for n = 6. Returns −1 or the
     index of the first plot before its slot's previous one."""
     n_m = codes.shape[0]
@@ -596,14 +596,14 @@ def track_plots_3d(
     bufs = scratch_3d()
     ex, conv = conversion_scratch(sigma_r.shape[0])
     for g in range(sigma_r.shape[0]):
-        noise_table(sigma_b[g] ** 2, sigma_e[g] ** 2, ex[g])
+        noise_table(sigma_beta_rad[g] ** 2, sigma_elevation_rad[g] ** 2, ex[g])
     trig = conv[3]
     for i in range(slot.shape[0]):
         k, g = slot[i], radar[i]
         r, b, el = r_m[i], az_rad[i], el_rad[i]
         plot_factors(b, el, ex[g], conv)
         sx, sy, sz = site[g, 0], site[g, 1], site[g, 2]
-        sr2, sb2, se2 = sigma_r[g] ** 2, sigma_b[g] ** 2, sigma_e[g] ** 2
+        sr2, sb2, se2 = sigma_r[g] ** 2, sigma_beta_rad[g] ** 2, sigma_elevation_rad[g] ** 2
         new = not started[k]
         dt = time_step(started, last_t, k, time_s[i])
         if dt < 0.0:

@@ -348,7 +348,7 @@ def _started(x, P, mu0, xm, Pm, mu):
 @_jit
 def track_plots_imm_2d(
     codes, start_codes, slot, time_s, r_m, az_rad, vr_mps, has_vr, radar, site, sigma_r,
-    sigma_b, sigma_vr, sigma_a, omega, Pi, mu0, v0, prm, with_stats, xs, Ps, mus, started,
+    sigma_beta_rad, sigma_vr, sigma_a, omega, Pi, mu0, v0, prm, with_stats, xs, Ps, mus, started,
     last_t, out_x, out_P, out_nis,
 ):  # fmt: skip
     """``core.filters.kernels_track.track_plots_2d`` with the IMM (module docstring): returns
@@ -366,7 +366,7 @@ def track_plots_imm_2d(
             out_nis (B, M): the NIS of the combined prediction, NaN at a start.
     """
     n_m, r = codes.shape[0], sigma_a.shape[0]
-    co, co_s = conversion_tables(codes, start_codes, sigma_r, sigma_b)
+    co, co_s = conversion_tables(codes, start_codes, sigma_r, sigma_beta_rad)
     bufs = scratch_2d()
     K = bufs[0]
     x, P = np.empty(4), np.empty((4, 4))
@@ -376,7 +376,7 @@ def track_plots_imm_2d(
         k, g = slot[i], radar[i]
         rr, b = r_m[i], az_rad[i]
         sx, sy = site[g, 0], site[g, 1]
-        sr2, s = sigma_r[g] * sigma_r[g], sigma_b[g] * sigma_b[g]
+        sr2, s = sigma_r[g] * sigma_r[g], sigma_beta_rad[g] * sigma_beta_rad[g]
         var_vr = sigma_vr[g] * sigma_vr[g]
         new = not started[k]
         dt = time_step(started, last_t, k, time_s[i])
@@ -426,11 +426,11 @@ def track_plots_imm_2d(
 @_jit
 def track_plots_imm_3d(
     codes, start_codes, slot, time_s, r_m, az_rad, el_rad, vr_mps, has_vr, radar, site,
-    sigma_r, sigma_b, sigma_e, sigma_vr, sigma_a, omega, Pi, mu0, v0, prm, with_stats, xs, Ps,
-    mus, started, last_t, out_x, out_P, out_nis,
+    sigma_r, sigma_beta_rad, sigma_elevation_rad, sigma_vr, sigma_a, omega, Pi, mu0, v0, prm,
+    with_stats, xs, Ps, mus, started, last_t, out_x, out_P, out_nis,
 ):  # fmt: skip
     """``track_plots_imm_2d`` in 3D (``core.filters.kernels_3d.track_plots_3d``'s stages):
-    elevations el_rad (B,), sites (R, 3), σε sigma_e (R,), models xs (K, M, r, 6),
+    elevations el_rad (B,), sites (R, 3), σε sigma_elevation_rad (R,), models xs (K, M, r, 6),
     Ps (K, M, r, 6, 6), outputs (B, M, 6), (B, M, 6, 6), (B, M); ``prm`` the UKF's weights
     for n = 6."""
     n_m, r = codes.shape[0], sigma_a.shape[0]
@@ -442,14 +442,14 @@ def track_plots_imm_3d(
     bufs = scratch_3d()
     ex, conv = conversion_scratch(sigma_r.shape[0])
     for g in range(sigma_r.shape[0]):
-        noise_table(sigma_b[g] ** 2, sigma_e[g] ** 2, ex[g])
+        noise_table(sigma_beta_rad[g] ** 2, sigma_elevation_rad[g] ** 2, ex[g])
     trig = conv[3]
     for i in range(slot.shape[0]):
         k, g = slot[i], radar[i]
         rr, b, el = r_m[i], az_rad[i], el_rad[i]
         plot_factors(b, el, ex[g], conv)
         sx, sy, sz = site[g, 0], site[g, 1], site[g, 2]
-        sr2, sb2, se2 = sigma_r[g] ** 2, sigma_b[g] ** 2, sigma_e[g] ** 2
+        sr2, sb2, se2 = sigma_r[g] ** 2, sigma_beta_rad[g] ** 2, sigma_elevation_rad[g] ** 2
         var_vr = sigma_vr[g] * sigma_vr[g]
         vr = vr_mps[i]
         new = not started[k]
@@ -552,11 +552,11 @@ def predicted_imm(xs, Ps, mus, slot, j: int, dt, sigma_a, omega, Pi, out_x, out_
 @_jit
 def gate_nis_imm_2d(
     xs, Ps, mus, slot, j: int, dt, sigma_a, omega, Pi, code: int, r_m, az_rad, sigma_r,
-    sigma_b, site, out,
+    sigma_beta_rad, site, out,
 ):  # fmt: skip
     """d² = νᵀ S⁻¹ ν of N (track, plot) pairs, 2D: pair i's track (slot[i], method j, of
     ``code``) predicted over dt[i] (``combined_prediction``) against its plot r_m[i],
-    az_rad[i] with noise std sigma_r[i], sigma_b[i] at site[i] (N, 2): the method's
+    az_rad[i] with noise std sigma_r[i], sigma_beta_rad[i] at site[i] (N, 2): the method's
     position measurement and its NIS (``position_measurement``, ``position_nis``), the
     statistic of the tracker kernels' monitor, into out (N,) (NaN where S is not positive
     definite)."""
@@ -568,19 +568,19 @@ def gate_nis_imm_2d(
         k = slot[i]
         out[i] = pair_nis_2d(
             xs[k, j], Ps[k, j], mus[k, j], dt[i], sigma_a, omega, Pi, code, r_m[i], az_rad[i],
-            sigma_r[i], sigma_b[i], site[i, 0], site[i, 1], x0, P0, mu, c, w, x, P,
+            sigma_r[i], sigma_beta_rad[i], site[i, 0], site[i, 1], x0, P0, mu, c, w, x, P,
         )  # fmt: skip
 
 
 @_inline
-def pair_nis_2d(xm, Pm, mu_k, dt, sigma_a, omega, Pi, code, r, b, sigma_r, sigma_b, sx, sy, x0,
-                P0, mu, c, w, x, P):  # fmt: skip
+def pair_nis_2d(xm, Pm, mu_k, dt, sigma_a, omega, Pi, code, r, b, sigma_r, sigma_beta_rad, sx, sy,
+                x0, P0, mu, c, w, x, P):  # fmt: skip
     """d² of one (track, plot) pair in 2D: the track's models xm, Pm, μ mu_k predicted over
-    dt (``combined_prediction``) against the plot (r, b) with noise std sigma_r, sigma_b at
+    dt (``combined_prediction``) against the plot (r, b) with noise std sigma_r, sigma_beta_rad at
     site (sx, sy), by method ``code``'s position measurement and its NIS (NaN where S is not
     positive definite); x0 … P scratch as ``combined_prediction``'s."""
     combined_prediction(xm, Pm, mu_k, dt, sigma_a, omega, Pi, x0, P0, mu, c, w, x, P)
-    sr2, s = sigma_r * sigma_r, sigma_b * sigma_b
+    sr2, s = sigma_r * sigma_r, sigma_beta_rad * sigma_beta_rad
     co = coefficients(code, s, sr2)
     meas = position_measurement(code, x, r, b, sr2, s, sx, sy, co)
     return position_nis(P, *meas)

@@ -151,7 +151,7 @@ class DopplerMeasurement:
     azimuth_rad: ArrayLike
     elevation_rad: ArrayLike
     sigma_vr_mps: ArrayLike
-    sigma_azimuth_rad: ArrayLike
+    sigma_beta_rad: ArrayLike
     sigma_elevation_rad: ArrayLike
 
     def _args(self, models: bool) -> tuple[list, dict]:
@@ -159,7 +159,7 @@ class DopplerMeasurement:
         vals.append(_expand(self.elevation_rad, models))
         kw = {
             "sigma_vr_mps": _expand(self.sigma_vr_mps, models),
-            "sigma_azimuth_rad": _expand(self.sigma_azimuth_rad, models),
+            "sigma_beta_rad": _expand(self.sigma_beta_rad, models),
             "sigma_elevation_rad": _expand(self.sigma_elevation_rad, models),
         }
         return vals, kw
@@ -217,7 +217,7 @@ def doppler_measurement(
     elevation_rad: ArrayLike,
     sigma_vr_mps: ArrayLike,
     sigma_r_m: ArrayLike,
-    sigma_azimuth_rad: ArrayLike,
+    sigma_beta_rad: ArrayLike,
     sigma_elevation_rad: ArrayLike,
     site: ArrayLike | None = None,
 ) -> DopplerMeasurement | ConvertedDopplerMeasurement:
@@ -235,6 +235,6 @@ def doppler_measurement(
         azimuth_rad,
         elevation_rad,
         sigma_vr_mps,
-        sigma_azimuth_rad,
+        sigma_beta_rad,
         sigma_elevation_rad,
     )

@@ -67,7 +67,7 @@ class PolarNoise(NamedTuple):
     """Measurement noise std of the plots: σr (m), σβ (rad), σε (rad; 0 in 2D)."""
 
     sigma_r_m: ArrayLike
-    sigma_azimuth_rad: ArrayLike
+    sigma_beta_rad: ArrayLike
     sigma_elevation_rad: ArrayLike = 0.0
 
 
@@ -77,7 +77,7 @@ def _parts_2d(name: str, plot: PolarPlot, noise: PolarNoise, predicted: list[Vec
         plot.range_m,
         plot.azimuth_rad,
         sigma_r_m=noise.sigma_r_m,
-        sigma_azimuth_rad=noise.sigma_azimuth_rad,
+        sigma_beta_rad=noise.sigma_beta_rad,
         predicted_xy=None if predicted is None else (predicted[0], predicted[1]),
     )
     return [c.x, c.y], {(0, 0): c.r00, (0, 1): c.r01, (1, 1): c.r11}

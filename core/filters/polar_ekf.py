@@ -75,7 +75,7 @@ def ekf_update(
     measurement: Sequence[ArrayLike],
     *,
     sigma_r_m: ArrayLike,
-    sigma_azimuth_rad: ArrayLike,
+    sigma_beta_rad: ArrayLike,
     sigma_elevation_rad: ArrayLike = 0.0,
     site: ArrayLike | None = None,
     out: CVBatch | None = None,
@@ -85,7 +85,7 @@ def ekf_update(
     Args:
         state: predicted batch (output of ``cv_predict``), 2D or 3D; no track at the site.
         measurement: (r̂, β̂) in 2D or (r̂, β̂, ε̂) in 3D, each (...) in m and rad.
-        sigma_r_m, sigma_azimuth_rad, sigma_elevation_rad: measurement noise std.
+        sigma_r_m, sigma_beta_rad, sigma_elevation_rad: measurement noise std.
         site: the radar's position (d,) (None: the origin).
         out: optional preallocated batch to write into (must not alias ``state``).
 
@@ -96,7 +96,7 @@ def ekf_update(
         state,
         measurement,
         sigma_r_m=sigma_r_m,
-        sigma_azimuth_rad=sigma_azimuth_rad,
+        sigma_beta_rad=sigma_beta_rad,
         sigma_elevation_rad=sigma_elevation_rad,
         site=site,
     )
@@ -109,7 +109,7 @@ def ekf_pseudo_measurement(
     measurement: Sequence[ArrayLike],
     *,
     sigma_r_m: ArrayLike,
-    sigma_azimuth_rad: ArrayLike,
+    sigma_beta_rad: ArrayLike,
     sigma_elevation_rad: ArrayLike = 0.0,
     site: ArrayLike | None = None,
 ) -> tuple[tuple[Vec, ...], dict[tuple[int, int], Vec]]:
@@ -118,7 +118,7 @@ def ekf_pseudo_measurement(
     ν'ᵀ S'⁻¹ ν' with S' = H_pos P⁻ H_posᵀ + R' (S = G S' Gᵀ, ν = G ν')."""
     meas = polar_measurement_vectors(state, measurement)
     var_r = np.asarray(sigma_r_m, dtype=np.float64) ** 2
-    var_b = np.asarray(sigma_azimuth_rad, dtype=np.float64) ** 2
+    var_b = np.asarray(sigma_beta_rad, dtype=np.float64) ** 2
     if state.dims == 2:
         px, py = site_offsets(state, site)
         # Predicted measurement h(x⁻) and the columns u = (c, sn), r ∂u/∂β = (−py, px) of J.

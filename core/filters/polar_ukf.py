@@ -144,7 +144,7 @@ def ukf_update(
     measurement: Sequence[ArrayLike],
     *,
     sigma_r_m: ArrayLike,
-    sigma_azimuth_rad: ArrayLike,
+    sigma_beta_rad: ArrayLike,
     sigma_elevation_rad: ArrayLike = 0.0,
     site: ArrayLike | None = None,
     params: UKFParams = _DEFAULT_UKF,
@@ -155,7 +155,7 @@ def ukf_update(
     Args:
         state: predicted batch (output of ``cv_predict``), 2D or 3D.
         measurement: (r̂, β̂) in 2D or (r̂, β̂, ε̂) in 3D, each (...) in m and rad.
-        sigma_r_m, sigma_azimuth_rad, sigma_elevation_rad: measurement noise std.
+        sigma_r_m, sigma_beta_rad, sigma_elevation_rad: measurement noise std.
         site: the radar's position (d,) (None: the origin).
         params: sigma-point parameters (α, β, κ).
         out: optional preallocated batch to write into (must not alias ``state``).
@@ -170,7 +170,7 @@ def ukf_update(
     c, wm0, wc0, w = params.weights(n)
     var = [
         np.asarray(sigma_r_m, dtype=np.float64) ** 2,
-        np.asarray(sigma_azimuth_rad, dtype=np.float64) ** 2,
+        np.asarray(sigma_beta_rad, dtype=np.float64) ** 2,
         np.asarray(sigma_elevation_rad, dtype=np.float64) ** 2,
     ][:m]
     if use_dense(state):

@@ -36,7 +36,7 @@ def finite_memory_start(
     azimuth_rad: ArrayLike,
     elevation_rad: ArrayLike | None = None,
     *,
-    sigma_azimuth_rad: float,
+    sigma_beta_rad: float,
     sigma_elevation_rad: float = 0.0,
     sigma_v0_mps: float,
     site: ArrayLike | None = None,
@@ -47,7 +47,7 @@ def finite_memory_start(
         fit: a fit of at least 2 parameters (range and radial velocity) over k plots.
         ranges_m: (..., k) oldest first.  radial_velocities_mps: (..., k) or None (range only).
         azimuth_rad, elevation_rad: (...) angles of the newest plot (elevation None: 2D).
-        sigma_azimuth_rad, sigma_elevation_rad: their noise std.
+        sigma_beta_rad, sigma_elevation_rad: their noise std.
         sigma_v0_mps: std of the unobserved cross-range velocity.
         site: the radar's position (d,) (None: the origin).
 
@@ -73,7 +73,7 @@ def finite_memory_start(
     e_b = g_b / cos_el[..., None]
     # Frame axes (columns) in the state's position space, and the variances along them.
     axes = [u, e_b] if dims == 2 else [u, e_b, g_e]
-    var_p = [np.full(r_hat.shape, fit.R[0, 0]), (r_hat * cos_el * sigma_azimuth_rad) ** 2]
+    var_p = [np.full(r_hat.shape, fit.R[0, 0]), (r_hat * cos_el * sigma_beta_rad) ** 2]
     if dims == 3:
         var_p.append((r_hat * sigma_elevation_rad) ** 2)
     var_v = [fit.R[1, 1]] + [sigma_v0_mps**2] * (dims - 1)

@@ -96,7 +96,7 @@ AIRLINER_RADAR = RadarSite(
     "surveillance",
     (0.0, 0.0, 30.0),
     sigma_r_m=50.0,
-    sigma_azimuth_rad=math.radians(0.15),
+    sigma_beta_rad=math.radians(0.15),
     sigma_elevation_rad=math.radians(0.3),
     sigma_vr_mps=0.0,
     period_s=4.5,

@@ -117,14 +117,14 @@ def crossing_scans(scene: CrossingScene, rng: np.random.Generator) -> list[Cross
     """One run of the scene: the N scans' plots (module docstring)."""
     truth = scene.truth()
     r_lo, r_hi, b_lo, b_hi = scene.region()
-    sb = math.radians(scene.sigma_beta_deg)
+    sigma_beta_rad = math.radians(scene.sigma_beta_deg)
     out = []
     for k in range(scene.scans):
         x, y = truth[k, :, 0], truth[k, :, 2]
         seen = rng.random(scene.targets) < scene.detection_prob
         idx = np.flatnonzero(seen)
         r = np.hypot(x[idx], y[idx]) + scene.sigma_r_m * rng.standard_normal(idx.size)
-        b = np.arctan2(y[idx], x[idx]) + sb * rng.standard_normal(idx.size)
+        b = np.arctan2(y[idx], x[idx]) + sigma_beta_rad * rng.standard_normal(idx.size)
         q = int(rng.poisson(scene.clutter_per_scan))
         rc = rng.uniform(r_lo, r_hi, q)
         bc = rng.uniform(b_lo, b_hi, q)

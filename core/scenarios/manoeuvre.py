@@ -179,7 +179,7 @@ MANOEUVRE_RADARS: tuple[RadarSite, ...] = tuple(
         name,
         site,
         sigma_r_m=60.0,
-        sigma_azimuth_rad=math.radians(0.15),
+        sigma_beta_rad=math.radians(0.15),
         sigma_elevation_rad=math.radians(0.3),
         sigma_vr_mps=vr,
         period_s=5.0,
@@ -315,7 +315,7 @@ def manoeuvre_plots(
     sites = np.array([r.position for r in radars], dtype=np.float64)[sched.radar]  # (N, 3)
     r, az, el, vr = polar_measurement(sites[:, None, :], tp, tv)  # (N, F)
     sig = np.array(
-        [[x.sigma_r_m, x.sigma_azimuth_rad, x.sigma_elevation_rad, x.sigma_vr_mps] for x in radars]
+        [[x.sigma_r_m, x.sigma_beta_rad, x.sigma_elevation_rad, x.sigma_vr_mps] for x in radars]
     )[sched.radar]  # (N, 4)
     n, f = r.shape
     noise = np.stack(

@@ -42,7 +42,7 @@ from radarviz.core.velocity.estimate import (
 #: The accuracy fields of a :class:`RadarSite`, in the order its noise is drawn.
 SIGMA_FIELDS: tuple[str, ...] = (
     "sigma_r_m",
-    "sigma_azimuth_rad",
+    "sigma_beta_rad",
     "sigma_elevation_rad",
     "sigma_vr_mps",
 )
@@ -53,7 +53,7 @@ class RadarSite:
     """A radar: name, site (m, ECS), accuracies, scan period and phase.
 
     The accuracies and timing are keyword-only (``RadarSite("R1", (0, 0, 0), sigma_r_m=50,
-    sigma_azimuth_rad=…, sigma_elevation_rad=…, sigma_vr_mps=1, period_s=10)``) so two angle
+    sigma_beta_rad=…, sigma_elevation_rad=…, sigma_vr_mps=1, period_s=10)``) so two angle
     σ's cannot be swapped by position. A σ of 0 means that measurement is exact.
     """
 
@@ -61,7 +61,7 @@ class RadarSite:
     position: tuple[float, float, float]
     _: KW_ONLY
     sigma_r_m: float
-    sigma_azimuth_rad: float
+    sigma_beta_rad: float
     sigma_elevation_rad: float
     sigma_vr_mps: float
     period_s: float
@@ -217,7 +217,7 @@ def generate_measurements(
         if children is not None:
             z = np.random.default_rng(children[k]).standard_normal((4, t.size))
             r = r + radar.sigma_r_m * z[0]
-            az = az + radar.sigma_azimuth_rad * z[1]
+            az = az + radar.sigma_beta_rad * z[1]
             el = el + radar.sigma_elevation_rad * z[2]
             vr = vr + radar.sigma_vr_mps * z[3]
         out[radar.name] = RadarMeasurements(radar, t, r, az, el, vr, pos, vel)
@@ -228,7 +228,8 @@ def fusion_scenario(
     period_s: float = 10.0,
     *,
     sigma_r_m: float | None = None,
-    sigma_angle_rad: float | None = None,
+    sigma_beta_rad: float | None = None,
+    sigma_elevation_rad: float | None = None,
     sigma_vr_mps: float | None = None,
 ) -> Scenario3D:
     """The velocity paper's baseline radars and target; the target turns for 100 s mid-way.
@@ -236,7 +237,7 @@ def fusion_scenario(
     Three radars at the baseline sites (``core.velocity.estimate.BASELINE_SITES_M``) with
     σr = 50, 100, 150 m and the baseline angle and radial-velocity accuracies, all scanning at
     ``period_s``; the target flies the baseline track for 200 s, turns at 0.02 rad/s for 100 s,
-    then flies straight on. ``sigma_r_m``, ``sigma_angle_rad`` (azimuth and elevation) and
+    then flies straight on. ``sigma_r_m``, ``sigma_beta_rad``, ``sigma_elevation_rad`` and
     ``sigma_vr_mps``, when given, replace the baseline accuracies of every radar (the tuning
     panel's values); each is checked against ``core.params``.
     """
@@ -244,19 +245,21 @@ def fusion_scenario(
         check("sigma_r_m", sigma_r_m)
     if sigma_vr_mps is not None:
         check("sigma_vr_mps", sigma_vr_mps)
-    if sigma_angle_rad is not None:
-        check("sigma_beta_deg", float(np.rad2deg(sigma_angle_rad)))
+    if sigma_beta_rad is not None:
+        check("sigma_beta_deg", float(np.rad2deg(sigma_beta_rad)))
+    if sigma_elevation_rad is not None:
+        check("sigma_elevation_deg", float(np.rad2deg(sigma_elevation_rad)))
     check("period_s", period_s)
     radars = tuple(
         RadarSite(
             f"R{k + 1}",
             tuple(site),
             sigma_r_m=sigma_r_m if sigma_r_m is not None else 50.0 * (k + 1),
-            sigma_azimuth_rad=sigma_angle_rad
-            if sigma_angle_rad is not None
+            sigma_beta_rad=sigma_beta_rad
+            if sigma_beta_rad is not None
             else float(np.deg2rad(BASELINE_SIGMA_AZ_DEG[k])),
-            sigma_elevation_rad=sigma_angle_rad
-            if sigma_angle_rad is not None
+            sigma_elevation_rad=sigma_elevation_rad
+            if sigma_elevation_rad is not None
             else float(np.deg2rad(BASELINE_SIGMA_EL_DEG[k])),
             sigma_vr_mps=sigma_vr_mps if sigma_vr_mps is not None else BASELINE_SIGMA_VR_MPS[k],
             period_s=period_s,

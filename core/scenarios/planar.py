@@ -72,7 +72,7 @@ def polar_measurements(
     truth: NDArray[np.float64],
     *,
     sigma_r_m: float,
-    sigma_azimuth_rad: float,
+    sigma_beta_rad: float,
     runs: int,
     rng: np.random.Generator,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -80,7 +80,7 @@ def polar_measurements(
 
     Args:
         truth: (N, 4) true states (x, ẋ, y, ẏ).
-        sigma_r_m: range noise σr, m.  sigma_azimuth_rad: azimuth noise σβ, rad.
+        sigma_r_m: range noise σr, m.  sigma_beta_rad: azimuth noise σβ, rad.
         runs: M.  rng: the generator all noise is drawn from (ranges first, then azimuths).
 
     Pass the σ's by keyword. (They are still accepted by position for the callers in
@@ -96,6 +96,6 @@ def polar_measurements(
     r_hat *= sigma_r_m
     r_hat += r
     beta_hat = rng.standard_normal((runs, steps))
-    beta_hat *= sigma_azimuth_rad
+    beta_hat *= sigma_beta_rad
     beta_hat += beta
     return r_hat, beta_hat

@@ -85,7 +85,7 @@ def spherical_measurements(
     truth: NDArray[np.float64],
     *,
     sigma_r_m: float,
-    sigma_azimuth_rad: float,
+    sigma_beta_rad: float,
     sigma_elevation_rad: float,
     runs: int,
     rng: np.random.Generator,
@@ -98,6 +98,6 @@ def spherical_measurements(
     r, beta, eps = polar_coordinates([truth[:, 0], truth[:, 2], truth[:, 4]])
     steps = truth.shape[0]
     r_hat = r + sigma_r_m * rng.standard_normal((runs, steps))
-    beta_hat = beta + sigma_azimuth_rad * rng.standard_normal((runs, steps))
+    beta_hat = beta + sigma_beta_rad * rng.standard_normal((runs, steps))
     eps_hat = eps + sigma_elevation_rad * rng.standard_normal((runs, steps))
     return r_hat, beta_hat, eps_hat

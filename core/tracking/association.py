@@ -749,11 +749,15 @@ class GNNTracker:
             from radarviz.core.tracking.kernels_gate import plot_points_2d
 
             points, r_ii = np.empty((n_p, 2)), np.empty((n_p, 2))
-            sr, sb = (np.ascontiguousarray(np.broadcast_to(v, (n_p,))) for v in noise[:2])
+            sr, sigma_beta_rad = (
+                np.ascontiguousarray(np.broadcast_to(v, (n_p,))) for v in noise[:2]
+            )
             code = METHOD_CODES[self._gate.method]
             # Contiguous arrays throughout: one compiled specialisation of the kernel.
             site_c = np.ascontiguousarray(site)
-            plot_points_2d(code, plot.range_m, plot.azimuth_rad, sr, sb, site_c, points, r_ii)
+            plot_points_2d(
+                code, plot.range_m, plot.azimuth_rad, sr, sigma_beta_rad, site_c, points, r_ii
+            )
             return points, r_ii, times
         z, R = METHODS[self._gate.method].convert(plot, noise)
         points = np.stack([np.asarray(z[i]) + site[:, i] for i in range(d)], -1)
@@ -1080,7 +1084,7 @@ class GNNTracker:
         xyz = site + r[:, None] * direction_cosines(b, e)
         gap = np.linalg.norm(xyz[:, : self.dims] - book.x[slots][:, 0::2], axis=1)
         dt = np.array([p.time_s for p in sub]) - book.last_s[slots]
-        sigma = np.array([p.sigma_r_m + p.range_m * p.sigma_azimuth_rad for p in sub])
+        sigma = np.array([p.sigma_r_m + p.range_m * p.sigma_beta_rad for p in sub])
         reach = self.association.max_speed_mps * dt + 3.0 * (sigma + book.sigma_m[slots])
         return single & (gap > reach)
 

@@ -52,12 +52,12 @@ COMPILED_DIMS: tuple[int, ...] = (2, 3)
 
 class RadarTable(NamedTuple):
     """The radars a block's plots refer to, R of them: site_m (R, 3) (m), and noise std
-    sigma_r_m, sigma_azimuth_rad, sigma_elevation_rad (R,) (m, rad) and
+    sigma_r_m, sigma_beta_rad, sigma_elevation_rad (R,) (m, rad) and
     sigma_radial_velocity_mps (R,) (m/s; 0 where the radar has no Doppler)."""
 
     site_m: NDArray[np.float64]
     sigma_r_m: NDArray[np.float64]
-    sigma_azimuth_rad: NDArray[np.float64]
+    sigma_beta_rad: NDArray[np.float64]
     sigma_elevation_rad: NDArray[np.float64]
     sigma_radial_velocity_mps: NDArray[np.float64]
 
@@ -236,7 +236,7 @@ class CompiledTracks:
         out_nis = np.empty((n, m))
         new = ~self.started[slot] if self.feed is not None else None
         plot = [_f(block.time_s), _f(block.range_m), _f(block.azimuth_rad)]
-        noise = [_f(rd.sigma_r_m), _f(rd.sigma_azimuth_rad)]
+        noise = [_f(rd.sigma_r_m), _f(rd.sigma_beta_rad)]
         if self.dims == 3:
             assert block.elevation_rad is not None
             plot.append(_f(block.elevation_rad))
@@ -327,7 +327,7 @@ class CompiledTracks:
         range_m: NDArray[np.float64],
         azimuth_rad: NDArray[np.float64],
         sigma_r_m: NDArray[np.float64],
-        sigma_azimuth_rad: NDArray[np.float64],
+        sigma_beta_rad: NDArray[np.float64],
         site: NDArray[np.float64],
     ) -> NDArray[np.float64]:
         """d² = νᵀ S⁻¹ ν of N (track, plot) pairs in 2D: ``method``'s track of labels[i]
@@ -344,7 +344,7 @@ class CompiledTracks:
         if dt.size and (dt.min() < 0 or not self.started[slot].all()):
             raise ValueError("gate_nis: a time before a track's last plot")
         out = np.empty(slot.size)
-        plot = (_f(range_m), _f(azimuth_rad), _f(sigma_r_m), _f(sigma_azimuth_rad), _f(site))
+        plot = (_f(range_m), _f(azimuth_rad), _f(sigma_r_m), _f(sigma_beta_rad), _f(site))
         code = int(self.codes[j])
         if self.imm is not None:
             from radarviz.core.filters.kernels_imm import gate_nis_imm_2d

@@ -404,7 +404,7 @@ class GateFilter(NamedTuple):
 class PlotArrays(NamedTuple):
     """B plots in time order, cut into batches: time_s, range_m, azimuth_rad (B,);
     radial_velocity_mps (B,), NaN where none (or Doppler unused); noise (B,) rows of the
-    noise table site (T, 2), sigma_r_m, sigma_azimuth_rad, sigma_radial_velocity_mps (T,);
+    noise table site (T, 2), sigma_r_m, sigma_beta_rad, sigma_radial_velocity_mps (T,);
     radar (B,) the association's radar of each plot; batch_start (nb + 1,) each batch's
     first plot; whole_scan (nb,) a batch handed in as a whole scan; measured_period_s (nb,)
     the feed's period of the batch's radar, NaN where none."""
@@ -416,7 +416,7 @@ class PlotArrays(NamedTuple):
     noise: NDArray[np.int64]
     site: NDArray[np.float64]
     sigma_r_m: NDArray[np.float64]
-    sigma_azimuth_rad: NDArray[np.float64]
+    sigma_beta_rad: NDArray[np.float64]
     sigma_radial_velocity_mps: NDArray[np.float64]
     radar: NDArray[np.int64]
     batch_start: NDArray[np.int64]
@@ -480,7 +480,7 @@ def associate_2d(pl, beams, radar_site, book, gf, rules, live, counters, since, 
     points, r_ii = np.empty((n_plots, 2)), np.empty((n_plots, 2))
     g = pl.noise
     plot_points_2d(
-        gf.codes[0], pl.range_m, pl.azimuth_rad, pl.sigma_r_m[g], pl.sigma_azimuth_rad[g],
+        gf.codes[0], pl.range_m, pl.azimuth_rad, pl.sigma_r_m[g], pl.sigma_beta_rad[g],
         pl.site[g], points, r_ii,
     )  # fmt: skip
     r = gf.sigma_a.shape[0]
@@ -620,7 +620,7 @@ def _batch(pl, beams, radar_site, book, gf, rules, live, counters, since, owner,
         vr = pl.radial_velocity_mps[lo:hi]
         bad = track_plots_imm_2d(
             gf.codes, gf.start_codes, own, times, pl.range_m[lo:hi], pl.azimuth_rad[lo:hi],
-            vr, ~np.isnan(vr), pl.noise[lo:hi], pl.site, pl.sigma_r_m, pl.sigma_azimuth_rad,
+            vr, ~np.isnan(vr), pl.noise[lo:hi], pl.site, pl.sigma_r_m, pl.sigma_beta_rad,
             pl.sigma_radial_velocity_mps, gf.sigma_a, gf.omega, gf.Pi, gf.mu0, gf.v0, gf.prm,
             False, gf.xs, gf.Ps, gf.mus, gf.started, gf.last_t, out_x, out_P, out_nis,
         )  # fmt: skip
@@ -732,7 +732,7 @@ def _gate_d2(pl, gf, s, j, x0, P0, mu, cc, w, xp, Pp) -> float:
     d2 = pair_nis_2d(
         gf.xs[s, 0], gf.Ps[s, 0], gf.mus[s, 0], pl.time_s[j] - gf.last_t[s], gf.sigma_a,
         gf.omega, gf.Pi, gf.codes[0], pl.range_m[j], pl.azimuth_rad[j], pl.sigma_r_m[g],
-        pl.sigma_azimuth_rad[g], pl.site[g, 0], pl.site[g, 1], x0, P0, mu, cc, w, xp, Pp,
+        pl.sigma_beta_rad[g], pl.site[g, 0], pl.site[g, 1], x0, P0, mu, cc, w, xp, Pp,
     )  # fmt: skip
     return d2 if math.isfinite(d2) else np.inf
 
@@ -748,7 +748,7 @@ def _too_fast(pl, book, rules, s, j) -> bool:
     dx, dy = px - book.x[s, 0], py - book.x[s, 2]
     gap = math.sqrt(dx * dx + dy * dy)
     dt = pl.time_s[j] - book.last_s[s]
-    sigma = pl.sigma_r_m[g] + r * pl.sigma_azimuth_rad[g]
+    sigma = pl.sigma_r_m[g] + r * pl.sigma_beta_rad[g]
     reach = rules.max_speed_mps * dt + 3.0 * (sigma + book.sigma_m[s])
     return gap > reach
 

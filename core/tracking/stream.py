@@ -109,7 +109,7 @@ class Plot:
     range_m: float
     azimuth_rad: float
     sigma_r_m: float
-    sigma_azimuth_rad: float
+    sigma_beta_rad: float
     site: tuple[float, float, float] = (0.0, 0.0, 0.0)
     radar: str = ""
     elevation_rad: float | None = None
@@ -137,7 +137,7 @@ def polar_arrays(plots: list[Plot], dims: int) -> tuple[PolarPlot, PolarNoise]:
             "range_m",
             "azimuth_rad",
             "sigma_r_m",
-            "sigma_azimuth_rad",
+            "sigma_beta_rad",
             "sigma_elevation_rad",
         )
     }
@@ -146,7 +146,7 @@ def polar_arrays(plots: list[Plot], dims: int) -> tuple[PolarPlot, PolarNoise]:
         el = np.array([p.elevation_rad for p in plots], dtype=np.float64)
     return (
         PolarPlot(col["range_m"], col["azimuth_rad"], el),
-        PolarNoise(col["sigma_r_m"], col["sigma_azimuth_rad"], col["sigma_elevation_rad"]),
+        PolarNoise(col["sigma_r_m"], col["sigma_beta_rad"], col["sigma_elevation_rad"]),
     )
 
 
@@ -228,7 +228,7 @@ class TrackGroup:
                 elevation_rad=0.0 if p.elevation_rad is None else p.elevation_rad,
                 sigma_vr_mps=p.sigma_radial_velocity_mps,
                 sigma_r_m=p.sigma_r_m,
-                sigma_azimuth_rad=p.sigma_azimuth_rad,
+                sigma_beta_rad=p.sigma_beta_rad,
                 sigma_elevation_rad=p.sigma_elevation_rad,
                 site=site,
             )
@@ -609,7 +609,7 @@ class StreamTracker:
             vrs,
             p.azimuth_rad,
             p.elevation_rad if self.three_d else None,
-            sigma_azimuth_rad=p.sigma_azimuth_rad,
+            sigma_beta_rad=p.sigma_beta_rad,
             sigma_elevation_rad=p.sigma_elevation_rad,
             sigma_v0_mps=self.options.sigma_v0_mps,
             site=np.asarray(p.site[:dims], dtype=np.float64),
@@ -650,7 +650,7 @@ def plot_block(plots: list[Plot], one_target: bool = False) -> PlotBlock:
     radar = np.array(
         [
             index.setdefault(
-                (p.site, p.sigma_r_m, p.sigma_azimuth_rad, p.sigma_elevation_rad,
+                (p.site, p.sigma_r_m, p.sigma_beta_rad, p.sigma_elevation_rad,
                  p.sigma_radial_velocity_mps),
                 len(index),
             )
@@ -695,7 +695,7 @@ def block_plots(block: PlotBlock) -> list[Plot]:
                 float(block.range_m[i]),
                 float(block.azimuth_rad[i]),
                 float(rd.sigma_r_m[g]),
-                float(rd.sigma_azimuth_rad[g]),
+                float(rd.sigma_beta_rad[g]),
                 tuple(map(float, rd.site_m[g])),
                 "",
                 None if el is None else float(el[i]),

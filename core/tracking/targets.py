@@ -355,7 +355,7 @@ class TargetTracker:
                 else plot.elevation_rad,
                 sigma_vr_mps=np.array([p.sigma_radial_velocity_mps for p in sub], dtype=float),
                 sigma_r_m=noise.sigma_r_m,
-                sigma_azimuth_rad=noise.sigma_azimuth_rad,
+                sigma_beta_rad=noise.sigma_beta_rad,
                 sigma_elevation_rad=noise.sigma_elevation_rad,
                 site=site,
             )
@@ -429,7 +429,7 @@ class TargetTracker:
         d2 = self._compiled.gate_nis(
             method, targets, time_s, plot.range_m, plot.azimuth_rad,
             np.broadcast_to(noise.sigma_r_m, time_s.shape),
-            np.broadcast_to(noise.sigma_azimuth_rad, time_s.shape), site,
+            np.broadcast_to(noise.sigma_beta_rad, time_s.shape), site,
         )  # fmt: skip
         return np.where(np.isfinite(d2), d2, np.inf)
 

@@ -157,7 +157,7 @@ def equivalent_variance(
     velocity: ArrayLike,
     *,
     sigma_vr_mps: ArrayLike,
-    sigma_azimuth_rad: ArrayLike,
+    sigma_beta_rad: ArrayLike,
     sigma_elevation_rad: ArrayLike,
 ) -> NDArray[np.float64]:
     """σeq_k² = σVr_k² + g_ε,k² σε_k² + g_β,k² σβ_k², shape (..., N); ``velocity`` (..., 3).
@@ -171,7 +171,7 @@ def equivalent_variance(
     return (
         _f(sigma_vr_mps) ** 2
         + (g_e * _f(sigma_elevation_rad)) ** 2
-        + (g_b * _f(sigma_azimuth_rad)) ** 2
+        + (g_b * _f(sigma_beta_rad)) ** 2
     )
 
 
@@ -257,7 +257,7 @@ def diagnose_geometry(
     sites: ArrayLike,
     target: ArrayLike,
     *,
-    sigma_azimuth_rad: ArrayLike,
+    sigma_beta_rad: ArrayLike,
     sigma_elevation_rad: ArrayLike,
 ) -> Geometry:
     """Diagnose one geometry; flags (never raises) on singular C. Sites (N, 3), target (3,).
@@ -268,7 +268,7 @@ def diagnose_geometry(
     s = _sites(sites)
     n = s.shape[0]
     p = _finite("target", target, (3,))
-    sb = _positive("sigma_azimuth_rad", sigma_azimuth_rad, n)
+    sigma_beta_rad = _positive("sigma_beta_rad", sigma_beta_rad, n)
     se = _positive("sigma_elevation_rad", sigma_elevation_rad, n)
     los = line_of_sight(s, p)
     reason = None
@@ -291,7 +291,7 @@ def diagnose_geometry(
             f"lines of sight are coplanar (condition number of C = {cond:.3g} > "
             f"{COND_MAX:g}): velocity not observable"
         )
-    spread = np.sqrt(se * se + (np.cos(los.elevation) * sb) ** 2)
+    spread = np.sqrt(se * se + (np.cos(los.elevation) * sigma_beta_rad) ** 2)
     m = float(np.max(spread) / sv[2]) if reason is None else float("inf")
     warning = None
     if reason is None and m > M_WARN:
@@ -340,7 +340,7 @@ class VelocityProblem(NamedTuple):
     target: NDArray[np.float64]
     velocity: NDArray[np.float64]
     sigma_vr_mps: NDArray[np.float64]
-    sigma_azimuth_rad: NDArray[np.float64]
+    sigma_beta_rad: NDArray[np.float64]
     sigma_elevation_rad: NDArray[np.float64]
     weighted: bool
 
@@ -351,7 +351,7 @@ def velocity_problem(
     velocity: ArrayLike,
     *,
     sigma_vr_mps: ArrayLike,
-    sigma_azimuth_rad: ArrayLike,
+    sigma_beta_rad: ArrayLike,
     sigma_elevation_rad: ArrayLike,
     weighted: bool | None = None,
 ) -> VelocityProblem:
@@ -367,7 +367,7 @@ def velocity_problem(
         target=_finite("target", target, (3,)),
         velocity=_finite("velocity", velocity, (3,)),
         sigma_vr_mps=_positive("sigma_vr_mps", sigma_vr_mps, n),
-        sigma_azimuth_rad=_positive("sigma_azimuth_rad", sigma_azimuth_rad, n),
+        sigma_beta_rad=_positive("sigma_beta_rad", sigma_beta_rad, n),
         sigma_elevation_rad=_positive("sigma_elevation_rad", sigma_elevation_rad, n),
         weighted=bool(weighted),
     )
@@ -410,14 +410,21 @@ def velocity_statistics(problem: VelocityProblem) -> VelocityStats:
         GeometryError: C is singular (see :func:`diagnose_geometry`).
     """
     pr = problem
-    sb, se = pr.sigma_azimuth_rad, pr.sigma_elevation_rad
+    sigma_beta_rad, se = pr.sigma_beta_rad, pr.sigma_elevation_rad
     geo = require_observable(
-        diagnose_geometry(pr.sites, pr.target, sigma_azimuth_rad=sb, sigma_elevation_rad=se)
+        diagnose_geometry(
+            pr.sites, pr.target, sigma_beta_rad=sigma_beta_rad, sigma_elevation_rad=se
+        )
     )
     C, az, el = geo.C, geo.los.azimuth, geo.los.elevation
     V = pr.velocity
     var_eq = equivalent_variance(
-        az, el, V, sigma_vr_mps=pr.sigma_vr_mps, sigma_azimuth_rad=sb, sigma_elevation_rad=se
+        az,
+        el,
+        V,
+        sigma_vr_mps=pr.sigma_vr_mps,
+        sigma_beta_rad=sigma_beta_rad,
+        sigma_elevation_rad=se,
     )
     weights = 1.0 / var_eq if pr.weighted else np.ones_like(var_eq)
     A = velocity_gain(C, weights if pr.weighted else None)
@@ -427,7 +434,7 @@ def velocity_statistics(problem: VelocityProblem) -> VelocityStats:
     corr = cov / np.outer(sigma, sigma)
 
     vr = C @ V
-    se2, sb2 = se**2, sb**2
+    se2, sb2 = se**2, sigma_beta_rad**2
     ce = np.cos(el)
     h = 0.5 * (se2 * vr + sb2 * ce * (np.cos(az) * V[0] + np.sin(az) * V[1]))
     w, u = unit_vector_partials(az, el)
@@ -486,7 +493,7 @@ def perturbed_velocity(
             los.elevation,
             problem.velocity,
             sigma_vr_mps=problem.sigma_vr_mps,
-            sigma_azimuth_rad=problem.sigma_azimuth_rad,
+            sigma_beta_rad=problem.sigma_beta_rad,
             sigma_elevation_rad=problem.sigma_elevation_rad,
         )
     return solve_velocity(C_hat, vr, np.broadcast_to(_f(weights), vr.shape))
@@ -542,7 +549,7 @@ def velocity_error_blocks(
             problem,
             d_vr_mps=z[0] * problem.sigma_vr_mps,
             d_elevation_rad=z[1] * problem.sigma_elevation_rad,
-            d_azimuth_rad=z[2] * problem.sigma_azimuth_rad,
+            d_azimuth_rad=z[2] * problem.sigma_beta_rad,
         )
         yield est - problem.velocity
 
@@ -702,7 +709,7 @@ def estimate_velocity(
     elevation_rad: ArrayLike,
     *,
     sigma_vr_mps: ArrayLike,
-    sigma_azimuth_rad: ArrayLike,
+    sigma_beta_rad: ArrayLike,
     sigma_elevation_rad: ArrayLike,
 ) -> VelocityEstimate:
     """Estimate V from measured (Vr_k, β_k, ε_k), k = 1 … N ≥ 3, each (N,).
@@ -721,7 +728,7 @@ def estimate_velocity(
     el = _finite("elevation_rad", elevation_rad, (n,))
     sigmas = {
         "sigma_vr_mps": _positive("sigma_vr_mps", sigma_vr_mps, n),
-        "sigma_azimuth_rad": (sb := _positive("sigma_azimuth_rad", sigma_azimuth_rad, n)),
+        "sigma_beta_rad": (sigma_beta_rad := _positive("sigma_beta_rad", sigma_beta_rad, n)),
         "sigma_elevation_rad": (se := _positive("sigma_elevation_rad", sigma_elevation_rad, n)),
     }
     C = direction_cosines(az, el)
@@ -749,7 +756,7 @@ def estimate_velocity(
         var_eq = equivalent_variance(az, el, v, **sigmas)
         A = velocity_gain(C, 1.0 / var_eq)
     cov = (A * var_eq) @ A.T
-    m = float(np.max(np.sqrt(se * se + (np.cos(el) * sb) ** 2)) / svals[2])
+    m = float(np.max(np.sqrt(se * se + (np.cos(el) * sigma_beta_rad) ** 2)) / svals[2])
     warning = None
     if m > M_WARN:
         warning = f"m = {m:.3g} > {M_WARN:g}: first-order velocity covariance unreliable"
@@ -781,7 +788,7 @@ def fuse_positions(
     elevation: ArrayLike,
     *,
     sigma_r_m: ArrayLike,
-    sigma_azimuth_rad: ArrayLike,
+    sigma_beta_rad: ArrayLike,
     sigma_elevation_rad: ArrayLike,
     refine: bool = True,
 ) -> FusedPosition:
@@ -806,7 +813,7 @@ def fuse_positions(
         raise ParameterError(f"sites must have shape (N, 3) with N >= 1 (got {s.shape})")
     n = s.shape[0]
     sr = _positive("sigma_r_m", sigma_r_m, n)
-    sb = _positive("sigma_azimuth_rad", sigma_azimuth_rad, n)
+    sigma_beta_rad = _positive("sigma_beta_rad", sigma_beta_rad, n)
     se = _positive("sigma_elevation_rad", sigma_elevation_rad, n)
     r, az, el = _f(range_), _f(azimuth), _f(elevation)
     if np.any(r <= 0.0) or np.any(np.abs(np.cos(el)) < 1e-9):
@@ -814,7 +821,7 @@ def fuse_positions(
             "a radar sees the target at zero range or at its zenith: "
             "its position covariance is singular"
         )
-    sig = {"sigma_r_m": sr, "sigma_azimuth_rad": sb, "sigma_elevation_rad": se}
+    sig = {"sigma_r_m": sr, "sigma_beta_rad": sigma_beta_rad, "sigma_elevation_rad": se}
     conv = convert_ucm_3d(r, az, el, **sig)
     pts = conv.z + s
     pos, P = _fuse(conv.R, pts)
@@ -869,7 +876,7 @@ def baseline_problem(target_m: ArrayLike = BASELINE_TARGET_M) -> VelocityProblem
         target_m,
         BASELINE_VELOCITY_MPS,
         sigma_vr_mps=BASELINE_SIGMA_VR_MPS,
-        sigma_azimuth_rad=np.deg2rad(BASELINE_SIGMA_AZ_DEG),
+        sigma_beta_rad=np.deg2rad(BASELINE_SIGMA_AZ_DEG),
         sigma_elevation_rad=np.deg2rad(BASELINE_SIGMA_EL_DEG),
     )
 

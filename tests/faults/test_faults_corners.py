@@ -119,7 +119,7 @@ def test_a_3d_track_straight_overhead_with_doppler_stays_finite(tmp_path: Path, 
     meas.write_text("\n".join(lines) + "\n")
     radars.write_text(
         "[radars.a]\nx_m = 0.0\ny_m = 0.0\nz_m = 0.0\n"
-        f"sigma_range_m = {sr_m!r}\nsigma_azimuth_deg = {sigma_deg!r}\n"
+        f"sigma_range_m = {sr_m!r}\nsigma_beta_deg = {sigma_deg!r}\n"
         f"sigma_elevation_deg = {sigma_deg!r}\nsigma_radial_velocity_mps = {svr_mps!r}\n"
     )
     code, _, err = run(

@@ -16,7 +16,7 @@ x_m = 0.0
 y_m = 0.0
 z_m = 0.0
 sigma_range_m = 250.0
-sigma_azimuth_deg = 1.0
+sigma_beta_deg = 1.0
 """
 PLOTS = [
     "time_s,radar,range_m,azimuth_deg",

@@ -63,7 +63,7 @@ def convert(
     azimuth_rad: ArrayLike,
     *,
     sigma_r_m: ArrayLike,
-    sigma_azimuth_rad: ArrayLike,
+    sigma_beta_rad: ArrayLike,
     predicted_xy_m: ArrayLike | None = None,
 ) -> Converted:
     """Convert polar radar measurements to a Cartesian point and its covariance.
@@ -74,7 +74,7 @@ def convert(
         range_m: measured ranges r̂, shape (...,), m.
         azimuth_rad: measured azimuths β̂, shape (...,), rad.
         sigma_r_m: range noise σr, scalar or (...,), m.
-        sigma_azimuth_rad: azimuth noise σβ, scalar or (...,), rad.
+        sigma_beta_rad: azimuth noise σβ, scalar or (...,), rad.
         predicted_xy_m: the filter's predicted position, shape (..., 2), m; ``ducm`` only
             (its covariance is evaluated there).
 
@@ -91,9 +91,9 @@ def convert(
     r = parameter("range_m").check_all(range_m)
     sr = parameter("sigma_r_m").check_all(sigma_r_m)
     beta = parameter("sigma_beta_deg")  # the σβ bounds, here in rad
-    sb = check_reals(
-        "sigma_azimuth_rad",
-        sigma_azimuth_rad,
+    sigma_beta_rad = check_reals(
+        "sigma_beta_rad",
+        sigma_beta_rad,
         low=math.radians(beta.low),
         high=math.radians(beta.high),
         low_open=beta.low_open,
@@ -107,7 +107,7 @@ def convert(
         r,
         az,
         sigma_r_m=sr,
-        sigma_azimuth_rad=sb,
+        sigma_beta_rad=sigma_beta_rad,
         predicted_xy=xy,
     )
 
@@ -315,7 +315,7 @@ def estimate_velocity(
     elevation_rad: ArrayLike,
     *,
     sigma_vr_mps: ArrayLike,
-    sigma_azimuth_rad: ArrayLike,
+    sigma_beta_rad: ArrayLike,
     sigma_elevation_rad: ArrayLike,
 ) -> VelocityEstimate:
     """The full velocity vector from N ≥ 3 radars' radial velocities.
@@ -326,7 +326,7 @@ def estimate_velocity(
         azimuth_rad: measured azimuths β of the target from each site, shape (N,), rad.
         elevation_rad: measured elevations ε, shape (N,), rad.
         sigma_vr_mps: radial-velocity noise, scalar or (N,), m/s.
-        sigma_azimuth_rad: azimuth noise, scalar or (N,), rad.
+        sigma_beta_rad: azimuth noise, scalar or (N,), rad.
         sigma_elevation_rad: elevation noise, scalar or (N,), rad.
 
     Returns:
@@ -343,7 +343,7 @@ def estimate_velocity(
         azimuth_rad,
         elevation_rad,
         sigma_vr_mps=sigma_vr_mps,
-        sigma_azimuth_rad=sigma_azimuth_rad,
+        sigma_beta_rad=sigma_beta_rad,
         sigma_elevation_rad=sigma_elevation_rad,
     )
 

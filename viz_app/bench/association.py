@@ -165,15 +165,23 @@ def bench_association(
     k = np.arange(targets)
     x0, y0 = 5e4 + GRID_M * (k % cols), GRID_M * (k // cols - (targets // cols) / 2)
     v = np.array([150.0, 0.0]) + rng.normal(0.0, 20.0, (targets, 2))
-    sb = math.radians(SIGMA_BETA_DEG)
+    sigma_beta_rad = math.radians(SIGMA_BETA_DEG)
 
     def scan(t: NDArray[np.float64]) -> list[Plot]:
         """Every target's plot, target i's at time t[i], in time order."""
         x, y = x0 + v[:, 0] * t, y0 + v[:, 1] * t
         r = np.hypot(x, y) + SIGMA_R_M * rng.standard_normal(targets)
-        b = np.arctan2(y, x) + sb * rng.standard_normal(targets)
+        b = np.arctan2(y, x) + sigma_beta_rad * rng.standard_normal(targets)
         return [
-            Plot(float(t[i]), float(r[i]), float(b[i]), SIGMA_R_M, sb, radar="radar", target=str(i))
+            Plot(
+                float(t[i]),
+                float(r[i]),
+                float(b[i]),
+                SIGMA_R_M,
+                sigma_beta_rad,
+                radar="radar",
+                target=str(i),
+            )
             for i in np.argsort(t, kind="stable").tolist()
         ]
 

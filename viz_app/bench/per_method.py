@@ -103,7 +103,7 @@ def _reference(method: str, r, b, vr, s: FilterSettings, out) -> None:
         r,
         b,
         sigma_r_m=s.sigma_r_m,
-        sigma_azimuth_rad=s.sigma_azimuth_rad,
+        sigma_beta_rad=s.sigma_beta_rad,
         period_s=s.period_s,
         sigma_a_mps2=s.sigma_a_mps2,
         sigma_v0_mps=s.sigma_v0_mps,
@@ -197,16 +197,16 @@ def bench_filterpy_per_method(config: TrackingConfig, runs: int) -> dict[str, fl
 
     r_all, b_all, vr_all = bench_measurements(config, runs)
     s = _settings(config)
-    T, sr, sb = s.period_s, s.sigma_r_m, s.sigma_azimuth_rad
+    T, sr, sigma_beta_rad = s.period_s, s.sigma_r_m, s.sigma_beta_rad
     steps = r_all.shape[1]
     F, Q = transition_matrix(T), process_noise(T, s.sigma_a_mps2)
     H = np.array([[1.0, 0.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]])
-    R_polar = np.diag([sr * sr, sb * sb])
+    R_polar = np.diag([sr * sr, sigma_beta_rad * sigma_beta_rad])
     ukf = s.ukf
 
     def start(method: str, r: float, b: float) -> tuple[np.ndarray, np.ndarray]:
         kind = {"ducm": "ucm", "ekf": "naive", "ukf": "naive", "ekf+doppler": "naive"}
-        c = convert(kind.get(method, method), r, b, sigma_r_m=sr, sigma_azimuth_rad=sb)
+        c = convert(kind.get(method, method), r, b, sigma_r_m=sr, sigma_beta_rad=sigma_beta_rad)
         x = np.array([c.z[0], 0.0, c.z[1], 0.0])
         P = np.zeros((4, 4))
         P[np.ix_([0, 2], [0, 2])] = c.R
@@ -253,7 +253,7 @@ def bench_filterpy_per_method(config: TrackingConfig, runs: int) -> dict[str, fl
                 f = KalmanFilter(4, 2)
                 f.F, f.H = F, H
                 if method != "ducm":
-                    c = convert(method, r, b, sigma_r_m=sr, sigma_azimuth_rad=sb)
+                    c = convert(method, r, b, sigma_r_m=sr, sigma_beta_rad=sigma_beta_rad)
             f.Q = Q
             f.x, f.P = x0, P0
             for n in range(1, steps):
@@ -262,7 +262,7 @@ def bench_filterpy_per_method(config: TrackingConfig, runs: int) -> dict[str, fl
                 t1 = time.perf_counter()
                 if method == "ducm":
                     pred = (f.x[0], f.x[2])
-                    cn = convert("ducm", r[n], b[n], sigma_r_m=sr, sigma_azimuth_rad=sb,
+                    cn = convert("ducm", r[n], b[n], sigma_r_m=sr, sigma_beta_rad=sigma_beta_rad,
                                  predicted_xy=np.array(pred))  # fmt: skip
                     z_n, R_n = cn.z, cn.R
                 elif method in ("naive", "seed", "cmkf_d", "ucm"):
@@ -279,7 +279,11 @@ def bench_filterpy_per_method(config: TrackingConfig, runs: int) -> dict[str, fl
                         pv = f.P[np.ix_([1, 3], [1, 3])]
                         dop.x, dop.P = f.x, f.P
                         dop.H = np.array([[0.0, cb, 0.0, sbn]])
-                        dop.update(vr[n], R=s.sigma_vr_mps**2 + sb * sb * (gv * gv + g @ pv @ g))
+                        dop.update(
+                            vr[n],
+                            R=s.sigma_vr_mps**2
+                            + sigma_beta_rad * sigma_beta_rad * (gv * gv + g @ pv @ g),
+                        )
                         f.x, f.P = dop.x, dop.P
                 else:
                     f.update(z_n, R=R_n)

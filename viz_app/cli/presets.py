@@ -36,7 +36,7 @@ def manoeuvre_radars() -> list[Radar]:
             s.name,
             *map(float, s.position),
             s.sigma_r_m,
-            math.degrees(s.sigma_azimuth_rad),
+            math.degrees(s.sigma_beta_rad),
             math.degrees(s.sigma_elevation_rad),
             s.sigma_vr_mps if s.name in DOPPLER_RADARS else None,
         )

@@ -93,8 +93,8 @@ def _style(method: str) -> str | tuple[int, tuple[int, int]]:
 
 
 def _sigma_label(case: Mapping[str, Any]) -> str:
-    sb = case.get("sigma_beta_deg")
-    text = f"σβ = {float(sb):g}°" if sb is not None else "σβ = ?"
+    sigma_beta_deg = case.get("sigma_beta_deg")
+    text = f"σβ = {float(sigma_beta_deg):g}°" if sigma_beta_deg is not None else "σβ = ?"
     if case.get("dims") == 3:
         text += f", E = {case['elevation_deg']:g}°, σε = {case['sigma_elevation_deg']:g}°"
     return text
@@ -107,11 +107,11 @@ def _note(ax: Axes, text: str) -> None:
 
 
 def _paper_bound(case: Mapping[str, Any]) -> float | None:
-    sb = case.get("sigma_beta_deg")
-    if sb is None:
+    sigma_beta_deg = case.get("sigma_beta_deg")
+    if sigma_beta_deg is None:
         return None
     for deg, bound in PAPER_BOUND_PERCENT.items():
-        if math.isclose(float(sb), deg, rel_tol=1e-9, abs_tol=1e-9):
+        if math.isclose(float(sigma_beta_deg), deg, rel_tol=1e-9, abs_tol=1e-9):
             return bound
     return None
 

@@ -519,9 +519,9 @@ class _Source(NamedTuple):
     radar: Radar
     index: int
     sigma_r: float
-    sigma_az: float
+    sigma_beta_rad: float
     site: tuple[float, float, float]
-    sigma_el: float
+    sigma_elevation_rad: float
     sigma_vr: float
 
 
@@ -930,7 +930,7 @@ class AsterixReader:
                     radar,
                     index[radar.name],
                     radar.sigma_range_m,
-                    math.radians(radar.sigma_azimuth_deg),
+                    math.radians(radar.sigma_beta_deg),
                     (radar.x_m, radar.y_m, radar.z_m),
                     math.radians(radar.sigma_elevation_deg or 0.0),
                     radar.sigma_radial_velocity_mps or 0.0,
@@ -1020,11 +1020,11 @@ class AsterixReader:
                     r,
                     az,
                     c.sigma_r,
-                    c.sigma_az,
+                    c.sigma_beta_rad,
                     c.site,
                     c.radar.name,
                     el,
-                    c.sigma_el if three_d else 0.0,
+                    c.sigma_elevation_rad if three_d else 0.0,
                     vr,
                     c.sigma_vr if vr is not None else 0.0,
                     target,

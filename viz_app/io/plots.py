@@ -27,7 +27,7 @@ Radars file (TOML, read with ``tomllib``)::
     [radars.NAME]
     x_m = 0.0; y_m = 0.0; z_m = 0.0          # site, m
     sigma_range_m = 250.0                    # > 0
-    sigma_azimuth_deg = 1.0                  # in (0, 20]
+    sigma_beta_deg = 1.0                  # in (0, 20]
     sigma_elevation_deg = 0.5                # in (0, 20]; needed by plots with an elevation
     sigma_radial_velocity_mps = 1.0          # > 0; needed by plots with a radial velocity
     sac = 25; sic = 201                      # ASTERIX data source, integers in [0, 255]; both
@@ -70,6 +70,7 @@ import csv
 import math
 import os
 import re
+import sys
 import time
 import tomllib
 from collections.abc import Callable, Iterable, Iterator, Mapping
@@ -116,7 +117,7 @@ from radarviz.viz_app.io.atomic import atomic_write, commit_together
 
 REQUIRED_COLUMNS = ("time_s", "radar", "range_m", "azimuth_deg")
 OPTIONAL_COLUMNS = ("elevation_deg", "radial_velocity_mps", "target")
-RADAR_KEYS = ("x_m", "y_m", "z_m", "sigma_range_m", "sigma_azimuth_deg")
+RADAR_KEYS = ("x_m", "y_m", "z_m", "sigma_range_m", "sigma_beta_deg")
 OPTIONAL_RADAR_KEYS = (
     "sigma_elevation_deg",
     "sigma_radial_velocity_mps",
@@ -127,6 +128,10 @@ OPTIONAL_RADAR_KEYS = (
     "min_elevation_deg",
     "max_elevation_deg",
 )
+#: Former names of radars-file keys, still read as the key they map to: each file using one
+#: gets one deprecation line on standard error (``load_radars``); a table giving both names
+#: is an error. Files are written with the new names only.
+DEPRECATED_RADAR_KEYS: dict[str, str] = {"sigma_azimuth_deg": "sigma_beta_deg"}
 #: The ASTERIX data source identifier of a radar (I048/010): integers in [0, 255], both or
 #: neither; no two radars may share a pair.
 SOURCE_KEYS = ("sac", "sic")
@@ -202,7 +207,7 @@ class Radar:
     y_m: float
     z_m: float
     sigma_range_m: float
-    sigma_azimuth_deg: float
+    sigma_beta_deg: float
     sigma_elevation_deg: float | None = None
     sigma_radial_velocity_mps: float | None = None
     #: The antenna's revolution (s) and the coverage (m, degrees) the association's misses
@@ -230,7 +235,7 @@ def _bad(where: str, column: str, what: str, got: object) -> ParameterError:
 #: The ``core.params`` entry bounding each radars-file key (site coordinates: ``site_m``).
 RADAR_KEY_PARAMETERS: dict[str, str] = {
     "sigma_range_m": "sigma_r_m",
-    "sigma_azimuth_deg": "sigma_beta_deg",
+    "sigma_beta_deg": "sigma_beta_deg",
     "sigma_elevation_deg": "sigma_elevation_deg",
     "sigma_radial_velocity_mps": "sigma_vr_mps",
     "rotation_period_s": "rotation_period_s",
@@ -250,8 +255,11 @@ def radar_coverage(radar: Radar) -> RadarCoverage:
     return RadarCoverage(radar.rotation_period_s, radar.min_range_m, radar.max_range_m, *el)
 
 
-def parse_radars(text: str, source: str) -> dict[str, Radar]:
-    """Radars from TOML text; errors name ``source``, the radar and the key."""
+def parse_radars(text: str, source: str, deprecated: list[str] | None = None) -> dict[str, Radar]:
+    """Radars from TOML text; errors name ``source``, the radar and the key.
+
+    A key of ``DEPRECATED_RADAR_KEYS`` is read as its new name; each such name used adds one
+    line to ``deprecated`` (when given), however many radars use it."""
     try:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
@@ -274,10 +282,24 @@ def parse_radars(text: str, source: str) -> dict[str, Radar]:
             raise ParameterError(f"{where}: must be a table [radars.{name}]")
         known = RADAR_KEYS + OPTIONAL_RADAR_KEYS + SOURCE_KEYS
         for key in table:
-            if key not in known:
+            if key not in known and key not in DEPRECATED_RADAR_KEYS:
                 raise ParameterError(
                     f"{where}, key {key}: unknown key (expected {', '.join(known)})"
                 )
+        # The key each value is read as -> the key the file gave it under (for the errors).
+        spelled: dict[str, str] = {}
+        for old, new in DEPRECATED_RADAR_KEYS.items():
+            if old not in table:
+                continue
+            if new in table:
+                raise ParameterError(
+                    f"{where}, key {old}: both {old} (deprecated) and {new} given; give only {new}"
+                )
+            table = {(new if k == old else k): v for k, v in table.items()}
+            spelled[new] = old
+            line = f"{source}: key {old} is deprecated, read as {new}"
+            if deprecated is not None and line not in deprecated:
+                deprecated.append(line)
         vals: dict[str, float] = {}
         for key in RADAR_KEYS + OPTIONAL_RADAR_KEYS:
             if key not in table:
@@ -285,6 +307,7 @@ def parse_radars(text: str, source: str) -> dict[str, Radar]:
                     raise ParameterError(f"{where}, key {key}: missing")
                 continue
             v = table[key]
+            given = spelled.get(key, key)
             # Each key's physically meaningful range is its parameter's (``core.params``).
             entry = PARAMETERS[RADAR_KEY_PARAMETERS.get(key, "site_m")]
             low, high = entry.low, entry.high
@@ -292,7 +315,8 @@ def parse_radars(text: str, source: str) -> dict[str, Radar]:
             ok = _is_real(v) and math.isfinite(v) and low <= v <= high
             if not ok:
                 raise ParameterError(
-                    f"{where}, key {key}: must be a finite number {rng}".rstrip() + f" (got {v!r})"
+                    f"{where}, key {given}: must be a finite number {rng}".rstrip()
+                    + f" (got {v!r})"
                 )
             vals[key] = float(v)
         for lo, hi in (("min_range_m", "max_range_m"), ("min_elevation_deg", "max_elevation_deg")):
@@ -459,15 +483,15 @@ class PlotReader:
                 raise _bad(
                     where, "azimuth_deg", "must be a finite number in [-360, 360]", row[i_az]
                 )
-            el = sigma_el = None
+            el = sigma_elevation_deg = None
             if i_el is not None:
                 el = _number(row[i_el])
                 if el is None or abs(el) > 90:
                     raise _bad(
                         where, "elevation_deg", "must be a finite number in [-90, 90]", row[i_el]
                     )
-                sigma_el = radar.sigma_elevation_deg
-                if sigma_el is None:
+                sigma_elevation_deg = radar.sigma_elevation_deg
+                if sigma_elevation_deg is None:
                     raise _bad(
                         where,
                         "elevation_deg",
@@ -504,11 +528,11 @@ class PlotReader:
                     r,
                     math.radians(az),
                     radar.sigma_range_m,
-                    math.radians(radar.sigma_azimuth_deg),
+                    math.radians(radar.sigma_beta_deg),
                     (radar.x_m, radar.y_m, radar.z_m),
                     name,
                     None if el is None else math.radians(el),
-                    0.0 if sigma_el is None else math.radians(sigma_el),
+                    0.0 if sigma_elevation_deg is None else math.radians(sigma_elevation_deg),
                     vr,
                     0.0 if sigma_vr is None else sigma_vr,
                     target,
@@ -767,7 +791,11 @@ def load_radars(path: str) -> dict[str, Radar]:
     except UnicodeDecodeError as exc:
         line = raw[: exc.start].count(b"\n") + 1
         raise ParameterError(f"{path} line {line}: not UTF-8 text") from None
-    return parse_radars(text, path)
+    deprecated: list[str] = []
+    radars = parse_radars(text, path, deprecated)
+    for line in deprecated:
+        print(f"radarviz: {line}", file=sys.stderr)
+    return radars
 
 
 def radar_table(radars: dict[str, Radar]) -> RadarTable:
@@ -777,7 +805,7 @@ def radar_table(radars: dict[str, Radar]) -> RadarTable:
     return RadarTable(
         np.array([(r.x_m, r.y_m, r.z_m) for r in rs], dtype=np.float64).reshape(-1, 3),
         np.array([r.sigma_range_m for r in rs], dtype=np.float64),
-        np.radians([r.sigma_azimuth_deg for r in rs]),
+        np.radians([r.sigma_beta_deg for r in rs]),
         np.radians([r.sigma_elevation_deg or 0.0 for r in rs]),
         np.array([r.sigma_radial_velocity_mps or 0.0 for r in rs], dtype=np.float64),
     )
@@ -1366,7 +1394,7 @@ def fusion_plots(seed: int = 1, steps: int = 60) -> tuple[list[Plot], list[Radar
             s.name,
             *map(float, s.position),
             s.sigma_r_m,
-            math.degrees(s.sigma_azimuth_rad),
+            math.degrees(s.sigma_beta_rad),
             math.degrees(s.sigma_elevation_rad),
             s.sigma_vr_mps,
         )
@@ -1376,8 +1404,8 @@ def fusion_plots(seed: int = 1, steps: int = 60) -> tuple[list[Plot], list[Radar
     for s in sites:
         m = meas[s.name]
         # Angles and σ through degrees and back, exactly as the file will give them.
-        sb, se = (
-            math.radians(math.degrees(v)) for v in (s.sigma_azimuth_rad, s.sigma_elevation_rad)
+        sigma_beta_rad, sigma_elevation_rad = (
+            math.radians(math.degrees(v)) for v in (s.sigma_beta_rad, s.sigma_elevation_rad)
         )
         for k in range(min(steps, m.t.size)):
             plots.append(
@@ -1386,11 +1414,11 @@ def fusion_plots(seed: int = 1, steps: int = 60) -> tuple[list[Plot], list[Radar
                     float(m.range[k]),
                     math.radians(math.degrees(float(m.azimuth[k]))),
                     s.sigma_r_m,
-                    sb,
+                    sigma_beta_rad,
                     tuple(map(float, s.position)),
                     s.name,
                     math.radians(math.degrees(float(m.elevation[k]))),
-                    se,
+                    sigma_elevation_rad,
                     float(m.radial_velocity[k]),
                     s.sigma_vr_mps,
                 )
@@ -1416,7 +1444,7 @@ PLOT_FIELDS: tuple[PlotField, ...] = (
     PlotField("range_m", positive=True, optional=False),
     PlotField("azimuth_rad", positive=False, optional=False),
     PlotField("sigma_r_m", positive=True, optional=False),
-    PlotField("sigma_azimuth_rad", positive=True, optional=False),
+    PlotField("sigma_beta_rad", positive=True, optional=False),
     PlotField("elevation_rad", positive=False, optional=True),
     PlotField("radial_velocity_mps", positive=False, optional=True),
 )

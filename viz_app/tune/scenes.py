@@ -111,7 +111,9 @@ def simulate(p: TuneParams) -> TuneResult:
     scenario = fusion_scenario(
         p.period_s,
         sigma_r_m=p.sigma_r_m,
-        sigma_angle_rad=float(np.deg2rad(p.sigma_beta_deg)),
+        # The panel's one σβ is every radar's azimuth and elevation noise.
+        sigma_beta_rad=float(np.deg2rad(p.sigma_beta_deg)),
+        sigma_elevation_rad=float(np.deg2rad(p.sigma_beta_deg)),
         sigma_vr_mps=p.sigma_vr_mps,
     )
     run = estimate_scans(scenario, p.steps, p.seed)
