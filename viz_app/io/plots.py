@@ -206,10 +206,10 @@ class Radar:
     x_m: float
     y_m: float
     z_m: float
-    sigma_range_m: float
+    sigma_r_m: float
     sigma_beta_deg: float
     sigma_elevation_deg: float | None = None
-    sigma_radial_velocity_mps: float | None = None
+    sigma_vr_mps: float | None = None
     #: The antenna's revolution (s) and the coverage (m, degrees) the association's misses
     #: count in (``core.tracking.coverage``); None: estimated from the radar's plots.
     rotation_period_s: float | None = None
@@ -498,7 +498,7 @@ class PlotReader:
                         f"radar {name!r} has no sigma_elevation_deg in the radars file",
                         row[i_el],
                     )
-            vr = sigma_vr = None
+            vr = sigma_vr_mps = None
             if i_vr is not None and row[i_vr].strip():  # an empty cell: no Doppler here
                 vr = _number(row[i_vr])
                 if vr is None or abs(vr) > MAX_RADIAL_VELOCITY_MPS:
@@ -509,8 +509,8 @@ class PlotReader:
                         f"{MAX_RADIAL_VELOCITY_MPS:g}] or empty",
                         row[i_vr],
                     )
-                sigma_vr = radar.sigma_radial_velocity_mps
-                if sigma_vr is None:
+                sigma_vr_mps = radar.sigma_vr_mps
+                if sigma_vr_mps is None:
                     raise _bad(
                         where,
                         "radial_velocity_mps",
@@ -527,14 +527,14 @@ class PlotReader:
                     t,
                     r,
                     math.radians(az),
-                    radar.sigma_range_m,
+                    radar.sigma_r_m,
                     math.radians(radar.sigma_beta_deg),
                     (radar.x_m, radar.y_m, radar.z_m),
                     name,
                     None if el is None else math.radians(el),
                     0.0 if sigma_elevation_deg is None else math.radians(sigma_elevation_deg),
                     vr,
-                    0.0 if sigma_vr is None else sigma_vr,
+                    0.0 if sigma_vr_mps is None else sigma_vr_mps,
                     target,
                 ),
             )
@@ -804,10 +804,10 @@ def radar_table(radars: dict[str, Radar]) -> RadarTable:
     rs = list(radars.values())
     return RadarTable(
         np.array([(r.x_m, r.y_m, r.z_m) for r in rs], dtype=np.float64).reshape(-1, 3),
-        np.array([r.sigma_range_m for r in rs], dtype=np.float64),
+        np.array([r.sigma_r_m for r in rs], dtype=np.float64),
         np.radians([r.sigma_beta_deg for r in rs]),
         np.radians([r.sigma_elevation_deg or 0.0 for r in rs]),
-        np.array([r.sigma_radial_velocity_mps or 0.0 for r in rs], dtype=np.float64),
+        np.array([r.sigma_vr_mps or 0.0 for r in rs], dtype=np.float64),
     )
 
 
@@ -1335,12 +1335,16 @@ def run_track(
 # --------------------------------------------------------------------------------------------
 
 
+#: Radar's field of each radars-file key whose name differs from it.
+_RADAR_FIELDS = {"sigma_range_m": "sigma_r_m", "sigma_radial_velocity_mps": "sigma_vr_mps"}
+
+
 def _radar_toml(radars: Iterable[Radar]) -> str:
     out = []
     for r in radars:
         out.append(f"[radars.{r.name}]")
         for key in RADAR_KEYS + OPTIONAL_RADAR_KEYS:
-            v = getattr(r, key)
+            v = getattr(r, _RADAR_FIELDS.get(key, key))
             if v is not None:
                 out.append(f"{key} = {float(v)!r}")
         if r.sac is not None and r.sic is not None:
