@@ -95,10 +95,10 @@ def air_traffic_file(
             f"x_m = {site[0]!r}",
             f"y_m = {site[1]!r}",
             f"z_m = {site[2]!r}",
-            f"sigma_range_m = {sigma_r_m!r}",
+            f"sigma_r_m = {sigma_r_m!r}",
             f"sigma_beta_deg = {sigma_beta_deg!r}",
             f"sigma_elevation_deg = {sigma_elevation_deg!r}",
-            f"sigma_radial_velocity_mps = {sigma_vr_mps!r}",
+            f"sigma_vr_mps = {sigma_vr_mps!r}",
             "",
         ]
     radars_path.write_text("\n".join(toml))

@@ -43,7 +43,7 @@ offset in the capture file, and errors name its packet too (number from 1, byte 
   file).
 * I048/120 radial Doppler speed, subfield CAL (calculated Doppler speed, 1 m/s, positive away
   from the radar): ``radial_velocity_mps``, when D = 0 (valid) and the radar has
-  ``sigma_radial_velocity_mps``; a doubtful one (D = 1) is not used.
+  ``sigma_vr_mps``; a doubtful one (D = 1) is not used.
 
 **The file's kind** is set by its first CAT048 record, as a CSV's is by its header: it is 3D
 when that record has a usable height, and of many targets when it has a track number; every

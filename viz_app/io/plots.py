@@ -26,10 +26,10 @@ Radars file (TOML, read with ``tomllib``)::
 
     [radars.NAME]
     x_m = 0.0; y_m = 0.0; z_m = 0.0          # site, m
-    sigma_range_m = 250.0                    # > 0
-    sigma_beta_deg = 1.0                  # in (0, 20]
+    sigma_r_m = 250.0                        # > 0
+    sigma_beta_deg = 1.0                     # in (0, 20]
     sigma_elevation_deg = 0.5                # in (0, 20]; needed by plots with an elevation
-    sigma_radial_velocity_mps = 1.0          # > 0; needed by plots with a radial velocity
+    sigma_vr_mps = 1.0                       # > 0; needed by plots with a radial velocity
     sac = 25; sic = 201                      # ASTERIX data source, integers in [0, 255]; both
                                              # or neither; needed to read ASTERIX files
 
@@ -117,10 +117,10 @@ from radarviz.viz_app.io.atomic import atomic_write, commit_together
 
 REQUIRED_COLUMNS = ("time_s", "radar", "range_m", "azimuth_deg")
 OPTIONAL_COLUMNS = ("elevation_deg", "radial_velocity_mps", "target")
-RADAR_KEYS = ("x_m", "y_m", "z_m", "sigma_range_m", "sigma_beta_deg")
+RADAR_KEYS = ("x_m", "y_m", "z_m", "sigma_r_m", "sigma_beta_deg")
 OPTIONAL_RADAR_KEYS = (
     "sigma_elevation_deg",
-    "sigma_radial_velocity_mps",
+    "sigma_vr_mps",
     # Coverage and rotation (``core.tracking.coverage``): estimated from the plots if absent.
     "rotation_period_s",
     "min_range_m",
@@ -131,7 +131,11 @@ OPTIONAL_RADAR_KEYS = (
 #: Former names of radars-file keys, still read as the key they map to: each file using one
 #: gets one deprecation line on standard error (``load_radars``); a table giving both names
 #: is an error. Files are written with the new names only.
-DEPRECATED_RADAR_KEYS: dict[str, str] = {"sigma_azimuth_deg": "sigma_beta_deg"}
+DEPRECATED_RADAR_KEYS: dict[str, str] = {
+    "sigma_range_m": "sigma_r_m",
+    "sigma_azimuth_deg": "sigma_beta_deg",
+    "sigma_radial_velocity_mps": "sigma_vr_mps",
+}
 #: The ASTERIX data source identifier of a radar (I048/010): integers in [0, 255], both or
 #: neither; no two radars may share a pair.
 SOURCE_KEYS = ("sac", "sic")
@@ -234,10 +238,10 @@ def _bad(where: str, column: str, what: str, got: object) -> ParameterError:
 
 #: The ``core.params`` entry bounding each radars-file key (site coordinates: ``site_m``).
 RADAR_KEY_PARAMETERS: dict[str, str] = {
-    "sigma_range_m": "sigma_r_m",
+    "sigma_r_m": "sigma_r_m",
     "sigma_beta_deg": "sigma_beta_deg",
     "sigma_elevation_deg": "sigma_elevation_deg",
-    "sigma_radial_velocity_mps": "sigma_vr_mps",
+    "sigma_vr_mps": "sigma_vr_mps",
     "rotation_period_s": "rotation_period_s",
     "min_range_m": "min_range_m",
     "max_range_m": "max_range_m",
@@ -514,7 +518,7 @@ class PlotReader:
                     raise _bad(
                         where,
                         "radial_velocity_mps",
-                        f"radar {name!r} has no sigma_radial_velocity_mps in the radars file",
+                        f"radar {name!r} has no sigma_vr_mps in the radars file",
                         row[i_vr],
                     )
             last_t = self.last_t = t
@@ -1335,16 +1339,12 @@ def run_track(
 # --------------------------------------------------------------------------------------------
 
 
-#: Radar's field of each radars-file key whose name differs from it.
-_RADAR_FIELDS = {"sigma_range_m": "sigma_r_m", "sigma_radial_velocity_mps": "sigma_vr_mps"}
-
-
 def _radar_toml(radars: Iterable[Radar]) -> str:
     out = []
     for r in radars:
         out.append(f"[radars.{r.name}]")
         for key in RADAR_KEYS + OPTIONAL_RADAR_KEYS:
-            v = getattr(r, _RADAR_FIELDS.get(key, key))
+            v = getattr(r, key)
             if v is not None:
                 out.append(f"{key} = {float(v)!r}")
         if r.sac is not None and r.sic is not None:
