@@ -728,8 +728,7 @@ def test_associate_refuses_a_labelled_file(tmp_path: Path, capsys: pytest.Captur
     m.write_text("time_s,radar,range_m,azimuth_deg,target\n0,radar,1e4,0,a\n")
     r = tmp_path / "r.toml"
     r.write_text(
-        "[radars.radar]\nx_m = 0.0\ny_m = 0.0\nz_m = 0.0\nsigma_range_m = 50.0\n"
-        "sigma_beta_deg = 0.3\n"
+        "[radars.radar]\nx_m = 0.0\ny_m = 0.0\nz_m = 0.0\nsigma_r_m = 50.0\nsigma_beta_deg = 0.3\n"
     )
     out = tmp_path / "t.csv"
     argv = ["track", "--input", str(m), "--radars", str(r), "--out", str(out), "--associate", "gnn"]

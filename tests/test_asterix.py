@@ -40,10 +40,10 @@ RADARS = """\
 x_m = 0.0
 y_m = 0.0
 z_m = 120.0
-sigma_range_m = 50.0
+sigma_r_m = 50.0
 sigma_beta_deg = 0.1
 sigma_elevation_deg = 0.2
-sigma_radial_velocity_mps = 1.0
+sigma_vr_mps = 1.0
 sac = 25
 sic = 201
 
@@ -51,7 +51,7 @@ sic = 201
 x_m = 30000.0
 y_m = 5000.0
 z_m = 0.0
-sigma_range_m = 100.0
+sigma_r_m = 100.0
 sigma_beta_deg = 0.3
 sac = 25
 sic = 7
@@ -151,7 +151,7 @@ def test_a_hand_laid_record_is_what_the_encoder_writes_and_the_reader_reads() ->
     assert p.range_m == 100 * 1852.0
     assert p.azimuth_rad == 0.0  # θ = 90° from north is the x (east) axis
     assert p.target == "1234" and p.radar == "north" and p.site == (0.0, 0.0, 120.0)
-    assert p.radial_velocity_mps == -12.0 and p.sigma_radial_velocity_mps == 1.0
+    assert p.radial_velocity_mps == -12.0 and p.sigma_vr_mps == 1.0
     assert p.sigma_elevation_rad == math.radians(0.2)
     # 10 000 ft = 3048 m seen from 120 m at 185.2 km: the vector route below, to 1e-12 rad.
     assert p.elevation_rad == pytest.approx(vector_elevation(185_200.0, 3048.0, 120.0), abs=1e-12)
@@ -441,7 +441,7 @@ def test_doppler_valid_doubtful_and_without_sigma() -> None:
         block(rec(128, more={"120": cal(0, -300)}), rec(256, more={"120": cal(1, 40)}), rec(384))
     )
     assert [p.radial_velocity_mps for p in plots] == [-300.0, None, None]
-    assert [p.sigma_radial_velocity_mps for p in plots] == [1.0, 0.0, 0.0]
+    assert [p.sigma_vr_mps for p in plots] == [1.0, 0.0, 0.0]
     flat = rec(128, more={"120": cal(0, 12)})
     flat["010"] = (("SAC", 25), ("SIC", 7))
     _, plots = read(block(flat))

@@ -244,7 +244,7 @@ def _plots_of_run(cfg, meas, j: int, target: str = ""):
             sigma_beta_rad=float(np.deg2rad(cfg.sigma_beta_deg)),
             radar="a",
             radial_velocity_mps=float(meas.vr[j, n]),
-            sigma_radial_velocity_mps=rp.sigma_vr_mps,
+            sigma_vr_mps=rp.sigma_vr_mps,
             target=target,
         )
         for n in range(meas.r.shape[1])

@@ -232,7 +232,7 @@ def test_finite_memory_track_is_the_window_fit() -> None:
                 1e-3,
                 radar="a",
                 radial_velocity_mps=v,
-                sigma_radial_velocity_mps=1.0,
+                sigma_vr_mps=1.0,
             )
         )
         plots.append(Plot(t + 1.0, r + v, 0.4, 50.0, 1e-3, radar="b"))

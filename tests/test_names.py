@@ -1,6 +1,7 @@
-"""One name per quantity: the azimuth noise σβ is ``sigma_beta_rad`` / ``sigma_beta_deg`` and
-the elevation noise σε ``sigma_elevation_rad`` / ``sigma_elevation_deg`` in every signature and
-record of ``core`` and ``viz_app``.
+"""One name per quantity: the azimuth noise σβ is ``sigma_beta_rad`` / ``sigma_beta_deg``, the
+elevation noise σε ``sigma_elevation_rad`` / ``sigma_elevation_deg``, the range noise σr
+``sigma_r_m`` and the radial-velocity noise σVr ``sigma_vr_mps`` in every signature and record
+of ``core`` and ``viz_app``.
 
 Every function's parameters (positional, keyword-only, ``*args``, ``**kwargs``; lambdas too)
 and every field of a class whose body declares annotated fields (dataclasses, NamedTuples)
@@ -24,6 +25,16 @@ RETIRED = frozenset(
         "sigma_angle_rad",
         "sigma_e",
         "sigma_el",
+        "sigma_r",
+        "sr",
+        "sr_m",
+        "sigma_range",
+        "sigma_range_m",
+        "sigma_vr",
+        "svr",
+        "svr_mps",
+        "sigma_radial_velocity",
+        "sigma_radial_velocity_mps",
     }
 )
 
@@ -66,14 +77,18 @@ from dataclasses import dataclass
 from typing import NamedTuple
 
 def f(a, sb, /, sigma_b=1, *sigma_e, sigma_az, **sigma_el): ...
-g = lambda sigma_angle_rad: 0
+def h(sr, sr_m, /, sigma_r=1, *svr, sigma_vr, **svr_mps): ...
+g = lambda sigma_angle_rad, sigma_range: 0
 
 @dataclass
 class C:
     sigma_azimuth_rad: float
+    sigma_range_m: float
+    sigma_radial_velocity_mps: float | None = None
 
 class N(NamedTuple):
     sigma_azimuth_deg: float
+    sigma_radial_velocity: float
 """
     found = {name for _, _, name in declared_names(ast.parse(code))} & RETIRED
     assert found == RETIRED
@@ -81,6 +96,7 @@ class N(NamedTuple):
 
 def test_no_retired_noise_names() -> None:
     bad = [line for path in sources() for line in retired_names(path)]
-    assert not bad, "retired names (sigma_beta_rad/_deg, sigma_elevation_rad/_deg instead):\n" + (
-        "\n".join(bad)
+    assert not bad, (
+        "retired names (sigma_beta_rad/_deg, sigma_elevation_rad/_deg, sigma_r_m and"
+        " sigma_vr_mps instead):\n" + "\n".join(bad)
     )

@@ -257,7 +257,7 @@ def write_files(tmp: Path, sites: list[RotatingRadar], pl: RotatingPlots, sigma_
             f"x_m = {s.x_m}",
             f"y_m = {s.y_m}",
             "z_m = 0.0",
-            f"sigma_range_m = {s.sigma_r_m * sigma_scale}",
+            f"sigma_r_m = {s.sigma_r_m * sigma_scale}",
             f"sigma_beta_deg = {math.degrees(s.sigma_beta_rad) * sigma_scale}",
             "",
         ]

@@ -67,10 +67,10 @@ SITES: dict[str, tuple[tuple[float, float, float], float, float, float, float]] 
 def radars_toml(sites: dict = SITES, skip: tuple[tuple[str, str], ...] = ()) -> str:
     """The radars file; ``skip`` drops (radar, key) pairs."""
     keys = (
-        "sigma_range_m",
+        "sigma_r_m",
         "sigma_beta_deg",
         "sigma_elevation_deg",
-        "sigma_radial_velocity_mps",
+        "sigma_vr_mps",
     )
     out = []
     for name, (site, *sigmas) in sites.items():

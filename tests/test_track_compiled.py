@@ -80,7 +80,7 @@ def scene(three_d: bool, targets: int = 5) -> list[Plot]:
                     sigma_r_m=p.sigma_r_m * (1.0 + 0.5 * g),
                     sigma_beta_rad=p.sigma_beta_rad * (1.0 + 0.25 * g),
                     radial_velocity_mps=None if (j + k) % 4 == 0 else float(vr),
-                    sigma_radial_velocity_mps=1.0 + g,
+                    sigma_vr_mps=1.0 + g,
                 )
             )
     return sorted(out, key=lambda p: p.time_s)
@@ -455,9 +455,9 @@ def test_the_block_file_path_equals_the_plots_tracked_one_by_one(
                 x_m=s[0],
                 y_m=s[1],
                 z_m=s[2],
-                sigma_range_m=base.sigma_range_m * (1.0 + 0.5 * g),
+                sigma_r_m=base.sigma_r_m * (1.0 + 0.5 * g),
                 sigma_beta_deg=base.sigma_beta_deg * (1.0 + 0.25 * g),
-                sigma_radial_velocity_mps=1.0 + g,
+                sigma_vr_mps=1.0 + g,
             )
             for g, s in enumerate(_SITES)
         ]

@@ -52,14 +52,14 @@ GOOD_RADARS = """\
 x_m = 0.0
 y_m = 0.0
 z_m = 0.0
-sigma_range_m = 250.0
+sigma_r_m = 250.0
 sigma_beta_deg = 1.0
 
 [radars.b]
 x_m = 60000.0
 y_m = -20000.0
 z_m = 15.0
-sigma_range_m = 100.0
+sigma_r_m = 100.0
 sigma_beta_deg = 0.5
 """
 
@@ -214,7 +214,7 @@ BAD_CASES = {
     "negative sigma": (
         HEADER + GOOD_ROWS[0],
         GOOD_RADARS.replace("100.0", "-1.0"),
-        "r.toml, radar 'b', key sigma_range_m: must be a finite number in [2, 100000]",
+        "r.toml, radar 'b', key sigma_r_m: must be a finite number in [2, 100000]",
     ),
     "missing radar key": (
         HEADER + GOOD_ROWS[0],
@@ -557,7 +557,7 @@ def test_rrd_recording_of_a_tracked_file(tmp_path: Path, rrd_contents) -> None:
 
 
 MIXED_RADARS = GOOD_RADARS.replace(
-    "sigma_beta_deg = 1.0\n", "sigma_beta_deg = 1.0\nsigma_radial_velocity_mps = 2.0\n"
+    "sigma_beta_deg = 1.0\n", "sigma_beta_deg = 1.0\nsigma_vr_mps = 2.0\n"
 )
 
 
@@ -606,7 +606,7 @@ NEW_BAD_CASES = {
     "doppler without sigma": (
         "time_s,radar,range_m,azimuth_deg,radial_velocity_mps\n0,a,150000,0.5,10\n",
         GOOD_RADARS,
-        "m.csv line 2, column radial_velocity_mps: radar 'a' has no sigma_radial_velocity_mps",
+        "m.csv line 2, column radial_velocity_mps: radar 'a' has no sigma_vr_mps",
     ),
     "elevation without sigma": (
         "time_s,radar,range_m,azimuth_deg,elevation_deg\n0,a,150000,0.5,3\n",

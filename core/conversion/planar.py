@@ -171,7 +171,7 @@ def _true_cov_parts(
     r: NDArray,
     c: NDArray,
     sn: NDArray,
-    sr: NDArray,
+    sigma_r_m: NDArray,
     sigma_beta_rad: NDArray,
     scale: ArrayLike = 1.0,
 ) -> CovParts:
@@ -188,7 +188,7 @@ def _true_cov_parts(
     k = _f(scale)
     e1, e2 = np.exp(-s), np.exp(-2.0 * s)
     om1, om2 = -np.expm1(-s), -np.expm1(-2.0 * s)
-    sr2 = sr * sr
+    sr2 = sigma_r_m * sigma_r_m
     r2 = r * r
     a_const = (0.5 * k) * sr2 * (1.0 + e2)
     A = r2 * ((0.5 * k) * om1 * om1)
@@ -227,9 +227,9 @@ def linearized_cov(
 
 
 def _linearized_parts(
-    r: NDArray, c: NDArray, sn: NDArray, sr: NDArray, sigma_beta_rad: NDArray
+    r: NDArray, c: NDArray, sn: NDArray, sigma_r_m: NDArray, sigma_beta_rad: NDArray
 ) -> CovParts:
-    sr2, rs = sr * sr, r * r * (sigma_beta_rad * sigma_beta_rad)
+    sr2, rs = sigma_r_m * sigma_r_m, r * r * (sigma_beta_rad * sigma_beta_rad)
     return sr2 * c * c + rs * sn * sn, (sr2 - rs) * sn * c, sr2 * sn * sn + rs * c * c
 
 
@@ -252,9 +252,9 @@ def averaged_cov(
 
 
 def _averaged_parts(
-    r: NDArray, c: NDArray, sn: NDArray, sr: NDArray, sigma_beta_rad: NDArray
+    r: NDArray, c: NDArray, sn: NDArray, sigma_r_m: NDArray, sigma_beta_rad: NDArray
 ) -> CovParts:
-    sr2, s = sr * sr, sigma_beta_rad * sigma_beta_rad
+    sr2, s = sigma_r_m * sigma_r_m, sigma_beta_rad * sigma_beta_rad
     c2, s2 = c * c, sn * sn
     e2 = np.exp(-2.0 * s)
     ch1, ch2, sh1, sh2 = np.cosh(s), np.cosh(2.0 * s), np.sinh(s), np.sinh(2.0 * s)
@@ -293,9 +293,9 @@ class ConvertedParts(NamedTuple):
         return Converted(np.stack([x, y], axis=-1), _sym2(r00, r01, r11))
 
 
-def _naive(r, c, sn, sr, sigma_beta_rad, predicted) -> ConvertedParts:
+def _naive(r, c, sn, sigma_r_m, sigma_beta_rad, predicted) -> ConvertedParts:
     """Naive conversion (eq. 8) with the linearized covariance (eq. 9)."""
-    return ConvertedParts(r * c, r * sn, *_linearized_parts(r, c, sn, sr, sigma_beta_rad))
+    return ConvertedParts(r * c, r * sn, *_linearized_parts(r, c, sn, sigma_r_m, sigma_beta_rad))
 
 
 def _averaged(method: str):
@@ -303,23 +303,27 @@ def _averaged(method: str):
     the converted point, see the module docstring) or Lerro & Bar-Shalom's (``cmkf_d``:
     κ = 1 − (e^(−s) − e^(−s/2))), both with the averaged covariance of eq. 11."""
 
-    def parts(r, c, sn, sr, sigma_beta_rad, predicted) -> ConvertedParts:
+    def parts(r, c, sn, sigma_r_m, sigma_beta_rad, predicted) -> ConvertedParts:
         kr = _SCALES[method](sigma_beta_rad * sigma_beta_rad) * r
-        return ConvertedParts(kr * c, kr * sn, *_averaged_parts(r, c, sn, sr, sigma_beta_rad))
+        return ConvertedParts(
+            kr * c, kr * sn, *_averaged_parts(r, c, sn, sigma_r_m, sigma_beta_rad)
+        )
 
     return parts
 
 
-def _ucm(r, c, sn, sr, sigma_beta_rad, predicted) -> ConvertedParts:
+def _ucm(r, c, sn, sigma_r_m, sigma_beta_rad, predicted) -> ConvertedParts:
     """Unbiased conversion (Mo, Song, Zhou, Sun, Bar-Shalom 1998): κ = e^(s/2); covariance the
     exact true-conditioned covariance of the unbiased point, e^s · ``naive_cov_given_truth``,
     evaluated at the measured (r̂, β̂)."""
     es = np.exp(sigma_beta_rad * sigma_beta_rad)
     kr = np.sqrt(es) * r
-    return ConvertedParts(kr * c, kr * sn, *_true_cov_parts(r, c, sn, sr, sigma_beta_rad, es))
+    return ConvertedParts(
+        kr * c, kr * sn, *_true_cov_parts(r, c, sn, sigma_r_m, sigma_beta_rad, es)
+    )
 
 
-def _ducm(r, c, sn, sr, sigma_beta_rad, predicted) -> ConvertedParts:
+def _ducm(r, c, sn, sigma_r_m, sigma_beta_rad, predicted) -> ConvertedParts:
     """Decorrelated unbiased conversion (Bordonaro, Willett, Bar-Shalom 2014): ucm's point,
     the covariance evaluated at the filter's predicted position (radar-centred), so the gain
     is independent of this measurement's error."""
@@ -330,7 +334,7 @@ def _ducm(r, c, sn, sr, sigma_beta_rad, predicted) -> ConvertedParts:
     es = np.exp(sigma_beta_rad * sigma_beta_rad)
     kr = np.sqrt(es) * r
     return ConvertedParts(
-        kr * c, kr * sn, *_true_cov_parts(r_p, px / r_p, py / r_p, sr, sigma_beta_rad, es)
+        kr * c, kr * sn, *_true_cov_parts(r_p, px / r_p, py / r_p, sigma_r_m, sigma_beta_rad, es)
     )
 
 

@@ -250,28 +250,35 @@ class _VariantSums:
 def run_doppler_tracking(config: DopplerTrackingConfig) -> DopplerTrackingResult:
     """Monte Carlo of both variants on the same measurements (common random numbers)."""
     radar = config.radar_preset()
-    sr, svr, T = radar.sigma_r_m, radar.sigma_vr_mps, radar.period_s
+    sigma_r_m, sigma_vr_mps, T = radar.sigma_r_m, radar.sigma_vr_mps, radar.period_s
     sigma_beta_rad = float(np.deg2rad(config.sigma_beta_deg))
     truth = config.scenario().truth()
     steps, k = truth.shape[0], config.start_scans
     rng = np.random.default_rng(np.random.SeedSequence(config.seed))
     meas = polar_doppler_measurements(
         truth,
-        sigma_r_m=sr,
+        sigma_r_m=sigma_r_m,
         sigma_beta_rad=sigma_beta_rad,
-        sigma_vr_mps=svr,
+        sigma_vr_mps=sigma_vr_mps,
         runs=config.runs,
         rng=rng,
     )
     settings = FilterSettings(
-        sr, sigma_beta_rad, T, config.sigma_a_mps2, config.sigma_v0_mps, sigma_vr_mps=svr
+        sigma_r_m,
+        sigma_beta_rad,
+        T,
+        config.sigma_a_mps2,
+        config.sigma_v0_mps,
+        sigma_vr_mps=sigma_vr_mps,
     )
     fits: dict[str, FiniteMemoryFit] = {}
     fields: dict[str, dict[str, object]] = {}
     for variant in config.variants:
         update = DOPPLER_UPDATE.get(variant)
         doppler = update is not None
-        fit = finite_memory_fit(k, sigma_r_m=sr, sigma_vr_mps=svr, period_s=T, with_doppler=doppler)
+        fit = finite_memory_fit(
+            k, sigma_r_m=sigma_r_m, sigma_vr_mps=sigma_vr_mps, period_s=T, with_doppler=doppler
+        )
         fits[variant] = fit
         start = finite_memory_start(
             fit,

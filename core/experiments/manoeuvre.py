@@ -380,9 +380,9 @@ def straight_line_check(
     target = prosov_target()
     truth = target.truth()  # (N, 4)
     rng = np.random.default_rng(np.random.SeedSequence(seed).spawn(1)[0])
-    sigma_r, sigma_beta_rad = 250.0, np.radians(1.0)
+    sigma_r_m, sigma_beta_rad = 250.0, np.radians(1.0)
     r_hat, b_hat = polar_measurements(
-        truth, sigma_r_m=sigma_r, sigma_beta_rad=sigma_beta_rad, runs=runs, rng=rng
+        truth, sigma_r_m=sigma_r_m, sigma_beta_rad=sigma_beta_rad, runs=runs, rng=rng
     )
     e2: dict[str, dict[str, NDArray]] = {}
     for label, motion in zip(("cv", "imm"), models, strict=True):
@@ -392,7 +392,7 @@ def straight_line_check(
             acc = np.zeros((len(names), runs))
             for n in range(target.steps):
                 plot = PolarPlot(r_hat[:, n], b_hat[:, n])
-                noise = PolarNoise(sigma_r, sigma_beta_rad)
+                noise = PolarNoise(sigma_r_m, sigma_beta_rad)
                 pre = group.group.start_parts(plot, noise) if group.group.converted else None
                 st, _ = group.add_arrays(
                     n * target.period_s, plot, noise, np.zeros(2), pre, None, with_stats=False

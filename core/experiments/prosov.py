@@ -705,7 +705,7 @@ def prosov_scene(
     shown = displayed_measurements(config, truth)
     r_hat, beta_hat = shown[:2]
     result, tracks = _monte_carlo(config, truth, progress, block, shown)
-    sr, sigma_beta_rad = config.sigma_r_m, config.sigma_beta_rad
+    sigma_r_m, sigma_beta_rad = config.sigma_r_m, config.sigma_beta_rad
     converted = {}
     for method in SHOWN_CONVERSIONS:
         if config.dims == 3:
@@ -714,14 +714,14 @@ def prosov_scene(
                 r_hat[0],
                 beta_hat[0],
                 shown[2][0],
-                sigma_r_m=sr,
+                sigma_r_m=sigma_r_m,
                 sigma_beta_rad=sigma_beta_rad,
                 sigma_elevation_rad=config.sigma_elevation_rad,
             )
             converted[method] = c3.z
             continue
         c = convert_parts(
-            method, r_hat[0], beta_hat[0], sigma_r_m=sr, sigma_beta_rad=sigma_beta_rad
+            method, r_hat[0], beta_hat[0], sigma_r_m=sigma_r_m, sigma_beta_rad=sigma_beta_rad
         )
         converted[method] = np.stack([c.x, c.y], -1)
     return ProsovScene(
@@ -780,10 +780,10 @@ def conversion_cloud(
     true_xy = truth[:, [0, 2]]
     basis = range_cross_basis(np.zeros(2), true_xy)  # (N, 2, 2)
     rng = np.random.default_rng(np.random.SeedSequence([config.seed, CLOUD_STREAM]))
-    sr, sigma_beta_rad = config.sigma_r_m, config.sigma_beta_rad
+    sigma_r_m, sigma_beta_rad = config.sigma_r_m, config.sigma_beta_rad
     # (P, N): one row per draw, one column per scan.
     r_c, b_c = polar_measurements(
-        truth, sigma_r_m=sr, sigma_beta_rad=sigma_beta_rad, runs=points, rng=rng
+        truth, sigma_r_m=sigma_r_m, sigma_beta_rad=sigma_beta_rad, runs=points, rng=rng
     )
     scans = truth.shape[0]
     cloud = {m: np.empty((scans, kept, 2)) for m in SHOWN_CONVERSIONS}
@@ -795,7 +795,7 @@ def conversion_cloud(
         block = slice(lo, min(lo + CLOUD_BLOCK_SCANS, scans))
         r_b, b_b = r_c[:, block].T, b_c[:, block].T  # (n, P)
         for method in SHOWN_CONVERSIONS:
-            c = convert_parts(method, r_b, b_b, sigma_r_m=sr, sigma_beta_rad=sigma_beta_rad)
+            c = convert_parts(method, r_b, b_b, sigma_r_m=sigma_r_m, sigma_beta_rad=sigma_beta_rad)
             xy = np.stack([c.x, c.y], -1)  # (n, P, 2)
             # offsets[n, p] = B[n] (xy[n, p] − truth[n]), one batched matmul (einsum is slow).
             offsets = (xy - true_xy[block, None, :]) @ np.swapaxes(basis[block], -1, -2)

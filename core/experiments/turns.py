@@ -107,11 +107,11 @@ def _scene(
     r = np.hypot(d[..., 0], d[..., 1])
     b = np.arctan2(d[..., 1], d[..., 0])
     rng = np.random.default_rng(np.random.SeedSequence(seed).spawn(runs + 1)[runs])
-    sr = np.array([radars[k].sigma_r_m for k in sched.radar])[:, None, None]
+    sigma_r_m = np.array([radars[k].sigma_r_m for k in sched.radar])[:, None, None]
     sigma_beta_rad = np.array([radars[k].sigma_beta_rad for k in sched.radar])[:, None, None]
     shape = (*r.shape, runs)
     meas = (
-        r[..., None] + sr * rng.standard_normal(shape),
+        r[..., None] + sigma_r_m * rng.standard_normal(shape),
         b[..., None] + sigma_beta_rad * rng.standard_normal(shape),
     )
     return mp, flights, meas, truth

@@ -427,7 +427,7 @@ def track_terms(x, P, t, c, s, out, k, m, L, y, e):
 
 
 @_inline
-def _step(code, xt, p, r, b, vr_hat, doppler, sr2, s, svr2, T, q, sx, sy, co, c, wm0, wc0, w):
+def _step(code, xt, p, r, b, vr_hat, doppler, sr2, s, var_vr, T, q, sx, sy, co, c, wm0, wc0, w):
     # one scan of a track: predict, the method's update, then Doppler's when V̂r is given
     xt, p = predict_s(xt, p, T, q)
     if code == EKF:
@@ -438,15 +438,15 @@ def _step(code, xt, p, r, b, vr_hat, doppler, sr2, s, svr2, T, q, sx, sy, co, c,
         zx, zy, r00, r01, r11 = convert(code, r, b, sr2, s, xt[0] - sx, xt[2] - sy, co)
         xt, p = position_update_s(xt, p, zx + sx - xt[0], zy + sy - xt[2], r00, r01, r11)
     if doppler:
-        xt, p = doppler_update_s(xt, p, vr_hat, b, svr2, s)
+        xt, p = doppler_update_s(xt, p, vr_hat, b, var_vr, s)
     return xt, p
 
 
 @_jit
 def filter_scans_2d(
-    code, start_code, r_hat, b_hat, vr_hat, doppler, first, last, sr, sigma_beta_rad, svr, T, sa,
-    v0, sx, sy, c, wm0, wc0, w, state, keep, xs, Ps, n_terms, truth, cos_los, sin_los,
-    group_sums, group_offset,
+    code, start_code, r_hat, b_hat, vr_hat, doppler, first, last, sigma_r_m, sigma_beta_rad,
+    sigma_vr_mps, T, sa, v0, sx, sy, c, wm0, wc0, w, state, keep, xs, Ps, n_terms, truth, cos_los,
+    sin_los, group_sums, group_offset,
 ):  # fmt: skip
     """Scans ``first … last − 1`` of every run; scan 0 starts a track from its plot (code
     ``start_code``), later scans continue from ``state`` (runs, 14): each run's x then the
@@ -461,8 +461,8 @@ def filter_scans_2d(
     Run-major: a run's state stays in registers over the chunk's scans; the state goes
     through memory once a chunk. (One loop, no call per run: a call's array arguments cost
     a reference count each.)"""
-    sr2, s, q = sr * sr, sigma_beta_rad * sigma_beta_rad, sa * sa
-    svr2 = svr * svr
+    sr2, s, q = sigma_r_m * sigma_r_m, sigma_beta_rad * sigma_beta_rad, sa * sa
+    var_vr = sigma_vr_mps * sigma_vr_mps
     co, co_start = coefficients(code, s, sr2), coefficients(start_code, s, sr2)
     groups = group_sums.shape[0]
     for m in range(r_hat.shape[0]):
@@ -478,7 +478,7 @@ def filter_scans_2d(
             if n > 0:
                 v = vr_hat[m, n] if doppler else 0.0
                 xt, p = _step(
-                    code, xt, p, r_hat[m, n], b_hat[m, n], v, doppler, sr2, s, svr2, T, q,
+                    code, xt, p, r_hat[m, n], b_hat[m, n], v, doppler, sr2, s, var_vr, T, q,
                     sx, sy, co, c, wm0, wc0, w,
                 )  # fmt: skip
             i = n - first

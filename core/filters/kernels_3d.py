@@ -581,7 +581,7 @@ def doppler_update_3d(x, P, vr_hat, trig, var_vr, sb2, se2, u, U, K, L):
 @_jit
 def track_plots_3d(
     codes, start_codes, slot, time_s, r_m, az_rad, el_rad, vr_mps, has_vr, radar, site,
-    sigma_r, sigma_beta_rad, sigma_elevation_rad, sigma_vr, sigma_a, v0, prm, xs, Ps, started,
+    sigma_r_m, sigma_beta_rad, sigma_elevation_rad, sigma_vr_mps, sigma_a, v0, prm, xs, Ps, started,
     last_t, out_x, out_P, out_nis,
 ):  # fmt: skip
     """``core.filters.kernels_track.track_plots_2d`` in 3D: plots with elevations el_rad
@@ -594,8 +594,8 @@ def track_plots_3d(
     z, nu, u, Uv, Kv = np.empty(3), np.empty(3), np.empty(3), np.empty(6), np.empty(6)
     R = np.empty((3, 3))
     bufs = scratch_3d()
-    ex, conv = conversion_scratch(sigma_r.shape[0])
-    for g in range(sigma_r.shape[0]):
+    ex, conv = conversion_scratch(sigma_r_m.shape[0])
+    for g in range(sigma_r_m.shape[0]):
         noise_table(sigma_beta_rad[g] ** 2, sigma_elevation_rad[g] ** 2, ex[g])
     trig = conv[3]
     for i in range(slot.shape[0]):
@@ -603,7 +603,7 @@ def track_plots_3d(
         r, b, el = r_m[i], az_rad[i], el_rad[i]
         plot_factors(b, el, ex[g], conv)
         sx, sy, sz = site[g, 0], site[g, 1], site[g, 2]
-        sr2, sb2, se2 = sigma_r[g] ** 2, sigma_beta_rad[g] ** 2, sigma_elevation_rad[g] ** 2
+        sr2, sb2, se2 = sigma_r_m[g] ** 2, sigma_beta_rad[g] ** 2, sigma_elevation_rad[g] ** 2
         new = not started[k]
         dt = time_step(started, last_t, k, time_s[i])
         if dt < 0.0:
@@ -628,7 +628,7 @@ def track_plots_3d(
                 nis = position_stats_3d(P, nu, R, bufs[0], bufs[1])[0]
                 position_stage_3d(code, x, P, r, b, el, sr2, sb2, se2, sx, sy, sz, nu, R, prm, bufs)
             if has_vr[i]:
-                var_vr = sigma_vr[g] * sigma_vr[g]
+                var_vr = sigma_vr_mps[g] * sigma_vr_mps[g]
                 if not new:
                     nis += doppler_nis_3d(x, P, vr_mps[i], trig, var_vr, sb2, se2, u)
                 doppler_update_3d(x, P, vr_mps[i], trig, var_vr, sb2, se2, u, Uv, Kv, bufs[4])

@@ -347,16 +347,16 @@ def _started(x, P, mu0, xm, Pm, mu):
 
 @_jit
 def track_plots_imm_2d(
-    codes, start_codes, slot, time_s, r_m, az_rad, vr_mps, has_vr, radar, site, sigma_r,
-    sigma_beta_rad, sigma_vr, sigma_a, omega, Pi, mu0, v0, prm, with_stats, xs, Ps, mus, started,
-    last_t, out_x, out_P, out_nis,
+    codes, start_codes, slot, time_s, r_m, az_rad, vr_mps, has_vr, radar, site, sigma_r_m,
+    sigma_beta_rad, sigma_vr_mps, sigma_a, omega, Pi, mu0, v0, prm, with_stats, xs, Ps, mus,
+    started, last_t, out_x, out_P, out_nis,
 ):  # fmt: skip
     """``core.filters.kernels_track.track_plots_2d`` with the IMM (module docstring): returns
     −1, or the index of the first plot before its slot's previous one (nothing from it on is
     filtered).
 
     Args:
-        codes … sigma_vr, v0, prm: as ``track_plots_2d``.
+        codes … sigma_vr_mps, v0, prm: as ``track_plots_2d``.
         sigma_a: (r,) σa of each model (m/s²); omega: (r,) its turn rate ω (rad/s, 0: constant
             velocity); Pi: (r, r) Π; mu0: (r,) a new track's μ.
         with_stats: compute the monitor's NIS (else out_nis is NaN).
@@ -366,7 +366,7 @@ def track_plots_imm_2d(
             out_nis (B, M): the NIS of the combined prediction, NaN at a start.
     """
     n_m, r = codes.shape[0], sigma_a.shape[0]
-    co, co_s = conversion_tables(codes, start_codes, sigma_r, sigma_beta_rad)
+    co, co_s = conversion_tables(codes, start_codes, sigma_r_m, sigma_beta_rad)
     bufs = scratch_2d()
     K = bufs[0]
     x, P = np.empty(4), np.empty((4, 4))
@@ -376,8 +376,8 @@ def track_plots_imm_2d(
         k, g = slot[i], radar[i]
         rr, b = r_m[i], az_rad[i]
         sx, sy = site[g, 0], site[g, 1]
-        sr2, s = sigma_r[g] * sigma_r[g], sigma_beta_rad[g] * sigma_beta_rad[g]
-        var_vr = sigma_vr[g] * sigma_vr[g]
+        sr2, s = sigma_r_m[g] * sigma_r_m[g], sigma_beta_rad[g] * sigma_beta_rad[g]
+        var_vr = sigma_vr_mps[g] * sigma_vr_mps[g]
         new = not started[k]
         dt = time_step(started, last_t, k, time_s[i])
         if dt < 0.0:
@@ -426,7 +426,7 @@ def track_plots_imm_2d(
 @_jit
 def track_plots_imm_3d(
     codes, start_codes, slot, time_s, r_m, az_rad, el_rad, vr_mps, has_vr, radar, site,
-    sigma_r, sigma_beta_rad, sigma_elevation_rad, sigma_vr, sigma_a, omega, Pi, mu0, v0, prm,
+    sigma_r_m, sigma_beta_rad, sigma_elevation_rad, sigma_vr_mps, sigma_a, omega, Pi, mu0, v0, prm,
     with_stats, xs, Ps, mus, started, last_t, out_x, out_P, out_nis,
 ):  # fmt: skip
     """``track_plots_imm_2d`` in 3D (``core.filters.kernels_3d.track_plots_3d``'s stages):
@@ -440,8 +440,8 @@ def track_plots_imm_3d(
     z, nu, u, Uv, Kv = np.empty(3), np.empty(3), np.empty(3), np.empty(6), np.empty(6)
     R = np.empty((3, 3))
     bufs = scratch_3d()
-    ex, conv = conversion_scratch(sigma_r.shape[0])
-    for g in range(sigma_r.shape[0]):
+    ex, conv = conversion_scratch(sigma_r_m.shape[0])
+    for g in range(sigma_r_m.shape[0]):
         noise_table(sigma_beta_rad[g] ** 2, sigma_elevation_rad[g] ** 2, ex[g])
     trig = conv[3]
     for i in range(slot.shape[0]):
@@ -449,8 +449,8 @@ def track_plots_imm_3d(
         rr, b, el = r_m[i], az_rad[i], el_rad[i]
         plot_factors(b, el, ex[g], conv)
         sx, sy, sz = site[g, 0], site[g, 1], site[g, 2]
-        sr2, sb2, se2 = sigma_r[g] ** 2, sigma_beta_rad[g] ** 2, sigma_elevation_rad[g] ** 2
-        var_vr = sigma_vr[g] * sigma_vr[g]
+        sr2, sb2, se2 = sigma_r_m[g] ** 2, sigma_beta_rad[g] ** 2, sigma_elevation_rad[g] ** 2
+        var_vr = sigma_vr_mps[g] * sigma_vr_mps[g]
         vr = vr_mps[i]
         new = not started[k]
         dt = time_step(started, last_t, k, time_s[i])
@@ -551,12 +551,12 @@ def predicted_imm(xs, Ps, mus, slot, j: int, dt, sigma_a, omega, Pi, out_x, out_
 
 @_jit
 def gate_nis_imm_2d(
-    xs, Ps, mus, slot, j: int, dt, sigma_a, omega, Pi, code: int, r_m, az_rad, sigma_r,
+    xs, Ps, mus, slot, j: int, dt, sigma_a, omega, Pi, code: int, r_m, az_rad, sigma_r_m,
     sigma_beta_rad, site, out,
 ):  # fmt: skip
     """d² = νᵀ S⁻¹ ν of N (track, plot) pairs, 2D: pair i's track (slot[i], method j, of
     ``code``) predicted over dt[i] (``combined_prediction``) against its plot r_m[i],
-    az_rad[i] with noise std sigma_r[i], sigma_beta_rad[i] at site[i] (N, 2): the method's
+    az_rad[i] with noise std sigma_r_m[i], sigma_beta_rad[i] at site[i] (N, 2): the method's
     position measurement and its NIS (``position_measurement``, ``position_nis``), the
     statistic of the tracker kernels' monitor, into out (N,) (NaN where S is not positive
     definite)."""
@@ -568,19 +568,19 @@ def gate_nis_imm_2d(
         k = slot[i]
         out[i] = pair_nis_2d(
             xs[k, j], Ps[k, j], mus[k, j], dt[i], sigma_a, omega, Pi, code, r_m[i], az_rad[i],
-            sigma_r[i], sigma_beta_rad[i], site[i, 0], site[i, 1], x0, P0, mu, c, w, x, P,
+            sigma_r_m[i], sigma_beta_rad[i], site[i, 0], site[i, 1], x0, P0, mu, c, w, x, P,
         )  # fmt: skip
 
 
 @_inline
-def pair_nis_2d(xm, Pm, mu_k, dt, sigma_a, omega, Pi, code, r, b, sigma_r, sigma_beta_rad, sx, sy,
+def pair_nis_2d(xm, Pm, mu_k, dt, sigma_a, omega, Pi, code, r, b, sigma_r_m, sigma_beta_rad, sx, sy,
                 x0, P0, mu, c, w, x, P):  # fmt: skip
     """d² of one (track, plot) pair in 2D: the track's models xm, Pm, μ mu_k predicted over
-    dt (``combined_prediction``) against the plot (r, b) with noise std sigma_r, sigma_beta_rad at
+    dt (``combined_prediction``) against the plot (r, b) with noise std sigma_r_m, sigma_beta_rad at
     site (sx, sy), by method ``code``'s position measurement and its NIS (NaN where S is not
     positive definite); x0 … P scratch as ``combined_prediction``'s."""
     combined_prediction(xm, Pm, mu_k, dt, sigma_a, omega, Pi, x0, P0, mu, c, w, x, P)
-    sr2, s = sigma_r * sigma_r, sigma_beta_rad * sigma_beta_rad
+    sr2, s = sigma_r_m * sigma_r_m, sigma_beta_rad * sigma_beta_rad
     co = coefficients(code, s, sr2)
     meas = position_measurement(code, x, r, b, sr2, s, sx, sy, co)
     return position_nis(P, *meas)

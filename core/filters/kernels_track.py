@@ -134,14 +134,14 @@ def scratch_2d():
 
 
 @_jit
-def conversion_tables(codes, start_codes, sigma_r, sigma_beta_rad):
+def conversion_tables(codes, start_codes, sigma_r_m, sigma_beta_rad):
     """The conversions' noise-only scalars (``coefficients``), once per radar and method, not
     per plot: (R, M, 8) for the methods' updates and for their starts."""
-    n_m, n_r = codes.shape[0], sigma_r.shape[0]
+    n_m, n_r = codes.shape[0], sigma_r_m.shape[0]
     co = np.empty((n_r, n_m, 8))
     co_s = np.empty((n_r, n_m, 8))
     for g in range(n_r):
-        s, sr2 = sigma_beta_rad[g] * sigma_beta_rad[g], sigma_r[g] * sigma_r[g]
+        s, sr2 = sigma_beta_rad[g] * sigma_beta_rad[g], sigma_r_m[g] * sigma_r_m[g]
         for j in range(n_m):
             co[g, j, :] = coefficients(codes[j], s, sr2)
             co_s[g, j, :] = coefficients(start_codes[j], s, sr2)
@@ -150,8 +150,8 @@ def conversion_tables(codes, start_codes, sigma_r, sigma_beta_rad):
 
 @_jit
 def track_plots_2d(
-    codes, start_codes, slot, time_s, r_m, az_rad, vr_mps, has_vr, radar, site, sigma_r,
-    sigma_beta_rad, sigma_vr, sigma_a, v0, prm, xs, Ps, started, last_t, out_x, out_P, out_nis,
+    codes, start_codes, slot, time_s, r_m, az_rad, vr_mps, has_vr, radar, site, sigma_r_m,
+    sigma_beta_rad, sigma_vr_mps, sigma_a, v0, prm, xs, Ps, started, last_t, out_x, out_P, out_nis,
 ):  # fmt: skip
     """Filter plots 0 … B − 1 in order; returns −1, or the index of the first plot whose
     time is before its slot's previous plot (nothing from it on is filtered).
@@ -160,8 +160,8 @@ def track_plots_2d(
         codes, start_codes: (M,) ``core.filters.compiled.METHOD_CODES`` / ``START_CODES``.
         slot (B,): each plot's target slot; time_s, r_m, az_rad, vr_mps (B,): its time (s),
             range (m), azimuth (rad) and radial velocity (m/s, read where has_vr (B,)).
-        radar (B,): index into the radar table site (R, 2) (m), sigma_r, sigma_beta_rad, sigma_vr
-            (R,) (m, rad, m/s).
+        radar (B,): index into the radar table site (R, 2) (m), sigma_r_m, sigma_beta_rad,
+            sigma_vr_mps (R,) (m, rad, m/s).
         sigma_a: process-noise acceleration std (m/s²); v0: start velocity std (m/s).
         prm: (4,) the UKF's (λ + n, Wm₀, Wc₀, W).
         xs (K, M, 4), Ps (K, M, 4, 4), started (K,), last_t (K,): every slot's tracks,
@@ -172,7 +172,7 @@ def track_plots_2d(
             linearised statistics, as the numpy engine); NaN at a start (no prediction).
     """
     n_m = codes.shape[0]
-    co, co_s = conversion_tables(codes, start_codes, sigma_r, sigma_beta_rad)
+    co, co_s = conversion_tables(codes, start_codes, sigma_r_m, sigma_beta_rad)
     q = sigma_a * sigma_a
     bufs = scratch_2d()
     K = bufs[0]
@@ -181,7 +181,7 @@ def track_plots_2d(
         k, g = slot[i], radar[i]
         r, b = r_m[i], az_rad[i]
         sx, sy = site[g, 0], site[g, 1]
-        sr2, s = sigma_r[g] * sigma_r[g], sigma_beta_rad[g] * sigma_beta_rad[g]
+        sr2, s = sigma_r_m[g] * sigma_r_m[g], sigma_beta_rad[g] * sigma_beta_rad[g]
         new = not started[k]
         dt = time_step(started, last_t, k, time_s[i])
         if dt < 0.0:
@@ -202,7 +202,7 @@ def track_plots_2d(
                 nis = position_nis(P, *meas)
                 position_stage(code, x, P, r, b, sr2, s, sx, sy, prm, meas, bufs)
             if has_vr[i]:
-                var_vr = sigma_vr[g] * sigma_vr[g]
+                var_vr = sigma_vr_mps[g] * sigma_vr_mps[g]
                 if not new:
                     nis += doppler_nis(x, P, vr_mps[i], b, var_vr, s)
                 doppler_update(x, P, vr_mps[i], b, var_vr, s, K)
@@ -237,7 +237,7 @@ def predicted_2d(xs, Ps, slot, j: int, dt, q: float, out_x, out_P):
 
 @_jit
 def gate_nis_2d(
-    xs, Ps, slot, j: int, dt, q: float, code: int, r_m, az_rad, sigma_r, sigma_beta_rad, site, out
+    xs, Ps, slot, j: int, dt, q: float, code: int, r_m, az_rad, sigma_r_m, sigma_beta_rad, site, out
 ):
     """``core.filters.kernels_imm.gate_nis_imm_2d`` for the cv model: pair i's track
     predicted over dt[i] by ``predict`` (σa² = q), then the method's position measurement
@@ -249,7 +249,7 @@ def gate_nis_2d(
         P[:, :] = Ps[k, j]
         if dt[i] > 0.0:
             predict(x, P, dt[i], q)
-        sr2, s = sigma_r[i] * sigma_r[i], sigma_beta_rad[i] * sigma_beta_rad[i]
+        sr2, s = sigma_r_m[i] * sigma_r_m[i], sigma_beta_rad[i] * sigma_beta_rad[i]
         co = coefficients(code, s, sr2)
         meas = position_measurement(code, x, r_m[i], az_rad[i], sr2, s, site[i, 0], site[i, 1], co)
         out[i] = position_nis(P, *meas)

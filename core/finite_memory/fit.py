@@ -161,21 +161,27 @@ def _check(
     kk = check_int("k", k, low=k_min, high=MAX_K)
     if not isinstance(with_doppler, bool | np.bool_):
         raise ParameterError(f"with_doppler must be True or False (got {with_doppler!r})")
-    sr = check_real("sigma_r_m", sigma_r_m, low=0.0)
+    sigma_r_m = check_real("sigma_r_m", sigma_r_m, low=0.0)
     T = check_real("period_s", period_s, low=0.0)
     t4 = T * T * T * T
-    if not (math.isfinite(sr * sr) and sr * sr > 0.0 and math.isfinite(t4) and t4 > 0.0):
+    if not (
+        math.isfinite(sigma_r_m * sigma_r_m)
+        and sigma_r_m * sigma_r_m > 0.0
+        and math.isfinite(t4)
+        and t4 > 0.0
+    ):
         raise ParameterError(
-            f"sigma_r_m and period_s must keep σr² and T⁴ finite and > 0 (got {sr:g}, {T:g})",
+            "sigma_r_m and period_s must keep σr² and T⁴ finite and > 0"
+            f" (got {sigma_r_m:g}, {T:g})",
             "sigma_r_m",
         )
     if not with_doppler:
-        return _Params(kk, sr, math.nan, T, False, math.nan)
-    sv = check_real("sigma_vr_mps", sigma_vr_mps, low=0.0)
-    c0 = c0_ratio(sigma_r_m=sr, sigma_vr_mps=sv, period_s=T)
+        return _Params(kk, sigma_r_m, math.nan, T, False, math.nan)
+    sigma_vr_mps = check_real("sigma_vr_mps", sigma_vr_mps, low=0.0)
+    c0 = c0_ratio(sigma_r_m=sigma_r_m, sigma_vr_mps=sigma_vr_mps, period_s=T)
     if not C0_MIN <= c0 <= C0_MAX:
         raise ParameterError(f"C0 = σr²/(T² σVr²) must be in [{C0_MIN:g}, {C0_MAX:g}] (got {c0:g})")
-    return _Params(kk, sr, sv, T, True, c0)
+    return _Params(kk, sigma_r_m, sigma_vr_mps, T, True, c0)
 
 
 # --------------------------------------------------------------------------------------------

@@ -749,14 +749,21 @@ class GNNTracker:
             from radarviz.core.tracking.kernels_gate import plot_points_2d
 
             points, r_ii = np.empty((n_p, 2)), np.empty((n_p, 2))
-            sr, sigma_beta_rad = (
+            sigma_r_m, sigma_beta_rad = (
                 np.ascontiguousarray(np.broadcast_to(v, (n_p,))) for v in noise[:2]
             )
             code = METHOD_CODES[self._gate.method]
             # Contiguous arrays throughout: one compiled specialisation of the kernel.
             site_c = np.ascontiguousarray(site)
             plot_points_2d(
-                code, plot.range_m, plot.azimuth_rad, sr, sigma_beta_rad, site_c, points, r_ii
+                code,
+                plot.range_m,
+                plot.azimuth_rad,
+                sigma_r_m,
+                sigma_beta_rad,
+                site_c,
+                points,
+                r_ii,
             )
             return points, r_ii, times
         z, R = METHODS[self._gate.method].convert(plot, noise)

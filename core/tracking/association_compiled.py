@@ -185,7 +185,7 @@ class CompiledAssociation:
             np.ascontiguousarray(block.time_s), np.ascontiguousarray(block.range_m),
             np.ascontiguousarray(block.azimuth_rad), np.ascontiguousarray(vr, dtype=np.float64),
             block.radar.astype(np.int64), np.ascontiguousarray(rd.site_m[:, :2]),
-            rd.sigma_r_m, rd.sigma_beta_rad, rd.sigma_radial_velocity_mps,
+            rd.sigma_r_m, rd.sigma_beta_rad, rd.sigma_vr_mps,
             np.ascontiguousarray(radar, dtype=np.int64), starts,
             np.full(len(batches), whole_scan, np.bool_),
             np.array([math.nan if p is None else p for p in measured_period_s], np.float64),

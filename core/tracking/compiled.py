@@ -53,13 +53,13 @@ COMPILED_DIMS: tuple[int, ...] = (2, 3)
 class RadarTable(NamedTuple):
     """The radars a block's plots refer to, R of them: site_m (R, 3) (m), and noise std
     sigma_r_m, sigma_beta_rad, sigma_elevation_rad (R,) (m, rad) and
-    sigma_radial_velocity_mps (R,) (m/s; 0 where the radar has no Doppler)."""
+    sigma_vr_mps (R,) (m/s; 0 where the radar has no Doppler)."""
 
     site_m: NDArray[np.float64]
     sigma_r_m: NDArray[np.float64]
     sigma_beta_rad: NDArray[np.float64]
     sigma_elevation_rad: NDArray[np.float64]
-    sigma_radial_velocity_mps: NDArray[np.float64]
+    sigma_vr_mps: NDArray[np.float64]
 
 
 class PlotBlock(NamedTuple):
@@ -246,7 +246,7 @@ class CompiledTracks:
         table = (
             np.ascontiguousarray(rd.site_m[:, : self.dims], dtype=np.float64),
             *noise,
-            _f(rd.sigma_radial_velocity_mps),
+            _f(rd.sigma_vr_mps),
         )
         if self.imm is None:
             model = (self.sigma_a, self.sigma_v0, self.prm, self.xs, self.Ps)

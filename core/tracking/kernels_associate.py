@@ -404,7 +404,7 @@ class GateFilter(NamedTuple):
 class PlotArrays(NamedTuple):
     """B plots in time order, cut into batches: time_s, range_m, azimuth_rad (B,);
     radial_velocity_mps (B,), NaN where none (or Doppler unused); noise (B,) rows of the
-    noise table site (T, 2), sigma_r_m, sigma_beta_rad, sigma_radial_velocity_mps (T,);
+    noise table site (T, 2), sigma_r_m, sigma_beta_rad, sigma_vr_mps (T,);
     radar (B,) the association's radar of each plot; batch_start (nb + 1,) each batch's
     first plot; whole_scan (nb,) a batch handed in as a whole scan; measured_period_s (nb,)
     the feed's period of the batch's radar, NaN where none."""
@@ -417,7 +417,7 @@ class PlotArrays(NamedTuple):
     site: NDArray[np.float64]
     sigma_r_m: NDArray[np.float64]
     sigma_beta_rad: NDArray[np.float64]
-    sigma_radial_velocity_mps: NDArray[np.float64]
+    sigma_vr_mps: NDArray[np.float64]
     radar: NDArray[np.int64]
     batch_start: NDArray[np.int64]
     whole_scan: NDArray[np.bool_]
@@ -621,7 +621,7 @@ def _batch(pl, beams, radar_site, book, gf, rules, live, counters, since, owner,
         bad = track_plots_imm_2d(
             gf.codes, gf.start_codes, own, times, pl.range_m[lo:hi], pl.azimuth_rad[lo:hi],
             vr, ~np.isnan(vr), pl.noise[lo:hi], pl.site, pl.sigma_r_m, pl.sigma_beta_rad,
-            pl.sigma_radial_velocity_mps, gf.sigma_a, gf.omega, gf.Pi, gf.mu0, gf.v0, gf.prm,
+            pl.sigma_vr_mps, gf.sigma_a, gf.omega, gf.Pi, gf.mu0, gf.v0, gf.prm,
             False, gf.xs, gf.Ps, gf.mus, gf.started, gf.last_t, out_x, out_P, out_nis,
         )  # fmt: skip
         if bad >= 0:

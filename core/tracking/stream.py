@@ -115,7 +115,7 @@ class Plot:
     elevation_rad: float | None = None
     sigma_elevation_rad: float = 0.0
     radial_velocity_mps: float | None = None
-    sigma_radial_velocity_mps: float = 0.0
+    sigma_vr_mps: float = 0.0
     target: str = ""
     radar_track: int | None = None
 
@@ -226,7 +226,7 @@ class TrackGroup:
                 range_m=p.range_m,
                 azimuth_rad=p.azimuth_rad,
                 elevation_rad=0.0 if p.elevation_rad is None else p.elevation_rad,
-                sigma_vr_mps=p.sigma_radial_velocity_mps,
+                sigma_vr_mps=p.sigma_vr_mps,
                 sigma_r_m=p.sigma_r_m,
                 sigma_beta_rad=p.sigma_beta_rad,
                 sigma_elevation_rad=p.sigma_elevation_rad,
@@ -588,7 +588,7 @@ class StreamTracker:
             fit = finite_memory_fit(
                 k,
                 sigma_r_m=p.sigma_r_m,
-                sigma_vr_mps=p.sigma_radial_velocity_mps if doppler else None,
+                sigma_vr_mps=p.sigma_vr_mps if doppler else None,
                 period_s=period,
                 with_doppler=doppler,
             )
@@ -651,7 +651,7 @@ def plot_block(plots: list[Plot], one_target: bool = False) -> PlotBlock:
         [
             index.setdefault(
                 (p.site, p.sigma_r_m, p.sigma_beta_rad, p.sigma_elevation_rad,
-                 p.sigma_radial_velocity_mps),
+                 p.sigma_vr_mps),
                 len(index),
             )
             for p in plots
@@ -701,7 +701,7 @@ def block_plots(block: PlotBlock) -> list[Plot]:
                 None if el is None else float(el[i]),
                 float(rd.sigma_elevation_rad[g]),
                 v,
-                float(rd.sigma_radial_velocity_mps[g]),
+                float(rd.sigma_vr_mps[g]),
                 block.labels[int(block.target[i])],
             )
         )

@@ -353,7 +353,7 @@ class TargetTracker:
                 elevation_rad=np.zeros(len(sub))
                 if plot.elevation_rad is None
                 else plot.elevation_rad,
-                sigma_vr_mps=np.array([p.sigma_radial_velocity_mps for p in sub], dtype=float),
+                sigma_vr_mps=np.array([p.sigma_vr_mps for p in sub], dtype=float),
                 sigma_r_m=noise.sigma_r_m,
                 sigma_beta_rad=noise.sigma_beta_rad,
                 sigma_elevation_rad=noise.sigma_elevation_rad,

@@ -812,7 +812,7 @@ def fuse_positions(
     if s.ndim != 2 or s.shape[1] != 3 or s.shape[0] < 1:
         raise ParameterError(f"sites must have shape (N, 3) with N >= 1 (got {s.shape})")
     n = s.shape[0]
-    sr = _positive("sigma_r_m", sigma_r_m, n)
+    sigma_r_m = _positive("sigma_r_m", sigma_r_m, n)
     sigma_beta_rad = _positive("sigma_beta_rad", sigma_beta_rad, n)
     se = _positive("sigma_elevation_rad", sigma_elevation_rad, n)
     r, az, el = _f(range_), _f(azimuth), _f(elevation)
@@ -821,7 +821,7 @@ def fuse_positions(
             "a radar sees the target at zero range or at its zenith: "
             "its position covariance is singular"
         )
-    sig = {"sigma_r_m": sr, "sigma_beta_rad": sigma_beta_rad, "sigma_elevation_rad": se}
+    sig = {"sigma_r_m": sigma_r_m, "sigma_beta_rad": sigma_beta_rad, "sigma_elevation_rad": se}
     conv = convert_ucm_3d(r, az, el, **sig)
     pts = conv.z + s
     pos, P = _fuse(conv.R, pts)

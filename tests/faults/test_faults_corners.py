@@ -108,19 +108,19 @@ def test_a_3d_track_straight_overhead_with_doppler_stays_finite(tmp_path: Path, 
     by their maximum both weights were 0: μ = 0 / 0. The prior now enters the shift. The track
     is where the plots put it: over the radar, at the measured range."""
     rng = np.random.default_rng(5)
-    sr_m, sigma_deg, svr_mps = 150.0, 0.3, 1.0
+    sigma_r_m, sigma_deg, sigma_vr_mps = 150.0, 0.3, 1.0
     lines = ["time_s,radar,range_m,azimuth_deg,elevation_deg,radial_velocity_mps"]
     for k in range(20):
-        r = 10000.0 + 50.0 * k + sr_m * rng.standard_normal()
-        vr = 5.0 + svr_mps * rng.standard_normal()
+        r = 10000.0 + 50.0 * k + sigma_r_m * rng.standard_normal()
+        vr = 5.0 + sigma_vr_mps * rng.standard_normal()
         az = 30.0 + sigma_deg * rng.standard_normal()
         lines.append(f"{10.0 * k!r},a,{r!r},{az!r},89.9999,{vr!r}")
     meas, radars, out = tmp_path / "m.csv", tmp_path / "r.toml", tmp_path / "t.csv"
     meas.write_text("\n".join(lines) + "\n")
     radars.write_text(
         "[radars.a]\nx_m = 0.0\ny_m = 0.0\nz_m = 0.0\n"
-        f"sigma_range_m = {sr_m!r}\nsigma_beta_deg = {sigma_deg!r}\n"
-        f"sigma_elevation_deg = {sigma_deg!r}\nsigma_radial_velocity_mps = {svr_mps!r}\n"
+        f"sigma_r_m = {sigma_r_m!r}\nsigma_beta_deg = {sigma_deg!r}\n"
+        f"sigma_elevation_deg = {sigma_deg!r}\nsigma_vr_mps = {sigma_vr_mps!r}\n"
     )
     code, _, err = run(
         capsys, "track", "--input", str(meas), "--radars", str(radars), "--out", str(out)
@@ -138,4 +138,4 @@ def test_a_3d_track_straight_overhead_with_doppler_stays_finite(tmp_path: Path, 
     for r in (r for r in rows if r["method"] != "ukf"):
         t = float(r["time_s"])
         assert abs(float(r["x_m"])) < horizontal_m and abs(float(r["y_m"])) < horizontal_m, r
-        assert abs(float(r["z_m"]) - (10000.0 + 5.0 * t)) < 5.0 * sr_m, r
+        assert abs(float(r["z_m"]) - (10000.0 + 5.0 * t)) < 5.0 * sigma_r_m, r

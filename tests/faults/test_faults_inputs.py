@@ -15,7 +15,7 @@ RADARS = """[radars.radar]
 x_m = 0.0
 y_m = 0.0
 z_m = 0.0
-sigma_range_m = 250.0
+sigma_r_m = 250.0
 sigma_beta_deg = 1.0
 """
 PLOTS = [

@@ -89,7 +89,7 @@ def convert(
     """
     check_choice("method", method, METHODS_2D)
     r = parameter("range_m").check_all(range_m)
-    sr = parameter("sigma_r_m").check_all(sigma_r_m)
+    sigma_r_m = parameter("sigma_r_m").check_all(sigma_r_m)
     beta = parameter("sigma_beta_deg")  # the σβ bounds, here in rad
     sigma_beta_rad = check_reals(
         "sigma_beta_rad",
@@ -106,7 +106,7 @@ def convert(
         method,
         r,
         az,
-        sigma_r_m=sr,
+        sigma_r_m=sigma_r_m,
         sigma_beta_rad=sigma_beta_rad,
         predicted_xy=xy,
     )

@@ -116,7 +116,7 @@ def _measurements(runs: int, steps: int, config: TrackingConfig, seed: int):
 def bench_batched(runs: int, config: TrackingConfig, repeats: int = 3) -> tuple[float, float]:
     """(end-to-end, filter-only) ns per track-step of the batched ucm filter; best of repeats."""
     steps = config.target.steps
-    sr, sigma_beta_rad, T = config.sigma_r_m, config.sigma_beta_rad, config.target.period_s
+    sigma_r_m, sigma_beta_rad, T = config.sigma_r_m, config.sigma_beta_rad, config.target.period_s
     sizes = block_sizes(runs)
     blocks = [_measurements(m, steps, config, seed=i) for i, m in enumerate(sizes)]
     end_to_end = float("inf")
@@ -128,7 +128,7 @@ def bench_batched(runs: int, config: TrackingConfig, repeats: int = 3) -> tuple[
     # Filter only: convert every block's measurements first, then time predict + update.
     converted = []
     for r_hat, b_hat in blocks:
-        c = convert("ucm", r_hat, b_hat, sigma_r_m=sr, sigma_beta_rad=sigma_beta_rad)
+        c = convert("ucm", r_hat, b_hat, sigma_r_m=sigma_r_m, sigma_beta_rad=sigma_beta_rad)
         converted.append(
             (
                 np.ascontiguousarray(c.z.transpose(1, 0, 2)),
@@ -153,9 +153,9 @@ def bench_batched(runs: int, config: TrackingConfig, repeats: int = 3) -> tuple[
 def bench_filterpy(runs: int, config: TrackingConfig) -> float:
     """ns per step of filterpy's KalmanFilter (predict + update) on ``runs`` runs."""
     steps = config.target.steps
-    sr, sigma_beta_rad, T = config.sigma_r_m, config.sigma_beta_rad, config.target.period_s
+    sigma_r_m, sigma_beta_rad, T = config.sigma_r_m, config.sigma_beta_rad, config.target.period_s
     r_hat, b_hat = _measurements(runs, steps, config, seed=12345)
-    c = convert("ucm", r_hat, b_hat, sigma_r_m=sr, sigma_beta_rad=sigma_beta_rad)
+    c = convert("ucm", r_hat, b_hat, sigma_r_m=sigma_r_m, sigma_beta_rad=sigma_beta_rad)
     F = transition_matrix(T)
     elapsed = 0.0
     for m in range(runs):
@@ -304,9 +304,9 @@ def bench_imm(runs: int, filterpy_runs: int, config: TrackingConfig) -> dict[str
         cv = _track_group_ns(CVModel(1.0), r_hat, b_hat, config)
         imm = _track_group_ns(DEFAULT_IMM, r_hat, b_hat, config)
         out[label] = {"cv_ns_per_step": cv, "imm_ns_per_step": imm, "imm_over_cv": imm / cv}
-    sr, sigma_beta_rad, T = config.sigma_r_m, config.sigma_beta_rad, config.target.period_s
+    sigma_r_m, sigma_beta_rad, T = config.sigma_r_m, config.sigma_beta_rad, config.target.period_s
     r_hat, b_hat = _measurements(filterpy_runs, steps, config, seed=12345)
-    c = convert("ucm", r_hat, b_hat, sigma_r_m=sr, sigma_beta_rad=sigma_beta_rad)
+    c = convert("ucm", r_hat, b_hat, sigma_r_m=sigma_r_m, sigma_beta_rad=sigma_beta_rad)
     elapsed = 0.0
     for m in range(filterpy_runs):
         init = cv_init(c.z[m, :1], c.R[m, :1])
@@ -366,14 +366,14 @@ def bench_targets(
 
     steps = config.target.steps
     r_hat, b_hat = _measurements(targets, steps, config, seed=21)
-    T, sr, sigma_beta_rad = config.target.period_s, config.sigma_r_m, config.sigma_beta_rad
+    T, sigma_r_m, sigma_beta_rad = config.target.period_s, config.sigma_r_m, config.sigma_beta_rad
     by_target = [
         [
             Plot(
                 n * T + 1e-3 * k,
                 float(r_hat[k, n]),
                 float(b_hat[k, n]),
-                sr,
+                sigma_r_m,
                 sigma_beta_rad,
                 target=str(k),
             )
@@ -415,7 +415,7 @@ def bench_targets(
     runs = max(1, 20_000 // steps)
     r1, b1 = _measurements(runs, steps, config, seed=22)
     one = [
-        Plot((k * steps + n) * T, float(r1[k, n]), float(b1[k, n]), sr, sigma_beta_rad)
+        Plot((k * steps + n) * T, float(r1[k, n]), float(b1[k, n]), sigma_r_m, sigma_beta_rad)
         for k in range(runs)
         for n in range(steps)
     ]

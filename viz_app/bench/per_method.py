@@ -197,16 +197,18 @@ def bench_filterpy_per_method(config: TrackingConfig, runs: int) -> dict[str, fl
 
     r_all, b_all, vr_all = bench_measurements(config, runs)
     s = _settings(config)
-    T, sr, sigma_beta_rad = s.period_s, s.sigma_r_m, s.sigma_beta_rad
+    T, sigma_r_m, sigma_beta_rad = s.period_s, s.sigma_r_m, s.sigma_beta_rad
     steps = r_all.shape[1]
     F, Q = transition_matrix(T), process_noise(T, s.sigma_a_mps2)
     H = np.array([[1.0, 0.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]])
-    R_polar = np.diag([sr * sr, sigma_beta_rad * sigma_beta_rad])
+    R_polar = np.diag([sigma_r_m * sigma_r_m, sigma_beta_rad * sigma_beta_rad])
     ukf = s.ukf
 
     def start(method: str, r: float, b: float) -> tuple[np.ndarray, np.ndarray]:
         kind = {"ducm": "ucm", "ekf": "naive", "ukf": "naive", "ekf+doppler": "naive"}
-        c = convert(kind.get(method, method), r, b, sigma_r_m=sr, sigma_beta_rad=sigma_beta_rad)
+        c = convert(
+            kind.get(method, method), r, b, sigma_r_m=sigma_r_m, sigma_beta_rad=sigma_beta_rad
+        )
         x = np.array([c.z[0], 0.0, c.z[1], 0.0])
         P = np.zeros((4, 4))
         P[np.ix_([0, 2], [0, 2])] = c.R
@@ -253,7 +255,7 @@ def bench_filterpy_per_method(config: TrackingConfig, runs: int) -> dict[str, fl
                 f = KalmanFilter(4, 2)
                 f.F, f.H = F, H
                 if method != "ducm":
-                    c = convert(method, r, b, sigma_r_m=sr, sigma_beta_rad=sigma_beta_rad)
+                    c = convert(method, r, b, sigma_r_m=sigma_r_m, sigma_beta_rad=sigma_beta_rad)
             f.Q = Q
             f.x, f.P = x0, P0
             for n in range(1, steps):
@@ -262,7 +264,8 @@ def bench_filterpy_per_method(config: TrackingConfig, runs: int) -> dict[str, fl
                 t1 = time.perf_counter()
                 if method == "ducm":
                     pred = (f.x[0], f.x[2])
-                    cn = convert("ducm", r[n], b[n], sigma_r_m=sr, sigma_beta_rad=sigma_beta_rad,
+                    cn = convert("ducm", r[n], b[n], sigma_r_m=sigma_r_m,
+                                 sigma_beta_rad=sigma_beta_rad,
                                  predicted_xy=np.array(pred))  # fmt: skip
                     z_n, R_n = cn.z, cn.R
                 elif method in ("naive", "seed", "cmkf_d", "ucm"):

@@ -171,9 +171,9 @@ def _naive_point(r, b, sr2, s):
 
 
 @_jit
-def naive(r_hat, b_hat, sr, sigma_beta_rad, T, q, v0, x_out, P_out):
+def naive(r_hat, b_hat, sigma_r_m, sigma_beta_rad, T, q, v0, x_out, P_out):
     """The naive converted-measurement filter (eq. 8, 9)."""
-    sr2, s = sr * sr, sigma_beta_rad * sigma_beta_rad
+    sr2, s = sigma_r_m * sigma_r_m, sigma_beta_rad * sigma_beta_rad
     for m in range(r_hat.shape[0]):
         x, p = _start(*_naive_point(r_hat[m, 0], b_hat[m, 0], sr2, s), v0)
         for n in range(1, r_hat.shape[1]):
@@ -213,8 +213,8 @@ def _averaged_point(r, b, kappa, sr2, k):
 
 
 @_jit
-def _averaged(r_hat, b_hat, sr, sigma_beta_rad, T, q, v0, kappa, x_out, P_out):
-    sr2, s = sr * sr, sigma_beta_rad * sigma_beta_rad
+def _averaged(r_hat, b_hat, sigma_r_m, sigma_beta_rad, T, q, v0, kappa, x_out, P_out):
+    sr2, s = sigma_r_m * sigma_r_m, sigma_beta_rad * sigma_beta_rad
     k = _averaged_constants(s, sr2)
     for m in range(r_hat.shape[0]):
         x, p = _start(*_averaged_point(r_hat[m, 0], b_hat[m, 0], kappa, sr2, k), v0)
@@ -226,20 +226,20 @@ def _averaged(r_hat, b_hat, sr, sigma_beta_rad, T, q, v0, kappa, x_out, P_out):
 
 
 @_jit
-def seed(r_hat, b_hat, sr, sigma_beta_rad, T, q, v0, x_out, P_out):
+def seed(r_hat, b_hat, sigma_r_m, sigma_beta_rad, T, q, v0, x_out, P_out):
     """Prosov's correction as printed: κ = 1 − σβ²/2 (eq. 10), covariance eq. 11."""
     s = sigma_beta_rad * sigma_beta_rad
-    _averaged(r_hat, b_hat, sr, sigma_beta_rad, T, q, v0, 1.0 - s / 2.0, x_out, P_out)
+    _averaged(r_hat, b_hat, sigma_r_m, sigma_beta_rad, T, q, v0, 1.0 - s / 2.0, x_out, P_out)
 
 
 @_jit
-def cmkf_d(r_hat, b_hat, sr, sigma_beta_rad, T, q, v0, x_out, P_out):
+def cmkf_d(r_hat, b_hat, sigma_r_m, sigma_beta_rad, T, q, v0, x_out, P_out):
     """Lerro and Bar-Shalom's debiasing κ = 1 − (e^(−s) − e^(−s/2)), covariance eq. 11."""
     s = sigma_beta_rad * sigma_beta_rad
     _averaged(
         r_hat,
         b_hat,
-        sr,
+        sigma_r_m,
         sigma_beta_rad,
         T,
         q,
@@ -284,9 +284,9 @@ def _ucm_point(r, b, k):
 
 
 @_jit
-def ucm(r_hat, b_hat, sr, sigma_beta_rad, T, q, v0, x_out, P_out):
+def ucm(r_hat, b_hat, sigma_r_m, sigma_beta_rad, T, q, v0, x_out, P_out):
     """Mo et al.'s unbiased conversion e^(s/2) r̂ û(β̂), its covariance at the measurement."""
-    k = _ucm_constants(sigma_beta_rad * sigma_beta_rad, sr * sr)
+    k = _ucm_constants(sigma_beta_rad * sigma_beta_rad, sigma_r_m * sigma_r_m)
     for m in range(r_hat.shape[0]):
         x, p = _start(*_ucm_point(r_hat[m, 0], b_hat[m, 0], k), v0)
         for n in range(1, r_hat.shape[1]):
@@ -296,10 +296,10 @@ def ucm(r_hat, b_hat, sr, sigma_beta_rad, T, q, v0, x_out, P_out):
 
 
 @_jit
-def ducm(r_hat, b_hat, sr, sigma_beta_rad, T, q, v0, x_out, P_out):
+def ducm(r_hat, b_hat, sigma_r_m, sigma_beta_rad, T, q, v0, x_out, P_out):
     """Bordonaro et al.'s decorrelated conversion: ucm's point, the covariance at the
     predicted position (ucm's start: there is no prediction at the first plot)."""
-    k = _ucm_constants(sigma_beta_rad * sigma_beta_rad, sr * sr)
+    k = _ucm_constants(sigma_beta_rad * sigma_beta_rad, sigma_r_m * sigma_r_m)
     for m in range(r_hat.shape[0]):
         x, p = _start(*_ucm_point(r_hat[m, 0], b_hat[m, 0], k), v0)
         for n in range(1, r_hat.shape[1]):
@@ -405,9 +405,9 @@ def _joseph_kh(p, a):
 
 
 @_jit
-def ekf(r_hat, b_hat, sr, sigma_beta_rad, T, q, v0, x_out, P_out):
+def ekf(r_hat, b_hat, sigma_r_m, sigma_beta_rad, T, q, v0, x_out, P_out):
     """The polar EKF from the naive start."""
-    sr2, s = sr * sr, sigma_beta_rad * sigma_beta_rad
+    sr2, s = sigma_r_m * sigma_r_m, sigma_beta_rad * sigma_beta_rad
     for m in range(r_hat.shape[0]):
         x, p = _start(*_naive_point(r_hat[m, 0], b_hat[m, 0], sr2, s), v0)
         for n in range(1, r_hat.shape[1]):
@@ -447,9 +447,15 @@ def _doppler_update(x, p, vr_hat, b, var_vr, s):
 
 
 @_jit
-def ekf_doppler(r_hat, b_hat, vr_hat, sr, sigma_beta_rad, svr, T, q, v0, x_out, P_out):
+def ekf_doppler(
+    r_hat, b_hat, vr_hat, sigma_r_m, sigma_beta_rad, sigma_vr_mps, T, q, v0, x_out, P_out
+):
     """The polar EKF, then the Doppler update of each plot's V̂r."""
-    sr2, s, var_vr = sr * sr, sigma_beta_rad * sigma_beta_rad, svr * svr
+    sr2, s, var_vr = (
+        sigma_r_m * sigma_r_m,
+        sigma_beta_rad * sigma_beta_rad,
+        sigma_vr_mps * sigma_vr_mps,
+    )
     for m in range(r_hat.shape[0]):
         x, p = _start(*_naive_point(r_hat[m, 0], b_hat[m, 0], sr2, s), v0)
         for n in range(1, r_hat.shape[1]):
@@ -547,9 +553,9 @@ def _ukf_update(x, p, r, b, vr, vb, c, wm0, wc0, w, X, Z):
 
 
 @_jit
-def ukf(r_hat, b_hat, sr, sigma_beta_rad, T, q, v0, c, wm0, wc0, w, x_out, P_out):
+def ukf(r_hat, b_hat, sigma_r_m, sigma_beta_rad, T, q, v0, c, wm0, wc0, w, x_out, P_out):
     """The polar UKF from the naive start; (c, wm0, wc0, w) = ``UKFParams.weights(4)``."""
-    sr2, s = sr * sr, sigma_beta_rad * sigma_beta_rad
+    sr2, s = sigma_r_m * sigma_r_m, sigma_beta_rad * sigma_beta_rad
     X, Z = np.empty((9, 4)), np.empty((9, 2))
     for m in range(r_hat.shape[0]):
         x, p = _start(*_naive_point(r_hat[m, 0], b_hat[m, 0], sr2, s), v0)

@@ -51,9 +51,11 @@ def air_traffic_file(
     written = 0
     with open(path, "wb") as fh:
         for n in range(scans):
-            for g, (name, site, (sr, sigma_beta_deg, sigma_elevation_deg, svr)) in enumerate(
-                RADARS
-            ):
+            for g, (
+                name,
+                site,
+                (sigma_r_m, sigma_beta_deg, sigma_elevation_deg, sigma_vr_mps),
+            ) in enumerate(RADARS):
                 # Targets swept in azimuth order within a scan: 1 ms apart.
                 t = n * PERIOD_S + g * PERIOD_S / n_radars + 1e-3 * np.arange(targets)
                 pos = p0 + v * t[:, None] - np.asarray(site)
@@ -63,7 +65,7 @@ def air_traffic_file(
                 cols = {
                     "time_s": t,
                     "radar": pa.array([name] * targets),
-                    "range_m": r + rng.normal(0, sr, targets),
+                    "range_m": r + rng.normal(0, sigma_r_m, targets),
                     "azimuth_deg": np.degrees(
                         np.arctan2(pos[:, 1], pos[:, 0])
                         + rng.normal(0, math.radians(sigma_beta_deg), targets)
@@ -74,7 +76,7 @@ def air_traffic_file(
                         0, math.radians(sigma_elevation_deg), targets
                     )
                     cols["elevation_deg"] = np.degrees(el)
-                    vr = np.einsum("ij,ij->i", pos, v) / r + rng.normal(0, svr, targets)
+                    vr = np.einsum("ij,ij->i", pos, v) / r + rng.normal(0, sigma_vr_mps, targets)
                     cols["radial_velocity_mps"] = vr
                 cols["target"] = labels
                 table = pa.table(cols)
@@ -87,16 +89,16 @@ def air_traffic_file(
         if writer is not None:
             writer.close()
     toml = []
-    for name, site, (sr, sigma_beta_deg, sigma_elevation_deg, svr) in RADARS:
+    for name, site, (sigma_r_m, sigma_beta_deg, sigma_elevation_deg, sigma_vr_mps) in RADARS:
         toml += [
             f"[radars.{name}]",
             f"x_m = {site[0]!r}",
             f"y_m = {site[1]!r}",
             f"z_m = {site[2]!r}",
-            f"sigma_range_m = {sr!r}",
+            f"sigma_r_m = {sigma_r_m!r}",
             f"sigma_beta_deg = {sigma_beta_deg!r}",
             f"sigma_elevation_deg = {sigma_elevation_deg!r}",
-            f"sigma_radial_velocity_mps = {svr!r}",
+            f"sigma_vr_mps = {sigma_vr_mps!r}",
             "",
         ]
     radars_path.write_text("\n".join(toml))

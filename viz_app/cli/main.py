@@ -483,10 +483,10 @@ def _cmd_reproduce_gorshkov(args: argparse.Namespace) -> int:
 
     radars: list = args.radars if args.radars is not None else list(PRESETS)
     if args.custom is not None:
-        sr = check_real("--custom SIGMA_R_M", args.custom[0], low=0.0, high=1e6)
+        sigma_r_m = check_real("--custom SIGMA_R_M", args.custom[0], low=0.0, high=1e6)
         c0 = check_real("--custom C0", args.custom[1], low=0.0, high=1e8)
         T = check_real("--custom PERIOD_S", args.custom[2], low=0.0, high=3600.0)
-        radars = [*radars, RadarPreset("custom", "-", sr, sr / (T * c0**0.5), T)]
+        radars = [*radars, RadarPreset("custom", "-", sigma_r_m, sigma_r_m / (T * c0**0.5), T)]
     from radarviz.viz_app.figures.common import check_figure_outputs  # matplotlib: late
 
     check_figure_outputs("--plot", args.plot)

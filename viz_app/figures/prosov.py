@@ -376,14 +376,14 @@ def _build_figure(
             title_fontsize=9,
         )
     first = cases[0]
-    sigma_r = first.get("sigma_r_m")
+    sigma_r_m = first.get("sigma_r_m")
     parts = [
         f"{doc.get('runs', '?')} Monte Carlo runs",
         f"seed {doc.get('seed', '?')}",
         f"T = {float(doc['period_s']):g} s" if doc.get("period_s") is not None else "T = ?",
     ]
-    if sigma_r is not None:
-        parts.append(f"σr = {float(sigma_r):g} m")
+    if sigma_r_m is not None:
+        parts.append(f"σr = {float(sigma_r_m):g} m")
     sep = "\n" if ncases == 1 else " — "
     fig.suptitle("Prosov: converted-measurement Kalman filters" + sep + ", ".join(parts))
     return fig

@@ -43,7 +43,7 @@ offset in the capture file, and errors name its packet too (number from 1, byte 
   file).
 * I048/120 radial Doppler speed, subfield CAL (calculated Doppler speed, 1 m/s, positive away
   from the radar): ``radial_velocity_mps``, when D = 0 (valid) and the radar has
-  ``sigma_radial_velocity_mps``; a doubtful one (D = 1) is not used.
+  ``sigma_vr_mps``; a doubtful one (D = 1) is not used.
 
 **The file's kind** is set by its first CAT048 record, as a CSV's is by its header: it is 3D
 when that record has a usable height, and of many targets when it has a track number; every
@@ -518,11 +518,11 @@ class _Source(NamedTuple):
 
     radar: Radar
     index: int
-    sigma_r: float
+    sigma_r_m: float
     sigma_beta_rad: float
     site: tuple[float, float, float]
     sigma_elevation_rad: float
-    sigma_vr: float
+    sigma_vr_mps: float
 
 
 class PlacedBlock(NamedTuple):
@@ -929,11 +929,11 @@ class AsterixReader:
                 c = sources[rec["sac"], rec["sic"]] = _Source(
                     radar,
                     index[radar.name],
-                    radar.sigma_range_m,
+                    radar.sigma_r_m,
                     math.radians(radar.sigma_beta_deg),
                     (radar.x_m, radar.y_m, radar.z_m),
                     math.radians(radar.sigma_elevation_deg or 0.0),
-                    radar.sigma_radial_velocity_mps or 0.0,
+                    radar.sigma_vr_mps or 0.0,
                 )
             radar = c.radar
             if "time_of_day" not in rec:
@@ -1006,7 +1006,7 @@ class AsterixReader:
                     )  # fmt: skip
                 el = radians(elevation_deg_of_sin(s))
             vr = None
-            if c.sigma_vr > 0 and rec.get("cal_valid"):
+            if c.sigma_vr_mps > 0 and rec.get("cal_valid"):
                 vr = rec["cal_doppler_m_per_s"]
             yield position, t, r, radians(beta_deg), el, vr, c, target, track
 
@@ -1019,14 +1019,14 @@ class AsterixReader:
                     t,
                     r,
                     az,
-                    c.sigma_r,
+                    c.sigma_r_m,
                     c.sigma_beta_rad,
                     c.site,
                     c.radar.name,
                     el,
                     c.sigma_elevation_rad if three_d else 0.0,
                     vr,
-                    c.sigma_vr if vr is not None else 0.0,
+                    c.sigma_vr_mps if vr is not None else 0.0,
                     target,
                     track,
                 ),

@@ -136,7 +136,7 @@ class PlotBlockReader:
         self._names = strings(self.names)
         self.table = radar_table(radars)
         self._has_el = np.array([r.sigma_elevation_deg is not None for r in radars.values()])
-        self._has_vr = np.array([r.sigma_radial_velocity_mps is not None for r in radars.values()])
+        self._has_vr = np.array([r.sigma_vr_mps is not None for r in radars.values()])
 
     @property
     def three_d(self) -> bool:

@@ -26,10 +26,10 @@ Radars file (TOML, read with ``tomllib``)::
 
     [radars.NAME]
     x_m = 0.0; y_m = 0.0; z_m = 0.0          # site, m
-    sigma_range_m = 250.0                    # > 0
-    sigma_beta_deg = 1.0                  # in (0, 20]
+    sigma_r_m = 250.0                        # > 0
+    sigma_beta_deg = 1.0                     # in (0, 20]
     sigma_elevation_deg = 0.5                # in (0, 20]; needed by plots with an elevation
-    sigma_radial_velocity_mps = 1.0          # > 0; needed by plots with a radial velocity
+    sigma_vr_mps = 1.0                       # > 0; needed by plots with a radial velocity
     sac = 25; sic = 201                      # ASTERIX data source, integers in [0, 255]; both
                                              # or neither; needed to read ASTERIX files
 
@@ -117,10 +117,10 @@ from radarviz.viz_app.io.atomic import atomic_write, commit_together
 
 REQUIRED_COLUMNS = ("time_s", "radar", "range_m", "azimuth_deg")
 OPTIONAL_COLUMNS = ("elevation_deg", "radial_velocity_mps", "target")
-RADAR_KEYS = ("x_m", "y_m", "z_m", "sigma_range_m", "sigma_beta_deg")
+RADAR_KEYS = ("x_m", "y_m", "z_m", "sigma_r_m", "sigma_beta_deg")
 OPTIONAL_RADAR_KEYS = (
     "sigma_elevation_deg",
-    "sigma_radial_velocity_mps",
+    "sigma_vr_mps",
     # Coverage and rotation (``core.tracking.coverage``): estimated from the plots if absent.
     "rotation_period_s",
     "min_range_m",
@@ -131,7 +131,11 @@ OPTIONAL_RADAR_KEYS = (
 #: Former names of radars-file keys, still read as the key they map to: each file using one
 #: gets one deprecation line on standard error (``load_radars``); a table giving both names
 #: is an error. Files are written with the new names only.
-DEPRECATED_RADAR_KEYS: dict[str, str] = {"sigma_azimuth_deg": "sigma_beta_deg"}
+DEPRECATED_RADAR_KEYS: dict[str, str] = {
+    "sigma_range_m": "sigma_r_m",
+    "sigma_azimuth_deg": "sigma_beta_deg",
+    "sigma_radial_velocity_mps": "sigma_vr_mps",
+}
 #: The ASTERIX data source identifier of a radar (I048/010): integers in [0, 255], both or
 #: neither; no two radars may share a pair.
 SOURCE_KEYS = ("sac", "sic")
@@ -206,10 +210,10 @@ class Radar:
     x_m: float
     y_m: float
     z_m: float
-    sigma_range_m: float
+    sigma_r_m: float
     sigma_beta_deg: float
     sigma_elevation_deg: float | None = None
-    sigma_radial_velocity_mps: float | None = None
+    sigma_vr_mps: float | None = None
     #: The antenna's revolution (s) and the coverage (m, degrees) the association's misses
     #: count in (``core.tracking.coverage``); None: estimated from the radar's plots.
     rotation_period_s: float | None = None
@@ -234,10 +238,10 @@ def _bad(where: str, column: str, what: str, got: object) -> ParameterError:
 
 #: The ``core.params`` entry bounding each radars-file key (site coordinates: ``site_m``).
 RADAR_KEY_PARAMETERS: dict[str, str] = {
-    "sigma_range_m": "sigma_r_m",
+    "sigma_r_m": "sigma_r_m",
     "sigma_beta_deg": "sigma_beta_deg",
     "sigma_elevation_deg": "sigma_elevation_deg",
-    "sigma_radial_velocity_mps": "sigma_vr_mps",
+    "sigma_vr_mps": "sigma_vr_mps",
     "rotation_period_s": "rotation_period_s",
     "min_range_m": "min_range_m",
     "max_range_m": "max_range_m",
@@ -498,7 +502,7 @@ class PlotReader:
                         f"radar {name!r} has no sigma_elevation_deg in the radars file",
                         row[i_el],
                     )
-            vr = sigma_vr = None
+            vr = sigma_vr_mps = None
             if i_vr is not None and row[i_vr].strip():  # an empty cell: no Doppler here
                 vr = _number(row[i_vr])
                 if vr is None or abs(vr) > MAX_RADIAL_VELOCITY_MPS:
@@ -509,12 +513,12 @@ class PlotReader:
                         f"{MAX_RADIAL_VELOCITY_MPS:g}] or empty",
                         row[i_vr],
                     )
-                sigma_vr = radar.sigma_radial_velocity_mps
-                if sigma_vr is None:
+                sigma_vr_mps = radar.sigma_vr_mps
+                if sigma_vr_mps is None:
                     raise _bad(
                         where,
                         "radial_velocity_mps",
-                        f"radar {name!r} has no sigma_radial_velocity_mps in the radars file",
+                        f"radar {name!r} has no sigma_vr_mps in the radars file",
                         row[i_vr],
                     )
             last_t = self.last_t = t
@@ -527,14 +531,14 @@ class PlotReader:
                     t,
                     r,
                     math.radians(az),
-                    radar.sigma_range_m,
+                    radar.sigma_r_m,
                     math.radians(radar.sigma_beta_deg),
                     (radar.x_m, radar.y_m, radar.z_m),
                     name,
                     None if el is None else math.radians(el),
                     0.0 if sigma_elevation_deg is None else math.radians(sigma_elevation_deg),
                     vr,
-                    0.0 if sigma_vr is None else sigma_vr,
+                    0.0 if sigma_vr_mps is None else sigma_vr_mps,
                     target,
                 ),
             )
@@ -804,10 +808,10 @@ def radar_table(radars: dict[str, Radar]) -> RadarTable:
     rs = list(radars.values())
     return RadarTable(
         np.array([(r.x_m, r.y_m, r.z_m) for r in rs], dtype=np.float64).reshape(-1, 3),
-        np.array([r.sigma_range_m for r in rs], dtype=np.float64),
+        np.array([r.sigma_r_m for r in rs], dtype=np.float64),
         np.radians([r.sigma_beta_deg for r in rs]),
         np.radians([r.sigma_elevation_deg or 0.0 for r in rs]),
-        np.array([r.sigma_radial_velocity_mps or 0.0 for r in rs], dtype=np.float64),
+        np.array([r.sigma_vr_mps or 0.0 for r in rs], dtype=np.float64),
     )
 
 

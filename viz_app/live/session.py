@@ -457,9 +457,9 @@ def warm_up(make: Callable[..., GNNTracker], options: Any, association: Any, rad
             x, y = radar.x_m + 20e3 + 50.0 * period_s * k, radar.y_m + 20e3
             r = math.hypot(x - radar.x_m, y - radar.y_m)
             az = math.atan2(x - radar.x_m, y - radar.y_m) % (2 * math.pi)
-            sigma_r, sigma_beta_rad = radar.sigma_range_m, math.radians(radar.sigma_beta_deg)
+            sigma_r_m, sigma_beta_rad = radar.sigma_r_m, math.radians(radar.sigma_beta_deg)
             t = period_s * k
-            batches.append([Plot(t, r, az, sigma_r, sigma_beta_rad, site, radar.name)])
+            batches.append([Plot(t, r, az, sigma_r_m, sigma_beta_rad, site, radar.name)])
     batches.sort(key=lambda b: b[0].time_s)
     tracker.add_batches(batches, [None] * len(batches))
 

@@ -118,7 +118,7 @@ STATUS_LEGEND = (
 
 
 def _label(r: Radar) -> str:
-    return f"{r.name}: σr {r.sigma_range_m:g} m, σβ {r.sigma_beta_deg:g}°"
+    return f"{r.name}: σr {r.sigma_r_m:g} m, σβ {r.sigma_beta_deg:g}°"
 
 
 def measured_point(p: Plot) -> tuple[float, float, float]:

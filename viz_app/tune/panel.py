@@ -212,10 +212,10 @@ class TunePanel:
         return f"C0 = σr²/(T²σVr²) = **{c0:.4g}**"
 
     def _derived_text(self, values: dict[str, Any]) -> str:
-        sr, t = values["sigma_r_m"], values["period_s"]
+        sigma_r_m, t = values["sigma_r_m"], values["period_s"]
         if self.doppler_name == "c0":
-            return self._sigma_vr_text(sr, t, values["c0"])
-        return self._c0_text(sr, t, values["sigma_vr_mps"])
+            return self._sigma_vr_text(sigma_r_m, t, values["c0"])
+        return self._c0_text(sigma_r_m, t, values["sigma_vr_mps"])
 
     # --- values -----------------------------------------------------------------------------
 
