@@ -11,6 +11,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import NamedTuple
 
 import pytest
 
@@ -43,17 +44,28 @@ sigma_r_m = 100.0
 sigma_beta_deg = 0.5
 sigma_vr_mps = 0.5
 """
-#: (old name, new name, the new name's value in radar a, and in radar b)
+
+
+class Alias(NamedTuple):
+    """A deprecated key: its old and new name, and the new name's value in radars a and b
+    of ``NEW_RADARS``."""
+
+    old: str
+    new: str
+    a: float
+    b: float
+
+    def old_radars(self) -> str:
+        """``NEW_RADARS`` with the old name for the new one."""
+        return NEW_RADARS.replace(f"{self.new} = ", f"{self.old} = ")
+
+
 ALIASES = [
-    ("sigma_range_m", "sigma_r_m", 250.0, 100.0),
-    ("sigma_azimuth_deg", "sigma_beta_deg", 1.0, 0.5),
-    ("sigma_radial_velocity_mps", "sigma_vr_mps", 1.5, 0.5),
+    Alias("sigma_range_m", "sigma_r_m", 250.0, 100.0),
+    Alias("sigma_azimuth_deg", "sigma_beta_deg", 1.0, 0.5),
+    Alias("sigma_radial_velocity_mps", "sigma_vr_mps", 1.5, 0.5),
 ]
-alias = pytest.mark.parametrize(("old", "new", "a", "b"), ALIASES, ids=[a[0] for a in ALIASES])
-
-
-def old_radars(old: str, new: str) -> str:
-    return NEW_RADARS.replace(f"{new} = ", f"{old} = ")
+each_alias = pytest.mark.parametrize("key", ALIASES, ids=[k.old for k in ALIASES])
 
 
 MEASUREMENTS = (
@@ -68,15 +80,16 @@ DEPRECATION = "radarviz: {}: key {} is deprecated, read as {}\n"
 
 def test_the_alias_map_names_retired_keys_of_the_current_ones() -> None:
     keys = RADAR_KEYS + OPTIONAL_RADAR_KEYS
-    assert DEPRECATED_RADAR_KEYS == {old: new for old, new, *_ in ALIASES}
+    assert DEPRECATED_RADAR_KEYS == {k.old: k.new for k in ALIASES}
     assert all(new in keys and old not in keys for old, new in DEPRECATED_RADAR_KEYS.items())
 
 
-@alias
+@each_alias
 def test_old_name_reads_as_the_new_one_with_one_deprecation_line(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str], old: str, new: str, a: float, b: float
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], key: Alias
 ) -> None:
-    old_text = old_radars(old, new)
+    old, new = key.old, key.new
+    old_text = key.old_radars()
     assert old_text.count(f"{old} = ") == 2  # two radars use the old name
     (tmp_path / "new.toml").write_text(NEW_RADARS)
     (tmp_path / "old.toml").write_text(old_text)
@@ -86,7 +99,7 @@ def test_old_name_reads_as_the_new_one_with_one_deprecation_line(
     read = load_radars(str(tmp_path / "old.toml"))
     assert capsys.readouterr().err == DEPRECATION.format(tmp_path / "old.toml", old, new)
     assert read == expected
-    assert [getattr(r, new) for r in read.values()] == [a, b]
+    assert [getattr(r, new) for r in read.values()] == [key.a, key.b]
 
     # parse_radars itself prints nothing: it hands the lines to its caller.
     lines: list[str] = []
@@ -95,19 +108,17 @@ def test_old_name_reads_as_the_new_one_with_one_deprecation_line(
     assert capsys.readouterr().err == ""
 
 
-@alias
+@each_alias
 def test_track_reads_an_old_radars_file_as_the_new_one(
     tmp_path: Path,
     monkeypatch: pytest.MonkeyPatch,
     capsys: pytest.CaptureFixture[str],
-    old: str,
-    new: str,
-    a: float,
-    b: float,
+    key: Alias,
 ) -> None:
+    old, new = key.old, key.new
     (tmp_path / "m.csv").write_text(MEASUREMENTS)
     (tmp_path / "new.toml").write_text(NEW_RADARS)
-    (tmp_path / "radars.toml").write_text(old_radars(old, new))
+    (tmp_path / "radars.toml").write_text(key.old_radars())
     monkeypatch.chdir(tmp_path)
     capsys.readouterr()
     assert main(["track", "--input", "m.csv", "--radars", "new.toml", "--out", "new.csv"]) == 0
@@ -117,17 +128,15 @@ def test_track_reads_an_old_radars_file_as_the_new_one(
     assert (tmp_path / "old.csv").read_bytes() == (tmp_path / "new.csv").read_bytes()
 
 
-@alias
+@each_alias
 def test_old_and_new_name_together_is_an_error_naming_both(
     tmp_path: Path,
     monkeypatch: pytest.MonkeyPatch,
     capsys: pytest.CaptureFixture[str],
-    old: str,
-    new: str,
-    a: float,
-    b: float,
+    key: Alias,
 ) -> None:
-    both = NEW_RADARS.replace(f"{new} = {b!r}\n", f"{new} = {b!r}\n{old} = {b!r}\n")
+    old, new = key.old, key.new
+    both = NEW_RADARS.replace(f"{new} = {key.b!r}\n", f"{new} = {key.b!r}\n{old} = {key.b!r}\n")
     assert both.count(f"{old} = ") == 1
     with pytest.raises(ParameterError) as exc:
         parse_radars(both, "r.toml")
@@ -146,11 +155,12 @@ def test_old_and_new_name_together_is_an_error_naming_both(
     assert not (tmp_path / "t.csv").exists()
 
 
-@alias
+@each_alias
 def test_a_bad_value_under_the_old_name_names_the_old_name(
-    old: str, new: str, a: float, b: float
+    key: Alias,
 ) -> None:
-    bad = old_radars(old, new).replace(f"{old} = {a!r}", f"{old} = -1.0")
+    old = key.old
+    bad = key.old_radars().replace(f"{old} = {key.a!r}", f"{old} = -1.0")
     with pytest.raises(ParameterError, match=rf"radar 'a', key {old}: must be"):
         parse_radars(bad, "r")
 
