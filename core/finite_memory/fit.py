@@ -163,13 +163,8 @@ def _check(
         raise ParameterError(f"with_doppler must be True or False (got {with_doppler!r})")
     sigma_r_m = check_real("sigma_r_m", sigma_r_m, low=0.0)
     T = check_real("period_s", period_s, low=0.0)
-    t4 = T * T * T * T
-    if not (
-        math.isfinite(sigma_r_m * sigma_r_m)
-        and sigma_r_m * sigma_r_m > 0.0
-        and math.isfinite(t4)
-        and t4 > 0.0
-    ):
+    sr2, t4 = sigma_r_m * sigma_r_m, T * T * T * T
+    if not (math.isfinite(sr2) and sr2 > 0.0 and math.isfinite(t4) and t4 > 0.0):
         raise ParameterError(
             "sigma_r_m and period_s must keep σr² and T⁴ finite and > 0"
             f" (got {sigma_r_m:g}, {T:g})",

@@ -451,11 +451,8 @@ def ekf_doppler(
     r_hat, b_hat, vr_hat, sigma_r_m, sigma_beta_rad, sigma_vr_mps, T, q, v0, x_out, P_out
 ):
     """The polar EKF, then the Doppler update of each plot's V̂r."""
-    sr2, s, var_vr = (
-        sigma_r_m * sigma_r_m,
-        sigma_beta_rad * sigma_beta_rad,
-        sigma_vr_mps * sigma_vr_mps,
-    )
+    sr2, s = sigma_r_m * sigma_r_m, sigma_beta_rad * sigma_beta_rad
+    var_vr = sigma_vr_mps * sigma_vr_mps
     for m in range(r_hat.shape[0]):
         x, p = _start(*_naive_point(r_hat[m, 0], b_hat[m, 0], sr2, s), v0)
         for n in range(1, r_hat.shape[1]):
