@@ -1,7 +1,8 @@
 """One name per quantity: the azimuth noise σβ is ``sigma_beta_rad`` / ``sigma_beta_deg``, the
 elevation noise σε ``sigma_elevation_rad`` / ``sigma_elevation_deg``, the range noise σr
-``sigma_r_m`` and the radial-velocity noise σVr ``sigma_vr_mps`` in every signature and record
-of ``core`` and ``viz_app``.
+``sigma_r_m``, the radial-velocity noise σVr ``sigma_vr_mps``, the motion model's acceleration
+noise σa ``sigma_a_mps2`` and the start velocity's σv0 ``sigma_v0_mps`` in every signature and
+record of ``core`` and ``viz_app``.
 
 Every function's parameters (positional, keyword-only, ``*args``, ``**kwargs``; lambdas too)
 and every field of a class whose body declares annotated fields (dataclasses, NamedTuples)
@@ -35,6 +36,8 @@ RETIRED = frozenset(
         "svr_mps",
         "sigma_radial_velocity",
         "sigma_radial_velocity_mps",
+        "sigma_a",
+        "sigma_v0",
     }
 )
 
@@ -78,6 +81,7 @@ from typing import NamedTuple
 
 def f(a, sb, /, sigma_b=1, *sigma_e, sigma_az, **sigma_el): ...
 def h(sr, sr_m, /, sigma_r=1, *svr, sigma_vr, **svr_mps): ...
+def k(sigma_a, sigma_v0): ...
 g = lambda sigma_angle_rad, sigma_range: 0
 
 @dataclass
@@ -97,6 +101,6 @@ class N(NamedTuple):
 def test_no_retired_noise_names() -> None:
     bad = [line for path in sources() for line in retired_names(path)]
     assert not bad, (
-        "retired names (sigma_beta_rad/_deg, sigma_elevation_rad/_deg, sigma_r_m and"
-        " sigma_vr_mps instead):\n" + "\n".join(bad)
+        "retired names (sigma_beta_rad/_deg, sigma_elevation_rad/_deg, sigma_r_m,"
+        " sigma_vr_mps, sigma_a_mps2 and sigma_v0_mps instead):\n" + "\n".join(bad)
     )

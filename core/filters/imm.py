@@ -89,11 +89,11 @@ def imm_predict(mixed: CVBatch, dt_s: float | NDArray[np.float64], model: IMMMod
     xs, Ps = [], []
     omegas = model.turn_rates_radps()
     n = mixed.x.shape[-1]
-    for j, sigma_a in enumerate(model.sigma_a_mps2):
+    for j, sigma_a_mps2 in enumerate(model.sigma_a_mps2):
         one = CVBatch(mixed.x[..., j, :], mixed.P[..., j, :, :])
         omega = float(omegas[j])
         if omega == 0.0:
-            pred = cv_predict(one, dt_s, sigma_a)
+            pred = cv_predict(one, dt_s, sigma_a_mps2)
         else:
             pred = CVBatch(one.x.copy(), one.P.copy())
             T = np.asarray(dt_s, dtype=np.float64)
@@ -102,7 +102,7 @@ def imm_predict(mixed: CVBatch, dt_s: float | NDArray[np.float64], model: IMMMod
             x_c = np.moveaxis(pred.x, -1, 0)  # components first: x_c[i], P_c[i, j]
             P_c = np.moveaxis(pred.P, (-2, -1), (0, 1))
             turn_predict(x_c, P_c, n, T, k)
-            add_process_noise(P_c, n, white_acceleration(T, float(sigma_a) ** 2))
+            add_process_noise(P_c, n, white_acceleration(T, float(sigma_a_mps2) ** 2))
         xs.append(pred.x)
         Ps.append(pred.P)
     return CVBatch(np.stack(xs, axis=-2), np.stack(Ps, axis=-3))

@@ -581,15 +581,15 @@ def doppler_update_3d(x, P, vr_hat, trig, var_vr, sb2, se2, u, U, K, L):
 @_jit
 def track_plots_3d(
     codes, start_codes, slot, time_s, r_m, az_rad, el_rad, vr_mps, has_vr, radar, site,
-    sigma_r_m, sigma_beta_rad, sigma_elevation_rad, sigma_vr_mps, sigma_a, v0, prm, xs, Ps, started,
-    last_t, out_x, out_P, out_nis,
+    sigma_r_m, sigma_beta_rad, sigma_elevation_rad, sigma_vr_mps, sigma_a_mps2, v0, prm, xs, Ps,
+    started, last_t, out_x, out_P, out_nis,
 ):  # fmt: skip
     """``core.filters.kernels_track.track_plots_2d`` in 3D: plots with elevations el_rad
     (B,), sites (R, 3), σε sigma_elevation_rad (R,), states xs (K, M, 6), Ps (K, M, 6, 6), outputs
     (B, M, 6), (B, M, 6, 6), (B, M); ``prm`` the UKF's weights for n = 6. Returns −1 or the
     index of the first plot before its slot's previous one."""
     n_m = codes.shape[0]
-    q = sigma_a * sigma_a
+    q = sigma_a_mps2 * sigma_a_mps2
     x, P = np.empty(6), np.empty((6, 6))
     z, nu, u, Uv, Kv = np.empty(3), np.empty(3), np.empty(3), np.empty(6), np.empty(6)
     R = np.empty((3, 3))

@@ -92,13 +92,13 @@ def turn_model_predict(x, P, n: int, T: float, omega: float, q: float):
 
 
 @_inline
-def predict_models(x0, P0, n: int, dt: float, sigma_a, omega):
+def predict_models(x0, P0, n: int, dt: float, sigma_a_mps2, omega):
     """Each model's prediction over dt (> 0) of its x0[m] (n,), P0[m] (n, n) in place: the
-    constant-velocity one of σa = sigma_a[m] where omega[m] is 0, else the coordinated turn
+    constant-velocity one of σa = sigma_a_mps2[m] where omega[m] is 0, else the coordinated turn
     at ω = omega[m] (rad/s): the one prediction step of the tracker kernels and of the
     association's gate (``combined_prediction``)."""
-    for m in range(sigma_a.shape[0]):
-        q = sigma_a[m] * sigma_a[m]
+    for m in range(sigma_a_mps2.shape[0]):
+        q = sigma_a_mps2[m] * sigma_a_mps2[m]
         if omega[m] != 0.0:
             turn_model_predict(x0[m], P0[m], n, dt, omega[m], q)
         elif n == 4:
@@ -348,7 +348,7 @@ def _started(x, P, mu0, xm, Pm, mu):
 @_jit
 def track_plots_imm_2d(
     codes, start_codes, slot, time_s, r_m, az_rad, vr_mps, has_vr, radar, site, sigma_r_m,
-    sigma_beta_rad, sigma_vr_mps, sigma_a, omega, Pi, mu0, v0, prm, with_stats, xs, Ps, mus,
+    sigma_beta_rad, sigma_vr_mps, sigma_a_mps2, omega, Pi, mu0, v0, prm, with_stats, xs, Ps, mus,
     started, last_t, out_x, out_P, out_nis,
 ):  # fmt: skip
     """``core.filters.kernels_track.track_plots_2d`` with the IMM (module docstring): returns
@@ -357,7 +357,7 @@ def track_plots_imm_2d(
 
     Args:
         codes … sigma_vr_mps, v0, prm: as ``track_plots_2d``.
-        sigma_a: (r,) σa of each model (m/s²); omega: (r,) its turn rate ω (rad/s, 0: constant
+        sigma_a_mps2: (r,) σa of each model (m/s²); omega: (r,) its turn rate ω (rad/s, 0: constant
             velocity); Pi: (r, r) Π; mu0: (r,) a new track's μ.
         with_stats: compute the monitor's NIS (else out_nis is NaN).
         xs (K, M, r, 4), Ps (K, M, r, 4, 4), mus (K, M, r), started (K,), last_t (K,): every
@@ -365,7 +365,7 @@ def track_plots_imm_2d(
         out_x (B, M, 4), out_P (B, M, 4, 4): each plot's combined posterior per method;
             out_nis (B, M): the NIS of the combined prediction, NaN at a start.
     """
-    n_m, r = codes.shape[0], sigma_a.shape[0]
+    n_m, r = codes.shape[0], sigma_a_mps2.shape[0]
     co, co_s = conversion_tables(codes, start_codes, sigma_r_m, sigma_beta_rad)
     bufs = scratch_2d()
     K = bufs[0]
@@ -394,7 +394,7 @@ def track_plots_imm_2d(
                 mu[:] = mus[k, j]
                 mix_2d(xs[k, j], Ps[k, j], mu, Pi, x0, P0, c, w)
                 if dt > 0.0:
-                    predict_models(x0, P0, 4, dt, sigma_a, omega)
+                    predict_models(x0, P0, 4, dt, sigma_a_mps2, omega)
                 if with_stats:
                     combine_2d(x0, P0, c, x, P)
                     meas = position_measurement(code, x, rr, b, sr2, s, sx, sy, co[g, j])
@@ -426,14 +426,14 @@ def track_plots_imm_2d(
 @_jit
 def track_plots_imm_3d(
     codes, start_codes, slot, time_s, r_m, az_rad, el_rad, vr_mps, has_vr, radar, site,
-    sigma_r_m, sigma_beta_rad, sigma_elevation_rad, sigma_vr_mps, sigma_a, omega, Pi, mu0, v0, prm,
-    with_stats, xs, Ps, mus, started, last_t, out_x, out_P, out_nis,
+    sigma_r_m, sigma_beta_rad, sigma_elevation_rad, sigma_vr_mps, sigma_a_mps2, omega, Pi, mu0, v0,
+    prm, with_stats, xs, Ps, mus, started, last_t, out_x, out_P, out_nis,
 ):  # fmt: skip
     """``track_plots_imm_2d`` in 3D (``core.filters.kernels_3d.track_plots_3d``'s stages):
     elevations el_rad (B,), sites (R, 3), σε sigma_elevation_rad (R,), models xs (K, M, r, 6),
     Ps (K, M, r, 6, 6), outputs (B, M, 6), (B, M, 6, 6), (B, M); ``prm`` the UKF's weights
     for n = 6."""
-    n_m, r = codes.shape[0], sigma_a.shape[0]
+    n_m, r = codes.shape[0], sigma_a_mps2.shape[0]
     x, P = np.empty(6), np.empty((6, 6))
     x0, P0 = np.empty((r, 6)), np.empty((r, 6, 6))  # the models, mixed then advanced
     mu, c, ll, w = np.empty(r), np.empty(r), np.empty(r), np.empty((r, r))
@@ -470,7 +470,7 @@ def track_plots_imm_3d(
                 mu[:] = mus[k, j]
                 mix_3d(xs[k, j], Ps[k, j], mu, Pi, x0, P0, c, w)
                 if dt > 0.0:
-                    predict_models(x0, P0, 6, dt, sigma_a, omega)
+                    predict_models(x0, P0, 6, dt, sigma_a_mps2, omega)
                 if with_stats:
                     combine_3d(x0, P0, c, x, P)
                     position_measurement_3d(
@@ -511,7 +511,7 @@ def track_plots_imm_3d(
 
 
 @_inline
-def combined_prediction(xm, Pm, mu_k, dt: float, sigma_a, omega, Pi, x0, P0, mu, c, w, x, P):
+def combined_prediction(xm, Pm, mu_k, dt: float, sigma_a_mps2, omega, Pi, x0, P0, mu, c, w, x, P):
     """One track's IMM prediction over dt (≥ 0) into x (n,), P (n, n), the track's models
     xm (r, n), Pm (r, n, n) and μ mu_k (r,) left as they are: the tracker kernels' mixing,
     each model's prediction, and the combination with the predicted probabilities c̄ (the
@@ -524,7 +524,7 @@ def combined_prediction(xm, Pm, mu_k, dt: float, sigma_a, omega, Pi, x0, P0, mu,
     else:
         mix_3d(xm, Pm, mu, Pi, x0, P0, c, w)
     if dt > 0.0:
-        predict_models(x0, P0, n, dt, sigma_a, omega)
+        predict_models(x0, P0, n, dt, sigma_a_mps2, omega)
     if n == 4:
         combine_2d(x0, P0, c, x, P)
     else:
@@ -532,26 +532,26 @@ def combined_prediction(xm, Pm, mu_k, dt: float, sigma_a, omega, Pi, x0, P0, mu,
 
 
 @_jit
-def predicted_imm(xs, Ps, mus, slot, j: int, dt, sigma_a, omega, Pi, out_x, out_P):
+def predicted_imm(xs, Ps, mus, slot, j: int, dt, sigma_a_mps2, omega, Pi, out_x, out_P):
     """Method j's IMM tracks of slots ``slot`` (N,) predicted over ``dt`` (N,) (s, ≥ 0), the
     stored tracks left as they are (the association's gate, ``CompiledTracks.predicted``):
     ``combined_prediction`` of each, as ``core.tracking.targets.TargetTracker.predicted``
     on the numpy engine. 2D or 3D: xs (K, M, r, n), Ps (K, M, r, n, n), mus (K, M, r) into
     out_x (N, n), out_P (N, n, n)."""
-    r, n = sigma_a.shape[0], xs.shape[3]
+    r, n = sigma_a_mps2.shape[0], xs.shape[3]
     x0, P0 = np.empty((r, n)), np.empty((r, n, n))
     mu, c, w = np.empty(r), np.empty(r), np.empty((r, r))
     for i in range(slot.shape[0]):
         k = slot[i]
         combined_prediction(
-            xs[k, j], Ps[k, j], mus[k, j], dt[i], sigma_a, omega, Pi, x0, P0, mu, c, w,
+            xs[k, j], Ps[k, j], mus[k, j], dt[i], sigma_a_mps2, omega, Pi, x0, P0, mu, c, w,
             out_x[i], out_P[i],
         )  # fmt: skip
 
 
 @_jit
 def gate_nis_imm_2d(
-    xs, Ps, mus, slot, j: int, dt, sigma_a, omega, Pi, code: int, r_m, az_rad, sigma_r_m,
+    xs, Ps, mus, slot, j: int, dt, sigma_a_mps2, omega, Pi, code: int, r_m, az_rad, sigma_r_m,
     sigma_beta_rad, site, out,
 ):  # fmt: skip
     """d² = νᵀ S⁻¹ ν of N (track, plot) pairs, 2D: pair i's track (slot[i], method j, of
@@ -560,26 +560,26 @@ def gate_nis_imm_2d(
     position measurement and its NIS (``position_measurement``, ``position_nis``), the
     statistic of the tracker kernels' monitor, into out (N,) (NaN where S is not positive
     definite)."""
-    r = sigma_a.shape[0]
+    r = sigma_a_mps2.shape[0]
     x0, P0 = np.empty((r, 4)), np.empty((r, 4, 4))
     mu, c, w = np.empty(r), np.empty(r), np.empty((r, r))
     x, P = np.empty(4), np.empty((4, 4))
     for i in range(slot.shape[0]):
         k = slot[i]
         out[i] = pair_nis_2d(
-            xs[k, j], Ps[k, j], mus[k, j], dt[i], sigma_a, omega, Pi, code, r_m[i], az_rad[i],
+            xs[k, j], Ps[k, j], mus[k, j], dt[i], sigma_a_mps2, omega, Pi, code, r_m[i], az_rad[i],
             sigma_r_m[i], sigma_beta_rad[i], site[i, 0], site[i, 1], x0, P0, mu, c, w, x, P,
         )  # fmt: skip
 
 
 @_inline
-def pair_nis_2d(xm, Pm, mu_k, dt, sigma_a, omega, Pi, code, r, b, sigma_r_m, sigma_beta_rad, sx, sy,
-                x0, P0, mu, c, w, x, P):  # fmt: skip
+def pair_nis_2d(xm, Pm, mu_k, dt, sigma_a_mps2, omega, Pi, code, r, b, sigma_r_m, sigma_beta_rad,
+                sx, sy, x0, P0, mu, c, w, x, P):  # fmt: skip
     """d² of one (track, plot) pair in 2D: the track's models xm, Pm, μ mu_k predicted over
     dt (``combined_prediction``) against the plot (r, b) with noise std sigma_r_m, sigma_beta_rad at
     site (sx, sy), by method ``code``'s position measurement and its NIS (NaN where S is not
     positive definite); x0 … P scratch as ``combined_prediction``'s."""
-    combined_prediction(xm, Pm, mu_k, dt, sigma_a, omega, Pi, x0, P0, mu, c, w, x, P)
+    combined_prediction(xm, Pm, mu_k, dt, sigma_a_mps2, omega, Pi, x0, P0, mu, c, w, x, P)
     sr2, s = sigma_r_m * sigma_r_m, sigma_beta_rad * sigma_beta_rad
     co = coefficients(code, s, sr2)
     meas = position_measurement(code, x, r, b, sr2, s, sx, sy, co)

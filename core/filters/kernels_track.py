@@ -151,7 +151,8 @@ def conversion_tables(codes, start_codes, sigma_r_m, sigma_beta_rad):
 @_jit
 def track_plots_2d(
     codes, start_codes, slot, time_s, r_m, az_rad, vr_mps, has_vr, radar, site, sigma_r_m,
-    sigma_beta_rad, sigma_vr_mps, sigma_a, v0, prm, xs, Ps, started, last_t, out_x, out_P, out_nis,
+    sigma_beta_rad, sigma_vr_mps, sigma_a_mps2, v0, prm, xs, Ps, started, last_t, out_x, out_P,
+    out_nis,
 ):  # fmt: skip
     """Filter plots 0 … B − 1 in order; returns −1, or the index of the first plot whose
     time is before its slot's previous plot (nothing from it on is filtered).
@@ -162,7 +163,7 @@ def track_plots_2d(
             range (m), azimuth (rad) and radial velocity (m/s, read where has_vr (B,)).
         radar (B,): index into the radar table site (R, 2) (m), sigma_r_m, sigma_beta_rad,
             sigma_vr_mps (R,) (m, rad, m/s).
-        sigma_a: process-noise acceleration std (m/s²); v0: start velocity std (m/s).
+        sigma_a_mps2: process-noise acceleration std (m/s²); v0: start velocity std (m/s).
         prm: (4,) the UKF's (λ + n, Wm₀, Wc₀, W).
         xs (K, M, 4), Ps (K, M, 4, 4), started (K,), last_t (K,): every slot's tracks,
             updated in place.
@@ -173,7 +174,7 @@ def track_plots_2d(
     """
     n_m = codes.shape[0]
     co, co_s = conversion_tables(codes, start_codes, sigma_r_m, sigma_beta_rad)
-    q = sigma_a * sigma_a
+    q = sigma_a_mps2 * sigma_a_mps2
     bufs = scratch_2d()
     K = bufs[0]
     x, P = np.empty(4), np.empty((4, 4))

@@ -131,8 +131,8 @@ class CompiledAssociation:
         imm = options.motion()
         assert isinstance(imm, IMMModel) and imm.models == self.imm.models
         self.imm = imm
-        sigma_a = np.array(imm.sigma_a_mps2, dtype=np.float64)
-        self._model = (*self._model[:2], sigma_a, *self._model[3:])
+        sigma_a_mps2 = np.array(imm.sigma_a_mps2, dtype=np.float64)
+        self._model = (*self._model[:2], sigma_a_mps2, *self._model[3:])
         a = association
         self.rules = self.rules._replace(
             gate=gate, scale=scale, q_max=q_max, max_speed_mps=float(a.max_speed_mps),  # type: ignore[attr-defined]

@@ -136,7 +136,7 @@ class CompiledTracks:
         self.methods = tuple(methods)
         self.codes = np.array([METHOD_CODES[m] for m in methods], dtype=np.int64)
         self.start_codes = np.array([START_CODES[m] for m in methods], dtype=np.int64)
-        self.sigma_a, self.sigma_v0 = float(sigma_a_mps2), float(sigma_v0_mps)
+        self.sigma_a_mps2, self.sigma_v0_mps = float(sigma_a_mps2), float(sigma_v0_mps)
         self.use_doppler = bool(use_doppler)
         self.dims = int(dims)
         ns = 2 * self.dims  # the state size
@@ -167,7 +167,7 @@ class CompiledTracks:
     def retune(self, sigma_a_mps2: float, motion: object) -> None:
         """The cv model's σa, or (``motion`` an IMM of as many models) each model's σa, from
         the next block on; the tracks keep their states."""
-        self.sigma_a = float(sigma_a_mps2)
+        self.sigma_a_mps2 = float(sigma_a_mps2)
         if self.imm is not None and isinstance(motion, IMMModel):
             self.imm = motion
             self.sigma_a_models = np.array(motion.sigma_a_mps2, dtype=np.float64)
@@ -249,10 +249,10 @@ class CompiledTracks:
             _f(rd.sigma_vr_mps),
         )
         if self.imm is None:
-            model = (self.sigma_a, self.sigma_v0, self.prm, self.xs, self.Ps)
+            model = (self.sigma_a_mps2, self.sigma_v0_mps, self.prm, self.xs, self.Ps)
         else:
             model = (self.sigma_a_models, self.turn_rates, self.transition, self.mu0)
-            model = (*model, self.sigma_v0, self.prm)
+            model = (*model, self.sigma_v0_mps, self.prm)
             model = (*model, self.feed is not None, self.xs, self.Ps, self.mus)
         kernel = _track_kernel(self.dims, self.imm is not None)
 
@@ -315,7 +315,7 @@ class CompiledTracks:
             )  # fmt: skip
         else:
             _predicted_kernel(self.dims)(
-                self.xs, self.Ps, slot, j, dt, self.sigma_a * self.sigma_a, out_x, out_P
+                self.xs, self.Ps, slot, j, dt, self.sigma_a_mps2 * self.sigma_a_mps2, out_x, out_P
             )
         return out_x, out_P
 
@@ -354,7 +354,7 @@ class CompiledTracks:
         else:
             from radarviz.core.filters.kernels_track import gate_nis_2d
 
-            q = self.sigma_a * self.sigma_a
+            q = self.sigma_a_mps2 * self.sigma_a_mps2
             gate_nis_2d(self.xs, self.Ps, slot, j, dt, q, code, *plot, out)
         return out
 

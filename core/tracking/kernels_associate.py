@@ -383,12 +383,12 @@ class GateFilter(NamedTuple):
     """The gating method's IMM tracks, one per book slot, in the layout of
     ``core.tracking.compiled.CompiledTracks`` with one method: xs (K, 1, r, 4),
     Ps (K, 1, r, 4, 4), mus (K, 1, r), started (K,), last_t (K,); and its model: codes,
-    start_codes (1,) the method's, sigma_a, omega (r,), Pi (r, r), mu0 (r,), v0 (σv0, m/s),
+    start_codes (1,) the method's, sigma_a_mps2, omega (r,), Pi (r, r), mu0 (r,), v0 (σv0, m/s),
     prm (the UKF's weights)."""
 
     codes: NDArray[np.int64]
     start_codes: NDArray[np.int64]
-    sigma_a: NDArray[np.float64]
+    sigma_a_mps2: NDArray[np.float64]
     omega: NDArray[np.float64]
     Pi: NDArray[np.float64]
     mu0: NDArray[np.float64]
@@ -483,7 +483,7 @@ def associate_2d(pl, beams, radar_site, book, gf, rules, live, counters, since, 
         gf.codes[0], pl.range_m, pl.azimuth_rad, pl.sigma_r_m[g], pl.sigma_beta_rad[g],
         pl.site[g], points, r_ii,
     )  # fmt: skip
-    r = gf.sigma_a.shape[0]
+    r = gf.sigma_a_mps2.shape[0]
     x0, P0 = np.empty((r, 4)), np.empty((r, 4, 4))
     mu, cc, w = np.empty(r), np.empty(r), np.empty((r, r))
     xp, Pp = np.empty(4), np.empty((4, 4))
@@ -621,7 +621,7 @@ def _batch(pl, beams, radar_site, book, gf, rules, live, counters, since, owner,
         bad = track_plots_imm_2d(
             gf.codes, gf.start_codes, own, times, pl.range_m[lo:hi], pl.azimuth_rad[lo:hi],
             vr, ~np.isnan(vr), pl.noise[lo:hi], pl.site, pl.sigma_r_m, pl.sigma_beta_rad,
-            pl.sigma_vr_mps, gf.sigma_a, gf.omega, gf.Pi, gf.mu0, gf.v0, gf.prm,
+            pl.sigma_vr_mps, gf.sigma_a_mps2, gf.omega, gf.Pi, gf.mu0, gf.v0, gf.prm,
             False, gf.xs, gf.Ps, gf.mus, gf.started, gf.last_t, out_x, out_P, out_nis,
         )  # fmt: skip
         if bad >= 0:
@@ -730,7 +730,7 @@ def _gate_d2(pl, gf, s, j, x0, P0, mu, cc, w, xp, Pp) -> float:
     a NaN."""
     g = pl.noise[j]
     d2 = pair_nis_2d(
-        gf.xs[s, 0], gf.Ps[s, 0], gf.mus[s, 0], pl.time_s[j] - gf.last_t[s], gf.sigma_a,
+        gf.xs[s, 0], gf.Ps[s, 0], gf.mus[s, 0], pl.time_s[j] - gf.last_t[s], gf.sigma_a_mps2,
         gf.omega, gf.Pi, gf.codes[0], pl.range_m[j], pl.azimuth_rad[j], pl.sigma_r_m[g],
         pl.sigma_beta_rad[g], pl.site[g, 0], pl.site[g, 1], x0, P0, mu, cc, w, xp, Pp,
     )  # fmt: skip

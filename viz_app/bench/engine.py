@@ -311,12 +311,12 @@ def bench_imm(runs: int, filterpy_runs: int, config: TrackingConfig) -> dict[str
     for m in range(filterpy_runs):
         init = cv_init(c.z[m, :1], c.R[m, :1])
         filters = []
-        for sigma_a, omega in zip(
+        for sigma_a_mps2, omega in zip(
             DEFAULT_IMM.sigma_a_mps2, DEFAULT_IMM.turn_rates_radps(), strict=True
         ):
             kf = KalmanFilter(dim_x=4, dim_z=2)
             F = transition_matrix(T) if omega == 0.0 else turn_transition_matrix(omega, T)
-            kf.F, kf.H, kf.Q = F, _H2, process_noise(T, sigma_a)
+            kf.F, kf.H, kf.Q = F, _H2, process_noise(T, sigma_a_mps2)
             kf.x, kf.P = init.x[0].copy(), init.P[0].copy()
             filters.append(kf)
         bank = IMMEstimator(

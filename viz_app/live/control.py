@@ -111,7 +111,7 @@ def _sigmas(value: Any) -> tuple[float, ...]:
 def settings_from_raw(raw: dict[str, Any], tracked: tuple[str, ...]) -> LiveSettings:
     """Checked settings from panel values (ParameterError naming the first bad one)."""
     model = check_choice("model", raw["model"], MOTION_MODELS)
-    sigma_a = check("sigma_a_mps2", float(raw["sigma_a_mps2"]))
+    sigma_a_mps2 = check("sigma_a_mps2", float(raw["sigma_a_mps2"]))
     shown = tuple(raw["shown"])
     if not shown:
         raise ParameterError(f"methods: show at least one of {', '.join(tracked)}", "methods")
@@ -124,7 +124,7 @@ def settings_from_raw(raw: dict[str, Any], tracked: tuple[str, ...]) -> LiveSett
         )
     return LiveSettings(
         model,
-        sigma_a,
+        sigma_a_mps2,
         _sigmas(raw["imm_sigma_a_mps2"]),
         float(gate),
         _integer("confirm_m", raw["confirm_m"]),
