@@ -133,11 +133,12 @@ def boxes_near(slots, x, P, last_s, t_lo, t_hi, q_max, omega_max, points, r_ii, 
         s = slots[k]
         if not (boxes[s, BOX_FROM_S] <= t_lo and t_hi <= boxes[s, BOX_UNTIL_S]):
             track_box(x, P, last_s, s, t_lo, until, q_max, omega_max, scale, boxes)
+        # One condition without a branch per bound: the four are taken at random.
         far = (
-            boxes[s, BOX_X_HI] < lo_x
-            or boxes[s, BOX_X_LO] > hi_x
-            or boxes[s, BOX_Y_HI] < lo_y
-            or boxes[s, BOX_Y_LO] > hi_y
+            (boxes[s, BOX_X_HI] < lo_x)
+            | (boxes[s, BOX_X_LO] > hi_x)
+            | (boxes[s, BOX_Y_HI] < lo_y)
+            | (boxes[s, BOX_Y_LO] > hi_y)
         )
         out[kept] = s
         kept += 0 if far else 1
