@@ -37,7 +37,9 @@ RETIRED = frozenset(
         "sigma_radial_velocity",
         "sigma_radial_velocity_mps",
         "sigma_a",
+        "sa",
         "sigma_v0",
+        "v0",
     }
 )
 
@@ -81,7 +83,7 @@ from typing import NamedTuple
 
 def f(a, sb, /, sigma_b=1, *sigma_e, sigma_az, **sigma_el): ...
 def h(sr, sr_m, /, sigma_r=1, *svr, sigma_vr, **svr_mps): ...
-def k(sigma_a, sigma_v0): ...
+def k(sigma_a, sa, sigma_v0, v0): ...
 g = lambda sigma_angle_rad, sigma_range: 0
 
 @dataclass

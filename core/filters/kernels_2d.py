@@ -151,9 +151,9 @@ def store_at(xt, p, xs, Ps, i, j):
 
 
 @_inline
-def start_s(zx: float, zy: float, r00: float, r01: float, r11: float, v0: float):
+def start_s(zx: float, zy: float, r00: float, r01: float, r11: float, sigma_v0_mps: float):
     # cv_init: position z with covariance R, velocity 0 with variance σv0²
-    v = v0 * v0
+    v = sigma_v0_mps * sigma_v0_mps
     return (zx, 0.0, zy, 0.0), (r00, 0.0, r01, 0.0, v, 0.0, 0.0, r11, 0.0, v)
 
 
@@ -378,9 +378,9 @@ def terms_s(xt, p, t, c: float, s: float):
 
 
 @_inline
-def start(x, P, zx: float, zy: float, r00: float, r01: float, r11: float, v0: float):
+def start(x, P, zx: float, zy: float, r00: float, r01: float, r11: float, sigma_v0_mps: float):
     # cv_init: position z with covariance R, velocity 0 with variance σv0²
-    xt, p = start_s(zx, zy, r00, r01, r11, v0)
+    xt, p = start_s(zx, zy, r00, r01, r11, sigma_v0_mps)
     store(xt, p, x, P)
 
 
@@ -445,8 +445,8 @@ def _step(code, xt, p, r, b, vr_hat, doppler, sr2, s, var_vr, T, q, sx, sy, co, 
 @_jit
 def filter_scans_2d(
     code, start_code, r_hat, b_hat, vr_hat, doppler, first, last, sigma_r_m, sigma_beta_rad,
-    sigma_vr_mps, T, sa, v0, sx, sy, c, wm0, wc0, w, state, keep, xs, Ps, n_terms, truth, cos_los,
-    sin_los, group_sums, group_offset,
+    sigma_vr_mps, T, sigma_a_mps2, sigma_v0_mps, sx, sy, c, wm0, wc0, w, state, keep, xs, Ps,
+    n_terms, truth, cos_los, sin_los, group_sums, group_offset,
 ):  # fmt: skip
     """Scans ``first … last − 1`` of every run; scan 0 starts a track from its plot (code
     ``start_code``), later scans continue from ``state`` (runs, 14): each run's x then the
@@ -461,7 +461,7 @@ def filter_scans_2d(
     Run-major: a run's state stays in registers over the chunk's scans; the state goes
     through memory once a chunk. (One loop, no call per run: a call's array arguments cost
     a reference count each.)"""
-    sr2, s, q = sigma_r_m * sigma_r_m, sigma_beta_rad * sigma_beta_rad, sa * sa
+    sr2, s, q = sigma_r_m * sigma_r_m, sigma_beta_rad * sigma_beta_rad, sigma_a_mps2 * sigma_a_mps2
     var_vr = sigma_vr_mps * sigma_vr_mps
     co, co_start = coefficients(code, s, sr2), coefficients(start_code, s, sr2)
     groups = group_sums.shape[0]
@@ -471,7 +471,7 @@ def filter_scans_2d(
             zx, zy, r00, r01, r11 = convert(
                 start_code, r_hat[m, 0], b_hat[m, 0], sr2, s, 0.0, 0.0, co_start
             )
-            xt, p = start_s(zx + sx, zy + sy, r00, r01, r11, v0)
+            xt, p = start_s(zx + sx, zy + sy, r00, r01, r11, sigma_v0_mps)
         else:
             xt, p = load_row(state, m)
         for n in range(first, last):

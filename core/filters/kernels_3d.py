@@ -208,7 +208,7 @@ def convert_3d(code, r, sr2, sb2, se2, px, py, pz, z, R, conv):
 
 
 @_inline
-def start_3d(x, P, z, R, sx, sy, sz, v0):
+def start_3d(x, P, z, R, sx, sy, sz, sigma_v0_mps):
     # cv_init: position z + site with covariance R, velocity 0 with variance σv0²
     for i in range(6):
         x[i] = 0.0
@@ -218,7 +218,7 @@ def start_3d(x, P, z, R, sx, sy, sz, v0):
     for a in range(3):
         for b in range(3):
             P[2 * a, 2 * b] = R[a, b]
-        P[2 * a + 1, 2 * a + 1] = v0 * v0
+        P[2 * a + 1, 2 * a + 1] = sigma_v0_mps * sigma_v0_mps
 
 
 @_inline
@@ -501,12 +501,12 @@ def position_measurement_3d(
 
 
 @_inline
-def start_track_3d(start_code, x, P, r, b, el, sr2, sb2, se2, sx, sy, sz, v0, z, R, conv):
+def start_track_3d(start_code, x, P, r, b, el, sr2, sb2, se2, sx, sy, sz, sigma_v0_mps, z, R, conv):
     """A track started at its first plot into x (6,), P (6, 6): the method's start conversion
-    about no prediction, velocity 0 with std ``v0`` (``Method.start``); z (3,), R (3, 3),
+    about no prediction, velocity 0 with std ``sigma_v0_mps`` (``Method.start``); z (3,), R (3, 3),
     ``conv``: scratch."""
     convert_3d(start_code, r, sr2, sb2, se2, 0.0, 0.0, 0.0, z, R, conv)
-    start_3d(x, P, z, R, sx, sy, sz, v0)
+    start_3d(x, P, z, R, sx, sy, sz, sigma_v0_mps)
 
 
 @_inline
@@ -581,8 +581,8 @@ def doppler_update_3d(x, P, vr_hat, trig, var_vr, sb2, se2, u, U, K, L):
 @_jit
 def track_plots_3d(
     codes, start_codes, slot, time_s, r_m, az_rad, el_rad, vr_mps, has_vr, radar, site,
-    sigma_r_m, sigma_beta_rad, sigma_elevation_rad, sigma_vr_mps, sigma_a_mps2, v0, prm, xs, Ps,
-    started, last_t, out_x, out_P, out_nis,
+    sigma_r_m, sigma_beta_rad, sigma_elevation_rad, sigma_vr_mps, sigma_a_mps2, sigma_v0_mps, prm,
+    xs, Ps, started, last_t, out_x, out_P, out_nis,
 ):  # fmt: skip
     """``core.filters.kernels_track.track_plots_2d`` in 3D: plots with elevations el_rad
     (B,), sites (R, 3), σε sigma_elevation_rad (R,), states xs (K, M, 6), Ps (K, M, 6, 6), outputs
@@ -613,7 +613,22 @@ def track_plots_3d(
             nis = np.nan
             if new:
                 start_track_3d(
-                    start_codes[j], x, P, r, b, el, sr2, sb2, se2, sx, sy, sz, v0, z, R, conv
+                    start_codes[j],
+                    x,
+                    P,
+                    r,
+                    b,
+                    el,
+                    sr2,
+                    sb2,
+                    se2,
+                    sx,
+                    sy,
+                    sz,
+                    sigma_v0_mps,
+                    z,
+                    R,
+                    conv,
                 )
             else:
                 for a in range(6):

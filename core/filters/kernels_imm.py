@@ -348,15 +348,15 @@ def _started(x, P, mu0, xm, Pm, mu):
 @_jit
 def track_plots_imm_2d(
     codes, start_codes, slot, time_s, r_m, az_rad, vr_mps, has_vr, radar, site, sigma_r_m,
-    sigma_beta_rad, sigma_vr_mps, sigma_a_mps2, omega, Pi, mu0, v0, prm, with_stats, xs, Ps, mus,
-    started, last_t, out_x, out_P, out_nis,
+    sigma_beta_rad, sigma_vr_mps, sigma_a_mps2, omega, Pi, mu0, sigma_v0_mps, prm, with_stats, xs,
+    Ps, mus, started, last_t, out_x, out_P, out_nis,
 ):  # fmt: skip
     """``core.filters.kernels_track.track_plots_2d`` with the IMM (module docstring): returns
     −1, or the index of the first plot before its slot's previous one (nothing from it on is
     filtered).
 
     Args:
-        codes … sigma_vr_mps, v0, prm: as ``track_plots_2d``.
+        codes … sigma_vr_mps, sigma_v0_mps, prm: as ``track_plots_2d``.
         sigma_a_mps2: (r,) σa of each model (m/s²); omega: (r,) its turn rate ω (rad/s, 0: constant
             velocity); Pi: (r, r) Π; mu0: (r,) a new track's μ.
         with_stats: compute the monitor's NIS (else out_nis is NaN).
@@ -386,7 +386,7 @@ def track_plots_imm_2d(
             code = codes[j]
             nis = np.nan
             if new:
-                start_track(start_codes[j], x, P, rr, b, sr2, s, sx, sy, co_s[g, j], v0)
+                start_track(start_codes[j], x, P, rr, b, sr2, s, sx, sy, co_s[g, j], sigma_v0_mps)
                 if has_vr[i]:
                     doppler_update(x, P, vr_mps[i], b, var_vr, s, K)
                 _started(x, P, mu0, x0, P0, mu)
@@ -426,8 +426,8 @@ def track_plots_imm_2d(
 @_jit
 def track_plots_imm_3d(
     codes, start_codes, slot, time_s, r_m, az_rad, el_rad, vr_mps, has_vr, radar, site,
-    sigma_r_m, sigma_beta_rad, sigma_elevation_rad, sigma_vr_mps, sigma_a_mps2, omega, Pi, mu0, v0,
-    prm, with_stats, xs, Ps, mus, started, last_t, out_x, out_P, out_nis,
+    sigma_r_m, sigma_beta_rad, sigma_elevation_rad, sigma_vr_mps, sigma_a_mps2, omega, Pi, mu0,
+    sigma_v0_mps, prm, with_stats, xs, Ps, mus, started, last_t, out_x, out_P, out_nis,
 ):  # fmt: skip
     """``track_plots_imm_2d`` in 3D (``core.filters.kernels_3d.track_plots_3d``'s stages):
     elevations el_rad (B,), sites (R, 3), σε sigma_elevation_rad (R,), models xs (K, M, r, 6),
@@ -461,7 +461,22 @@ def track_plots_imm_3d(
             nis = np.nan
             if new:
                 start_track_3d(
-                    start_codes[j], x, P, rr, b, el, sr2, sb2, se2, sx, sy, sz, v0, z, R, conv
+                    start_codes[j],
+                    x,
+                    P,
+                    rr,
+                    b,
+                    el,
+                    sr2,
+                    sb2,
+                    se2,
+                    sx,
+                    sy,
+                    sz,
+                    sigma_v0_mps,
+                    z,
+                    R,
+                    conv,
                 )
                 if has_vr[i]:
                     doppler_update_3d(x, P, vr, trig, var_vr, sb2, se2, u, Uv, Kv, bufs[4])

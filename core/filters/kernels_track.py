@@ -120,11 +120,11 @@ def position_stage(code, x, P, r, b, sr2, s, sx, sy, prm, meas, bufs):
 
 
 @_inline
-def start_track(start_code, x, P, r, b, sr2, s, sx, sy, co, v0):
+def start_track(start_code, x, P, r, b, sr2, s, sx, sy, co, sigma_v0_mps):
     """A track started at its first plot into x (4,), P (4, 4): the method's start conversion
-    (``co`` its coefficients), velocity 0 with std ``v0`` (``Method.start``)."""
+    (``co`` its coefficients), velocity 0 with std ``sigma_v0_mps`` (``Method.start``)."""
     zx, zy, r00, r01, r11 = convert(start_code, r, b, sr2, s, 0.0, 0.0, co)
-    start(x, P, zx + sx, zy + sy, r00, r01, r11, v0)
+    start(x, P, zx + sx, zy + sy, r00, r01, r11, sigma_v0_mps)
 
 
 @_jit
@@ -151,8 +151,8 @@ def conversion_tables(codes, start_codes, sigma_r_m, sigma_beta_rad):
 @_jit
 def track_plots_2d(
     codes, start_codes, slot, time_s, r_m, az_rad, vr_mps, has_vr, radar, site, sigma_r_m,
-    sigma_beta_rad, sigma_vr_mps, sigma_a_mps2, v0, prm, xs, Ps, started, last_t, out_x, out_P,
-    out_nis,
+    sigma_beta_rad, sigma_vr_mps, sigma_a_mps2, sigma_v0_mps, prm, xs, Ps, started, last_t, out_x,
+    out_P, out_nis,
 ):  # fmt: skip
     """Filter plots 0 … B − 1 in order; returns −1, or the index of the first plot whose
     time is before its slot's previous plot (nothing from it on is filtered).
@@ -163,7 +163,7 @@ def track_plots_2d(
             range (m), azimuth (rad) and radial velocity (m/s, read where has_vr (B,)).
         radar (B,): index into the radar table site (R, 2) (m), sigma_r_m, sigma_beta_rad,
             sigma_vr_mps (R,) (m, rad, m/s).
-        sigma_a_mps2: process-noise acceleration std (m/s²); v0: start velocity std (m/s).
+        sigma_a_mps2: process-noise acceleration std (m/s²); sigma_v0_mps: start velocity std (m/s).
         prm: (4,) the UKF's (λ + n, Wm₀, Wc₀, W).
         xs (K, M, 4), Ps (K, M, 4, 4), started (K,), last_t (K,): every slot's tracks,
             updated in place.
@@ -191,7 +191,7 @@ def track_plots_2d(
             code = codes[j]
             nis = np.nan
             if new:
-                start_track(start_codes[j], x, P, r, b, sr2, s, sx, sy, co_s[g, j], v0)
+                start_track(start_codes[j], x, P, r, b, sr2, s, sx, sy, co_s[g, j], sigma_v0_mps)
             else:
                 for a in range(4):
                     x[a] = xs[k, j, a]

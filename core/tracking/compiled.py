@@ -154,7 +154,7 @@ class CompiledTracks:
         self.Ps = np.zeros((0, m, *models, ns, ns))
         self.mus = np.zeros((0, m, *models))
         if imm is not None:
-            self.sigma_a_models = np.array(imm.sigma_a_mps2, dtype=np.float64)
+            self.imm_sigma_a_mps2 = np.array(imm.sigma_a_mps2, dtype=np.float64)
             self.turn_rates = imm.turn_rates_radps()
             self.transition = imm.transition_matrix()
             self.mu0 = imm.initial_probabilities()
@@ -170,7 +170,13 @@ class CompiledTracks:
         self.sigma_a_mps2 = float(sigma_a_mps2)
         if self.imm is not None and isinstance(motion, IMMModel):
             self.imm = motion
-            self.sigma_a_models = np.array(motion.sigma_a_mps2, dtype=np.float64)
+            self.imm_sigma_a_mps2 = np.array(motion.sigma_a_mps2, dtype=np.float64)
+
+    @property
+    def _accel_variance(self) -> float:
+        """σa² (m²/s⁴), the cv model's ``q`` in the kernels' Q = q g gᵀ, g = (T²/2, T)
+        (``core.filters.predict.white_acceleration``)."""
+        return self.sigma_a_mps2 * self.sigma_a_mps2
 
     @property
     def targets(self) -> tuple[str, ...]:
@@ -251,7 +257,7 @@ class CompiledTracks:
         if self.imm is None:
             model = (self.sigma_a_mps2, self.sigma_v0_mps, self.prm, self.xs, self.Ps)
         else:
-            model = (self.sigma_a_models, self.turn_rates, self.transition, self.mu0)
+            model = (self.imm_sigma_a_mps2, self.turn_rates, self.transition, self.mu0)
             model = (*model, self.sigma_v0_mps, self.prm)
             model = (*model, self.feed is not None, self.xs, self.Ps, self.mus)
         kernel = _track_kernel(self.dims, self.imm is not None)
@@ -310,12 +316,12 @@ class CompiledTracks:
             from radarviz.core.filters.kernels_imm import predicted_imm
 
             predicted_imm(
-                self.xs, self.Ps, self.mus, slot, j, dt, self.sigma_a_models, self.turn_rates,
+                self.xs, self.Ps, self.mus, slot, j, dt, self.imm_sigma_a_mps2, self.turn_rates,
                 self.transition, out_x, out_P,
             )  # fmt: skip
         else:
             _predicted_kernel(self.dims)(
-                self.xs, self.Ps, slot, j, dt, self.sigma_a_mps2 * self.sigma_a_mps2, out_x, out_P
+                self.xs, self.Ps, slot, j, dt, self._accel_variance, out_x, out_P
             )
         return out_x, out_P
 
@@ -349,12 +355,12 @@ class CompiledTracks:
         if self.imm is not None:
             from radarviz.core.filters.kernels_imm import gate_nis_imm_2d
 
-            model = (self.sigma_a_models, self.turn_rates, self.transition)
+            model = (self.imm_sigma_a_mps2, self.turn_rates, self.transition)
             gate_nis_imm_2d(self.xs, self.Ps, self.mus, slot, j, dt, *model, code, *plot, out)
         else:
             from radarviz.core.filters.kernels_track import gate_nis_2d
 
-            q = self.sigma_a_mps2 * self.sigma_a_mps2
+            q = self._accel_variance
             gate_nis_2d(self.xs, self.Ps, slot, j, dt, q, code, *plot, out)
         return out
 

@@ -383,8 +383,8 @@ class GateFilter(NamedTuple):
     """The gating method's IMM tracks, one per book slot, in the layout of
     ``core.tracking.compiled.CompiledTracks`` with one method: xs (K, 1, r, 4),
     Ps (K, 1, r, 4, 4), mus (K, 1, r), started (K,), last_t (K,); and its model: codes,
-    start_codes (1,) the method's, sigma_a_mps2, omega (r,), Pi (r, r), mu0 (r,), v0 (σv0, m/s),
-    prm (the UKF's weights)."""
+    start_codes (1,) the method's, sigma_a_mps2, omega (r,), Pi (r, r), mu0 (r,),
+    sigma_v0_mps (σv0, m/s), prm (the UKF's weights)."""
 
     codes: NDArray[np.int64]
     start_codes: NDArray[np.int64]
@@ -392,7 +392,7 @@ class GateFilter(NamedTuple):
     omega: NDArray[np.float64]
     Pi: NDArray[np.float64]
     mu0: NDArray[np.float64]
-    v0: float
+    sigma_v0_mps: float
     prm: NDArray[np.float64]
     xs: NDArray[np.float64]
     Ps: NDArray[np.float64]
@@ -621,7 +621,7 @@ def _batch(pl, beams, radar_site, book, gf, rules, live, counters, since, owner,
         bad = track_plots_imm_2d(
             gf.codes, gf.start_codes, own, times, pl.range_m[lo:hi], pl.azimuth_rad[lo:hi],
             vr, ~np.isnan(vr), pl.noise[lo:hi], pl.site, pl.sigma_r_m, pl.sigma_beta_rad,
-            pl.sigma_vr_mps, gf.sigma_a_mps2, gf.omega, gf.Pi, gf.mu0, gf.v0, gf.prm,
+            pl.sigma_vr_mps, gf.sigma_a_mps2, gf.omega, gf.Pi, gf.mu0, gf.sigma_v0_mps, gf.prm,
             False, gf.xs, gf.Ps, gf.mus, gf.started, gf.last_t, out_x, out_P, out_nis,
         )  # fmt: skip
         if bad >= 0:

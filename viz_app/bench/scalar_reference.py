@@ -140,8 +140,8 @@ def _joseph2(p, k00, k01, k10, k11, k20, k21, k30, k31, r00, r01, r11):
 
 
 @_jit
-def _start(zx, zy, r00, r01, r11, v0):
-    v = v0 * v0
+def _start(zx, zy, r00, r01, r11, sigma_v0_mps):
+    v = sigma_v0_mps * sigma_v0_mps
     return (zx, 0.0, zy, 0.0), (r00, 0.0, r01, 0.0, v, 0.0, 0.0, r11, 0.0, v)
 
 
@@ -171,11 +171,11 @@ def _naive_point(r, b, sr2, s):
 
 
 @_jit
-def naive(r_hat, b_hat, sigma_r_m, sigma_beta_rad, T, q, v0, x_out, P_out):
+def naive(r_hat, b_hat, sigma_r_m, sigma_beta_rad, T, q, sigma_v0_mps, x_out, P_out):
     """The naive converted-measurement filter (eq. 8, 9)."""
     sr2, s = sigma_r_m * sigma_r_m, sigma_beta_rad * sigma_beta_rad
     for m in range(r_hat.shape[0]):
-        x, p = _start(*_naive_point(r_hat[m, 0], b_hat[m, 0], sr2, s), v0)
+        x, p = _start(*_naive_point(r_hat[m, 0], b_hat[m, 0], sr2, s), sigma_v0_mps)
         for n in range(1, r_hat.shape[1]):
             x, p = _predict(x, p, T, q)
             x, p = _position_update(x, p, *_naive_point(r_hat[m, n], b_hat[m, n], sr2, s))
@@ -213,11 +213,11 @@ def _averaged_point(r, b, kappa, sr2, k):
 
 
 @_jit
-def _averaged(r_hat, b_hat, sigma_r_m, sigma_beta_rad, T, q, v0, kappa, x_out, P_out):
+def _averaged(r_hat, b_hat, sigma_r_m, sigma_beta_rad, T, q, sigma_v0_mps, kappa, x_out, P_out):
     sr2, s = sigma_r_m * sigma_r_m, sigma_beta_rad * sigma_beta_rad
     k = _averaged_constants(s, sr2)
     for m in range(r_hat.shape[0]):
-        x, p = _start(*_averaged_point(r_hat[m, 0], b_hat[m, 0], kappa, sr2, k), v0)
+        x, p = _start(*_averaged_point(r_hat[m, 0], b_hat[m, 0], kappa, sr2, k), sigma_v0_mps)
         for n in range(1, r_hat.shape[1]):
             x, p = _predict(x, p, T, q)
             z = _averaged_point(r_hat[m, n], b_hat[m, n], kappa, sr2, k)
@@ -226,14 +226,16 @@ def _averaged(r_hat, b_hat, sigma_r_m, sigma_beta_rad, T, q, v0, kappa, x_out, P
 
 
 @_jit
-def seed(r_hat, b_hat, sigma_r_m, sigma_beta_rad, T, q, v0, x_out, P_out):
+def seed(r_hat, b_hat, sigma_r_m, sigma_beta_rad, T, q, sigma_v0_mps, x_out, P_out):
     """Prosov's correction as printed: κ = 1 − σβ²/2 (eq. 10), covariance eq. 11."""
     s = sigma_beta_rad * sigma_beta_rad
-    _averaged(r_hat, b_hat, sigma_r_m, sigma_beta_rad, T, q, v0, 1.0 - s / 2.0, x_out, P_out)
+    _averaged(
+        r_hat, b_hat, sigma_r_m, sigma_beta_rad, T, q, sigma_v0_mps, 1.0 - s / 2.0, x_out, P_out
+    )
 
 
 @_jit
-def cmkf_d(r_hat, b_hat, sigma_r_m, sigma_beta_rad, T, q, v0, x_out, P_out):
+def cmkf_d(r_hat, b_hat, sigma_r_m, sigma_beta_rad, T, q, sigma_v0_mps, x_out, P_out):
     """Lerro and Bar-Shalom's debiasing κ = 1 − (e^(−s) − e^(−s/2)), covariance eq. 11."""
     s = sigma_beta_rad * sigma_beta_rad
     _averaged(
@@ -243,7 +245,7 @@ def cmkf_d(r_hat, b_hat, sigma_r_m, sigma_beta_rad, T, q, v0, x_out, P_out):
         sigma_beta_rad,
         T,
         q,
-        v0,
+        sigma_v0_mps,
         1.0 - (math.exp(-s) - math.exp(-s / 2.0)),
         x_out,
         P_out,
@@ -284,11 +286,11 @@ def _ucm_point(r, b, k):
 
 
 @_jit
-def ucm(r_hat, b_hat, sigma_r_m, sigma_beta_rad, T, q, v0, x_out, P_out):
+def ucm(r_hat, b_hat, sigma_r_m, sigma_beta_rad, T, q, sigma_v0_mps, x_out, P_out):
     """Mo et al.'s unbiased conversion e^(s/2) r̂ û(β̂), its covariance at the measurement."""
     k = _ucm_constants(sigma_beta_rad * sigma_beta_rad, sigma_r_m * sigma_r_m)
     for m in range(r_hat.shape[0]):
-        x, p = _start(*_ucm_point(r_hat[m, 0], b_hat[m, 0], k), v0)
+        x, p = _start(*_ucm_point(r_hat[m, 0], b_hat[m, 0], k), sigma_v0_mps)
         for n in range(1, r_hat.shape[1]):
             x, p = _predict(x, p, T, q)
             x, p = _position_update(x, p, *_ucm_point(r_hat[m, n], b_hat[m, n], k))
@@ -296,12 +298,12 @@ def ucm(r_hat, b_hat, sigma_r_m, sigma_beta_rad, T, q, v0, x_out, P_out):
 
 
 @_jit
-def ducm(r_hat, b_hat, sigma_r_m, sigma_beta_rad, T, q, v0, x_out, P_out):
+def ducm(r_hat, b_hat, sigma_r_m, sigma_beta_rad, T, q, sigma_v0_mps, x_out, P_out):
     """Bordonaro et al.'s decorrelated conversion: ucm's point, the covariance at the
     predicted position (ucm's start: there is no prediction at the first plot)."""
     k = _ucm_constants(sigma_beta_rad * sigma_beta_rad, sigma_r_m * sigma_r_m)
     for m in range(r_hat.shape[0]):
-        x, p = _start(*_ucm_point(r_hat[m, 0], b_hat[m, 0], k), v0)
+        x, p = _start(*_ucm_point(r_hat[m, 0], b_hat[m, 0], k), sigma_v0_mps)
         for n in range(1, r_hat.shape[1]):
             x, p = _predict(x, p, T, q)
             r, b = r_hat[m, n], b_hat[m, n]
@@ -405,11 +407,11 @@ def _joseph_kh(p, a):
 
 
 @_jit
-def ekf(r_hat, b_hat, sigma_r_m, sigma_beta_rad, T, q, v0, x_out, P_out):
+def ekf(r_hat, b_hat, sigma_r_m, sigma_beta_rad, T, q, sigma_v0_mps, x_out, P_out):
     """The polar EKF from the naive start."""
     sr2, s = sigma_r_m * sigma_r_m, sigma_beta_rad * sigma_beta_rad
     for m in range(r_hat.shape[0]):
-        x, p = _start(*_naive_point(r_hat[m, 0], b_hat[m, 0], sr2, s), v0)
+        x, p = _start(*_naive_point(r_hat[m, 0], b_hat[m, 0], sr2, s), sigma_v0_mps)
         for n in range(1, r_hat.shape[1]):
             x, p = _predict(x, p, T, q)
             x, p = _ekf_update(x, p, r_hat[m, n], b_hat[m, n], sr2, s)
@@ -448,13 +450,13 @@ def _doppler_update(x, p, vr_hat, b, var_vr, s):
 
 @_jit
 def ekf_doppler(
-    r_hat, b_hat, vr_hat, sigma_r_m, sigma_beta_rad, sigma_vr_mps, T, q, v0, x_out, P_out
+    r_hat, b_hat, vr_hat, sigma_r_m, sigma_beta_rad, sigma_vr_mps, T, q, sigma_v0_mps, x_out, P_out
 ):
     """The polar EKF, then the Doppler update of each plot's V̂r."""
     sr2, s = sigma_r_m * sigma_r_m, sigma_beta_rad * sigma_beta_rad
     var_vr = sigma_vr_mps * sigma_vr_mps
     for m in range(r_hat.shape[0]):
-        x, p = _start(*_naive_point(r_hat[m, 0], b_hat[m, 0], sr2, s), v0)
+        x, p = _start(*_naive_point(r_hat[m, 0], b_hat[m, 0], sr2, s), sigma_v0_mps)
         for n in range(1, r_hat.shape[1]):
             x, p = _predict(x, p, T, q)
             b = b_hat[m, n]
@@ -550,12 +552,12 @@ def _ukf_update(x, p, r, b, vr, vb, c, wm0, wc0, w, X, Z):
 
 
 @_jit
-def ukf(r_hat, b_hat, sigma_r_m, sigma_beta_rad, T, q, v0, c, wm0, wc0, w, x_out, P_out):
+def ukf(r_hat, b_hat, sigma_r_m, sigma_beta_rad, T, q, sigma_v0_mps, c, wm0, wc0, w, x_out, P_out):
     """The polar UKF from the naive start; (c, wm0, wc0, w) = ``UKFParams.weights(4)``."""
     sr2, s = sigma_r_m * sigma_r_m, sigma_beta_rad * sigma_beta_rad
     X, Z = np.empty((9, 4)), np.empty((9, 2))
     for m in range(r_hat.shape[0]):
-        x, p = _start(*_naive_point(r_hat[m, 0], b_hat[m, 0], sr2, s), v0)
+        x, p = _start(*_naive_point(r_hat[m, 0], b_hat[m, 0], sr2, s), sigma_v0_mps)
         for n in range(1, r_hat.shape[1]):
             x, p = _predict(x, p, T, q)
             x, p = _ukf_update(x, p, r_hat[m, n], b_hat[m, n], sr2, s, c, wm0, wc0, w, X, Z)
