@@ -29,7 +29,7 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
-from radarviz.core.filters.kernels_2d import _jit
+from radarviz.core.filters.kernels_2d import _inline, _jit
 from radarviz.core.filters.kernels_imm import pair_nis_2d, track_plots_imm_2d
 from radarviz.core.tracking.kernels_gate import BOX_UNTIL_S, boxes_near, near_pairs, plot_points_2d
 
@@ -497,7 +497,10 @@ def associate_2d(pl, beams, radar_site, book, gf, rules, live, counters, since, 
     return -1
 
 
-@_jit
+# _batch is inlined into the batch loop: a call passes some sixty arrays, each costing a
+# reference count in and out, and inlined the whole association ran about 6% faster at 1000
+# targets (docs/performance.md, section 5).
+@_inline
 def _batch(pl, beams, radar_site, book, gf, rules, live, counters, since, owner, status_out,
            events, boxes, b, lo, hi, points, r_ii, nx, x0, P0, mu, cc, w, xp, Pp):  # fmt: skip
     """One batch, plots lo:hi (``GNNTracker._add`` and ``_manage``)."""
