@@ -613,23 +613,9 @@ def track_plots_3d(
             nis = np.nan
             if new:
                 start_track_3d(
-                    start_codes[j],
-                    x,
-                    P,
-                    r,
-                    b,
-                    el,
-                    sr2,
-                    sb2,
-                    se2,
-                    sx,
-                    sy,
-                    sz,
-                    sigma_v0_mps,
-                    z,
-                    R,
-                    conv,
-                )
+                    start_codes[j], x, P, r, b, el, sr2, sb2, se2, sx, sy, sz, sigma_v0_mps, z,
+                    R, conv,
+                )  # fmt: skip
             else:
                 for a in range(6):
                     x[a] = xs[k, j, a]

@@ -461,23 +461,9 @@ def track_plots_imm_3d(
             nis = np.nan
             if new:
                 start_track_3d(
-                    start_codes[j],
-                    x,
-                    P,
-                    rr,
-                    b,
-                    el,
-                    sr2,
-                    sb2,
-                    se2,
-                    sx,
-                    sy,
-                    sz,
-                    sigma_v0_mps,
-                    z,
-                    R,
-                    conv,
-                )
+                    start_codes[j], x, P, rr, b, el, sr2, sb2, se2, sx, sy, sz, sigma_v0_mps, z,
+                    R, conv,
+                )  # fmt: skip
                 if has_vr[i]:
                     doppler_update_3d(x, P, vr, trig, var_vr, sb2, se2, u, Uv, Kv, bufs[4])
                 _started(x, P, mu0, x0, P0, mu)
