@@ -183,3 +183,38 @@ def test_sparse_assign_is_the_components_optimum() -> None:
         assert sorted(zip(r2.tolist(), c2.tolist(), strict=True)) == sorted(
             zip(got_r.tolist(), got_c.tolist(), strict=True)
         )
+
+
+@pytest.mark.parametrize("sigma_beta_deg", [0.15, 0.5])
+def test_the_sweeps_skip_judges_as_testing_every_track(sigma_beta_deg: float) -> None:
+    """The compiled sweep tests a track only from its bound on when the beam can pass it
+    (``kernels_associate._due``); with a model tolerance no batch meets (a new beam model
+    at every batch, every track tested at every batch) the same misses follow: the same
+    tracks, statuses, expected detections and judgement times. At σβ 0.5° the plots' own
+    azimuths stray from the beam model more, and new models start more often."""
+    sites = [
+        RotatingRadar(
+            f"r{j}", x, y, period_s=4.0 + 0.37 * j, phase_rad=1.3 * j, max_range_m=60e3,
+            sigma_beta_rad=np.radians(sigma_beta_deg), detection_prob=0.85,
+            clutter_per_turn=8.0, clockwise=j != 2,
+        )
+        for j, (x, y) in enumerate(SITES)
+    ]  # fmt: skip
+    rng = np.random.default_rng(11)
+    traffic = air_traffic(rng, 200, 50.0, turn_rate_dps=2.0, en_route=True)
+    batches = batches_of(rotating_scene_plots(sites, rotating_plots(rng, sites, traffic, 50.0)))
+    gnns = [GNNTracker(("ucm",), False, OPTIONS, AssociationOptions()) for _ in range(2)]
+    every = gnns[1]._compiled
+    assert every is not None
+    every.rules = every.rules._replace(model_tolerance_rad=-1.0)
+    results = [run(gnn, batches, 500) for gnn in gnns]
+    assert summary(gnns[0], results[0]) == summary(gnns[1], results[1])
+    a, b = gnns[0].book, gnns[1].book
+    live = a.live_slots()
+    assert np.array_equal(live, b.live_slots()) and live.size > 150
+    for name in ("hits", "expected", "misses", "judged_s", "hit_s"):
+        assert np.array_equal(getattr(a, name)[live], getattr(b, name)[live]), name
+    # The skip was in force: most live tracks' bounds lie ahead of the last batch.
+    end = batches[-1][-1].time_s
+    assert np.mean(a.due_s[live] > end) > 0.5
+    assert np.all(np.isinf(b.due_s[live]) | (b.due_s[live] > 0))

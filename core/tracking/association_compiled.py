@@ -29,6 +29,9 @@ from radarviz.core.tracking.coverage import (
     MAX_MARGIN_RAD,
     MIN_MARGIN_RAD,
     REVISITS_KEPT,
+    SWEEP_BEAM_TOLERANCE_RAD,
+    SWEEP_HORIZON,
+    SWEEP_PERIOD_DRIFT,
     BeamTable,
     beam_constants,
 )
@@ -115,7 +118,8 @@ class CompiledAssociation:
         self.rules = ka.Rules(
             gate, scale, q_max, omega_max, float(a.max_speed_mps), int(a.confirm_m),  # type: ignore[attr-defined]
             int(a.confirm_n), int(a.delete_misses), MIN_MARGIN_RAD, MAX_MARGIN_RAD,  # type: ignore[attr-defined]
-            EDGE_FRACTION, *beam_constants(),
+            EDGE_FRACTION, *beam_constants(), SWEEP_BEAM_TOLERANCE_RAD, SWEEP_PERIOD_DRIFT,
+            SWEEP_HORIZON,
         )  # fmt: skip
         self.live = np.zeros(0, np.int64)
         #: live tracks, tracks started, batches, free slots, events (``kernels_associate``).
@@ -193,7 +197,7 @@ class CompiledAssociation:
         arrays = ka.BookArrays(
             book.status, book.hits, book.expected, book.misses, book.born_s, book.last_s,
             book.x, book.P, book.sigma_m, book.sigma_v, book.alive, book.rank, book.hit_s,
-            book.judged_s, book.plots, book.folded, book.free,
+            book.judged_s, book.due_s, book.plots, book.folded, book.free,
         )  # fmt: skip
         gf = ka.GateFilter(*self._model, self._xs, self._Ps, self._mus, self._started, self._last_t)
         c = self.counters

@@ -83,6 +83,16 @@ TWO_PI = 2.0 * math.pi
 #: A track is expected inside a coverage limit only this far inside it, relative to its
 #: range, beside three of its position σ (``RadarBeam.inside``).
 EDGE_FRACTION = 0.01
+#: The compiled sweep's skip (``core.tracking.kernels_associate._swept``): a track is
+#: tested against a radar's sweep only from the earliest time its beam can have passed it,
+#: a bound worked out at its previous test from a model of the beam's azimuth,
+#: β(t) = β₀ + d 2π (t − t₀) / T. The model holds while each batch's last azimuth is within
+#: ``SWEEP_BEAM_TOLERANCE_RAD`` of it and the period estimate within ``SWEEP_PERIOD_DRIFT``
+#: (relative) of its T; otherwise a new model starts and every track is tested. A bound
+#: reaches at most ``SWEEP_HORIZON`` revolutions ahead.
+SWEEP_BEAM_TOLERANCE_RAD = 0.03
+SWEEP_PERIOD_DRIFT = 0.01
+SWEEP_HORIZON = 0.75
 
 
 @dataclass(frozen=True)

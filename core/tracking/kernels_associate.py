@@ -42,7 +42,9 @@ B_RANGE_LO, B_RANGE_HI, B_EL_LO, B_EL_HI = 3, 4, 5, 6
 B_LAST_S, B_LAST_AZ, B_SWEPT_TO = 7, 8, 9
 B_GIVEN_MIN_R, B_GIVEN_MAX_R, B_GIVEN_MIN_EL, B_GIVEN_MAX_EL = 10, 11, 12, 13
 B_RATE_MEDIAN = 14  # the median of the beam rates, as of B_RATES_AT of them
-BEAM_FLOATS = 15
+# The sweep's beam model (``_swept``): its time t₀, azimuth β₀, period T and direction d.
+B_MODEL_S, B_MODEL_AZ, B_MODEL_PERIOD, B_MODEL_DIR = 15, 16, 17, 18
+BEAM_FLOATS = 19
 # Counts.
 B_SAME, B_OTHER, B_TURN_NEG, B_TURN_POS, B_MEASURED = 0, 1, 2, 3, 4
 B_N_REVISITS, B_REVISIT_HEAD, B_N_RATES, B_N_CLOSE, B_SEEN = 5, 6, 7, 8, 9
@@ -374,6 +376,7 @@ class BookArrays(NamedTuple):
     rank: NDArray[np.int64]
     hit_s: NDArray[np.float64]
     judged_s: NDArray[np.float64]
+    due_s: NDArray[np.float64]
     plots: NDArray[np.int64]
     folded: NDArray[np.int64]
     free: NDArray[np.int64]
@@ -428,8 +431,8 @@ class Rules(NamedTuple):
     """The association's numbers: gate γ; scale (γ times ``PREFILTER_MARGIN``); q_max and
     omega_max (``GNNTracker.near``); max_speed_mps; confirm_m, confirm_n, delete_misses;
     the sweep's min_margin_rad, max_margin_rad, edge_fraction; the beam's cells,
-    min_revisit_s, min_revisits, kept, max_pair_s, min_pair_s, beam_noise_rad
-    (``core.tracking.coverage``)."""
+    min_revisit_s, min_revisits, kept, max_pair_s, min_pair_s, beam_noise_rad; the sweep's
+    skip: model_tolerance_rad, period_drift, horizon (``core.tracking.coverage``)."""
 
     gate: float
     scale: float
@@ -449,6 +452,9 @@ class Rules(NamedTuple):
     max_pair_s: float
     min_pair_s: float
     beam_noise_rad: float
+    model_tolerance_rad: float
+    period_drift: float
+    horizon: float
 
 
 #: ``counters`` of ``associate_2d``: live tracks, tracks started (the last id), batches, free
@@ -594,6 +600,7 @@ def _batch(pl, beams, radar_site, book, gf, rules, live, counters, since, owner,
             book.hit_s[s, g] = times[j]
             book.plots[s, g] += 1
             boxes[s, BOX_UNTIL_S] = -np.inf  # its box is of its previous state
+            book.due_s[s, :] = -np.inf  # so are its sweep bounds
     for q in range(n_free):  # unassigned plots start tentative tracks (``TrackBook.start``)
         j = free[q]
         counters[C_FREE] -= 1
@@ -608,6 +615,7 @@ def _batch(pl, beams, radar_site, book, gf, rules, live, counters, since, owner,
         boxes[s, BOX_UNTIL_S] = -np.inf
         book.hit_s[s, :] = -np.inf
         book.judged_s[s, :] = -np.inf
+        book.due_s[s, :] = -np.inf
         book.hit_s[s, g] = times[j]
         book.plots[s, :] = 0
         book.plots[s, g] = 1
@@ -760,7 +768,14 @@ def _too_fast(pl, book, rules, s, j) -> bool:
 def _swept(pl, beams, radar_site, book, rules, g, times, slots, whole_scan):
     """``GNNTracker._swept``: the slots among ``slots`` this batch's sweep judges (passed by
     the beam inside the radar's coverage, not judged in this sweep already), their
-    ``judged_s`` set; the beam's sweep start moved (``RadarBeam.swept``)."""
+    ``judged_s`` set; the beam's sweep start moved (``RadarBeam.swept``).
+
+    A rotating radar's batch sweeps a degree or two, so most tracks cannot be judged by it;
+    a slot is tested only once the batch's end reaches its ``due_s`` for the radar, the
+    earliest time the test can pass (``_due``), set at its previous test and reset by a
+    hit. The bounds hold under the radar's beam model (``core.tracking.coverage``,
+    ``SWEEP_BEAM_TOLERANCE_RAD``): a batch that leaves the model starts a new one and tests
+    every slot, so the slots judged are those of testing every slot at every batch."""
     if slots.shape[0] == 0:
         return slots
     if g < 0:
@@ -791,11 +806,31 @@ def _swept(pl, beams, radar_site, book, rules, g, times, slots, whole_scan):
     # margin plus the turn away from the beam cannot be in the swept window.
     bx, by = math.cos(f[B_LAST_AZ]), math.sin(f[B_LAST_AZ])
     window = not whole and turned < TWO_PI
+    # The beam model of the skip: kept while this batch agrees with it, else started anew
+    # here (and every slot tested, its bounds worked out under the new model).
+    skip = False
+    model_az = 0.0
+    if not whole:
+        t0, p0 = f[B_MODEL_S], f[B_MODEL_PERIOD]
+        model_az = f[B_MODEL_AZ] + direction * TWO_PI * (end - t0) / p0
+        skip = (
+            f[B_MODEL_DIR] == direction
+            and abs(period - p0) <= rules.period_drift * p0
+            and abs(_wrap(f[B_LAST_AZ] - model_az)) <= rules.model_tolerance_rad
+        )  # NaN (no model yet): False
+        if not skip:
+            f[B_MODEL_S], f[B_MODEL_AZ], f[B_MODEL_PERIOD] = end, f[B_LAST_AZ], period
+            f[B_MODEL_DIR] = direction
+            model_az = f[B_MODEL_AZ]
     for q in range(slots.shape[0]):
         s = slots[q]
+        if skip and end < book.due_s[s, g]:
+            continue
         if known and not whole:
             # Judged or hit by this radar within half a period of the end: not this sweep's.
             if not (book.judged_s[s, g] + half < end and book.hit_s[s, g] <= end - half):
+                low = (1.0 - rules.period_drift) * f[B_MODEL_PERIOD] / 2
+                book.due_s[s, g] = max(book.judged_s[s, g], book.hit_s[s, g]) + low
                 continue
         ahead = end - book.last_s[s]
         px = book.x[s, 0] + book.x[s, 1] * ahead
@@ -806,6 +841,11 @@ def _swept(pl, beams, radar_site, book, rules, g, times, slots, whole_scan):
         rng = math.sqrt(rx * rx + ry * ry)
         margin = min(max(3.0 * sigma / max(rng, 1.0), rules.min_margin_rad),
                      rules.max_margin_rad)  # fmt: skip
+        if not whole:
+            book.due_s[s, g] = end + _due(
+                rx, ry, rng, book.x[s, 1], book.x[s, 3], sigma, book.sigma_m[s],
+                book.sigma_v[s], ahead, model_az, direction, f[B_MODEL_PERIOD], rules,
+            )  # fmt: skip
         if window:
             # The angle θ to the beam exceeds φ = margin + turn when cos θ < 1 − φ²/2 ≤ cos φ
             # (less a rounding allowance): outside the window whatever the exact angle.
@@ -831,3 +871,42 @@ def _swept(pl, beams, radar_site, book, rules, g, times, slots, whole_scan):
             out[k] = s
             k += 1
     return out[:k]
+
+
+@_jit
+def _due(rx, ry, rng, vx, vy, sigma, sigma_m, sigma_v, ahead, model_az, direction, model_period,
+         rules) -> float:  # fmt: skip
+    """How long after now (τ ≥ 0, s) a radar's sweep can first judge a track, at (rx, ry)
+    from the radar (range rng), moving at (vx, vy), its predicted position σ now ``sigma``
+    (from σ_m, σ_v and ``ahead``, ``_swept``), under the beam model (``_swept``):
+    β(now + τ) = model_az + d ω τ + e, |e| ≤ ε (``model_tolerance_rad``), ω = 2π / T.
+
+    The sweep judges at τ only if δ = (d (β − φ)) mod 2π, φ the track's predicted azimuth,
+    lies in (m, m + s], m its margin and s ≤ ω' τ the beam's turn since the previous batch
+    (ω' = ω (1 + ρ), the period estimate within ρ of T). Over τ ≤ H (``horizon``
+    revolutions) the range stays within r ± |v| H, so φ moves at most a τ with
+    a = |v| / (r − |v| H), and m (3σ over the range, σ growing with the time ahead, clamped)
+    stays within [m₋, m₊]; take a' = a + ω ρ. With u = d (β₀ − φ₀) mod 2π,
+    δ + 2πk = u + ω τ ± (ε + a' τ) for some integer k, and the window needs
+    u + ω τ + ε + a' τ − 2πk > m₋ and u − ε − a' τ − 2πk ≤ m₊. The earliest τ for k = 0, 1
+    and −1 (any other k comes later) is the bound, at most H; 0 where a track may move too
+    fast about the radar (near it) for one."""
+    omega = TWO_PI / model_period
+    eps = rules.model_tolerance_rad
+    horizon = rules.horizon * model_period
+    speed = math.sqrt(vx * vx + vy * vy)
+    least = rng - speed * horizon
+    if least <= 1.0:
+        return 0.0
+    sv = sigma_v * (ahead + horizon)
+    sigma_hi = math.sqrt(sigma_m * sigma_m + sv * sv)
+    lo = min(max(3.0 * sigma / (rng + speed * horizon), rules.min_margin_rad),
+             rules.max_margin_rad)  # fmt: skip
+    hi = min(max(3.0 * sigma_hi / least, rules.min_margin_rad), rules.max_margin_rad)
+    a = speed / least + omega * rules.period_drift
+    u = (direction * (model_az - math.atan2(ry, rx))) % TWO_PI
+    closing = omega + a
+    tau0 = max((lo - u - eps) / closing, (u - eps - hi) / a, 0.0)  # k = 0
+    tau1 = (TWO_PI + lo - u - eps) / closing  # k = 1
+    tau_1 = (u + TWO_PI - eps - hi) / a  # k = −1
+    return max(min(tau0, tau1, tau_1, horizon), 0.0)
