@@ -188,6 +188,10 @@ class AssociationOptions:
             )
 
 
+#: A status code's name (``_add_batches``).
+_STATUS_NAMES = np.array([TENTATIVE, CONFIRMED], dtype=object)
+
+
 @contextlib.contextmanager
 def cycle_collector_paused() -> Iterator[None]:
     """Python's cycle collector paused for the block, and restored after it.
@@ -974,15 +978,22 @@ class GNNTracker:
             return out
         index = {name: i for i, name in enumerate(self.beams)}
         radar = np.zeros(len(batches), np.int64)  # each batch's radar
+        # Every plot's radar name, and whether all are 2D, once for the call.
+        names = [p.radar for plots in batches for p in plots]
+        flat_2d = [p.elevation_rad for plots in batches for p in plots].count(None) == len(names)
+        lo = 0
         for b, plots in enumerate(batches):
+            hi = lo + len(plots)
             if not plots:
                 measured[b] = None
                 continue
-            name = plots[0].radar
+            name = names[lo]
             i = index.get(name)
+            one_radar = names[lo:hi].count(name) == hi - lo
+            lo = hi
             # A 2D batch of one radar already seen (the compiled route is 2D): the checks of
             # ``_check_batch`` and ``_radar`` without a call a batch.
-            if i is None or any(p.radar != name or p.elevation_rad is not None for p in plots):
+            if i is None or not one_radar or not flat_2d:
                 measured[b] = measured[b] if i is not None else None  # ``measured_period``
                 try:
                     self._check_batch(plots)
@@ -1010,14 +1021,14 @@ class GNNTracker:
         self._started = self.book._started
         # The requested methods' tracks of the labelled plots, from the call's own arrays.
         owner = res.ids
-        ids = list(map(str, owner.tolist()))
         u, first, inv = np.unique(owner, return_index=True, return_inverse=True)
         order = np.argsort(first)  # labels in order of their first plot
         rank = np.empty_like(order)
         rank[order] = np.arange(order.size)
-        block = res.block._replace(
-            target=rank[inv.reshape(-1)].astype(np.intp), labels=tuple(str(t) for t in u[order])
-        )
+        labels = np.array([str(t) for t in u[order].tolist()], dtype=object)
+        target = rank[inv.reshape(-1)].astype(np.intp)
+        ids = labels[target].tolist()  # each plot's track id, one str per track
+        block = res.block._replace(target=target, labels=tuple(labels.tolist()))
         try:
             rows = StateRows(self.tracker.add_arrays(block), self.methods)
             if self._gate.tracker is not self.tracker:
@@ -1031,13 +1042,13 @@ class GNNTracker:
             self.tracker.forget(deleted)
             if self._gate.tracker is not self.tracker:
                 self._gate.tracker.forget(deleted)
-        names = (TENTATIVE, CONFIRMED)
-        status = [names[c] for c in res.status.tolist()]
+        status = _STATUS_NAMES[res.status].tolist()
         out = []
         bounds = starts.tolist()
+        for confirmed in res.confirmed:
+            self.ever_confirmed.extend(confirmed)
         for b in range(len(batches)):
             lo, hi = bounds[b], bounds[b + 1]
-            self.ever_confirmed.extend(res.confirmed[b])
             out.append(
                 ScanResult(
                     ids[lo:hi], status[lo:hi], rows.slice(lo, hi), res.confirmed[b],
