@@ -112,8 +112,6 @@ class CompiledAssociation:
         self._xs, self._Ps = np.zeros((0, 1, r, 4)), np.zeros((0, 1, r, 4, 4))
         self._mus = np.zeros((0, 1, r))
         self._started, self._last_t = np.zeros(0, np.bool_), np.zeros(0)
-        #: Each slot's box of the prefilter (``core.tracking.kernels_gate.track_box``).
-        self._boxes = np.zeros((0, kernels_gate.BOX_COLUMNS))
         a = association
         self.rules = ka.Rules(
             gate, scale, q_max, omega_max, float(a.max_speed_mps), int(a.confirm_m),  # type: ignore[attr-defined]
@@ -121,9 +119,14 @@ class CompiledAssociation:
             EDGE_FRACTION, *beam_constants(), SWEEP_BEAM_TOLERANCE_RAD, SWEEP_PERIOD_DRIFT,
             SWEEP_HORIZON,
         )  # fmt: skip
-        self.live = np.zeros(0, np.int64)
-        #: live tracks, tracks started, batches, free slots, events (``kernels_associate``).
-        self.counters = np.zeros(5, np.int64)
+        #: The live tracks in order of initiation, and their boxes and sweep bounds.
+        self.live = ka.LiveArrays(
+            np.zeros(0, np.int64), np.zeros(0, np.int64),
+            np.zeros((kernels_gate.BOX_COLUMNS, 0)), np.zeros((1, 0)),
+        )  # fmt: skip
+        #: live positions, tracks started, batches, free slots, events, holes
+        #: (``kernels_associate``).
+        self.counters = np.zeros(ka.COUNTERS, np.int64)
         #: A lower bound of the live tracks' last plot times (the coasting pass's skip).
         self.since = np.full(1, -np.inf)
 
@@ -144,8 +147,9 @@ class CompiledAssociation:
             delete_misses=int(a.delete_misses),  # type: ignore[attr-defined]
         )  # fmt: skip
 
-    def _fit(self) -> None:
-        """The gating tracks' and the live list's arrays as large as the book's."""
+    def _fit(self, radars: int) -> None:
+        """The gating tracks' and the live tracks' arrays as large as the book's, with a
+        sweep bound per radar."""
         cap = self.book.alive.shape[0]
         have = self._started.shape[0]
         if cap > have:
@@ -154,10 +158,21 @@ class CompiledAssociation:
             def more(a: NDArray, fill: float = 0.0) -> NDArray:
                 return np.concatenate([a, np.full((grow, *a.shape[1:]), fill, a.dtype)])
 
+            def wider(a: NDArray, fill: float) -> NDArray:
+                return np.concatenate([a, np.full((a.shape[0], grow), fill)], axis=1)
+
             self._xs, self._Ps, self._mus = more(self._xs), more(self._Ps), more(self._mus)
             self._started, self._last_t = more(self._started, False), more(self._last_t)
-            self._boxes = more(self._boxes, -math.inf)  # none drawn yet
-            self.live = more(self.live, -1)
+            lv = self.live
+            # New positions: no box drawn yet, no bound yet.
+            self.live = lv._replace(
+                slot=more(lv.slot, -1), pos=more(lv.pos, -1),
+                boxes=wider(lv.boxes, -math.inf), due_s=wider(lv.due_s, -math.inf),
+            )  # fmt: skip
+        due = self.live.due_s
+        if radars > due.shape[0]:
+            rows = np.full((radars - due.shape[0], due.shape[1]), -math.inf)
+            self.live = self.live._replace(due_s=np.concatenate([due, rows]))
 
     def run(
         self,
@@ -175,7 +190,7 @@ class CompiledAssociation:
         plots = [p for b in batches for p in b]
         n = len(plots)
         book.reserve(n)
-        self._fit()
+        self._fit(sites.shape[0])
         longest = max((len(b) for b in batches), default=0)
         self.beams.grow(sites.shape[0], REVISITS_KEPT + longest + 1)
         block = plot_block(plots, one_target=True)
@@ -197,18 +212,17 @@ class CompiledAssociation:
         arrays = ka.BookArrays(
             book.status, book.hits, book.expected, book.misses, book.born_s, book.last_s,
             book.x, book.P, book.sigma_m, book.sigma_v, book.alive, book.rank, book.hit_s,
-            book.judged_s, book.due_s, book.plots, book.folded, book.free,
+            book.judged_s, book.plots, book.folded, book.free,
         )  # fmt: skip
         gf = ka.GateFilter(*self._model, self._xs, self._Ps, self._mus, self._started, self._last_t)
         c = self.counters
         c[ka.C_FREE], c[ka.C_EVENTS] = book.free_top, 0
-        c[ka.C_LIVE] = int(np.count_nonzero(book.alive))
         owner = np.zeros(n, np.int64)
         status = np.zeros(n, np.int8)
         events = np.zeros((3 * n + c[ka.C_LIVE] + 1, 4), np.int64)
         bad = ka.associate_2d(
             pl, self.beams.arrays, np.ascontiguousarray(sites[:, :2]), arrays, gf, self.rules,
-            self.live, c, self.since, owner, status, events, self._boxes,
+            self.live, c, self.since, owner, status, events,
         )  # fmt: skip
         book.free_top = int(c[ka.C_FREE])
         out = CallResult(len(batches))

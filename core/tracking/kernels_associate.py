@@ -31,7 +31,17 @@ from numpy.typing import NDArray
 
 from radarviz.core.filters.kernels_2d import _inline, _jit
 from radarviz.core.filters.kernels_imm import pair_nis_2d, track_plots_imm_2d
-from radarviz.core.tracking.kernels_gate import BOX_UNTIL_S, boxes_near, near_pairs, plot_points_2d
+from radarviz.core.tracking.kernels_gate import (
+    BOX_FROM_S,
+    BOX_UNTIL_S,
+    BOX_X_HI,
+    BOX_X_LO,
+    BOX_Y_HI,
+    BOX_Y_LO,
+    boxes_near,
+    near_pairs,
+    plot_points_2d,
+)
 
 TWO_PI = 2.0 * math.pi
 
@@ -376,7 +386,6 @@ class BookArrays(NamedTuple):
     rank: NDArray[np.int64]
     hit_s: NDArray[np.float64]
     judged_s: NDArray[np.float64]
-    due_s: NDArray[np.float64]
     plots: NDArray[np.int64]
     folded: NDArray[np.int64]
     free: NDArray[np.int64]
@@ -457,9 +466,27 @@ class Rules(NamedTuple):
     horizon: float
 
 
-#: ``counters`` of ``associate_2d``: live tracks, tracks started (the last id), batches, free
-#: slots (the top of ``BookArrays.free``), events written.
-C_LIVE, C_STARTED, C_BATCHES, C_FREE, C_EVENTS = 0, 1, 2, 3, 4
+class LiveArrays(NamedTuple):
+    """The live tracks in order of initiation, at positions 0 … n − 1 (n in ``counters``),
+    and what the per-batch passes over every live track read, laid out by position so that
+    each pass reads its rows in order: slot (L,) the book's slot at each position (−1: a
+    hole, a track deleted since the positions were last closed up, ``_close_up``); pos (K,)
+    each book slot's position (−1: not live); boxes (``BOX_COLUMNS``, L) the prefilter's box
+    (``core.tracking.kernels_gate.track_box``; times −∞: drawn when next needed; a hole's
+    holds always and meets nothing); due_s (R, L) the earliest time each radar's sweep can
+    judge the track (``_swept``; −∞: at the radar's next batch; a hole's +∞)."""
+
+    slot: NDArray[np.int64]
+    pos: NDArray[np.int64]
+    boxes: NDArray[np.float64]
+    due_s: NDArray[np.float64]
+
+
+#: ``counters`` of ``associate_2d``: live positions (``LiveArrays``, holes included), tracks
+#: started (the last id), batches, free slots (the top of ``BookArrays.free``), events
+#: written, holes among the live positions.
+C_LIVE, C_STARTED, C_BATCHES, C_FREE, C_EVENTS, C_HOLES = 0, 1, 2, 3, 4, 5
+COUNTERS = 6
 #: Event kinds (``associate_2d``'s events rows: batch, kind, slot, id).
 EV_START, EV_CONFIRM, EV_DELETE = 0, 1, 2
 TENTATIVE_CODE, CONFIRMED_CODE = 0, 1
@@ -467,16 +494,14 @@ TENTATIVE_CODE, CONFIRMED_CODE = 0, 1
 
 @_jit
 def associate_2d(pl, beams, radar_site, book, gf, rules, live, counters, since, owner,
-                 status_out, events, boxes):  # fmt: skip
+                 status_out, events):  # fmt: skip
     """Associate every batch of ``pl`` (``PlotArrays``) in order (module docstring): the
-    beams (``BeamArrays``, R rows), the radars' sites (R, 2), the book (``BookArrays``) and
-    the gating tracks (``GateFilter``) changed in place; live (K,) the live slots in order of
-    initiation (their number in counters); since (1,) a lower bound of their last plot
+    beams (``BeamArrays``, R rows), the radars' sites (R, 2), the book (``BookArrays``),
+    the gating tracks (``GateFilter``) and the live tracks (``LiveArrays``, their number in
+    counters) changed in place; since (1,) a lower bound of their last plot
     times. Writes per plot the id of its track (owner (B,))
     and that track's status after its batch (status_out (B,)), and the events in order
-    (events (E, 4): batch, kind, slot, id); boxes (K, ``BOX_COLUMNS``) each slot's box of the
-    prefilter (``core.tracking.kernels_gate.track_box``; a box whose times are −∞ is drawn
-    when next needed). Returns −1, or the index of a plot earlier than
+    (events (E, 4): batch, kind, slot, id). Returns −1, or the index of a plot earlier than
     its track's previous one (nothing from its batch on is done). The book must have a free
     slot per plot (``C_FREE`` ≥ B)."""
     n_plots = pl.time_s.shape[0]
@@ -496,8 +521,8 @@ def associate_2d(pl, beams, radar_site, book, gf, rules, live, counters, since, 
     for b in range(n_batches):
         lo, hi = pl.batch_start[b], pl.batch_start[b + 1]
         bad = _batch(pl, beams, radar_site, book, gf, rules, live, counters, since, owner,
-                     status_out, events, boxes, b, lo, hi, points, r_ii, nx, x0, P0, mu, cc, w,
-                     xp, Pp)  # fmt: skip
+                     status_out, events, b, lo, hi, points, r_ii, nx, x0, P0, mu, cc, w, xp,
+                     Pp)  # fmt: skip
         if bad >= 0:
             return bad
     return -1
@@ -508,10 +533,12 @@ def associate_2d(pl, beams, radar_site, book, gf, rules, live, counters, since, 
 # targets (docs/performance.md, section 5).
 @_inline
 def _batch(pl, beams, radar_site, book, gf, rules, live, counters, since, owner, status_out,
-           events, boxes, b, lo, hi, points, r_ii, nx, x0, P0, mu, cc, w, xp, Pp):  # fmt: skip
+           events, b, lo, hi, points, r_ii, nx, x0, P0, mu, cc, w, xp, Pp):  # fmt: skip
     """One batch, plots lo:hi (``GNNTracker._add`` and ``_manage``)."""
     n = hi - lo
     counters[C_BATCHES] += 1
+    if counters[C_LIVE] + n > live.slot.shape[0]:  # room for a start per plot
+        _close_up(live, counters)
     g = pl.radar[lo] if n else -1
     times = pl.time_s[lo:hi]
     if g >= 0:
@@ -532,7 +559,7 @@ def _batch(pl, beams, radar_site, book, gf, rules, live, counters, since, owner,
     n_live = counters[C_LIVE]
     # The tracks that existed before this batch (starts append to ``live`` after them; the
     # deletions compact it at the batch's end).
-    before = live[:n_live]
+    before = live.slot[:n_live]
     own = np.full(n, -1, np.int64)  # each plot's slot
     free = np.arange(n)  # plots (of the batch) not yet assigned
     n_free = n
@@ -544,7 +571,7 @@ def _batch(pl, beams, radar_site, book, gf, rules, live, counters, since, owner,
     if n:
         n_near = boxes_near(
             before, book.x, book.P, book.last_s, times[0], times[n - 1], rules.q_max,
-            rules.omega_max, points[lo:hi], r_ii[lo:hi], rules.scale, boxes, near,
+            rules.omega_max, points[lo:hi], r_ii[lo:hi], rules.scale, live.boxes, near,
         )  # fmt: skip
     for code in (CONFIRMED_CODE, TENTATIVE_CODE):  # confirmed tracks choose first
         if n_free == 0:
@@ -599,8 +626,9 @@ def _batch(pl, beams, radar_site, book, gf, rules, live, counters, since, owner,
             book.last_s[s] = times[j]
             book.hit_s[s, g] = times[j]
             book.plots[s, g] += 1
-            boxes[s, BOX_UNTIL_S] = -np.inf  # its box is of its previous state
-            book.due_s[s, :] = -np.inf  # so are its sweep bounds
+            q = live.pos[s]
+            live.boxes[BOX_UNTIL_S, q] = -np.inf  # its box is of its previous state
+            live.due_s[:, q] = -np.inf  # so are its sweep bounds
     for q in range(n_free):  # unassigned plots start tentative tracks (``TrackBook.start``)
         j = free[q]
         counters[C_FREE] -= 1
@@ -612,15 +640,16 @@ def _batch(pl, beams, radar_site, book, gf, rules, live, counters, since, owner,
         book.status[s] = CONFIRMED_CODE if rules.confirm_m <= 1 else TENTATIVE_CODE
         book.hits[s], book.expected[s], book.misses[s] = 1, 1, 0
         book.born_s[s] = book.last_s[s] = times[j]
-        boxes[s, BOX_UNTIL_S] = -np.inf
         book.hit_s[s, :] = -np.inf
         book.judged_s[s, :] = -np.inf
-        book.due_s[s, :] = -np.inf
         book.hit_s[s, g] = times[j]
         book.plots[s, :] = 0
         book.plots[s, g] = 1
         gf.started[s] = False  # a reused slot's old track is gone
-        live[counters[C_LIVE]] = s
+        q = counters[C_LIVE]
+        live.slot[q], live.pos[s] = s, q
+        live.boxes[BOX_UNTIL_S, q] = -np.inf
+        live.due_s[:, q] = -np.inf
         counters[C_LIVE] += 1
         _event(events, counters, b, EV_START, s, ident)
     for j in range(n):  # the track ids: "1", "2", … in order of initiation
@@ -644,7 +673,8 @@ def _batch(pl, beams, radar_site, book, gf, rules, live, counters, since, owner,
             book.sigma_m[s] = math.sqrt(max(out_P[j, 0, 0, 0], out_P[j, 0, 2, 2]))
             book.sigma_v[s] = math.sqrt(max(out_P[j, 0, 1, 1], out_P[j, 0, 3, 3]))
     # The sweep's misses, then confirmation and deletion, on the tracks they touch.
-    judged = _swept(pl, beams, radar_site, book, rules, g, times, before, pl.whole_scan[b])
+    due = live.due_s[g] if g >= 0 else live.due_s[0]
+    judged = _swept(pl, beams, radar_site, book, rules, g, times, before, pl.whole_scan[b], due)
     touched = np.empty(judged.shape[0] + n, np.int64)
     nt = 0
     for s in judged:
@@ -680,6 +710,8 @@ def _batch(pl, beams, radar_site, book, gf, rules, live, counters, since, owner,
         end = times[n - 1]
         lowest = math.inf
         for s in before:  # a track started in this batch has not coasted
+            if s < 0:
+                continue  # a hole
             if book.last_s[s] < end - coast:
                 doomed[nd] = s
                 nd += 1
@@ -702,17 +734,37 @@ def _batch(pl, beams, radar_site, book, gf, rules, live, counters, since, owner,
             book.free[counters[C_FREE]] = s
             counters[C_FREE] += 1
             _event(events, counters, b, EV_DELETE, s, book.rank[s] + 1)
-        keep = 0
-        for q in range(counters[C_LIVE]):
-            if book.alive[live[q]]:
-                live[keep] = live[q]
-                keep += 1
-        counters[C_LIVE] = keep
+            # Its position becomes a hole, closed up with the others once they are many.
+            q = live.pos[s]
+            live.slot[q], live.pos[s] = -1, -1
+            live.boxes[BOX_X_LO, q], live.boxes[BOX_X_HI, q] = np.inf, -np.inf
+            live.boxes[BOX_Y_LO, q], live.boxes[BOX_Y_HI, q] = np.inf, -np.inf
+            live.boxes[BOX_FROM_S, q], live.boxes[BOX_UNTIL_S, q] = -np.inf, np.inf
+            live.due_s[:, q] = np.inf
+            counters[C_HOLES] += 1
+        if counters[C_HOLES] > max(16, counters[C_LIVE] // 4):
+            _close_up(live, counters)
     for j in range(n):
         s = own[j]
         # A track deleted at this batch cannot have a plot in it (it was missed).
         status_out[lo + j] = book.status[s] if book.alive[s] else TENTATIVE_CODE
     return -1
+
+
+@_jit
+def _close_up(live, counters):
+    """Close up the holes of the live positions (``LiveArrays``), in order."""
+    keep = 0
+    for q in range(counters[C_LIVE]):
+        s = live.slot[q]
+        if s < 0:
+            continue
+        if keep != q:
+            live.slot[keep], live.pos[s] = s, keep
+            live.boxes[:, keep] = live.boxes[:, q]
+            live.due_s[:, keep] = live.due_s[:, q]
+        keep += 1
+    counters[C_LIVE], counters[C_HOLES] = keep, 0
 
 
 @_jit
@@ -765,15 +817,15 @@ def _too_fast(pl, book, rules, s, j) -> bool:
 
 
 @_jit
-def _swept(pl, beams, radar_site, book, rules, g, times, slots, whole_scan):
+def _swept(pl, beams, radar_site, book, rules, g, times, slots, whole_scan, due):
     """``GNNTracker._swept``: the slots among ``slots`` this batch's sweep judges (passed by
     the beam inside the radar's coverage, not judged in this sweep already), their
     ``judged_s`` set; the beam's sweep start moved (``RadarBeam.swept``).
 
     A rotating radar's batch sweeps a degree or two, so most tracks cannot be judged by it;
-    a slot is tested only once the batch's end reaches its ``due_s`` for the radar, the
-    earliest time the test can pass (``_due``), set at its previous test and reset by a
-    hit. The bounds hold under the radar's beam model (``core.tracking.coverage``,
+    slots[q] is tested only once the batch's end reaches due[q] (``LiveArrays.due_s`` of
+    the radar), the earliest time the test can pass (``_due``), set at its previous test and
+    reset by a hit. The bounds hold under the radar's beam model (``core.tracking.coverage``,
     ``SWEEP_BEAM_TOLERANCE_RAD``): a batch that leaves the model starts a new one and tests
     every slot, so the slots judged are those of testing every slot at every batch."""
     if slots.shape[0] == 0:
@@ -824,13 +876,13 @@ def _swept(pl, beams, radar_site, book, rules, g, times, slots, whole_scan):
             model_az = f[B_MODEL_AZ]
     for q in range(slots.shape[0]):
         s = slots[q]
-        if skip and end < book.due_s[s, g]:
+        if (skip and end < due[q]) or s < 0:  # not yet, or a hole
             continue
         if known and not whole:
             # Judged or hit by this radar within half a period of the end: not this sweep's.
             if not (book.judged_s[s, g] + half < end and book.hit_s[s, g] <= end - half):
                 low = (1.0 - rules.period_drift) * f[B_MODEL_PERIOD] / 2
-                book.due_s[s, g] = max(book.judged_s[s, g], book.hit_s[s, g]) + low
+                due[q] = max(book.judged_s[s, g], book.hit_s[s, g]) + low
                 continue
         ahead = end - book.last_s[s]
         px = book.x[s, 0] + book.x[s, 1] * ahead
@@ -842,7 +894,7 @@ def _swept(pl, beams, radar_site, book, rules, g, times, slots, whole_scan):
         margin = min(max(3.0 * sigma / max(rng, 1.0), rules.min_margin_rad),
                      rules.max_margin_rad)  # fmt: skip
         if not whole:
-            book.due_s[s, g] = end + _due(
+            due[q] = end + _due(
                 rx, ry, rng, book.x[s, 1], book.x[s, 3], sigma, book.sigma_m[s],
                 book.sigma_v[s], ahead, model_az, direction, f[B_MODEL_PERIOD], rules,
             )  # fmt: skip

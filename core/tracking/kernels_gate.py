@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from radarviz.core.filters.kernels_2d import _jit, coefficients, convert
 
 
@@ -72,15 +74,16 @@ def near_pairs(slots, x, P, last_s, time_s, q_max, omega_max, points, r_ii, scal
 #: How long a track's box (``track_box``) serves, s: past it, or after the track's next
 #: plot, the box is drawn again. Longer boxes are drawn less often and admit more tracks.
 BOX_HORIZON_S = 1.0
-#: The columns of a box row: its x and y bounds (m), and the plot times it holds for (s).
+#: The rows of a box column: its x and y bounds (m), and the plot times it holds for (s).
 BOX_X_LO, BOX_X_HI, BOX_Y_LO, BOX_Y_HI, BOX_FROM_S, BOX_UNTIL_S = 0, 1, 2, 3, 4, 5
 BOX_COLUMNS = 6
 
 
 @_jit
-def track_box(x, P, last_s, s, t_from, t_until, q_max, omega_max, scale, boxes):
-    """Draw row s of boxes (K, ``BOX_COLUMNS``): a horizontal box holding, for every plot
-    time in [t_from, t_until], every 2D point that ``near_pairs``' bound admits for slot s
+def track_box(x, P, last_s, s, t_from, t_until, q_max, omega_max, scale, boxes, q):
+    """Draw slot s's box into column q of boxes (``BOX_COLUMNS``, K): a horizontal box
+    holding, for every plot time in [t_from, t_until], every 2D point that ``near_pairs``'
+    bound admits for slot s
     (x (K, n), P (K, n, n), last_s (K,) as there) once the box is widened on each axis by
     √(scale R_ii) of the plot (``boxes_near``).
 
@@ -105,22 +108,27 @@ def track_box(x, P, last_s, s, t_from, t_until, q_max, omega_max, scale, boxes):
         var = max(v0, v1, 0.0)
         w = delta + math.sqrt(scale * (2.0 * (var + delta * delta) + 0.25 * q_max * tt * tt))
         w += 1e-9 * (w + abs(c0) + abs(c1) + 1.0)
-        boxes[s, 2 * a] = min(c0, c1) - w
-        boxes[s, 2 * a + 1] = max(c0, c1) + w
-    boxes[s, BOX_FROM_S], boxes[s, BOX_UNTIL_S] = t_from, t_until
+        boxes[2 * a, q] = min(c0, c1) - w
+        boxes[2 * a + 1, q] = max(c0, c1) + w
+    boxes[BOX_FROM_S, q], boxes[BOX_UNTIL_S, q] = t_from, t_until
 
 
 @_jit
 def boxes_near(slots, x, P, last_s, t_lo, t_hi, q_max, omega_max, points, r_ii, scale,
                boxes, out):  # fmt: skip
-    """Write into out (N at most) the tracks of ``slots`` (N,) whose box (``track_box``)
-    meets a batch's 2D plots, points (B, 2) and r_ii (B, 2) as ``near_pairs`` takes them,
-    times from t_lo to t_hi: each plot's point inside the box widened by √(scale R_ii); in
-    ``slots`` order; returns how many. A box that does not hold for the batch's times (the
-    track has had a plot since, or it was drawn for earlier times) is drawn again first,
-    for [t_lo, t_lo + ``BOX_HORIZON_S``] (at least to t_hi). A track left out has no pair in
+    """Write into out (N at most) the tracks of ``slots`` (N,) whose box (``track_box``;
+    slots[q]'s in column q of boxes (``BOX_COLUMNS``, K)) meets a batch's 2D plots, points
+    (B, 2) and r_ii (B, 2) as ``near_pairs`` takes them, times from t_lo to t_hi: each
+    plot's point inside the box widened by √(scale R_ii); in ``slots`` order; returns how
+    many. A box that does not hold for the batch's times (the track has had a plot since,
+    or it was drawn for earlier times) is drawn again first, for
+    [t_lo, t_lo + ``BOX_HORIZON_S``] (at least to t_hi). A track left out has no pair in
     ``near_pairs`` (``track_box``), so ``near_pairs`` over the tracks kept finds the same
-    pairs; the test costs a few comparisons a track, whatever the batch's size."""
+    pairs; the test costs a few comparisons a track, whatever the batch's size.
+
+    Two passes: the first reads the boxes in order and flags, without a branch, each box
+    that is stale or meets the batch's bounds (a NaN box meets them: the exact test rejects
+    it); the second draws the stale ones again and keeps those that meet."""
     lo_x, lo_y, hi_x, hi_y = math.inf, math.inf, -math.inf, -math.inf
     for j in range(points.shape[0]):
         ex = math.sqrt(scale * r_ii[j, 0]) * (1.0 + 1e-9)
@@ -128,20 +136,25 @@ def boxes_near(slots, x, P, last_s, t_lo, t_hi, q_max, omega_max, points, r_ii, 
         lo_x, hi_x = min(lo_x, points[j, 0] - ex), max(hi_x, points[j, 0] + ex)
         lo_y, hi_y = min(lo_y, points[j, 1] - ey), max(hi_y, points[j, 1] + ey)
     until = max(t_lo + BOX_HORIZON_S, t_hi)
+    n = slots.shape[0]
+    bx_lo, bx_hi, by_lo, by_hi = boxes[BOX_X_LO], boxes[BOX_X_HI], boxes[BOX_Y_LO], boxes[BOX_Y_HI]
+    b_from, b_until = boxes[BOX_FROM_S], boxes[BOX_UNTIL_S]
+    flag = np.empty(n, np.bool_)
+    for q in range(n):
+        held = (b_from[q] <= t_lo) & (t_hi <= b_until[q])  # NaN times: not held
+        far = (bx_hi[q] < lo_x) | (bx_lo[q] > hi_x) | (by_hi[q] < lo_y) | (by_lo[q] > hi_y)
+        flag[q] = not (held and far)
     kept = 0
-    for k in range(slots.shape[0]):
-        s = slots[k]
-        if not (boxes[s, BOX_FROM_S] <= t_lo and t_hi <= boxes[s, BOX_UNTIL_S]):
-            track_box(x, P, last_s, s, t_lo, until, q_max, omega_max, scale, boxes)
-        # One condition without a branch per bound: the four are taken at random.
-        far = (
-            (boxes[s, BOX_X_HI] < lo_x)
-            | (boxes[s, BOX_X_LO] > hi_x)
-            | (boxes[s, BOX_Y_HI] < lo_y)
-            | (boxes[s, BOX_Y_LO] > hi_y)
-        )
-        out[kept] = s
-        kept += 0 if far else 1
+    for q in range(n):
+        if not flag[q]:
+            continue
+        if not (b_from[q] <= t_lo and t_hi <= b_until[q]):
+            track_box(x, P, last_s, slots[q], t_lo, until, q_max, omega_max, scale, boxes, q)
+            far = (bx_hi[q] < lo_x) | (bx_lo[q] > hi_x) | (by_hi[q] < lo_y) | (by_lo[q] > hi_y)
+            if far:
+                continue
+        out[kept] = slots[q]
+        kept += 1
     return kept
 
 

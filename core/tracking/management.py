@@ -69,9 +69,6 @@ class TrackBook:
         self._started = 0
         self.hit_s = np.zeros((0, 0))
         self.judged_s = np.zeros((0, 0))
-        #: (K, R) the earliest time each radar's sweep can judge the track (the compiled
-        #: association's skip, ``core.tracking.kernels_associate._swept``; −∞: at once).
-        self.due_s = np.zeros((0, 0))
         self.plots = np.zeros((0, 0), np.int64)
         #: (R, 2) plots of deleted tracks: [never confirmed, confirmed] per radar.
         self.folded = np.zeros((0, 2), np.int64)
@@ -106,7 +103,6 @@ class TrackBook:
         self.label.extend([""] * grow)
         self.hit_s = table(self.hit_s, -np.inf)
         self.judged_s = table(self.judged_s, -np.inf)
-        self.due_s = table(self.due_s, -np.inf)
         self.plots = table(self.plots, 0)
         folded = np.zeros((rad, 2), np.int64)
         folded[: self.folded.shape[0]] = self.folded
@@ -142,7 +138,7 @@ class TrackBook:
         self._started += 1
         self.status[s], self.hits[s], self.expected[s], self.misses[s] = TENTATIVE_CODE, 1, 1, 0
         self.born_s[s] = self.last_s[s] = time_s
-        self.hit_s[s] = self.judged_s[s] = self.due_s[s] = -np.inf
+        self.hit_s[s] = self.judged_s[s] = -np.inf
         self.hit_s[s, radar] = time_s
         self.plots[s] = 0
         self.plots[s, radar] = 1
@@ -155,7 +151,6 @@ class TrackBook:
         self.misses[slots] = 0
         self.last_s[slots] = time_s
         self.hit_s[slots, radar] = time_s
-        self.due_s[slots] = -np.inf
         self.plots[slots, radar] += 1
 
     def miss(self, slots: NDArray[np.intp]) -> None:
