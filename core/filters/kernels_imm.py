@@ -567,21 +567,23 @@ def gate_nis_imm_2d(
     x, P = np.empty(4), np.empty((4, 4))
     for i in range(slot.shape[0]):
         k = slot[i]
+        co = coefficients(code, sigma_beta_rad[i] * sigma_beta_rad[i], sigma_r_m[i] * sigma_r_m[i])
         out[i] = pair_nis_2d(
             xs[k, j], Ps[k, j], mus[k, j], dt[i], sigma_a_mps2, omega, Pi, code, r_m[i], az_rad[i],
-            sigma_r_m[i], sigma_beta_rad[i], site[i, 0], site[i, 1], x0, P0, mu, c, w, x, P,
+            sigma_r_m[i], sigma_beta_rad[i], site[i, 0], site[i, 1], co, x0, P0, mu, c, w, x, P,
         )  # fmt: skip
 
 
 @_inline
 def pair_nis_2d(xm, Pm, mu_k, dt, sigma_a_mps2, omega, Pi, code, r, b, sigma_r_m, sigma_beta_rad,
-                sx, sy, x0, P0, mu, c, w, x, P):  # fmt: skip
+                sx, sy, co, x0, P0, mu, c, w, x, P):  # fmt: skip
     """d² of one (track, plot) pair in 2D: the track's models xm, Pm, μ mu_k predicted over
-    dt (``combined_prediction``) against the plot (r, b) with noise std sigma_r_m, sigma_beta_rad at
-    site (sx, sy), by method ``code``'s position measurement and its NIS (NaN where S is not
-    positive definite); x0 … P scratch as ``combined_prediction``'s."""
+    dt (``combined_prediction``) against the plot (r, b) with noise std sigma_r_m,
+    sigma_beta_rad at site (sx, sy) and the conversion's coefficients co (``coefficients``
+    of the noise: the same for every plot of a radar, so a caller forms them once), by method
+    ``code``'s position measurement and its NIS (NaN where S is not positive definite);
+    x0 … P scratch as ``combined_prediction``'s."""
     combined_prediction(xm, Pm, mu_k, dt, sigma_a_mps2, omega, Pi, x0, P0, mu, c, w, x, P)
     sr2, s = sigma_r_m * sigma_r_m, sigma_beta_rad * sigma_beta_rad
-    co = coefficients(code, s, sr2)
     meas = position_measurement(code, x, r, b, sr2, s, sx, sy, co)
     return position_nis(P, *meas)

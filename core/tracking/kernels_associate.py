@@ -29,7 +29,7 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
-from radarviz.core.filters.kernels_2d import _inline, _jit
+from radarviz.core.filters.kernels_2d import _inline, _jit, coefficients
 from radarviz.core.filters.kernels_imm import pair_nis_2d, track_plots_imm_2d
 from radarviz.core.tracking.kernels_gate import (
     BOX_FROM_S,
@@ -514,6 +514,11 @@ def associate_2d(pl, beams, radar_site, book, gf, rules, live, counters, since, 
         gf.codes[0], pl.range_m, pl.azimuth_rad, pl.sigma_r_m[g], pl.sigma_beta_rad[g],
         pl.site[g], points, r_ii,
     )  # fmt: skip
+    # The gating conversion's coefficients of each noise row (``pair_nis_2d``), once.
+    co = np.empty((pl.sigma_r_m.shape[0], 8))
+    for t in range(co.shape[0]):
+        sr, sb = pl.sigma_r_m[t], pl.sigma_beta_rad[t]
+        co[t] = coefficients(gf.codes[0], sb * sb, sr * sr)
     r = gf.sigma_a_mps2.shape[0]
     x0, P0 = np.empty((r, 4)), np.empty((r, 4, 4))
     mu, cc, w = np.empty(r), np.empty(r), np.empty((r, r))
@@ -521,8 +526,8 @@ def associate_2d(pl, beams, radar_site, book, gf, rules, live, counters, since, 
     for b in range(n_batches):
         lo, hi = pl.batch_start[b], pl.batch_start[b + 1]
         bad = _batch(pl, beams, radar_site, book, gf, rules, live, counters, since, owner,
-                     status_out, events, b, lo, hi, points, r_ii, nx, x0, P0, mu, cc, w, xp,
-                     Pp)  # fmt: skip
+                     status_out, events, b, lo, hi, points, r_ii, co, nx, x0, P0, mu, cc, w,
+                     xp, Pp)  # fmt: skip
         if bad >= 0:
             return bad
     return -1
@@ -533,7 +538,7 @@ def associate_2d(pl, beams, radar_site, book, gf, rules, live, counters, since, 
 # targets (docs/performance.md, section 5).
 @_inline
 def _batch(pl, beams, radar_site, book, gf, rules, live, counters, since, owner, status_out,
-           events, b, lo, hi, points, r_ii, nx, x0, P0, mu, cc, w, xp, Pp):  # fmt: skip
+           events, b, lo, hi, points, r_ii, co, nx, x0, P0, mu, cc, w, xp, Pp):  # fmt: skip
     """One batch, plots lo:hi (``GNNTracker._add`` and ``_manage``)."""
     n = hi - lo
     counters[C_BATCHES] += 1
@@ -601,7 +606,7 @@ def _batch(pl, beams, radar_site, book, gf, rules, live, counters, since, owner,
         d2 = np.empty(found)
         for e in range(found):
             s, j = slots[rows[e]], cols_pl[cols[e]]
-            d2[e] = _gate_d2(pl, gf, s, j, x0, P0, mu, cc, w, xp, Pp)
+            d2[e] = _gate_d2(pl, gf, s, j, co, x0, P0, mu, cc, w, xp, Pp)
             if code == TENTATIVE_CODE and book.hits[s] == 1 and _too_fast(pl, book, rules, s, j):
                 d2[e] = np.inf
         out_r, out_c = np.empty(found, np.int64), np.empty(found, np.int64)
@@ -787,15 +792,15 @@ def _coast_s(beams, rules, n_radars) -> float:
 
 
 @_jit
-def _gate_d2(pl, gf, s, j, x0, P0, mu, cc, w, xp, Pp) -> float:
+def _gate_d2(pl, gf, s, j, co, x0, P0, mu, cc, w, xp, Pp) -> float:
     """d² of plot j against slot s's gating track predicted to the plot's time
-    (``core.filters.kernels_imm.pair_nis_2d``, the statistic of ``gate_nis_imm_2d``); ∞ for
-    a NaN."""
+    (``core.filters.kernels_imm.pair_nis_2d``, the statistic of ``gate_nis_imm_2d``; co
+    (T, 8) the conversion's coefficients of each noise row); ∞ for a NaN."""
     g = pl.noise[j]
     d2 = pair_nis_2d(
         gf.xs[s, 0], gf.Ps[s, 0], gf.mus[s, 0], pl.time_s[j] - gf.last_t[s], gf.sigma_a_mps2,
         gf.omega, gf.Pi, gf.codes[0], pl.range_m[j], pl.azimuth_rad[j], pl.sigma_r_m[g],
-        pl.sigma_beta_rad[g], pl.site[g, 0], pl.site[g, 1], x0, P0, mu, cc, w, xp, Pp,
+        pl.sigma_beta_rad[g], pl.site[g, 0], pl.site[g, 1], co[g], x0, P0, mu, cc, w, xp, Pp,
     )  # fmt: skip
     return d2 if math.isfinite(d2) else np.inf
 
