@@ -678,7 +678,7 @@ def _batch(pl, beams, radar_site, book, gf, rules, live, counters, since, owner,
             book.sigma_m[s] = math.sqrt(max(out_P[j, 0, 0, 0], out_P[j, 0, 2, 2]))
             book.sigma_v[s] = math.sqrt(max(out_P[j, 0, 1, 1], out_P[j, 0, 3, 3]))
     # The sweep's misses, then confirmation and deletion, on the tracks they touch.
-    due = live.due_s[g] if g >= 0 else live.due_s[0]
+    due = live.due_s[max(g, 0)]  # (a batch without plots judges nothing by its bounds)
     judged = _swept(pl, beams, radar_site, book, rules, g, times, before, pl.whole_scan[b], due)
     touched = np.empty(judged.shape[0] + n, np.int64)
     nt = 0
@@ -879,6 +879,8 @@ def _swept(pl, beams, radar_site, book, rules, g, times, slots, whole_scan, due)
             f[B_MODEL_S], f[B_MODEL_AZ], f[B_MODEL_PERIOD] = end, f[B_LAST_AZ], period
             f[B_MODEL_DIR] = direction
             model_az = f[B_MODEL_AZ]
+    # A slot judged or hit within half a period is not judged before then.
+    half_low = (1.0 - rules.period_drift) * f[B_MODEL_PERIOD] / 2
     for q in range(slots.shape[0]):
         s = slots[q]
         if (skip and end < due[q]) or s < 0:  # not yet, or a hole
@@ -886,8 +888,7 @@ def _swept(pl, beams, radar_site, book, rules, g, times, slots, whole_scan, due)
         if known and not whole:
             # Judged or hit by this radar within half a period of the end: not this sweep's.
             if not (book.judged_s[s, g] + half < end and book.hit_s[s, g] <= end - half):
-                low = (1.0 - rules.period_drift) * f[B_MODEL_PERIOD] / 2
-                due[q] = max(book.judged_s[s, g], book.hit_s[s, g]) + low
+                due[q] = max(book.judged_s[s, g], book.hit_s[s, g]) + half_low
                 continue
         ahead = end - book.last_s[s]
         px = book.x[s, 0] + book.x[s, 1] * ahead
@@ -896,8 +897,7 @@ def _swept(pl, beams, radar_site, book, rules, g, times, slots, whole_scan, due)
         sigma = math.sqrt(book.sigma_m[s] * book.sigma_m[s] + sv * sv)
         rx, ry = px - radar_site[g, 0], py - radar_site[g, 1]
         rng = math.sqrt(rx * rx + ry * ry)
-        margin = min(max(3.0 * sigma / max(rng, 1.0), rules.min_margin_rad),
-                     rules.max_margin_rad)  # fmt: skip
+        margin = _margin(sigma, max(rng, 1.0), rules)
         if not whole:
             due[q] = end + _due(
                 rx, ry, rng, book.x[s, 1], book.x[s, 3], sigma, book.sigma_m[s],
@@ -930,6 +930,13 @@ def _swept(pl, beams, radar_site, book, rules, g, times, slots, whole_scan, due)
     return out[:k]
 
 
+@_inline
+def _margin(sigma, rng, rules) -> float:
+    """A track's azimuth margin (``core.tracking.coverage``): 3σ of its position over its
+    range, within [``min_margin_rad``, ``max_margin_rad``]."""
+    return min(max(3.0 * sigma / rng, rules.min_margin_rad), rules.max_margin_rad)
+
+
 @_jit
 def _due(rx, ry, rng, vx, vy, sigma, sigma_m, sigma_v, ahead, model_az, direction, model_period,
          rules) -> float:  # fmt: skip
@@ -957,9 +964,7 @@ def _due(rx, ry, rng, vx, vy, sigma, sigma_m, sigma_v, ahead, model_az, directio
         return 0.0
     sv = sigma_v * (ahead + horizon)
     sigma_hi = math.sqrt(sigma_m * sigma_m + sv * sv)
-    lo = min(max(3.0 * sigma / (rng + speed * horizon), rules.min_margin_rad),
-             rules.max_margin_rad)  # fmt: skip
-    hi = min(max(3.0 * sigma_hi / least, rules.min_margin_rad), rules.max_margin_rad)
+    lo, hi = _margin(sigma, rng + speed * horizon, rules), _margin(sigma_hi, least, rules)
     a = speed / least + omega * rules.period_drift
     u = (direction * (model_az - math.atan2(ry, rx))) % TWO_PI
     closing = omega + a

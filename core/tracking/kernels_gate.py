@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from radarviz.core.filters.kernels_2d import _jit, coefficients, convert
+from radarviz.core.filters.kernels_2d import _inline, _jit, coefficients, convert
 
 
 @_jit
@@ -113,6 +113,18 @@ def track_box(x, P, last_s, s, t_from, t_until, q_max, omega_max, scale, boxes, 
     boxes[BOX_FROM_S, q], boxes[BOX_UNTIL_S, q] = t_from, t_until
 
 
+@_inline
+def _far(boxes, q, lo_x, hi_x, lo_y, hi_y) -> bool:
+    """Box column q misses [lo_x, hi_x] × [lo_y, hi_y] (a NaN box does not: one condition
+    without a branch per bound, the four taken at random)."""
+    return (
+        (boxes[BOX_X_HI, q] < lo_x)
+        | (boxes[BOX_X_LO, q] > hi_x)
+        | (boxes[BOX_Y_HI, q] < lo_y)
+        | (boxes[BOX_Y_LO, q] > hi_y)
+    )
+
+
 @_jit
 def boxes_near(slots, x, P, last_s, t_lo, t_hi, q_max, omega_max, points, r_ii, scale,
                boxes, out):  # fmt: skip
@@ -137,12 +149,11 @@ def boxes_near(slots, x, P, last_s, t_lo, t_hi, q_max, omega_max, points, r_ii, 
         lo_y, hi_y = min(lo_y, points[j, 1] - ey), max(hi_y, points[j, 1] + ey)
     until = max(t_lo + BOX_HORIZON_S, t_hi)
     n = slots.shape[0]
-    bx_lo, bx_hi, by_lo, by_hi = boxes[BOX_X_LO], boxes[BOX_X_HI], boxes[BOX_Y_LO], boxes[BOX_Y_HI]
     b_from, b_until = boxes[BOX_FROM_S], boxes[BOX_UNTIL_S]
     flag = np.empty(n, np.bool_)
     for q in range(n):
         held = (b_from[q] <= t_lo) & (t_hi <= b_until[q])  # NaN times: not held
-        far = (bx_hi[q] < lo_x) | (bx_lo[q] > hi_x) | (by_hi[q] < lo_y) | (by_lo[q] > hi_y)
+        far = _far(boxes, q, lo_x, hi_x, lo_y, hi_y)
         flag[q] = not (held and far)
     kept = 0
     for q in range(n):
@@ -150,8 +161,7 @@ def boxes_near(slots, x, P, last_s, t_lo, t_hi, q_max, omega_max, points, r_ii, 
             continue
         if not (b_from[q] <= t_lo and t_hi <= b_until[q]):
             track_box(x, P, last_s, slots[q], t_lo, until, q_max, omega_max, scale, boxes, q)
-            far = (bx_hi[q] < lo_x) | (bx_lo[q] > hi_x) | (by_hi[q] < lo_y) | (by_lo[q] > hi_y)
-            if far:
+            if _far(boxes, q, lo_x, hi_x, lo_y, hi_y):
                 continue
         out[kept] = slots[q]
         kept += 1
