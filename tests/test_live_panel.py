@@ -159,7 +159,7 @@ def test_a_panel_change_applies_from_the_next_run_and_keeps_the_tracks(server: A
     rules = tracker._compiled.rules
     assert (rules.gate, rules.scale) == (tracker.gate, tracker.gate * PREFILTER_MARGIN)
     assert (rules.confirm_m, rules.confirm_n, rules.delete_misses) == (2, 3, 7)
-    assert tracker._compiled._model[2].tolist() == [0.5, 4.0, 4.0, 40.0]
+    assert tracker._compiled.tracks.imm_sigma_a_mps2.tolist() == [0.5, 4.0, 4.0, 40.0]
     assert rules.q_max == pytest.approx(40.0**2)
     # The bad value changed nothing, and said so.
     assert control.settings.gate_probability == 0.99 and "gate_probability" in control.error

@@ -640,15 +640,22 @@ class GNNTracker:
         self.model = options.model
         self._omega_max = math.radians(max((abs(float(w)) for w in rates), default=0.0))
         self.association = a = association
-        # The gate reads predictions and deletes tracks (TargetTracker.predicted, forget) on
-        # either engine: the compiled one (the default) runs the kernels' own prediction,
-        # ``engine="numpy"`` the reference.
-        self.tracker = TargetTracker(self.methods, three_d, options)
         dims = 3 if three_d else 2
         self.dims = dims
+        compiled = eligible(options, three_d, boxed(a.method), dense)
+        # The gate reads predictions and deletes tracks (TargetTracker.predicted, forget) on
+        # either engine: the compiled one (the default) runs the kernels' own prediction,
+        # ``engine="numpy"`` the reference. On the compiled route the association filters
+        # every plot itself, once, in the tracker's rows: the gating method is one of the
+        # tracker's methods (after the requested ones, unreported, when not requested).
         if a.method in self.methods:
-            gate_tracker = self.tracker
+            self.tracker = gate_tracker = TargetTracker(self.methods, three_d, options)
+        elif compiled:
+            self.tracker = gate_tracker = TargetTracker(
+                (*self.methods, a.method), three_d, options, reported=len(self.methods)
+            )
         else:
+            self.tracker = TargetTracker(self.methods, three_d, options)
             gate_tracker = TargetTracker((a.method,), three_d, _without_monitor(options))
         self._gate = _Gate(a.method, gate_threshold(a.gate_probability, dims), gate_tracker)
         self.book = TrackBook(a.confirm_m, a.confirm_n, a.delete_misses, 2 * dims)
@@ -666,9 +673,11 @@ class GNNTracker:
         #: The compiled route (``core.tracking.association_compiled``), or None: the Python
         #: route of ``_add``.
         self._compiled: CompiledAssociation | None = None
-        if eligible(options, three_d, boxed(a.method), dense):
+        if compiled:
+            tracks = self.tracker.compiled
+            assert tracks is not None
             self._compiled = CompiledAssociation(
-                a.method, options, self.gate, self.gate * PREFILTER_MARGIN, self._q_max,
+                a.method, tracks, options, self.gate, self.gate * PREFILTER_MARGIN, self._q_max,
                 self._omega_max, a, self.book, self._table,
             )  # fmt: skip
 
@@ -721,7 +730,7 @@ class GNNTracker:
         book.kdel = association.delete_misses
         if self._compiled is not None:
             scale = threshold * PREFILTER_MARGIN
-            self._compiled.retune(options, threshold, scale, q_max, association)
+            self._compiled.retune(threshold, scale, q_max, association)
 
     @property
     def gate(self) -> float:
@@ -1019,29 +1028,15 @@ class GNNTracker:
             raise exc
         self.batches += len(batches)
         self._started = self.book._started
-        # The requested methods' tracks of the labelled plots, from the call's own arrays.
-        owner = res.ids
-        u, first, inv = np.unique(owner, return_index=True, return_inverse=True)
-        order = np.argsort(first)  # labels in order of their first plot
-        rank = np.empty_like(order)
-        rank[order] = np.arange(order.size)
-        labels = np.array([str(t) for t in u[order].tolist()], dtype=object)
-        target = rank[inv.reshape(-1)].astype(np.intp)
-        ids = labels[target].tolist()  # each plot's track id, one str per track
-        block = res.block._replace(target=target, labels=tuple(labels.tolist()))
-        try:
-            rows = StateRows(self.tracker.add_arrays(block), self.methods)
-            if self._gate.tracker is not self.tracker:
-                self._gate.tracker.add_arrays(block)
-        except PlotError as exc:
-            b = int(np.searchsorted(starts, exc.index, side="right")) - 1
-            exc.batch, exc.index = b, int(exc.index - starts[b])  # type: ignore[attr-defined]
-            raise
+        # Each plot's track id, one str per track; the requested methods' rows, filtered by
+        # the call itself.
+        u, inv = np.unique(res.ids, return_inverse=True)
+        ids = np.array([str(t) for t in u.tolist()], dtype=object)[inv.reshape(-1)].tolist()
+        assert res.tracks is not None
+        rows = StateRows(res.tracks, self.methods)
         deleted = [t for d in res.deleted for t in d]
         if deleted:
             self.tracker.forget(deleted)
-            if self._gate.tracker is not self.tracker:
-                self._gate.tracker.forget(deleted)
         status = _STATUS_NAMES[res.status].tolist()
         out = []
         bounds = starts.tolist()

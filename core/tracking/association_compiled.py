@@ -2,14 +2,18 @@
 (``core.tracking.kernels_associate.associate_2d``) many at a time.
 
 ``GNNTracker`` takes this route for the tracks the kernel has (``eligible``: 2D plots, the
-compiled engine, the IMM with the first-plot start and the line-of-sight Doppler update, a
-gating method that converts the plot alone, the sparse assignment); the Python route
+compiled engine (``StreamOptions.compiled``: no monitor that wants each update as a call),
+the IMM with the first-plot start and the line-of-sight Doppler update, a gating method
+that converts the plot alone, the sparse assignment); the Python route
 (``GNNTracker._add``) stays for the others and, on the numpy engine, is the reference the
 compiled route is checked against (``tests/test_association_kernel.py``: the same track of
 every plot). The kernel keeps the book's and the beams' arrays (``TrackBook``,
-``BeamTable``) and the gating method's own tracks; this class lays a call's plots out as
-arrays, keeps the gating tracks' arrays as large as the book, and brings the book's ids
-(``TrackBook.slot``, ``label``) up to date from the kernel's events.
+``BeamTable``) and every method's tracks, in the tracker's own arrays
+(``core.tracking.compiled.CompiledTracks``, a row per book slot): each plot is filtered once,
+by the association, and the gating method's update is the one the next batch gates with.
+This class lays a call's plots out as arrays, keeps the tracker's rows as many as the book's
+slots, and brings the book's ids (``TrackBook.slot``, ``label``) and the tracker's row names
+(``CompiledTracks.bind``) up to date from the kernel's events.
 """
 
 from __future__ import annotations
@@ -20,10 +24,7 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from radarviz.core.filters.compiled import METHOD_CODES, START_CODES
-from radarviz.core.filters.models import IMMModel
-from radarviz.core.filters.polar_ukf import UKFParams
-from radarviz.core.tracking.compiled import PlotBlock
+from radarviz.core.tracking.compiled import CompiledTracks, TrackBlock
 from radarviz.core.tracking.coverage import (
     EDGE_FRACTION,
     MAX_MARGIN_RAD,
@@ -45,7 +46,7 @@ def eligible(options: StreamOptions, three_d: bool, boxed_gate: bool, dense: boo
         not three_d
         and not dense
         and boxed_gate
-        and options.engine == "compiled"
+        and options.compiled(three_d)
         and options.model == "imm"
         and options.init == "first-plot"
         and options.doppler_update == "line_of_sight"
@@ -54,31 +55,37 @@ def eligible(options: StreamOptions, three_d: bool, boxed_gate: bool, dense: boo
 
 class CallResult:
     """What one call did, per batch: the plots' track ids and statuses (codes), and the ids
-    confirmed and deleted at each batch (``ScanResult``'s parts), and the call's plots as a
-    ``PlotBlock`` (of one target: the caller labels it with the ids)."""
+    confirmed and deleted at each batch (``ScanResult``'s parts); every method's posterior
+    after each plot (``tracks``: x (B, M, 4), P (B, M, 4, 4), each plot's row) and its NIS
+    (``nis`` (B, M)), and which plots started their tracks (``start`` (B,))."""
 
     def __init__(self, batches: int):
-        self.block: PlotBlock | None = None
         self.ids: NDArray[np.int64] = np.zeros(0, np.int64)
         self.status: NDArray[np.int8] = np.zeros(0, np.int8)
         self.confirmed: list[list[str]] = [[] for _ in range(batches)]
         self.deleted: list[list[str]] = [[] for _ in range(batches)]
+        self.tracks: TrackBlock | None = None
+        self.nis: NDArray[np.float64] = np.zeros((0, 0))
+        self.start: NDArray[np.bool_] = np.zeros(0, np.bool_)
 
 
 class CompiledAssociation:
-    """The gating tracks and the call of the compiled association (module docstring).
+    """The call of the compiled association (module docstring).
 
     Args:
-        method: the gating method; options: the filters' ``StreamOptions`` (the IMM, σv0,
-            Doppler); gate: γ; scale: γ times the prefilter's margin; q_max, omega_max: the
-            prefilter's bounds (``GNNTracker.near``); max_speed_mps, confirm_m, confirm_n,
-            delete_misses: ``AssociationOptions``; book: the tracker's ``TrackBook``;
-            beams: its ``BeamTable``.
+        method: the gating method; tracks: the tracker's ``CompiledTracks`` (the IMM, σv0,
+            the methods, the gating one among them), whose rows the kernel updates;
+            options: the filters' ``StreamOptions`` (the Doppler); gate: γ; scale: γ times
+            the prefilter's margin; q_max, omega_max: the prefilter's bounds
+            (``GNNTracker.near``); max_speed_mps, confirm_m, confirm_n, delete_misses:
+            ``AssociationOptions``; book: the tracker's ``TrackBook``; beams: its
+            ``BeamTable``.
     """
 
     def __init__(
         self,
         method: str,
+        tracks: CompiledTracks,
         options: StreamOptions,
         gate: float,
         scale: float,
@@ -92,26 +99,12 @@ class CompiledAssociation:
         from radarviz.core.tracking import kernels_gate
 
         self._k = ka
-        imm = options.motion()
-        assert isinstance(imm, IMMModel)
-        self.imm = imm
+        assert tracks.imm is not None and tracks.dims == 2
+        self.tracks = tracks
         self.use_doppler = options.use_doppler
         self.book, self.beams = book, beams
         self.method = method
-        self._model = (
-            np.array([METHOD_CODES[method]], np.int64),
-            np.array([START_CODES[method]], np.int64),
-            np.array(imm.sigma_a_mps2, dtype=np.float64),
-            imm.turn_rates_radps(),
-            imm.transition_matrix(),
-            imm.initial_probabilities(),
-            float(options.sigma_v0_mps),
-            np.array(UKFParams().weights(4), dtype=np.float64),
-        )
-        r = imm.models
-        self._xs, self._Ps = np.zeros((0, 1, r, 4)), np.zeros((0, 1, r, 4, 4))
-        self._mus = np.zeros((0, 1, r))
-        self._started, self._last_t = np.zeros(0, np.bool_), np.zeros(0)
+        self.gate_index = tracks.methods.index(method)
         a = association
         self.rules = ka.Rules(
             gate, scale, q_max, omega_max, float(a.max_speed_mps), int(a.confirm_m),  # type: ignore[attr-defined]
@@ -130,16 +123,10 @@ class CompiledAssociation:
         #: A lower bound of the live tracks' last plot times (the coasting pass's skip).
         self.since = np.full(1, -np.inf)
 
-    def retune(
-        self, options: StreamOptions, gate: float, scale: float, q_max: float, association: object
-    ) -> None:
-        """The IMM's σa per model, γ, the prefilter's scale and bound, the fastest target and
-        the M-of-N and deletion rules of ``GNNTracker.retune``, from the next call on."""
-        imm = options.motion()
-        assert isinstance(imm, IMMModel) and imm.models == self.imm.models
-        self.imm = imm
-        sigma_a_mps2 = np.array(imm.sigma_a_mps2, dtype=np.float64)
-        self._model = (*self._model[:2], sigma_a_mps2, *self._model[3:])
+    def retune(self, gate: float, scale: float, q_max: float, association: object) -> None:
+        """γ, the prefilter's scale and bound, the fastest target and the M-of-N and deletion
+        rules of ``GNNTracker.retune``, from the next call on (the IMM's σa per model is the
+        tracker's, ``CompiledTracks.retune``)."""
         a = association
         self.rules = self.rules._replace(
             gate=gate, scale=scale, q_max=q_max, max_speed_mps=float(a.max_speed_mps),  # type: ignore[attr-defined]
@@ -148,10 +135,11 @@ class CompiledAssociation:
         )  # fmt: skip
 
     def _fit(self, radars: int) -> None:
-        """The gating tracks' and the live tracks' arrays as large as the book's, with a
+        """The tracker's rows and the live tracks' arrays as many as the book's slots, with a
         sweep bound per radar."""
         cap = self.book.alive.shape[0]
-        have = self._started.shape[0]
+        self.tracks.reserve(cap)
+        have = self.live.pos.shape[0]
         if cap > have:
             grow = cap - have
 
@@ -161,8 +149,6 @@ class CompiledAssociation:
             def wider(a: NDArray, fill: float) -> NDArray:
                 return np.concatenate([a, np.full((a.shape[0], grow), fill)], axis=1)
 
-            self._xs, self._Ps, self._mus = more(self._xs), more(self._Ps), more(self._mus)
-            self._started, self._last_t = more(self._started, False), more(self._last_t)
             lv = self.live
             # New positions: no box drawn yet, no bound yet.
             self.live = lv._replace(
@@ -214,28 +200,45 @@ class CompiledAssociation:
             book.x, book.P, book.sigma_m, book.sigma_v, book.alive, book.rank, book.hit_s,
             book.judged_s, book.plots, book.folded, book.free,
         )  # fmt: skip
-        gf = ka.GateFilter(*self._model, self._xs, self._Ps, self._mus, self._started, self._last_t)
+        tk = self.tracks
+        imm = tk.imm
+        assert imm is not None
+        tr = ka.TrackArrays(
+            tk.codes, tk.start_codes, tk.imm_sigma_a_mps2, tk.turn_rates, tk.transition, tk.mu0,
+            tk.sigma_v0_mps, tk.prm, tk.xs, tk.Ps, tk.mus, tk.started, tk.last_t,
+            self.gate_index, tk.feed is not None,
+        )  # fmt: skip
         c = self.counters
         c[ka.C_FREE], c[ka.C_EVENTS] = book.free_top, 0
-        owner = np.zeros(n, np.int64)
-        status = np.zeros(n, np.int8)
+        owner, row = np.zeros(n, np.int64), np.zeros(n, np.int64)
+        status, start = np.zeros(n, np.int8), np.zeros(n, np.bool_)
         events = np.zeros((3 * n + c[ka.C_LIVE] + 1, 4), np.int64)
+        m = tk.xs.shape[1]
+        out_x, out_P, out_nis = np.empty((n, m, 4)), np.empty((n, m, 4, 4)), np.empty((n, m))
         bad = ka.associate_2d(
-            pl, self.beams.arrays, np.ascontiguousarray(sites[:, :2]), arrays, gf, self.rules,
-            self.live, c, self.since, owner, status, events,
+            pl, self.beams.arrays, np.ascontiguousarray(sites[:, :2]), arrays, tr, self.rules,
+            self.live, c, self.since, owner, status, row, start, events, out_x, out_P, out_nis,
         )  # fmt: skip
         book.free_top = int(c[ka.C_FREE])
         out = CallResult(len(batches))
-        out.ids, out.status, out.block = owner, status, block
+        out.ids, out.status = owner, status
+        out.tracks, out.nis, out.start = TrackBlock(out_x, out_P, row), out_nis, start
         label, slot = book.label, book.slot
         for b, kind, s, ident in events[: c[ka.C_EVENTS]].tolist():
             t = str(ident)
             if kind == ka.EV_START:
                 label[s], slot[t] = t, s
+                tk.bind(t, s)
                 book._started += 1
             elif kind == ka.EV_CONFIRM:
                 out.confirmed[b].append(t)
             else:
                 del slot[t]
                 out.deleted[b].append(t)
+        # The monitor's updates of the batches done (before a deleted track's row is released
+        # by ``GNNTracker``, so its last updates are its own).
+        done = n if bad < 0 else int(starts[np.searchsorted(starts, bad, side="right") - 1])
+        tk.feed_monitor(
+            row[:done], pl.time_s[:done], out_nis[:done], ~np.isnan(vr[:done]), start[:done]
+        )
         return out, int(bad)

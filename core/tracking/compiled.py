@@ -132,8 +132,12 @@ class CompiledTracks:
         monitor: ConsistencyMonitor | None = None,
         name: Callable[[str, str], str] | None = None,
         imm: IMMModel | None = None,
+        reported: int | None = None,
     ):
         self.methods = tuple(methods)
+        #: The leading methods the monitor sees (the rest are kept for a caller's own use:
+        #: the association's gating method when it is not a requested one).
+        self.reported = len(self.methods) if reported is None else int(reported)
         self.codes = np.array([METHOD_CODES[m] for m in methods], dtype=np.int64)
         self.start_codes = np.array([START_CODES[m] for m in methods], dtype=np.int64)
         self.sigma_a_mps2, self.sigma_v0_mps = float(sigma_a_mps2), float(sigma_v0_mps)
@@ -160,9 +164,11 @@ class CompiledTracks:
             self.mu0 = imm.initial_probabilities()
         self.started = np.zeros(0, dtype=np.bool_)
         self.last_t = np.zeros(0)
-        self.feed = None if monitor is None else MonitorFeed(monitor, len(methods))
+        self.feed = None if monitor is None else MonitorFeed(monitor, self.reported)
         self.name = name or (lambda target, method: method)
         self._track_names: list[str] = []
+        #: Rows numbered by the caller (``bind``) instead of by ``add``.
+        self._bound = False
 
     def retune(self, sigma_a_mps2: float, motion: object) -> None:
         """The cv model's σa, or (``motion`` an IMM of as many models) each model's σa, from
@@ -183,42 +189,63 @@ class CompiledTracks:
         return tuple(self.slots)
 
     def _names(self) -> list[str]:
-        """The monitor's name of every track t·M + j (extended as targets come)."""
-        have = len(self._track_names) // max(1, len(self.methods))
+        """The monitor's name of every reported track t·M + j (extended as targets come)."""
+        m = self.reported
+        have = len(self._track_names) // max(1, m)
         for t in self._labels[have:]:
-            self._track_names.extend(self.name(t, m) for m in self.methods)
+            self._track_names.extend(self.name(t, method) for method in self.methods[:m])
         return self._track_names
+
+    def _label_row(self, label: str, k: int) -> None:
+        """Row ``k`` holds ``label``'s tracks from now on (a freed row's monitor state went
+        to the monitor's records at ``forget``)."""
+        self.slots[label] = k
+        if k >= len(self._labels):
+            self._labels.extend([""] * (k + 1 - len(self._labels)))
+        self._labels[k] = label
+        m = self.reported
+        if len(self._track_names) > k * m:
+            self._track_names[k * m : (k + 1) * m] = [
+                self.name(label, method) for method in self.methods[:m]
+            ]
 
     def _slots(self, labels: tuple[str, ...]) -> NDArray[np.intp]:
         """Each label's slot, new targets added (the state arrays grow by doubling)."""
+        assert not self._bound, "rows numbered by the caller (bind)"
         slots = self.slots
         for t in labels:
             if t not in slots:
-                # A freed row's monitor state went to the monitor's records (``forget``).
-                if self._free:
-                    k = slots[t] = self._free.pop()
-                    self._labels[k] = t
-                    m = len(self.methods)
-                    if len(self._track_names) > k * m:
-                        self._track_names[k * m : (k + 1) * m] = [
-                            self.name(t, method) for method in self.methods
-                        ]
-                else:
-                    slots[t] = len(self._labels)
-                    self._labels.append(t)
+                self._label_row(t, self._free.pop() if self._free else len(self._labels))
         ids = np.array([slots[t] for t in labels], np.intp)
-        need = len(self._labels)
-        have = self.started.shape[0]
-        if need > have:
-            cap = max(need, 2 * have, 16)
-            grow = cap - have
-            self.xs = np.concatenate([self.xs, np.zeros((grow, *self.xs.shape[1:]))])
-            self.Ps = np.concatenate([self.Ps, np.zeros((grow, *self.Ps.shape[1:]))])
-            self.started = np.concatenate([self.started, np.zeros(grow, dtype=np.bool_)])
-            self.last_t = np.concatenate([self.last_t, np.zeros(grow)])
-            if self.feed is not None:
-                self.feed.grow(cap)
+        self.reserve(len(self._labels))
         return ids
+
+    def reserve(self, rows: int) -> None:
+        """Room for ``rows`` targets' tracks (the state arrays grow by doubling)."""
+        have = self.started.shape[0]
+        if rows <= have:
+            return
+        cap = max(rows, 2 * have, 16)
+        grow = cap - have
+
+        def more(a: NDArray[Any]) -> NDArray[Any]:
+            return np.concatenate([a, np.zeros((grow, *a.shape[1:]), a.dtype)])
+
+        self.xs, self.Ps, self.started, self.last_t = map(
+            more, (self.xs, self.Ps, self.started, self.last_t)
+        )
+        if self.imm is not None:
+            self.mus = more(self.mus)
+        if self.feed is not None:
+            self.feed.grow(cap)
+
+    def bind(self, label: str, row: int) -> None:
+        """``label``'s tracks are in row ``row`` (``reserve`` made it), numbered by the
+        caller: the compiled association (``core.tracking.association_compiled``) updates
+        the rows itself, by its book's slots, and names them here for ``predicted``,
+        ``forget`` and the monitor. A caller that binds never calls ``add``."""
+        self._bound = True
+        self._label_row(label, row)
 
     def add(self, block: PlotBlock) -> TrackBlock:
         """Filter a block in order; raises ``OutOfOrderError`` at a plot earlier than its
@@ -226,9 +253,6 @@ class CompiledTracks:
         and later ones not; in a block split between two threads the other half's later
         plots may be in the tracks' state too, which no caller reads after the error)."""
         slot = self._slots(block.labels)[block.target]
-        if self.imm is not None and self.mus.shape[0] < self.started.shape[0]:
-            grow = self.started.shape[0] - self.mus.shape[0]
-            self.mus = np.concatenate([self.mus, np.zeros((grow, *self.mus.shape[1:]))])
         n, m = block.size, len(self.methods)
         vr = block.radial_velocity_mps
         has_vr = np.zeros(n, dtype=np.bool_) if vr is None else ~np.isnan(vr)
@@ -280,18 +304,31 @@ class CompiledTracks:
             _, idx = np.unique(slot, return_index=True)
             first[idx] = True
             starts = new & first
-            self.feed.add(
-                slot[:done],
-                block.time_s[:done],
-                out_nis[:done],
-                self.dims + has_vr[:done].astype(np.int64),
-                ~starts[:done],
-                self._names(),
+            self.feed_monitor(
+                slot[:done], block.time_s[:done], out_nis[:done], has_vr[:done], starts[:done]
             )
         if bad >= 0:
             k = slot[bad]
             raise OutOfOrderError(int(bad), float(block.time_s[bad]), float(self.last_t[k]))
         return TrackBlock(out_x, out_P, slot)
+
+    def feed_monitor(
+        self,
+        slot: NDArray[np.intp],
+        time_s: NDArray[np.float64],
+        nis: NDArray[np.float64],
+        has_vr: NDArray[np.bool_],
+        start: NDArray[np.bool_],
+    ) -> None:
+        """The monitor's updates of B filtered plots: each plot's row slot (B,), time (B,),
+        every method's NIS (B, M) (the reported columns read), whether it had a Doppler
+        (B,) and whether it started its track (B,: no update). Nothing without a monitor."""
+        if self.feed is None:
+            return
+        self.feed.add(
+            slot, time_s, nis[:, : self.reported], self.dims + has_vr.astype(np.int64),
+            ~start, self._names(),
+        )  # fmt: skip
 
     def predicted(
         self, method: str, labels: list[str], time_s: float | NDArray[np.float64]
@@ -375,7 +412,8 @@ class CompiledTracks:
             rows.append(k)
         if self.feed is not None and rows:
             self.feed.release(rows)
-        self._free.extend(rows)
+        if not self._bound:  # a binding caller numbers (and reuses) the rows itself
+            self._free.extend(rows)
 
 
 @functools.cache

@@ -7,9 +7,11 @@ per batch the beam's estimates (``observe_beam``), the prefilter of every live t
 (``core.tracking.kernels_gate.near_pairs``), each candidate predicted to its plot's own time
 and scored by the gating method's position NIS (``core.filters.kernels_imm``'s
 ``combined_prediction``, the tracker kernels' own steps), the speed gate of two-plot
-initiation, the optimal assignment (``sparse_assign``), the gating method's update of every
-plot's track (``core.filters.kernels_imm.track_plots_imm_2d``), hits and starts, the sweep's
-misses, M-of-N confirmation and deletion (``core.tracking.management``'s rules on its arrays).
+initiation, the optimal assignment (``sparse_assign``), hits and starts, every method's
+update of every plot's track (``core.filters.kernels_imm.track_plots_imm_2d``, on the
+tracker's own rows: each plot is filtered once, the gating method's update being the one the
+next batch gates with), the sweep's misses, M-of-N confirmation and deletion
+(``core.tracking.management``'s rules on its arrays).
 
 What each step computes is written, with its reasons, in ``core.tracking.association``,
 ``core.tracking.coverage`` and ``core.tracking.management``; the code below follows them step
@@ -391,12 +393,13 @@ class BookArrays(NamedTuple):
     free: NDArray[np.int64]
 
 
-class GateFilter(NamedTuple):
-    """The gating method's IMM tracks, one per book slot, in the layout of
-    ``core.tracking.compiled.CompiledTracks`` with one method: xs (K, 1, r, 4),
-    Ps (K, 1, r, 4, 4), mus (K, 1, r), started (K,), last_t (K,); and its model: codes,
-    start_codes (1,) the method's, sigma_a_mps2, omega (r,), Pi (r, r), mu0 (r,),
-    sigma_v0_mps (σv0, m/s), prm (the UKF's weights)."""
+class TrackArrays(NamedTuple):
+    """Every method's IMM tracks, one row per book slot: the arrays of the tracker's
+    ``core.tracking.compiled.CompiledTracks`` (its rows bound to the book's slots), M methods:
+    xs (K, M, r, 4), Ps (K, M, r, 4, 4), mus (K, M, r), started (K,), last_t (K,); their
+    model: codes, start_codes (M,) the methods', sigma_a_mps2, omega (r,), Pi (r, r),
+    mu0 (r,), sigma_v0_mps (σv0, m/s), prm (the UKF's weights); gate, the gating method's
+    index among the M; with_stats, whether to compute the monitor's NIS."""
 
     codes: NDArray[np.int64]
     start_codes: NDArray[np.int64]
@@ -411,6 +414,8 @@ class GateFilter(NamedTuple):
     mus: NDArray[np.float64]
     started: NDArray[np.bool_]
     last_t: NDArray[np.float64]
+    gate: int
+    with_stats: bool
 
 
 class PlotArrays(NamedTuple):
@@ -493,17 +498,21 @@ TENTATIVE_CODE, CONFIRMED_CODE = 0, 1
 
 
 @_jit
-def associate_2d(pl, beams, radar_site, book, gf, rules, live, counters, since, owner,
-                 status_out, events):  # fmt: skip
+def associate_2d(pl, beams, radar_site, book, tr, rules, live, counters, since, owner,
+                 status_out, row_out, start_out, events, out_x, out_P, out_nis):  # fmt: skip
     """Associate every batch of ``pl`` (``PlotArrays``) in order (module docstring): the
     beams (``BeamArrays``, R rows), the radars' sites (R, 2), the book (``BookArrays``),
-    the gating tracks (``GateFilter``) and the live tracks (``LiveArrays``, their number in
+    the tracks (``TrackArrays``) and the live tracks (``LiveArrays``, their number in
     counters) changed in place; since (1,) a lower bound of their last plot
-    times. Writes per plot the id of its track (owner (B,))
-    and that track's status after its batch (status_out (B,)), and the events in order
-    (events (E, 4): batch, kind, slot, id). Returns −1, or the index of a plot earlier than
-    its track's previous one (nothing from its batch on is done). The book must have a free
-    slot per plot (``C_FREE`` ≥ B)."""
+    times. Writes per plot the id of its track (owner (B,)), that track's status after its
+    batch (status_out (B,)), its slot (row_out (B,)), whether it started the track
+    (start_out (B,)) and every method's posterior and NIS after the plot (out_x
+    (B, M, 4), out_P (B, M, 4, 4), out_nis (B, M), ``track_plots_imm_2d``'s), and the events
+    in order (events (E, 4): batch, kind, slot, id). Returns −1, or the index of a plot
+    earlier than its track's previous one (nothing from its batch on is done). The book
+    must have a free slot per plot (``C_FREE`` ≥ B); a slot freed by a deletion is reused
+    from the next call on, so that a row holds one track's plots within a call (the caller
+    names the rows and feeds the monitor once a call)."""
     n_plots = pl.time_s.shape[0]
     n_batches = pl.whole_scan.shape[0]
     nx = book.x.shape[1]
@@ -511,34 +520,43 @@ def associate_2d(pl, beams, radar_site, book, gf, rules, live, counters, since, 
     points, r_ii = np.empty((n_plots, 2)), np.empty((n_plots, 2))
     g = pl.noise
     plot_points_2d(
-        gf.codes[0], pl.range_m, pl.azimuth_rad, pl.sigma_r_m[g], pl.sigma_beta_rad[g],
+        tr.codes[tr.gate], pl.range_m, pl.azimuth_rad, pl.sigma_r_m[g], pl.sigma_beta_rad[g],
         pl.site[g], points, r_ii,
     )  # fmt: skip
     # The gating conversion's coefficients of each noise row (``pair_nis_2d``), once.
     co = np.empty((pl.sigma_r_m.shape[0], 8))
     for t in range(co.shape[0]):
         sr, sb = pl.sigma_r_m[t], pl.sigma_beta_rad[t]
-        co[t] = coefficients(gf.codes[0], sb * sb, sr * sr)
-    r = gf.sigma_a_mps2.shape[0]
+        co[t] = coefficients(tr.codes[tr.gate], sb * sb, sr * sr)
+    r = tr.sigma_a_mps2.shape[0]
     x0, P0 = np.empty((r, 4)), np.empty((r, 4, 4))
     mu, cc, w = np.empty(r), np.empty(r), np.empty((r, r))
     xp, Pp = np.empty(4), np.empty((4, 4))
+    # Slots freed in this call, handed to the free stack at its end (docstring).
+    freed = np.empty(book.alive.shape[0], np.int64)
+    n_freed = np.zeros(1, np.int64)
+    bad = -1
     for b in range(n_batches):
         lo, hi = pl.batch_start[b], pl.batch_start[b + 1]
-        bad = _batch(pl, beams, radar_site, book, gf, rules, live, counters, since, owner,
-                     status_out, events, b, lo, hi, points, r_ii, co, nx, x0, P0, mu, cc, w,
-                     xp, Pp)  # fmt: skip
+        bad = _batch(pl, beams, radar_site, book, tr, rules, live, counters, since, owner,
+                     status_out, row_out, start_out, events, out_x, out_P, out_nis, freed,
+                     n_freed, b, lo, hi, points, r_ii, co, nx, x0, P0, mu, cc, w, xp,
+                     Pp)  # fmt: skip
         if bad >= 0:
-            return bad
-    return -1
+            break
+    for e in range(n_freed[0]):
+        book.free[counters[C_FREE]] = freed[e]
+        counters[C_FREE] += 1
+    return bad
 
 
 # _batch is inlined into the batch loop: a call passes some sixty arrays, each costing a
 # reference count in and out, and inlined the whole association ran about 6% faster at 1000
 # targets (docs/performance.md, section 5).
 @_inline
-def _batch(pl, beams, radar_site, book, gf, rules, live, counters, since, owner, status_out,
-           events, b, lo, hi, points, r_ii, co, nx, x0, P0, mu, cc, w, xp, Pp):  # fmt: skip
+def _batch(pl, beams, radar_site, book, tr, rules, live, counters, since, owner, status_out,
+           row_out, start_out, events, out_x, out_P, out_nis, freed, n_freed, b, lo, hi, points,
+           r_ii, co, nx, x0, P0, mu, cc, w, xp, Pp):  # fmt: skip
     """One batch, plots lo:hi (``GNNTracker._add`` and ``_manage``)."""
     n = hi - lo
     counters[C_BATCHES] += 1
@@ -606,7 +624,7 @@ def _batch(pl, beams, radar_site, book, gf, rules, live, counters, since, owner,
         d2 = np.empty(found)
         for e in range(found):
             s, j = slots[rows[e]], cols_pl[cols[e]]
-            d2[e] = _gate_d2(pl, gf, s, j, co, x0, P0, mu, cc, w, xp, Pp)
+            d2[e] = _gate_d2(pl, tr, s, j, co, x0, P0, mu, cc, w, xp, Pp)
             if code == TENTATIVE_CODE and book.hits[s] == 1 and _too_fast(pl, book, rules, s, j):
                 d2[e] = np.inf
         out_r, out_c = np.empty(found, np.int64), np.empty(found, np.int64)
@@ -641,6 +659,7 @@ def _batch(pl, beams, radar_site, book, gf, rules, live, counters, since, owner,
         counters[C_STARTED] += 1
         ident = counters[C_STARTED]
         own[j] = s
+        start_out[lo + j] = True
         book.alive[s], book.rank[s] = True, ident - 1
         book.status[s] = CONFIRMED_CODE if rules.confirm_m <= 1 else TENTATIVE_CODE
         book.hits[s], book.expected[s], book.misses[s] = 1, 1, 0
@@ -650,7 +669,7 @@ def _batch(pl, beams, radar_site, book, gf, rules, live, counters, since, owner,
         book.hit_s[s, g] = times[j]
         book.plots[s, :] = 0
         book.plots[s, g] = 1
-        gf.started[s] = False  # a reused slot's old track is gone
+        tr.started[s] = False  # a reused slot's old track is gone
         q = counters[C_LIVE]
         live.slot[q], live.pos[s] = s, q
         live.boxes[BOX_UNTIL_S, q] = -np.inf
@@ -659,24 +678,26 @@ def _batch(pl, beams, radar_site, book, gf, rules, live, counters, since, owner,
         _event(events, counters, b, EV_START, s, ident)
     for j in range(n):  # the track ids: "1", "2", … in order of initiation
         owner[lo + j] = book.rank[own[j]] + 1
-    # The gating method's update of every plot's track, in plot order.
+        row_out[lo + j] = own[j]
+    # Every method's update of every plot's track, in plot order.
     if n:
-        out_x, out_P, out_nis = np.empty((n, 1, 4)), np.empty((n, 1, 4, 4)), np.empty((n, 1))
         vr = pl.radial_velocity_mps[lo:hi]
         bad = track_plots_imm_2d(
-            gf.codes, gf.start_codes, own, times, pl.range_m[lo:hi], pl.azimuth_rad[lo:hi],
+            tr.codes, tr.start_codes, own, times, pl.range_m[lo:hi], pl.azimuth_rad[lo:hi],
             vr, ~np.isnan(vr), pl.noise[lo:hi], pl.site, pl.sigma_r_m, pl.sigma_beta_rad,
-            pl.sigma_vr_mps, gf.sigma_a_mps2, gf.omega, gf.Pi, gf.mu0, gf.sigma_v0_mps, gf.prm,
-            False, gf.xs, gf.Ps, gf.mus, gf.started, gf.last_t, out_x, out_P, out_nis,
+            pl.sigma_vr_mps, tr.sigma_a_mps2, tr.omega, tr.Pi, tr.mu0, tr.sigma_v0_mps, tr.prm,
+            tr.with_stats, tr.xs, tr.Ps, tr.mus, tr.started, tr.last_t, out_x[lo:hi],
+            out_P[lo:hi], out_nis[lo:hi],
         )  # fmt: skip
         if bad >= 0:
             return lo + bad
-        for j in range(n):  # each track's latest state, for its sweeps
-            s = own[j]
-            book.x[s] = out_x[j, 0, :nx]
-            book.P[s] = out_P[j, 0, :nx, :nx]
-            book.sigma_m[s] = math.sqrt(max(out_P[j, 0, 0, 0], out_P[j, 0, 2, 2]))
-            book.sigma_v[s] = math.sqrt(max(out_P[j, 0, 1, 1], out_P[j, 0, 3, 3]))
+        a = tr.gate
+        for j in range(n):  # each track's latest state by the gating method, for its sweeps
+            s, i = own[j], lo + j
+            book.x[s] = out_x[i, a, :nx]
+            book.P[s] = out_P[i, a, :nx, :nx]
+            book.sigma_m[s] = math.sqrt(max(out_P[i, a, 0, 0], out_P[i, a, 2, 2]))
+            book.sigma_v[s] = math.sqrt(max(out_P[i, a, 1, 1], out_P[i, a, 3, 3]))
     # The sweep's misses, then confirmation and deletion, on the tracks they touch.
     due = live.due_s[max(g, 0)]  # (a batch without plots judges nothing by its bounds)
     judged = _swept(pl, beams, radar_site, book, rules, g, times, before, pl.whole_scan[b], due)
@@ -736,8 +757,8 @@ def _batch(pl, beams, radar_site, book, gf, rules, live, counters, since, owner,
             st = book.status[s]
             for a in range(book.folded.shape[0]):
                 book.folded[a, st] += book.plots[s, a]
-            book.free[counters[C_FREE]] = s
-            counters[C_FREE] += 1
+            freed[n_freed[0]] = s  # to the free stack at the call's end
+            n_freed[0] += 1
             _event(events, counters, b, EV_DELETE, s, book.rank[s] + 1)
             # Its position becomes a hole, closed up with the others once they are many.
             q = live.pos[s]
@@ -792,14 +813,14 @@ def _coast_s(beams, rules, n_radars) -> float:
 
 
 @_jit
-def _gate_d2(pl, gf, s, j, co, x0, P0, mu, cc, w, xp, Pp) -> float:
+def _gate_d2(pl, tr, s, j, co, x0, P0, mu, cc, w, xp, Pp) -> float:
     """d² of plot j against slot s's gating track predicted to the plot's time
     (``core.filters.kernels_imm.pair_nis_2d``, the statistic of ``gate_nis_imm_2d``; co
     (T, 8) the conversion's coefficients of each noise row); ∞ for a NaN."""
-    g = pl.noise[j]
+    g, a = pl.noise[j], tr.gate
     d2 = pair_nis_2d(
-        gf.xs[s, 0], gf.Ps[s, 0], gf.mus[s, 0], pl.time_s[j] - gf.last_t[s], gf.sigma_a_mps2,
-        gf.omega, gf.Pi, gf.codes[0], pl.range_m[j], pl.azimuth_rad[j], pl.sigma_r_m[g],
+        tr.xs[s, a], tr.Ps[s, a], tr.mus[s, a], pl.time_s[j] - tr.last_t[s], tr.sigma_a_mps2,
+        tr.omega, tr.Pi, tr.codes[a], pl.range_m[j], pl.azimuth_rad[j], pl.sigma_r_m[g],
         pl.sigma_beta_rad[g], pl.site[g, 0], pl.site[g, 1], co[g], x0, P0, mu, cc, w, xp, Pp,
     )  # fmt: skip
     return d2 if math.isfinite(d2) else np.inf

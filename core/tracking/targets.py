@@ -175,9 +175,18 @@ class TargetTracker:
         methods: from ``ALL_METHODS`` (2D) or ``METHODS_3D`` (3D).
         three_d: plots carry elevations (every plot must then have one).
         options: ``StreamOptions`` with the first-plot start and no finite-memory track.
+        reported: how many of ``methods`` (the leading ones) the monitor sees; the rest are
+            tracked for the caller's own use (the association's gating method when it is
+            not a requested one). None: all.
     """
 
-    def __init__(self, methods: tuple[str, ...], three_d: bool, options: StreamOptions):
+    def __init__(
+        self,
+        methods: tuple[str, ...],
+        three_d: bool,
+        options: StreamOptions,
+        reported: int | None = None,
+    ):
         check_methods(methods, three_d)
         if options.init != "first-plot":
             raise ParameterError(
@@ -192,6 +201,7 @@ class TargetTracker:
                 "finite_memory_k",
             )
         self.methods = tuple(methods)
+        self.reported = len(self.methods) if reported is None else int(reported)
         self.three_d = three_d
         self.options = options
         self.dims = 3 if three_d else 2
@@ -220,6 +230,7 @@ class TargetTracker:
                 options.monitor,
                 track_name,
                 imm=motion if isinstance(motion, IMMModel) else None,
+                reported=self.reported,
             )
 
     def retune(self, options: StreamOptions) -> None:
@@ -238,6 +249,11 @@ class TargetTracker:
         if self._compiled is not None:
             return self._compiled.targets
         return tuple(self._slot)
+
+    @property
+    def compiled(self) -> CompiledTracks | None:
+        """The tracks on the compiled engine (``CompiledTracks``), or None (numpy)."""
+        return self._compiled
 
     @property
     def engine(self) -> str:
@@ -366,13 +382,13 @@ class TargetTracker:
                 ids, start, plot, noise, site, doppler, dt_s, monitor is not None
             )
             results.append((as_6(state), stats))
-        for m in self.methods:
+        for j, m in enumerate(self.methods):
             b, row = self._where[m]
             (x6, P6), stats = results[b]
             converted = self._banks[b].axis == 1
             xs, Ps = (x6[row], P6[row]) if converted else (x6, P6)
             nis = None
-            if stats is not None and monitor is not None:
+            if stats is not None and monitor is not None and j < self.reported:
                 nis = stats.nis[row] if converted else stats.nis
             for i, x, P in zip(which, xs, Ps, strict=True):
                 out[i].append((m, x, P))
@@ -445,7 +461,8 @@ class TargetTracker:
                 self._free.append(self._slot.pop(t))
         monitor = self.options.monitor
         if monitor is not None and not getattr(monitor, "keep_deleted", True):
-            monitor.forget([track_name(t, m) for t in targets for m in self.methods])
+            reported = self.methods[: self.reported]
+            monitor.forget([track_name(t, m) for t in targets for m in reported])
 
 
 #: The methods whose position measurement converts the plot alone (``gate_distances``).
