@@ -106,20 +106,26 @@ def check_finite_figures(
 
 
 def check_finite_document(
-    where: str, doc: object, nonnegative: Sequence[str] | bool = (), path: str = ""
+    where: str,
+    doc: object,
+    nonnegative: Sequence[str] | bool = (),
+    path: str = "",
+    signed: Sequence[str] = (),
 ) -> None:
     """:func:`check_finite_result` on every number of a JSON-ready document (dicts, lists,
     numbers; strings, booleans and None are not results). A number under a key in
-    ``nonnegative`` (True: every number, e.g. a benchmark's times and ratios) must be >= 0.
+    ``nonnegative`` (True: every number, e.g. a benchmark's times and ratios), and not in
+    ``signed`` (a figure that may be below zero, such as a trend's slope), must be >= 0.
     The failing value is named by its path in the document ("baseline.sigma_mc_mps[1]"). For
     documents where nothing is undefined by construction."""
     if isinstance(doc, Mapping):
         for key, value in doc.items():
-            check_finite_document(where, value, nonnegative, f"{path}.{key}" if path else key)
+            at = f"{path}.{key}" if path else key
+            check_finite_document(where, value, nonnegative, at, signed)
     elif isinstance(doc, list | tuple):
         for i, value in enumerate(doc):
-            check_finite_document(where, value, nonnegative, f"{path}[{i}]")
+            check_finite_document(where, value, nonnegative, f"{path}[{i}]", signed)
     elif isinstance(doc, int | float) and not isinstance(doc, bool):
         key = path.split(".")[-1].split("[")[0]
         positive = nonnegative if isinstance(nonnegative, bool) else key in nonnegative
-        check_finite_result(where, path, doc, nonnegative=positive)
+        check_finite_result(where, path, doc, nonnegative=positive and key not in signed)

@@ -545,6 +545,23 @@ def test_check_finite_result_names_the_value_and_spares_undefined_ones() -> None
         check_finite_document("w", {"baseline": {"sigma_mc_mps": [1.0, math.nan], "warning": None}})
 
 
+def test_a_bench_document_may_carry_a_negative_memory_slope() -> None:
+    """A soak whose resident set shrinks after its warm-up has a negative slope: the bench's
+    check takes it (``SIGNED_FIGURES``), and still refuses a negative time or a NaN slope."""
+    from radarviz.viz_app.bench.live import SIGNED_FIGURES
+
+    doc = {"live": {"latency_ms": 30.0, "memory": {"slope_mib_per_h": -6.1, "flat": True}}}
+    check_finite_document("bench", doc, nonnegative=True, signed=SIGNED_FIGURES)
+    with pytest.raises(ResultError, match=r"live\.memory\.slope_mib_per_h is -6\.1"):
+        check_finite_document("bench", doc, nonnegative=True)
+    doc["live"]["latency_ms"] = -1.0
+    with pytest.raises(ResultError, match=r"live\.latency_ms is -1"):
+        check_finite_document("bench", doc, nonnegative=True, signed=SIGNED_FIGURES)
+    doc["live"]["latency_ms"], doc["live"]["memory"]["slope_mib_per_h"] = 30.0, math.nan
+    with pytest.raises(ResultError, match=r"slope_mib_per_h is NaN"):
+        check_finite_document("bench", doc, nonnegative=True, signed=SIGNED_FIGURES)
+
+
 def _spoil(result, method: str, key: str, scan: int, value: float):
     """Put ``value`` into ``result.metrics[method].key`` at ``scan`` (1-based), in place."""
     getattr(result.metrics[method], key)[scan - 1] = value

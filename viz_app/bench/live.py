@@ -78,6 +78,11 @@ def rss_mib(pid: int) -> float | None:
     return None
 
 
+#: The bench's figures that may be below zero (``check_finite_document``'s ``signed``): a
+#: soak's memory slope, negative when the resident set shrinks after its warm-up.
+SIGNED_FIGURES = ("slope_mib_per_h",)
+
+
 def memory_trend(
     times_s: list[float], rss: list[float], warmup_s: float, blocks: int = SOAK_BLOCKS
 ) -> dict[str, Any]:

@@ -573,6 +573,14 @@ def _cmd_reproduce_manoeuvre(args: argparse.Namespace) -> int:
     return 0
 
 
+def _check_bench(doc: dict[str, Any]) -> None:
+    """Every figure of a bench document finite, and >= 0 but for the signed ones (times,
+    rates and ratios; a memory slope may be negative)."""
+    from radarviz.viz_app.bench.live import SIGNED_FIGURES
+
+    check_finite_document("bench", doc, nonnegative=True, signed=SIGNED_FIGURES)
+
+
 def _cmd_bench(args: argparse.Namespace) -> int:
     for m in args.runs:
         check_int("--runs", m, low=100, high=10_000_000)
@@ -603,7 +611,7 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         from radarviz.viz_app.bench.asterix import bench_asterix, format_asterix
 
         doc = {"asterix": bench_asterix(args.asterix_plots, targets=args.asterix_targets)}
-        check_finite_document("bench", doc, nonnegative=True)
+        _check_bench(doc)
         print_report(doc, args.json, lambda d: format_asterix(d["asterix"]))
         return 0
     if args.only == "live":
@@ -612,7 +620,7 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         soak = args.live_soak_s is not None
         seconds = args.live_soak_s if soak else args.live_seconds
         doc = {"live": bench_live(args.live_rate, seconds, args.live_targets, soak=soak)}
-        check_finite_document("bench", doc, nonnegative=True)
+        _check_bench(doc)
         print_report(doc, args.json, lambda d: format_live(d["live"]))
         return 0
     if args.only == "tune":
@@ -620,14 +628,14 @@ def _cmd_bench(args: argparse.Namespace) -> int:
 
         check_int("--tune-changes", args.tune_changes, low=1, high=50)
         doc = {"tune": bench_tune_frames(args.tune_changes)}
-        check_finite_document("bench", doc, nonnegative=True)
+        _check_bench(doc)
         print_report(doc, args.json, lambda d: format_tune_frames(d["tune"]))
         return 0
     if args.only == "association":
         from radarviz.viz_app.bench.association import bench_association, format_association
 
         doc = {"association": bench_association(args.targets)}
-        check_finite_document("bench", doc, nonnegative=True)
+        _check_bench(doc)
         print_report(doc, args.json, lambda d: format_association(d["association"]))
         return 0
     check_int("--track-plots", args.track_plots, low=1000, high=10_000_000)
@@ -654,7 +662,7 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         track_plots=args.track_plots,
         live=(args.live_rate, args.live_seconds, args.live_targets),
     )
-    check_finite_document("bench", doc, nonnegative=True)  # times, rates and ratios
+    _check_bench(doc)
     print_report(doc, args.json, format_bench)
     if args.markdown is not None:
         from radarviz.viz_app.bench.markdown import bench_section, write_bench_section
