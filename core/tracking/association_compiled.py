@@ -55,9 +55,8 @@ def eligible(options: StreamOptions, three_d: bool, boxed_gate: bool, dense: boo
 
 class CallResult:
     """What one call did, per batch: the plots' track ids and statuses (codes), and the ids
-    confirmed and deleted at each batch (``ScanResult``'s parts); every method's posterior
-    after each plot (``tracks``: x (B, M, 4), P (B, M, 4, 4), each plot's row) and its NIS
-    (``nis`` (B, M)), and which plots started their tracks (``start`` (B,))."""
+    confirmed and deleted at each batch (``ScanResult``'s parts), and every method's
+    posterior after each plot (``tracks``: x (B, M, 4), P (B, M, 4, 4), each plot's row)."""
 
     def __init__(self, batches: int):
         self.ids: NDArray[np.int64] = np.zeros(0, np.int64)
@@ -65,8 +64,6 @@ class CallResult:
         self.confirmed: list[list[str]] = [[] for _ in range(batches)]
         self.deleted: list[list[str]] = [[] for _ in range(batches)]
         self.tracks: TrackBlock | None = None
-        self.nis: NDArray[np.float64] = np.zeros((0, 0))
-        self.start: NDArray[np.bool_] = np.zeros(0, np.bool_)
 
 
 class CompiledAssociation:
@@ -222,7 +219,7 @@ class CompiledAssociation:
         book.free_top = int(c[ka.C_FREE])
         out = CallResult(len(batches))
         out.ids, out.status = owner, status
-        out.tracks, out.nis, out.start = TrackBlock(out_x, out_P, row), out_nis, start
+        out.tracks = TrackBlock(out_x, out_P, row)
         label, slot = book.label, book.slot
         for b, kind, s, ident in events[: c[ka.C_EVENTS]].tolist():
             t = str(ident)
