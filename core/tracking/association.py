@@ -677,7 +677,7 @@ class GNNTracker:
             tracks = self.tracker.compiled
             assert tracks is not None
             self._compiled = CompiledAssociation(
-                a.method, tracks, options, self.gate, self.gate * PREFILTER_MARGIN, self._q_max,
+                a.method, tracks, self.gate, self.gate * PREFILTER_MARGIN, self._q_max,
                 self._omega_max, a, self.book, self._table,
             )  # fmt: skip
 

@@ -71,19 +71,17 @@ class CompiledAssociation:
 
     Args:
         method: the gating method; tracks: the tracker's ``CompiledTracks`` (the IMM, σv0,
-            the methods, the gating one among them), whose rows the kernel updates;
-            options: the filters' ``StreamOptions`` (the Doppler); gate: γ; scale: γ times
-            the prefilter's margin; q_max, omega_max: the prefilter's bounds
-            (``GNNTracker.near``); max_speed_mps, confirm_m, confirm_n, delete_misses:
-            ``AssociationOptions``; book: the tracker's ``TrackBook``; beams: its
-            ``BeamTable``.
+            the Doppler, the methods, the gating one among them), whose rows the kernel
+            updates; gate: γ; scale: γ times the prefilter's margin; q_max, omega_max: the
+            prefilter's bounds (``GNNTracker.near``); max_speed_mps, confirm_m, confirm_n,
+            delete_misses: ``AssociationOptions``; book: the tracker's ``TrackBook``; beams:
+            its ``BeamTable``.
     """
 
     def __init__(
         self,
         method: str,
         tracks: CompiledTracks,
-        options: StreamOptions,
         gate: float,
         scale: float,
         q_max: float,
@@ -98,9 +96,7 @@ class CompiledAssociation:
         self._k = ka
         assert tracks.imm is not None and tracks.dims == 2
         self.tracks = tracks
-        self.use_doppler = options.use_doppler
         self.book, self.beams = book, beams
-        self.method = method
         self.gate_index = tracks.methods.index(method)
         a = association
         self.rules = ka.Rules(
@@ -178,7 +174,7 @@ class CompiledAssociation:
         self.beams.grow(sites.shape[0], REVISITS_KEPT + longest + 1)
         block = plot_block(plots, one_target=True)
         vr = block.radial_velocity_mps
-        if vr is None or not self.use_doppler:
+        if vr is None or not self.tracks.use_doppler:
             vr = np.full(n, np.nan)
         rd = block.radars
         starts = np.zeros(len(batches) + 1, np.int64)
