@@ -241,6 +241,56 @@ def test_coalescer_waits_for_typing_to_settle() -> None:
     assert times[0] >= 300.0 and times[1] < 300.0, times
 
 
+def test_coalescer_prepares_at_once_and_sends_only_the_settled_item() -> None:
+    """With ``prepare``: each keystroke's value is prepared at once, the ones overtaken during
+    the pause go to ``discard`` (never to ``fn``, never reported), the whole value's own
+    preparation is what ``fn`` gets once the pause has passed; a preparation that fails is
+    reported only if its item comes due."""
+    prepared: list[str] = []
+    sent: list[str] = []
+    dropped: list[str] = []
+    errors: list[str] = []
+
+    def prepare(item: str) -> str:
+        if item == "0":
+            raise ValueError("sigma must be > 0")  # a half-typed value: must never show
+        prepared.append(item)
+        return f"built {item}"
+
+    w = Coalescer(
+        sent.append,
+        on_error=lambda item, exc: errors.append(f"{item}: {exc}"),
+        prepare=prepare,
+        discard=dropped.append,
+    )
+    try:
+        for partial in ("0", "0.", "0.3"):
+            w.submit(partial, settle_s=0.3)
+            time.sleep(0.1)
+        assert w.wait_idle(10)
+        w.submit("0")  # the bad value, settled: now it is reported
+        assert w.wait_idle(10)
+    finally:
+        w.stop()
+    assert sent == ["built 0.3"]
+    assert set(dropped) <= {"built 0."} and "0.3" in prepared
+    assert errors == ["0: sigma must be > 0"]
+
+
+def test_session_sends_a_run_only_when_committed() -> None:
+    """A prepared run holds its recording unsent; commit sends it and moves the scene the
+    viewer shows, discard drops it and leaves that scene as it was."""
+    s = TuneSession(None)
+    first = s.prepare(SMALL)
+    assert first.rec is not None and s.blueprint_scene is None
+    s.discard(first)
+    assert first.rec is None and s.blueprint_scene is None
+    report = s.run(replace(SMALL, scene="gorshkov"))
+    assert s.blueprint_scene == "gorshkov" and report.params.scene == "gorshkov"
+    with pytest.raises(ParameterError, match=r"^sigma_r_m "):
+        s.prepare({**SMALL.__dict__, "sigma_r_m": -5.0})
+
+
 def test_sigma_vr_or_c0_is_the_doppler_control() -> None:
     p = TuneParams.from_raw({"sigma_r_m": 250.0, "period_s": 10.0, "sigma_vr_mps": 25.0})
     assert p.c0 == pytest.approx(1.0) and p.sigma_vr_mps == pytest.approx(25.0)

@@ -347,8 +347,10 @@ class TunePage:
                 box = self.controls.get_by_role("slider").first.locator(SLIDER_BOX).first
             box.click()
             box.press("Control+a")
-            box.type(typed, delay=80)  # a quick typist: 80 ms between keys
-            t0 = time.time()
+            box.type(typed[:-1], delay=80)  # a quick typist: 80 ms between keys
+            self.page.wait_for_timeout(80)
+            t0 = time.time()  # the last keystroke (``type`` returns only after its delay)
+            box.press(typed[-1])
         return self._timed(scene, t0)
 
     def stop(self) -> None:

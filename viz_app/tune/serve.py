@@ -187,7 +187,13 @@ def cmd_tune(
             guard, port, wrap=lambda inner: serve_page(inner, page), verbose=False
         )
         session = TuneSession(grpc_uri(bind, grpc_port), echo=True)
-        worker = Coalescer(session.run, session.done, session.error)
+        worker = Coalescer(
+            session.commit,
+            session.done,
+            session.error,
+            prepare=session.prepare,
+            discard=session.discard,
+        )
         panel = TunePanel(server, session, worker)
         prepare_blueprints()  # no run (a first switch of scene included) builds one
         wait_port(bind, grpc_port, proc=proc)

@@ -5,6 +5,14 @@ switches to it; the last good run and the last error are kept, and listeners (th
 told after every run. Bad values (``ParameterError``) and results that are not finite
 (``ResultError``: a NaN, a negative NEES) become the error line; the last good run stays on
 screen.
+
+A run has two stages (the worker's ``prepare`` and ``fn``): :meth:`TuneSession.prepare`
+simulates and logs the whole run into a recording stream with no sink yet (the SDK keeps it
+in memory); :meth:`TuneSession.commit` connects that stream to the viewer's server, which
+then sends the run in one burst. Why: the viewer takes in what has arrived at the start of
+each of its frames (a few hundred ms each with software WebGL), so a run streamed while it is
+being logged is drawn in parts over several frames. :meth:`TuneSession.discard` drops a
+prepared run that a newer change overtook during the panel's settling pause.
 """
 
 from __future__ import annotations
@@ -181,6 +189,26 @@ def release_streams() -> None:
 
 
 @dataclass
+class PreparedRun:
+    """A run logged into ``rec`` (no sink yet: held in memory), not yet sent."""
+
+    recording_id: str
+    params: TuneParams
+    result: TuneResult
+    rec: rr.RecordingStream | None
+
+    def close(self) -> None:
+        """Disconnect the stream (what it has not sent is dropped), let it go and free its
+        native threads (:func:`release_streams` frees only streams no object holds)."""
+        rec, self.rec = self.rec, None
+        if rec is not None:
+            with contextlib.suppress(Exception):
+                rec.disconnect()
+            del rec
+            release_streams()
+
+
+@dataclass
 class RunReport:
     recording_id: str
     params: TuneParams
@@ -205,25 +233,45 @@ class TuneSession:
         self.listeners: list[Callable[[TuneSession], None]] = []
         self._lock = threading.Lock()
 
-    def run(self, raw: dict[str, Any]) -> RunReport:
+    def run(self, raw: dict[str, Any] | TuneParams) -> RunReport:
+        """Prepare and commit at once (no settling pause)."""
+        return self.commit(self.prepare(raw))
+
+    def prepare(self, raw: dict[str, Any] | TuneParams) -> PreparedRun:
+        """Check the values, simulate, and log the run into a stream with no sink yet (a
+        ``ParameterError`` or ``ResultError`` for bad values, nothing kept)."""
         params = raw if isinstance(raw, TuneParams) else TuneParams.from_raw(raw)
         rid = f"tune-{self.runs_done + 1}-{uuid.uuid4().hex[:8]}"
-        rec = rr.RecordingStream(APPLICATION_ID, recording_id=rid)
+        rec = rr.RecordingStream(APPLICATION_ID, recording_id=rid)  # held until connected
         try:
-            if self.grpc_uri is not None:
-                rec.connect_grpc(self.grpc_uri)
-            else:
-                rec.set_sinks()  # no sink: the data are dropped (tests, benchmarks)
+            # The blueprint goes with a run that changes scene from the one the viewer shows;
+            # ``blueprint_scene`` moves only when a run is sent (a discarded run sent none).
             switch = params.scene != self.blueprint_scene
             result = log_tuning_scene(rec, params, series=False, blueprint=switch)
+        except BaseException:
+            PreparedRun(rid, params, None, rec).close()  # type: ignore[arg-type]
+            raise
+        return PreparedRun(rid, params, result, rec)
+
+    def commit(self, run: PreparedRun) -> RunReport:
+        """Send a prepared run to the viewer's server (at once, in one burst) and close it."""
+        rec = run.rec
+        assert rec is not None, "a prepared run is sent once"
+        try:
+            if self.grpc_uri is not None:
+                rec.connect_grpc(self.grpc_uri)  # sends what the stream holds
+            else:
+                rec.set_sinks()  # no sink: the data are dropped (tests, benchmarks)
             rec.flush()
-            self.blueprint_scene = params.scene
+            self.blueprint_scene = run.params.scene
         finally:
-            with contextlib.suppress(Exception):
-                rec.disconnect()
             del rec
-            release_streams()
-        return RunReport(rid, params, result.figures, result)
+            run.close()
+        return RunReport(run.recording_id, run.params, run.result.figures, run.result)
+
+    def discard(self, run: PreparedRun) -> None:
+        """Drop a prepared run unsent (a newer change overtook it)."""
+        run.close()
 
     # Coalescer callbacks
     def done(self, raw: Any, report: RunReport, ms: float) -> None:

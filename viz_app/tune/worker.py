@@ -7,6 +7,12 @@ items arrive during a run, it runs once more with the newest only.
 A typed number arrives one keystroke at a time ("0.3" as 0, 0., 0.3): ``submit(item,
 settle_s=…)`` makes the worker wait until no newer item has come for ``settle_s`` seconds,
 so a half-typed value is never run.
+
+A run may come in two stages, ``prepare`` then ``fn``: the worker prepares the newest item at
+once (for the panel: simulate and log into a recording not yet sent) and runs ``fn`` on it
+(send it to the viewer) only once the settling pause has passed with no newer item; a
+prepared item overtaken by a newer one goes to ``discard`` instead and is never shown. So
+the pause hides the simulation's time instead of adding to it.
 """
 
 from __future__ import annotations
@@ -18,14 +24,23 @@ from collections.abc import Callable
 from typing import Any
 
 
+class _Failed:
+    """A ``prepare`` that raised: its exception, reported once the item is due."""
+
+    def __init__(self, exc: Exception) -> None:
+        self.exc = exc
+
+
 class Coalescer:
     """One worker thread that runs ``fn`` on the newest submitted item only.
 
     ``submit`` just stores the item (its submit time, and when it may run) under the lock and
-    notifies. The worker takes the newest item once its settling time has passed with no newer
-    one, runs ``fn`` outside the lock, then ``on_done(item, result, ms)`` with ``ms`` the time
+    notifies. The worker prepares the newest item at once (``prepare``, the identity by
+    default), waits until its settling time has passed with no newer one (a newer one: the
+    prepared item goes to ``discard`` and the newer one is prepared), runs ``fn`` on the
+    prepared item outside the lock, then ``on_done(item, result, ms)`` with ``ms`` the time
     from that item's submission to the end of the run (the settling pause included), or
-    ``on_error(item, exc)`` on any exception (the worker keeps going).
+    ``on_error(item, exc)`` on any exception of ``prepare`` or ``fn`` (the worker keeps going).
     """
 
     def __init__(
@@ -34,12 +49,17 @@ class Coalescer:
         on_done: Callable[[Any, Any, float], None] | None = None,
         on_error: Callable[[Any, BaseException], None] | None = None,
         name: str = "radarviz-tune-worker",
+        prepare: Callable[[Any], Any] | None = None,
+        discard: Callable[[Any], None] | None = None,
     ) -> None:
         self._fn = fn
+        self._prepare = prepare
+        self._discard = discard
         self._on_done = on_done
         self._on_error = on_error
         self._cond = threading.Condition()
         self._pending: tuple[Any, float, float] | None = None  # item, submitted, runs at
+        self._seq = 0  # numbers the submits: tells a prepared item from a newer one
         self._busy = False
         self._stopping = False
         self.submitted = 0
@@ -53,6 +73,7 @@ class Coalescer:
         now = time.perf_counter()
         with self._cond:
             self._pending = (item, now, now + max(settle_s, 0.0))
+            self._seq += 1
             self.submitted += 1
             self._cond.notify_all()
 
@@ -76,32 +97,64 @@ class Coalescer:
     def _loop(self) -> None:
         while True:
             with self._cond:
-                while True:
-                    self._cond.wait_for(lambda: self._pending is not None or self._stopping)
-                    if self._stopping:
-                        return
+                self._cond.wait_for(lambda: self._pending is not None or self._stopping)
+                if self._stopping:
+                    return
+                assert self._pending is not None
+                item, t0, _ = self._pending
+                seq = self._seq
+            prepared = self._prepared(item)
+            with self._cond:
+                while True:  # the settling pause: a newer submit moves the time on
+                    if self._stopping or self._seq != seq:
+                        break
                     assert self._pending is not None
                     wait = self._pending[2] - time.perf_counter()
                     if wait <= 0:
                         break
-                    self._cond.wait(wait)  # a newer submit moves the time on
-                item, t0, _ = self._pending
-                self._pending = None
-                self._busy = True
+                    self._cond.wait(wait)
+                current = self._seq == seq and not self._stopping
+                if current:
+                    self._pending = None
+                    self._busy = True
+            if not current:  # overtaken (or stopping): never shown
+                self._drop(prepared)
+                continue
+            self._finish(item, t0, prepared)
+
+    def _prepared(self, item: Any) -> Any:
+        if self._prepare is None:
+            return item
+        try:
+            return self._prepare(item)
+        except Exception as exc:  # reported once the item is due, never if it is overtaken
+            return _Failed(exc)
+
+    def _drop(self, prepared: Any) -> None:
+        if self._discard is None or isinstance(prepared, _Failed):
+            return
+        try:
+            self._discard(prepared)
+        except Exception as exc:
+            print(f"radarviz tune: discard failed: {exc}", file=sys.stderr, flush=True)
+
+    def _finish(self, item: Any, t0: float, prepared: Any) -> None:
+        try:
             try:
-                try:
-                    result = self._fn(item)
-                except Exception as exc:  # never let a bad run stop the worker
-                    if self._on_error is not None:
-                        self._on_error(item, exc)
-                else:
-                    if self._on_done is not None:
-                        self._on_done(item, result, (time.perf_counter() - t0) * 1e3)
-            except Exception as exc:  # a failing callback must not stop the worker either
-                print(f"radarviz tune: callback failed: {exc}", file=sys.stderr, flush=True)
-            finally:
-                with self._cond:
-                    self._busy = False
-                    self.completed += 1
-                    self.last_item = item
-                    self._cond.notify_all()
+                if isinstance(prepared, _Failed):
+                    raise prepared.exc
+                result = self._fn(prepared)
+            except Exception as exc:  # never let a bad run stop the worker
+                if self._on_error is not None:
+                    self._on_error(item, exc)
+            else:
+                if self._on_done is not None:
+                    self._on_done(item, result, (time.perf_counter() - t0) * 1e3)
+        except Exception as exc:  # a failing callback must not stop the worker either
+            print(f"radarviz tune: callback failed: {exc}", file=sys.stderr, flush=True)
+        finally:
+            with self._cond:
+                self._busy = False
+                self.completed += 1
+                self.last_item = item
+                self._cond.notify_all()
