@@ -190,12 +190,13 @@ def release_streams() -> None:
 
 @dataclass
 class PreparedRun:
-    """A run logged into ``rec`` (no sink yet: held in memory), not yet sent."""
+    """A run logged into ``rec`` (no sink yet: held in memory), not yet sent; ``rec`` is
+    None once it is closed, ``result`` None until the run is logged."""
 
     recording_id: str
     params: TuneParams
-    result: TuneResult
     rec: rr.RecordingStream | None
+    result: TuneResult | None = None
 
     def close(self) -> None:
         """Disconnect the stream (what it has not sent is dropped), let it go and free its
@@ -242,21 +243,23 @@ class TuneSession:
         ``ParameterError`` or ``ResultError`` for bad values, nothing kept)."""
         params = raw if isinstance(raw, TuneParams) else TuneParams.from_raw(raw)
         rid = f"tune-{self.runs_done + 1}-{uuid.uuid4().hex[:8]}"
-        rec = rr.RecordingStream(APPLICATION_ID, recording_id=rid)  # held until connected
+        # The stream holds what is logged until it is connected (``commit``).
+        run = PreparedRun(rid, params, rr.RecordingStream(APPLICATION_ID, recording_id=rid))
+        assert run.rec is not None
         try:
             # The blueprint goes with a run that changes scene from the one the viewer shows;
             # ``blueprint_scene`` moves only when a run is sent (a discarded run sent none).
             switch = params.scene != self.blueprint_scene
-            result = log_tuning_scene(rec, params, series=False, blueprint=switch)
+            run.result = log_tuning_scene(run.rec, params, series=False, blueprint=switch)
         except BaseException:
-            PreparedRun(rid, params, None, rec).close()  # type: ignore[arg-type]
+            run.close()
             raise
-        return PreparedRun(rid, params, result, rec)
+        return run
 
     def commit(self, run: PreparedRun) -> RunReport:
         """Send a prepared run to the viewer's server (at once, in one burst) and close it."""
-        rec = run.rec
-        assert rec is not None, "a prepared run is sent once"
+        rec, result = run.rec, run.result
+        assert rec is not None and result is not None, "a prepared run is sent once"
         try:
             if self.grpc_uri is not None:
                 rec.connect_grpc(self.grpc_uri)  # sends what the stream holds
@@ -267,7 +270,7 @@ class TuneSession:
         finally:
             del rec
             run.close()
-        return RunReport(run.recording_id, run.params, run.result.figures, run.result)
+        return RunReport(run.recording_id, run.params, result.figures, result)
 
     def discard(self, run: PreparedRun) -> None:
         """Drop a prepared run unsent (a newer change overtook it)."""
