@@ -244,14 +244,15 @@ class TuneSession:
         params = raw if isinstance(raw, TuneParams) else TuneParams.from_raw(raw)
         rid = f"tune-{self.runs_done + 1}-{uuid.uuid4().hex[:8]}"
         # The stream holds what is logged until it is connected (``commit``).
-        run = PreparedRun(rid, params, rr.RecordingStream(APPLICATION_ID, recording_id=rid))
-        assert run.rec is not None
+        rec = rr.RecordingStream(APPLICATION_ID, recording_id=rid)
+        run = PreparedRun(rid, params, rec)
         try:
             # The blueprint goes with a run that changes scene from the one the viewer shows;
             # ``blueprint_scene`` moves only when a run is sent (a discarded run sent none).
             switch = params.scene != self.blueprint_scene
-            run.result = log_tuning_scene(run.rec, params, series=False, blueprint=switch)
+            run.result = log_tuning_scene(rec, params, series=False, blueprint=switch)
         except BaseException:
+            del rec  # the run's close frees the stream only once nothing else holds it
             run.close()
             raise
         return run

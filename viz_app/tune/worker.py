@@ -59,7 +59,6 @@ class Coalescer:
         self._on_error = on_error
         self._cond = threading.Condition()
         self._pending: tuple[Any, float, float] | None = None  # item, submitted, runs at
-        self._seq = 0  # numbers the submits: tells a prepared item from a newer one
         self._busy = False
         self._stopping = False
         self.submitted = 0
@@ -73,7 +72,6 @@ class Coalescer:
         now = time.perf_counter()
         with self._cond:
             self._pending = (item, now, now + max(settle_s, 0.0))
-            self._seq += 1
             self.submitted += 1
             self._cond.notify_all()
 
@@ -102,18 +100,18 @@ class Coalescer:
                     return
                 assert self._pending is not None
                 item, t0, _ = self._pending
-                seq = self._seq
+                seq = self.submitted  # tells this item from a newer one
             prepared = self._prepared(item)
             with self._cond:
                 while True:  # the settling pause: a newer submit moves the time on
-                    if self._stopping or self._seq != seq:
+                    if self._stopping or self.submitted != seq:
                         break
                     assert self._pending is not None
                     wait = self._pending[2] - time.perf_counter()
                     if wait <= 0:
                         break
                     self._cond.wait(wait)
-                current = self._seq == seq and not self._stopping
+                current = self.submitted == seq and not self._stopping
                 if current:
                     self._pending = None
                     self._busy = True
