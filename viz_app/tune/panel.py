@@ -3,14 +3,18 @@
 Every control acts where its parameter enters the chosen scene (``tune.params``), and only
 the controls the chosen scene reads are shown (``SCENE_PARAMETERS``). The Doppler accuracy is
 one control, entered as σVr or as C0 (the user's choice; the other is derived and shown).
-Typed numbers and the σβ slider apply after a pause of ``SETTLE_S`` (a half-typed "0.3" is
-never run as 0); the scene, the preset and the method boxes apply at once. A bad value is
+Typed numbers apply after a pause of ``SETTLE_S`` (a half-typed "0.3" is never run as 0); the
+σβ slider's steps come the same way as the keystrokes in its number box, so they wait too. A
+value the page reports finished (a slider let go, Enter in a number box:
+:meth:`TunePanel.finished`) runs at once. The scene, the preset and the method boxes apply at
+once. A bad value is
 one error line naming the parameter and its range, and the last good run stays on screen.
 """
 
 from __future__ import annotations
 
 import contextlib
+import math
 from typing import Any
 
 from radarviz.core.experiments.prosov import ALL_METHODS
@@ -43,6 +47,14 @@ TUNE_CONTROLS: dict[str, tuple[str, float, str | None]] = {
 SETTLE_S = 0.5
 #: The choice of how the Doppler accuracy is entered: label → the control it shows.
 DOPPLER_INPUTS: dict[str, str] = {"σVr (m/s)": "sigma_vr_mps", "C0": "c0"}
+
+
+def _same(raw: Any, value: float) -> bool:
+    """Whether the panel value ``raw`` is the number ``value`` (False for no number)."""
+    try:
+        return math.isclose(float(raw), value, rel_tol=1e-9, abs_tol=1e-12)
+    except (TypeError, ValueError):
+        return False
 
 
 def parameter_label(name: str) -> str:
@@ -127,7 +139,8 @@ class TunePanel:
         gui.add_markdown(
             "## radarviz tune\nEach change re-runs the chosen scene; the Rerun viewer beside "
             f"these controls switches to the new run. Typed numbers apply after a {SETTLE_S:g} s "
-            "pause; only the values the scene reads are shown."
+            "pause or on Enter, the slider when let go; only the values the scene reads are "
+            "shown."
         )
         self.scene = gui.add_dropdown(
             "scene",
@@ -157,6 +170,7 @@ class TunePanel:
         self.error_md = gui.add_markdown("")
         self.status_md = gui.add_markdown(session.status_markdown())
         self._steps = p.steps
+        self._last_typed: str | None = None  # the control the newest typed value is from
         for h in self.controls.values():
             h.on_update(self._typed)
         for h in (self.scene, self.doppler_input, *self.methods.values()):
@@ -239,9 +253,34 @@ class TunePanel:
         self.derived.content = self._derived_text(self.raw_values())
         self.worker.submit(self.raw(), settle_s=settle_s)
 
-    def _typed(self, _event: Any = None) -> None:
+    def _typed(self, event: Any = None) -> None:
         """A number or the slider: run once the typing has paused."""
+        target = getattr(event, "target", None)
+        self._last_typed = next((n for n, h in self.controls.items() if h is target), None)
         self._submit(SETTLE_S)
+
+    def finished(self, value: float) -> str | None:
+        """The page saw the user finish ``value`` (a slider let go, Enter in a number box): run
+        it without the settling pause. Returns the control the report was taken for (None: no
+        value typed yet).
+
+        Viser sends a slider's steps and a number box's keystrokes alike, so the worker cannot
+        tell a finished value from a half-typed one; the page can (``tune.page``). The report
+        is about the control last typed into or moved: the pending run is hurried if that
+        control holds ``value`` in it. If the value has not reached the panel yet (it comes by
+        Viser's WebSocket, the report by a request of its own), the worker waits one pause
+        for it.
+        """
+        name = self._last_typed
+        if name is None:
+            return None
+
+        def match(raw: Any) -> bool:
+            return isinstance(raw, dict) and _same(raw.get(name), value)
+
+        arrived = _same(self.controls[name].value, value)
+        self.worker.hurry(match, expect_s=0.0 if arrived else SETTLE_S)
+        return name
 
     def _changed(self, _event: Any = None) -> None:
         """The scene, the Doppler input or a method box: show its controls and run at once."""

@@ -183,8 +183,16 @@ def cmd_tune(
         view_url = viewer_url(connect, web_port, grpc_port)
         page = panel_page(embedded_viewer_url(connect, web_port, grpc_port))
         guard = PanelGuard(host=host, bind=bind)
+        panels: list[TunePanel] = []  # the page's reports go to the panel, once it is built
+
+        def finished(value: float) -> None:
+            for p in panels:
+                name = p.finished(value)
+                if name is not None:
+                    print(f"finished {name}={value:g}", flush=True)
+
         server = guarded_viser_server(
-            guard, port, wrap=lambda inner: serve_page(inner, page), verbose=False
+            guard, port, wrap=lambda inner: serve_page(inner, page, finished), verbose=False
         )
         session = TuneSession(grpc_uri(bind, grpc_port), echo=True)
         worker = Coalescer(
@@ -195,6 +203,7 @@ def cmd_tune(
             discard=session.discard,
         )
         panel = TunePanel(server, session, worker)
+        panels.append(panel)
         prepare_blueprints()  # no run (a first switch of scene included) builds one
         wait_port(bind, grpc_port, proc=proc)
         wait_viewer(proc, "--viewer-port", bind, web_port)

@@ -251,6 +251,9 @@ class TuneSession:
             # ``blueprint_scene`` moves only when a run is sent (a discarded run sent none).
             switch = params.scene != self.blueprint_scene
             run.result = log_tuning_scene(rec, params, series=False, blueprint=switch)
+            # Into the stream's buffer now: a run committed before the SDK's own flush tick
+            # would otherwise reach the viewer in two parts (two frames to draw, not one).
+            rec.flush()
         except BaseException:
             del rec  # the run's close frees the stream only once nothing else holds it
             run.close()

@@ -6,7 +6,8 @@ items arrive during a run, it runs once more with the newest only.
 
 A typed number arrives one keystroke at a time ("0.3" as 0, 0., 0.3): ``submit(item,
 settle_s=…)`` makes the worker wait until no newer item has come for ``settle_s`` seconds,
-so a half-typed value is never run.
+so a half-typed value is never run. A value the user has visibly finished (a slider let go:
+``hurry``) need not wait for the pause: its run goes out as soon as it is ready.
 
 A run may come in two stages, ``prepare`` then ``fn``: the worker prepares the newest item at
 once (for the panel: simulate and log into a recording not yet sent) and runs ``fn`` on it
@@ -59,6 +60,7 @@ class Coalescer:
         self._on_error = on_error
         self._cond = threading.Condition()
         self._pending: tuple[Any, float, float] | None = None  # item, submitted, runs at
+        self._hurry: tuple[Callable[[Any], bool], float] | None = None  # match, until
         self._busy = False
         self._stopping = False
         self.submitted = 0
@@ -71,9 +73,32 @@ class Coalescer:
         """Make ``item`` the next to run, once ``settle_s`` seconds pass with no newer one."""
         now = time.perf_counter()
         with self._cond:
-            self._pending = (item, now, now + max(settle_s, 0.0))
+            runs_at = now + max(settle_s, 0.0)
+            if self._hurry is not None and now <= self._hurry[1] and self._hurry[0](item):
+                runs_at, self._hurry = now, None  # finished before its value arrived
+            self._pending = (item, now, runs_at)
             self.submitted += 1
             self._cond.notify_all()
+
+    def hurry(self, match: Callable[[Any], bool], expect_s: float = 0.0) -> bool:
+        """End the settling pause of the pending item if ``match(item)``: the user has finished
+        that value (let go of a slider), so no later keystroke can change it. True if a pending
+        item was hurried.
+
+        The signal may overtake the value it is about (they come by different connections):
+        with ``expect_s`` > 0 and nothing pending that matches, the next item submitted within
+        ``expect_s`` seconds that matches runs without a pause.
+        """
+        now = time.perf_counter()
+        with self._cond:
+            if self._pending is not None and match(self._pending[0]):
+                item, t0, runs_at = self._pending
+                self._pending = (item, t0, min(runs_at, now))
+                self._hurry = None
+                self._cond.notify_all()
+                return True
+            self._hurry = (match, now + expect_s) if expect_s > 0 else None
+            return False
 
     def wait_idle(self, timeout: float | None = None) -> bool:
         """Wait until nothing is pending or running; False on timeout."""
