@@ -566,6 +566,15 @@ def test_tune_panel_slider_makes_new_recording(
             # The status line in the panel (React DOM) names the new recording.
             controls.get_by_text(second.group(1)).first.wait_for(timeout=30_000)
             assert controls.get_by_text("σβ 2.1°").count() >= 1
+            # Enter in a number box finishes the typed value too.
+            box = controls.get_by_label("σr (m)", exact=True).first
+            box.fill("260")
+            box.press("Enter")
+            reported = r"^finished sigma_r_m=260$"
+            _expect(lines, r"^run (\S+) scene=prosov sigma_beta_deg=2.1 .*", 60, log)
+            if not any(re.search(reported, line) for line in log):
+                _expect(lines, reported, 30, log)
+            controls.get_by_text("σr 260 m").first.wait_for(timeout=30_000)
             page.screenshot(path=str(ARTIFACTS / "tune_panel.png"))
 
             view = browser.new_page(viewport={"width": 1400, "height": 900})

@@ -8,8 +8,9 @@ timed to itself, not to the end of a screenshot (which takes a while with softwa
 makes the page draw a frame of its own). The panel is driven through its own controls, in the
 order prosov → velocity → gorshkov → prosov; in each scene, after the switch to it, the
 scene's own parameter is changed ``changes`` times: a σβ slider step (prosov, velocity: the
-keypress is the change, the panel's settling pause is inside the figure) or a typed C0
-(Gorshkov, whose first tab σβ does not enter: timed from the last keystroke).
+keypress is the change; the page reports the slider let go, and the step runs without the
+typing pause) or a typed C0 (Gorshkov, whose first tab σβ does not enter: timed from the last
+keystroke, no Enter, so the panel's settling pause is inside the figure).
 
 A change's figure (:meth:`Screencast.first_frame`) is the time from the change to the first
 frame from which on the viewer's views (its chrome rows cut off) stay what they are when the
