@@ -7,8 +7,8 @@ Typed numbers apply after a pause of ``SETTLE_S`` (a half-typed "0.3" is never r
 σβ slider's steps come the same way as the keystrokes in its number box, so they wait too. A
 value the page reports finished (a slider let go, Enter in a number box:
 :meth:`TunePanel.finished`) runs at once. The scene, the preset and the method boxes apply at
-once. A bad value is
-one error line naming the parameter and its range, and the last good run stays on screen.
+once. A bad value is one error line naming the parameter and its range, and the last good run
+stays on screen.
 """
 
 from __future__ import annotations
