@@ -6,8 +6,9 @@ items arrive during a run, it runs once more with the newest only.
 
 A typed number arrives one keystroke at a time ("0.3" as 0, 0., 0.3): ``submit(item,
 settle_s=…)`` makes the worker wait until no newer item has come for ``settle_s`` seconds,
-so a half-typed value is never run. A value the user has visibly finished (a slider let go:
-``hurry``) need not wait for the pause: its run goes out as soon as it is ready.
+so a half-typed value is never run. A value the user has visibly finished (a slider let go,
+Enter in a number box: ``hurry``) need not wait for the pause: its run goes out as soon as it
+is ready.
 
 A run may come in two stages, ``prepare`` then ``fn``: the worker prepares the newest item at
 once (for the panel: simulate and log into a recording not yet sent) and runs ``fn`` on it
@@ -82,8 +83,8 @@ class Coalescer:
 
     def hurry(self, match: Callable[[Any], bool], expect_s: float = 0.0) -> bool:
         """End the settling pause of the pending item if ``match(item)``: the user has finished
-        that value (let go of a slider), so no later keystroke can change it. True if a pending
-        item was hurried.
+        that value (let go of a slider, pressed Enter), so no later keystroke can change it.
+        True if a pending item was hurried.
 
         The signal may overtake the value it is about (they come by different connections):
         with ``expect_s`` > 0 and nothing pending that matches, the next item submitted within
