@@ -24,8 +24,10 @@ import pytest
 from filterpy.common import Q_discrete_white_noise
 from filterpy.kalman import ExtendedKalmanFilter, MerweScaledSigmaPoints, UnscentedKalmanFilter
 
+import radarviz.core.filters.ekf_2d as ekf_2d
 import radarviz.core.filters.polar_ekf as ekf_module
 import radarviz.core.filters.polar_ukf as ukf_module
+import radarviz.core.filters.ukf_2d as ukf_2d
 from radarviz.core.conversion.planar import convert
 from radarviz.core.filters.methods import METHODS, PolarNoise, PolarPlot
 from radarviz.core.filters.polar_ukf import UKFParams, dense_cholesky
@@ -231,9 +233,14 @@ def test_near_pi_measurements_straddle() -> None:
 
 @pytest.mark.parametrize("kind", ["ekf", "ukf"])
 def test_comparison_catches_missing_wrap(kind: str, monkeypatch: pytest.MonkeyPatch) -> None:
-    """Negative control: without angle wrapping the near-π comparison must fail."""
+    """Negative control: without angle wrapping the near-π comparison must fail. The 2D
+    updates wrap by their module's ``wrap`` (``core.filters.ekf_2d``, ``ukf_2d``), the 3D
+    ones by ``wrap_angle``."""
+    no_wrap = lambda a: np.asarray(a, dtype=np.float64)  # noqa: E731
     for module in (ekf_module, ukf_module):
-        monkeypatch.setattr(module, "wrap_angle", lambda a: np.asarray(a, dtype=np.float64))
+        monkeypatch.setattr(module, "wrap_angle", no_wrap)
+    for module in (ekf_2d, ukf_2d):
+        monkeypatch.setattr(module, "wrap", no_wrap)
     with pytest.raises(AssertionError):
         compare_with_filterpy(kind, NEAR_PI, 1.0, 0.0)
 

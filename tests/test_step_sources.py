@@ -8,9 +8,9 @@ called by the numpy engine and the array-API path). The test reads every functio
 (``_predict_2d = _inline(predict_2d)``): a function whose name matches a kind must reach one
 of its implementations, so a second hand-written prediction (a kernel's own F P Fᵀ, a "fast
 path" re-deriving Q) fails here, naming its file. A kind's copies that are still to be
-replaced are listed as such (``not_yet``), and the test holds that list to the tree. The
-other update kinds (EKF, UKF, Doppler, the IMM's mixing and combination) are not yet written
-once (docs/architecture.md, section 3) and are not listed.
+replaced are listed as such (``not_yet``), and the test holds that list to the tree: the 3D
+updates are still written per engine, and the IMM's mixing and combination and the 3D
+conversions are not yet listed (docs/architecture.md, section 3).
 """
 
 from __future__ import annotations
@@ -62,14 +62,48 @@ STEP_KINDS: dict[str, StepKind] = {
     "position update (Joseph form on a factor)": StepKind(
         pattern=r"position_update|joseph",
         implementations=frozenset({"core/filters/position_2d.py:position_update_2d"}),
-        not_this_step={"core/filters/position.py:_update_2d": "calls it on a batch in blocks"},
         not_yet={
             "core/filters/kernels_3d.py:position_update_3d": "the 3D kernels' update",
             "core/filters/kernels_3d.py:factored_joseph_3d": "the 3D kernels' Joseph form",
             "core/filters/position.py:joseph_update_position": "the numpy 3D update",
-            "core/filters/state.py:dense_joseph_update": "the numpy dense form (3D, Doppler)",
-            "core/filters/state.py:factored_joseph": "the numpy form of any size (3D, Doppler)",
-            "core/filters/array_api.py:_joseph": "the array-API path's update",
+            "core/filters/state.py:dense_joseph_update": "the numpy dense form (3D)",
+            "core/filters/state.py:factored_joseph": "the numpy form of any size (3D)",
+        },
+    ),
+    "polar EKF update": StepKind(
+        pattern=r"ekf_update|ekf_measurement|ekf_pseudo",
+        implementations=frozenset(
+            {"core/filters/ekf_2d.py:ekf_measurement_2d", "core/filters/ekf_2d.py:ekf_update_2d"}
+        ),
+        not_yet={
+            "core/filters/kernels_3d.py:ekf_measurement_3d": "the 3D kernels' EKF",
+            "core/filters/polar_ekf.py:_ekf_measurement_3d": "the numpy 3D EKF",
+        },
+    ),
+    "polar UKF update": StepKind(
+        pattern=r"ukf_update|_ukf",
+        implementations=frozenset({"core/filters/ukf_2d.py:ukf_update_2d"}),
+        not_yet={
+            "core/filters/kernels_3d.py:ukf_update_3d": "the 3D kernels' UKF",
+            "core/filters/polar_ukf.py:_ukf_update_components": "the numpy 3D UKF",
+            "core/filters/polar_ukf.py:_ukf_update_dense": "the numpy 3D UKF, small batches",
+        },
+    ),
+    "Doppler update along the measured line of sight": StepKind(
+        pattern=r"doppler_update",
+        implementations=frozenset({"core/filters/doppler_2d.py:doppler_update_2d"}),
+        not_this_step={
+            "core/filters/converted_doppler.py:converted_doppler_update": (
+                "the converted r̂·V̂r measurement, its own kind"
+            ),
+            "core/filters/joint_doppler.py:joint_doppler_update": (
+                "the EKF and the Doppler value as one update, its own kind"
+            ),
+        },
+        not_yet={
+            "core/filters/kernels_3d.py:doppler_update_3d": "the 3D kernels' Doppler update",
+            "core/filters/doppler.py:_doppler_update_components": "the numpy 3D update",
+            "core/filters/doppler.py:_doppler_update_dense": "the numpy 3D update, small batches",
         },
     ),
 }
@@ -79,7 +113,25 @@ STEP_KINDS: dict[str, StepKind] = {
 class Function:
     key: str  # "file:function"
     name: str
-    calls: set[str]
+    calls: set[str]  # the names it calls or passes on (a step handed to ``step_2d``)
+
+
+def _uses(node: ast.FunctionDef) -> set[str]:
+    """The names a function calls (``f(…)``, ``m.f(…)``, a bound step ``steps["f"](…)``) or
+    passes to a call by name (a step handed to the function that applies it, ``step_2d``)."""
+    names = set()
+    for c in ast.walk(node):
+        if not isinstance(c, ast.Call):
+            continue
+        f = c.func
+        if isinstance(f, ast.Name):
+            names.add(f.id)
+        elif isinstance(f, ast.Attribute):
+            names.add(f.attr)
+        elif isinstance(f, ast.Subscript) and isinstance(f.slice, ast.Constant):
+            names.add(str(f.slice.value))
+        names |= {a.id for a in c.args if isinstance(a, ast.Name)}
+    return names
 
 
 @cache
@@ -94,12 +146,7 @@ def core_functions() -> tuple[tuple[Function, ...], dict[str, str]]:
         tree = ast.parse(path.read_text(encoding="utf-8"))
         for node in ast.walk(tree):
             if isinstance(node, ast.FunctionDef):
-                calls = {
-                    c.func.id if isinstance(c.func, ast.Name) else c.func.attr
-                    for c in ast.walk(node)
-                    if isinstance(c, ast.Call) and isinstance(c.func, ast.Name | ast.Attribute)
-                }
-                functions.append(Function(f"{rel}:{node.name}", node.name, calls))
+                functions.append(Function(f"{rel}:{node.name}", node.name, _uses(node)))
         for node in tree.body:
             if not isinstance(node, ast.Assign):
                 continue
@@ -170,7 +217,7 @@ def test_every_engine_reaches_the_prediction() -> None:
     """The numpy engine, the array-API path and the 2D and 3D kernels all predict through
     the one implementation."""
     reach = built_on(STEP_KINDS["constant-velocity prediction"], *core_functions())
-    for name in ("cv_predict", "_predict", "predict_s", "predict_3d", "predict_models"):
+    for name in ("cv_predict", "filter_history_xp", "predict_s", "predict_3d", "predict_models"):
         assert name in reach, name
 
 
@@ -184,3 +231,28 @@ def test_a_hand_written_copy_is_found() -> None:
         Function("core/filters/fast.py:predict_wrapped", "predict_wrapped", {"_predict_2d"}),
     )
     assert copies(kind, functions + fake, aliases) == ["core/filters/fast.py:predict_fast"]
+
+
+def test_a_hand_written_update_is_found() -> None:
+    """The same for an update, from source: a UKF re-derived with the elementary functions
+    (its locals passed on by name) is reported; one handing the step to the batch applier,
+    or calling the array-API path's bound copy, is not."""
+    source = """
+def ukf_update_fast(x, P, r, b):
+    L = cholesky(P)
+    return finish(x, P, L, sqrt(r), atan2(b, r), wrap(b))
+
+def ukf_update_batched(state, args, out):
+    return step_2d(ukf_update_2d, state, args, out)
+
+def ukf_update_bound(xp, x, P, args):
+    return _steps(xp)["ukf_update_2d"](x, P, *args)
+"""
+    fake = tuple(
+        Function(f"core/filters/fast.py:{node.name}", node.name, _uses(node))
+        for node in ast.parse(source).body
+        if isinstance(node, ast.FunctionDef)
+    )
+    functions, aliases = core_functions()
+    found = copies(STEP_KINDS["polar UKF update"], functions + fake, aliases)
+    assert found == ["core/filters/fast.py:ukf_update_fast"]

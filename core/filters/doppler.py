@@ -28,11 +28,13 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from radarviz.core.filters.doppler_2d import doppler_update_2d
 from radarviz.core.filters.state import (
     CVBatch,
     dense_joseph_update,
     factored_joseph,
     semidefinite_cholesky,
+    step_2d,
     target_batch,
     use_dense,
     velocity_index,
@@ -59,14 +61,36 @@ def doppler_update(
         sigma_vr_mps, sigma_beta_rad, sigma_elevation_rad: the plot's noise std.
         out: optional preallocated batch to write into (must not alias ``state``).
     """
-    x, P = state.x, state.P
-    dims, n = state.dims, x.shape[-1]
-    vel = velocity_index(dims)
-    u, g_b, g_e, var_vr, var_b, var_e = _geometry(
+    dims = state.dims
+    if dims == 2:  # written once, for every engine (``core.filters.doppler_2d``)
+        var_vr = np.asarray(sigma_vr_mps, dtype=np.float64) ** 2
+        var_b = np.asarray(sigma_beta_rad, dtype=np.float64) ** 2
+        vr = np.asarray(radial_velocity_mps, dtype=np.float64)
+        az = np.asarray(azimuth_rad, dtype=np.float64)
+        return step_2d(doppler_update_2d, state, (vr, az, var_vr, var_b), out)
+    geometry = _geometry(
         dims, azimuth_rad, elevation_rad, sigma_vr_mps, sigma_beta_rad, sigma_elevation_rad
     )
     if use_dense(state):  # the same update as matrix products (small batches)
-        return _dense(state, radial_velocity_mps, u, g_b, g_e, var_vr, var_b, var_e, out)
+        return _doppler_update_dense(state, radial_velocity_mps, *geometry, out)
+    return _doppler_update_components(state, radial_velocity_mps, *geometry, out)
+
+
+def _doppler_update_components(
+    state: CVBatch,
+    radial_velocity_mps: ArrayLike,
+    u: tuple,
+    g_b: tuple,
+    g_e: tuple,
+    var_vr: NDArray[np.float64],
+    var_b: NDArray[np.float64],
+    var_e: NDArray[np.float64],
+    out: CVBatch | None,
+) -> CVBatch:
+    """``doppler_update`` of a 3D batch, one vector operation per component."""
+    x, P = state.x, state.P
+    dims, n = state.dims, x.shape[-1]
+    vel = velocity_index(dims)
     v = [x[..., i] for i in vel]
     Pvv = [[P[..., i, j] for j in vel] for i in vel]
 
@@ -117,7 +141,7 @@ def doppler_update(
     return out
 
 
-def _dense(
+def _doppler_update_dense(
     state: CVBatch,
     radial_velocity_mps: ArrayLike,
     u: tuple,
@@ -128,7 +152,8 @@ def _dense(
     var_e: NDArray[np.float64],
     out: CVBatch | None,
 ) -> CVBatch:
-    """``doppler_update`` for small batches: the variance and the update as matrix products."""
+    """``doppler_update`` for small 3D batches: the variance and the update as matrix
+    products."""
     return dense_joseph_update(
         state, *_dense_terms(state, radial_velocity_mps, u, g_b, g_e, var_vr, var_b, var_e), out
     )

@@ -20,7 +20,6 @@ import numba
 import numpy as np
 
 from radarviz.core.conversion.elementwise import DUCM, conversion_coefficients, converted_point
-from radarviz.core.filters import position_2d
 from radarviz.core.filters.codes import EKF, UKF, is_polar, reads_prediction
 from radarviz.core.filters.predict import (
     add_process_noise,
@@ -28,7 +27,7 @@ from radarviz.core.filters.predict import (
     predict_components,
     white_acceleration,
 )
-from radarviz.core.filters.rebind import rebind
+from radarviz.core.filters.steps_2d import bind_2d
 
 # error_model="numpy": a division by zero or a negative pivot gives inf / NaN for that track,
 # as the numpy engine does, instead of raising. cache=True: compiled once per machine.
@@ -180,162 +179,20 @@ def _select(c: bool, a: float, b: float) -> float:
     return a if c else b
 
 
-# The position update and the semi-definite Cholesky factor: ``core.filters.position_2d``'s
-# functions (the numpy engine's too), compiled here with the scalar sqrt and select.
-_position_2d = rebind(
-    [
-        position_2d._pivot,
-        position_2d._below,
-        position_2d.semidefinite_cholesky_2d,
-        position_2d._add_outer,
-        position_2d._z_col,
-        position_2d._krk,
-        position_2d.position_update_2d,
-    ],
-    {"sqrt": sqrt, "where": _select},
+# The 2D updates (position, EKF, UKF, Doppler: ``core.filters.steps_2d``), written once as
+# plain arithmetic (the numpy engine's and the array-API path's too), compiled here with the
+# scalar elementary functions.
+_steps = bind_2d(
+    {"sqrt": sqrt, "where": _select, "atan2": atan2, "wrap": wrap, "cos": cos, "sin": sin},
     _inline,
 )
-semidefinite_cholesky_s = _position_2d["semidefinite_cholesky_2d"]
-_add_outer = _position_2d["_add_outer"]
-_z_col = _position_2d["_z_col"]
-position_update_s = _position_2d["position_update_2d"]
-
-
-@_inline
-def ekf_update_s(xt, p, r: float, b: float, vr: float, vb: float, sx: float, sy: float):
-    # core.filters.polar_ekf: ν' = J ν and R' = J R Jᵀ at the prediction (J the polar-to-
-    # Cartesian Jacobian), then the position update
-    px, py = xt[0] - sx, xt[2] - sy
-    rp = norm(px, py)
-    cb, sb_ = px / rp, py / rp
-    nr, nb = r - rp, wrap(b - atan2(py, px))
-    return position_update_s(
-        xt,
-        p,
-        cb * nr - py * nb,
-        sb_ * nr + px * nb,
-        cb * cb * vr + py * py * vb,
-        cb * sb_ * vr - px * py * vb,
-        sb_ * sb_ * vr + px * px * vb,
-    )
-
-
-@_inline
-def _point_error(f: float, col, k0, k1, d0: float, d1: float):
-    # e = f L[:, k] − K d for the point ±column k with residual d
-    return (
-        f * col[0] - (k0[0] * d0 + k1[0] * d1),
-        f * col[1] - (k0[1] * d0 + k1[1] * d1),
-        f * col[2] - (k0[2] * d0 + k1[2] * d1),
-        f * col[3] - (k0[3] * d0 + k1[3] * d1),
-    )
-
-
-@_inline
-def _gain_row(l0, l1, l2, e0r, e1r, e2r, e0b, e1b, e2b, w, i00, i01, i11):
-    # row i of K = Pxz S⁻¹, Pxz's row W Σ_k L[i, k] (d_k+ − d_k−) (column 3's difference is 0)
-    a0 = w * (l0 * e0r + l1 * e1r + l2 * e2r)
-    a1 = w * (l0 * e0b + l1 * e1b + l2 * e2b)
-    return a0 * i00 + a1 * i01, a0 * i01 + a1 * i11
-
-
-@_inline
-def ukf_update_s(xt, p, r, b, vr, vb, sx, sy, c, wm0, wc0, w):
-    # core.filters.polar_ukf: sigma points of (x⁻, P⁻) through the polar map, unscented S and
-    # Pxz, K = Pxz S⁻¹, x⁺ = x + K ν, and P⁺ in Joseph form, Σ_p Wc_p e_p e_pᵀ + K R Kᵀ with
-    # e_p = (χ_p − x⁻) − K d_p (a sum of semi-definite terms: it cannot turn indefinite).
-    L0, L1, L2, L3 = semidefinite_cholesky_s(p, c)
-    px, py = xt[0] - sx, xt[2] - sy
-    r0, b0 = norm(px, py), atan2(py, px)
-    # The polar map reads the position only, and column k of the lower factor moves it by
-    # (L[0, k], L[2, k]) = (L00, L20), (0, L21), (0, L22), (0, 0): column 3's two points are
-    # the central point, and columns 1, 2 move y alone.
-    ra, ba = norm(px + L0[0], py + L0[2]), atan2(py + L0[2], px + L0[0])
-    rb, bb = norm(px - L0[0], py - L0[2]), atan2(py - L0[2], px - L0[0])
-    rc, bc = norm(px, py + L1[2]), atan2(py + L1[2], px)
-    rd, bd = norm(px, py - L1[2]), atan2(py - L1[2], px)
-    re, be = norm(px, py + L2[2]), atan2(py + L2[2], px)
-    rf, bf = norm(px, py - L2[2]), atan2(py - L2[2], px)
-    # the unscented mean: z̄r = Wm0 r0 + W Σ r_p, z̄β = β0 + W Σ wrap(β_p − β0)
-    zr = wm0 * r0 + w * (ra + rb + rc + rd + re + rf + 2.0 * r0)
-    acc = wrap(ba - b0) + wrap(bb - b0) + wrap(bc - b0) + wrap(bd - b0)
-    zb = wrap(b0 + w * (acc + wrap(be - b0) + wrap(bf - b0)))
-    # residuals d_p = (r_p − z̄r, wrap(β_p − z̄β)): central (g), ±column 0 (a, b), 1 (c, d),
-    # 2 (e, f); column 3's are the central one
-    gr, gb = r0 - zr, wrap(b0 - zb)
-    dar, dab = ra - zr, wrap(ba - zb)
-    dbr, dbb = rb - zr, wrap(bb - zb)
-    dcr, dcb = rc - zr, wrap(bc - zb)
-    ddr, ddb = rd - zr, wrap(bd - zb)
-    der, deb = re - zr, wrap(be - zb)
-    dfr, dfb = rf - zr, wrap(bf - zb)
-    wg = wc0 + 2.0 * w
-    s00 = dar * dar + dbr * dbr + dcr * dcr + ddr * ddr + der * der + dfr * dfr
-    s01 = dar * dab + dbr * dbb + dcr * dcb + ddr * ddb + der * deb + dfr * dfb
-    s11 = dab * dab + dbb * dbb + dcb * dcb + ddb * ddb + deb * deb + dfb * dfb
-    s00 = vr + wg * gr * gr + w * s00
-    s01 = wg * gr * gb + w * s01
-    s11 = vb + wg * gb * gb + w * s11
-    det = s00 * s11 - s01 * s01
-    i00, i01, i11 = s11 / det, -s01 / det, s00 / det
-    e0r, e1r, e2r = dar - dbr, dcr - ddr, der - dfr
-    e0b, e1b, e2b = dab - dbb, dcb - ddb, deb - dfb
-    k00, k01 = _gain_row(L0[0], L1[0], L2[0], e0r, e1r, e2r, e0b, e1b, e2b, w, i00, i01, i11)
-    k10, k11 = _gain_row(L0[1], L1[1], L2[1], e0r, e1r, e2r, e0b, e1b, e2b, w, i00, i01, i11)
-    k20, k21 = _gain_row(L0[2], L1[2], L2[2], e0r, e1r, e2r, e0b, e1b, e2b, w, i00, i01, i11)
-    k30, k31 = _gain_row(L0[3], L1[3], L2[3], e0r, e1r, e2r, e0b, e1b, e2b, w, i00, i01, i11)
-    k0, k1 = (k00, k10, k20, k30), (k01, k11, k21, k31)
-    nr, nb = r - zr, wrap(b - zb)
-    xn = (
-        xt[0] + (k00 * nr + k01 * nb),
-        xt[1] + (k10 * nr + k11 * nb),
-        xt[2] + (k20 * nr + k21 * nb),
-        xt[3] + (k30 * nr + k31 * nb),
-    )
-    # P⁺: the central point (e = −K d₀), K R Kᵀ, then the points ± column k: e = ±L[:, k] − K d
-    zero = (0.0, 0.0, 0.0, 0.0)
-    pn = _add_outer((0.0,) * 10, wc0, _point_error(0.0, zero, k0, k1, gr, gb))
-    pn = _add_outer(pn, vr, k0)
-    pn = _add_outer(pn, vb, k1)
-    pn = _add_outer(pn, w, _point_error(1.0, L0, k0, k1, dar, dab))
-    pn = _add_outer(pn, w, _point_error(-1.0, L0, k0, k1, dbr, dbb))
-    pn = _add_outer(pn, w, _point_error(1.0, L1, k0, k1, dcr, dcb))
-    pn = _add_outer(pn, w, _point_error(-1.0, L1, k0, k1, ddr, ddb))
-    pn = _add_outer(pn, w, _point_error(1.0, L2, k0, k1, der, deb))
-    pn = _add_outer(pn, w, _point_error(-1.0, L2, k0, k1, dfr, dfb))
-    pn = _add_outer(pn, w, _point_error(1.0, L3, k0, k1, gr, gb))
-    pn = _add_outer(pn, w, _point_error(-1.0, L3, k0, k1, gr, gb))
-    return xn, pn
-
-
-@_inline
-def doppler_update_s(xt, p, vr_hat: float, b: float, var_vr: float, vb: float):
-    # core.filters.doppler: V̂r = û·v + e along the measured line of sight û = (cos β̂, sin β̂),
-    # var e = σVr² + σβ² ((g·v)² + gᵀ P_vv g), g = (−sin β̂, cos β̂); U = P hᵀ, k = U / S and
-    # the scalar Joseph form on P's Cholesky factor (``core.filters.state.factored_joseph``).
-    x0, x1, x2, x3 = xt
-    _, p01, _, p03, p11, p12, p13, _, p23, p33 = p
-    u0, u1 = cos(b), sin(b)
-    g0, g1 = -u1, u0
-    gv = g0 * x1 + g1 * x3
-    gpg = g0 * g0 * p11 + g1 * g1 * p33 + 2.0 * g1 * g0 * p13
-    r_e = var_vr + vb * (gv * gv + gpg)
-    U0, U1 = p01 * u0 + p03 * u1, p11 * u0 + p13 * u1
-    U2, U3 = p12 * u0 + p23 * u1, p13 * u0 + p33 * u1
-    S = u0 * U1 + u1 * U3 + r_e
-    nu = vr_hat - (u0 * x1 + u1 * x3)
-    f = 1.0 / S
-    k0, k1, k2, k3 = U0 * f, U1 * f, U2 * f, U3 * f
-    xn = (x0 + k0 * nu, x1 + k1 * nu, x2 + k2 * nu, x3 + k3 * nu)
-    L0, L1, L2, L3 = semidefinite_cholesky_s(p, 1.0, True)
-    kk, zero = (k0, k1, k2, k3), (0.0, 0.0, 0.0, 0.0)
-    # Z = L − k (h L), h L's entries u0 L[1, c] + u1 L[3, c]; P⁺ = Z Zᵀ + var e k kᵀ
-    pn = _add_outer((0.0,) * 10, r_e, kk)
-    pn = _add_outer(pn, 1.0, _z_col(L0, kk, zero, u0 * L0[1] + u1 * L0[3], 0.0))
-    pn = _add_outer(pn, 1.0, _z_col(L1, kk, zero, u0 * L1[1] + u1 * L1[3], 0.0))
-    pn = _add_outer(pn, 1.0, _z_col(L2, kk, zero, u1 * L2[3], 0.0))
-    pn = _add_outer(pn, 1.0, _z_col(L3, kk, zero, u1 * L3[3], 0.0))
-    return xn, pn
+semidefinite_cholesky_s = _steps["semidefinite_cholesky_2d"]
+_add_outer = _steps["_add_outer"]
+position_update_s = _steps["position_update_2d"]
+ekf_measurement_s = _steps["ekf_measurement_2d"]
+ekf_update_s = _steps["ekf_update_2d"]
+ukf_update_s = _steps["ukf_update_2d"]
+doppler_update_s = _steps["doppler_update_2d"]
 
 
 @_inline

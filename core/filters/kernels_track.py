@@ -17,7 +17,7 @@ Imported on first use only (numba and the cached machine code load then).
 
 from __future__ import annotations
 
-from math import atan2, cos, hypot, log, sin
+from math import cos, log, sin
 
 import numpy as np
 
@@ -28,12 +28,12 @@ from radarviz.core.filters.kernels_2d import (
     coefficients,
     convert,
     doppler_update,
+    ekf_measurement_s,
     is_polar_c,
     position_update,
     predict,
     start,
     ukf_update,
-    wrap,
 )
 
 
@@ -93,16 +93,7 @@ def position_measurement(code, x, r, b, sr2, s, sx, sy, co):
     EKF's, as the numpy engine's)."""
     px, py = x[0] - sx, x[2] - sy
     if is_polar_c(code):
-        rp = hypot(px, py)
-        cb, sb_ = px / rp, py / rp
-        nr, nb = r - rp, wrap(b - atan2(py, px))
-        return (
-            cb * nr - py * nb,
-            sb_ * nr + px * nb,
-            cb * cb * sr2 + py * py * s,
-            cb * sb_ * sr2 - px * py * s,
-            sb_ * sb_ * sr2 + px * px * s,
-        )
+        return ekf_measurement_s(px, py, r, b, sr2, s)
     zx, zy, r00, r01, r11 = convert(code, r, b, sr2, s, px, py, co)
     return zx + sx - x[0], zy + sy - x[2], r00, r01, r11
 

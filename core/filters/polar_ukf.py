@@ -57,11 +57,13 @@ from radarviz.core.filters.state import (
     mean_components,
     position_index,
     semidefinite_cholesky,
+    step_2d,
     sym,
     symmetric_inverse,
     target_batch,
     use_dense,
 )
+from radarviz.core.filters.ukf_2d import ukf_update_2d
 from radarviz.core.geometry import polar_coordinates, wrap_angle
 
 
@@ -164,17 +166,35 @@ def ukf_update(
         The posterior batch (``out`` if given, else a new one).
     """
     meas = polar_measurement_vectors(state, measurement)
-    x, P = state.x, state.P
-    n, m = x.shape[-1], state.dims  # state size; measurement size (one per position axis)
-    pos = position_index(m)
-    c, wm0, wc0, w = params.weights(n)
+    m = state.dims  # measurement size (one per position axis)
     var = [
         np.asarray(sigma_r_m, dtype=np.float64) ** 2,
         np.asarray(sigma_beta_rad, dtype=np.float64) ** 2,
         np.asarray(sigma_elevation_rad, dtype=np.float64) ** 2,
     ][:m]
+    if m == 2:  # written once, for every engine (``core.filters.ukf_2d``)
+        site_xy = np.zeros(2) if site is None else np.asarray(site, dtype=np.float64)
+        args = (*meas, *var, site_xy[..., 0], site_xy[..., 1], *params.weights(4))
+        return step_2d(ukf_update_2d, state, args, out)
     if use_dense(state):
-        return _ukf_dense(state, meas, var, site, params, out)
+        return _ukf_update_dense(state, meas, var, site, params, out)
+    return _ukf_update_components(state, meas, var, site, params, out)
+
+
+def _ukf_update_components(
+    state: CVBatch,
+    meas: list[NDArray[np.float64]],
+    var: list[NDArray[np.float64]],
+    site: ArrayLike | None,
+    params: UKFParams,
+    out: CVBatch | None,
+) -> CVBatch:
+    """``ukf_update`` of a 3D batch with the Cholesky factor written out over the batch as
+    (...) vectors (module docstring)."""
+    x, P = state.x, state.P
+    n, m = x.shape[-1], state.dims  # state size; measurement size (one per position axis)
+    pos = position_index(m)
+    c, wm0, wc0, w = params.weights(n)
     col = cholesky_columns(P, np.sqrt(c))  # entries (i, k) of √((n+λ)P⁻), k <= n − 2
 
     # Sigma points through h. χ_{k±} = x⁻ ± column k moves position axis a only if 2a >= k.
@@ -306,7 +326,7 @@ def sum_terms(terms: list[Vec]) -> Vec:
     return acc
 
 
-def _ukf_dense(
+def _ukf_update_dense(
     state: CVBatch,
     meas: list[NDArray[np.float64]],
     var: list[NDArray[np.float64]],
@@ -314,7 +334,7 @@ def _ukf_dense(
     params: UKFParams,
     out: CVBatch | None,
 ) -> CVBatch:
-    """``ukf_update`` for small batches: the module docstring's equations with all 2n + 1
+    """``ukf_update`` for small 3D batches: the module docstring's equations with all 2n + 1
     sigma points as one (..., 2n+1, n) array and batched matrix products (the tests check it
     against the component-wise path)."""
     x, P = state.x, state.P

@@ -14,7 +14,6 @@ change of variables in ``core.filters.polar_ekf``, of the polar EKF too: one imp
 from __future__ import annotations
 
 import functools
-import math
 from collections.abc import Sequence
 
 import numpy as np
@@ -28,14 +27,12 @@ from radarviz.core.filters.state import (
     dense_joseph_update,
     factored_joseph,
     mean_components,
-    mirror_upper,
     position_index,
     semidefinite_cholesky,
-    store_tuples_2d,
+    step_2d,
     sym,
     symmetric_inverse,
     target_batch,
-    tuples_2d,
     use_dense,
 )
 
@@ -87,44 +84,6 @@ def joseph_update_position(
     return out
 
 
-#: Tracks per block of the 2D update (``_update_2d``): its tuple arithmetic holds about sixty
-#: temporaries of a block at once, so blocks bound the working memory (and stay in cache).
-BLOCK_TRACKS = 8192
-
-
-def _update_2d(
-    state: CVBatch,
-    innovation: Sequence[Vec],
-    R: dict[tuple[int, int], Vec],
-    out: CVBatch | None,
-) -> CVBatch:
-    """``innovation_update`` of a 2D batch by ``position_update_2d`` on its components, in
-    blocks along the batch's last axis."""
-    out = target_batch(state, out)
-    shape = state.batch_shape
-    last = shape[-1] if shape else 1
-    step = max(1, BLOCK_TRACKS // max(1, math.prod(shape[:-1])))
-    for start in range(0, last, step):
-        cut = (Ellipsis, slice(start, start + step)) if shape else ()
-
-        def part(v: Vec, cut: tuple = cut) -> Vec:
-            # a term that varies along the last axis is cut with it; one that broadcasts is not
-            return v[cut] if cut and np.ndim(v) and np.shape(v)[-1] == last else v
-
-        with np.errstate(invalid="ignore", divide="ignore"):  # a singular S: NaN, as compiled
-            xn, pn = position_update_2d(
-                *tuples_2d(state, cut),
-                part(innovation[0]),
-                part(innovation[1]),
-                part(R[0, 0]),
-                part(R[0, 1]),
-                part(R[1, 1]),
-            )
-        store_tuples_2d(xn, pn, out, cut)
-    mirror_upper(out.P)
-    return out
-
-
 def position_gain(state: CVBatch, S: dict[tuple[int, int], Vec]) -> NDArray[np.float64]:
     """K = P Hᵀ S⁻¹ (n, d, ...) component-major, S⁻¹ written out (``symmetric_inverse``)."""
     Pc = cov_components(state.P)
@@ -169,7 +128,8 @@ def innovation_update(
     (``core.filters.state.dense_joseph_update``).
     """
     if state.dims == 2:
-        return _update_2d(state, innovation, R, out)
+        args = (innovation[0], innovation[1], R[0, 0], R[0, 1], R[1, 1])
+        return step_2d(position_update_2d, state, args, out)
     P = state.P
     pos = position_index(state.dims)
     d = len(pos)

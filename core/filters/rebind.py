@@ -35,3 +35,17 @@ def rebind(
         out[f.__name__] = wrap(copy)
     shared.update(out)
     return out
+
+
+def rebind_modules(
+    groups: Sequence[Sequence[types.FunctionType]],
+    elementary: dict[str, Any],
+    wrap: Callable[[types.FunctionType], Any] = lambda f: f,
+) -> dict[str, Any]:
+    """``rebind`` of each group (one module's functions) in order, every group's copies
+    calling the wrapped copies of the groups before it (a step calling another module's
+    step by the name it imported) as well as ``elementary``."""
+    out: dict[str, Any] = {}
+    for functions in groups:
+        out.update(rebind(functions, {**elementary, **out}, wrap))
+    return out

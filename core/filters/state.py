@@ -16,6 +16,7 @@ product per track: that is what makes 10⁵ runs cheap (see ``radarviz bench``).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Sequence
 from typing import NamedTuple
 
 import numpy as np
@@ -159,6 +160,40 @@ def store_tuples_2d(x: tuple, p: tuple, out: CVBatch, cut: tuple = ()) -> None:
         ox[i][cut] = x[i]
     for (i, j), v in zip(UPPER_2D, p, strict=True):
         oP[i, j][cut] = v
+
+
+#: Tracks per block of a 2D step on a batch (``step_2d``): a step's tuple arithmetic holds
+#: about sixty temporaries of a block at once, so blocks bound the working memory (and stay
+#: in cache).
+BLOCK_TRACKS = 8192
+
+
+def step_2d(
+    step: Callable[..., tuple[tuple, tuple]],
+    state: CVBatch,
+    args: Sequence[ArrayLike],
+    out: CVBatch | None = None,
+) -> CVBatch:
+    """A 2D step written once as plain arithmetic (``core.filters.position_2d`` and its
+    siblings: ``step(x, p, *args) -> (x⁺, p⁺)`` on the ``tuples_2d`` layout) applied to a
+    numpy batch, in blocks of ``BLOCK_TRACKS`` along the batch's last axis.
+
+    Each of ``args`` is a number or an array broadcasting against the batch shape; one that
+    varies along the last axis is cut with the block, one that broadcasts is passed whole.
+    A singular step (a zero S, an indefinite P) gives NaN for its tracks, as compiled code
+    does, without a warning."""
+    out = target_batch(state, out)
+    shape = state.batch_shape
+    last = shape[-1] if shape else 1
+    block = max(1, BLOCK_TRACKS // max(1, math.prod(shape[:-1])))
+    for start in range(0, last, block):
+        cut = (Ellipsis, slice(start, start + block)) if shape else ()
+        part = [a[cut] if cut and np.ndim(a) and np.shape(a)[-1] == last else a for a in args]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            xn, pn = step(*tuples_2d(state, cut), *part)
+        store_tuples_2d(xn, pn, out, cut)
+    mirror_upper(out.P)
+    return out
 
 
 def mirror_upper(P: NDArray[np.float64]) -> None:
