@@ -93,7 +93,7 @@ def test_kernel_matches_numpy_engine_off_the_origin(method: str) -> None:
 
 
 def test_ukf_kernel_takes_a_null_direction_and_refuses_an_indefinite_covariance() -> None:
-    """As the numpy engine (``polar_ukf.semidefinite_cholesky``): σv0 = 0 with Q = 0 leaves the
+    """As the numpy engine (``position_2d.semidefinite_cholesky_2d``): σv0 = 0 with Q = 0 leaves the
     velocity variance exactly 0, a null direction the sigma points do not move along (finite
     states, equal to numpy's); a start covariance indefinite beyond rounding makes that track
     NaN and leaves the others alone."""

@@ -1,12 +1,13 @@
-"""The engine's two layouts agree: component-wise vector operations (large batches, the Monte
-Carlo) and batched matrix products (small batches, the streaming tracker), for every update
-kind, 2D and 3D; and the method registry covers what the docs say.
+"""A track updated alone equals its row of a batch, for every update kind, 2D and 3D; and the
+method registry covers what the docs say.
 
-A track is updated alone (a batch of one: the dense path) and as one row of a batch of 64 (the
-component path). Both evaluate the same equations in a different order, so they differ by
-rounding only: float64 ε ≈ 1e-16 amplified by the cancellation in P⁺ (the update shrinks the
-position variance by up to ~10⁴ here), so we assert 1e-9 relative to the largest entry;
-a wrong term shows at ≥ 1e-4.
+Every batch size runs the same step functions (``core.filters.steps_2d``, ``steps_3d``), but a
+batch of 64 is applied in blocks, its arguments cut or broadcast per block
+(``core.filters.state.step_2d``, ``step_3d``), and a batch of one is not: a wrong cut or a
+misaligned argument shows here. The two differ by rounding at most (numpy's vector loops and
+scalar code may order a sum differently), float64 ε ≈ 1e-16 amplified by the cancellation in P⁺
+(the update shrinks the position variance by up to ~10⁴ here), so we assert 1e-9 relative to
+the largest entry; a wrong term shows at ≥ 1e-4.
 """
 
 from __future__ import annotations
@@ -27,10 +28,9 @@ from radarviz.core.filters.polar_ekf import ekf_update
 from radarviz.core.filters.polar_ukf import ukf_update
 from radarviz.core.filters.position import cv_update
 from radarviz.core.filters.predict import cv_predict
-from radarviz.core.filters.state import DENSE_MAX_RUNS, CVBatch, as_batch
+from radarviz.core.filters.state import BLOCK_TRACKS, CVBatch, as_batch
 
 BATCH = 64
-assert BATCH > DENSE_MAX_RUNS
 
 
 def _states(dims: int, seed: int) -> CVBatch:
@@ -101,7 +101,13 @@ def _updates(dims: int):
 
 @pytest.mark.parametrize("dims", [2, 3])
 @pytest.mark.parametrize("kind", ["predict", "position", "ekf", "ukf", "doppler"])
-def test_dense_and_component_paths_agree(dims: int, kind: str) -> None:
+def test_a_track_alone_equals_its_row_of_a_batch(
+    dims: int, kind: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import radarviz.core.filters.state as state_module
+
+    assert BLOCK_TRACKS >= BATCH
+    monkeypatch.setattr(state_module, "BLOCK_TRACKS", 10)  # 64 tracks: 7 blocks, one partial
     state = _states(dims, seed=dims)
     meas = _measurement(state, dims, seed=10 + dims)
     update = _updates(dims)[kind]

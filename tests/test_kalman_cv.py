@@ -7,9 +7,9 @@ import pytest
 from filterpy.kalman import KalmanFilter
 
 from radarviz.core.conversion.planar import convert
-from radarviz.core.filters.position import cv_update, joseph_update_position
+from radarviz.core.filters.position import cv_update
 from radarviz.core.filters.predict import cv_predict, process_noise, transition_matrix
-from radarviz.core.filters.state import as_batch, cv_init, empty_batch, quad_form_inv
+from radarviz.core.filters.state import cv_init, empty_batch, quad_form_inv
 
 H2 = np.array([[1.0, 0.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]])
 
@@ -48,29 +48,6 @@ def test_batched_kf_equals_filterpy_step_by_step(method: str, sigma_a: float) ->
             # largest entry leaves six orders of magnitude for error growth over 40 steps.
             np.testing.assert_allclose(state.x[m], kf.x, rtol=0, atol=1e-9 * np.abs(kf.x).max())
             np.testing.assert_allclose(state.P[m], kf.P, rtol=0, atol=1e-9 * np.abs(kf.P).max())
-
-
-@pytest.mark.parametrize("dims", [2, 3])
-def test_joseph_identity_holds_for_any_gain(dims: int) -> None:
-    rng = np.random.default_rng(3)
-    m, n = 50, 2 * dims
-    H = np.zeros((dims, n))
-    H[np.arange(dims), np.arange(0, n, 2)] = 1.0
-    P = _random_spd(rng, m, n, 1e4)
-    R = _random_spd(rng, m, dims, 1e3)
-    K = rng.normal(size=(m, n, dims)) * 0.1
-    state = as_batch(rng.normal(size=(m, n)), P)
-    nu = rng.normal(size=(m, dims))
-    out = joseph_update_position(
-        state,
-        [nu[:, i] for i in range(dims)],
-        np.ascontiguousarray(K.transpose(1, 2, 0)),
-        {(i, j): R[:, i, j] for i in range(dims) for j in range(i, dims)},
-    )
-    A = np.eye(n) - K @ H
-    expected = A @ P @ A.transpose(0, 2, 1) + K @ R @ K.transpose(0, 2, 1)
-    np.testing.assert_allclose(out.P, expected, rtol=1e-10, atol=1e-10 * np.abs(expected).max())
-    np.testing.assert_allclose(out.x, state.x + (K @ nu[:, :, None])[:, :, 0], rtol=1e-12)
 
 
 @pytest.mark.parametrize("sigma_a", [0.0, 0.7])

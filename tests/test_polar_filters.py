@@ -30,7 +30,8 @@ import radarviz.core.filters.polar_ukf as ukf_module
 import radarviz.core.filters.ukf_2d as ukf_2d
 from radarviz.core.conversion.planar import convert
 from radarviz.core.filters.methods import METHODS, PolarNoise, PolarPlot
-from radarviz.core.filters.polar_ukf import UKFParams, dense_cholesky
+from radarviz.core.filters.polar_ukf import UKFParams
+from radarviz.core.filters.position_3d import semidefinite_cholesky_3d
 from radarviz.core.filters.predict import cv_predict, transition_matrix
 from radarviz.core.filters.state import CVBatch, cv_init, empty_batch, quad_form_inv
 from radarviz.core.geometry import wrap_angle
@@ -234,11 +235,8 @@ def test_near_pi_measurements_straddle() -> None:
 @pytest.mark.parametrize("kind", ["ekf", "ukf"])
 def test_comparison_catches_missing_wrap(kind: str, monkeypatch: pytest.MonkeyPatch) -> None:
     """Negative control: without angle wrapping the near-π comparison must fail. The 2D
-    updates wrap by their module's ``wrap`` (``core.filters.ekf_2d``, ``ukf_2d``), the 3D
-    ones by ``wrap_angle``."""
+    updates wrap by their module's ``wrap`` (``core.filters.ekf_2d``, ``ukf_2d``)."""
     no_wrap = lambda a: np.asarray(a, dtype=np.float64)  # noqa: E731
-    for module in (ekf_module, ukf_module):
-        monkeypatch.setattr(module, "wrap_angle", no_wrap)
     for module in (ekf_2d, ukf_2d):
         monkeypatch.setattr(module, "wrap", no_wrap)
     with pytest.raises(AssertionError):
@@ -386,22 +384,31 @@ def test_working_memory_is_linear_and_small(update) -> None:
     assert np.isfinite(out.P).all()
 
 
+def _factor_3d(P: np.ndarray) -> np.ndarray:
+    """``semidefinite_cholesky_3d`` of a batch P (m, 6, 6) on its component-major views."""
+    L = np.zeros_like(P)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        semidefinite_cholesky_3d(P.transpose(1, 2, 0), 1.0, L.transpose(1, 2, 0))
+    return L
+
+
 def test_semidefinite_cholesky_accepts_a_null_direction() -> None:
     """L Lᵀ = P for a batch of P (6, 6) of rank 4 (built as A Aᵀ, A 6 × 4: two exact null
     directions, which LAPACK's Cholesky refuses), LAPACK's factor where P is positive definite,
-    and NaN for an indefinite P only (its neighbours untouched)."""
+    and NaN for an indefinite P only (its neighbours untouched): the engine's one 3D factor
+    (``core.filters.position_3d``), on a batch as the numpy engine runs it."""
     rng = np.random.default_rng(3)
     A = rng.standard_normal((5, 6, 4)) * np.array([1e3, 1.0, 1e3, 1.0, 1e2, 1.0])[:, None]
     P = A @ A.mT
     with pytest.raises(np.linalg.LinAlgError):
         np.linalg.cholesky(P)
-    L = dense_cholesky(P)
+    L = _factor_3d(P)
     np.testing.assert_allclose(L @ L.mT, P, rtol=0, atol=1e-12 * np.abs(P).max())
     assert np.all(np.triu(L, 1) == 0)
     B = rng.standard_normal((5, 6, 6))
     Q = B @ B.mT + np.eye(6)
-    np.testing.assert_allclose(dense_cholesky(Q), np.linalg.cholesky(Q), rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(_factor_3d(Q), np.linalg.cholesky(Q), rtol=1e-12, atol=1e-12)
     Q[2, 0, 0] = -1.0  # indefinite
-    L = dense_cholesky(Q)
+    L = _factor_3d(Q)
     assert np.isnan(L[2]).any()
     np.testing.assert_allclose(np.delete(L, 2, 0), np.linalg.cholesky(np.delete(Q, 2, 0)))

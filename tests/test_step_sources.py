@@ -8,9 +8,9 @@ called by the numpy engine and the array-API path). The test reads every functio
 (``_predict_2d = _inline(predict_2d)``): a function whose name matches a kind must reach one
 of its implementations, so a second hand-written prediction (a kernel's own F P Fᵀ, a "fast
 path" re-deriving Q) fails here, naming its file. A kind's copies that are still to be
-replaced are listed as such (``not_yet``), and the test holds that list to the tree: the 3D
-updates are still written per engine, and the IMM's mixing and combination and the 3D
-conversions are not yet listed (docs/architecture.md, section 3).
+replaced are listed as such (``not_yet``), and the test holds that list to the tree. The
+IMM's mixing and combination and the 3D conversions are not yet written once and not yet
+listed (docs/architecture.md, section 3).
 """
 
 from __future__ import annotations
@@ -61,37 +61,44 @@ STEP_KINDS: dict[str, StepKind] = {
     ),
     "position update (Joseph form on a factor)": StepKind(
         pattern=r"position_update|joseph",
-        implementations=frozenset({"core/filters/position_2d.py:position_update_2d"}),
-        not_yet={
-            "core/filters/kernels_3d.py:position_update_3d": "the 3D kernels' update",
-            "core/filters/kernels_3d.py:factored_joseph_3d": "the 3D kernels' Joseph form",
-            "core/filters/position.py:joseph_update_position": "the numpy 3D update",
-            "core/filters/state.py:dense_joseph_update": "the numpy dense form (3D)",
-            "core/filters/state.py:factored_joseph": "the numpy form of any size (3D)",
+        implementations=frozenset(
+            {
+                "core/filters/position_2d.py:position_update_2d",
+                "core/filters/position_3d.py:position_update_3d",
+                "core/filters/position_3d.py:factored_joseph_3d",
+            }
+        ),
+        not_this_step={
+            "core/filters/joseph.py:joseph_update": (
+                "the Joseph form for any H, of the converted and the joint Doppler updates "
+                "(numpy only, no kernel); its factor is the 2D and 3D one"
+            ),
         },
     ),
     "polar EKF update": StepKind(
         pattern=r"ekf_update|ekf_measurement|ekf_pseudo",
         implementations=frozenset(
-            {"core/filters/ekf_2d.py:ekf_measurement_2d", "core/filters/ekf_2d.py:ekf_update_2d"}
+            {
+                "core/filters/ekf_2d.py:ekf_measurement_2d",
+                "core/filters/ekf_2d.py:ekf_update_2d",
+                "core/filters/ekf_3d.py:ekf_measurement_3d",
+            }
         ),
-        not_yet={
-            "core/filters/kernels_3d.py:ekf_measurement_3d": "the 3D kernels' EKF",
-            "core/filters/polar_ekf.py:_ekf_measurement_3d": "the numpy 3D EKF",
-        },
     ),
     "polar UKF update": StepKind(
         pattern=r"ukf_update|_ukf",
-        implementations=frozenset({"core/filters/ukf_2d.py:ukf_update_2d"}),
-        not_yet={
-            "core/filters/kernels_3d.py:ukf_update_3d": "the 3D kernels' UKF",
-            "core/filters/polar_ukf.py:_ukf_update_components": "the numpy 3D UKF",
-            "core/filters/polar_ukf.py:_ukf_update_dense": "the numpy 3D UKF, small batches",
-        },
+        implementations=frozenset(
+            {"core/filters/ukf_2d.py:ukf_update_2d", "core/filters/ukf_3d.py:ukf_update_3d"}
+        ),
     ),
     "Doppler update along the measured line of sight": StepKind(
         pattern=r"doppler_update",
-        implementations=frozenset({"core/filters/doppler_2d.py:doppler_update_2d"}),
+        implementations=frozenset(
+            {
+                "core/filters/doppler_2d.py:doppler_update_2d",
+                "core/filters/doppler_3d.py:doppler_update_3d",
+            }
+        ),
         not_this_step={
             "core/filters/converted_doppler.py:converted_doppler_update": (
                 "the converted r̂·V̂r measurement, its own kind"
@@ -100,10 +107,17 @@ STEP_KINDS: dict[str, StepKind] = {
                 "the EKF and the Doppler value as one update, its own kind"
             ),
         },
-        not_yet={
-            "core/filters/kernels_3d.py:doppler_update_3d": "the 3D kernels' Doppler update",
-            "core/filters/doppler.py:_doppler_update_components": "the numpy 3D update",
-            "core/filters/doppler.py:_doppler_update_dense": "the numpy 3D update, small batches",
+    ),
+    "semi-definite Cholesky factor": StepKind(
+        pattern=r"cholesky",
+        implementations=frozenset(
+            {
+                "core/filters/position_2d.py:semidefinite_cholesky_2d",
+                "core/filters/position_3d.py:semidefinite_cholesky_3d",
+            }
+        ),
+        not_this_step={
+            "core/filters/joseph.py:cholesky_factor": "the 2D and 3D factor as a dense array",
         },
     ),
 }

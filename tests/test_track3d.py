@@ -756,21 +756,6 @@ def test_ukf_starting_at_the_pole_stays_finite_and_semidefinite(height_m: float)
         assert np.linalg.eigvalsh(P).min() >= -1e-13 * np.abs(P).max()
 
 
-def test_ukf_at_the_pole_component_path_equals_dense_path(monkeypatch) -> None:
-    """The batched (component-wise) UKF takes the same square root and the same Joseph form
-    as the dense one: a track started at the pole agrees to rounding (the RTOL argument of
-    this module), where it used to be NaN."""
-    import radarviz.core.filters.state as state
-
-    plots = overhead_plots(100.0)
-    dense = StreamTracker(("ukf",), True, StreamOptions()).add_block(plots)
-    monkeypatch.setattr(state, "DENSE_MAX_RUNS", 0)
-    batched = StreamTracker(("ukf",), True, StreamOptions()).add_block(plots)
-    for a, b in zip(dense, batched, strict=True):
-        close(b[0][1], a[0][1])
-        close(b[0][2], a[0][2])
-
-
 def test_track_3d_file_starting_at_the_pole(tmp_path: Path) -> None:
     """``radarviz track`` on a 3D file whose first plot is straight above the radar: every
     3D method writes finite tracks (the UKF used to end in a LinAlgError traceback)."""

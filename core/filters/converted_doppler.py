@@ -23,7 +23,7 @@ second-order terms (the same bookkeeping as ``core.conversion.second_order``)::
 
 so the update is the scalar Kalman update with ν = η̂ − d̂·v̂ − tr P_pv and
 S = H P Hᵀ + R_η + tr(P_pv P_pv) + tr(P_pp P_vv), in Joseph form
-(``core.filters.state.dense_joseph_update``).
+(``core.filters.joseph.joseph_update``).
 
 Used after the plot's position update (sequential processing), η̂'s error shares e_r with the
 range the position update used: their correlation is Vr σr / √(r² σVr² + Vr² σr²), under 0.05
@@ -35,9 +35,9 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from radarviz.core.filters.joseph import joseph_update
 from radarviz.core.filters.state import (
     CVBatch,
-    dense_joseph_update,
     position_index,
     velocity_index,
 )
@@ -126,4 +126,4 @@ def converted_doppler_update(
         sigma_vr_mps=sigma_vr_mps,
         site=site,
     )
-    return dense_joseph_update(state, nu, H, R, out)
+    return joseph_update(state, nu, H, R, out)

@@ -18,7 +18,7 @@ Joseph form, for the scalar measurement::
     U = P hᵀ,  S = h U + var e,  K = U / S,  x⁺ = x + K (V̂r − û·v̂),
     P⁺ = (I − K h) P (I − K h)ᵀ + K var e Kᵀ
 
-evaluated on a Cholesky factor of P (``core.filters.state.factored_joseph``): never
+evaluated on a Cholesky factor of P (``core.filters.joseph``): never
 P − K S Kᵀ, whose subtraction leaves rounding of either sign when P_vv is large against
 var e.
 """
@@ -29,14 +29,12 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from radarviz.core.filters.doppler_2d import doppler_update_2d
+from radarviz.core.filters.doppler_3d import doppler_update_3d
 from radarviz.core.filters.state import (
     CVBatch,
-    dense_joseph_update,
-    factored_joseph,
-    semidefinite_cholesky,
+    components,
     step_2d,
-    target_batch,
-    use_dense,
+    step_3d,
     velocity_index,
 )
 
@@ -61,102 +59,22 @@ def doppler_update(
         sigma_vr_mps, sigma_beta_rad, sigma_elevation_rad: the plot's noise std.
         out: optional preallocated batch to write into (must not alias ``state``).
     """
-    dims = state.dims
-    if dims == 2:  # written once, for every engine (``core.filters.doppler_2d``)
-        var_vr = np.asarray(sigma_vr_mps, dtype=np.float64) ** 2
-        var_b = np.asarray(sigma_beta_rad, dtype=np.float64) ** 2
-        vr = np.asarray(radial_velocity_mps, dtype=np.float64)
-        az = np.asarray(azimuth_rad, dtype=np.float64)
+    var_vr = np.asarray(sigma_vr_mps, dtype=np.float64) ** 2
+    var_b = np.asarray(sigma_beta_rad, dtype=np.float64) ** 2
+    vr = np.asarray(radial_velocity_mps, dtype=np.float64)
+    az = np.asarray(azimuth_rad, dtype=np.float64)
+    if state.dims == 2:  # written once, for every engine (``core.filters.doppler_2d``)
         return step_2d(doppler_update_2d, state, (vr, az, var_vr, var_b), out)
-    geometry = _geometry(
-        dims, azimuth_rad, elevation_rad, sigma_vr_mps, sigma_beta_rad, sigma_elevation_rad
-    )
-    if use_dense(state):  # the same update as matrix products (small batches)
-        return _doppler_update_dense(state, radial_velocity_mps, *geometry, out)
-    return _doppler_update_components(state, radial_velocity_mps, *geometry, out)
+    # in 3D, ``core.filters.doppler_3d``, û's angles as (cos β̂, sin β̂, cos ε̂, sin ε̂)
+    el = np.asarray(elevation_rad, dtype=np.float64)
+    var_e = np.asarray(sigma_elevation_rad, dtype=np.float64) ** 2
+    trig = components((np.cos(az), np.sin(az), np.cos(el), np.sin(el)), state.batch_shape)
+    args = (vr, trig, var_vr, var_b, var_e)
+    return step_3d(doppler_update_3d, state, args, SCRATCH_3D, out)
 
 
-def _doppler_update_components(
-    state: CVBatch,
-    radial_velocity_mps: ArrayLike,
-    u: tuple,
-    g_b: tuple,
-    g_e: tuple,
-    var_vr: NDArray[np.float64],
-    var_b: NDArray[np.float64],
-    var_e: NDArray[np.float64],
-    out: CVBatch | None,
-) -> CVBatch:
-    """``doppler_update`` of a 3D batch, one vector operation per component."""
-    x, P = state.x, state.P
-    dims, n = state.dims, x.shape[-1]
-    vel = velocity_index(dims)
-    v = [x[..., i] for i in vel]
-    Pvv = [[P[..., i, j] for j in vel] for i in vel]
-
-    def angle_term(g: tuple) -> NDArray[np.float64]:
-        """(g·v̂)² + gᵀ P_vv g for the first len(g) velocity axes."""
-        k = len(g)
-        gv = g[0] * v[0]
-        gPg = g[0] * g[0] * Pvv[0][0]
-        for a in range(1, k):
-            gv = gv + g[a] * v[a]
-            gPg = gPg + g[a] * g[a] * Pvv[a][a]
-            for b in range(a):
-                gPg = gPg + 2.0 * g[a] * g[b] * Pvv[a][b]
-        return gv * gv + gPg
-
-    r_e = var_vr + var_b * angle_term(g_b)
-    if dims == 3:
-        r_e = r_e + var_e * angle_term(g_e)
-    pred_vr = u[0] * v[0]
-    for a in range(1, dims):
-        pred_vr = pred_vr + u[a] * v[a]
-    # U = P hᵀ (h = u on the velocity), S = h U + var e, K = U / S.
-    U = []
-    for i in range(n):
-        acc = P[..., i, vel[0]] * u[0]
-        for a in range(1, dims):
-            acc = acc + P[..., i, vel[a]] * u[a]
-        U.append(acc)
-    S = u[0] * U[vel[0]]
-    for a in range(1, dims):
-        S = S + u[a] * U[vel[a]]
-    S = S + r_e
-    inv_S = 1.0 / S
-    K = [U[i] * inv_S for i in range(n)]
-    nu = np.asarray(radial_velocity_mps, dtype=np.float64) - pred_vr
-    out = target_batch(state, out)
-    for i in range(n):
-        out.x[..., i] = x[..., i] + K[i] * nu
-    L = semidefinite_cholesky(P, null_negative=True)
-    hL = []
-    for k in range(n):
-        acc = 0.0
-        for a, i in enumerate(vel):
-            if i >= k:
-                acc = acc + u[a] * L[i, k]
-        hL.append(acc)
-    factored_joseph(L, [[k] for k in K], [hL], {(0, 0): r_e}, out.P)
-    return out
-
-
-def _doppler_update_dense(
-    state: CVBatch,
-    radial_velocity_mps: ArrayLike,
-    u: tuple,
-    g_b: tuple,
-    g_e: tuple,
-    var_vr: NDArray[np.float64],
-    var_b: NDArray[np.float64],
-    var_e: NDArray[np.float64],
-    out: CVBatch | None,
-) -> CVBatch:
-    """``doppler_update`` for small 3D batches: the variance and the update as matrix
-    products."""
-    return dense_joseph_update(
-        state, *_dense_terms(state, radial_velocity_mps, u, g_b, g_e, var_vr, var_b, var_e), out
-    )
+#: The scratch arrays of ``doppler_update_3d``: u (3,), U, K (6,), L (6, 6).
+SCRATCH_3D = ((3,), (6,), (6,), (6, 6))
 
 
 def doppler_terms(

@@ -9,7 +9,7 @@ folded into its variance::
     P⁺ = Z Zᵀ + var e k kᵀ,   Z = L − k (h L),   L Lᵀ = P               (the Joseph form)
 
 with h = û on the velocity components (ẋ, ẏ) and L the semi-definite Cholesky factor of P
-(``core.filters.position_2d``; why on a factor: ``core.filters.state.factored_joseph``).
+(``core.filters.position_2d``; why on a factor: ``core.filters.joseph``).
 
 The elementary functions (``cos``, ``sin``, and ``sqrt``, ``where`` in the factor) are
 numpy's here; numba-compiled code (``core.filters.kernels_2d``) and the array-API path

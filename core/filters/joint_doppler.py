@@ -20,7 +20,7 @@ through J::
     ν = (ν', ν_d),   H = [H_pos; H_d],   R = [[R', J c], [(J c)ᵀ, var e]],
     c = (0, −(g_β·v̂) σβ²[, −(g_ε·v̂) σε²])               (v̂ the predicted velocity)
 
-in Joseph form (``core.filters.state.dense_joseph_update``). The angle errors' share of e is
+in Joseph form (``core.filters.joseph.joseph_update``). The angle errors' share of e is
 ρ² = (g·v)² σβ² / var e: small for the metre- and decimetre-band radars RLS1–RLS4 (1–5%),
 0.92 for the centimetre-band RLS5–RLS6 at σβ = 1° (``docs/finite_memory.md``, section 7).
 """
@@ -33,8 +33,9 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from radarviz.core.filters.doppler import doppler_terms, doppler_tilt_covariance
+from radarviz.core.filters.joseph import joseph_update
 from radarviz.core.filters.polar_ekf import ekf_pseudo_measurement, site_offsets
-from radarviz.core.filters.state import CVBatch, dense_joseph_update, position_index
+from radarviz.core.filters.state import CVBatch, position_index
 
 
 def joint_doppler_update(
@@ -98,4 +99,4 @@ def joint_doppler_update(
     nu[..., dims] = nu_d[..., 0]
     H[..., dims, :] = H_d[..., 0, :]
     R[..., dims, dims] = var_d[..., 0, 0]
-    return dense_joseph_update(state, nu, H, R)
+    return joseph_update(state, nu, H, R)

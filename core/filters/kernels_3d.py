@@ -1,20 +1,12 @@
 """The compiled (numba) 3D tracker kernel: the seven methods in 3D and the Doppler update as
 scalar loops, the 6 × 6 state (x, ẋ, y, ẏ, z, ż) in small arrays, one plot at a time.
 
-It mirrors the numpy engine's 3D route line by line:
-
-=========  =========================================================================
-kind       the lines it mirrors
-=========  =========================================================================
-predict    ``core.filters.predict.cv_predict`` in 3D (per axis [[1, T], [0, 1]], Q)
-converted  ``core.conversion.spatial`` (the five conversions: moments of each angle,
-           ``_combined_cov``, the per-axis scales) → ``core.filters.position``
-ekf        ``core.filters.polar_ekf.ekf_pseudo_measurement`` (ν' = J ν, R' = J R Jᵀ) →
-           the position update
-ukf        ``core.filters.polar_ukf.ukf_update`` (13 sigma points, bearing averaged
-           relative to the central point, Joseph form as a sum over the points)
-doppler    ``core.filters.doppler.doppler_update`` with the elevation terms
-=========  =========================================================================
+The updates are the ones every engine runs, written once (``core.filters.steps_3d``: the
+position update, the EKF's measurement, the UKF, the Doppler update) and compiled here with
+the scalar elementary functions; the prediction is ``core.filters.predict``'s. This module
+adds the 3D conversions, which mirror ``core.conversion.spatial`` (the five conversions:
+moments of each angle, ``_combined_cov``, the per-axis scales), the innovation statistics
+and the plot loop.
 
 The numpy engine stays the reference (``tests/test_track_compiled.py`` holds every method, with
 and without Doppler, to it at 1e-9 relative). Imported on first use only.
@@ -22,7 +14,6 @@ and without Doppler, to it at 1e-9 relative). Imported on first use only.
 
 from __future__ import annotations
 
-import math
 from math import atan2, cos, exp, expm1, hypot, log, sin, sqrt
 
 import numpy as np
@@ -32,6 +23,7 @@ from radarviz.core.filters.codes import UKF
 from radarviz.core.filters.kernels_2d import (
     _inline,
     _jit,
+    _select,
     add_process_noise_c,
     is_polar_c,
     predict_components_c,
@@ -40,7 +32,19 @@ from radarviz.core.filters.kernels_2d import (
     wrap,
 )
 from radarviz.core.filters.kernels_track import time_step
-from radarviz.core.filters.polar_ukf import SEMIDEFINITE_RTOL
+from radarviz.core.filters.steps_3d import bind_3d
+
+# The 3D updates (position, the EKF's measurement, UKF, Doppler: ``core.filters.steps_3d``),
+# written once as plain arithmetic (the numpy engine's too), compiled here with the scalar
+# elementary functions.
+_steps = bind_3d({"sqrt": sqrt, "where": _select, "atan2": atan2, "wrap": wrap}, _inline)
+semidefinite_cholesky_3d = _steps["semidefinite_cholesky_3d"]
+inverse_3 = _steps["inverse_3"]
+position_update_3d = _steps["position_update_3d"]
+ekf_measurement_3d_c = _steps["ekf_measurement_3d"]
+ukf_update_3d = _steps["ukf_update_3d"]
+doppler_terms_3d = _steps["doppler_terms_3d"]
+doppler_update_3d = _steps["doppler_update_3d"]
 
 
 @_jit
@@ -230,20 +234,6 @@ def predict_3d(x, P, T: float, q: float):
 
 
 @_inline
-def inverse_3(S, Si) -> float:
-    # The inverse of a symmetric 3 × 3 by cofactors; returns the determinant
-    a, b, c = S[0, 0], S[0, 1], S[0, 2]
-    d, e, f = S[1, 1], S[1, 2], S[2, 2]
-    c00, c01, c02 = d * f - e * e, c * e - b * f, b * e - c * d
-    det = a * c00 + b * c01 + c * c02
-    Si[0, 0], Si[0, 1], Si[0, 2] = c00 / det, c01 / det, c02 / det
-    Si[1, 1], Si[1, 2] = (a * f - c * c) / det, (b * c - a * e) / det
-    Si[2, 2] = (a * d - b * b) / det
-    Si[1, 0], Si[2, 0], Si[2, 1] = Si[0, 1], Si[0, 2], Si[1, 2]
-    return det
-
-
-@_inline
 def nis_3(S, nu) -> float:
     # νᵀ S⁻¹ ν by the Cholesky factor (core.filters.state.quad_form_inv): NaN unless S is
     # positive definite
@@ -265,199 +255,6 @@ def nis_3(S, nu) -> float:
     y1 = (nu[1] - l10 * y0) / l11
     y2 = (nu[2] - l20 * y0 - l21 * y1) / l22
     return y0 * y0 + y1 * y1 + y2 * y2
-
-
-@_inline
-def semidefinite_cholesky_3d(P, c: float, L, null_negative: bool = False):
-    # The lower Cholesky factor of c·P (6, 6) into L, semi-definite
-    # (``core.filters.state.semidefinite_cholesky``): a pivot in [−tol, 0] (with
-    # null_negative: any pivot <= 0) is a null direction (its column 0), below −tol the track
-    # becomes NaN
-    for j in range(6):
-        d = c * P[j, j]
-        for k in range(j):
-            d -= L[j, k] * L[j, k]
-        tol = SEMIDEFINITE_RTOL * c * P[j, j]
-        # a pivot above 0 is a variance, however small
-        null = d <= 0.0 if null_negative else -tol <= d <= 0.0
-        if null:
-            d = 0.0
-        elif d < -tol:
-            d = math.nan  # indefinite beyond rounding: this track becomes NaN
-        d = sqrt(d)
-        L[j, j] = d
-        for i in range(j + 1, 6):
-            e = c * P[i, j]
-            for k in range(j):
-                e -= L[i, k] * L[j, k]
-            L[i, j] = 0.0 if null else e / d
-        for i in range(j):
-            L[i, j] = 0.0
-
-
-@_inline
-def factored_joseph_3d(P, L, K, m: int, R):
-    # core.filters.state.factored_joseph: P⁺ = Z Zᵀ + K R Kᵀ into P (6, 6), Z = L − K (H L)
-    # already in L, K's first m columns the gain, R (m, m) the noise
-    for i in range(6):
-        for j in range(i, 6):
-            acc = 0.0
-            for a in range(m):
-                for b in range(m):
-                    acc += K[i, a] * R[a, b] * K[j, b]
-            for k in range(6):
-                acc += L[i, k] * L[j, k]
-            P[i, j] = acc
-            P[j, i] = acc
-
-
-@_inline
-def position_update_3d(x, P, nu, R, S, Si, K, U, L):
-    # core.filters.position in 3D: S = H P Hᵀ + R, K = P Hᵀ S⁻¹, x⁺ = x + K ν, and the
-    # Joseph form on P's Cholesky factor L, P⁺ = Z Zᵀ + K R Kᵀ with Z = L − K (H L)
-    # (``core.filters.state.factored_joseph``); L (6, 6) scratch
-    for a in range(3):
-        for b in range(3):
-            S[a, b] = P[2 * a, 2 * b] + R[a, b]
-    inverse_3(S, Si)
-    for i in range(6):
-        for a in range(3):
-            U[i, a] = P[i, 2 * a]
-    for i in range(6):
-        for a in range(3):
-            acc = 0.0
-            for b in range(3):
-                acc += U[i, b] * Si[b, a]
-            K[i, a] = acc
-    for i in range(6):
-        for a in range(3):
-            x[i] += K[i, a] * nu[a]
-    semidefinite_cholesky_3d(P, 1.0, L, True)
-    for k in range(6):  # H L into U: U[k, a] = L[2a, k]
-        for a in range(3):
-            U[k, a] = L[2 * a, k]
-    for i in range(6):  # Z = L − K (H L), in place
-        for k in range(6):
-            L[i, k] -= K[i, 0] * U[k, 0] + K[i, 1] * U[k, 1] + K[i, 2] * U[k, 2]
-    factored_joseph_3d(P, L, K, 3, R)
-
-
-@_inline
-def ekf_measurement_3d(x, r, b, el, sr2, sb2, se2, sx, sy, sz, nu, R):
-    # polar_ekf.ekf_pseudo_measurement in 3D: ν' = J ν, R' = J R Jᵀ at the prediction
-    dx, dy, dz = x[0] - sx, x[2] - sy, x[4] - sz
-    rho = hypot(dx, dy)
-    rp = sqrt(rho * rho + dz * dz)
-    bp, ep = atan2(dy, dx), atan2(dz, rho)
-    u = (dx / rp, dy / rp, dz / rp)
-    jb = (-dy, dx, 0.0)
-    je = (-dz * dx / rho, -dz * dy / rho, rho)
-    nr, nb, ne = r - rp, wrap(b - bp), el - ep
-    for i in range(3):
-        nu[i] = u[i] * nr + jb[i] * nb + je[i] * ne
-        for j in range(i, 3):
-            R[i, j] = u[i] * u[j] * sr2 + jb[i] * jb[j] * sb2 + je[i] * je[j] * se2
-            R[j, i] = R[i, j]
-
-
-@_inline
-def polar_3(qx: float, qy: float, qz: float, Z, p):
-    # core.geometry.polar_coordinates: (r, β, ε) of an offset into Z[p] (ρ by sqrt, not
-    # hypot: its guard against overflow costs 13 points × every plot, and a radar's offsets
-    # are far from 1e154 m; the two differ in the last bit at most)
-    rho = sqrt(qx * qx + qy * qy)
-    Z[p, 0] = sqrt(rho * rho + qz * qz)
-    Z[p, 1] = atan2(qy, qx)
-    Z[p, 2] = atan2(qz, rho)
-
-
-@_inline
-def ukf_update_3d(x, P, r, b, el, sr2, sb2, se2, sx, sy, sz, prm, L, Z, K, S, Si, E):
-    # core.filters.polar_ukf.ukf_update in 3D: 2n + 1 = 13 points of (x⁻, P⁻) through the
-    # polar map, unscented S and Pxz, K = Pxz S⁻¹, x⁺ = x + K ν, and P⁺ in Joseph form
-    # Σ_p Wc_p e_p e_pᵀ + K R Kᵀ with e_p = (χ_p − x⁻) − K d_p.
-    c, wm0, wc0, w = prm[0], prm[1], prm[2], prm[3]
-    semidefinite_cholesky_3d(P, c, L)
-    px, py, pz = x[0] - sx, x[2] - sy, x[4] - sz
-    polar_3(px, py, pz, Z, 0)
-    for k in range(6):  # Z[1 + 2k] = +column k, Z[2 + 2k] = −column k
-        for sgn in range(2):
-            f = 1.0 if sgn == 0 else -1.0
-            polar_3(px + f * L[0, k], py + f * L[2, k], pz + f * L[4, k], Z, 1 + 2 * k + sgn)
-    r0, b0, e0 = Z[0, 0], Z[0, 1], Z[0, 2]
-    zr, ze = wm0 * r0, wm0 * e0
-    acc = 0.0
-    for p in range(1, 13):
-        zr += w * Z[p, 0]
-        ze += w * Z[p, 2]
-        acc += wrap(Z[p, 1] - b0)
-    zb = wrap(b0 + w * acc)
-    for a in range(3):
-        for bb in range(3):
-            S[a, bb] = 0.0
-    S[0, 0], S[1, 1], S[2, 2] = sr2, sb2, se2
-    for p in range(13):
-        wp = wc0 if p == 0 else w
-        Z[p, 0] -= zr
-        Z[p, 1] = wrap(Z[p, 1] - zb)
-        Z[p, 2] -= ze
-        for a in range(3):
-            for bb in range(3):
-                S[a, bb] += wp * Z[p, a] * Z[p, bb]
-    inverse_3(S, Si)
-    nu0, nu1, nu2 = r - zr, wrap(b - zb), el - ze
-    for i in range(6):  # Pxz = W Σ_k L[:, k] (d_k+ − d_k−)ᵀ, then K = Pxz S⁻¹
-        a0, a1, a2 = 0.0, 0.0, 0.0
-        for k in range(6):
-            a0 += L[i, k] * (Z[1 + 2 * k, 0] - Z[2 + 2 * k, 0])
-            a1 += L[i, k] * (Z[1 + 2 * k, 1] - Z[2 + 2 * k, 1])
-            a2 += L[i, k] * (Z[1 + 2 * k, 2] - Z[2 + 2 * k, 2])
-        a0 *= w
-        a1 *= w
-        a2 *= w
-        for e in range(3):
-            K[i, e] = a0 * Si[0, e] + a1 * Si[1, e] + a2 * Si[2, e]
-    for i in range(6):
-        x[i] += K[i, 0] * nu0 + K[i, 1] * nu1 + K[i, 2] * nu2
-    for i in range(6):  # the central point (e = −K d₀) and K R Kᵀ
-        E[i] = K[i, 0] * Z[0, 0] + K[i, 1] * Z[0, 1] + K[i, 2] * Z[0, 2]
-    for i in range(6):
-        for j in range(i, 6):
-            P[i, j] = (
-                wc0 * E[i] * E[j]
-                + sr2 * K[i, 0] * K[j, 0]
-                + sb2 * K[i, 1] * K[j, 1]
-                + se2 * K[i, 2] * K[j, 2]
-            )
-    for k in range(6):  # the points ± column k: e = ±L[:, k] − K d
-        for sgn in range(2):
-            p, f = 1 + 2 * k + sgn, 1.0 if sgn == 0 else -1.0
-            for i in range(6):
-                E[i] = f * L[i, k] - (K[i, 0] * Z[p, 0] + K[i, 1] * Z[p, 1] + K[i, 2] * Z[p, 2])
-            for i in range(6):
-                for j in range(i, 6):
-                    P[i, j] += w * E[i] * E[j]
-    for i in range(6):
-        for j in range(i):
-            P[i, j] = P[j, i]
-
-
-@_inline
-def doppler_terms_3d(x, P, trig, var_vr: float, sb2: float, se2: float, u):
-    # core.filters.doppler: û = u(β̂, ε̂) into u; returns var e = σVr² + σβ² ((g_β·v)² +
-    # g_βᵀ P_vv g_β) + σε² ((g_ε·v)² + g_εᵀ P_vv g_ε), g_β on the first two axes
-    ca, sa, ce, se = trig[0], trig[1], trig[2], trig[3]  # ``plot_factors``
-    u[0], u[1], u[2] = ce * ca, ce * sa, se
-    gb0, gb1 = -ce * sa, ce * ca
-    ge0, ge1, ge2 = -se * ca, -se * sa, ce
-    v0, v1, v2 = x[1], x[3], x[5]
-    gv = gb0 * v0 + gb1 * v1
-    gpg = gb0 * gb0 * P[1, 1] + gb1 * gb1 * P[3, 3] + 2.0 * gb1 * gb0 * P[3, 1]
-    r_e = var_vr + sb2 * (gv * gv + gpg)
-    gv = ge0 * v0 + ge1 * v1 + ge2 * v2
-    gpg = ge0 * ge0 * P[1, 1] + ge1 * ge1 * P[3, 3] + ge2 * ge2 * P[5, 5]
-    gpg += 2.0 * ge1 * ge0 * P[3, 1] + 2.0 * ge2 * ge0 * P[5, 1] + 2.0 * ge2 * ge1 * P[5, 3]
-    return r_e + se2 * (gv * gv + gpg)
 
 
 @_inline
@@ -492,7 +289,7 @@ def position_measurement_3d(
     scratch. ``converted``: z and R hold this plot's conversion already (a conversion that
     does not read the prediction, not ducm, made for another state of the same track)."""
     if is_polar_c(code):
-        ekf_measurement_3d(x, r, b, el, sr2, sb2, se2, sx, sy, sz, nu, R)
+        ekf_measurement_3d_c(x[0] - sx, x[2] - sy, x[4] - sz, r, b, el, sr2, sb2, se2, nu, R)
     else:
         if not (converted and not reads_prediction_c(code)):
             px, py, pz = x[0] - sx, x[2] - sy, x[4] - sz
@@ -547,35 +344,6 @@ def scratch_3d():
         np.empty((13, 3)),
         np.empty(6),
     )
-
-
-@_inline
-def doppler_update_3d(x, P, vr_hat, trig, var_vr, sb2, se2, u, U, K, L):
-    # core.filters.doppler.doppler_update in 3D: U = P hᵀ, S = h U + var e, K = U / S,
-    # x⁺ = x + K ν, and the Joseph form on P's Cholesky factor L (6, 6 scratch),
-    # P⁺ = Z Zᵀ + var e K Kᵀ with Z = L − K (h L) (``core.filters.state.factored_joseph``)
-    r_e = doppler_terms_3d(x, P, trig, var_vr, sb2, se2, u)
-    for i in range(6):
-        U[i] = P[i, 1] * u[0] + P[i, 3] * u[1] + P[i, 5] * u[2]
-    S = u[0] * U[1] + u[1] * U[3] + u[2] * U[5] + r_e
-    nu = vr_hat - (u[0] * x[1] + u[1] * x[3] + u[2] * x[5])
-    inv_s = 1.0 / S
-    for i in range(6):
-        K[i] = U[i] * inv_s
-        x[i] += K[i] * nu
-    semidefinite_cholesky_3d(P, 1.0, L, True)
-    for k in range(6):  # h L into U
-        U[k] = u[0] * L[1, k] + u[1] * L[3, k] + u[2] * L[5, k]
-    for i in range(6):  # Z = L − K (h L), in place
-        for k in range(6):
-            L[i, k] -= K[i] * U[k]
-    for i in range(6):
-        for j in range(i, 6):
-            acc = r_e * K[i] * K[j]
-            for k in range(6):
-                acc += L[i, k] * L[j, k]
-            P[i, j] = acc
-            P[j, i] = acc
 
 
 @_jit

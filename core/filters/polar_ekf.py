@@ -42,9 +42,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from radarviz.core.filters.ekf_2d import ekf_measurement_2d
+from radarviz.core.filters.ekf_3d import ekf_measurement_3d
 from radarviz.core.filters.position import innovation_update
 from radarviz.core.filters.state import CVBatch, Vec, position_index
-from radarviz.core.geometry import polar_coordinates, wrap_angle
 
 
 def site_offsets(state: CVBatch, site: ArrayLike | None) -> list[Vec]:
@@ -125,27 +125,8 @@ def ekf_pseudo_measurement(
         nx, ny, r00, r01, r11 = ekf_measurement_2d(dx, dy, meas[0], meas[1], var_r, var_b)
         return (nx, ny), {(0, 0): r00, (0, 1): r01, (1, 1): r11}
     var_e = np.asarray(sigma_elevation_rad, dtype=np.float64) ** 2
-    return _ekf_measurement_3d(site_offsets(state, site), meas, var_r, var_b, var_e)
-
-
-def _ekf_measurement_3d(
-    offset: list[Vec], meas: list[Vec], var_r: Vec, var_b: Vec, var_e: Vec
-) -> tuple[tuple[Vec, ...], dict[tuple[int, int], Vec]]:
-    """``ekf_pseudo_measurement`` in 3D: ν' = J ν and R' = J R Jᵀ at the offset (dx, dy, dz)."""
-    dx, dy, dz = offset
-    rp, bp, ep = polar_coordinates([dx, dy, dz])
-    rho = np.hypot(dx, dy)
-    # Columns of J: u = d/r, r ∂u/∂β = (−dy, dx, 0), r ∂u/∂ε = (−dz dx/ρ, −dz dy/ρ, ρ).
-    u = (dx / rp, dy / rp, dz / rp)
-    jb = (-dy, dx, np.zeros_like(dx))
-    je = (-dz * dx / rho, -dz * dy / rho, rho)
-    nu_r = meas[0] - rp
-    nu_b = wrap_angle(meas[1] - bp)
-    nu_e = meas[2] - ep
-    nu = tuple(u[i] * nu_r + jb[i] * nu_b + je[i] * nu_e for i in range(3))
-    Rp = {
-        (i, j): u[i] * u[j] * var_r + jb[i] * jb[j] * var_b + je[i] * je[j] * var_e
-        for i in range(3)
-        for j in range(i, 3)
-    }
-    return nu, Rp
+    dx, dy, dz = site_offsets(state, site)
+    shape = state.batch_shape
+    nu, Rp = np.empty((3, *shape)), np.empty((3, 3, *shape))
+    ekf_measurement_3d(dx, dy, dz, *meas, var_r, var_b, var_e, nu, Rp)
+    return tuple(nu), {(i, j): Rp[i, j] for i in range(3) for j in range(i, 3)}

@@ -19,13 +19,13 @@ indefinite, which the subtraction does when P⁺ is small against P⁻ in some d
 Bearing mean: ẑ_β = wrap(β₀ + Σ Wm_i wrap(β_i − β₀)), with β₀ the bearing of the central
 point; a plain weighted sum would put the mean of bearings straddling ±π near 0.
 
-Batched without per-track matrices or a (..., 2n+1, n) sigma-point array: the Cholesky
-factor is written out over the batch as (...) vectors, and because it is lower triangular and
-only the position enters h, the two points along its last column (the last velocity
-component alone) map to ζ₀ and drop out of Pxz. So 2(n − 1) distinct polar evaluations per
-track, and the last factor column is never formed.
+The arithmetic is written once per dimension, for every engine: ``core.filters.ukf_2d``
+(the 2D state as tuples of numbers or arrays) and ``core.filters.ukf_3d`` (in place on a
+track's arrays or a batch's component-major views); this module applies them to a numpy
+batch. Because the factor is lower triangular and only the position enters h, the points
+along a column that moves no position component map to ζ₀.
 
-P⁻ need only be positive semi-definite (:func:`semidefinite_cholesky`): a direction of zero
+P⁻ need only be positive semi-definite (``core.filters.position_2d``'s factor): a direction of zero
 variance to rounding is legitimate and does occur. A first-plot start at elevation ±90° (or
 at range 0) has a singular position covariance (the azimuth column r cos ε ∂u/∂β of the
 conversion Jacobian vanishes), that null direction survives the prediction up to the tiny
@@ -46,25 +46,16 @@ from collections.abc import Sequence
 from typing import NamedTuple
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
-from radarviz.core.filters.polar_ekf import polar_measurement_vectors, site_offsets
+from radarviz.core.filters.polar_ekf import polar_measurement_vectors
 from radarviz.core.filters.state import (
-    SEMIDEFINITE_RTOL,
     CVBatch,
-    Vec,
-    cov_components,
-    mean_components,
-    position_index,
-    semidefinite_cholesky,
     step_2d,
-    sym,
-    symmetric_inverse,
-    target_batch,
-    use_dense,
+    step_3d,
 )
 from radarviz.core.filters.ukf_2d import ukf_update_2d
-from radarviz.core.geometry import polar_coordinates, wrap_angle
+from radarviz.core.filters.ukf_3d import ukf_update_3d
 
 
 class UKFParams(NamedTuple):
@@ -109,38 +100,6 @@ class UKFParams(NamedTuple):
 _DEFAULT_UKF = UKFParams()
 
 
-def cholesky_columns(P: NDArray[np.float64], scale: float) -> dict[tuple[int, int], Vec]:
-    """All but the last column of ``scale ·`` the lower Cholesky factor of every P (..., n, n)
-    (:func:`semidefinite_cholesky`).
-
-    Returns the entries (i, k), i >= k, k <= n − 2, as (...) vectors. The last column (only
-    its (n−1, n−1) entry is nonzero) moves the sigma points along the last velocity component
-    alone, which h ignores, so the UKF never needs it; the last pivot is never formed, so it
-    is not checked.
-    """
-    L = semidefinite_cholesky(P, P.shape[-1] - 1)
-    for v in L.values():
-        v *= scale
-    return L
-
-
-def dense_cholesky(P: NDArray[np.float64]) -> NDArray[np.float64]:
-    """The lower Cholesky factor (..., n, n) of positive semi-definite P (..., n, n).
-
-    LAPACK's where every P of the batch is positive definite (filterpy's square root);
-    otherwise :func:`semidefinite_cholesky`, which accepts a null direction and gives NaN only
-    to a track whose P is indefinite beyond rounding.
-    """
-    try:
-        return np.linalg.cholesky(P)
-    except np.linalg.LinAlgError:
-        pass
-    L = np.zeros_like(P)
-    for (i, k), v in semidefinite_cholesky(P).items():
-        L[..., i, k] = v
-    return L
-
-
 def ukf_update(
     state: CVBatch,
     measurement: Sequence[ArrayLike],
@@ -176,201 +135,11 @@ def ukf_update(
         site_xy = np.zeros(2) if site is None else np.asarray(site, dtype=np.float64)
         args = (*meas, *var, site_xy[..., 0], site_xy[..., 1], *params.weights(4))
         return step_2d(ukf_update_2d, state, args, out)
-    if use_dense(state):
-        return _ukf_update_dense(state, meas, var, site, params, out)
-    return _ukf_update_components(state, meas, var, site, params, out)
+    site_xyz = np.zeros(3) if site is None else np.asarray(site, dtype=np.float64)
+    sites = (site_xyz[..., 0], site_xyz[..., 1], site_xyz[..., 2])
+    args = (*meas, *var, *sites, params.weights(6))
+    return step_3d(ukf_update_3d, state, args, SCRATCH_3D, out)
 
 
-def _ukf_update_components(
-    state: CVBatch,
-    meas: list[NDArray[np.float64]],
-    var: list[NDArray[np.float64]],
-    site: ArrayLike | None,
-    params: UKFParams,
-    out: CVBatch | None,
-) -> CVBatch:
-    """``ukf_update`` of a 3D batch with the Cholesky factor written out over the batch as
-    (...) vectors (module docstring)."""
-    x, P = state.x, state.P
-    n, m = x.shape[-1], state.dims  # state size; measurement size (one per position axis)
-    pos = position_index(m)
-    c, wm0, wc0, w = params.weights(n)
-    col = cholesky_columns(P, np.sqrt(c))  # entries (i, k) of √((n+λ)P⁻), k <= n − 2
-
-    # Sigma points through h. χ_{k±} = x⁻ ± column k moves position axis a only if 2a >= k.
-    p0 = site_offsets(state, site)
-    h0 = polar_coordinates(p0)
-    Z: list[list[Vec]] = [[] for _ in range(m)]  # Z[c][2k], Z[c][2k+1]: component c of ζ_{k±}
-    for k in range(n - 1):
-        for sign in (1.0, -1.0):
-            q = [p0[a] + sign * col[pa, k] if pa >= k else p0[a] for a, pa in enumerate(pos)]
-            for comp, value in enumerate(polar_coordinates(q)):
-                Z[comp].append(value)
-    del q
-    npts = 2 * (n - 1)
-    # χ₀ and the two points along the last column all map to h0: weight Wm₀ + 2W in the
-    # mean, Wc₀ + 2W in S. The bearing (component 1) is averaged relative to h0's.
-    mean: list[Vec] = []
-    for comp in range(m):
-        if comp == 1:
-            acc = wrap_angle(Z[1][0] - h0[1])
-            for i in range(1, npts):
-                acc += wrap_angle(Z[1][i] - h0[1])
-            acc *= w
-            acc += h0[1]
-            mean.append(wrap_angle(acc))
-        else:
-            acc = Z[comp][0] + Z[comp][1]
-            for i in range(2, npts):
-                acc += Z[comp][i]
-            acc *= w
-            acc += (wm0 + 2.0 * w) * h0[comp]
-            mean.append(acc)
-    del acc
-
-    def residual(comp: int, value: Vec) -> Vec:
-        return wrap_angle(value - mean[1]) if comp == 1 else value - mean[comp]
-
-    # Residuals d_i = ζ_i ⊖ ẑ, in place, and the unscented S = Σ Wc_i d_i d_iᵀ + R.
-    d0 = [residual(comp, h0[comp]) for comp in range(m)]
-    del h0, p0
-    wcc = wc0 + 2.0 * w
-    S = {(a, b): (wcc * d0[a]) * d0[b] for a in range(m) for b in range(a, m)}
-    for comp in range(m):
-        for i in range(npts):
-            Z[comp][i] = residual(comp, Z[comp][i])
-    for a in range(m):
-        for b in range(a, m):
-            acc = Z[a][0] * Z[b][0]
-            for i in range(1, npts):
-                acc += Z[a][i] * Z[b][i]
-            S[a, b] += w * acc + var[a] if a == b else w * acc
-    # Cross covariance: χ_{k±} − x⁻ = ±column k, so Pxz = W Σ_k column_k (d_{k+} − d_{k−})ᵀ.
-    D = [[Z[comp][2 * k] - Z[comp][2 * k + 1] for k in range(n - 1)] for comp in range(m)]
-    inv = symmetric_inverse(S, m, scale=w)  # folds the weight W of Pxz into S⁻¹
-    del S
-    inv = {(a, b): sym(inv, a, b) for a in range(m) for b in range(m)}
-    K: list[list[Vec]] = [[] for _ in range(m)]  # K[e][i]: gain row i, column e
-    for i in range(n):
-        a_row = []
-        for comp in range(m):
-            a = col[i, 0] * D[comp][0]
-            for k in range(1, min(i, n - 2) + 1):
-                a += col[i, k] * D[comp][k]
-            a_row.append(a)
-        for e in range(m):
-            g = a_row[0] * inv[0, e]
-            for comp in range(1, m):
-                g = g + a_row[comp] * inv[comp, e]
-            K[e].append(g)
-    del D, inv
-    nu = [residual(comp, meas[comp]) for comp in range(m)]
-    mean.clear()  # every residual is taken: free ẑ
-    out = target_batch(state, out)
-    xc, oxc = mean_components(x), mean_components(out.x)
-    for i in range(n):
-        acc = xc[i] + K[0][i] * nu[0]
-        for e in range(1, m):
-            acc = acc + K[e][i] * nu[e]
-        oxc[i] = acc
-    del nu, acc
-    # P⁺ in Joseph form (module docstring): Σ_p Wc_p e_p e_pᵀ + K R Kᵀ, e_p = (χ_p − x⁻) − K d_p.
-    # χ₀ and the two points along the last column share d_p = d₀ (weight Wc₀ + 2W, e = −K d₀,
-    # their ± last-column parts cancelling in the cross terms); those two add 2W·(n+λ)·dₙ₋₁ =
-    # dₙ₋₁, the last Cholesky pivot of P⁻, at (n−1, n−1).
-    Pc, oPc = cov_components(P), cov_components(out.P)
-    last = Pc[n - 1, n - 1] - sum_terms([col[n - 1, k] * col[n - 1, k] for k in range(n - 1)]) / c
-    tol = SEMIDEFINITE_RTOL * Pc[n - 1, n - 1]
-    last = np.where(last >= 0.0, last, np.where(last < -tol, np.nan, 0.0))
-    del tol
-    kd0 = [sum_terms([K[e][i] * d0[e] for e in range(m)]) for i in range(n)]
-    for i in range(n):  # the accumulators are out's own P (no temporaries per entry)
-        for j in range(i, n):
-            acc = oPc[i, j]
-            np.multiply(kd0[i], kd0[j], out=acc)
-            acc *= wcc
-            for e in range(m):
-                acc += (var[e] * K[e][i]) * K[e][j]
-    oPc[n - 1, n - 1] += last
-    del kd0, d0, last
-    for k in range(n - 1):
-        for p, sign in ((2 * k, 1.0), (2 * k + 1, -1.0)):
-            e_p = []  # −e_p (the sign drops out of the products)
-            for i in range(n):
-                v = sum_terms([K[e][i] * Z[e][p] for e in range(m)])
-                if i >= k:
-                    v -= sign * col[i, k]
-                e_p.append(v)
-            for i in range(n):
-                we = w * e_p[i]
-                for j in range(i, n):
-                    oPc[i, j] += we * e_p[j]
-                del we
-            del e_p
-            for e in range(m):
-                Z[e][p] = None  # type: ignore[call-overload]  # each point freed once used
-        for i in range(k, n):
-            del col[i, k]
-    del Z, col
-    for i in range(n):
-        for j in range(i + 1, n):
-            oPc[j, i] = oPc[i, j]
-    return out
-
-
-def sum_terms(terms: list[Vec]) -> Vec:
-    """t₀ + t₁ + … left to right (the order fixes the rounding)."""
-    acc = terms[0]
-    for t in terms[1:]:
-        acc = acc + t
-    return acc
-
-
-def _ukf_update_dense(
-    state: CVBatch,
-    meas: list[NDArray[np.float64]],
-    var: list[NDArray[np.float64]],
-    site: ArrayLike | None,
-    params: UKFParams,
-    out: CVBatch | None,
-) -> CVBatch:
-    """``ukf_update`` for small 3D batches: the module docstring's equations with all 2n + 1
-    sigma points as one (..., 2n+1, n) array and batched matrix products (the tests check it
-    against the component-wise path)."""
-    x, P = state.x, state.P
-    n, m = x.shape[-1], state.dims
-    pos = list(position_index(m))
-    c, wm0, wc0, w = params.weights(n)
-    cols = dense_cholesky(c * P).mT  # row k: column k of the factor
-    chi = np.concatenate([x[..., None, :], x[..., None, :] + cols, x[..., None, :] - cols], -2)
-    offsets = chi[..., pos]
-    if site is not None:
-        # A site per track (..., d) lines up with the tracks, not with the sigma points.
-        offsets = offsets - np.asarray(site, dtype=np.float64)[..., None, :]
-    zeta = np.stack(polar_coordinates([offsets[..., a] for a in range(m)]), -1)  # (..., 2n+1, m)
-    wm = np.full(2 * n + 1, w)
-    wm[0] = wm0
-    wc = wm.copy()
-    wc[0] = wc0
-    b0 = zeta[..., :1, 1]
-    zeta[..., 1] = b0 + wrap_angle(zeta[..., 1] - b0)  # bearings relative to the central one
-    z_mean = np.einsum("p,...pm->...m", wm, zeta)
-    dz = zeta - z_mean[..., None, :]
-    dz[..., 1] = wrap_angle(dz[..., 1])
-    dx = chi - x[..., None, :]
-    R = np.zeros((*state.batch_shape, m, m))
-    for a in range(m):
-        R[..., a, a] = var[a]
-    S = np.einsum("p,...pi,...pj->...ij", wc, dz, dz) + R
-    Pxz = np.einsum("p,...pi,...pj->...ij", wc, dx, dz)
-    K = np.linalg.solve(S, Pxz.mT).mT
-    nu = np.stack(meas, -1) - z_mean
-    nu[..., 1] = wrap_angle(nu[..., 1])
-    # Joseph form: P⁺ = Σ Wc_i (dx_i − K dz_i)(dx_i − K dz_i)ᵀ + K R Kᵀ, equal to P − K S Kᵀ
-    # but a sum of positive semi-definite terms, so no cancellation can make it indefinite.
-    e = dx - dz @ K.mT
-    P_new = np.einsum("p,...pi,...pj->...ij", wc, e, e) + K @ R @ K.mT
-    out = target_batch(state, out)
-    out.x[...] = x + (K @ nu[..., None])[..., 0]
-    out.P[...] = 0.5 * (P_new + P_new.mT)
-    return out
+#: The scratch arrays of ``ukf_update_3d``: L (6, 6), Z (13, 3), K (6, 3), S, Si (3, 3), E (6,).
+SCRATCH_3D = ((6, 6), (13, 3), (6, 3), (3, 3), (3, 3), (6,))

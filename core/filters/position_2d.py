@@ -10,10 +10,13 @@ position and ν = z − H x⁻::
     S = H P Hᵀ + R,   K = P Hᵀ S⁻¹,   x⁺ = x⁻ + K ν
     P⁺ = Z Zᵀ + K R Kᵀ,   Z = L − K (H L),   L Lᵀ = P        (the Joseph form on a factor)
 
-is ``core.filters.position``'s and ``core.filters.state.factored_joseph``'s (why on a
-factor: there). The semi-definite Cholesky factor treats a pivot within rounding of zero as
-a direction of zero variance and one below it as NaN
-(``core.filters.state.semidefinite_cholesky``).
+is ``core.filters.position``'s (why on a factor: ``core.filters.joseph``). The
+semi-definite Cholesky factor is the recursion d_j = P_jj − Σ_{k<j} L_jk², L_jj = √d_j,
+L_ij = (P_ij − Σ_{k<j} L_ik L_jk) / L_jj; a pivot d_j in [−tol, 0], tol = 10⁻⁹ P_jj
+(``core.filters.state.SEMIDEFINITE_RTOL``, why that size: there), is a direction of zero
+variance (its column 0, the exact factor of a semi-definite P) and one below −tol gives NaN
+for that track only; with ``null_negative`` every pivot <= 0 is a null direction (the Kalman
+updates' factor, ``core.filters.joseph``).
 
 The branches of that factor are written with ``where`` and the roots with ``sqrt``, this
 module's numpy functions; the compiled kernels compile a copy of these functions with the
@@ -47,8 +50,8 @@ def _below(e, d, null):
 
 
 def semidefinite_cholesky_2d(p, c: float, null_negative: bool = False):
-    """The lower Cholesky factor of c·P (``core.filters.state.semidefinite_cholesky``, with
-    its ``null_negative``) as its columns (L[:, 0], …, L[:, 3]), 4-tuples each."""
+    """The lower Cholesky factor of c·P (module docstring; ``null_negative``: every pivot
+    <= 0 a null direction) as its columns (L[:, 0], …, L[:, 3]), 4-tuples each."""
     p00, p01, p02, p03, p11, p12, p13, p22, p23, p33 = p
     rt, nn = SEMIDEFINITE_RTOL, null_negative
     l00, n0 = _pivot(c * p00, rt * c * p00, nn)
@@ -92,7 +95,7 @@ def _krk(ki0: float, ki1: float, kj0: float, kj1: float, r00: float, r01: float,
 def position_update_2d(xt, p, nx: float, ny: float, r00: float, r01: float, r11: float):
     # core.filters.position: S = H P Hᵀ + R, K = P Hᵀ S⁻¹, x⁺ = x + K ν, and the Joseph form
     # on P's Cholesky factor L, P⁺ = Z Zᵀ + K R Kᵀ with Z = L − K (H L): a sum of squares,
-    # never P − K S Kᵀ (``core.filters.state.factored_joseph``).
+    # never P − K S Kᵀ (``core.filters.joseph``).
     x0, x1, x2, x3 = xt
     p00, p01, p02, p03, _, p12, _, p22, p23, _ = p
     s00, s01, s11 = p00 + r00, p02 + r01, p22 + r11

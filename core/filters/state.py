@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -115,8 +115,6 @@ def target_batch(state: CVBatch, out: CVBatch | None) -> CVBatch:
     and faulting them in costs more than the arithmetic. Loops ping-pong between two batches.
     """
     if out is None:
-        if use_dense(state):  # the dense path needs no component-major storage
-            return CVBatch(np.empty(state.x.shape), np.empty(state.P.shape))
         return empty_batch(state.batch_shape, state.dims)
     if out.x.shape != state.x.shape or np.shares_memory(out.P, state.P):
         raise ValueError("out must be a separate batch with the same number of runs")
@@ -168,31 +166,86 @@ def store_tuples_2d(x: tuple, p: tuple, out: CVBatch, cut: tuple = ()) -> None:
 BLOCK_TRACKS = 8192
 
 
+def _blocks(shape: tuple[int, ...]) -> list[tuple]:
+    """The cuts (``(..., slice)``) of a batch of ``shape`` into blocks of about
+    ``BLOCK_TRACKS`` tracks along its last axis; ``[()]`` for a single track."""
+    if not shape:
+        return [()]
+    last = shape[-1]
+    block = max(1, BLOCK_TRACKS // max(1, math.prod(shape[:-1])))
+    return [(Ellipsis, slice(start, start + block)) for start in range(0, last, block)]
+
+
+def _cut(args: Sequence[Any], cut: tuple, last: int) -> list[Any]:
+    """``args`` for one block: an array whose last axis is the batch's is cut with it; a
+    number, a tuple, or an array that broadcasts along that axis is passed whole."""
+    return [
+        a[cut] if cut and isinstance(a, np.ndarray) and a.ndim and a.shape[-1] == last else a
+        for a in args
+    ]
+
+
 def step_2d(
     step: Callable[..., tuple[tuple, tuple]],
     state: CVBatch,
-    args: Sequence[ArrayLike],
+    args: Sequence[Any],
     out: CVBatch | None = None,
 ) -> CVBatch:
     """A 2D step written once as plain arithmetic (``core.filters.position_2d`` and its
     siblings: ``step(x, p, *args) -> (x⁺, p⁺)`` on the ``tuples_2d`` layout) applied to a
     numpy batch, in blocks of ``BLOCK_TRACKS`` along the batch's last axis.
 
-    Each of ``args`` is a number or an array broadcasting against the batch shape; one that
-    varies along the last axis is cut with the block, one that broadcasts is passed whole.
-    A singular step (a zero S, an indefinite P) gives NaN for its tracks, as compiled code
-    does, without a warning."""
+    Each of ``args`` is a number, a tuple of numbers, or an array broadcasting against the
+    batch shape; an array whose last axis is the batch's is cut with the block. A singular
+    step (a zero S, an indefinite P) gives NaN for its tracks, as compiled code does,
+    without a warning."""
     out = target_batch(state, out)
     shape = state.batch_shape
-    last = shape[-1] if shape else 1
-    block = max(1, BLOCK_TRACKS // max(1, math.prod(shape[:-1])))
-    for start in range(0, last, block):
-        cut = (Ellipsis, slice(start, start + block)) if shape else ()
-        part = [a[cut] if cut and np.ndim(a) and np.shape(a)[-1] == last else a for a in args]
+    for cut in _blocks(shape):
+        part = _cut(args, cut, shape[-1] if shape else 1)
         with np.errstate(invalid="ignore", divide="ignore"):
             xn, pn = step(*tuples_2d(state, cut), *part)
         store_tuples_2d(xn, pn, out, cut)
     mirror_upper(out.P)
+    return out
+
+
+def step_3d(
+    step: Callable[..., None],
+    state: CVBatch,
+    args: Sequence[Any],
+    scratch: Sequence[tuple[int, ...]],
+    out: CVBatch | None = None,
+) -> CVBatch:
+    """A 3D step written once as plain arithmetic (``core.filters.position_3d`` and its
+    siblings: ``step(x, P, *args, *scratch)`` updating x (6,) and P (6, 6) in place, indexed
+    ``x[i]``, ``P[i, j]``) applied to a numpy batch: on its component-major views (6, ...)
+    and (6, 6, ...), so every entry is a vector over the block, in blocks of
+    ``BLOCK_TRACKS`` along the batch's last axis.
+
+    ``args`` as for ``step_2d`` (an argument indexed per component, ν or R, is one array
+    with the components first and the batch shape after); ``scratch``: the shapes of the
+    step's scratch arrays, each allocated with the block's shape appended."""
+    out = target_batch(state, out)
+    out.x[...] = state.x
+    out.P[...] = state.P
+    xc, Pc = mean_components(out.x), cov_components(out.P)
+    shape = state.batch_shape
+    for cut in _blocks(shape):
+        part = _cut(args, cut, shape[-1] if shape else 1)
+        block = xc[(0, *cut)].shape if cut else ()
+        bufs = [np.empty((*s, *block)) for s in scratch]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            step(xc[(slice(None), *cut)], Pc[(slice(None), slice(None), *cut)], *part, *bufs)
+    return out
+
+
+def components(values: Sequence[ArrayLike], shape: tuple[int, ...]) -> NDArray[np.float64]:
+    """Numbers or arrays broadcasting against a batch ``shape`` as one (k, *shape) array
+    (an argument of a 3D step indexed per component: ν, û's angles)."""
+    out = np.empty((len(values), *shape))
+    for i, v in enumerate(values):
+        out[i] = v
     return out
 
 
@@ -246,194 +299,6 @@ def quad_form_inv(P: NDArray[np.float64], e: NDArray[np.float64]) -> NDArray[np.
 SEMIDEFINITE_RTOL = 1e-9
 
 
-def semidefinite_cholesky(
-    P: NDArray[np.float64], columns: int | None = None, null_negative: bool = False
-) -> dict[tuple[int, int], Vec]:
-    """Entries (i, k), i >= k, k < ``columns``, of the lower Cholesky factor L of every
-    positive semi-definite P (..., n, n), L Lᵀ = P, as (...) vectors.
-
-    The column-by-column (Cholesky–Banachiewicz) recursion::
-
-        d_j = P_jj − Σ_{k<j} L_jk²,   L_jj = √d_j,   L_ij = (P_ij − Σ_{k<j} L_ik L_jk) / L_jj
-
-    A pivot with −``SEMIDEFINITE_RTOL`` · P_jj ≤ d_j ≤ 0 is a direction of zero variance (to
-    rounding): its column is zero, which is the exact factor of a semi-definite P (there the
-    P_ij − Σ L_ik L_jk vanish with d_j). A pivot below −``SEMIDEFINITE_RTOL`` · P_jj (P
-    indefinite beyond rounding) gives NaN for that track only. Where P is positive definite
-    this is the usual Cholesky factor, LAPACK's to rounding. ``columns`` None: all n.
-
-    ``null_negative``: every pivot <= 0 is a null direction (NaN only from a NaN in P). For
-    the Kalman updates' factor (``factored_joseph``), whose P is positive semi-definite in
-    exact arithmetic (a prediction F P Fᵀ + Q, an IMM mixing, an earlier update, each a sum
-    of positive semi-definite terms): a negative pivot there is rounding whatever its size
-    against P_jj, which in a nearly singular P (a long prediction: eigenvalues 10¹⁴ apart)
-    exceeds any fixed fraction (10⁻⁸ of P_jj measured after 10⁶ s steps).
-    """
-    n = P.shape[-1]
-    columns = n if columns is None else columns
-    Pc = cov_components(P)
-    L: dict[tuple[int, int], Vec] = {}
-    with np.errstate(invalid="ignore", divide="ignore"):
-        for j in range(columns):
-            d = Pc[j, j].copy()
-            for k in range(j):
-                d -= L[j, k] * L[j, k]
-            tol = SEMIDEFINITE_RTOL * Pc[j, j]
-            null = (d <= 0.0) if null_negative else (d <= 0.0) & (d >= -tol)
-            d[null] = 0.0
-            d[d < -tol] = np.nan  # indefinite beyond rounding: this track becomes NaN
-            np.sqrt(d, out=d)
-            L[j, j] = d
-            for i in range(j + 1, n):
-                e = Pc[i, j].copy()
-                for k in range(j):
-                    e -= L[i, k] * L[j, k]
-                e /= d
-                e[null] = 0.0
-                L[i, j] = e
-    return L
-
-
-def symmetric_inverse(
-    S: dict[tuple[int, int], Vec], m: int, scale: float = 1.0
-) -> dict[tuple[int, int], Vec]:
-    """Entries (i, j), i <= j, of ``scale`` · S⁻¹ for a batch of symmetric m × m matrices.
-
-    ``S`` holds the upper-triangle entries as (...) arrays, m = 1, 2 or 3. Written out
-    (adjugate over the determinant) so the cost is a dozen vector operations, whatever the
-    batch size; ``scale`` is folded into the reciprocal of the determinant.
-    """
-    if m == 1:
-        return {(0, 0): scale / S[0, 0]}
-    if m == 2:
-        s00, s01, s11 = S[0, 0], S[0, 1], S[1, 1]
-        inv_det = scale / (s00 * s11 - s01 * s01)
-        return {(0, 0): s11 * inv_det, (0, 1): -s01 * inv_det, (1, 1): s00 * inv_det}
-    if m == 3:
-        s00, s01, s02 = S[0, 0], S[0, 1], S[0, 2]
-        s11, s12, s22 = S[1, 1], S[1, 2], S[2, 2]
-        c00 = s11 * s22 - s12 * s12
-        c01 = s02 * s12 - s01 * s22
-        c02 = s01 * s12 - s02 * s11
-        inv_det = scale / (s00 * c00 + s01 * c01 + s02 * c02)
-        return {
-            (0, 0): c00 * inv_det,
-            (0, 1): c01 * inv_det,
-            (0, 2): c02 * inv_det,
-            (1, 1): (s00 * s22 - s02 * s02) * inv_det,
-            (1, 2): (s01 * s02 - s00 * s12) * inv_det,
-            (2, 2): (s00 * s11 - s01 * s01) * inv_det,
-        }
-    raise ValueError(f"symmetric_inverse supports 1 to 3 dimensions (got {m})")
-
-
 def sym(M: dict[tuple[int, int], Vec], i: int, j: int) -> Vec:
     """Entry (i, j) of a symmetric matrix stored by its upper triangle."""
     return M[(i, j)] if i <= j else M[(j, i)]
-
-
-def factored_joseph(
-    L: dict[tuple[int, int], Vec],
-    K: list[list[Vec]],
-    HL: list[list[Vec | float]],
-    R: dict[tuple[int, int], Vec],
-    out_P: NDArray[np.float64],
-) -> None:
-    """The Joseph-form covariance P⁺ = (I − K H) P (I − K H)ᵀ + K R Kᵀ of a batch, on a factor
-    L of P (P = L Lᵀ, ``semidefinite_cholesky``), into ``out_P`` (..., n, n)::
-
-        Z = L − K (H L),   P⁺ = Z Zᵀ + K R Kᵀ
-
-    Why on a factor. P − K S Kᵀ, and the Joseph form multiplied out, P − K Uᵀ + (K S − U) Kᵀ,
-    subtract from P terms of P's size to leave P⁺: when P is large against R (a long time
-    step: P ≈ 10¹² R and more) what is left is rounding, of either sign, and so is M P Mᵀ
-    evaluated as products wherever P⁺ is small against P (a velocity known from Doppler under
-    a prediction of 10⁸ s). Here the subtraction is in Z, where an error is only an error:
-    P⁺ is a sum of squares (Z Zᵀ) and of K R Kᵀ, positive semi-definite for any gain, and its
-    entries stay within rounding of P⁺'s own size.
-
-    Args:
-        L: the entries (i, k), i >= k, of P's lower factor, each (...)
-            (``semidefinite_cholesky`` with ``null_negative``).
-        K: the gain, K[i][a] (...) for state i and measurement component a.
-        HL: H L, HL[a][k] (...) (or 0.0) for measurement component a and column k.
-        R: the upper entries (a, b), a <= b, of the measurement noise, each (...).
-        out_P: the (..., n, n) output, written whole (symmetric).
-    """
-    n, d = len(K), len(HL)
-    Pc = cov_components(out_P)
-    # K R Kᵀ first, then one column z = Z[:, k] at a time added as z zᵀ: the working memory
-    # is L, K R and one column, not Z whole.
-    KR = [[sum(K[i][a] * sym(R, a, b) for a in range(d)) for b in range(d)] for i in range(n)]
-    for i in range(n):
-        for j in range(i, n):
-            acc = KR[i][0] * K[j][0]
-            for b in range(1, d):
-                acc += KR[i][b] * K[j][b]
-            Pc[i, j] = acc
-    del KR
-    for k in range(n):
-        z = []
-        for i in range(n):
-            v = K[i][0] * HL[0][k]
-            for a in range(1, d):
-                v = v + K[i][a] * HL[a][k]
-            z.append(L[i, k] - v if i >= k else -v)
-        for i in range(n):
-            for j in range(i, n):
-                Pc[i, j] += z[i] * z[j]
-    for i in range(n):
-        for j in range(i + 1, n):
-            Pc[j, i] = Pc[i, j]
-
-
-#: Batches of at most this many tracks take the dense path (``dense_joseph_update``): below it
-#: numpy's per-call overhead, not arithmetic, is the cost, and a few matrix products beat a few
-#: hundred vector operations (measured crossover: between 16 and 64 tracks).
-DENSE_MAX_RUNS = 16
-
-
-def use_dense(state: CVBatch) -> bool:
-    """Whether ``state`` is small enough for the dense path."""
-    return state.runs <= DENSE_MAX_RUNS
-
-
-def dense_joseph_update(
-    state: CVBatch,
-    innovation: NDArray[np.float64],
-    H: NDArray[np.float64],
-    R: NDArray[np.float64],
-    out: CVBatch | None = None,
-) -> CVBatch:
-    """The Joseph-form Kalman update as matrix products, for small batches.
-
-        U = P Hᵀ,  S = H U + R,  K = U S⁻¹,  x⁺ = x + K ν,
-        P⁺ = M P Mᵀ + K R Kᵀ,   M = I − K H                        (symmetrised)
-
-    The same equations as the component-wise updates (``core.filters.position``,
-    ``core.filters.doppler``), evaluated with a handful of batched matrix products instead of
-    one vector operation per entry; the tests check the two against each other.
-
-    P⁺ is the Joseph form on a factor of P (``factored_joseph``): M P Mᵀ = (M L)(M L)ᵀ with
-    L the (semi-definite) Cholesky factor of P, so P⁺ is a sum of squares, positive
-    semi-definite however large P is against R.
-
-    Args:
-        innovation: ν (..., k).  H: (..., k, n) or (k, n).  R: (..., k, k).
-    """
-    x, P = state.x, state.P
-    U = P @ H.mT
-    S = H @ U + R
-    if S.shape[-1] == 1:  # a scalar measurement (Doppler): S⁻¹ is a division
-        K = U / S
-    else:
-        K = np.linalg.solve(S, U.mT).mT  # U S⁻¹ (S symmetric)
-    L = np.zeros(P.shape)
-    for (i, k), v in semidefinite_cholesky(P, null_negative=True).items():
-        L[..., i, k] = v
-    Z = L - K @ (H @ L)  # (I − K H) L
-    P_new = Z @ Z.mT + K @ R @ K.mT
-    out = target_batch(state, out)
-    out.x[...] = x + (K @ innovation[..., None])[..., 0]
-    out.P[...] = 0.5 * (P_new + P_new.mT)
-    return out

@@ -4,7 +4,7 @@ The prediction over such a step makes P ≈ 10³¹ m² (σa² T⁴ / 4 with the 
 against a noise R ≈ 10⁴ m²; an update that subtracts from P a term of P's size (P − K S Kᵀ, or
 the Joseph form multiplied out) leaves rounding of either sign, and the run stopped at its
 first negative variance (exit 1). The update is now the Joseph form on a Cholesky factor of P
-(``core.filters.state.factored_joseph``), a sum of squares.
+(``core.filters.joseph``), a sum of squares.
 """
 
 from __future__ import annotations
