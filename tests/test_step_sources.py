@@ -8,9 +8,8 @@ called by the numpy engine and the array-API path). The test reads every functio
 (``_predict_2d = _inline(predict_2d)``): a function whose name matches a kind must reach one
 of its implementations, so a second hand-written prediction (a kernel's own F P Fᵀ, a "fast
 path" re-deriving Q) fails here, naming its file. A kind's copies that are still to be
-replaced are listed as such (``not_yet``), and the test holds that list to the tree. The
-IMM's mixing and combination and the 3D conversions are not yet written once and not yet
-listed (docs/architecture.md, section 3).
+replaced are listed as such (``not_yet``), and the test holds that list to the tree. The 3D
+conversions are not yet written once and not yet listed (docs/architecture.md, section 3).
 """
 
 from __future__ import annotations
@@ -53,7 +52,9 @@ STEP_KINDS: dict[str, StepKind] = {
             }
         ),
         not_this_step={
-            "core/filters/kernels_imm.py:_predicted": "the IMM's predicted model probabilities",
+            "core/filters/imm_moments.py:predicted_probabilities": (
+                "the IMM's predicted model probabilities"
+            ),
             "core/filters/methods.py:_predicted": "a method's predicted measurement",
             "core/tracking/compiled.py:_predicted_kernel": "loads a compiled kernel",
             "core/filters/codes.py:reads_prediction": "whether a conversion reads the prediction",
@@ -106,6 +107,21 @@ STEP_KINDS: dict[str, StepKind] = {
             "core/filters/joint_doppler.py:joint_doppler_update": (
                 "the EKF and the Doppler value as one update, its own kind"
             ),
+        },
+    ),
+    "IMM mixing and combination": StepKind(
+        pattern=r"mix|combine",
+        implementations=frozenset(
+            {
+                "core/filters/imm_moments.py:mix_2d",
+                "core/filters/imm_moments.py:combine_2d",
+                "core/filters/imm_moments.py:mix_3d",
+                "core/filters/imm_moments.py:combine_3d",
+            }
+        ),
+        not_this_step={
+            "core/conversion/spatial.py:_combined_cov": "a 3D conversion's covariance",
+            "core/filters/kernels_3d.py:combined_cov": "a 3D conversion's covariance",
         },
     ),
     "semi-definite Cholesky factor": StepKind(

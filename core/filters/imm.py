@@ -30,10 +30,11 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
+from radarviz.core.filters.imm_moments import combine_2d, combine_3d, mix_2d, mix_3d
 from radarviz.core.filters.innovation import InnovationStats
 from radarviz.core.filters.models import IMMModel
 from radarviz.core.filters.predict import add_process_noise, cv_predict, white_acceleration
-from radarviz.core.filters.state import CVBatch
+from radarviz.core.filters.state import CVBatch, cov_components, empty_batch, mean_components
 from radarviz.core.filters.step import Stage, moves
 from radarviz.core.filters.turn import turn_factors, turn_predict
 
@@ -59,26 +60,43 @@ def imm_start(state: CVBatch, model: IMMModel) -> IMMState:
     return IMMState(CVBatch(x, P), mu)
 
 
+def _model_views(models: CVBatch) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The models' component-major views: x (..., r, n) as (r, n, ...), P as (r, n, n, ...)."""
+    return np.moveaxis(models.x, (-2, -1), (0, 1)), np.moveaxis(models.P, (-3, -2, -1), (0, 1, 2))
+
+
 def imm_combine(models: CVBatch, mu: NDArray[np.float64]) -> CVBatch:
-    """The moment-matched estimate Σⱼ μⱼ N(xⱼ, Pⱼ): x (..., n), P (..., n, n)."""
-    x = np.einsum("...j,...jn->...n", mu, models.x)
-    dx = models.x - x[..., None, :]
-    P = np.einsum("...j,...jmn->...mn", mu, models.P + dx[..., :, None] * dx[..., None, :])
-    return CVBatch(x, 0.5 * (P + P.mT))
+    """The moment-matched estimate Σⱼ μⱼ N(xⱼ, Pⱼ): x (..., n), P (..., n, n)
+    (``core.filters.imm_moments``, every engine's)."""
+    xm, Pm = _model_views(models)
+    n = models.x.shape[-1]
+    out = empty_batch(models.batch_shape[:-1], n // 2)
+    mu_c = np.moveaxis(np.broadcast_to(mu, models.batch_shape), -1, 0)
+    if n == 4:
+        combine_2d(xm, Pm, mu_c, mean_components(out.x), cov_components(out.P))
+    else:
+        combine_3d(xm, Pm, mu_c, mean_components(out.x), cov_components(out.P))
+    return out
 
 
 def imm_mix(imm: IMMState, transition: NDArray[np.float64]) -> tuple[CVBatch, NDArray[np.float64]]:
-    """The mixed initial conditions (x⁰ⱼ, P⁰ⱼ), batch (..., r), and c̄ (..., r)."""
-    mu = imm.probabilities
-    c = mu @ transition  # c̄ⱼ = Σᵢ μᵢ πᵢⱼ
-    w = transition * mu[..., :, None] / c[..., None, :]  # μᵢ|ⱼ, (..., i, j)
-    x, P = imm.models.x, imm.models.P
-    x0 = np.einsum("...ij,...in->...jn", w, x)
-    dx = x[..., :, None, :] - x0[..., None, :, :]  # xᵢ − x⁰ⱼ, (..., i, j, n)
-    P0 = np.einsum("...ij,...imn->...jmn", w, P) + np.einsum(
-        "...ij,...ijm,...ijn->...jmn", w, dx, dx
-    )
-    return CVBatch(x0, 0.5 * (P0 + P0.mT)), c
+    """The mixed initial conditions (x⁰ⱼ, P⁰ⱼ), batch (..., r), and c̄ (..., r)
+    (``core.filters.imm_moments``, every engine's)."""
+    models = imm.models
+    xm, Pm = _model_views(models)
+    n, r = models.x.shape[-1], models.x.shape[-2]
+    shape = models.batch_shape[:-1]
+    out = empty_batch((*shape, r), n // 2)
+    c = np.empty((r, *shape))
+    w = np.empty((r, r, *shape))
+    mu_c = np.moveaxis(np.broadcast_to(imm.probabilities, models.batch_shape), -1, 0)
+    x0, P0 = _model_views(out)
+    Pi = np.asarray(transition, dtype=np.float64)
+    if n == 4:
+        mix_2d(xm, Pm, mu_c, Pi, x0, P0, c, w)
+    else:
+        mix_3d(xm, Pm, mu_c, Pi, x0, P0, c, w)
+    return out, np.moveaxis(c, 0, -1)
 
 
 def imm_predict(mixed: CVBatch, dt_s: float | NDArray[np.float64], model: IMMModel) -> CVBatch:

@@ -20,6 +20,7 @@ import numba
 import numpy as np
 
 from radarviz.core.conversion.elementwise import DUCM, conversion_coefficients, converted_point
+from radarviz.core.filters import tuples
 from radarviz.core.filters.codes import EKF, UKF, is_polar, reads_prediction
 from radarviz.core.filters.predict import (
     add_process_noise,
@@ -28,6 +29,7 @@ from radarviz.core.filters.predict import (
     white_acceleration,
 )
 from radarviz.core.filters.steps_2d import bind_2d
+from radarviz.core.filters.tuples import load_2d, store_2d
 
 # error_model="numpy": a division by zero or a negative pivot gives inf / NaN for that track,
 # as the numpy engine does, instead of raising. cache=True: compiled once per machine.
@@ -98,24 +100,11 @@ def convert(code: int, r: float, b: float, sr2: float, s: float, px: float, py: 
 # for callers holding one track in arrays) load, call these and store.
 
 
-@_inline
-def load(x, P):
-    """(x, p) of the arrays x (4,), P (4, 4) (P's upper triangle)."""
-    return (x[0], x[1], x[2], x[3]), (
-        P[0, 0], P[0, 1], P[0, 2], P[0, 3], P[1, 1], P[1, 2], P[1, 3], P[2, 2], P[2, 3], P[3, 3]
-    )  # fmt: skip
-
-
-@_inline
-def store(xt, p, x, P):
-    """Write (x, p) into x (4,) and the symmetric P (4, 4)."""
-    for i in range(4):
-        x[i] = xt[i]
-    p00, p01, p02, p03, p11, p12, p13, p22, p23, p33 = p
-    P[0, 0], P[0, 1], P[0, 2], P[0, 3] = p00, p01, p02, p03
-    P[1, 0], P[1, 1], P[1, 2], P[1, 3] = p01, p11, p12, p13
-    P[2, 0], P[2, 1], P[2, 2], P[2, 3] = p02, p12, p22, p23
-    P[3, 0], P[3, 1], P[3, 2], P[3, 3] = p03, p13, p23, p33
+# A track's arrays to tuples and back (``core.filters.tuples``, the numpy engine's IMM too).
+load = _inline(load_2d)
+store = _inline(store_2d)
+load_3d = _inline(tuples.load_3d)
+store_3d = _inline(tuples.store_3d)
 
 
 @_inline

@@ -35,6 +35,7 @@ from math import exp, sin
 
 import numpy as np
 
+from radarviz.core.filters import imm_moments
 from radarviz.core.filters.kernels_2d import (
     _add_outer,
     _inline,
@@ -43,8 +44,10 @@ from radarviz.core.filters.kernels_2d import (
     coefficients,
     doppler_update,
     load,
+    load_3d,
     predict,
     store,
+    store_3d,
     white_acceleration_c,
 )
 from radarviz.core.filters.kernels_3d import (
@@ -71,6 +74,7 @@ from radarviz.core.filters.kernels_track import (
     start_track,
     time_step,
 )
+from radarviz.core.filters.rebind import rebind
 from radarviz.core.filters.turn import turn_factors, turn_predict
 
 _LOG_2PI = math.log(2.0 * math.pi)
@@ -113,184 +117,23 @@ def log_likelihood(nis: float, log_det: float, dof: int) -> float:
     return -0.5 * (nis + log_det + dof * _LOG_2PI)
 
 
-# The mixing and the combination, one form per state size: each model's (x, p) read once into
-# scalars (the Monte Carlo kernel's tuples, ``core.filters.kernels_2d.load``; in 3D ``load_3d``)
-# and the sums carried in registers instead of going through memory. The models share the
-# state layout, so a model's term is its weight, its x and the upper triangle of its P; the
-# result's upper triangle is mirrored. Against loops over arrays of any n: a quarter of their
-# time in 2D (two models: 114 against 453 ns a mixing, 44 against 116 ns a combination), and
-# in 3D 286 against about 630 ns a mixing, each measured as a compiled call.
-
-
-@_inline
-def _predicted(mu, Pi, c):
-    # the predicted model probabilities c̄ⱼ = Σᵢ πᵢⱼ μᵢ into c (r,)
-    r = mu.shape[0]
-    for j in range(r):
-        acc = 0.0
-        for i in range(r):
-            acc += mu[i] * Pi[i, j]
-        c[j] = acc
-
-
-@_inline
-def _weights(mu, Pi, c, j, wj):
-    # the mixing weights μᵢ|ⱼ = πᵢⱼ μᵢ / c̄ⱼ of model j into wj (r,)
-    for i in range(mu.shape[0]):
-        wj[i] = Pi[i, j] * mu[i] / c[j]
-
-
-@_inline
-def _add_scaled(p, w: float, q):
-    # p + w q on the ten upper entries
-    return (
-        p[0] + w * q[0], p[1] + w * q[1], p[2] + w * q[2], p[3] + w * q[3], p[4] + w * q[4],
-        p[5] + w * q[5], p[6] + w * q[6], p[7] + w * q[7], p[8] + w * q[8], p[9] + w * q[9],
-    )  # fmt: skip
-
-
-@_inline
-def _mean_2d(xm, mu):
-    # Σᵢ μᵢ xᵢ over the rows of xm (r, 4)
-    xa = (0.0, 0.0, 0.0, 0.0)
-    for i in range(xm.shape[0]):
-        m = mu[i]
-        xa = (
-            xa[0] + m * xm[i, 0],
-            xa[1] + m * xm[i, 1],
-            xa[2] + m * xm[i, 2],
-            xa[3] + m * xm[i, 3],
-        )
-    return xa
-
-
-@_inline
-def _spread_2d(xm, Pm, mu, xa):
-    # Σᵢ μᵢ (Pᵢ + (xᵢ − x̄)(xᵢ − x̄)ᵀ), upper entries
-    pa = (0.0,) * 10
-    for i in range(xm.shape[0]):
-        xi, pi = load(xm[i], Pm[i])
-        d = (xi[0] - xa[0], xi[1] - xa[1], xi[2] - xa[2], xi[3] - xa[3])
-        pa = _add_outer(_add_scaled(pa, mu[i], pi), mu[i], d)
-    return pa
-
-
-@_inline
-def mix_2d(xm, Pm, mu, Pi, x0, P0, c, w):
-    """The mixed initial conditions of one track (``core.filters.imm.imm_mix``), 2D (n = 4):
-    from the models' xm (r, n), Pm (r, n, n) (read as its upper triangles) and μ (r,), with
-    Π (r, r), into x0 (r, n), P0 (r, n, n) (symmetric) and c̄ (r,); w (r, r) scratch (row 0 the
-    weights μᵢ|ⱼ of one j, model j's mixture being ``combine_2d``'s with them)."""
-    _predicted(mu, Pi, c)
-    wj = w[0]  # μᵢ|ⱼ of one j at a time
-    for j in range(xm.shape[0]):
-        _weights(mu, Pi, c, j, wj)
-        xa = _mean_2d(xm, wj)
-        store(xa, _spread_2d(xm, Pm, wj, xa), x0[j], P0[j])
-
-
-@_inline
-def combine_2d(xm, Pm, mu, x, P):
-    """The moment-matched Σⱼ μⱼ N(xⱼ, Pⱼ) (``core.filters.imm.imm_combine``), 2D (n = 4): of
-    xm (r, n), Pm (r, n, n) (upper triangles), μ (r,) into x (n,), P (n, n) (symmetric)."""
-    xa = _mean_2d(xm, mu)
-    store(xa, _spread_2d(xm, Pm, mu, xa), x, P)
-
-
-# The 3D forms (n = 6): the same in registers, P as its 21 upper entries (row by row). The
-# models share the state layout, so one model's (x, p) and a weight are all a term needs.
-
-
-@_inline
-def load_3d(x, P):
-    """(x, p) of the arrays x (6,), P (6, 6) (P's 21 upper entries, row by row)."""
-    return (x[0], x[1], x[2], x[3], x[4], x[5]), (
-        P[0, 0], P[0, 1], P[0, 2], P[0, 3], P[0, 4], P[0, 5],
-        P[1, 1], P[1, 2], P[1, 3], P[1, 4], P[1, 5],
-        P[2, 2], P[2, 3], P[2, 4], P[2, 5],
-        P[3, 3], P[3, 4], P[3, 5],
-        P[4, 4], P[4, 5],
-        P[5, 5],
-    )  # fmt: skip
-
-
-@_inline
-def store_3d(xt, p, x, P):
-    """Write (x, p) into x (6,) and the symmetric P (6, 6): the upper entries, mirrored."""
-    for a in range(6):
-        x[a] = xt[a]
-    k = 0
-    for a in range(6):
-        for b in range(a, 6):
-            P[a, b] = p[k]
-            P[b, a] = p[k]
-            k += 1
-
-
-@_inline
-def _add_term_3d(p, w: float, q, e):
-    # p + w (q + e eᵀ) on the 21 upper entries
-    e0, e1, e2, e3, e4, e5 = e
-    return (
-        p[0] + w * (q[0] + e0 * e0), p[1] + w * (q[1] + e0 * e1), p[2] + w * (q[2] + e0 * e2),
-        p[3] + w * (q[3] + e0 * e3), p[4] + w * (q[4] + e0 * e4), p[5] + w * (q[5] + e0 * e5),
-        p[6] + w * (q[6] + e1 * e1), p[7] + w * (q[7] + e1 * e2), p[8] + w * (q[8] + e1 * e3),
-        p[9] + w * (q[9] + e1 * e4), p[10] + w * (q[10] + e1 * e5), p[11] + w * (q[11] + e2 * e2),
-        p[12] + w * (q[12] + e2 * e3), p[13] + w * (q[13] + e2 * e4),
-        p[14] + w * (q[14] + e2 * e5), p[15] + w * (q[15] + e3 * e3),
-        p[16] + w * (q[16] + e3 * e4), p[17] + w * (q[17] + e3 * e5),
-        p[18] + w * (q[18] + e4 * e4), p[19] + w * (q[19] + e4 * e5),
-        p[20] + w * (q[20] + e5 * e5),
-    )  # fmt: skip
-
-
-@_inline
-def _mean_3d(xm, mu):
-    # Σᵢ μᵢ xᵢ over the rows of xm (r, 6)
-    xa = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
-    for i in range(xm.shape[0]):
-        m = mu[i]
-        xa = (
-            xa[0] + m * xm[i, 0], xa[1] + m * xm[i, 1], xa[2] + m * xm[i, 2],
-            xa[3] + m * xm[i, 3], xa[4] + m * xm[i, 4], xa[5] + m * xm[i, 5],
-        )  # fmt: skip
-    return xa
-
-
-@_inline
-def _spread_3d(xm, Pm, mu, xa):
-    # Σᵢ μᵢ (Pᵢ + (xᵢ − x̄)(xᵢ − x̄)ᵀ), upper entries
-    pa = (0.0,) * 21
-    for i in range(xm.shape[0]):
-        xi, pi = load_3d(xm[i], Pm[i])
-        d = (
-            xi[0] - xa[0],
-            xi[1] - xa[1],
-            xi[2] - xa[2],
-            xi[3] - xa[3],
-            xi[4] - xa[4],
-            xi[5] - xa[5],
-        )
-        pa = _add_term_3d(pa, mu[i], pi, d)
-    return pa
-
-
-@_inline
-def mix_3d(xm, Pm, mu, Pi, x0, P0, c, w):
-    """``mix_2d`` for the 3D state (n = 6)."""
-    _predicted(mu, Pi, c)
-    wj = w[0]  # μᵢ|ⱼ of one j at a time
-    for j in range(xm.shape[0]):
-        _weights(mu, Pi, c, j, wj)
-        xa = _mean_3d(xm, wj)
-        store_3d(xa, _spread_3d(xm, Pm, wj, xa), x0[j], P0[j])
-
-
-@_inline
-def combine_3d(xm, Pm, mu, x, P):
-    """``combine_2d`` for the 3D state (n = 6)."""
-    xa = _mean_3d(xm, mu)
-    store_3d(xa, _spread_3d(xm, Pm, mu, xa), x, P)
+# The mixing and the combination (``core.filters.imm_moments``, the numpy engine's too),
+# compiled here with the kernels' compiled tuple helpers.
+_moments = rebind(
+    imm_moments.STEP_FUNCTIONS,
+    {
+        "load_2d": load,
+        "store_2d": store,
+        "load_3d": load_3d,
+        "store_3d": store_3d,
+        "_add_outer": _add_outer,
+    },
+    _inline,
+)
+mix_2d = _moments["mix_2d"]
+combine_2d = _moments["combine_2d"]
+mix_3d = _moments["mix_3d"]
+combine_3d = _moments["combine_3d"]
 
 
 @_inline
