@@ -22,6 +22,7 @@ from math import atan2, cos, sin, sqrt
 import numba
 import numpy as np
 
+from radarviz.core.confidence import BAND_GROUPS
 from radarviz.core.conversion.elementwise import (
     CMKF_D,
     DUCM,
@@ -331,8 +332,10 @@ def _step(code, xt, p, r, b, vr_hat, doppler, sr2, s, var_vr, T, q, sx, sy, co, 
 # 256 lanes keep the buffer (55 kB) within the second-level cache's closest part with the
 # block's measurement rows.
 
-#: Runs filtered side by side: the lanes of the structure-of-arrays blocks.
+#: Runs filtered side by side: the lanes of the structure-of-arrays blocks (a multiple of
+#: ``BAND_GROUPS``, so each block deals its runs to the groups the same way).
 LANES = 256
+assert LANES % BAND_GROUPS == 0
 _STATE, _R, _B, _V, _TERMS = 0, 14, 15, 16, 17
 _ROWS = _TERMS + 10
 
@@ -430,6 +433,29 @@ def _terms_lanes(buf, t, c, s):
             buf[(_TERMS + a) * LANES + j] = tm[a]
 
 
+@_exact
+def _add_terms(buf, sums, i, m0, n_sum):
+    # The terms of lanes 0 … n_sum − 1 (runs m0 + j) into sums[i, a·G + (m0 + j) mod G], run
+    # after run, as each group's sum takes them (in the order of m). ``_exact``: no
+    # reassociation, so each sum is that sequence of additions. A full block of the prosov
+    # groups (G = BAND_GROUPS, which divides LANES and so m0): group q of the block takes
+    # lanes q, q + G, …, in one loop over q that LLVM vectorises; otherwise lane by lane.
+    groups = sums.shape[1] // 10
+    if groups == BAND_GROUPS and n_sum == LANES:
+        for a in range(10):
+            row = (_TERMS + a) * LANES
+            for q in range(BAND_GROUPS):
+                v = sums[i, a * BAND_GROUPS + q]
+                for k in range(LANES // BAND_GROUPS):
+                    v += buf[row + k * BAND_GROUPS + q]
+                sums[i, a * BAND_GROUPS + q] = v
+    else:
+        for j in range(n_sum):
+            q = (m0 + j) % groups
+            for a in range(10):
+                sums[i, a * groups + q] += buf[(_TERMS + a) * LANES + j]
+
+
 @_jit
 def filter_scans_2d(
     code, start_code, r_hat, b_hat, vr_hat, doppler, first, last, sigma_r_m, sigma_beta_rad,
@@ -456,6 +482,14 @@ def filter_scans_2d(
     groups = group_sums.shape[0]
     runs = r_hat.shape[0]
     buf = np.empty(_ROWS * LANES)
+    # The sums by run phase m mod G (group (group_offset + m) mod G): sums[i, a·G + phase], so
+    # a block's lanes add to consecutive entries (``_add_terms``)
+    sums = np.empty((last - first, 10 * groups))
+    for ph in range(groups):
+        g = (group_offset + ph) % groups
+        for i in range(last - first):
+            for a in range(10):
+                sums[i, a * groups + ph] = group_sums[g, i, a]
     for m0 in range(0, runs, LANES):
         nb = min(LANES, runs - m0)
         for j in range(LANES):
@@ -497,10 +531,7 @@ def filter_scans_2d(
             if n_sum > 0:
                 t = (truth[n, 0], truth[n, 1], truth[n, 2], truth[n, 3])
                 _terms_lanes(buf, t, cos_los[n, 0], sin_los[n, 0])
-                for j in range(n_sum):
-                    g = (group_offset + m0 + j) % groups
-                    for a in range(10):
-                        group_sums[g, i, a] += buf[(_TERMS + a) * LANES + j]
+                _add_terms(buf, sums, i, m0, n_sum)
             if keep:
                 for j in range(n_sum, nb):
                     xt, p = _lane(buf, j)
@@ -508,3 +539,8 @@ def filter_scans_2d(
         for j in range(nb):
             xt, p = _lane(buf, j)
             store_row(xt, p, state, m0 + j)
+    for ph in range(groups):
+        g = (group_offset + ph) % groups
+        for i in range(last - first):
+            for a in range(10):
+                group_sums[g, i, a] = sums[i, a * groups + ph]
