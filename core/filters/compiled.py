@@ -1,10 +1,12 @@
-"""The 2D Monte Carlo filters as compiled scalar loops (numba), one track at a time.
+"""The 2D Monte Carlo filters as compiled loops (numba), blocks of runs side by side.
 
 The numpy engine (``core.filters.methods`` and the update modules) evaluates each scan as a
 few hundred vector operations over the whole batch. At the tuning panel's few hundred runs
 that is all call overhead (~1 ms per scan and method group); at 10⁴–10⁵ runs it streams
 every intermediate through memory. This module runs the *same equations* as one compiled
-loop over tracks and scans, with the 4 × 4 state in registers:
+loop over blocks of a few hundred runs and their scans, a block's states held as structure
+of arrays in cache and each step vectorised over the block's runs
+(``core.filters.kernels_2d``):
 
 =========  =======================================================================
 kind       the lines it mirrors
@@ -146,10 +148,11 @@ def filter_scans(
     runs, steps = np.shape(r_hat)
     begin = 0 if start is None else start[0] + 1
     k = max(1, min(int(chunk_scans), steps - begin))
-    # The kernel walks run after run, each over the chunk's scans. Over many scans a run's
-    # row of the (m, N) arrays is read in memory order; over a few, the scan-major (column-
-    # major) copy puts consecutive runs' plots side by side instead (a run-major row per
-    # run and scan would cost a cache line for 8 bytes).
+    # The kernel walks blocks of runs, each over the chunk's scans, reading one scan of a
+    # block's runs at a time. Over many scans the rows of a block's (m, N) arrays stay in
+    # cache from scan to scan, and a transposed copy would cost more than it saves; over a
+    # few, the scan-major (column-major) copy puts the block's plots side by side instead
+    # (a run-major row per run and scan would cost a cache line for 8 bytes).
     layout = np.asfortranarray if k < SCAN_MAJOR_BELOW else np.ascontiguousarray
     r_runs = layout(r_hat, dtype=np.float64)
     b_runs = layout(beta_hat, dtype=np.float64)

@@ -1,9 +1,12 @@
-"""The compiled (numba) kernel behind ``core.filters.compiled``: scalar code, one track at a
-time, the numpy engine's equations (see that module's table) on each track's state held in
-local scalars (x and the ten upper entries of P), so the whole step stays in registers.
+"""The compiled (numba) kernel behind ``core.filters.compiled``: the numpy engine's equations
+(see that module's table) on each track's state as scalars (x and the ten upper entries of
+P), so a whole step is straight-line code on numbers. The Monte Carlo kernel
+``filter_scans_2d`` runs these steps on blocks of runs held as structure of arrays, in loops
+over the runs of a block that LLVM vectorises (one run per lane of a packed register).
 
-The per-step functions come in two forms: ``*_s`` on (x, p) tuples, which the Monte Carlo
-kernel ``filter_scans_2d`` chains, and the array forms (``start``, ``predict``,
+The per-step functions come in two forms: ``*_s`` on (x, p) tuples, which the kernels chain
+(``filter_scans_2d`` a binding of them to vectorisable sine, cosine and arc tangent,
+``core.filters.trig``), and the array forms (``start``, ``predict``,
 ``position_update``, ``ukf_update``, ``doppler_update``, ``track_terms``) that load a track
 from arrays, call them and store it, for callers holding one track in arrays.
 
@@ -14,12 +17,21 @@ loading the cached machine code) is paid only by commands that filter a Monte Ca
 from __future__ import annotations
 
 import math
-from math import atan2, ceil, cos, sin, sqrt
+from math import atan2, cos, sin, sqrt
 
 import numba
 import numpy as np
 
-from radarviz.core.conversion.elementwise import DUCM, conversion_coefficients, converted_point
+from radarviz.core.confidence import BAND_GROUPS
+from radarviz.core.conversion.elementwise import (
+    CMKF_D,
+    DUCM,
+    NAIVE,
+    SEED,
+    UCM,
+    conversion_coefficients,
+    converted_point,
+)
 from radarviz.core.filters import tuples
 from radarviz.core.filters.codes import EKF, UKF, is_polar, reads_prediction
 from radarviz.core.filters.predict import (
@@ -29,6 +41,8 @@ from radarviz.core.filters.predict import (
     white_acceleration,
 )
 from radarviz.core.filters.steps_2d import bind_2d
+from radarviz.core.filters.trig import atan2 as trig_atan2
+from radarviz.core.filters.trig import sincos
 from radarviz.core.filters.tuples import load_2d, store_2d
 
 # error_model="numpy": a division by zero or a negative pivot gives inf / NaN for that track,
@@ -60,8 +74,9 @@ def norm(x: float, y: float) -> float:
 
 @_inline
 def wrap(a: float) -> float:
-    # core.geometry.wrap_angle: a − 2π ceil(a/(2π) − ½), to (−π, π]
-    return a - _TWO_PI * ceil(a * (1.0 / _TWO_PI) - 0.5)
+    # core.geometry.wrap_angle: a − 2π ceil(a/(2π) − ½), to (−π, π]; numpy's ceil, a float
+    # (math.ceil's is an integer, whose conversions a vectorised loop would pay for)
+    return a - _TWO_PI * np.ceil(a * (1.0 / _TWO_PI) - 0.5)
 
 
 # The conversions' arithmetic lives in ``core.conversion.elementwise`` (shared with the
@@ -83,19 +98,26 @@ def coefficients(code: int, s: float, sr2: float):
 
 
 @_inline
-def convert(code: int, r: float, b: float, sr2: float, s: float, px: float, py: float, co):
-    # The five conversions of core.conversion.planar: point and covariance (radar-centred);
-    # ``co``: ``coefficients(code, s, sr2)``; (px, py) the radar-centred prediction (ducm).
+def convert_cs(code: int, r: float, cb: float, sb: float, sr2: float, s: float, px, py, co):
+    # The five conversions of core.conversion.planar: point and covariance (radar-centred) of
+    # the plot (r, β̂), cb = cos β̂, sb = sin β̂; ``co``: ``coefficients(code, s, sr2)`` (or its
+    # tuple); (px, py) the radar-centred prediction (ducm).
     rp = cp = sp = 0.0
     if code == DUCM:  # the covariance at the predicted position
         rp = norm(px, py)
         cp, sp = px / rp, py / rp
-    return _converted_point(code, r, cos(b), sin(b), sr2, s, co, rp, cp, sp)
+    return _converted_point(code, r, cb, sb, sr2, s, co, rp, cp, sp)
+
+
+@_inline
+def convert(code: int, r: float, b: float, sr2: float, s: float, px: float, py: float, co):
+    # ``convert_cs`` with the C library's cos β̂, sin β̂
+    return convert_cs(code, r, cos(b), sin(b), sr2, s, px, py, co)
 
 
 # The state of one track as scalars: x = (x, ẋ, y, ẏ) and p = the ten upper entries of the
-# symmetric P, (p00, p01, p02, p03, p11, p12, p13, p22, p23, p33). The Monte Carlo kernel keeps
-# them in registers for all the scans of a run; the array forms below (``start``, ``predict``,
+# symmetric P, (p00, p01, p02, p03, p11, p12, p13, p22, p23, p33). A kernel walking one track
+# keeps them in registers over its scans; the array forms below (``start``, ``predict``,
 # ``position_update``, ``ukf_update``, ``doppler_update``: x (4,), P (4, 4) updated in place,
 # for callers holding one track in arrays) load, call these and store.
 
@@ -272,20 +294,139 @@ def track_terms(x, P, t, c, s, out, k, m, L, y, e):
         out[a, k, m] = tm[a]
 
 
+# The Monte Carlo kernel works on blocks of ``LANES`` runs in structure-of-arrays form: one
+# buffer of ``_ROWS`` rows × ``LANES`` (row k of lane j at k·LANES + j): the state (x then
+# the upper entries of P, as ``load_row``), the scan's plot (r̂, β̂, V̂r) and the metric terms.
+# Each stage of a scan is one loop over the lanes that loads a lane's numbers, calls the
+# steps above on them and stores them, so LLVM vectorises it: consecutive runs go side by
+# side in a packed register. One buffer and a constant row stride let it prove the rows
+# apart (no run-time alias checks), and a block always has ``LANES`` lanes (a short block's
+# last lanes repeat its first run), so the loops have a constant count and no scalar tail.
+# 256 lanes keep the buffer (55 kB) within the second-level cache's closest part with the
+# block's measurement rows.
+
+#: Runs filtered side by side: the lanes of the structure-of-arrays blocks (a multiple of
+#: ``BAND_GROUPS``, so each block deals its runs to the groups the same way).
+LANES = 256
+assert LANES % BAND_GROUPS == 0
+_STATE, _R, _B, _V, _TERMS = 0, 14, 15, 16, 17
+_ROWS = _TERMS + 10
+
+
+# The steps again, for the vectorised loops: the same functions bound to elementary functions
+# that are plain arithmetic (``core.filters.trig``), since a call to the C library's cos or
+# atan2 keeps LLVM from vectorising a loop. The trig functions keep their sums in order (no
+# "reassoc": the rounding to an integer adds and subtracts 1.5·2⁵²). The bound copies carry
+# the original functions' names, so they are not cached on their own (two bindings of one
+# name would share a cache entry); the kernels that inline them are.
+_exact = numba.njit(
+    cache=True, error_model="numpy", nogil=True, fastmath={"contract", "nsz"}, forceinline=True
+)
+_sincos = _exact(sincos)
+_atan2_v = _exact(trig_atan2)
+_inline_v = numba.njit(
+    cache=False, error_model="numpy", nogil=True, fastmath=_FAST, forceinline=True
+)
+
+
 @_inline
-def _step(code, xt, p, r, b, vr_hat, doppler, sr2, s, var_vr, T, q, sx, sy, co, c, wm0, wc0, w):
-    # one scan of a track: predict, the method's update, then Doppler's when V̂r is given
-    xt, p = predict_s(xt, p, T, q)
-    if code == EKF:
-        xt, p = ekf_update_s(xt, p, r, b, sr2, s, sx, sy)
-    elif code == UKF:
-        xt, p = ukf_update_s(xt, p, r, b, sr2, s, sx, sy, c, wm0, wc0, w)
+def _sin_v(a: float) -> float:
+    return _sincos(a)[0]
+
+
+@_inline
+def _cos_v(a: float) -> float:
+    return _sincos(a)[1]
+
+
+_vsteps = bind_2d(
+    {"sqrt": sqrt, "where": _select, "atan2": _atan2_v, "wrap": wrap, "cos": _cos_v, "sin": _sin_v},
+    _inline_v,
+)
+position_update_v = _vsteps["position_update_2d"]
+ekf_update_v = _vsteps["ekf_update_2d"]
+ukf_update_v = _vsteps["ukf_update_2d"]
+doppler_update_v = _vsteps["doppler_update_2d"]
+
+
+@_inline
+def _lane(buf, j):
+    """(x, p) of lane j of a block buffer."""
+    return (buf[j], buf[LANES + j], buf[2 * LANES + j], buf[3 * LANES + j]), (
+        buf[4 * LANES + j], buf[5 * LANES + j], buf[6 * LANES + j], buf[7 * LANES + j],
+        buf[8 * LANES + j], buf[9 * LANES + j], buf[10 * LANES + j], buf[11 * LANES + j],
+        buf[12 * LANES + j], buf[13 * LANES + j],
+    )  # fmt: skip
+
+
+@_inline
+def _store_lane(xt, p, buf, j):
+    for k in range(4):
+        buf[k * LANES + j] = xt[k]
+    for k in range(10):
+        buf[(4 + k) * LANES + j] = p[k]
+
+
+@_inline
+def _update_lanes(code, buf, sr2, s, T, q, sx, sy, co, c, wm0, wc0, w):
+    # Every lane of a block one scan on: predict, then the method's update on the lane's plot
+    # (the steps' vectorisable binding). ``code`` is a constant where this is
+    # inlined, so the method's branch is chosen before LLVM vectorises the loop.
+    for j in range(LANES):
+        xt, p = _lane(buf, j)
+        r, b = buf[_R * LANES + j], buf[_B * LANES + j]
+        xt, p = predict_s(xt, p, T, q)
+        if code == EKF:
+            xt, p = ekf_update_v(xt, p, r, b, sr2, s, sx, sy)
+        elif code == UKF:
+            xt, p = ukf_update_v(xt, p, r, b, sr2, s, sx, sy, c, wm0, wc0, w)
+        else:
+            sb, cb = _sincos(b)
+            zx, zy, r00, r01, r11 = convert_cs(code, r, cb, sb, sr2, s, xt[0] - sx, xt[2] - sy, co)
+            xt, p = position_update_v(xt, p, zx + sx - xt[0], zy + sy - xt[2], r00, r01, r11)
+        _store_lane(xt, p, buf, j)
+
+
+@_inline
+def _doppler_lanes(buf, var_vr, s):
+    # Every lane's Doppler update by its V̂r along its measured line of sight
+    for j in range(LANES):
+        xt, p = _lane(buf, j)
+        xt, p = doppler_update_v(xt, p, buf[_V * LANES + j], buf[_B * LANES + j], var_vr, s)
+        _store_lane(xt, p, buf, j)
+
+
+@_inline
+def _terms_lanes(buf, t, c, s):
+    # Every lane's metric terms (``terms_s``) into the buffer's term rows
+    for j in range(LANES):
+        xt, p = _lane(buf, j)
+        tm = terms_s(xt, p, t, c, s)
+        for a in range(10):
+            buf[(_TERMS + a) * LANES + j] = tm[a]
+
+
+@_exact
+def _add_terms(buf, sums, i, m0, n_sum):
+    # The terms of lanes 0 … n_sum − 1 (runs m0 + j) into sums[i, a·G + (m0 + j) mod G], run
+    # after run, as each group's sum takes them (in the order of m). ``_exact``: no
+    # reassociation, so each sum is that sequence of additions. A full block of the prosov
+    # groups (G = BAND_GROUPS, which divides LANES and so m0): group q of the block takes
+    # lanes q, q + G, …, in one loop over q that LLVM vectorises; otherwise lane by lane.
+    groups = sums.shape[1] // 10
+    if groups == BAND_GROUPS and n_sum == LANES:
+        for a in range(10):
+            row = (_TERMS + a) * LANES
+            for q in range(BAND_GROUPS):
+                v = sums[i, a * BAND_GROUPS + q]
+                for k in range(LANES // BAND_GROUPS):
+                    v += buf[row + k * BAND_GROUPS + q]
+                sums[i, a * BAND_GROUPS + q] = v
     else:
-        zx, zy, r00, r01, r11 = convert(code, r, b, sr2, s, xt[0] - sx, xt[2] - sy, co)
-        xt, p = position_update_s(xt, p, zx + sx - xt[0], zy + sy - xt[2], r00, r01, r11)
-    if doppler:
-        xt, p = doppler_update_s(xt, p, vr_hat, b, var_vr, s)
-    return xt, p
+        for j in range(n_sum):
+            q = (m0 + j) % groups
+            for a in range(10):
+                sums[i, a * groups + q] += buf[(_TERMS + a) * LANES + j]
 
 
 @_jit
@@ -304,35 +445,75 @@ def filter_scans_2d(
     (``core.confidence.group_sums``' dealing), in the order of m; with ``keep`` the others
     write their states into xs[n − first, m − n_terms], Ps[…].
 
-    Run-major: a run's state stays in registers over the chunk's scans; the state goes
-    through memory once a chunk. (One loop, no call per run: a call's array arguments cost
-    a reference count each.)"""
+    Block-major: ``LANES`` runs at a time (the comment above ``LANES``), scan after scan, a
+    stage of a scan one vectorised loop over the block's lanes; the block's states stay in
+    its buffer over the chunk's scans and go through ``state`` once a chunk. Each run is
+    filtered on its own, so its result does not depend on the block it falls in."""
     sr2, s, q = sigma_r_m * sigma_r_m, sigma_beta_rad * sigma_beta_rad, sigma_a_mps2 * sigma_a_mps2
     var_vr = sigma_vr_mps * sigma_vr_mps
-    co, co_start = coefficients(code, s, sr2), coefficients(start_code, s, sr2)
+    co, co_start = _coefficients(code, s, sr2), coefficients(start_code, s, sr2)
     groups = group_sums.shape[0]
-    for m in range(r_hat.shape[0]):
-        g = (group_offset + m) % groups
-        if first == 0:
-            zx, zy, r00, r01, r11 = convert(
-                start_code, r_hat[m, 0], b_hat[m, 0], sr2, s, 0.0, 0.0, co_start
-            )
-            xt, p = start_s(zx + sx, zy + sy, r00, r01, r11, sigma_v0_mps)
-        else:
-            xt, p = load_row(state, m)
+    runs = r_hat.shape[0]
+    buf = np.empty(_ROWS * LANES)
+    # The sums by run phase m mod G (group (group_offset + m) mod G): sums[i, a·G + phase], so
+    # a block's lanes add to consecutive entries (``_add_terms``)
+    sums = np.empty((last - first, 10 * groups))
+    for ph in range(groups):
+        g = (group_offset + ph) % groups
+        for i in range(last - first):
+            for a in range(10):
+                sums[i, a * groups + ph] = group_sums[g, i, a]
+    for m0 in range(0, runs, LANES):
+        nb = min(LANES, runs - m0)
+        for j in range(LANES):
+            m = m0 + j if j < nb else m0  # a short block's spare lanes repeat its first run
+            if first == 0:
+                zx, zy, r00, r01, r11 = convert(
+                    start_code, r_hat[m, 0], b_hat[m, 0], sr2, s, 0.0, 0.0, co_start
+                )
+                xt, p = start_s(zx + sx, zy + sy, r00, r01, r11, sigma_v0_mps)
+            else:
+                xt, p = load_row(state, m)
+            _store_lane(xt, p, buf, j)
         for n in range(first, last):
             if n > 0:
-                v = vr_hat[m, n] if doppler else 0.0
-                xt, p = _step(
-                    code, xt, p, r_hat[m, n], b_hat[m, n], v, doppler, sr2, s, var_vr, T, q,
-                    sx, sy, co, c, wm0, wc0, w,
-                )  # fmt: skip
+                for j in range(LANES):
+                    m = m0 + j if j < nb else m0
+                    buf[_R * LANES + j] = r_hat[m, n]
+                    buf[_B * LANES + j] = b_hat[m, n]
+                    buf[_V * LANES + j] = vr_hat[m, n] if doppler else 0.0
+                # one loop per method, each with its code a constant (``_update_lanes``)
+                if code == NAIVE:
+                    _update_lanes(NAIVE, buf, sr2, s, T, q, sx, sy, co, c, wm0, wc0, w)
+                elif code == SEED:
+                    _update_lanes(SEED, buf, sr2, s, T, q, sx, sy, co, c, wm0, wc0, w)
+                elif code == CMKF_D:
+                    _update_lanes(CMKF_D, buf, sr2, s, T, q, sx, sy, co, c, wm0, wc0, w)
+                elif code == UCM:
+                    _update_lanes(UCM, buf, sr2, s, T, q, sx, sy, co, c, wm0, wc0, w)
+                elif code == DUCM:
+                    _update_lanes(DUCM, buf, sr2, s, T, q, sx, sy, co, c, wm0, wc0, w)
+                elif code == EKF:
+                    _update_lanes(EKF, buf, sr2, s, T, q, sx, sy, co, c, wm0, wc0, w)
+                else:
+                    _update_lanes(UKF, buf, sr2, s, T, q, sx, sy, co, c, wm0, wc0, w)
+                if doppler:
+                    _doppler_lanes(buf, var_vr, s)
             i = n - first
-            if m < n_terms:
+            n_sum = min(max(n_terms - m0, 0), nb)  # the block's runs that give terms
+            if n_sum > 0:
                 t = (truth[n, 0], truth[n, 1], truth[n, 2], truth[n, 3])
-                tm = terms_s(xt, p, t, cos_los[n, 0], sin_los[n, 0])
-                for a in range(10):
-                    group_sums[g, i, a] += tm[a]
-            elif keep:
-                store_at(xt, p, xs, Ps, i, m - n_terms)
-        store_row(xt, p, state, m)
+                _terms_lanes(buf, t, cos_los[n, 0], sin_los[n, 0])
+                _add_terms(buf, sums, i, m0, n_sum)
+            if keep:
+                for j in range(n_sum, nb):
+                    xt, p = _lane(buf, j)
+                    store_at(xt, p, xs, Ps, i, m0 + j - n_terms)
+        for j in range(nb):
+            xt, p = _lane(buf, j)
+            store_row(xt, p, state, m0 + j)
+    for ph in range(groups):
+        g = (group_offset + ph) % groups
+        for i in range(last - first):
+            for a in range(10):
+                group_sums[g, i, a] = sums[i, a * groups + ph]
