@@ -41,10 +41,15 @@ def rebind_modules(
     groups: Sequence[Sequence[types.FunctionType]],
     elementary: dict[str, Any],
     wrap: Callable[[types.FunctionType], Any] = lambda f: f,
+    required: Sequence[str] = (),
 ) -> dict[str, Any]:
     """``rebind`` of each group (one module's functions) in order, every group's copies
     calling the wrapped copies of the groups before it (a step calling another module's
-    step by the name it imported) as well as ``elementary``."""
+    step by the name it imported) as well as ``elementary``, which must hold every name of
+    ``required`` (the elementary functions the steps call)."""
+    missing = sorted(set(required) - set(elementary))
+    if missing:
+        raise ValueError(f"rebind_modules: elementary functions missing: {missing}")
     out: dict[str, Any] = {}
     for functions in groups:
         out.update(rebind(functions, {**elementary, **out}, wrap))

@@ -41,7 +41,4 @@ ELEMENTARY = ("sqrt", "where", "atan2", "wrap", "cos", "sin")
 def bind_2d(elementary: dict[str, Any], wrap: Callable[[Any], Any] = lambda f: f) -> dict[str, Any]:
     """``{name: wrap(copy)}`` of every function of ``STEP_FUNCTIONS_2D``, the copies calling
     ``elementary`` (every name of ``ELEMENTARY``) and one another's wrapped copies."""
-    missing = set(ELEMENTARY) - set(elementary)
-    if missing:
-        raise ValueError(f"bind_2d: elementary functions missing: {sorted(missing)}")
-    return rebind_modules(STEP_FUNCTIONS_2D, elementary, wrap)
+    return rebind_modules(STEP_FUNCTIONS_2D, elementary, wrap, ELEMENTARY)

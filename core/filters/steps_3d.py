@@ -40,7 +40,4 @@ ELEMENTARY = ("sqrt", "where", "atan2", "wrap")
 def bind_3d(elementary: dict[str, Any], wrap: Callable[[Any], Any] = lambda f: f) -> dict[str, Any]:
     """``{name: wrap(copy)}`` of every function of ``STEP_FUNCTIONS_3D``, the copies calling
     ``elementary`` (every name of ``ELEMENTARY``) and one another's wrapped copies."""
-    missing = set(ELEMENTARY) - set(elementary)
-    if missing:
-        raise ValueError(f"bind_3d: elementary functions missing: {sorted(missing)}")
-    return rebind_modules(STEP_FUNCTIONS_3D, elementary, wrap)
+    return rebind_modules(STEP_FUNCTIONS_3D, elementary, wrap, ELEMENTARY)
