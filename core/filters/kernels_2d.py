@@ -98,15 +98,15 @@ def coefficients(code: int, s: float, sr2: float):
 
 
 @_inline
-def convert_cs(code: int, r: float, cb: float, sb: float, sr2: float, s: float, px, py, co):
+def convert_cs(code: int, r: float, cos_b: float, sin_b: float, sr2: float, s: float, px, py, co):
     # The five conversions of core.conversion.planar: point and covariance (radar-centred) of
-    # the plot (r, β̂), cb = cos β̂, sb = sin β̂; ``co``: ``coefficients(code, s, sr2)`` (or its
-    # tuple); (px, py) the radar-centred prediction (ducm).
+    # the plot (r, β̂), cos_b = cos β̂, sin_b = sin β̂; ``co``: ``coefficients(code, s, sr2)``
+    # (or its tuple); (px, py) the radar-centred prediction (ducm).
     rp = cp = sp = 0.0
     if code == DUCM:  # the covariance at the predicted position
         rp = norm(px, py)
         cp, sp = px / rp, py / rp
-    return _converted_point(code, r, cb, sb, sr2, s, co, rp, cp, sp)
+    return _converted_point(code, r, cos_b, sin_b, sr2, s, co, rp, cp, sp)
 
 
 @_inline
@@ -381,8 +381,10 @@ def _update_lanes(code, buf, sr2, s, T, q, sx, sy, co, c, wm0, wc0, w):
         elif code == UKF:
             xt, p = ukf_update_v(xt, p, r, b, sr2, s, sx, sy, c, wm0, wc0, w)
         else:
-            sb, cb = _sincos(b)
-            zx, zy, r00, r01, r11 = convert_cs(code, r, cb, sb, sr2, s, xt[0] - sx, xt[2] - sy, co)
+            sin_b, cos_b = _sincos(b)
+            zx, zy, r00, r01, r11 = convert_cs(
+                code, r, cos_b, sin_b, sr2, s, xt[0] - sx, xt[2] - sy, co
+            )
             xt, p = position_update_v(xt, p, zx + sx - xt[0], zy + sy - xt[2], r00, r01, r11)
         _store_lane(xt, p, buf, j)
 
