@@ -66,13 +66,6 @@ _TWO_PI = 2.0 * math.pi
 
 
 @_inline
-def norm(x: float, y: float) -> float:
-    # √(x² + y²): hypot's guard against overflow is not needed at radar ranges, and costs
-    # several times the square root
-    return sqrt(x * x + y * y)
-
-
-@_inline
 def wrap(a: float) -> float:
     # core.geometry.wrap_angle: a − 2π ceil(a/(2π) − ½), to (−π, π]; numpy's ceil, a float
     # (math.ceil's is an integer, whose conversions a vectorised loop would pay for)
@@ -197,11 +190,10 @@ _steps = bind_2d(
     {"sqrt": sqrt, "where": _select, "atan2": atan2, "wrap": wrap, "cos": cos, "sin": sin},
     _inline,
 )
-semidefinite_cholesky_s = _steps["semidefinite_cholesky_2d"]
 _add_outer = _steps["_add_outer"]
+norm = _steps["_norm"]  # √(x² + y²) (``core.filters.ukf_2d``), ducm's range too
 position_update_s = _steps["position_update_2d"]
 ekf_measurement_s = _steps["ekf_measurement_2d"]
-ekf_update_s = _steps["ekf_update_2d"]
 ukf_update_s = _steps["ukf_update_2d"]
 doppler_update_s = _steps["doppler_update_2d"]
 

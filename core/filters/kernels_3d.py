@@ -38,7 +38,6 @@ from radarviz.core.filters.steps_3d import bind_3d
 # written once as plain arithmetic (the numpy engine's too), compiled here with the scalar
 # elementary functions.
 _steps = bind_3d({"sqrt": sqrt, "where": _select, "atan2": atan2, "wrap": wrap}, _inline)
-semidefinite_cholesky_3d = _steps["semidefinite_cholesky_3d"]
 inverse_3 = _steps["inverse_3"]
 position_update_3d = _steps["position_update_3d"]
 ekf_measurement_3d_c = _steps["ekf_measurement_3d"]
