@@ -259,6 +259,10 @@ def test_seed_3d_is_the_second_order_tool() -> None:
         c = convert("seed", r, az, el, sr, sa, se)
         want = scales("seed", sa, se) * point_3d(r, az, el)
         assert np.max(np.abs(c.z - want)) < 1e-12 * r
+        # and the general second-order tool's term on the naive point gives that point too
+        sig = {"sigma_r_m": sr, "sigma_beta_rad": sa, "sigma_elevation_rad": se}
+        term = cv3.seed_correction_3d(r, az, el, **sig)
+        assert np.max(np.abs(c.z - (point_3d(r, az, el) + term))) < 1e-12 * r
 
 
 def _quadratic(theta: np.ndarray) -> np.ndarray:

@@ -8,8 +8,7 @@ called by the numpy engine and the array-API path). The test reads every functio
 (``_predict_2d = _inline(predict_2d)``): a function whose name matches a kind must reach one
 of its implementations, so a second hand-written prediction (a kernel's own F P Fᵀ, a "fast
 path" re-deriving Q) fails here, naming its file. A kind's copies that are still to be
-replaced are listed as such (``not_yet``), and the test holds that list to the tree. The 3D
-conversions are not yet written once and not yet listed (docs/architecture.md, section 3).
+replaced are listed as such (``not_yet``), and the test holds that list to the tree.
 """
 
 from __future__ import annotations
@@ -120,8 +119,54 @@ STEP_KINDS: dict[str, StepKind] = {
             }
         ),
         not_this_step={
-            "core/conversion/spatial.py:_combined_cov": "a 3D conversion's covariance",
-            "core/filters/kernels_3d.py:combined_cov": "a 3D conversion's covariance",
+            "core/conversion/elementwise_3d.py:combined_entries": "a 3D conversion's covariance",
+        },
+    ),
+    "polar-to-Cartesian conversion (2D and 3D)": StepKind(
+        pattern=r"convert|_cov$|_cov_|_entries|moments$|noise_table|coefficients|scale",
+        implementations=frozenset(
+            {
+                f"core/conversion/elementwise.py:{name}"
+                for name in (
+                    "scale",
+                    "averaged_coefficients",
+                    "true_cov_coefficients",
+                    "conversion_coefficients",
+                    "linearized_entries",
+                    "averaged_entries",
+                    "true_entries",
+                    "converted_point",
+                )
+            }
+            | {
+                f"core/conversion/elementwise_3d.py:{name}"
+                for name in (
+                    "exponentials",
+                    "noise_table",
+                    "angle_moments",
+                    "posterior_moments",
+                    "combined_entries",
+                    "linearized_entries_3d",
+                    "true_entries_3d",
+                    "averaged_entries_3d",
+                    "converted_point_3d",
+                )
+            }
+        ),
+        not_this_step={
+            "core/conversion/second_order.py:second_order_cov": (
+                "the second-order moments of any map (Prosov's eq. 7), the analysis tool the "
+                "seed's scale is derived with"
+            ),
+            "core/conversion/second_order.py:second_order_convert": "the same tool",
+            "core/filters/converted_doppler.py:converted_doppler_moments": (
+                "the converted r̂·V̂r measurement, its own kind"
+            ),
+            "core/filters/converted_doppler.py:converted_doppler_terms": "the same measurement",
+            "core/filters/converted_doppler.py:converted_doppler_update": "the same measurement",
+            "core/filters/imm_moments.py:_add_scaled": "the IMM's weighted outer products",
+            "core/filters/position.py:upper_entries": "a matrix's upper entries as a dict",
+            "core/finite_memory/fit.py:_closed_cov": "the finite-memory fit's covariance",
         },
     ),
     "semi-definite Cholesky factor": StepKind(

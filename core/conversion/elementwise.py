@@ -1,64 +1,136 @@
-"""The five 2D conversions (``core.conversion.planar``) as plain arithmetic, for any number
-type: Python floats in numba-compiled code (``core.filters.kernels_2d`` compiles these two
-functions) and arrays of any array-API namespace (``core.filters.array_api``). One home for
-the compiled and the array-API paths; ``core.conversion.planar`` is the numpy reference both
-are tested against.
+"""The five 2D conversions (``core.conversion.planar``) as plain arithmetic, written once for
+every engine: over numpy arrays of any shape (the numpy engine and the analysis functions of
+``core.conversion.planar`` call them as they are), over Python floats in numba-compiled code
+(``core.filters.kernels_2d`` compiles them; numba types numpy's elementary functions on
+numbers), and over another array-API namespace's arrays (``core.filters.array_api``).
 
 The scalars that depend on s = σβ² and σr² only (most of a conversion's transcendental
 functions) are formed once by ``conversion_coefficients``; ``converted_point`` then takes
-cos β̂ and sin β̂ (the caller's namespace evaluates them) and uses + − × ÷ only.
+cos β̂ and sin β̂ (the caller evaluates them) and uses + − × ÷ only. The three covariances
+the papers name are functions of their own, called by the conversions and by the analysis:
+
+* ``linearized_entries``: the first-order J diag(σr², s) Jᵀ (Prosov eq. 9);
+* ``averaged_entries``: eq. 11a–c, Lerro and Bar-Shalom's posterior-averaged covariance;
+* ``true_entries``: the naive point's exact covariance given the truth, times k (ucm and ducm
+  take k = e^s, the square of their scale).
 """
 
 from __future__ import annotations
 
-import math
+from numpy import cosh, exp, expm1, sinh, sqrt
 
-#: Conversion codes, the ``core.filters.compiled.METHOD_CODES`` of the converted methods.
+#: Conversion codes, the ``core.filters.codes.METHOD_CODES`` of the converted methods.
 NAIVE, SEED, CMKF_D, UCM, DUCM = 0, 1, 2, 3, 4
 
 
-def conversion_coefficients(code: int, s: float, sr2: float) -> tuple[float, ...]:
+def scale(code: int, s):
+    """The scale κ(s) conversion ``code`` applies to the naive point r̂ (cos β̂, sin β̂):
+    naive 1; seed 1 − s/2 (Prosov eq. 10 as printed); cmkf_d 1 − (e^(−s) − e^(−s/2)) (Lerro
+    and Bar-Shalom's debiasing); ucm and ducm e^(s/2) = √(e^s) (Mo et al.: 1 / E[cos v_β])."""
+    if code == SEED:
+        return 1.0 - s / 2.0
+    if code == CMKF_D:
+        return 1.0 - (exp(-s) - exp(-s / 2.0))
+    if code == UCM or code == DUCM:
+        return sqrt(exp(s))
+    return 1.0 + 0.0 * s
+
+
+def averaged_coefficients(s):
+    """The seven scalars of eq. 11 that depend on s only: e^(−2s), cosh 2s − cosh s and
+    sinh 2s − sinh s (as the products 2 sinh(3s/2) sinh(s/2) and 2 cosh(3s/2) sinh(s/2): no
+    cancellation at small s), 2 cosh 2s − cosh s, 2 sinh 2s − sinh s, e^(−4s), e^s − 1."""
+    sh_half = sinh(0.5 * s)
+    return (
+        exp(-2.0 * s),
+        2.0 * sinh(1.5 * s) * sh_half,
+        2.0 * cosh(1.5 * s) * sh_half,
+        2.0 * cosh(2.0 * s) - cosh(s),
+        2.0 * sinh(2.0 * s) - sinh(s),
+        exp(-4.0 * s),
+        expm1(s),
+    )
+
+
+def true_cov_coefficients(s, sr2, k):
+    """(a1, a0, b1, c1, c0) of ``true_entries`` × k: with A = a1 r² + a0, B = b1 (r² + σr²),
+    C = c1 r² + c0,
+
+        A = ½ k [σr² (1 + e^(−2s)) + r² (1 − e^(−s))²],   B = ½ k (σr² + r²)(1 − e^(−2s)),
+        C = k [σr² e^(−2s) − r² e^(−s) (1 − e^(−s))]
+
+    (1 − e^(−s) by expm1, so the O(s) variances keep full precision)."""
+    e1, e2 = exp(-s), exp(-2.0 * s)
+    om1, om2 = -expm1(-s), -expm1(-2.0 * s)
+    return (
+        (0.5 * k) * om1 * om1,
+        (0.5 * k) * sr2 * (1.0 + e2),
+        (0.5 * k) * om2,
+        -k * e1 * om1,
+        k * sr2 * e2,
+    )
+
+
+def conversion_coefficients(code: int, s, sr2) -> tuple:
     """The eight scalars of conversion ``code`` that depend on s = σβ² and σr² only (zeros
     where a conversion needs fewer; always eight, so compiled code sees one type).
 
-    seed / cmkf_d: κ (seed 1 − s/2, eq. 10 as printed; cmkf_d 1 − (e^(−s) − e^(−s/2))), then
-    eq. 11's e^(−2s), cosh 2s − cosh s and sinh 2s − sinh s (as the products
-    2 sinh(3s/2) sinh(s/2) and 2 cosh(3s/2) sinh(s/2): no cancellation at small s),
-    2 cosh 2s − cosh s, 2 sinh 2s − sinh s, e^(−4s), e^s − 1
-    (``core.conversion.planar._averaged_parts``).
-
-    ucm / ducm: κ = e^(s/2) and the true-conditioned covariance × e^s
-    (``core.conversion.planar._true_cov_parts``) as A = a1 r² + a0, B = b1 (r² + σr²),
-    C = c1 r² + c0: (κ, a1, a0, b1, c1, c0, 0, 0).
+    seed / cmkf_d: (κ, ``averaged_coefficients(s)``); ucm / ducm: (κ,
+    ``true_cov_coefficients(s, σr², e^s)``, 0, 0); naive: zeros.
     """
     if code == SEED or code == CMKF_D:
-        kappa = 1.0 - s / 2.0 if code == SEED else 1.0 - (math.exp(-s) - math.exp(-s / 2.0))
-        sh_half = math.sinh(0.5 * s)
-        return (
-            kappa,
-            math.exp(-2.0 * s),
-            2.0 * math.sinh(1.5 * s) * sh_half,
-            2.0 * math.cosh(1.5 * s) * sh_half,
-            2.0 * math.cosh(2.0 * s) - math.cosh(s),
-            2.0 * math.sinh(2.0 * s) - math.sinh(s),
-            math.exp(-4.0 * s),
-            math.expm1(s),
-        )
+        a = averaged_coefficients(s)
+        return scale(code, s), a[0], a[1], a[2], a[3], a[4], a[5], a[6]
     if code == UCM or code == DUCM:
-        k = math.exp(s)
-        e1, e2 = math.exp(-s), math.exp(-2.0 * s)
-        om1, om2 = -math.expm1(-s), -math.expm1(-2.0 * s)
-        return (
-            math.sqrt(k),
-            (0.5 * k) * om1 * om1,
-            (0.5 * k) * sr2 * (1.0 + e2),
-            (0.5 * k) * om2,
-            -k * e1 * om1,
-            k * sr2 * e2,
-            0.0,
-            0.0,
-        )
-    return (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+        k = exp(s)
+        t = true_cov_coefficients(s, sr2, k)
+        return sqrt(k), t[0], t[1], t[2], t[3], t[4], 0.0 * s, 0.0 * s
+    z = 0.0 * s
+    return (z, z, z, z, z, z, z, z)
+
+
+def linearized_entries(r, c, sn, sr2, s):
+    """(R00, R01, R11) of the first-order covariance J diag(σr², s) Jᵀ of the naive point at
+    range r and bearing (c, sn) = (cos β, sin β) (Prosov eq. 9):
+
+        R00 = σr² cos²β + r² s sin²β,   R11 = σr² sin²β + r² s cos²β,
+        R01 = (σr² − r² s) sin β cos β
+    """
+    rs = r * r * s
+    return sr2 * c * c + rs * sn * sn, (sr2 - rs) * sn * c, sr2 * sn * sn + rs * c * c
+
+
+def averaged_entries(r, c, sn, sr2, e2, a_c, a_s, b_c, b_s, e4, em1):
+    """(c11, c12, c22) of Prosov eq. 11a–c at range r and bearing (c, sn), the scalars from
+    ``averaged_coefficients``:
+
+        c11 = r² e^(−2s) [cos²β (cosh 2s − cosh s) + sin²β (sinh 2s − sinh s)]
+            + σr² e^(−2s) [cos²β (2 cosh 2s − cosh s) + sin²β (2 sinh 2s − sinh s)]
+        c22 = the same with sin and cos exchanged
+        c12 = sin β cos β e^(−4s) [σr² + (r² + σr²)(1 − e^s)]
+    """
+    c2, s2, r2 = c * c, sn * sn, r * r
+    c11 = r2 * (e2 * (c2 * a_c + s2 * a_s)) + sr2 * e2 * (c2 * b_c + s2 * b_s)
+    c22 = r2 * (e2 * (s2 * a_c + c2 * a_s)) + sr2 * e2 * (s2 * b_c + c2 * b_s)
+    c12 = sn * c * e4 * (sr2 - (r2 + sr2) * em1)
+    return c11, c12, c22
+
+
+def true_entries(r, c, sn, sr2, a1, a0, b1, c1, c0):
+    """(Cxx, Cxy, Cyy) of the naive point's exact covariance given the truth (r, β), β as
+    (c, sn), times the k of ``true_cov_coefficients`` (whose scalars these are):
+
+        Cxx = cos²β A + sin²β B,   Cyy = sin²β A + cos²β B,   Cxy = sin β cos β C,
+
+    σr² E[u uᵀ] + r² Cov(u), u = (cos β̂, sin β̂), regrouped so that every term of the
+    diagonal is non-negative: written as E[p pᵀ] − E[p] E[p]ᵀ the radial variance would lose
+    ~eps·r²/σr² of its relative precision and could come out ≤ 0 once r/σr ≳ 5e7.
+    """
+    r2 = r * r
+    a = r2 * a1 + a0
+    b = (r2 + sr2) * b1
+    cx = r2 * c1 + c0
+    return c * c * a + sn * sn * b, cx * (sn * c), sn * sn * a + c * c * b
 
 
 def converted_point(code, r, c, sn, sr2, s, co, rp, cp, sp):
@@ -76,28 +148,26 @@ def converted_point(code, r, c, sn, sr2, s, co, rp, cp, sp):
     the same point, the covariance at the prediction.
     """
     if code == NAIVE:
-        rs = r * r * s
-        return (
-            r * c,
-            r * sn,
-            sr2 * c * c + rs * sn * sn,
-            (sr2 - rs) * sn * c,
-            sr2 * sn * sn + rs * c * c,
-        )
+        cov = linearized_entries(r, c, sn, sr2, s)
+        return r * c, r * sn, cov[0], cov[1], cov[2]
     kr = co[0] * r
     if code == SEED or code == CMKF_D:
-        c2, s2, r2 = c * c, sn * sn, r * r
-        e2, a_c, a_s, b_c, b_s = co[1], co[2], co[3], co[4], co[5]
-        c11 = r2 * (e2 * (c2 * a_c + s2 * a_s)) + sr2 * e2 * (c2 * b_c + s2 * b_s)
-        c22 = r2 * (e2 * (s2 * a_c + c2 * a_s)) + sr2 * e2 * (s2 * b_c + c2 * b_s)
-        c12 = sn * c * co[6] * (sr2 - (r2 + sr2) * co[7])
-        return kr * c, kr * sn, c11, c12, c22
-    if code == UCM:  # the covariance at the measurement
-        rc, cc, sc = r, c, sn
+        cov = averaged_entries(r, c, sn, sr2, co[1], co[2], co[3], co[4], co[5], co[6], co[7])
+    elif code == UCM:  # the covariance at the measurement
+        cov = true_entries(r, c, sn, sr2, co[1], co[2], co[3], co[4], co[5])
     else:  # ducm: at the prediction
-        rc, cc, sc = rp, cp, sp
-    r2 = rc * rc
-    a = r2 * co[1] + co[2]
-    b = (r2 + sr2) * co[3]
-    cx = r2 * co[4] + co[5]
-    return kr * c, kr * sn, cc * cc * a + sc * sc * b, cx * (sc * cc), sc * sc * a + cc * cc * b
+        cov = true_entries(rp, cp, sp, sr2, co[1], co[2], co[3], co[4], co[5])
+    return kr * c, kr * sn, cov[0], cov[1], cov[2]
+
+
+#: The functions to compile, for the engines that re-bind them (``core.filters.rebind``).
+CONVERSION_FUNCTIONS = (
+    scale,
+    averaged_coefficients,
+    true_cov_coefficients,
+    conversion_coefficients,
+    linearized_entries,
+    averaged_entries,
+    true_entries,
+    converted_point,
+)

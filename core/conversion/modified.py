@@ -25,7 +25,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from radarviz.core.conversion.planar import Converted, _f, naive_cov_given_truth
-from radarviz.core.conversion.spatial import _point_3d, naive_cov_given_truth_3d
+from radarviz.core.conversion.spatial import _point_3d, naive_cov_given_truth_3d, ucm_scale_3d
 
 Arr = NDArray[np.float64]
 
@@ -74,4 +74,5 @@ def convert_mucm_3d(
         sigma_beta_rad=sigma_beta_rad,
         sigma_elevation_rad=sigma_elevation_rad,
     )
-    return Converted(np.exp(s / 2.0) * naive, _with_offset(cov, 2.0 * np.sinh(s / 2.0) * naive))
+    kappa = ucm_scale_3d(sigma_beta_rad, sigma_elevation_rad)  # ucm's point, to the last bit
+    return Converted(kappa * naive, _with_offset(cov, 2.0 * np.sinh(s / 2.0) * naive))

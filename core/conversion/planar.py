@@ -44,6 +44,20 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from radarviz.core.conversion import elementwise
+from radarviz.core.conversion.elementwise import (
+    CMKF_D,
+    DUCM,
+    NAIVE,
+    SEED,
+    UCM,
+    averaged_coefficients,
+    conversion_coefficients,
+    converted_point,
+    scale,
+    true_cov_coefficients,
+    true_entries,
+)
 from radarviz.core.geometry import polar_coordinates
 
 METHODS_2D: tuple[str, ...] = ("naive", "seed", "cmkf_d", "ucm", "ducm")
@@ -74,58 +88,14 @@ def _f(a: ArrayLike) -> NDArray[np.float64]:
 
 
 # --------------------------------------------------------------------------------------------
-# Exact moments (used by ucm / ducm and by the tests)
+# The naive point given the truth (used by ``core.conversion.modified`` and the tests)
 # --------------------------------------------------------------------------------------------
 
 
-class _AngleMoments(NamedTuple):
-    """Moments of (cos θ̂, sin θ̂) for θ̂ ~ N(θ, s), written without cancellation."""
-
-    mc: NDArray[np.float64]  # E[cos θ̂] = e^(−s/2) cos θ
-    ms: NDArray[np.float64]  # E[sin θ̂] = e^(−s/2) sin θ
-    ecc: NDArray[np.float64]  # E[cos² θ̂] = ½(1 + e^(−2s) cos 2θ)
-    ess: NDArray[np.float64]  # E[sin² θ̂] = ½(1 − e^(−2s) cos 2θ)
-    esc: NDArray[np.float64]  # E[sin θ̂ cos θ̂] = ½ e^(−2s) sin 2θ
-    vcc: NDArray[np.float64]  # Var(cos θ̂) = ½ cos²θ (1 − e^(−s))² + ½ sin²θ (1 − e^(−2s))
-    vss: NDArray[np.float64]  # Var(sin θ̂) = ½ sin²θ (1 − e^(−s))² + ½ cos²θ (1 − e^(−2s))
-    csc: NDArray[np.float64]  # Cov(sin θ̂, cos θ̂) = −sin θ cos θ e^(−s) (1 − e^(−s))
-
-
-def _angle_moments(theta: NDArray, s: NDArray) -> _AngleMoments:
-    """One-angle moments; 1 − e^(−s) via expm1 so the O(s) variances keep full precision."""
-    return _angle_moments_cs(np.cos(theta), np.sin(theta), s)
-
-
-def _angle_moments_cs(c: NDArray, sn: NDArray, s: NDArray) -> _AngleMoments:
-    """``_angle_moments`` from cos θ and sin θ (callers often have them without trigonometry)."""
-    cc, ss, sc = c * c, sn * sn, sn * c
-    e_half, e1, e2 = np.exp(-s / 2.0), np.exp(-s), np.exp(-2.0 * s)
-    om1, om2 = -np.expm1(-s), -np.expm1(-2.0 * s)
-    return _AngleMoments(
-        mc=e_half * c,
-        ms=e_half * sn,
-        ecc=0.5 * (cc * (1.0 + e2) + ss * om2),
-        ess=0.5 * (ss * (1.0 + e2) + cc * om2),
-        esc=e2 * sc,
-        vcc=0.5 * (cc * om1 * om1 + ss * om2),
-        vss=0.5 * (ss * om1 * om1 + cc * om2),
-        csc=-e1 * om1 * sc,
-    )
-
-
-#: The scale κ(s), s = σβ², that each 2D method applies to the naive point.
-_SCALES = {
-    "naive": lambda s: np.ones_like(s),
-    "seed": lambda s: 1.0 - s / 2.0,  # Prosov eq. 10 as printed
-    "cmkf_d": lambda s: 1.0 - (np.exp(-s) - np.exp(-s / 2.0)),  # Lerro & Bar-Shalom debiasing
-    "ucm": lambda s: np.exp(s / 2.0),  # Mo et al. 1998: 1 / E[cos v_β]
-    "ducm": lambda s: np.exp(s / 2.0),
-}
-
-
 def scale_factor(method: str, *, sigma_beta_rad: ArrayLike) -> NDArray[np.float64]:
-    """The scale κ a 2D method applies to the naive point ``r̂ (cos β̂, sin β̂)``."""
-    return _SCALES[_method(method)](_f(sigma_beta_rad) ** 2)
+    """The scale κ a 2D method applies to the naive point ``r̂ (cos β̂, sin β̂)``
+    (``core.conversion.elementwise.scale``)."""
+    return np.asarray(scale(_CODES[_method(method)], _f(sigma_beta_rad) ** 2))
 
 
 def _method(method: str) -> str:
@@ -157,53 +127,12 @@ def naive_cov_given_truth(
     Scaling the point by κ scales this by κ², so it also gives the ucm covariance.
 
     Numerics: evaluated as σr² E[u uᵀ] + r² Cov(u), u = (cos β̂, sin β̂), which is the same
-    thing with the O(r²) cancellation removed (as written above, the radial variance loses
-    ~eps·r²/σr² relative precision and can come out ≤ 0 once r/σr ≳ 5e7 at small s).
+    thing with the O(r²) cancellation removed (``core.conversion.elementwise.true_entries``).
     """
     r, beta = _f(r), _f(beta)
-    return _sym2(*_true_cov_parts(r, np.cos(beta), np.sin(beta), _f(sigma_r_m), _f(sigma_beta_rad)))
-
-
-CovParts = tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]
-
-
-def _true_cov_parts(
-    r: NDArray,
-    c: NDArray,
-    sn: NDArray,
-    sigma_r_m: NDArray,
-    sigma_beta_rad: NDArray,
-    scale: ArrayLike = 1.0,
-) -> CovParts:
-    """(Cxx, Cxy, Cyy) of ``naive_cov_given_truth`` × ``scale``, bearing given by cos c, sin sn.
-
-    σr² E[u uᵀ] + r² Cov(u) regrouped by cos²β, sin²β and sin β cos β (every term of the
-    diagonal is non-negative, so nothing cancels), with the scalar coefficients folded first:
-
-        Cxx = cos²β · A + sin²β · B,   Cyy = sin²β · A + cos²β · B,   Cxy = sin β cos β · C
-        A = ½[σr² (1 + e^(−2s)) + r² (1 − e^(−s))²],   B = ½ (σr² + r²)(1 − e^(−2s))
-        C = σr² e^(−2s) − r² e^(−s) (1 − e^(−s))
-    """
-    s = sigma_beta_rad * sigma_beta_rad
-    k = _f(scale)
-    e1, e2 = np.exp(-s), np.exp(-2.0 * s)
-    om1, om2 = -np.expm1(-s), -np.expm1(-2.0 * s)
-    sr2 = sigma_r_m * sigma_r_m
-    r2 = r * r
-    a_const = (0.5 * k) * sr2 * (1.0 + e2)
-    A = r2 * ((0.5 * k) * om1 * om1)
-    A += a_const
-    B = r2 + sr2
-    B *= (0.5 * k) * om2
-    C = r2 * (-k * e1 * om1)
-    C += k * sr2 * e2
-    cc, ss = c * c, sn * sn
-    cxx = cc * A
-    cxx += ss * B
-    cyy = ss * A
-    cyy += cc * B
-    C = C * (sn * c)  # not in place: r and the bearing may broadcast against each other
-    return cxx, C, cyy
+    s, sr2 = _f(sigma_beta_rad) ** 2, _f(sigma_r_m) ** 2
+    co = true_cov_coefficients(s, sr2, 1.0)
+    return _sym2(*true_entries(r, np.cos(beta), np.sin(beta), sr2, *co))
 
 
 # --------------------------------------------------------------------------------------------
@@ -221,16 +150,8 @@ def linearized_cov(
     R12 = (σr² − r² s) sin β cos β
     """
     r, beta = _f(r), _f(beta)
-    return _sym2(
-        *_linearized_parts(r, np.cos(beta), np.sin(beta), _f(sigma_r_m), _f(sigma_beta_rad))
-    )
-
-
-def _linearized_parts(
-    r: NDArray, c: NDArray, sn: NDArray, sigma_r_m: NDArray, sigma_beta_rad: NDArray
-) -> CovParts:
-    sr2, rs = sigma_r_m * sigma_r_m, r * r * (sigma_beta_rad * sigma_beta_rad)
-    return sr2 * c * c + rs * sn * sn, (sr2 - rs) * sn * c, sr2 * sn * sn + rs * c * c
+    sr2, s = _f(sigma_r_m) ** 2, _f(sigma_beta_rad) ** 2
+    return _sym2(*elementwise.linearized_entries(r, np.cos(beta), np.sin(beta), sr2, s))
 
 
 def averaged_cov(
@@ -248,25 +169,9 @@ def averaged_cov(
     that identity by quadrature.
     """
     r, beta = _f(r), _f(beta)
-    return _sym2(*_averaged_parts(r, np.cos(beta), np.sin(beta), _f(sigma_r_m), _f(sigma_beta_rad)))
-
-
-def _averaged_parts(
-    r: NDArray, c: NDArray, sn: NDArray, sigma_r_m: NDArray, sigma_beta_rad: NDArray
-) -> CovParts:
-    sr2, s = sigma_r_m * sigma_r_m, sigma_beta_rad * sigma_beta_rad
-    c2, s2 = c * c, sn * sn
-    e2 = np.exp(-2.0 * s)
-    ch1, ch2, sh1, sh2 = np.cosh(s), np.cosh(2.0 * s), np.sinh(s), np.sinh(2.0 * s)
-    r2 = r * r
-    # cosh 2s − cosh s and sinh 2s − sinh s as products (no cancellation at small s).
-    sh_half = np.sinh(0.5 * s)
-    a_c, a_s = 2.0 * np.sinh(1.5 * s) * sh_half, 2.0 * np.cosh(1.5 * s) * sh_half
-    b_c, b_s = 2.0 * ch2 - ch1, 2.0 * sh2 - sh1
-    c11 = r2 * (e2 * (c2 * a_c + s2 * a_s)) + sr2 * e2 * (c2 * b_c + s2 * b_s)
-    c22 = r2 * (e2 * (s2 * a_c + c2 * a_s)) + sr2 * e2 * (s2 * b_c + c2 * b_s)
-    c12 = sn * c * np.exp(-4.0 * s) * (sr2 - (r2 + sr2) * np.expm1(s))
-    return c11, c12, c22
+    sr2, s = _f(sigma_r_m) ** 2, _f(sigma_beta_rad) ** 2
+    co = averaged_coefficients(s)
+    return _sym2(*elementwise.averaged_entries(r, np.cos(beta), np.sin(beta), sr2, *co))
 
 
 # --------------------------------------------------------------------------------------------
@@ -293,58 +198,8 @@ class ConvertedParts(NamedTuple):
         return Converted(np.stack([x, y], axis=-1), _sym2(r00, r01, r11))
 
 
-def _naive(r, c, sn, sigma_r_m, sigma_beta_rad, predicted) -> ConvertedParts:
-    """Naive conversion (eq. 8) with the linearized covariance (eq. 9)."""
-    return ConvertedParts(r * c, r * sn, *_linearized_parts(r, c, sn, sigma_r_m, sigma_beta_rad))
-
-
-def _averaged(method: str):
-    """Prosov's correction as printed (``seed``: κ = 1 − s/2, eq. 10; it *doubles* the bias of
-    the converted point, see the module docstring) or Lerro & Bar-Shalom's (``cmkf_d``:
-    κ = 1 − (e^(−s) − e^(−s/2))), both with the averaged covariance of eq. 11."""
-
-    def parts(r, c, sn, sigma_r_m, sigma_beta_rad, predicted) -> ConvertedParts:
-        kr = _SCALES[method](sigma_beta_rad * sigma_beta_rad) * r
-        return ConvertedParts(
-            kr * c, kr * sn, *_averaged_parts(r, c, sn, sigma_r_m, sigma_beta_rad)
-        )
-
-    return parts
-
-
-def _ucm(r, c, sn, sigma_r_m, sigma_beta_rad, predicted) -> ConvertedParts:
-    """Unbiased conversion (Mo, Song, Zhou, Sun, Bar-Shalom 1998): κ = e^(s/2); covariance the
-    exact true-conditioned covariance of the unbiased point, e^s · ``naive_cov_given_truth``,
-    evaluated at the measured (r̂, β̂)."""
-    es = np.exp(sigma_beta_rad * sigma_beta_rad)
-    kr = np.sqrt(es) * r
-    return ConvertedParts(
-        kr * c, kr * sn, *_true_cov_parts(r, c, sn, sigma_r_m, sigma_beta_rad, es)
-    )
-
-
-def _ducm(r, c, sn, sigma_r_m, sigma_beta_rad, predicted) -> ConvertedParts:
-    """Decorrelated unbiased conversion (Bordonaro, Willett, Bar-Shalom 2014): ucm's point,
-    the covariance evaluated at the filter's predicted position (radar-centred), so the gain
-    is independent of this measurement's error."""
-    if predicted is None:
-        raise ValueError("method ducm needs predicted_xy (the filter's predicted position)")
-    px, py = _f(predicted[0]), _f(predicted[1])
-    r_p = polar_coordinates([px, py])[0]
-    es = np.exp(sigma_beta_rad * sigma_beta_rad)
-    kr = np.sqrt(es) * r
-    return ConvertedParts(
-        kr * c, kr * sn, *_true_cov_parts(r_p, px / r_p, py / r_p, sigma_r_m, sigma_beta_rad, es)
-    )
-
-
-_CONVERSIONS = {
-    "naive": _naive,
-    "seed": _averaged("seed"),
-    "cmkf_d": _averaged("cmkf_d"),
-    "ucm": _ucm,
-    "ducm": _ducm,
-}
+#: Each conversion's code (``core.conversion.elementwise``), by name.
+_CODES = {"naive": NAIVE, "seed": SEED, "cmkf_d": CMKF_D, "ucm": UCM, "ducm": DUCM}
 
 
 def convert_parts(
@@ -364,14 +219,24 @@ def convert_parts(
         predicted_xy: the filter's predicted position, radar-centred: two (...) arrays, or one
             (..., 2) array.
     """
+    code = _CODES[_method(method)]
     r, beta = _f(r), _f(beta)
-    c, sn = np.cos(beta), np.sin(beta)
-    predicted = predicted_xy
-    if predicted is not None and not isinstance(predicted, tuple):
-        p = _f(predicted)
-        predicted = (p[..., 0], p[..., 1])
-    fn = _CONVERSIONS[_method(method)]
-    return fn(r, c, sn, _f(sigma_r_m), _f(sigma_beta_rad), predicted)
+    sr2, s = _f(sigma_r_m) ** 2, _f(sigma_beta_rad) ** 2
+    rp = cp = sp = None
+    if code == DUCM:  # the covariance at the filter's predicted position
+        if predicted_xy is None:
+            raise ValueError("method ducm needs predicted_xy (the filter's predicted position)")
+        if isinstance(predicted_xy, tuple):
+            px, py = _f(predicted_xy[0]), _f(predicted_xy[1])
+        else:
+            p = _f(predicted_xy)
+            px, py = p[..., 0], p[..., 1]
+        rp = polar_coordinates([px, py])[0]
+        cp, sp = px / rp, py / rp
+    co = conversion_coefficients(code, s, sr2)
+    return ConvertedParts(
+        *converted_point(code, r, np.cos(beta), np.sin(beta), sr2, s, co, rp, cp, sp)
+    )
 
 
 def convert(

@@ -93,8 +93,9 @@ def filter_history_xp(
     s_ = settings
     code, start_code = METHOD_CODES[method], START_CODES[method]
     sr2, s = s_.sigma_r_m**2, s_.sigma_beta_rad**2
-    co = conversion_coefficients(code, s, sr2)
-    co_start = conversion_coefficients(start_code, s, sr2)
+    # as Python floats: the coefficients are numpy's numbers, which other namespaces refuse
+    co = tuple(float(c) for c in conversion_coefficients(code, s, sr2))
+    co_start = tuple(float(c) for c in conversion_coefficients(start_code, s, sr2))
     sx, sy = s_.site_m
     T, q = s_.period_s, s_.sigma_a_mps2**2
     prm = s_.ukf.weights(4)

@@ -25,12 +25,11 @@ import numpy as np
 from radarviz.core.confidence import BAND_GROUPS
 from radarviz.core.conversion.elementwise import (
     CMKF_D,
+    CONVERSION_FUNCTIONS,
     DUCM,
     NAIVE,
     SEED,
     UCM,
-    conversion_coefficients,
-    converted_point,
 )
 from radarviz.core.filters import tuples
 from radarviz.core.filters.codes import EKF, UKF, is_polar, reads_prediction
@@ -40,6 +39,7 @@ from radarviz.core.filters.predict import (
     predict_components,
     white_acceleration,
 )
+from radarviz.core.filters.rebind import rebind
 from radarviz.core.filters.steps_2d import bind_2d
 from radarviz.core.filters.trig import atan2 as trig_atan2
 from radarviz.core.filters.trig import sincos
@@ -60,6 +60,9 @@ from radarviz.core.filters.tuples import load_2d, store_2d
 _FAST = {"contract", "reassoc", "nsz", "arcp"}
 _jit = numba.njit(cache=True, error_model="numpy", nogil=True, fastmath=_FAST)
 _inline = numba.njit(cache=True, error_model="numpy", nogil=True, fastmath=_FAST, forceinline=True)
+# _exact: no fastmath, each operation the one written (IEEE, as numpy computes it), where
+# results must not depend on the call site LLVM inlines a function at (``kernels_3d``).
+_exact = numba.njit(cache=True, error_model="numpy", nogil=True)
 
 
 _TWO_PI = 2.0 * math.pi
@@ -72,10 +75,11 @@ def wrap(a: float) -> float:
     return a - _TWO_PI * np.ceil(a * (1.0 / _TWO_PI) - 0.5)
 
 
-# The conversions' arithmetic lives in ``core.conversion.elementwise`` (shared with the
-# array-API path), compiled here.
-_coefficients = _inline(conversion_coefficients)
-_converted_point = _inline(converted_point)
+# The conversions' arithmetic lives in ``core.conversion.elementwise`` (the numpy engine's and
+# the array-API path's too), compiled here.
+conversion_steps = rebind(CONVERSION_FUNCTIONS, {}, _inline)
+_coefficients = conversion_steps["conversion_coefficients"]
+_converted_point = conversion_steps["converted_point"]
 
 
 @_jit

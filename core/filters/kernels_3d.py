@@ -3,10 +3,9 @@ scalar loops, the 6 × 6 state (x, ẋ, y, ẏ, z, ż) in small arrays, one plot
 
 The updates are the ones every engine runs, written once (``core.filters.steps_3d``: the
 position update, the EKF's measurement, the UKF, the Doppler update) and compiled here with
-the scalar elementary functions; the prediction is ``core.filters.predict``'s. This module
-adds the 3D conversions, which mirror ``core.conversion.spatial`` (the five conversions:
-moments of each angle, ``_combined_cov``, the per-axis scales), the innovation statistics
-and the plot loop.
+the scalar elementary functions; the prediction is ``core.filters.predict``'s; the 3D
+conversions are ``core.conversion.elementwise_3d``'s. This module adds the innovation
+statistics and the plot loop.
 
 The numpy engine stays the reference (``tests/test_track_compiled.py`` holds every method, with
 and without Doppler, to it at 1e-9 relative). Imported on first use only.
@@ -14,13 +13,15 @@ and without Doppler, to it at 1e-9 relative). Imported on first use only.
 
 from __future__ import annotations
 
-from math import atan2, cos, exp, expm1, hypot, log, sin, sqrt
+from math import atan2, cos, log, sin, sqrt
 
 import numpy as np
 
-from radarviz.core.conversion.elementwise import CMKF_D, NAIVE, SEED, UCM
+from radarviz.core.conversion.elementwise import scale
+from radarviz.core.conversion.elementwise_3d import CONVERSION_FUNCTIONS_3D
 from radarviz.core.filters.codes import UKF
 from radarviz.core.filters.kernels_2d import (
+    _exact,
     _inline,
     _jit,
     _select,
@@ -32,6 +33,7 @@ from radarviz.core.filters.kernels_2d import (
     wrap,
 )
 from radarviz.core.filters.kernels_track import time_step
+from radarviz.core.filters.rebind import rebind
 from radarviz.core.filters.steps_3d import bind_3d
 
 # The 3D updates (position, the EKF's measurement, UKF, Doppler: ``core.filters.steps_3d``),
@@ -46,168 +48,62 @@ doppler_terms_3d = _steps["doppler_terms_3d"]
 doppler_update_3d = _steps["doppler_update_3d"]
 
 
-@_jit
-def exponentials(s: float, out):
-    # The noise-only factors of ``moments`` for an angle variance s: out = (e^(−s/2), e^(−s),
-    # e^(−2s), 1 − e^(−s), 1 − e^(−2s)) (once per radar, not per plot, method and model)
-    out[0], out[1], out[2] = exp(-s / 2.0), exp(-s), exp(-2.0 * s)
-    out[3], out[4] = -expm1(-s), -expm1(-2.0 * s)
+# The 3D conversions (``core.conversion.elementwise_3d``, the numpy engine's too), compiled
+# here without fastmath (``_exact``): LLVM inlines them at each of their call sites (a track's
+# start, the monitor's statistics, a model's update), and with contraction allowed it fused
+# their products and sums differently at each, so a target's results came to depend by
+# rounding on which site converted its plot, and so on the other targets in its block (the
+# bit-for-bit test of a target of many against its plots alone failed). Without it each
+# operation is the one written, everywhere, as in numpy.
+_conversions = rebind(CONVERSION_FUNCTIONS_3D, {"scale": _exact(scale)}, _exact)
+_noise_table = _conversions["noise_table"]
+_converted_point_3d = _conversions["converted_point_3d"]
 
 
 @_jit
-def noise_table(sb2: float, se2: float, out):
-    # A radar's noise-only factors of the conversions, out (5, 5): rows 0–3 the
-    # ``exponentials`` of σβ², σε², 2σβ², 2σε²; row 4 the scales (cmkf_d's κ_xy, κ_z, then
-    # ucm's and ducm's κ_xy, κ_z, 0) of ``convert_3d`` with s_xy = σβ² + σε², s_z = σε²
-    exponentials(sb2, out[0])
-    exponentials(se2, out[1])
-    exponentials(2.0 * sb2, out[2])
-    exponentials(2.0 * se2, out[3])
-    s_xy, s_z = sb2 + se2, se2
-    out[4, 0] = 1.0 - (exp(-s_xy) - exp(-s_xy / 2.0))
-    out[4, 1] = 1.0 - (exp(-s_z) - exp(-s_z / 2.0))
-    out[4, 2], out[4, 3], out[4, 4] = exp(s_xy / 2.0), exp(s_z / 2.0), 0.0
+def fill_noise_table(sb2: float, se2: float, out):
+    # A radar's noise-only factors of the conversions into out (5, 5)
+    # (``core.conversion.elementwise_3d.noise_table``; once per radar, not per plot, method
+    # and model)
+    t = _noise_table(sb2, se2)
+    for a in range(5):
+        row = t[a]
+        for c in range(5):
+            out[a, c] = row[c]
 
 
 @_jit
 def conversion_scratch(radars: int):
     # The conversions' per-kernel arrays: the noise table of every radar (radars, 5, 5) and
-    # ``conv`` = (mb, me, tmp (9,) scratch, trig (4,), ex (5, 5)) that ``plot_factors`` fills
-    # per plot
-    return np.empty((radars, 5, 5)), (
-        np.empty(9),
-        np.empty(9),
-        np.empty(9),
-        np.empty(4),
-        np.empty((5, 5)),
-    )
+    # ``conv`` = (trig (4,), ex (5, 5)) that ``plot_factors`` fills per plot
+    return np.empty((radars, 5, 5)), (np.empty(4), np.empty((5, 5)))
 
 
 @_inline
 def plot_factors(b: float, el: float, ex_g, conv):
     # A plot's factors of the conversions and the Doppler stage, once per plot for every
     # method and model: trig = (cos β̂, sin β̂, cos ε̂, sin ε̂), and its radar's noise table
-    trig, ex = conv[3], conv[4]
+    trig, ex = conv
     trig[0], trig[1], trig[2], trig[3] = cos(b), sin(b), cos(el), sin(el)
     for a in range(5):
         for c in range(5):
             ex[a, c] = ex_g[a, c]
 
 
-# The per-plot stages below are inlined into the kernels (``_inline``): a compiled call with a
-# dozen array arguments costs more than the 3D position update it makes (measured: 270 against
-# 105 ns for a position stage). The angle moments and ``combined_cov`` stay calls: inlined, the
-# results of one target came to depend by rounding on the other targets' in the block (the
-# bit-for-bit test of a target of many against its plots alone failed), and a call is only
-# made by the converted methods, once per plot.
-
-
-@_jit
-def moments(c: float, sn: float, ex, out):
-    # core.conversion.planar._angle_moments_cs, then spatial._given_truth: out = (ecc, ess,
-    # esc, vcc, vss, csc, mc, ms, mc²) of θ̂ ~ N(θ, s), (c, sn) = (cos θ, sin θ), ex the
-    # ``exponentials`` of s
-    cc, ss, sc = c * c, sn * sn, sn * c
-    e_half, e1, e2, om1, om2 = ex[0], ex[1], ex[2], ex[3], ex[4]
-    out[0] = 0.5 * (cc * (1.0 + e2) + ss * om2)
-    out[1] = 0.5 * (ss * (1.0 + e2) + cc * om2)
-    out[2] = e2 * sc
-    out[3] = 0.5 * (cc * om1 * om1 + ss * om2)
-    out[4] = 0.5 * (ss * om1 * om1 + cc * om2)
-    out[5] = -e1 * om1 * sc
-    out[6] = e_half * c
-    out[7] = e_half * sn
-    out[8] = out[6] * out[6]
-
-
-@_jit
-def posterior_moments(c: float, sn: float, ex, ex2, out, tmp):
-    # spatial._posterior_average: the moments averaged over the truth θ ~ N(θ̂, s); ex, ex2
-    # the ``exponentials`` of s and 2s
-    moments(c, sn, ex2, out)  # ecc, ess, esc of variance 2s
-    moments(c, sn, ex, tmp)
-    e1, om1, om2 = ex[1], ex[3], ex[4]
-    half1, half2 = 0.5 * om1 * om1, 0.5 * om2
-    out[3] = half1 * tmp[0] + half2 * tmp[1]
-    out[4] = half1 * tmp[1] + half2 * tmp[0]
-    out[5] = -e1 * om1 * tmp[2]
-    out[6] = e1 * c
-    out[7] = e1 * sn
-    out[8] = e1 * tmp[0]
-
-
-@_jit
-def combined_cov(range_sq: float, var_r: float, e, b, R):
-    # spatial._combined_cov: σr² E[u uᵀ] + range_sq Cov(u), from elevation moments e and
-    # azimuth moments b (indices as ``moments``)
-    xx = var_r * (e[0] * b[0]) + range_sq * (e[3] * b[0] + e[8] * b[3])
-    xy = var_r * (e[0] * b[2]) + range_sq * (e[3] * b[2] + e[8] * b[5])
-    yy = var_r * (e[0] * b[1]) + range_sq * (e[3] * b[1] + e[8] * b[4])
-    xz = var_r * (e[2] * b[6]) + range_sq * (e[5] * b[6])
-    yz = var_r * (e[2] * b[7]) + range_sq * (e[5] * b[7])
-    zz = var_r * e[1] + range_sq * e[4]
-    R[0, 0], R[0, 1], R[0, 2] = xx, xy, xz
-    R[1, 0], R[1, 1], R[1, 2] = xy, yy, yz
-    R[2, 0], R[2, 1], R[2, 2] = xz, yz, zz
-
-
-@_jit
-def given_truth_cov(r, cos_b, sin_b, cos_e, sin_e, sr2: float, ex, R, mb, me):
-    # spatial.naive_cov_given_truth_3d at (r, β, ε), (cos_b, sin_b, cos_e, sin_e) =
-    # (cos β, sin β, cos ε, sin ε); ex the radar's ``noise_table``
-    moments(cos_b, sin_b, ex[0], mb)
-    moments(cos_e, sin_e, ex[1], me)
-    combined_cov(r * r, sr2, me, mb, R)
-
-
 @_inline
 def convert_3d(code, r, sr2, sb2, se2, px, py, pz, z, R, conv):
-    # spatial.convert_3d: the radar-centred point z (3,) and covariance R (3, 3) of
-    # (r̂, β̂, ε̂), whose cosines, sines and radar's noise table ``plot_factors`` put in
-    # ``conv``; (px, py, pz): the predicted position minus the site (ducm only)
-    mb, me, tmp, trig, ex = conv
-    cos_b, sin_b, cos_e, sin_e = trig[0], trig[1], trig[2], trig[3]
-    u0, u1, u2 = cos_e * cos_b, cos_e * sin_b, sin_e
-    s_xy, s_z = sb2 + se2, se2
-    if code == NAIVE:  # naive: J diag(σr², sβ, sε) Jᵀ, J = [u, r ∂u/∂β, r ∂u/∂ε]
-        z[0], z[1], z[2] = r * u0, r * u1, r * u2
-        jb0, jb1 = r * (-cos_e * sin_b), r * (cos_e * cos_b)
-        je0, je1, je2 = r * (-sin_e * cos_b), r * (-sin_e * sin_b), r * cos_e
-        jb = (jb0, jb1, 0.0)
-        je = (je0, je1, je2)
-        uu = (u0, u1, u2)
-        for i in range(3):
-            for j in range(i, 3):
-                R[i, j] = sr2 * uu[i] * uu[j] + sb2 * jb[i] * jb[j] + se2 * je[i] * je[j]
-                R[j, i] = R[i, j]  # exactly symmetric (products in one order)
-        return
-    if code == SEED or code == CMKF_D:
-        if code == SEED:  # seed: the naive point + Prosov's second-order term (eq. 10's sign)
-            k_xy, k_z = 1.0 - s_xy / 2.0, 1.0 - s_z / 2.0
-        else:  # cmkf_d: κ(s) = 1 − (e^(−s) − e^(−s/2)) per axis (``noise_table``)
-            k_xy, k_z = ex[4, 0], ex[4, 1]
-        z[0], z[1], z[2] = k_xy * (r * u0), k_xy * (r * u1), k_z * (r * u2)
-        # averaged_cov_3d: the posterior-averaged moments, E[r²] = r̂² + σr²
-        posterior_moments(cos_b, sin_b, ex[0], ex[2], mb, tmp)
-        posterior_moments(cos_e, sin_e, ex[1], ex[3], me, tmp)
-        combined_cov(r * r + sr2, sr2, me, mb, R)
-        return
-    # ucm / ducm: κ = e^(s/2) per axis, covariance D C D with C the true-conditioned one,
-    # at the measurement (ucm) or at the prediction (ducm)
-    k_xy, k_z = ex[4, 2], ex[4, 3]  # e^(s/2) (``noise_table``)
-    z[0], z[1], z[2] = k_xy * (r * u0), k_xy * (r * u1), k_z * (r * u2)
-    if code == UCM:
-        given_truth_cov(r, cos_b, sin_b, cos_e, sin_e, sr2, ex, R, mb, me)
-    else:
-        rho = hypot(px, py)
-        rp = sqrt(rho * rho + pz * pz)
-        bp, ep = atan2(py, px), atan2(pz, rho)
-        given_truth_cov(rp, cos(bp), sin(bp), cos(ep), sin(ep), sr2, ex, R, mb, me)
-    kap = (k_xy, k_xy, k_z)
-    for i in range(3):
-        for j in range(i, 3):
-            R[i, j] = kap[i] * R[i, j] * kap[j]
-            R[j, i] = R[i, j]
+    # The radar-centred point z (3,) and covariance R (3, 3) of (r̂, β̂, ε̂), whose cosines,
+    # sines and radar's noise table ``plot_factors`` put in ``conv``; (px, py, pz): the
+    # predicted position minus the site (ducm only)
+    # (``core.conversion.elementwise_3d.converted_point_3d``)
+    trig, ex = conv
+    t = _converted_point_3d(
+        code, r, trig[0], trig[1], trig[2], trig[3], sr2, sb2, se2, ex, px, py, pz
+    )
+    z[0], z[1], z[2] = t[0], t[1], t[2]
+    R[0, 0], R[0, 1], R[0, 2] = t[3], t[4], t[5]
+    R[1, 0], R[1, 1], R[1, 2] = t[4], t[6], t[7]
+    R[2, 0], R[2, 1], R[2, 2] = t[5], t[7], t[8]
 
 
 @_inline
@@ -363,8 +259,8 @@ def track_plots_3d(
     bufs = scratch_3d()
     ex, conv = conversion_scratch(sigma_r_m.shape[0])
     for g in range(sigma_r_m.shape[0]):
-        noise_table(sigma_beta_rad[g] ** 2, sigma_elevation_rad[g] ** 2, ex[g])
-    trig = conv[3]
+        fill_noise_table(sigma_beta_rad[g] ** 2, sigma_elevation_rad[g] ** 2, ex[g])
+    trig = conv[0]
     for i in range(slot.shape[0]):
         k, g = slot[i], radar[i]
         r, b, el = r_m[i], az_rad[i], el_rad[i]

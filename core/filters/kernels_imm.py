@@ -54,7 +54,7 @@ from radarviz.core.filters.kernels_3d import (
     conversion_scratch,
     doppler_stats_3d,
     doppler_update_3d,
-    noise_table,
+    fill_noise_table,
     plot_factors,
     position_measurement_3d,
     position_stage_3d,
@@ -285,8 +285,8 @@ def track_plots_imm_3d(
     bufs = scratch_3d()
     ex, conv = conversion_scratch(sigma_r_m.shape[0])
     for g in range(sigma_r_m.shape[0]):
-        noise_table(sigma_beta_rad[g] ** 2, sigma_elevation_rad[g] ** 2, ex[g])
-    trig = conv[3]
+        fill_noise_table(sigma_beta_rad[g] ** 2, sigma_elevation_rad[g] ** 2, ex[g])
+    trig = conv[0]
     for i in range(slot.shape[0]):
         k, g = slot[i], radar[i]
         rr, b, el = r_m[i], az_rad[i], el_rad[i]

@@ -38,10 +38,10 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from radarviz.core.conversion.planar import convert_parts
-from radarviz.core.conversion.spatial import convert_3d
+from radarviz.core.conversion.spatial import UPPER_3D, convert_parts_3d
 from radarviz.core.filters.polar_ekf import ekf_pseudo_measurement, ekf_update, site_offsets
 from radarviz.core.filters.polar_ukf import ukf_update
-from radarviz.core.filters.position import cv_update_parts, innovation_update, upper_entries
+from radarviz.core.filters.position import cv_update_parts, innovation_update
 from radarviz.core.filters.state import CVBatch, Vec, cv_init, position_index
 
 Parts = tuple[list[Vec], dict[tuple[int, int], Vec]]
@@ -84,7 +84,7 @@ def _parts_2d(name: str, plot: PolarPlot, noise: PolarNoise, predicted: list[Vec
 
 
 def _parts_3d(name: str, plot: PolarPlot, noise: PolarNoise, predicted: list[Vec] | None) -> Parts:
-    c = convert_3d(
+    c = convert_parts_3d(
         name,
         plot.range_m,
         plot.azimuth_rad,
@@ -92,7 +92,7 @@ def _parts_3d(name: str, plot: PolarPlot, noise: PolarNoise, predicted: list[Vec
         **noise._asdict(),
         predicted_xyz=None if predicted is None else np.stack(np.broadcast_arrays(*predicted), -1),
     )
-    return [c.z[..., i] for i in range(3)], upper_entries(c.R)
+    return list(c[:3]), dict(zip(UPPER_3D, c[3:], strict=True))
 
 
 @dataclass(frozen=True)
