@@ -169,6 +169,52 @@ STEP_KINDS: dict[str, StepKind] = {
             "core/finite_memory/fit.py:_closed_cov": "the finite-memory fit's covariance",
         },
     ),
+    "innovation statistics (NIS and log det S)": StepKind(
+        pattern=r"(position|doppler)_(stats|nis|innovation)|^nis_\d|gaussian_stats|linear_innov",
+        implementations=frozenset(
+            {
+                "core/filters/position_2d.py:position_stats_2d",
+                "core/filters/position_3d.py:position_stats_3d",
+                "core/filters/doppler_2d.py:doppler_stats_2d",
+                "core/filters/doppler_3d.py:doppler_stats_3d",
+            }
+        ),
+        not_this_step={
+            "core/filters/innovation.py:gaussian_stats": (
+                "any linear measurement's statistics (ν, S given): the converted and the "
+                "joint Doppler updates', which have no kernel"
+            ),
+            "core/filters/innovation.py:linear_innovation": "the same, from H and R",
+        },
+        not_yet={
+            "core/filters/kernels_track.py:position_stats": (
+                "the tracker kernels' own 2D statistics: bound to the steps' copy, a target's "
+                "IMM results came to depend by rounding on the other targets in its block"
+            ),
+            "core/filters/kernels_track.py:position_nis": "calls position_stats",
+            "core/filters/kernels_track.py:doppler_stats": "as position_stats",
+            "core/filters/kernels_track.py:doppler_nis": "calls doppler_stats",
+            "core/filters/kernels_3d.py:nis_3": "as position_stats, in 3D",
+            "core/filters/kernels_3d.py:position_stats_3d_c": "as position_stats, in 3D",
+            "core/filters/kernels_3d.py:doppler_stats_3d_c": "as position_stats, in 3D",
+            "core/filters/kernels_3d.py:doppler_nis_3d": "calls doppler_stats_3d_c",
+        },
+    ),
+    "IMM mode probabilities": StepKind(
+        pattern=r"(predicted|updated|mode)_probabilit",
+        implementations=frozenset(
+            {
+                "core/filters/imm_moments.py:predicted_probabilities",
+                "core/filters/imm_moments.py:updated_probabilities",
+            }
+        ),
+        not_yet={
+            "core/filters/kernels_imm.py:mode_probabilities": (
+                "the IMM kernels' own update of μ: bound to the shared one, a split block's "
+                "3D IMM results differed from one thread's by rounding"
+            ),
+        },
+    ),
     "semi-definite Cholesky factor": StepKind(
         pattern=r"cholesky",
         implementations=frozenset(

@@ -28,13 +28,17 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from radarviz.core.filters.doppler_2d import doppler_update_2d
-from radarviz.core.filters.doppler_3d import doppler_update_3d
+from radarviz.core.filters.doppler_2d import doppler_stats_2d, doppler_update_2d
+from radarviz.core.filters.doppler_3d import doppler_stats_3d, doppler_update_3d
+from radarviz.core.filters.innovation import InnovationStats
 from radarviz.core.filters.state import (
     CVBatch,
     components,
+    cov_components,
+    mean_components,
     step_2d,
     step_3d,
+    tuples_2d,
     velocity_index,
 )
 
@@ -75,6 +79,36 @@ def doppler_update(
 
 #: The scratch arrays of ``doppler_update_3d``: u (3,), U, K (6,), L (6, 6).
 SCRATCH_3D = ((3,), (6,), (6,), (6, 6))
+
+
+def doppler_innovation(
+    state: CVBatch,
+    radial_velocity_mps: ArrayLike,
+    azimuth_rad: ArrayLike,
+    elevation_rad: ArrayLike = 0.0,
+    *,
+    sigma_vr_mps: ArrayLike,
+    sigma_beta_rad: ArrayLike,
+    sigma_elevation_rad: ArrayLike = 0.0,
+) -> InnovationStats:
+    """The innovation statistics of the Doppler update of every track (``doppler_update``'s
+    arguments): ν = V̂r − û·v̂, S = û P_vv ûᵀ + var e, one degree of freedom. Written once for
+    every engine (``doppler_stats_2d``, ``doppler_stats_3d``), on the batch's components."""
+    var_vr = np.asarray(sigma_vr_mps, dtype=np.float64) ** 2
+    var_b = np.asarray(sigma_beta_rad, dtype=np.float64) ** 2
+    vr = np.asarray(radial_velocity_mps, dtype=np.float64)
+    az = np.asarray(azimuth_rad, dtype=np.float64)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        if state.dims == 2:
+            stats = doppler_stats_2d(*tuples_2d(state), vr, az, var_vr, var_b)
+        else:
+            el = np.asarray(elevation_rad, dtype=np.float64)
+            var_e = np.asarray(sigma_elevation_rad, dtype=np.float64) ** 2
+            trig = (np.cos(az), np.sin(az), np.cos(el), np.sin(el))
+            xc, Pc = mean_components(state.x), cov_components(state.P)
+            stats = doppler_stats_3d(xc, Pc, vr, trig, var_vr, var_b, var_e, [0.0, 0.0, 0.0])
+    nis, log_s = (np.array(np.broadcast_to(v, state.batch_shape)) for v in stats)
+    return InnovationStats(nis, log_s, 1)
 
 
 def doppler_terms(

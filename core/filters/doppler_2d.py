@@ -26,6 +26,33 @@ from radarviz.core.filters.position_2d import _add_outer, _z_col, semidefinite_c
 #: The elementary functions, numpy's here; the kernels and the array-API path rebind them.
 cos = np.cos
 sin = np.sin
+where = np.where
+log = np.log
+nan = np.nan
+
+
+def doppler_terms_2d(xt, p, b, var_vr, var_b):
+    """(û₀, û₁, var e) of a plot at bearing ``b`` on the state (xt, p) (module docstring)."""
+    x1, x3 = xt[1], xt[3]
+    p11, p13, p33 = p[4], p[6], p[9]
+    u0, u1 = cos(b), sin(b)
+    g0, g1 = -u1, u0
+    gv = g0 * x1 + g1 * x3
+    gpg = g0 * g0 * p11 + g1 * g1 * p33 + 2.0 * g1 * g0 * p13
+    return u0, u1, var_vr + var_b * (gv * gv + gpg)
+
+
+def doppler_stats_2d(xt, p, vr_hat, b, var_vr, var_b):
+    """(ν² / S, log S) of the Doppler measurement on the state (xt, p) it would update
+    (``core.filters.innovation``): ν = V̂r − û·v̂, S = û P_vv ûᵀ + var e (as
+    ``doppler_update_2d`` forms it); both NaN unless S > 0."""
+    u0, u1, r_e = doppler_terms_2d(xt, p, b, var_vr, var_b)
+    _, _, _, _, p11, _, p13, _, _, p33 = p
+    S = u0 * (p11 * u0 + p13 * u1) + u1 * (p13 * u0 + p33 * u1) + r_e
+    nu = vr_hat - (u0 * xt[1] + u1 * xt[3])
+    ok = S > 0.0
+    s = where(ok, S, 1.0)
+    return where(ok, nu * nu / s, nan), where(ok, log(s), nan)
 
 
 def doppler_update_2d(xt, p, vr_hat, b, var_vr, var_b):
@@ -34,11 +61,7 @@ def doppler_update_2d(xt, p, vr_hat, b, var_vr, var_b):
     (module docstring); var_vr = σVr² (m²/s²), var_b = σβ² (rad²)."""
     x0, x1, x2, x3 = xt
     _, p01, _, p03, p11, p12, p13, _, p23, p33 = p
-    u0, u1 = cos(b), sin(b)
-    g0, g1 = -u1, u0
-    gv = g0 * x1 + g1 * x3
-    gpg = g0 * g0 * p11 + g1 * g1 * p33 + 2.0 * g1 * g0 * p13
-    r_e = var_vr + var_b * (gv * gv + gpg)
+    u0, u1, r_e = doppler_terms_2d(xt, p, b, var_vr, var_b)
     U0, U1 = p01 * u0 + p03 * u1, p11 * u0 + p13 * u1
     U2, U3 = p12 * u0 + p23 * u1, p13 * u0 + p33 * u1
     S = u0 * U1 + u1 * U3 + r_e

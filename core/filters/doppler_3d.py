@@ -18,7 +18,14 @@ The angles come as ``trig`` = (cos β̂, sin β̂, cos ε̂, sin ε̂), formed o
 
 from __future__ import annotations
 
+import numpy as np
+
 from radarviz.core.filters.position_3d import semidefinite_cholesky_3d
+
+#: The elementary functions, numpy's here; the kernels re-bind them.
+where = np.where
+log = np.log
+nan = np.nan
 
 
 def doppler_terms_3d(x, P, trig, var_vr, var_b, var_e, u):
@@ -62,3 +69,18 @@ def doppler_update_3d(x, P, vr_hat, trig, var_vr, var_b, var_e, u, U, K, L):
                 acc += L[i, k] * L[j, k]
             P[i, j] = acc
             P[j, i] = acc
+
+
+def doppler_stats_3d(x, P, vr_hat, trig, var_vr, var_b, var_e, u):
+    """(ν² / S, log S) of the Doppler measurement on the state x (6,), P (6, 6) it would
+    update (``core.filters.innovation``): ν = V̂r − û·v̂, S = û P_vv ûᵀ + var e (as
+    ``doppler_update_3d`` forms it); both NaN unless S > 0; u (3,): scratch."""
+    r_e = doppler_terms_3d(x, P, trig, var_vr, var_b, var_e, u)
+    U1 = P[1, 1] * u[0] + P[1, 3] * u[1] + P[1, 5] * u[2]
+    U3 = P[3, 1] * u[0] + P[3, 3] * u[1] + P[3, 5] * u[2]
+    U5 = P[5, 1] * u[0] + P[5, 3] * u[1] + P[5, 5] * u[2]
+    S = u[0] * U1 + u[1] * U3 + u[2] * U5 + r_e
+    nu = vr_hat - (u[0] * x[1] + u[1] * x[3] + u[2] * x[5])
+    ok = S > 0.0
+    s = where(ok, S, 1.0)
+    return where(ok, nu * nu / s, nan), where(ok, log(s), nan)

@@ -30,7 +30,13 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
-from radarviz.core.filters.imm_moments import combine_2d, combine_3d, mix_2d, mix_3d
+from radarviz.core.filters.imm_moments import (
+    combine_2d,
+    combine_3d,
+    mix_2d,
+    mix_3d,
+    updated_probabilities,
+)
 from radarviz.core.filters.innovation import InnovationStats
 from radarviz.core.filters.models import IMMModel
 from radarviz.core.filters.predict import add_process_noise, cv_predict, white_acceleration
@@ -129,19 +135,17 @@ def imm_predict(mixed: CVBatch, dt_s: float | NDArray[np.float64], model: IMMMod
 def mode_probabilities(
     prior: NDArray[np.float64], log_likelihood: NDArray[np.float64]
 ) -> NDArray[np.float64]:
-    """μⱼ ∝ Λⱼ c̄ⱼ, normalised over the last axis, as exp(log Λⱼ + log c̄ⱼ − max) (so that a
-    far-off plot does not underflow every model to 0). The prior is inside the shift: a plot
-    updates μ once per stage (position, then Doppler), and a first stage that left a model
-    μ = 0 (underflow) while the second stage's likelihood favours it by more than e⁷⁴⁵ gave
-    0 · 1 + μ · 0 = 0 / 0 with the likelihoods alone shifted (a 3D track at 89.9999° elevation
-    with Doppler: NaN states). A model whose likelihood is not finite (its S not positive
-    definite) gets no weight; a track with no finite weight keeps its prior c̄."""
-    with np.errstate(divide="ignore"):  # log 0 = −inf: a model of prior 0 stays at 0
-        lw = np.where(np.isfinite(log_likelihood), log_likelihood, -np.inf) + np.log(prior)
-    top = lw.max(axis=-1, keepdims=True)
-    ok = np.isfinite(top)
-    w = np.where(ok, np.exp(lw - np.where(ok, top, 0.0)), prior)
-    return w / w.sum(axis=-1, keepdims=True)
+    """μⱼ ∝ Λⱼ c̄ⱼ over the last axis (the models) of the prior c̄ and the models'
+    log-likelihoods, each (..., r) (``core.filters.imm_moments.updated_probabilities``: the
+    shift that keeps a far-off plot from underflowing, and the models that get no weight)."""
+    prior, log_likelihood = np.broadcast_arrays(prior, log_likelihood)
+    mu = np.empty(prior.shape)
+    # written once for every engine (``core.filters.imm_moments``), on the models' axis first
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        updated_probabilities(
+            np.moveaxis(prior, -1, 0), np.moveaxis(log_likelihood, -1, 0), np.moveaxis(mu, -1, 0)
+        )
+    return mu
 
 
 def imm_step(

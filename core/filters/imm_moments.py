@@ -1,10 +1,11 @@
-"""The IMM's mixing and combination written once, as plain arithmetic over one track's arrays
-or a batch's component-major views alike.
+"""The IMM's mixing, mode probabilities and combination written once, as plain arithmetic
+over one track's arrays or a batch's component-major views alike.
 
 With μ the model probabilities and Π the transition matrix (``core.filters.imm``)::
 
     mixing        c̄ⱼ = Σᵢ πᵢⱼ μᵢ,   μᵢ|ⱼ = πᵢⱼ μᵢ / c̄ⱼ
                   x⁰ⱼ = Σᵢ μᵢ|ⱼ xᵢ,   P⁰ⱼ = Σᵢ μᵢ|ⱼ (Pᵢ + (xᵢ − x⁰ⱼ)(xᵢ − x⁰ⱼ)ᵀ)
+    update        μⱼ ∝ Λⱼ c̄ⱼ   (Λⱼ model j's likelihood of the plot)
     combination   x = Σⱼ μⱼ xⱼ,   P = Σⱼ μⱼ (Pⱼ + (xⱼ − x)(xⱼ − x)ᵀ)
 
 The models' estimates are indexed ``xm[i, a]``, ``Pm[i, a, b]`` and the probabilities
@@ -20,8 +21,53 @@ measured as a compiled call.
 
 from __future__ import annotations
 
+import numpy as np
+
 from radarviz.core.filters.position_2d import _add_outer
 from radarviz.core.filters.tuples import load_2d, load_3d, store_2d, store_3d
+
+#: The elementary functions, numpy's here (numba compiles them on numbers too); the kernels
+#: re-bind ``where`` to a scalar select.
+where = np.where
+exp = np.exp
+log = np.log
+isfinite = np.isfinite
+maximum = np.maximum
+inf = np.inf
+
+
+def _log_weight(prior, ll, j):
+    # (whether model j can take weight, log Λⱼ + log c̄ⱼ there): a model of prior 0 or whose
+    # likelihood is not finite (its S not positive definite) gets none
+    ok = (prior[j] > 0.0) & isfinite(ll[j])
+    return ok, ll[j] + log(where(ok, prior[j], 1.0))
+
+
+def updated_probabilities(prior, ll, mu):
+    """μⱼ ∝ Λⱼ c̄ⱼ into mu (r, …) (may be ``prior``), from the prior c̄ (r, …) and the
+    models' log-likelihoods ll (r, …), as exp(log Λⱼ + log c̄ⱼ − max) normalised over the
+    models (so that a far-off plot does not underflow every model to 0). The prior is inside
+    the shift: a plot updates μ once per stage (position, then Doppler), and a first stage
+    that left a model μ = 0 (underflow) while the second stage's likelihood favours it by
+    more than e⁷⁴⁵ gave 0 · 1 + μ · 0 = 0 / 0 with the likelihoods alone shifted (a 3D track
+    at 89.9999° elevation with Doppler: NaN states). A model of prior 0 or whose likelihood
+    is not finite gets no weight; a track with no model that can take weight keeps its
+    prior."""
+    r = prior.shape[0]
+    top = -inf
+    for j in range(r):
+        ok, lw = _log_weight(prior, ll, j)
+        top = maximum(top, where(ok, lw, -inf))
+    found = isfinite(top)
+    shift = where(found, top, 0.0)
+    total = 0.0
+    for j in range(r):
+        ok, lw = _log_weight(prior, ll, j)
+        w = where(found, exp(where(ok, lw - shift, -inf)), prior[j])
+        mu[j] = w
+        total = total + w
+    for j in range(r):
+        mu[j] = mu[j] / total
 
 
 def predicted_probabilities(mu, Pi, c):

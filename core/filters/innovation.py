@@ -21,13 +21,9 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
-from radarviz.core.filters.state import (
-    CVBatch,
-    Vec,
-    cov_components,
-    position_index,
-    quad_form_inv,
-)
+from radarviz.core.filters.position_2d import position_stats_2d
+from radarviz.core.filters.position_3d import position_stats_3d
+from radarviz.core.filters.state import CVBatch, Vec, cov_components, quad_form_inv
 
 _LOG_2PI = math.log(2.0 * math.pi)
 
@@ -74,26 +70,27 @@ def position_innovation(
     state: CVBatch, innovation: Sequence[Vec], R: dict[tuple[int, int], Vec]
 ) -> InnovationStats:
     """The statistics of a position measurement (``core.filters.position``): H = H_pos,
-    S = H P⁻ Hᵀ + R; ``innovation`` has d components, ``R`` upper entries, each (...)."""
-    return gaussian_stats(*position_terms(state, innovation, R))
+    S = H P⁻ Hᵀ + R; ``innovation`` has d components, ``R`` upper entries, each (...).
 
-
-def position_terms(
-    state: CVBatch, innovation: Sequence[Vec], R: dict[tuple[int, int], Vec]
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """ν (..., d) and S = H_pos P⁻ H_posᵀ + R (..., d, d) of a position measurement (what
-    ``position_innovation`` takes the statistics of; a gate needs only νᵀ S⁻¹ ν)."""
-    pos = position_index(state.dims)
-    d = len(pos)
-    shape = state.batch_shape
+    Written once for every engine: ``position_stats_2d`` (``core.filters.position_2d``) and
+    ``position_stats_3d`` (``core.filters.position_3d``), on the batch's components."""
     Pc = cov_components(state.P)
-    S = np.empty((*shape, d, d))
-    nu = np.empty((*shape, d))
-    for i in range(d):
-        nu[..., i] = innovation[i]
-        for j in range(i, d):
-            S[..., i, j] = S[..., j, i] = Pc[pos[i], pos[j]] + R[i, j]
-    return nu, S
+    with np.errstate(invalid="ignore", divide="ignore"):
+        if state.dims == 2:
+            nu_x, nu_y = innovation
+            stats = position_stats_2d(
+                Pc[0, 0], Pc[0, 2], Pc[2, 2], nu_x, nu_y, R[0, 0], R[0, 1], R[1, 1]
+            )
+        else:
+            stats = position_stats_3d(Pc, innovation, R)
+    return _stats(stats, state.batch_shape, state.dims)
+
+
+def _stats(stats: tuple, shape: tuple[int, ...], dof: int) -> InnovationStats:
+    """(νᵀ S⁻¹ ν, log det S) of a step's statistics as ``InnovationStats`` of the batch's
+    shape (a measurement given as scalars broadcasts over the batch)."""
+    nis, log_det = (np.array(np.broadcast_to(v, shape), dtype=np.float64) for v in stats)
+    return InnovationStats(nis, log_det, dof)
 
 
 def linear_innovation(

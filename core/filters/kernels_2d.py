@@ -60,9 +60,6 @@ from radarviz.core.filters.tuples import load_2d, store_2d
 _FAST = {"contract", "reassoc", "nsz", "arcp"}
 _jit = numba.njit(cache=True, error_model="numpy", nogil=True, fastmath=_FAST)
 _inline = numba.njit(cache=True, error_model="numpy", nogil=True, fastmath=_FAST, forceinline=True)
-# _exact: no fastmath, each operation the one written (IEEE, as numpy computes it), where
-# results must not depend on the call site LLVM inlines a function at (``kernels_3d``).
-_exact = numba.njit(cache=True, error_model="numpy", nogil=True)
 
 
 _TWO_PI = 2.0 * math.pi
@@ -191,7 +188,15 @@ def _select(c: bool, a: float, b: float) -> float:
 # plain arithmetic (the numpy engine's and the array-API path's too), compiled here with the
 # scalar elementary functions.
 _steps = bind_2d(
-    {"sqrt": sqrt, "where": _select, "atan2": atan2, "wrap": wrap, "cos": cos, "sin": sin},
+    {
+        "sqrt": sqrt,
+        "where": _select,
+        "atan2": atan2,
+        "wrap": wrap,
+        "cos": cos,
+        "sin": sin,
+        "log": math.log,
+    },
     _inline,
 )
 _add_outer = _steps["_add_outer"]
@@ -336,7 +341,15 @@ def _cos_v(a: float) -> float:
 
 
 _vsteps = bind_2d(
-    {"sqrt": sqrt, "where": _select, "atan2": _atan2_v, "wrap": wrap, "cos": _cos_v, "sin": _sin_v},
+    {
+        "sqrt": sqrt,
+        "where": _select,
+        "atan2": _atan2_v,
+        "wrap": wrap,
+        "cos": _cos_v,
+        "sin": _sin_v,
+        "log": math.log,
+    },
     _inline_v,
 )
 position_update_v = _vsteps["position_update_2d"]

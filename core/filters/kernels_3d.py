@@ -39,7 +39,9 @@ from radarviz.core.filters.steps_3d import bind_3d
 # The 3D updates (position, the EKF's measurement, UKF, Doppler: ``core.filters.steps_3d``),
 # written once as plain arithmetic (the numpy engine's too), compiled here with the scalar
 # elementary functions.
-_steps = bind_3d({"sqrt": sqrt, "where": _select, "atan2": atan2, "wrap": wrap}, _inline)
+_steps = bind_3d(
+    {"sqrt": sqrt, "where": _select, "atan2": atan2, "wrap": wrap, "log": log}, _inline
+)
 inverse_3 = _steps["inverse_3"]
 position_update_3d = _steps["position_update_3d"]
 ekf_measurement_3d_c = _steps["ekf_measurement_3d"]
@@ -49,12 +51,11 @@ doppler_update_3d = _steps["doppler_update_3d"]
 
 
 # The 3D conversions (``core.conversion.elementwise_3d``, the numpy engine's too), compiled
-# here without fastmath (``_exact``): LLVM inlines them at each of their call sites (a track's
-# start, the monitor's statistics, a model's update), and with contraction allowed it fused
-# their products and sums differently at each, so a target's results came to depend by
-# rounding on which site converted its plot, and so on the other targets in its block (the
-# bit-for-bit test of a target of many against its plots alone failed). Without it each
-# operation is the one written, everywhere, as in numpy.
+# without reassociation (``kernels_2d._exact``): LLVM inlines them at each of their call
+# sites (a track's start, the monitor's statistics, a model's update), and with "reassoc" it
+# reordered their products and sums differently at each, so a target's results came to depend
+# by rounding on which site converted its plot, and so on the other targets in its block (the
+# bit-for-bit tests of ``tests/test_track_compiled.py``).
 _conversions = rebind(CONVERSION_FUNCTIONS_3D, {"scale": _exact(scale)}, _exact)
 _noise_table = _conversions["noise_table"]
 _converted_point_3d = _conversions["converted_point_3d"]
@@ -153,7 +154,7 @@ def nis_3(S, nu) -> float:
 
 
 @_inline
-def doppler_stats_3d(x, P, vr_hat, trig, var_vr, sb2, se2, u):
+def doppler_stats_3d_c(x, P, vr_hat, trig, var_vr, sb2, se2, u):
     # (ν² / S, log S) of the Doppler stage (doppler_terms, linear_innovation); NaN unless S > 0
     r_e = doppler_terms_3d(x, P, trig, var_vr, sb2, se2, u)
     S = r_e
@@ -168,8 +169,8 @@ def doppler_stats_3d(x, P, vr_hat, trig, var_vr, sb2, se2, u):
 
 @_inline
 def doppler_nis_3d(x, P, vr_hat, trig, var_vr, sb2, se2, u) -> float:
-    # ν² / S of ``doppler_stats_3d``
-    return doppler_stats_3d(x, P, vr_hat, trig, var_vr, sb2, se2, u)[0]
+    # ν² / S of ``doppler_stats_3d_c``
+    return doppler_stats_3d_c(x, P, vr_hat, trig, var_vr, sb2, se2, u)[0]
 
 
 @_inline
@@ -202,7 +203,7 @@ def start_track_3d(start_code, x, P, r, b, el, sr2, sb2, se2, sx, sy, sz, sigma_
 
 
 @_inline
-def position_stats_3d(P, nu, R, S, Si):
+def position_stats_3d_c(P, nu, R, S, Si):
     """(νᵀ S⁻¹ ν, log det S) of ``position_measurement_3d``'s (ν, R) on P (6, 6), S = H P Hᵀ + R
     into S (3, 3) (Si: scratch); both NaN unless S is positive definite."""
     for a in range(3):
@@ -289,7 +290,7 @@ def track_plots_3d(
                 position_measurement_3d(
                     code, x, r, b, el, sr2, sb2, se2, sx, sy, sz, nu, R, z, conv
                 )
-                nis = position_stats_3d(P, nu, R, bufs[0], bufs[1])[0]
+                nis = position_stats_3d_c(P, nu, R, bufs[0], bufs[1])[0]
                 position_stage_3d(code, x, P, r, b, el, sr2, sb2, se2, sx, sy, sz, nu, R, prm, bufs)
             if has_vr[i]:
                 var_vr = sigma_vr_mps[g] * sigma_vr_mps[g]

@@ -52,13 +52,13 @@ from radarviz.core.filters.kernels_2d import (
 )
 from radarviz.core.filters.kernels_3d import (
     conversion_scratch,
-    doppler_stats_3d,
+    doppler_stats_3d_c,
     doppler_update_3d,
     fill_noise_table,
     plot_factors,
     position_measurement_3d,
     position_stage_3d,
-    position_stats_3d,
+    position_stats_3d_c,
     predict_3d,
     scratch_3d,
     start_track_3d,
@@ -320,7 +320,7 @@ def track_plots_imm_3d(
                     position_measurement_3d(
                         code, x, rr, b, el, sr2, sb2, se2, sx, sy, sz, nu, R, z, conv
                     )
-                    nis = position_stats_3d(P, nu, R, bufs[0], bufs[1])[0]
+                    nis = position_stats_3d_c(P, nu, R, bufs[0], bufs[1])[0]
                 # From the first conversion on, z and R hold this plot's (for codes < 4: one
                 # that does not read the prediction, so every model's is the same).
                 converted = with_stats
@@ -330,7 +330,7 @@ def track_plots_imm_3d(
                         code, xj, rr, b, el, sr2, sb2, se2, sx, sy, sz, nu, R, z, conv, converted
                     )
                     converted = True
-                    st = position_stats_3d(Pj, nu, R, bufs[0], bufs[1])
+                    st = position_stats_3d_c(Pj, nu, R, bufs[0], bufs[1])
                     ll[m] = log_likelihood(st[0], st[1], 3)
                     position_stage_3d(
                         code, xj, Pj, rr, b, el, sr2, sb2, se2, sx, sy, sz, nu, R, prm, bufs
@@ -339,10 +339,10 @@ def track_plots_imm_3d(
                 if has_vr[i]:
                     if with_stats:
                         combine_3d(x0, P0, mu, x, P)
-                        nis += doppler_stats_3d(x, P, vr, trig, var_vr, sb2, se2, u)[0]
+                        nis += doppler_stats_3d_c(x, P, vr, trig, var_vr, sb2, se2, u)[0]
                     for m in range(r):
                         xj, Pj = x0[m], P0[m]
-                        st = doppler_stats_3d(xj, Pj, vr, trig, var_vr, sb2, se2, u)
+                        st = doppler_stats_3d_c(xj, Pj, vr, trig, var_vr, sb2, se2, u)
                         ll[m] = log_likelihood(st[0], st[1], 1)
                         doppler_update_3d(xj, Pj, vr, trig, var_vr, sb2, se2, u, Uv, Kv, bufs[4])
                     mode_probabilities(mu, ll, mu)

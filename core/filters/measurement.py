@@ -32,7 +32,7 @@ from radarviz.core.filters.converted_doppler import (
     converted_doppler_terms,
     converted_doppler_update,
 )
-from radarviz.core.filters.doppler import doppler_terms, doppler_update
+from radarviz.core.filters.doppler import doppler_innovation, doppler_update
 from radarviz.core.filters.innovation import (
     InnovationStats,
     linear_innovation,
@@ -166,8 +166,7 @@ class DopplerMeasurement:
 
     def innovation(self, state: CVBatch, models: bool = False) -> InnovationStats:
         vals, kw = self._args(models)
-        nu, H, R = doppler_terms(state, *vals, **kw)
-        return linear_innovation(state, nu, H, R)
+        return doppler_innovation(state, *vals, **kw)
 
     def update(self, state: CVBatch, models: bool = False) -> CVBatch:
         vals, kw = self._args(models)

@@ -34,6 +34,7 @@ from radarviz.core.filters.state import SEMIDEFINITE_RTOL
 #: The elementary functions, numpy's here; the kernels rebind them to scalar ones.
 sqrt = np.sqrt
 where = np.where
+log = np.log
 nan = math.nan
 
 
@@ -133,3 +134,19 @@ def position_update_2d(xt, p, nx: float, ny: float, r00: float, r01: float, r11:
     pn = _add_outer(pn, 1.0, _z_col(L2, k0, k1, 0.0, L2[2]))
     pn = _add_outer(pn, 1.0, L3)
     return xn, pn
+
+
+def position_stats_2d(p00, p02, p22, nx, ny, r00, r01, r11):
+    """(νᵀ S⁻¹ ν, log det S) of a position measurement on P's position entries p00, p02, p22
+    (``core.filters.innovation``): S = H P Hᵀ + R = [[p00 + r00, p02 + r01], [·, p22 + r11]],
+
+        νᵀ S⁻¹ ν = (s11 νx² − 2 s01 νx νy + s00 νy²) / det S,   det S = s00 s11 − s01²;
+
+    both NaN unless S is positive definite (a broken track: the monitor counts it out of
+    band, the IMM gives that model no weight)."""
+    s00, s01, s11 = p00 + r00, p02 + r01, p22 + r11
+    det = s00 * s11 - s01 * s01
+    ok = (s00 > 0.0) & (det > 0.0)
+    d = where(ok, det, 1.0)
+    nis = (s11 * nx * nx - 2.0 * s01 * nx * ny + s00 * ny * ny) / d
+    return where(ok, nis, nan), where(ok, log(d), nan)

@@ -30,6 +30,8 @@ from radarviz.core.filters.state import SEMIDEFINITE_RTOL
 #: The elementary functions, numpy's here; the kernels re-bind them.
 sqrt = np.sqrt
 where = np.where
+log = np.log
+nan = np.nan
 
 
 def semidefinite_cholesky_3d(P, c, L, null_negative=False):
@@ -108,3 +110,27 @@ def position_update_3d(x, P, nu, R, S, Si, K, U, L):
         for k in range(6):
             L[i, k] -= K[i, 0] * U[k, 0] + K[i, 1] * U[k, 1] + K[i, 2] * U[k, 2]
     factored_joseph_3d(P, L, K, 3, R, U)  # U free again: K R
+
+
+def position_stats_3d(P, nu, R):
+    """(νᵀ S⁻¹ ν, log det S) of a position measurement (ν (3,), R (3, 3), its upper entries
+    read) on P (6, 6) (``core.filters.innovation``), S = H P Hᵀ + R, by S's Cholesky factor:
+    νᵀ S⁻¹ ν = |L⁻¹ ν|², det S = the product of the pivots d₀ d₁ d₂ (each Lⱼⱼ²); both NaN
+    unless S is positive definite (every pivot > 0)."""
+    s00, s01, s02 = P[0, 0] + R[0, 0], P[0, 2] + R[0, 1], P[0, 4] + R[0, 2]
+    s11, s12, s22 = P[2, 2] + R[1, 1], P[2, 4] + R[1, 2], P[4, 4] + R[2, 2]
+    ok = s00 > 0.0
+    l00 = sqrt(where(ok, s00, 1.0))
+    l10, l20 = s01 / l00, s02 / l00
+    d1 = s11 - l10 * l10
+    ok = ok & (d1 > 0.0)
+    l11 = sqrt(where(ok, d1, 1.0))
+    l21 = (s12 - l20 * l10) / l11
+    d2 = s22 - l20 * l20 - l21 * l21
+    ok = ok & (d2 > 0.0)
+    l22 = sqrt(where(ok, d2, 1.0))
+    y0 = nu[0] / l00
+    y1 = (nu[1] - l10 * y0) / l11
+    y2 = (nu[2] - l20 * y0 - l21 * y1) / l22
+    nis = y0 * y0 + y1 * y1 + y2 * y2
+    return where(ok, nis, nan), where(ok, log(where(ok, s00 * d1 * d2, 1.0)), nan)

@@ -105,7 +105,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from radarviz.core.chi2 import chi2_quantile
-from radarviz.core.filters.innovation import position_terms
+from radarviz.core.filters.innovation import position_innovation
 from radarviz.core.filters.methods import (
     METHODS,
     MethodGroup,
@@ -113,7 +113,7 @@ from radarviz.core.filters.methods import (
     PolarPlot,
     stack_parts,
 )
-from radarviz.core.filters.state import CVBatch, position_index, quad_form_inv
+from radarviz.core.filters.state import CVBatch, position_index
 from radarviz.core.geometry import direction_cosines
 from radarviz.core.params import ParameterError, check, check_choice, default
 from radarviz.core.tracking.association_compiled import CompiledAssociation, eligible
@@ -364,9 +364,8 @@ def _mahalanobis(
     """d² of a batch of predictions, x (*B, n), against plots broadcastable to B.
 
     ν and R are the method's measurement (``MethodGroup.measurement``, what its update and
-    ``PlotMeasurement.innovation`` use), S that of ``core.filters.innovation.position_terms``
-    (the NIS without log det S, which the gate does not need); d² ≥ γ, or NaN → ∞, for an S
-    not positive definite.
+    ``PlotMeasurement.innovation`` use), d² its NIS (``core.filters.innovation.
+    position_innovation``); d² ≥ γ, or NaN → ∞, for an S not positive definite.
     """
     group = MethodGroup((method,))
     shape = state.x.shape[:-1]
@@ -380,9 +379,8 @@ def _mahalanobis(
     if parts is None:
         plot = PolarPlot(*(None if v is None else np.broadcast_to(v, shape) for v in plot))
     batch = CVBatch(x, P)
-    nu, S = position_terms(batch, *group.measurement(batch, plot, noise, site=site, parts=parts))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        d2 = quad_form_inv(S, nu).reshape(shape)  # a NaN for an S not positive definite
+    nu, R = group.measurement(batch, plot, noise, site=site, parts=parts)
+    d2 = position_innovation(batch, nu, R).nis.reshape(shape)  # NaN: S not positive definite
     return np.where(np.isfinite(d2), d2, np.inf)
 
 
