@@ -22,7 +22,6 @@ KERNEL_MODULES = (
     "radarviz.core.tracking.kernels_monitor",
     "radarviz.viz_app.io.csv_text",
     "radarviz.viz_app.bench.reference",
-    "radarviz.viz_app.bench.scalar_reference",
 )
 
 
