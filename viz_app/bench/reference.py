@@ -186,7 +186,8 @@ def wrap_angle(a: float) -> float:
 @_jit
 def constant_velocity_model(period_s: float, sigma_a_mps2: float) -> tuple[Array, Array]:
     """F and Q of the constant-velocity model driven by a white acceleration of std σa held
-    over each period (Q = σa² Γ Γᵀ, Γ = (T²/2, T) per axis), for x = (x, ẋ, y, ẏ): per axis
+    over each period (the discrete white-noise acceleration model of Bar-Shalom, Li &
+    Kirubarajan 2001: Q = σa² Γ Γᵀ, Γ = (T²/2, T) per axis), for x = (x, ẋ, y, ẏ): per axis
     F = [[1, T], [0, 1]], Q = σa² [[T⁴/4, T³/2], [T³/2, T²]]."""
     T, q = period_s, sigma_a_mps2 * sigma_a_mps2
     F, Q = np.eye(4), np.zeros((4, 4))
@@ -266,8 +267,8 @@ def update_scratch(d: int) -> UpdateScratch:
 
 @_jit
 def kalman_update(x: Array, P: Array, H: Array, R: Array, nu: Array, w: UpdateScratch) -> None:
-    """The Kalman update by an innovation ν = z − h(x⁻) (d), in place (Kalman 1960; the
-    covariance in Joseph's form, Bucy & Joseph 1968):
+    """The Kalman update by an innovation ν = z − h(x⁻) (d), in place, the covariance in
+    Joseph's form (symmetric and positive semi-definite to rounding for any gain):
 
         S = H P Hᵀ + R,   K = P Hᵀ S⁻¹,   x⁺ = x + K ν,
         P⁺ = (I − K H) P (I − K H)ᵀ + K R Kᵀ
@@ -626,7 +627,7 @@ def ukf_filter(
     x_out: Array,
     P_out: Array,
 ) -> None:
-    """The polar unscented Kalman filter from the naive start, with Van der Merwe's scaled
+    """The polar unscented Kalman filter from the naive start, with Van der Merwe's (2004) scaled
     sigma points (n = 4, λ = α²(n + κ) − n; the weights from ``UKFParams.weights``:
     lambda_n = n + λ, Wm₀ = λ/(n+λ), Wc₀ = Wm₀ + 1 − α² + β, W_k = 1/(2(n+λ))). Per scan the
     prediction, then:
