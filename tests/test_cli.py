@@ -194,7 +194,7 @@ def test_bench_figures_are_consistent(capsys) -> None:
         assert doc["compiled_speedup"][m] == pytest.approx(
             doc["numpy_ns_per_step"][m] / doc["compiled_ns_per_step"][m], rel=1e-12
         )
-    from radarviz.viz_app.bench.scalar_reference import REFERENCE_METHODS
+    from radarviz.viz_app.bench.reference import REFERENCE_METHODS
 
     pm = doc["per_method"]
     assert pm["per_method_runs"] == 500 and pm["filterpy_runs"] == 3

@@ -268,38 +268,3 @@ def test_a_method_without_a_kernel_runs_on_the_numpy_engine(monkeypatch) -> None
     np.testing.assert_allclose(
         mixed.metrics["naive"].rmse_x_m, reference.metrics["naive"].rmse_x_m, rtol=TOL
     )
-
-
-@pytest.mark.parametrize("kind", ["ucm", "ekf", "ukf", "ekf+doppler"])
-def test_bench_references_compute_what_the_engine_computes(kind: str) -> None:
-    """Reference filters written from the equations in textbook matrix form
-    (``tests/reference_filters.py``) end where the engine ends: an independent route."""
-    from reference_filters import reference_final_states
-
-    cfg = TrackingConfig(sigma_beta_deg=1.0, seed=4)
-    truth = cfg.target.truth()
-    r_hat, beta_hat = block_measurements(cfg, 0, 4, truth)
-    rng = np.random.default_rng(0)
-    vr_hat = 200.0 + 1.5 * rng.standard_normal(r_hat.shape)
-    s = FilterSettings(cfg.sigma_r_m, cfg.sigma_beta_rad, 10.0, 0.0, 1000.0, sigma_vr_mps=1.5)
-    doppler = kind == "ekf+doppler"
-    x, P = filter_history(
-        kind.removesuffix("+doppler"),
-        r_hat,
-        beta_hat,
-        s,
-        radial_velocity_mps=vr_hat if doppler else None,
-    )
-    ref = reference_final_states(
-        kind,
-        r_hat,
-        beta_hat,
-        sigma_r_m=s.sigma_r_m,
-        sigma_beta_rad=s.sigma_beta_rad,
-        period_s=s.period_s,
-        sigma_v0_mps=s.sigma_v0_mps,
-        radial_velocity_mps=vr_hat,
-        sigma_vr_mps=1.5,
-    )
-    sigma = np.sqrt(np.diagonal(P[-1], axis1=-2, axis2=-1))
-    assert np.max(np.abs(ref - x[-1]) / sigma) < 1e-6

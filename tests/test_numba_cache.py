@@ -21,7 +21,7 @@ KERNEL_MODULES = (
     "radarviz.core.filters.kernels_imm",
     "radarviz.core.tracking.kernels_monitor",
     "radarviz.viz_app.io.csv_text",
-    "radarviz.viz_app.bench.scalar_reference",
+    "radarviz.viz_app.bench.reference",
 )
 
 

@@ -111,7 +111,7 @@ NUMBA_IMPORTERS = frozenset(
     {
         "radarviz.core.filters.kernels_2d",
         "radarviz.viz_app.io.csv_text",
-        "radarviz.viz_app.bench.scalar_reference",
+        "radarviz.viz_app.bench.reference",
     }
 )
 

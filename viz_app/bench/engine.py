@@ -16,7 +16,7 @@ Figures (ns per track-step = wall time / (runs × scans), one core):
   on the same measurements, best of three; ``compiled_speedup`` their ratio.
 * ``experiment_ns_per_step`` / ``experiment_over_filter``: the whole one-method Monte Carlo
   (measurements, compiled filter, statistics) per track-step, and its ratio to the filter.
-* ``per_method``: the engine against the compiled scalar reference and filterpy, per method,
+* ``per_method``: the engine against the compiled reference and filterpy, per method,
   and the all-method Monte Carlo against the filter alone (``viz_app.bench.per_method``).
 * ``one_thread_s`` / ``all_cores_s`` / ``parallel_efficiency``: the all-method Monte Carlo
   of ``parallel_runs`` runs on one thread and on every core (blocks over threads), with
@@ -626,7 +626,7 @@ def format_bench(doc: dict[str, Any]) -> str:
         )
     pm = doc["per_method"]
     lines.append(
-        f"engine vs compiled scalar reference vs filterpy, {pm['per_method_runs']} runs × "
+        f"engine vs compiled textbook reference vs filterpy, {pm['per_method_runs']} runs × "
         f"{doc['scans']} scans (filterpy {pm['filterpy_runs']} runs), ns per track-step, "
         f"medians of {pm['per_method_repeats']} interleaved repeats ({pm['per_method_clock']}):"
     )

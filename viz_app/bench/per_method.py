@@ -1,5 +1,6 @@
-"""``radarviz bench``'s per-method figures: the Monte Carlo engine against the compiled scalar
-reference (``viz_app.bench.scalar_reference``) and filterpy, measured in the same run.
+"""``radarviz bench``'s per-method figures: the Monte Carlo engine against the compiled
+reference filter in textbook matrix form (``viz_app.bench.reference``) and filterpy, measured
+in the same run.
 
 Per method (the seven 2D methods and ``ekf+doppler``, the EKF followed by the Doppler update
 of each plot's V̂r), ns per track-step (wall time / (runs × scans), one thread), the same
@@ -9,7 +10,7 @@ measurements for every one:
   the final states (``states=False``): the same work as the reference.
 * ``engine_metrics_ns_per_step``: the same filter forming the Monte Carlo's metric sums as it
   goes (``TermsRequest``, ``TERMS_SCANS`` scans a pass), as ``reproduce prosov`` runs it.
-* ``reference_ns_per_step``: the compiled scalar reference (final states).
+* ``reference_ns_per_step``: the compiled reference (final states).
 * ``engine_over_reference`` / ``metrics_over_reference``: the median over the repeats of the
   same-repeat ratio (timings interleaved, so a load on the machine hits both).
 * ``filterpy_ns_per_step``: filterpy's ``KalmanFilter`` (converted methods: the method's
@@ -48,7 +49,7 @@ from radarviz.core.filters.compiled import FilterSettings, TermsRequest, filter_
 from radarviz.core.filters.predict import process_noise, transition_matrix
 from radarviz.core.geometry import wrap_angle
 from radarviz.core.metrics import truth_line_of_sight
-from radarviz.viz_app.bench.scalar_reference import REFERENCE_METHODS, run_reference
+from radarviz.viz_app.bench.reference import REFERENCE_METHODS, run_reference
 
 #: σVr of the Doppler measurements the ``ekf+doppler`` figures filter, m/s.
 BENCH_SIGMA_VR_MPS = 1.0
