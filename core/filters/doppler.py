@@ -43,6 +43,22 @@ from radarviz.core.filters.state import (
 )
 
 
+def _values(
+    radial_velocity_mps: ArrayLike,
+    azimuth_rad: ArrayLike,
+    sigma_vr_mps: ArrayLike,
+    sigma_beta_rad: ArrayLike,
+) -> tuple[NDArray[np.float64], ...]:
+    """V̂r, β̂, σVr² and σβ² as arrays, as the update and its statistics take them."""
+    f = np.float64
+    return (
+        np.asarray(radial_velocity_mps, dtype=f),
+        np.asarray(azimuth_rad, dtype=f),
+        np.asarray(sigma_vr_mps, dtype=f) ** 2,
+        np.asarray(sigma_beta_rad, dtype=f) ** 2,
+    )
+
+
 def doppler_update(
     state: CVBatch,
     radial_velocity_mps: ArrayLike,
@@ -63,10 +79,7 @@ def doppler_update(
         sigma_vr_mps, sigma_beta_rad, sigma_elevation_rad: the plot's noise std.
         out: optional preallocated batch to write into (must not alias ``state``).
     """
-    var_vr = np.asarray(sigma_vr_mps, dtype=np.float64) ** 2
-    var_b = np.asarray(sigma_beta_rad, dtype=np.float64) ** 2
-    vr = np.asarray(radial_velocity_mps, dtype=np.float64)
-    az = np.asarray(azimuth_rad, dtype=np.float64)
+    vr, az, var_vr, var_b = _values(radial_velocity_mps, azimuth_rad, sigma_vr_mps, sigma_beta_rad)
     if state.dims == 2:  # written once, for every engine (``core.filters.doppler_2d``)
         return step_2d(doppler_update_2d, state, (vr, az, var_vr, var_b), out)
     # in 3D, ``core.filters.doppler_3d``, û's angles as (cos β̂, sin β̂, cos ε̂, sin ε̂)
@@ -94,10 +107,7 @@ def doppler_innovation(
     """The innovation statistics of the Doppler update of every track (``doppler_update``'s
     arguments): ν = V̂r − û·v̂, S = û P_vv ûᵀ + var e, one degree of freedom. Written once for
     every engine (``doppler_stats_2d``, ``doppler_stats_3d``), on the batch's components."""
-    var_vr = np.asarray(sigma_vr_mps, dtype=np.float64) ** 2
-    var_b = np.asarray(sigma_beta_rad, dtype=np.float64) ** 2
-    vr = np.asarray(radial_velocity_mps, dtype=np.float64)
-    az = np.asarray(azimuth_rad, dtype=np.float64)
+    vr, az, var_vr, var_b = _values(radial_velocity_mps, azimuth_rad, sigma_vr_mps, sigma_beta_rad)
     with np.errstate(invalid="ignore", divide="ignore"):
         if state.dims == 2:
             stats = doppler_stats_2d(*tuples_2d(state), vr, az, var_vr, var_b)
