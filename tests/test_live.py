@@ -551,3 +551,45 @@ def test_the_live_recorder_reuses_series_slots_so_its_entities_stay_bounded(
         1 for c in cols["/plots/sigma_pos_m/0000"].get("Clear:is_recursive", []) if c is not None
     )
     assert clears >= 10  # the slot held about half the forty tracks, one after another
+
+
+def test_the_live_recorder_leaves_track_ids_out_of_the_sdks_string_store(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The Rerun SDK keeps every string ``rr.escape_entity_path_part`` is given for the life
+    of the process (about 73 bytes each): a live session, which starts a track for every
+    clutter plot, must not escape its track ids, or its memory grows with the tracks ever
+    started. Sixty tracks started and deleted, half of them confirmed: no id is escaped."""
+    import numpy as np
+    import rerun as rr
+
+    from radarviz.core.tracking.stream import Plot
+    from radarviz.viz_app.io.plots import Radar
+    from radarviz.viz_app.rerun.live_recording import LiveTrackRecorder
+
+    escaped: list[str] = []
+    real = rr.escape_entity_path_part
+
+    def counted(part: str) -> str:
+        escaped.append(part)
+        return real(part)
+
+    monkeypatch.setattr(rr, "escape_entity_path_part", counted)
+
+    class Discard:
+        def __getattr__(self, name: str):
+            return lambda *args, **kwargs: None
+
+    radar = Radar("r", 0.0, 0.0, 0.0, 50.0, 0.3)
+    x, P = np.zeros(6), np.eye(6)
+    recorder = LiveTrackRecorder(Discard(), [radar], clock=iter(range(10**6)).__next__)
+    for track in range(60):
+        status = "confirmed" if track % 2 else "tentative"
+        for scan in range(3):
+            plot = Plot(10.0 * track + scan, 1e4, 0.1, 50.0, 0.005, radar="r")
+            recorder.add(replace(plot, target=str(track)), [("ucm", x + track, P)], status)
+            recorder.end_scan([str(track)] if scan == 2 else [])
+            recorder.flush()
+    recorder.close()
+    assert recorder.count == 180 and not recorder._now
+    assert escaped == []

@@ -459,8 +459,7 @@ class TrackRecorder:
         self._inset_rows.clear()
 
     def _inset_name(self, method: str) -> str:
-        target = self._inset_target or ""
-        return track_name(rr.escape_entity_path_part(target), method) if target else method
+        return self._entity_name(self._inset_target or "", method)
 
     def _inset_view(self) -> rrb.Spatial2DView:
         """The inset's view: ± a round distance holding every offset and 1σ ellipse."""
