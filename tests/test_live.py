@@ -551,3 +551,96 @@ def test_the_live_recorder_reuses_series_slots_so_its_entities_stay_bounded(
         1 for c in cols["/plots/sigma_pos_m/0000"].get("Clear:is_recursive", []) if c is not None
     )
     assert clears >= 10  # the slot held about half the forty tracks, one after another
+
+
+def test_the_live_recorders_layout_values_take_their_memory_at_the_start() -> None:
+    """What a live recorder keeps to frame its views (the newest ``layout_kept`` values of
+    each time series and of the inset's reaches) is a ring taken at the start: rows sent for
+    a while do not make its traced memory grow. (A list of every flush's small arrays,
+    trimmed at twice ``layout_kept``, grew by an object per array until then: 54 kB here.)"""
+    import gc
+    import tracemalloc
+
+    import numpy as np
+
+    from radarviz.core.tracking.stream import Plot
+    from radarviz.viz_app.io.plots import Radar
+    from radarviz.viz_app.rerun.live_recording import LiveTrackRecorder
+
+    class Discard:
+        def __getattr__(self, name: str):
+            return lambda *args, **kwargs: None
+
+    class Small(LiveTrackRecorder):
+        layout_kept = 1000
+
+    radar = Radar("r", 0.0, 0.0, 0.0, 50.0, 0.3)
+    x, P = np.zeros(6), np.eye(6)
+    recorder = Small(Discard(), [radar], clock=iter(range(10**6)).__next__)
+    scan = 0
+
+    def scans(n: int) -> None:
+        nonlocal scan
+        for _ in range(n):
+            for track in range(4):
+                plot = Plot(2.0 * scan, 1e4 + track, 0.1, 50.0, 0.005, radar="r")
+                rows = [("ucm", x + track + 1e-3 * scan, P)]
+                recorder.add(replace(plot, target=str(track)), rows, "confirmed")
+            recorder.end_scan([])
+            recorder.flush()
+            scan += 1
+
+    tracemalloc.start()
+    try:
+        scans(300)  # past layout_kept values of each series and reach
+        gc.collect()
+        before = tracemalloc.get_traced_memory()[0]
+        scans(180)  # up to about twice layout_kept: the old list's longest
+        gc.collect()
+        grown = tracemalloc.get_traced_memory()[0] - before
+    finally:
+        tracemalloc.stop()
+    assert grown < 20_000, grown
+    assert len(recorder._series["speed_mps"]) == recorder.layout_kept
+
+
+def test_the_live_recorder_leaves_track_ids_out_of_the_sdks_string_store(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The Rerun SDK keeps every string ``rr.escape_entity_path_part`` is given for the life
+    of the process (about 73 bytes each): a live session, which starts a track for every
+    clutter plot, must not escape its track ids, or its memory grows with the tracks ever
+    started. Sixty tracks started and deleted, half of them confirmed: no id is escaped."""
+    import numpy as np
+    import rerun as rr
+
+    from radarviz.core.tracking.stream import Plot
+    from radarviz.viz_app.io.plots import Radar
+    from radarviz.viz_app.rerun.live_recording import LiveTrackRecorder
+
+    escaped: list[str] = []
+    real = rr.escape_entity_path_part
+
+    def counted(part: str) -> str:
+        escaped.append(part)
+        return real(part)
+
+    monkeypatch.setattr(rr, "escape_entity_path_part", counted)
+
+    class Discard:
+        def __getattr__(self, name: str):
+            return lambda *args, **kwargs: None
+
+    radar = Radar("r", 0.0, 0.0, 0.0, 50.0, 0.3)
+    x, P = np.zeros(6), np.eye(6)
+    recorder = LiveTrackRecorder(Discard(), [radar], clock=iter(range(10**6)).__next__)
+    for track in range(60):
+        status = "confirmed" if track % 2 else "tentative"
+        for scan in range(3):
+            plot = Plot(10.0 * track + scan, 1e4, 0.1, 50.0, 0.005, radar="r")
+            recorder.add(replace(plot, target=str(track)), [("ucm", x + track, P)], status)
+            recorder.end_scan([str(track)] if scan == 2 else [])
+            recorder.flush()
+    recorder.close()
+    assert recorder.count == 180 and not recorder._now
+    assert escaped == []

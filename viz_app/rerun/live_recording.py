@@ -37,7 +37,8 @@ session. A confirmed track's time series therefore go to a *slot*, ``plots/{seri
 it is deleted and its rows are all sent; the lowest free slot is taken next, so the slots in
 use number the most tracks confirmed at once, and a slot's next track starts with a ``Clear``
 that ends its last track's line (and its legend names the new one). The ``PATH_CHUNKS`` path
-entities of every method are all made at the start, empty.
+entities of every method are all made at the start, empty. Nor does a track's id go through
+the SDK's entity path escaping (``_entity_name``), whose strings the SDK keeps for good.
 """
 
 from __future__ import annotations
@@ -146,6 +147,15 @@ class LiveTrackRecorder(TrackRecorder):
         self._send_paths()
         self._send_waiting(len(self._waiting))
         super().close()  # nothing left buffered: its log lines and the layout
+
+    def _entity_name(self, target: str, method: str) -> str:
+        """A track's name as the recorder's key (``track_name``), not escaped as an entity
+        path: a live track has no entity of its own (its state is a row of the method's
+        entities, its time series a slot's). The Rerun SDK keeps every string it escapes for
+        the life of the process (``rr.escape_entity_path_part``: about 73 bytes each, measured
+        on rerun-sdk 0.41), so escaping the id of every track ever started, the clutter's
+        included, made the session's memory grow with them."""
+        return track_name(target, method) if target else method
 
     def _send_now(self) -> None:
         """One row per method of every live track: position, 1σ ellipsoid, velocity."""

@@ -135,6 +135,48 @@ Row = tuple[int, float, np.ndarray, np.ndarray, str]
 _POS, _VEL = list(position_index(3)), list(velocity_index(3))
 
 
+class NewestValues:
+    """The newest ``kept`` values of a stream of numbers, or every one (``kept`` None).
+
+    Bounded (``kept`` given): a ring of ``kept`` values allocated and written at the start,
+    so the memory it will ever hold is taken at once and stays the same; a stream that runs
+    for hours (``radarviz live``) neither fills nor frees anything as it goes. (A list of
+    every call's small arrays, trimmed when it reached twice ``kept``, rose for minutes
+    before its first trim and then swung up and down with it.) Unbounded: packed values
+    (``array``), every one, for a file's whole run."""
+
+    def __init__(self, kept: int | None, dtype: type = np.float64):
+        self.kept = kept
+        self.dtype = np.dtype(dtype)
+        self._ring = None if kept is None else np.full(kept, np.nan, dtype=self.dtype)
+        self._packed = array("f" if self.dtype == np.float32 else "d") if kept is None else None
+        self._n = 0
+
+    def add(self, values: np.ndarray | list[float]) -> None:
+        v = np.ravel(np.asarray(values, dtype=self.dtype))
+        if self._ring is None:
+            assert self._packed is not None
+            self._packed.frombytes(v.tobytes())
+            self._n += v.shape[0]
+            return
+        ring, k = self._ring, self._ring.shape[0]
+        v = v[-k:]
+        at = self._n % k
+        head = min(v.shape[0], k - at)
+        ring[at : at + head] = v[:head]
+        ring[: v.shape[0] - head] = v[head:]
+        self._n += v.shape[0]
+
+    def values(self) -> np.ndarray:
+        """The values kept (a copy; in no particular order once a ring has wrapped)."""
+        if self._ring is None:
+            return np.frombuffer(self._packed, dtype=self.dtype).copy()
+        return self._ring[: min(self._n, self._ring.shape[0])].copy()
+
+    def __len__(self) -> int:
+        return self._n if self._ring is None else min(self._n, self._ring.shape[0])
+
+
 class TrackRecorder:
     """Buffers plots and track states and sends them to a recording in chunks."""
 
@@ -215,15 +257,14 @@ class TrackRecorder:
         self._coloured = 0
         self._methods: set[str] = set()
         # The confirmed rows' series values, for axes that ignore their outliers (the newest
-        # ``layout_kept`` of each series; ``_series_n``: how many those are).
-        self._series: dict[str, list[np.ndarray]] = defaultdict(list)
-        self._series_n: dict[str, int] = defaultdict(int)
+        # ``layout_kept`` of each series).
+        self._series = {name: NewestValues(self.layout_kept, np.float32) for name in SERIES}
         self._time_s = 0.0
         # The inset: the first target's estimates and 1σ ellipses about the methods' mean
         # (``_inset_rows``: plot, time_s, method, offset (2,), covariance (2, 2)).
         self._inset_target: str | None = None
         self._inset_rows: list[tuple[int, float, str, np.ndarray, np.ndarray]] = []
-        self._inset_reach_m = array("d")
+        self._inset_reach_m = NewestValues(self.layout_kept)
         rec.log("inset", flip_y(1.0), static=True)  # north up
         rec.log(
             "inset/reference",
@@ -315,9 +356,9 @@ class TrackRecorder:
         ``plot2d.robust_limits`` with a margin; None (the view's own) without values."""
         from radarviz.viz_app.rerun.plot2d import robust_limits
 
-        if not self._series.get(series):
+        if not len(self._series[series]):
             return None
-        lo, hi = robust_limits(self._series[series])
+        lo, hi = robust_limits([self._series[series].values()])
         pad = 0.08 * max(hi - lo, abs(hi) * 0.05, 1e-9)
         return rrb.ScalarAxis(range=(max(lo - pad, 0.0), hi + pad))
 
@@ -421,11 +462,8 @@ class TrackRecorder:
             off = p - ref
             reach = float(np.abs(off).max() + np.sqrt(max(np.linalg.eigvalsh(cov).max(), 0.0)))
             if np.isfinite(reach):
-                self._inset_reach_m.append(reach)
+                self._inset_reach_m.add([reach])
             self._inset_rows.append((self.count, self._time_s, method, off, cov))
-        kept = self.layout_kept
-        if kept is not None and len(self._inset_reach_m) > 2 * kept:
-            del self._inset_reach_m[:-kept]  # the newest kept (trimmed by halves: no cost a row)
 
     def _send_inset(self) -> None:
         """The buffered inset rows, one ``send_columns`` per method and part."""
@@ -459,15 +497,14 @@ class TrackRecorder:
         self._inset_rows.clear()
 
     def _inset_name(self, method: str) -> str:
-        target = self._inset_target or ""
-        return track_name(rr.escape_entity_path_part(target), method) if target else method
+        return self._entity_name(self._inset_target or "", method)
 
     def _inset_view(self) -> rrb.Spatial2DView:
         """The inset's view: ± a round distance holding every offset and 1σ ellipse."""
         from radarviz.viz_app.rerun.prosov_scene import nice_ceiling
 
         # Most rows, not the start's wide ellipses, set the frame (those then overflow it).
-        reaches = np.asarray(self._inset_reach_m)
+        reaches = self._inset_reach_m.values()
         reach = float(np.percentile(reaches, 80)) if reaches.size else 1.0
         half = nice_ceiling(max(1.15 * reach, 1.0))
         who = f"track {self._inset_target}" if self._inset_target else "the target"
@@ -684,18 +721,7 @@ class TrackRecorder:
             rec.send_columns(
                 f"plots/{series}/{entity}", indexes=at, columns=rr.Scalars.columns(scalars=values)
             )
-            self._keep_series(series, values.astype(np.float32))
-
-    def _keep_series(self, series: str, values: np.ndarray) -> None:
-        """Keep a series' values for its axis (``_robust_axis``), the newest ``layout_kept``."""
-        got = self._series[series]
-        got.append(values)
-        self._series_n[series] += len(values)
-        kept = self.layout_kept
-        if kept is None or self._series_n[series] <= 2 * kept:
-            return
-        while self._series_n[series] - len(got[0]) >= kept:  # trimmed by halves, as the inset
-            self._series_n[series] -= len(got.pop(0))
+            self._series[series].add(values)  # for its axis (``_robust_axis``)
 
     def _send_track(self, target: str, method: str, items: list[Row]) -> None:
         """One track's buffered rows: its confirmed rows' position, covariance and velocity
