@@ -56,6 +56,7 @@ from radarviz.viz_app.io.asterix import AsterixReader, ScanTiming, tiled_blocks
 from radarviz.viz_app.io.plots import READ_BLOCK, BatchRunner, Radar, scan_period
 from radarviz.viz_app.live.control import LiveControl
 from radarviz.viz_app.live.replay import Address
+from radarviz.viz_app.newest import NewestValues
 
 #: Seconds a blocking receive or file read waits before looking at the stop flag.
 POLL_S = 0.05
@@ -318,31 +319,6 @@ class LiveResult:
     seconds: float
 
 
-class Latencies:
-    """The newest ``LATENCIES_KEPT`` latencies (s), in a ring allocated (and touched) at the
-    start, so a session's memory does not grow with the plots it has tracked."""
-
-    def __init__(self, kept: int = LATENCIES_KEPT):
-        self._ring = np.full(kept, np.nan)
-        self._n = 0
-
-    def add(self, values: np.ndarray) -> None:
-        ring, k = self._ring, self._ring.shape[0]
-        values = values[-k:]
-        at = self._n % k
-        head = min(values.shape[0], k - at)
-        ring[at : at + head] = values[:head]
-        ring[: values.shape[0] - head] = values[head:]
-        self._n += values.shape[0]
-
-    def values(self) -> np.ndarray:
-        """The latencies kept (a copy; in no particular order once the ring has wrapped)."""
-        return self._ring[: min(self._n, self._ring.shape[0])].copy()
-
-    def __len__(self) -> int:
-        return min(self._n, self._ring.shape[0])
-
-
 def track_feed(
     plots: queue.Queue,
     tracker: GNNTracker | LiveControl,
@@ -379,8 +355,8 @@ def track_feed(
     assert isinstance(first, GNNTracker)
     locate = lambda key, column: f"plot {key[1]}"  # noqa: E731
     runner = BatchRunner(first, "live", locate, rows_named, scan_named)
-    latencies = Latencies()
-    parts = {name: Latencies(PARTS_KEPT) for name in LATENCY_PARTS}
+    latencies = NewestValues(LATENCIES_KEPT)
+    parts = {name: NewestValues(PARTS_KEPT) for name in LATENCY_PARTS}
     first_held = [0.0]
     last_run = [0.0]
     held_at: list[tuple[int, float]] = []  # (plots, when) of every batch held
