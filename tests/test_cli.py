@@ -490,3 +490,17 @@ if len(sys.argv) == 2:
 
     assert imported("--help") == "[]"
     assert imported("track", "--help") == "['presets', 'track']"  # track's presets
+
+
+@pytest.mark.skipif(not Path("/proc/self/status").exists(), reason="Linux's VmHWM")
+def test_peak_rss_is_the_process_own_not_its_parents() -> None:
+    """``peak_rss_mb`` of a process started by a large one is its own peak: ``ru_maxrss``
+    keeps the parent's across fork and exec (a child of this 400 MB test reported 407)."""
+    import numpy as np
+
+    held = np.ones(400 * 2**20 // 8)  # 400 MiB, touched
+    code = "from radarviz.viz_app.runtime import peak_rss_mb; print(peak_rss_mb())"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    child = float(out.stdout)
+    assert 0.0 < child < 200.0, child
+    assert held.sum() > 0
