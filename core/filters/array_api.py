@@ -64,7 +64,6 @@ def _steps(xp: Any) -> dict[str, Any]:
             "wrap": functools.partial(_wrap, xp),
             "cos": xp.cos,
             "sin": xp.sin,
-            "log": xp.log,
         }
     )
 

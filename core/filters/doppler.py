@@ -30,7 +30,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from radarviz.core.filters.doppler_2d import doppler_stats_2d, doppler_update_2d
 from radarviz.core.filters.doppler_3d import doppler_stats_3d, doppler_update_3d
-from radarviz.core.filters.innovation import InnovationStats
+from radarviz.core.filters.innovation import InnovationStats, innovation_stats
 from radarviz.core.filters.state import (
     CVBatch,
     components,
@@ -117,8 +117,7 @@ def doppler_innovation(
             trig = (np.cos(az), np.sin(az), np.cos(el), np.sin(el))
             xc, Pc = mean_components(state.x), cov_components(state.P)
             stats = doppler_stats_3d(xc, Pc, vr, trig, var_vr, var_b, var_e, [0.0, 0.0, 0.0])
-    nis, log_s = (np.array(np.broadcast_to(v, state.batch_shape)) for v in stats)
-    return InnovationStats(nis, log_s, 1)
+    return innovation_stats(stats, state.batch_shape, 1)
 
 
 def doppler_terms(

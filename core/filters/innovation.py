@@ -83,10 +83,10 @@ def position_innovation(
             )
         else:
             stats = position_stats_3d(Pc, innovation, R)
-    return _stats(stats, state.batch_shape, state.dims)
+    return innovation_stats(stats, state.batch_shape, state.dims)
 
 
-def _stats(stats: tuple, shape: tuple[int, ...], dof: int) -> InnovationStats:
+def innovation_stats(stats: tuple, shape: tuple[int, ...], dof: int) -> InnovationStats:
     """(νᵀ S⁻¹ ν, log det S) of a step's statistics as ``InnovationStats`` of the batch's
     shape (a measurement given as scalars broadcasts over the batch)."""
     nis, log_det = (np.array(np.broadcast_to(v, shape), dtype=np.float64) for v in stats)

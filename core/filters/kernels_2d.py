@@ -188,15 +188,7 @@ def _select(c: bool, a: float, b: float) -> float:
 # plain arithmetic (the numpy engine's and the array-API path's too), compiled here with the
 # scalar elementary functions.
 _steps = bind_2d(
-    {
-        "sqrt": sqrt,
-        "where": _select,
-        "atan2": atan2,
-        "wrap": wrap,
-        "cos": cos,
-        "sin": sin,
-        "log": math.log,
-    },
+    {"sqrt": sqrt, "where": _select, "atan2": atan2, "wrap": wrap, "cos": cos, "sin": sin},
     _inline,
 )
 _add_outer = _steps["_add_outer"]
@@ -341,15 +333,7 @@ def _cos_v(a: float) -> float:
 
 
 _vsteps = bind_2d(
-    {
-        "sqrt": sqrt,
-        "where": _select,
-        "atan2": _atan2_v,
-        "wrap": wrap,
-        "cos": _cos_v,
-        "sin": _sin_v,
-        "log": math.log,
-    },
+    {"sqrt": sqrt, "where": _select, "atan2": _atan2_v, "wrap": wrap, "cos": _cos_v, "sin": _sin_v},
     _inline_v,
 )
 position_update_v = _vsteps["position_update_2d"]

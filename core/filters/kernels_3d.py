@@ -39,9 +39,7 @@ from radarviz.core.filters.steps_3d import bind_3d
 # The 3D updates (position, the EKF's measurement, UKF, Doppler: ``core.filters.steps_3d``),
 # written once as plain arithmetic (the numpy engine's too), compiled here with the scalar
 # elementary functions.
-_steps = bind_3d(
-    {"sqrt": sqrt, "where": _select, "atan2": atan2, "wrap": wrap, "log": log}, _inline
-)
+_steps = bind_3d({"sqrt": sqrt, "where": _select, "atan2": atan2, "wrap": wrap}, _inline)
 inverse_3 = _steps["inverse_3"]
 position_update_3d = _steps["position_update_3d"]
 ekf_measurement_3d_c = _steps["ekf_measurement_3d"]
@@ -105,6 +103,11 @@ def convert_3d(code, r, sr2, sb2, se2, px, py, pz, z, R, conv):
     R[0, 0], R[0, 1], R[0, 2] = t[3], t[4], t[5]
     R[1, 0], R[1, 1], R[1, 2] = t[4], t[6], t[7]
     R[2, 0], R[2, 1], R[2, 2] = t[5], t[7], t[8]
+
+
+# The per-plot stages below are inlined into the kernels (``_inline``): a compiled call with a
+# dozen array arguments costs more than the 3D position update it makes (measured: 270 against
+# 105 ns for a position stage).
 
 
 @_inline

@@ -27,15 +27,14 @@ STEP_FUNCTIONS_3D = (
         position_3d.inverse_3,
         position_3d.factored_joseph_3d,
         position_3d.position_update_3d,
-        position_3d.position_stats_3d,
     ),
     (ekf_3d.ekf_measurement_3d,),
     (ukf_3d.polar_3, ukf_3d.ukf_update_3d),
-    (doppler_3d.doppler_terms_3d, doppler_3d.doppler_update_3d, doppler_3d.doppler_stats_3d),
+    (doppler_3d.doppler_terms_3d, doppler_3d.doppler_update_3d),
 )
 
 #: The elementary functions the steps call by name.
-ELEMENTARY = ("sqrt", "where", "atan2", "wrap", "log")
+ELEMENTARY = ("sqrt", "where", "atan2", "wrap")
 
 
 def bind_3d(elementary: dict[str, Any], wrap: Callable[[Any], Any] = lambda f: f) -> dict[str, Any]:
