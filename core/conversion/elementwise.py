@@ -21,6 +21,8 @@ from numpy import cosh, exp, expm1, sinh, sqrt
 
 #: Conversion codes, the ``core.filters.codes.METHOD_CODES`` of the converted methods.
 NAIVE, SEED, CMKF_D, UCM, DUCM = 0, 1, 2, 3, 4
+#: Each conversion's code, by its name (2D and 3D alike).
+CODES: dict[str, int] = {"naive": NAIVE, "seed": SEED, "cmkf_d": CMKF_D, "ucm": UCM, "ducm": DUCM}
 
 
 def scale(code: int, s):

@@ -46,11 +46,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from radarviz.core.conversion import elementwise
 from radarviz.core.conversion.elementwise import (
-    CMKF_D,
+    CODES,
     DUCM,
-    NAIVE,
-    SEED,
-    UCM,
     averaged_coefficients,
     conversion_coefficients,
     converted_point,
@@ -95,7 +92,7 @@ def _f(a: ArrayLike) -> NDArray[np.float64]:
 def scale_factor(method: str, *, sigma_beta_rad: ArrayLike) -> NDArray[np.float64]:
     """The scale κ a 2D method applies to the naive point ``r̂ (cos β̂, sin β̂)``
     (``core.conversion.elementwise.scale``)."""
-    return np.asarray(scale(_CODES[_method(method)], _f(sigma_beta_rad) ** 2))
+    return np.asarray(scale(CODES[_method(method)], _f(sigma_beta_rad) ** 2))
 
 
 def _method(method: str) -> str:
@@ -198,10 +195,6 @@ class ConvertedParts(NamedTuple):
         return Converted(np.stack([x, y], axis=-1), _sym2(r00, r01, r11))
 
 
-#: Each conversion's code (``core.conversion.elementwise``), by name.
-_CODES = {"naive": NAIVE, "seed": SEED, "cmkf_d": CMKF_D, "ucm": UCM, "ducm": DUCM}
-
-
 def convert_parts(
     method: str,
     r: ArrayLike,
@@ -219,7 +212,7 @@ def convert_parts(
         predicted_xy: the filter's predicted position, radar-centred: two (...) arrays, or one
             (..., 2) array.
     """
-    code = _CODES[_method(method)]
+    code = CODES[_method(method)]
     r, beta = _f(r), _f(beta)
     sr2, s = _f(sigma_r_m) ** 2, _f(sigma_beta_rad) ** 2
     rp = cp = sp = None

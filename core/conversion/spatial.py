@@ -34,7 +34,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from radarviz.core.conversion import elementwise_3d
-from radarviz.core.conversion.elementwise import CMKF_D, DUCM, NAIVE, SEED, UCM, scale
+from radarviz.core.conversion.elementwise import CODES, scale
 from radarviz.core.conversion.elementwise_3d import converted_point_3d, noise_table
 from radarviz.core.conversion.planar import Converted, _f
 from radarviz.core.conversion.second_order import second_order_correction, spherical_hessians
@@ -44,8 +44,6 @@ from radarviz.core.geometry import direction_cosines
 CONVERSIONS_3D: tuple[str, ...] = ("naive", "seed", "cmkf_d", "ucm", "ducm")
 #: The (i, j) of the covariance entries of ``convert_parts_3d``, in their order.
 UPPER_3D: tuple[tuple[int, int], ...] = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
-#: Each conversion's code (``core.conversion.elementwise``), by name.
-_CODES = {"naive": NAIVE, "seed": SEED, "cmkf_d": CMKF_D, "ucm": UCM, "ducm": DUCM}
 
 
 def _point_3d(r: NDArray, az: NDArray, el: NDArray) -> NDArray[np.float64]:
@@ -103,7 +101,7 @@ def convert_parts_3d(
         px, py, pz = p[..., 0], p[..., 1], p[..., 2]
     sr2, sb2, se2, table = _variances(sigma_r_m, sigma_beta_rad, sigma_elevation_rad)
     parts = converted_point_3d(
-        _CODES[method], *_plot(r, azimuth, elevation), sr2, sb2, se2, table, px, py, pz
+        CODES[method], *_plot(r, azimuth, elevation), sr2, sb2, se2, table, px, py, pz
     )
     return tuple(np.broadcast_arrays(*parts))
 
@@ -259,7 +257,7 @@ def scale_3d(method: str, sigma_beta_rad: ArrayLike, sigma_elevation_rad: ArrayL
     s = sβ + sε on x and y, s = sε on z (the angle variances that enter each direction
     cosine)."""
     var_beta, var_elevation = _f(sigma_beta_rad) ** 2, _f(sigma_elevation_rad) ** 2
-    code = _CODES[method]
+    code = CODES[method]
     kxy, kz = np.broadcast_arrays(scale(code, var_beta + var_elevation), scale(code, var_elevation))
     return np.stack([kxy, kxy, kz], axis=-1)
 

@@ -10,19 +10,13 @@ method's code is declared once, by its entry in the registry.
 
 from __future__ import annotations
 
-from radarviz.core.conversion.elementwise import CMKF_D, DUCM, NAIVE, SEED, UCM
+from radarviz.core.conversion.elementwise import CODES, DUCM
 from radarviz.core.filters.methods import METHODS
 
 #: The polar filters' codes, after the conversions'.
 EKF, UKF = 5, 6
 #: Each conversion's code, by its name (``Method.start_conversion``).
-CONVERSION_CODES: dict[str, int] = {
-    "naive": NAIVE,
-    "seed": SEED,
-    "cmkf_d": CMKF_D,
-    "ucm": UCM,
-    "ducm": DUCM,
-}
+CONVERSION_CODES: dict[str, int] = CODES
 #: A polar filter's code, by its kind (``Method.kind``).
 POLAR_CODES: dict[str, int] = {"ekf": EKF, "ukf": UKF}
 
