@@ -21,6 +21,7 @@ from radarviz.core.filters.methods import (
     METHODS,
     METHODS_3D,
     POLAR_METHODS,
+    Kind,
     PolarNoise,
     PolarPlot,
 )
@@ -143,7 +144,7 @@ def test_registry_lists_every_method_once() -> None:
     assert ALL_METHODS == ("naive", "seed", "cmkf_d", "ucm", "ducm", "ekf", "ukf")
     assert POLAR_METHODS == ("ekf", "ukf")
     assert METHODS_3D == ALL_METHODS  # every method exists in 2D and 3D
-    assert {m.kind for m in METHODS.values()} == {"converted", "ekf", "ukf"}
+    assert {m.kind for m in METHODS.values()} == set(Kind)
 
 
 @pytest.mark.parametrize("name", ALL_METHODS)

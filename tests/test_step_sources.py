@@ -56,7 +56,10 @@ STEP_KINDS: dict[str, StepKind] = {
             ),
             "core/filters/methods.py:_predicted": "a method's predicted measurement",
             "core/tracking/compiled.py:_predicted_kernel": "loads a compiled kernel",
-            "core/filters/codes.py:reads_prediction": "whether a conversion reads the prediction",
+            "core/conversion/registry.py:about_prediction": (
+                "whether a conversion's covariance is taken at the prediction"
+            ),
+            "core/filters/methods.py:about_prediction": "the same, of a method",
         },
     ),
     "position update (Joseph form on a factor)": StepKind(
@@ -128,7 +131,10 @@ STEP_KINDS: dict[str, StepKind] = {
             {
                 f"core/conversion/elementwise.py:{name}"
                 for name in (
-                    "scale",
+                    "unit_scale",
+                    "seed_scale",
+                    "debiasing_scale",
+                    "unbiasing_scale",
                     "averaged_coefficients",
                     "true_cov_coefficients",
                     "conversion_coefficients",
@@ -167,6 +173,18 @@ STEP_KINDS: dict[str, StepKind] = {
             "core/filters/imm_moments.py:_add_scaled": "the IMM's weighted outer products",
             "core/filters/position.py:upper_entries": "a matrix's upper entries as a dict",
             "core/finite_memory/fit.py:_closed_cov": "the finite-memory fit's covariance",
+            # These reach a ``*_scale`` implementation as ``Conversion.scale``, an attribute
+            # the registry binds, which the call graph below does not follow.
+            **{
+                key: "calls a registered conversion's scale through the registry"
+                for key in (
+                    "core/conversion/planar.py:scale_factor",
+                    "core/conversion/registry.py:scales",
+                    "core/conversion/spatial.py:scale_3d",
+                    "core/conversion/spatial.py:ucm_scale_3d",
+                    "core/filters/methods.py:scale_table",
+                )
+            },
         },
     ),
     "innovation statistics (NIS and log det S)": StepKind(

@@ -1,41 +1,67 @@
-"""The five 2D conversions (``core.conversion.planar``) as plain arithmetic, written once for
-every engine: over numpy arrays of any shape (the numpy engine and the analysis functions of
+"""The 2D conversions' arithmetic (``core.conversion.planar``), written once for every
+engine: over numpy arrays of any shape (the numpy engine and the analysis functions of
 ``core.conversion.planar`` call them as they are), over Python floats in numba-compiled code
 (``core.filters.kernels_2d`` compiles them; numba types numpy's elementary functions on
 numbers), and over another array-API namespace's arrays (``core.filters.array_api``).
 
-The scalars that depend on s = σβ² and σr² only (most of a conversion's transcendental
-functions) are formed once by ``conversion_coefficients``; ``converted_point`` then takes
-cos β̂ and sin β̂ (the caller evaluates them) and uses + − × ÷ only. The three covariances
-the papers name are functions of their own, called by the conversions and by the analysis:
+A conversion (``core.conversion.registry``) is a scale κ(s) of the naive point r̂ (cos β̂,
+sin β̂), one of the ``*_scale`` functions here, and a ``Covariance`` form. The scalars that
+depend on s = σβ² and σr² only (κ and most of a covariance's transcendental functions) are
+formed once by ``conversion_coefficients``; ``converted_point`` then takes cos β̂ and sin β̂
+(the caller evaluates them) and uses + − × ÷ only. The covariances the papers name are
+functions of their own, called by the conversions and by the analysis:
 
 * ``linearized_entries``: the first-order J diag(σr², s) Jᵀ (Prosov eq. 9);
 * ``averaged_entries``: eq. 11a–c, Lerro and Bar-Shalom's posterior-averaged covariance;
-* ``true_entries``: the naive point's exact covariance given the truth, times k (ucm and ducm
-  take k = e^s, the square of their scale).
+* ``true_entries``: the naive point's exact covariance given the truth, times k (the exact
+  forms take k = κ², the point being scaled by κ).
 """
 
 from __future__ import annotations
 
+from enum import IntEnum
+
 from numpy import cosh, exp, expm1, sinh, sqrt
 
-#: Conversion codes, the ``core.filters.codes.METHOD_CODES`` of the converted methods.
-NAIVE, SEED, CMKF_D, UCM, DUCM = 0, 1, 2, 3, 4
-#: Each conversion's code, by its name (2D and 3D alike).
-CODES: dict[str, int] = {"naive": NAIVE, "seed": SEED, "cmkf_d": CMKF_D, "ucm": UCM, "ducm": DUCM}
+
+class Covariance(IntEnum):
+    """The covariance a converted point carries, as the papers name it. A conversion is a
+    scale κ(s) of the naive point and one of these (``core.conversion.registry``); the
+    compiled kernels branch on these values, never on a conversion's name.
+
+    LINEARIZED: J diag(σr², s) Jᵀ at the measurement (Prosov eq. 9), ``linearized_entries``.
+    AVERAGED: eq. 11, the exact covariance averaged over the posterior of the truth (Lerro and
+    Bar-Shalom), ``averaged_entries``.
+    EXACT: the naive point's exact covariance given the truth, taken at the measurement and
+    times κ² (the point is scaled by κ; Mo et al.), ``true_entries``.
+    EXACT_AT_PREDICTION: the same at the filter's predicted position (Bordonaro et al.), so it
+    needs the prediction.
+    """
+
+    LINEARIZED = 0
+    AVERAGED = 1
+    EXACT = 2
+    EXACT_AT_PREDICTION = 3
 
 
-def scale(code: int, s):
-    """The scale κ(s) conversion ``code`` applies to the naive point r̂ (cos β̂, sin β̂):
-    naive 1; seed 1 − s/2 (Prosov eq. 10 as printed); cmkf_d 1 − (e^(−s) − e^(−s/2)) (Lerro
-    and Bar-Shalom's debiasing); ucm and ducm e^(s/2) = √(e^s) (Mo et al.: 1 / E[cos v_β])."""
-    if code == SEED:
-        return 1.0 - s / 2.0
-    if code == CMKF_D:
-        return 1.0 - (exp(-s) - exp(-s / 2.0))
-    if code == UCM or code == DUCM:
-        return sqrt(exp(s))
+def unit_scale(s):
+    """κ = 1: the naive point (Prosov eq. 8)."""
     return 1.0 + 0.0 * s
+
+
+def seed_scale(s):
+    """κ = 1 − s/2: Prosov's eq. 10 as printed (the second-order term with its sign)."""
+    return 1.0 - s / 2.0
+
+
+def debiasing_scale(s):
+    """κ = 1 − (e^(−s) − e^(−s/2)): Lerro and Bar-Shalom's additive debiasing as a scale."""
+    return 1.0 - (exp(-s) - exp(-s / 2.0))
+
+
+def unbiasing_scale(s):
+    """κ = e^(s/2) = √(e^s) = 1 / E[cos v_β]: Mo et al.'s multiplicative unbiasing."""
+    return sqrt(exp(s))
 
 
 def averaged_coefficients(s):
@@ -73,22 +99,23 @@ def true_cov_coefficients(s, sr2, k):
     )
 
 
-def conversion_coefficients(code: int, s, sr2) -> tuple:
-    """The eight scalars of conversion ``code`` that depend on s = σβ² and σr² only (zeros
-    where a conversion needs fewer; always eight, so compiled code sees one type).
+def conversion_coefficients(covariance, kappa, s, sr2) -> tuple:
+    """The eight scalars of a conversion that depend on s = σβ² and σr² only: its scale κ
+    then its covariance's (zeros where it needs fewer; always eight, so compiled code sees
+    one type).
 
-    seed / cmkf_d: (κ, ``averaged_coefficients(s)``); ucm / ducm: (κ,
-    ``true_cov_coefficients(s, σr², e^s)``, 0, 0); naive: zeros.
+    ``Covariance.AVERAGED``: (κ, ``averaged_coefficients(s)``); ``EXACT`` and
+    ``EXACT_AT_PREDICTION``: (κ, ``true_cov_coefficients(s, σr², κ²)``, 0, 0);
+    ``LINEARIZED``: (κ, 0, …).
     """
-    if code == SEED or code == CMKF_D:
-        a = averaged_coefficients(s)
-        return scale(code, s), a[0], a[1], a[2], a[3], a[4], a[5], a[6]
-    if code == UCM or code == DUCM:
-        k = exp(s)
-        t = true_cov_coefficients(s, sr2, k)
-        return sqrt(k), t[0], t[1], t[2], t[3], t[4], 0.0 * s, 0.0 * s
     z = 0.0 * s
-    return (z, z, z, z, z, z, z, z)
+    if covariance == Covariance.AVERAGED:
+        a = averaged_coefficients(s)
+        return kappa + z, a[0], a[1], a[2], a[3], a[4], a[5], a[6]
+    if covariance == Covariance.EXACT or covariance == Covariance.EXACT_AT_PREDICTION:
+        t = true_cov_coefficients(s, sr2, kappa * kappa)
+        return kappa + z, t[0], t[1], t[2], t[3], t[4], z, z
+    return (kappa + z, z, z, z, z, z, z, z)
 
 
 def linearized_entries(r, c, sn, sr2, s):
@@ -135,36 +162,32 @@ def true_entries(r, c, sn, sr2, a1, a0, b1, c1, c0):
     return c * c * a + sn * sn * b, cx * (sn * c), sn * sn * a + c * c * b
 
 
-def converted_point(code, r, c, sn, sr2, s, co, rp, cp, sp):
+def converted_point(covariance, r, c, sn, sr2, s, co, rp, cp, sp):
     """The converted point and covariance (x, y, R00, R01, R11), radar-centred, of the
-    measured range r and bearing β̂ given as c = cos β̂, sn = sin β̂.
+    measured range r and bearing β̂ given as c = cos β̂, sn = sin β̂: κ r̂ (c, sn) with the
+    ``covariance`` form.
 
     Args:
-        code: ``NAIVE`` … ``DUCM``.  sr2, s: σr² and σβ².
-        co: ``conversion_coefficients(code, s, sr2)``.
-        rp, cp, sp: ducm only: the predicted position's range and cos, sin of its bearing
-            (any value for the others).
-
-    naive: eq. 8 with the linearised covariance eq. 9; seed / cmkf_d: κ r̂ û with eq. 11 at
-    the measurement; ucm: e^(s/2) r̂ û with the exact covariance at the measurement; ducm:
-    the same point, the covariance at the prediction.
+        covariance: a ``Covariance``.  sr2, s: σr² and σβ².
+        co: ``conversion_coefficients(covariance, κ, s, sr2)`` (κ first).
+        rp, cp, sp: ``EXACT_AT_PREDICTION`` only: the predicted position's range and cos,
+            sin of its bearing (any value otherwise).
     """
-    if code == NAIVE:
-        cov = linearized_entries(r, c, sn, sr2, s)
-        return r * c, r * sn, cov[0], cov[1], cov[2]
     kr = co[0] * r
-    if code == SEED or code == CMKF_D:
+    if covariance == Covariance.LINEARIZED:
+        cov = linearized_entries(r, c, sn, sr2, s)
+    elif covariance == Covariance.AVERAGED:
         cov = averaged_entries(r, c, sn, sr2, co[1], co[2], co[3], co[4], co[5], co[6], co[7])
-    elif code == UCM:  # the covariance at the measurement
+    elif covariance == Covariance.EXACT:  # at the measurement
         cov = true_entries(r, c, sn, sr2, co[1], co[2], co[3], co[4], co[5])
-    else:  # ducm: at the prediction
+    else:  # at the prediction
         cov = true_entries(rp, cp, sp, sr2, co[1], co[2], co[3], co[4], co[5])
     return kr * c, kr * sn, cov[0], cov[1], cov[2]
 
 
-#: The functions to compile, for the engines that re-bind them (``core.filters.rebind``).
+#: The functions to compile, for the engines that re-bind them (``core.filters.rebind``). The
+#: scales are not among them: a kernel takes κ as a number (``core.filters.methods``).
 CONVERSION_FUNCTIONS = (
-    scale,
     averaged_coefficients,
     true_cov_coefficients,
     conversion_coefficients,

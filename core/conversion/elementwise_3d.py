@@ -1,20 +1,21 @@
-"""The five 3D conversions (``core.conversion.spatial``) as plain arithmetic, written once for
+"""The 3D conversions' arithmetic (``core.conversion.spatial``), plain arithmetic, written once for
 every engine: over numpy arrays of any shape (``core.conversion.spatial`` calls them as they
 are) and over Python floats in numba-compiled code (``core.filters.kernels_3d`` compiles them;
 numba types numpy's elementary functions on numbers).
 
-A radar's noise-only factors (``noise_table``: each angle's exponentials and the per-axis
-scales) are formed once per radar; ``converted_point_3d`` then takes a plot's range and the
-cosines and sines of its angles. Each covariance is built from one-angle moments
-(``angle_moments`` given the truth, ``posterior_moments`` averaged over the flat-prior
-posterior) combined by ``combined_entries``, with no O(r²) terms that cancel.
+A radar's noise-only factors (``noise_table``: each angle's exponentials) and a
+conversion's per-axis scales are formed once per radar; ``converted_point_3d`` then takes a
+plot's range and the cosines and sines of its angles. Each covariance is built from
+one-angle moments (``angle_moments`` given the truth, ``posterior_moments`` averaged over
+the flat-prior posterior) combined by ``combined_entries``, with no O(r²) terms that
+cancel.
 """
 
 from __future__ import annotations
 
 from numpy import arctan2, cos, exp, expm1, hypot, sin, sqrt
 
-from radarviz.core.conversion.elementwise import CMKF_D, NAIVE, SEED, UCM, scale
+from radarviz.core.conversion.elementwise import Covariance
 
 
 def exponentials(s):
@@ -25,18 +26,9 @@ def exponentials(s):
 
 
 def noise_table(sb2, se2):
-    """A radar's noise-only factors of the conversions, five rows of five: rows 0–3 the
-    ``exponentials`` of σβ², σε², 2σβ², 2σε²; row 4 the per-axis scales (cmkf_d's κ_xy, κ_z,
-    then ucm's and ducm's κ_xy, κ_z, 0), the 2D κ(s) (``core.conversion.elementwise.scale``)
-    with s = σβ² + σε² for x and y and s = σε² for z."""
-    s_xy, s_z = sb2 + se2, se2
-    return (
-        exponentials(sb2),
-        exponentials(se2),
-        exponentials(2.0 * sb2),
-        exponentials(2.0 * se2),
-        (scale(CMKF_D, s_xy), scale(CMKF_D, s_z), scale(UCM, s_xy), scale(UCM, s_z), 0.0 * s_z),
-    )
+    """A radar's noise-only factors of the covariances, four rows of five: the
+    ``exponentials`` of σβ², σε², 2σβ², 2σε²."""
+    return exponentials(sb2), exponentials(se2), exponentials(2.0 * sb2), exponentials(2.0 * se2)
 
 
 def angle_moments(c, sn, ex):
@@ -150,51 +142,50 @@ def averaged_entries_3d(r, cos_b, sin_b, cos_e, sin_e, sr2, table):
     return combined_entries(r * r + sr2, sr2, e, b)
 
 
-def converted_point_3d(code, r, cos_b, sin_b, cos_e, sin_e, sr2, sb2, se2, table, px, py, pz):
+def converted_point_3d(
+    covariance, kxy, kz, r, cos_b, sin_b, cos_e, sin_e, sr2, sb2, se2, table, px, py, pz
+):
     """The converted point and covariance (x, y, z, Rxx, Rxy, Rxz, Ryy, Ryz, Rzz),
-    radar-centred, of the plot (r̂, β̂, ε̂) given as r and the cosines and sines of its angles.
+    radar-centred, of the plot (r̂, β̂, ε̂) given as r and the cosines and sines of its angles:
+    D r̂ u, D = diag(κxy, κxy, κz), with the ``covariance`` form.
 
     Args:
-        code: ``NAIVE`` … ``DUCM`` (``core.conversion.elementwise``).
+        covariance: a ``core.conversion.elementwise.Covariance``.
+        kxy, kz: the conversion's scale per axis, κ(σβ² + σε²) and κ(σε²) (a 3D scale is the
+            2D one with s the summed variance of the angles in that axis).
         sr2, sb2, se2: σr², σβ², σε².  table: the radar's ``noise_table(sb2, se2)``.
-        px, py, pz: ducm only: the predicted position, radar-centred (any value otherwise).
+        px, py, pz: ``EXACT_AT_PREDICTION`` only: the predicted position, radar-centred (any
+            value otherwise).
 
-    naive: r̂ u with J diag(σr², σβ², σε²) Jᵀ; seed (κ = 1 − s/2 per axis, eq. 10's sign) and
-    cmkf_d (κ = 1 − (e^(−s) − e^(−s/2))): κ r̂ u with the averaged covariance; ucm:
-    e^(s/2) r̂ u per axis with D C D, C the exact covariance at the measurement, D = diag(κ);
-    ducm: the same point, C at the prediction.
+    LINEARIZED: J diag(σr², σβ², σε²) Jᵀ; AVERAGED: the averaged covariance (eq. 11 in 3D),
+    as the papers give it, not scaled; EXACT: D C D, C the exact covariance at the
+    measurement; EXACT_AT_PREDICTION: C at the prediction.
     """
     u0, u1, u2 = cos_e * cos_b, cos_e * sin_b, sin_e
-    if code == NAIVE:
+    x, y, z = kxy * (r * u0), kxy * (r * u1), kz * (r * u2)
+    if covariance == Covariance.LINEARIZED:
         c = linearized_entries_3d(r, cos_b, sin_b, cos_e, sin_e, sr2, sb2, se2)
-        return r * u0, r * u1, r * u2, c[0], c[1], c[2], c[3], c[4], c[5]
-    if code == SEED or code == CMKF_D:
-        if code == SEED:
-            k_xy, k_z = scale(SEED, sb2 + se2), scale(SEED, se2)
-        else:
-            k_xy, k_z = table[4][0], table[4][1]
-        c = averaged_entries_3d(r, cos_b, sin_b, cos_e, sin_e, sr2, table)
-        x, y, z = k_xy * (r * u0), k_xy * (r * u1), k_z * (r * u2)
         return x, y, z, c[0], c[1], c[2], c[3], c[4], c[5]
-    k_xy, k_z = table[4][2], table[4][3]
-    if code == UCM:  # at the measurement
+    if covariance == Covariance.AVERAGED:
+        c = averaged_entries_3d(r, cos_b, sin_b, cos_e, sin_e, sr2, table)
+        return x, y, z, c[0], c[1], c[2], c[3], c[4], c[5]
+    if covariance == Covariance.EXACT:  # at the measurement
         c = true_entries_3d(r, cos_b, sin_b, cos_e, sin_e, sr2, table)
-    else:  # ducm: at the prediction
+    else:  # at the prediction
         rho = hypot(px, py)
         bp, ep = arctan2(py, px), arctan2(pz, rho)
         rp = sqrt(rho * rho + pz * pz)
         c = true_entries_3d(rp, cos(bp), sin(bp), cos(ep), sin(ep), sr2, table)
-    x, y, z = k_xy * (r * u0), k_xy * (r * u1), k_z * (r * u2)
     return (
         x,
         y,
         z,
-        k_xy * c[0] * k_xy,
-        k_xy * c[1] * k_xy,
-        k_xy * c[2] * k_z,
-        k_xy * c[3] * k_xy,
-        k_xy * c[4] * k_z,
-        k_z * c[5] * k_z,
+        kxy * c[0] * kxy,
+        kxy * c[1] * kxy,
+        kxy * c[2] * kz,
+        kxy * c[3] * kxy,
+        kxy * c[4] * kz,
+        kz * c[5] * kz,
     )
 
 

@@ -46,18 +46,16 @@ from numpy.typing import ArrayLike, NDArray
 
 from radarviz.core.conversion import elementwise
 from radarviz.core.conversion.elementwise import (
-    CODES,
-    DUCM,
     averaged_coefficients,
     conversion_coefficients,
     converted_point,
-    scale,
     true_cov_coefficients,
     true_entries,
 )
+from radarviz.core.conversion.registry import CONVERSIONS, conversion_named
 from radarviz.core.geometry import polar_coordinates
 
-METHODS_2D: tuple[str, ...] = ("naive", "seed", "cmkf_d", "ucm", "ducm")
+METHODS_2D: tuple[str, ...] = tuple(CONVERSIONS)
 
 
 class Converted(NamedTuple):
@@ -91,14 +89,8 @@ def _f(a: ArrayLike) -> NDArray[np.float64]:
 
 def scale_factor(method: str, *, sigma_beta_rad: ArrayLike) -> NDArray[np.float64]:
     """The scale κ a 2D method applies to the naive point ``r̂ (cos β̂, sin β̂)``
-    (``core.conversion.elementwise.scale``)."""
-    return np.asarray(scale(CODES[_method(method)], _f(sigma_beta_rad) ** 2))
-
-
-def _method(method: str) -> str:
-    if method not in METHODS_2D:
-        raise ValueError(f"method must be one of {', '.join(METHODS_2D)} (got {method!r})")
-    return method
+    (its ``core.conversion.registry.Conversion.scale``)."""
+    return np.asarray(conversion_named(method).scale(_f(sigma_beta_rad) ** 2))
 
 
 def naive_mean_given_truth(
@@ -212,13 +204,15 @@ def convert_parts(
         predicted_xy: the filter's predicted position, radar-centred: two (...) arrays, or one
             (..., 2) array.
     """
-    code = CODES[_method(method)]
+    conversion = conversion_named(method)
     r, beta = _f(r), _f(beta)
     sr2, s = _f(sigma_r_m) ** 2, _f(sigma_beta_rad) ** 2
     rp = cp = sp = None
-    if code == DUCM:  # the covariance at the filter's predicted position
+    if conversion.about_prediction:  # the covariance at the filter's predicted position
         if predicted_xy is None:
-            raise ValueError("method ducm needs predicted_xy (the filter's predicted position)")
+            raise ValueError(
+                f"method {method} needs predicted_xy (the filter's predicted position)"
+            )
         if isinstance(predicted_xy, tuple):
             px, py = _f(predicted_xy[0]), _f(predicted_xy[1])
         else:
@@ -226,9 +220,10 @@ def convert_parts(
             px, py = p[..., 0], p[..., 1]
         rp = polar_coordinates([px, py])[0]
         cp, sp = px / rp, py / rp
-    co = conversion_coefficients(code, s, sr2)
+    form = conversion.covariance
+    co = conversion_coefficients(form, conversion.scale(s), s, sr2)
     return ConvertedParts(
-        *converted_point(code, r, np.cos(beta), np.sin(beta), sr2, s, co, rp, cp, sp)
+        *converted_point(form, r, np.cos(beta), np.sin(beta), sr2, s, co, rp, cp, sp)
     )
 
 

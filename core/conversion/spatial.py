@@ -34,14 +34,14 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from radarviz.core.conversion import elementwise_3d
-from radarviz.core.conversion.elementwise import CODES, scale
 from radarviz.core.conversion.elementwise_3d import converted_point_3d, noise_table
 from radarviz.core.conversion.planar import Converted, _f
+from radarviz.core.conversion.registry import CONVERSIONS, conversion_named
 from radarviz.core.conversion.second_order import second_order_correction, spherical_hessians
 from radarviz.core.geometry import direction_cosines
 
 #: The 3D conversions, with the names of their 2D forms.
-CONVERSIONS_3D: tuple[str, ...] = ("naive", "seed", "cmkf_d", "ucm", "ducm")
+CONVERSIONS_3D: tuple[str, ...] = tuple(CONVERSIONS)
 #: The (i, j) of the covariance entries of ``convert_parts_3d``, in their order.
 UPPER_3D: tuple[tuple[int, int], ...] = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
 
@@ -91,18 +91,21 @@ def convert_parts_3d(
         r, azimuth, elevation: (...) measured range (m) and angles (rad).
         sigma_r_m, sigma_beta_rad, sigma_elevation_rad: σr, σβ, σε, scalars or (...).
     """
-    if method not in CONVERSIONS_3D:
-        raise ValueError(f"method must be one of {', '.join(CONVERSIONS_3D)} (got {method!r})")
+    conversion = conversion_named(method)
     px = py = pz = 0.0
-    if method == "ducm":
+    if conversion.about_prediction:
         if predicted_xyz is None:
-            raise ValueError("method ducm needs predicted_xyz (the filter's predicted position)")
+            raise ValueError(
+                f"method {method} needs predicted_xyz (the filter's predicted position)"
+            )
         p = _f(predicted_xyz)
         px, py, pz = p[..., 0], p[..., 1], p[..., 2]
     sr2, sb2, se2, table = _variances(sigma_r_m, sigma_beta_rad, sigma_elevation_rad)
+    kxy, kz = conversion.scales(_f(sigma_beta_rad), _f(sigma_elevation_rad))
     parts = converted_point_3d(
-        CODES[method], *_plot(r, azimuth, elevation), sr2, sb2, se2, table, px, py, pz
-    )
+        conversion.covariance, kxy, kz, *_plot(r, azimuth, elevation), sr2, sb2, se2, table,
+        px, py, pz,
+    )  # fmt: skip
     return tuple(np.broadcast_arrays(*parts))
 
 
@@ -253,12 +256,10 @@ def averaged_cov_3d(
 
 
 def scale_3d(method: str, sigma_beta_rad: ArrayLike, sigma_elevation_rad: ArrayLike) -> NDArray:
-    """κ (..., 3): the 2D method's scale κ(s) (``core.conversion.elementwise.scale``) per axis,
-    s = sβ + sε on x and y, s = sε on z (the angle variances that enter each direction
-    cosine)."""
-    var_beta, var_elevation = _f(sigma_beta_rad) ** 2, _f(sigma_elevation_rad) ** 2
-    code = CODES[method]
-    kxy, kz = np.broadcast_arrays(scale(code, var_beta + var_elevation), scale(code, var_elevation))
+    """κ (..., 3): the conversion's scale κ(s) per axis (``Conversion.scales``), s = sβ + sε
+    on x and y, s = sε on z (the angle variances that enter each direction cosine)."""
+    scales = conversion_named(method).scales(_f(sigma_beta_rad), _f(sigma_elevation_rad))
+    kxy, kz = np.broadcast_arrays(*scales)
     return np.stack([kxy, kxy, kz], axis=-1)
 
 

@@ -27,9 +27,9 @@ import functools
 import math
 from typing import Any
 
-from radarviz.core.conversion.elementwise import DUCM, conversion_coefficients, converted_point
-from radarviz.core.filters.codes import EKF, METHOD_CODES, START_CODES, UKF
+from radarviz.core.conversion.elementwise import Covariance, converted_point
 from radarviz.core.filters.compiled import FilterSettings
+from radarviz.core.filters.methods import Kind, conversion_table, method_named
 from radarviz.core.filters.predict import predict_2d, white_acceleration
 from radarviz.core.filters.state import UPPER_2D
 from radarviz.core.filters.steps_2d import bind_2d
@@ -43,14 +43,15 @@ def _wrap(xp: Any, a: Array) -> Array:
     return a - _TWO_PI * xp.ceil(a * (1.0 / _TWO_PI) - 0.5)
 
 
-def _convert(xp: Any, code: int, r, b, sr2: float, s: float, co, px=None, py=None):
-    """The five 2D conversions: (x, y, R00, R01, R11), radar-centred
-    (``core.conversion.elementwise.converted_point``; (px, py) the prediction, for ducm)."""
+def _convert(xp: Any, form: int, r, b, sr2: float, s: float, co, px=None, py=None):
+    """A 2D conversion of covariance ``form`` and scalars ``co``: (x, y, R00, R01, R11),
+    radar-centred (``core.conversion.elementwise.converted_point``; (px, py) the
+    prediction, for ``EXACT_AT_PREDICTION``)."""
     rp = cp = sp = None
-    if code == DUCM:
+    if form == Covariance.EXACT_AT_PREDICTION:
         rp = xp.hypot(px, py)
         cp, sp = px / rp, py / rp
-    return converted_point(code, r, xp.cos(b), xp.sin(b), sr2, s, co, rp, cp, sp)
+    return converted_point(form, r, xp.cos(b), xp.sin(b), sr2, s, co, rp, cp, sp)
 
 
 @functools.cache
@@ -91,16 +92,17 @@ def filter_history_xp(
 
         xp = array_namespace(r_hat)
     s_ = settings
-    code, start_code = METHOD_CODES[method], START_CODES[method]
+    kind = method_named(method).kind
+    form, start_form = (c.covariance for c in method_named(method).conversions())
     sr2, s = s_.sigma_r_m**2, s_.sigma_beta_rad**2
-    # as Python floats: the coefficients are numpy's numbers, which other namespaces refuse
-    co = tuple(float(c) for c in conversion_coefficients(code, s, sr2))
-    co_start = tuple(float(c) for c in conversion_coefficients(start_code, s, sr2))
+    # as Python floats: the scalars are numpy's numbers, which other namespaces refuse
+    table = conversion_table([method], s_.sigma_r_m, s_.sigma_beta_rad)[0, 0]
+    co, co_start = (tuple(float(c) for c in row) for row in table)
     sx, sy = s_.site_m
     T, q = s_.period_s, s_.sigma_a_mps2**2
     prm = s_.ukf.weights(4)
     n_scans = r_hat.shape[1]
-    zx, zy, r00, r01, r11 = _convert(xp, start_code, r_hat[:, 0], beta_hat[:, 0], sr2, s, co_start)
+    zx, zy, r00, r01, r11 = _convert(xp, start_form, r_hat[:, 0], beta_hat[:, 0], sr2, s, co_start)
     zero = xp.zeros_like(zx)
     v0 = zero + s_.sigma_v0_mps**2
     x = (zx + sx, zero, zy + sy, zero)
@@ -110,12 +112,12 @@ def filter_history_xp(
     for n in range(1, n_scans):
         r, b = r_hat[:, n], beta_hat[:, n]
         x, P = predict_2d(x, P, T, white_acceleration(T, q))
-        if code == EKF:
+        if kind == Kind.EKF:
             x, P = steps["ekf_update_2d"](x, P, r, b, sr2, s, sx, sy)
-        elif code == UKF:
+        elif kind == Kind.UKF:
             x, P = steps["ukf_update_2d"](x, P, r, b, sr2, s, sx, sy, *prm)
         else:
-            zx, zy, r00, r01, r11 = _convert(xp, code, r, b, sr2, s, co, x[0] - sx, x[2] - sy)
+            zx, zy, r00, r01, r11 = _convert(xp, form, r, b, sr2, s, co, x[0] - sx, x[2] - sy)
             nx, ny = zx + sx - x[0], zy + sy - x[2]
             x, P = steps["position_update_2d"](x, P, nx, ny, r00, r01, r11)
         if radial_velocity_mps is not None:

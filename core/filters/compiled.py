@@ -40,12 +40,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from radarviz.core.confidence import BAND_GROUPS
-from radarviz.core.filters.codes import METHOD_CODES, START_CODES
+from radarviz.core.filters.methods import METHODS, conversion_table, method_plan
 from radarviz.core.filters.polar_ukf import UKFParams
 from radarviz.core.filters.state import CVBatch
 from radarviz.core.filters.terms import SUM_NAMES
 
-COMPILED_METHODS: tuple[str, ...] = tuple(METHOD_CODES)
+#: The methods the compiled Monte Carlo runs: every registered 2D method (the kernel reads a
+#: method only through ``method_plan`` and ``conversion_table``).
+COMPILED_METHODS: tuple[str, ...] = tuple(n for n, m in METHODS.items() if 2 in m.dims)
 #: Chunks of fewer scans read the measurements scan-major (``filter_scans``).
 SCAN_MAJOR_BELOW = 8
 #: The Monte Carlo engines an experiment can run on: this module, or the numpy engine (the
@@ -176,12 +178,14 @@ def filter_scans(
         offset = int(terms.offset)
     s = settings
     c, wm0, wc0, w = s.ukf.weights(4)
+    plan = method_plan([method])[0]
+    conversions = conversion_table([method], s.sigma_r_m, s.sigma_beta_rad)[0, 0]
     for first in range(begin, steps, k):
         last = min(first + k, steps)
         sums[...] = 0.0
         kernel(
-            METHOD_CODES[method],
-            START_CODES[method],
+            plan,
+            conversions,
             r_runs,
             b_runs,
             vr_runs,

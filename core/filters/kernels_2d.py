@@ -23,16 +23,9 @@ import numba
 import numpy as np
 
 from radarviz.core.confidence import BAND_GROUPS
-from radarviz.core.conversion.elementwise import (
-    CMKF_D,
-    CONVERSION_FUNCTIONS,
-    DUCM,
-    NAIVE,
-    SEED,
-    UCM,
-)
+from radarviz.core.conversion.elementwise import CONVERSION_FUNCTIONS, Covariance
 from radarviz.core.filters import tuples
-from radarviz.core.filters.codes import EKF, UKF, is_polar, reads_prediction
+from radarviz.core.filters.methods import Kind
 from radarviz.core.filters.predict import (
     add_process_noise,
     predict_2d,
@@ -73,40 +66,36 @@ def wrap(a: float) -> float:
 
 
 # The conversions' arithmetic lives in ``core.conversion.elementwise`` (the numpy engine's and
-# the array-API path's too), compiled here.
+# the array-API path's too), compiled here. A conversion reaches a kernel as its covariance
+# form (a ``Covariance``) and its scalars (``core.filters.methods.conversion_table``, κ
+# first), never as a name: the kernels branch on the form only.
 conversion_steps = rebind(CONVERSION_FUNCTIONS, {}, _inline)
-_coefficients = conversion_steps["conversion_coefficients"]
 _converted_point = conversion_steps["converted_point"]
 
 
-@_jit
-def coefficients(code: int, s: float, sr2: float):
-    """The scalars of a conversion that depend on s = σβ² and σr² only, formed once per block
-    (they are most of a conversion's transcendental functions): an (8,) array
-    (``core.conversion.elementwise.conversion_coefficients``)."""
-    t = _coefficients(code, s, sr2)
-    co = np.empty(8)
-    for i in range(8):
-        co[i] = t[i]
-    return co
+@_inline
+def row_tuple(co):
+    """An (8,) row of conversion scalars as a tuple (registers, not loads, in a loop)."""
+    return (co[0], co[1], co[2], co[3], co[4], co[5], co[6], co[7])
 
 
 @_inline
-def convert_cs(code: int, r: float, cos_b: float, sin_b: float, sr2: float, s: float, px, py, co):
-    # The five conversions of core.conversion.planar: point and covariance (radar-centred) of
-    # the plot (r, β̂), cos_b = cos β̂, sin_b = sin β̂; ``co``: ``coefficients(code, s, sr2)``
-    # (or its tuple); (px, py) the radar-centred prediction (ducm).
+def convert_cs(form, r: float, cos_b: float, sin_b: float, sr2: float, s: float, px, py, co):
+    # A conversion's point and covariance (radar-centred) of the plot (r, β̂), cos_b = cos β̂,
+    # sin_b = sin β̂; ``form`` its ``Covariance``, ``co`` its scalars (a row of
+    # ``conversion_table``, or its tuple); (px, py) the radar-centred prediction (read by
+    # ``EXACT_AT_PREDICTION`` only).
     rp = cp = sp = 0.0
-    if code == DUCM:  # the covariance at the predicted position
+    if form == Covariance.EXACT_AT_PREDICTION:  # the covariance at the predicted position
         rp = norm(px, py)
         cp, sp = px / rp, py / rp
-    return _converted_point(code, r, cos_b, sin_b, sr2, s, co, rp, cp, sp)
+    return _converted_point(form, r, cos_b, sin_b, sr2, s, co, rp, cp, sp)
 
 
 @_inline
-def convert(code: int, r: float, b: float, sr2: float, s: float, px: float, py: float, co):
+def convert(form, r: float, b: float, sr2: float, s: float, px: float, py: float, co):
     # ``convert_cs`` with the C library's cos β̂, sin β̂
-    return convert_cs(code, r, cos(b), sin(b), sr2, s, px, py, co)
+    return convert_cs(form, r, cos(b), sin(b), sr2, s, px, py, co)
 
 
 # The state of one track as scalars: x = (x, ẋ, y, ẏ) and p = the ten upper entries of the
@@ -167,9 +156,6 @@ _predict_2d = _inline(predict_2d)
 white_acceleration_c = _inline(white_acceleration)
 predict_components_c = _inline(predict_components)
 add_process_noise_c = _inline(add_process_noise)
-# The method codes' tests (``core.filters.codes``), for the kernel modules.
-is_polar_c = _inline(is_polar)
-reads_prediction_c = _inline(reads_prediction)
 
 
 @_inline
@@ -361,22 +347,23 @@ def _store_lane(xt, p, buf, j):
 
 
 @_inline
-def _update_lanes(code, buf, sr2, s, T, q, sx, sy, co, c, wm0, wc0, w):
+def _update_lanes(kind, form, buf, sr2, s, T, q, sx, sy, co, c, wm0, wc0, w):
     # Every lane of a block one scan on: predict, then the method's update on the lane's plot
-    # (the steps' vectorisable binding). ``code`` is a constant where this is
-    # inlined, so the method's branch is chosen before LLVM vectorises the loop.
+    # (the steps' vectorisable binding). ``kind`` (a ``Kind``) and ``form`` (a converted
+    # method's ``Covariance``) are constants where this is inlined, so the branch is chosen
+    # before LLVM vectorises the loop.
     for j in range(LANES):
         xt, p = _lane(buf, j)
         r, b = buf[_R * LANES + j], buf[_B * LANES + j]
         xt, p = predict_s(xt, p, T, q)
-        if code == EKF:
+        if kind == Kind.EKF:
             xt, p = ekf_update_v(xt, p, r, b, sr2, s, sx, sy)
-        elif code == UKF:
+        elif kind == Kind.UKF:
             xt, p = ukf_update_v(xt, p, r, b, sr2, s, sx, sy, c, wm0, wc0, w)
         else:
             sin_b, cos_b = _sincos(b)
             zx, zy, r00, r01, r11 = convert_cs(
-                code, r, cos_b, sin_b, sr2, s, xt[0] - sx, xt[2] - sy, co
+                form, r, cos_b, sin_b, sr2, s, xt[0] - sx, xt[2] - sy, co
             )
             xt, p = position_update_v(xt, p, zx + sx - xt[0], zy + sy - xt[2], r00, r01, r11)
         _store_lane(xt, p, buf, j)
@@ -426,13 +413,16 @@ def _add_terms(buf, sums, i, m0, n_sum):
 
 @_jit
 def filter_scans_2d(
-    code, start_code, r_hat, b_hat, vr_hat, doppler, first, last, sigma_r_m, sigma_beta_rad,
+    plan, conversions, r_hat, b_hat, vr_hat, doppler, first, last, sigma_r_m, sigma_beta_rad,
     sigma_vr_mps, T, sigma_a_mps2, sigma_v0_mps, sx, sy, c, wm0, wc0, w, state, keep, xs, Ps,
     n_terms, truth, cos_los, sin_los, group_sums, group_offset,
 ):  # fmt: skip
-    """Scans ``first … last − 1`` of every run; scan 0 starts a track from its plot (code
-    ``start_code``), later scans continue from ``state`` (runs, 14): each run's x then the
-    upper entries of P (``load_row``), updated in place.
+    """Scans ``first … last − 1`` of every run; scan 0 starts a track from its plot, later
+    scans continue from ``state`` (runs, 14): each run's x then the upper entries of P
+    (``load_row``), updated in place.
+
+    plan (3,), conversions (2, 8): the method's row of ``core.filters.methods.method_plan``
+    and of ``conversion_table`` (its update's scalars, then its start's).
 
     r_hat, b_hat, vr_hat: (m, N) measurements, one run a row (any memory layout). Runs
     m < ``n_terms`` add their metric terms (``terms_s``) at scan n into
@@ -446,7 +436,8 @@ def filter_scans_2d(
     filtered on its own, so its result does not depend on the block it falls in."""
     sr2, s, q = sigma_r_m * sigma_r_m, sigma_beta_rad * sigma_beta_rad, sigma_a_mps2 * sigma_a_mps2
     var_vr = sigma_vr_mps * sigma_vr_mps
-    co, co_start = _coefficients(code, s, sr2), coefficients(start_code, s, sr2)
+    kind, form, start_form = plan[0], plan[1], plan[2]
+    co, co_start = row_tuple(conversions[0]), row_tuple(conversions[1])
     groups = group_sums.shape[0]
     runs = r_hat.shape[0]
     buf = np.empty(_ROWS * LANES)
@@ -464,7 +455,7 @@ def filter_scans_2d(
             m = m0 + j if j < nb else m0  # a short block's spare lanes repeat its first run
             if first == 0:
                 zx, zy, r00, r01, r11 = convert(
-                    start_code, r_hat[m, 0], b_hat[m, 0], sr2, s, 0.0, 0.0, co_start
+                    start_form, r_hat[m, 0], b_hat[m, 0], sr2, s, 0.0, 0.0, co_start
                 )
                 xt, p = start_s(zx + sx, zy + sy, r00, r01, r11, sigma_v0_mps)
             else:
@@ -477,21 +468,20 @@ def filter_scans_2d(
                     buf[_R * LANES + j] = r_hat[m, n]
                     buf[_B * LANES + j] = b_hat[m, n]
                     buf[_V * LANES + j] = vr_hat[m, n] if doppler else 0.0
-                # one loop per method, each with its code a constant (``_update_lanes``)
-                if code == NAIVE:
-                    _update_lanes(NAIVE, buf, sr2, s, T, q, sx, sy, co, c, wm0, wc0, w)
-                elif code == SEED:
-                    _update_lanes(SEED, buf, sr2, s, T, q, sx, sy, co, c, wm0, wc0, w)
-                elif code == CMKF_D:
-                    _update_lanes(CMKF_D, buf, sr2, s, T, q, sx, sy, co, c, wm0, wc0, w)
-                elif code == UCM:
-                    _update_lanes(UCM, buf, sr2, s, T, q, sx, sy, co, c, wm0, wc0, w)
-                elif code == DUCM:
-                    _update_lanes(DUCM, buf, sr2, s, T, q, sx, sy, co, c, wm0, wc0, w)
-                elif code == EKF:
-                    _update_lanes(EKF, buf, sr2, s, T, q, sx, sy, co, c, wm0, wc0, w)
+                # one loop per kind of update, each with its kind a constant (``_update_lanes``)
+                lanes = (buf, sr2, s, T, q, sx, sy, co, c, wm0, wc0, w)
+                if kind == Kind.EKF:
+                    _update_lanes(Kind.EKF, Covariance.LINEARIZED, *lanes)
+                elif kind == Kind.UKF:
+                    _update_lanes(Kind.UKF, Covariance.LINEARIZED, *lanes)
+                elif form == Covariance.LINEARIZED:
+                    _update_lanes(Kind.CONVERTED, Covariance.LINEARIZED, *lanes)
+                elif form == Covariance.AVERAGED:
+                    _update_lanes(Kind.CONVERTED, Covariance.AVERAGED, *lanes)
+                elif form == Covariance.EXACT:
+                    _update_lanes(Kind.CONVERTED, Covariance.EXACT, *lanes)
                 else:
-                    _update_lanes(UKF, buf, sr2, s, T, q, sx, sy, co, c, wm0, wc0, w)
+                    _update_lanes(Kind.CONVERTED, Covariance.EXACT_AT_PREDICTION, *lanes)
                 if doppler:
                     _doppler_lanes(buf, var_vr, s)
             i = n - first

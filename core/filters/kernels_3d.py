@@ -17,22 +17,20 @@ from math import atan2, cos, log, sin, sqrt
 
 import numpy as np
 
-from radarviz.core.conversion.elementwise import scale
+from radarviz.core.conversion.elementwise import Covariance
 from radarviz.core.conversion.elementwise_3d import CONVERSION_FUNCTIONS_3D
-from radarviz.core.filters.codes import UKF
 from radarviz.core.filters.kernels_2d import (
     _exact,
     _inline,
     _jit,
     _select,
     add_process_noise_c,
-    is_polar_c,
     predict_components_c,
-    reads_prediction_c,
     white_acceleration_c,
     wrap,
 )
 from radarviz.core.filters.kernels_track import time_step
+from radarviz.core.filters.methods import PLAN_COVARIANCE, PLAN_KIND, PLAN_START, Kind
 from radarviz.core.filters.rebind import rebind
 from radarviz.core.filters.steps_3d import bind_3d
 
@@ -54,18 +52,18 @@ doppler_update_3d = _steps["doppler_update_3d"]
 # reordered their products and sums differently at each, so a target's results came to depend
 # by rounding on which site converted its plot, and so on the other targets in its block (the
 # bit-for-bit tests of ``tests/test_track_compiled.py``).
-_conversions = rebind(CONVERSION_FUNCTIONS_3D, {"scale": _exact(scale)}, _exact)
+_conversions = rebind(CONVERSION_FUNCTIONS_3D, {}, _exact)
 _noise_table = _conversions["noise_table"]
 _converted_point_3d = _conversions["converted_point_3d"]
 
 
 @_jit
 def fill_noise_table(sb2: float, se2: float, out):
-    # A radar's noise-only factors of the conversions into out (5, 5)
+    # A radar's noise-only factors of the conversions into out (4, 5)
     # (``core.conversion.elementwise_3d.noise_table``; once per radar, not per plot, method
     # and model)
     t = _noise_table(sb2, se2)
-    for a in range(5):
+    for a in range(4):
         row = t[a]
         for c in range(5):
             out[a, c] = row[c]
@@ -73,9 +71,9 @@ def fill_noise_table(sb2: float, se2: float, out):
 
 @_jit
 def conversion_scratch(radars: int):
-    # The conversions' per-kernel arrays: the noise table of every radar (radars, 5, 5) and
-    # ``conv`` = (trig (4,), ex (5, 5)) that ``plot_factors`` fills per plot
-    return np.empty((radars, 5, 5)), (np.empty(4), np.empty((5, 5)))
+    # The conversions' per-kernel arrays: the noise table of every radar (radars, 4, 5) and
+    # ``conv`` = (trig (4,), ex (4, 5)) that ``plot_factors`` fills per plot
+    return np.empty((radars, 4, 5)), (np.empty(4), np.empty((4, 5)))
 
 
 @_inline
@@ -84,20 +82,21 @@ def plot_factors(b: float, el: float, ex_g, conv):
     # method and model: trig = (cos β̂, sin β̂, cos ε̂, sin ε̂), and its radar's noise table
     trig, ex = conv
     trig[0], trig[1], trig[2], trig[3] = cos(b), sin(b), cos(el), sin(el)
-    for a in range(5):
+    for a in range(4):
         for c in range(5):
             ex[a, c] = ex_g[a, c]
 
 
 @_inline
-def convert_3d(code, r, sr2, sb2, se2, px, py, pz, z, R, conv):
+def convert_3d(form, k, r, sr2, sb2, se2, px, py, pz, z, R, conv):
     # The radar-centred point z (3,) and covariance R (3, 3) of (r̂, β̂, ε̂), whose cosines,
-    # sines and radar's noise table ``plot_factors`` put in ``conv``; (px, py, pz): the
-    # predicted position minus the site (ducm only)
+    # sines and radar's noise table ``plot_factors`` put in ``conv``, by the conversion of
+    # covariance ``form`` and scales k = (κxy, κz) (a row of ``scale_table``); (px, py, pz):
+    # the predicted position minus the site (read by ``EXACT_AT_PREDICTION`` only)
     # (``core.conversion.elementwise_3d.converted_point_3d``)
     trig, ex = conv
     t = _converted_point_3d(
-        code, r, trig[0], trig[1], trig[2], trig[3], sr2, sb2, se2, ex, px, py, pz
+        form, k[0], k[1], r, trig[0], trig[1], trig[2], trig[3], sr2, sb2, se2, ex, px, py, pz
     )
     z[0], z[1], z[2] = t[0], t[1], t[2]
     R[0, 0], R[0, 1], R[0, 2] = t[3], t[4], t[5]
@@ -178,30 +177,32 @@ def doppler_nis_3d(x, P, vr_hat, trig, var_vr, sb2, se2, u) -> float:
 
 @_inline
 def position_measurement_3d(
-    code, x, r, b, el, sr2, sb2, se2, sx, sy, sz, nu, R, z, conv, converted=False
+    plan, k, x, r, b, el, sr2, sb2, se2, sx, sy, sz, nu, R, z, conv, converted=False
 ):
-    """The position stage of method ``code`` on the prediction x (6,) as a position
+    """The position stage of the method of ``plan`` (its row of ``method_plan``; k its
+    update's scales, a row of ``scale_table``) on the prediction x (6,) as a position
     measurement (``MethodGroup.measurement``) into nu (3,) (m) and R (3, 3) (m²): converted
     methods ν = z + site − H x⁻ with the conversion's z (3,) and R; ``ekf`` and ``ukf`` the
     EKF's ν' = J ν, R' = J R Jᵀ at the prediction. ``conv`` (``conversion_scratch``, the
-    plot's ``plot_factors`` in it) is
-    scratch. ``converted``: z and R hold this plot's conversion already (a conversion that
-    does not read the prediction, not ducm, made for another state of the same track)."""
-    if is_polar_c(code):
+    plot's ``plot_factors`` in it) is scratch. ``converted``: z and R hold this plot's
+    conversion already (one that does not read the prediction, made for another state of the
+    same track)."""
+    form = plan[PLAN_COVARIANCE]
+    if plan[PLAN_KIND] != Kind.CONVERTED:
         ekf_measurement_3d_c(x[0] - sx, x[2] - sy, x[4] - sz, r, b, el, sr2, sb2, se2, nu, R)
     else:
-        if not (converted and not reads_prediction_c(code)):
+        if not (converted and form != Covariance.EXACT_AT_PREDICTION):
             px, py, pz = x[0] - sx, x[2] - sy, x[4] - sz
-            convert_3d(code, r, sr2, sb2, se2, px, py, pz, z, R, conv)
+            convert_3d(form, k, r, sr2, sb2, se2, px, py, pz, z, R, conv)
         nu[0], nu[1], nu[2] = z[0] + sx - x[0], z[1] + sy - x[2], z[2] + sz - x[4]
 
 
 @_inline
-def start_track_3d(start_code, x, P, r, b, el, sr2, sb2, se2, sx, sy, sz, sigma_v0_mps, z, R, conv):
-    """A track started at its first plot into x (6,), P (6, 6): the method's start conversion
-    about no prediction, velocity 0 with std ``sigma_v0_mps`` (``Method.start``); z (3,), R (3, 3),
-    ``conv``: scratch."""
-    convert_3d(start_code, r, sr2, sb2, se2, 0.0, 0.0, 0.0, z, R, conv)
+def start_track_3d(plan, k, x, P, r, b, el, sr2, sb2, se2, sx, sy, sz, sigma_v0_mps, z, R, conv):
+    """A track started at its first plot into x (6,), P (6, 6): the start conversion of the
+    method of ``plan`` (k its scales), velocity 0 with std ``sigma_v0_mps`` (``Method.start``);
+    z (3,), R (3, 3), ``conv``: scratch."""
+    convert_3d(plan[PLAN_START], k, r, sr2, sb2, se2, 0.0, 0.0, 0.0, z, R, conv)
     start_3d(x, P, z, R, sx, sy, sz, sigma_v0_mps)
 
 
@@ -220,11 +221,11 @@ def position_stats_3d_c(P, nu, R, S, Si):
 
 
 @_inline
-def position_stage_3d(code, x, P, r, b, el, sr2, sb2, se2, sx, sy, sz, nu, R, prm, bufs):
-    """The method's update of x (6,), P (6, 6) in place: the UKF (``code`` ``UKF``) or the position
-    update by (ν, R); ``bufs`` the scratch (S, Si, K, U, L, Z, E) of ``scratch_3d``."""
+def position_stage_3d(plan, x, P, r, b, el, sr2, sb2, se2, sx, sy, sz, nu, R, prm, bufs):
+    """The method's update of x (6,), P (6, 6) in place: the UKF (kind ``Kind.UKF``) or the
+    position update by (ν, R); ``bufs`` the scratch (S, Si, K, U, L, Z, E) of ``scratch_3d``."""
     S, Si, K, U, L, Z, E = bufs
-    if code == UKF:
+    if plan[PLAN_KIND] == Kind.UKF:
         ukf_update_3d(x, P, r, b, el, sr2, sb2, se2, sx, sy, sz, prm, L, Z, K, S, Si, E)
     else:
         position_update_3d(x, P, nu, R, S, Si, K, U, L)
@@ -247,15 +248,16 @@ def scratch_3d():
 
 @_jit
 def track_plots_3d(
-    codes, start_codes, slot, time_s, r_m, az_rad, el_rad, vr_mps, has_vr, radar, site,
+    plan, scales, slot, time_s, r_m, az_rad, el_rad, vr_mps, has_vr, radar, site,
     sigma_r_m, sigma_beta_rad, sigma_elevation_rad, sigma_vr_mps, sigma_a_mps2, sigma_v0_mps, prm,
     xs, Ps, started, last_t, out_x, out_P, out_nis,
 ):  # fmt: skip
     """``core.filters.kernels_track.track_plots_2d`` in 3D: plots with elevations el_rad
     (B,), sites (R, 3), σε sigma_elevation_rad (R,), states xs (K, M, 6), Ps (K, M, 6, 6), outputs
-    (B, M, 6), (B, M, 6, 6), (B, M); ``prm`` the UKF's weights for n = 6. Returns −1 or the
+    (B, M, 6), (B, M, 6, 6), (B, M); ``prm`` the UKF's weights for n = 6; scales (R, M, 2, 2)
+    the methods' ``scale_table`` in place of 2D's conversion scalars. Returns −1 or the
     index of the first plot before its slot's previous one."""
-    n_m = codes.shape[0]
+    n_m = plan.shape[0]
     q = sigma_a_mps2 * sigma_a_mps2
     x, P = np.empty(6), np.empty((6, 6))
     z, nu, u, Uv, Kv = np.empty(3), np.empty(3), np.empty(3), np.empty(6), np.empty(6)
@@ -276,13 +278,12 @@ def track_plots_3d(
         if dt < 0.0:
             return i
         for j in range(n_m):
-            code = codes[j]
+            pj, kj = plan[j], scales[g, j]
             nis = np.nan
             if new:
                 start_track_3d(
-                    start_codes[j], x, P, r, b, el, sr2, sb2, se2, sx, sy, sz, sigma_v0_mps, z,
-                    R, conv,
-                )  # fmt: skip
+                    pj, kj[1], x, P, r, b, el, sr2, sb2, se2, sx, sy, sz, sigma_v0_mps, z, R, conv
+                )
             else:
                 for a in range(6):
                     x[a] = xs[k, j, a]
@@ -291,10 +292,10 @@ def track_plots_3d(
                 if dt > 0.0:
                     predict_3d(x, P, dt, q)
                 position_measurement_3d(
-                    code, x, r, b, el, sr2, sb2, se2, sx, sy, sz, nu, R, z, conv
+                    pj, kj[0], x, r, b, el, sr2, sb2, se2, sx, sy, sz, nu, R, z, conv
                 )
                 nis = position_stats_3d_c(P, nu, R, bufs[0], bufs[1])[0]
-                position_stage_3d(code, x, P, r, b, el, sr2, sb2, se2, sx, sy, sz, nu, R, prm, bufs)
+                position_stage_3d(pj, x, P, r, b, el, sr2, sb2, se2, sx, sy, sz, nu, R, prm, bufs)
             if has_vr[i]:
                 var_vr = sigma_vr_mps[g] * sigma_vr_mps[g]
                 if not new:

@@ -41,7 +41,6 @@ from radarviz.core.filters.kernels_2d import (
     _inline,
     _jit,
     add_process_noise_c,
-    coefficients,
     doppler_update,
     load,
     load_3d,
@@ -64,7 +63,6 @@ from radarviz.core.filters.kernels_3d import (
     start_track_3d,
 )
 from radarviz.core.filters.kernels_track import (
-    conversion_tables,
     doppler_stats,
     position_measurement,
     position_nis,
@@ -190,7 +188,7 @@ def _started(x, P, mu0, xm, Pm, mu):
 
 @_jit
 def track_plots_imm_2d(
-    codes, start_codes, slot, time_s, r_m, az_rad, vr_mps, has_vr, radar, site, sigma_r_m,
+    plan, conversions, slot, time_s, r_m, az_rad, vr_mps, has_vr, radar, site, sigma_r_m,
     sigma_beta_rad, sigma_vr_mps, sigma_a_mps2, omega, Pi, mu0, sigma_v0_mps, prm, with_stats, xs,
     Ps, mus, started, last_t, out_x, out_P, out_nis,
 ):  # fmt: skip
@@ -199,7 +197,7 @@ def track_plots_imm_2d(
     filtered).
 
     Args:
-        codes … sigma_vr_mps, sigma_v0_mps, prm: as ``track_plots_2d``.
+        plan … sigma_vr_mps, sigma_v0_mps, prm: as ``track_plots_2d``.
         sigma_a_mps2: (r,) σa of each model (m/s²); omega: (r,) its turn rate ω (rad/s, 0: constant
             velocity); Pi: (r, r) Π; mu0: (r,) a new track's μ.
         with_stats: compute the monitor's NIS (else out_nis is NaN).
@@ -208,8 +206,7 @@ def track_plots_imm_2d(
         out_x (B, M, 4), out_P (B, M, 4, 4): each plot's combined posterior per method;
             out_nis (B, M): the NIS of the combined prediction, NaN at a start.
     """
-    n_m, r = codes.shape[0], sigma_a_mps2.shape[0]
-    co, co_s = conversion_tables(codes, start_codes, sigma_r_m, sigma_beta_rad)
+    n_m, r = plan.shape[0], sigma_a_mps2.shape[0]
     bufs = scratch_2d()
     K = bufs[0]
     x, P = np.empty(4), np.empty((4, 4))
@@ -226,10 +223,10 @@ def track_plots_imm_2d(
         if dt < 0.0:
             return i
         for j in range(n_m):
-            code = codes[j]
+            pj, co = plan[j], conversions[g, j]
             nis = np.nan
             if new:
-                start_track(start_codes[j], x, P, rr, b, sr2, s, sx, sy, co_s[g, j], sigma_v0_mps)
+                start_track(pj, x, P, rr, b, sr2, s, sx, sy, co[1], sigma_v0_mps)
                 if has_vr[i]:
                     doppler_update(x, P, vr_mps[i], b, var_vr, s, K)
                 _started(x, P, mu0, x0, P0, mu)
@@ -240,13 +237,13 @@ def track_plots_imm_2d(
                     predict_models(x0, P0, 4, dt, sigma_a_mps2, omega)
                 if with_stats:
                     combine_2d(x0, P0, c, x, P)
-                    meas = position_measurement(code, x, rr, b, sr2, s, sx, sy, co[g, j])
+                    meas = position_measurement(pj, x, rr, b, sr2, s, sx, sy, co[0])
                     nis = position_stats(P, *meas)[0]
                 for m in range(r):
                     xj, Pj = x0[m], P0[m]
-                    meas = position_measurement(code, xj, rr, b, sr2, s, sx, sy, co[g, j])
+                    meas = position_measurement(pj, xj, rr, b, sr2, s, sx, sy, co[0])
                     ll[m] = log_likelihood(*position_stats(Pj, *meas), 2)
-                    position_stage(code, xj, Pj, rr, b, sr2, s, sx, sy, prm, meas, bufs)
+                    position_stage(pj, xj, Pj, rr, b, sr2, s, sx, sy, prm, meas, bufs)
                 mode_probabilities(c, ll, mu)
                 if has_vr[i]:
                     if with_stats:
@@ -268,15 +265,15 @@ def track_plots_imm_2d(
 
 @_jit
 def track_plots_imm_3d(
-    codes, start_codes, slot, time_s, r_m, az_rad, el_rad, vr_mps, has_vr, radar, site,
+    plan, scales, slot, time_s, r_m, az_rad, el_rad, vr_mps, has_vr, radar, site,
     sigma_r_m, sigma_beta_rad, sigma_elevation_rad, sigma_vr_mps, sigma_a_mps2, omega, Pi, mu0,
     sigma_v0_mps, prm, with_stats, xs, Ps, mus, started, last_t, out_x, out_P, out_nis,
 ):  # fmt: skip
     """``track_plots_imm_2d`` in 3D (``core.filters.kernels_3d.track_plots_3d``'s stages):
     elevations el_rad (B,), sites (R, 3), σε sigma_elevation_rad (R,), models xs (K, M, r, 6),
     Ps (K, M, r, 6, 6), outputs (B, M, 6), (B, M, 6, 6), (B, M); ``prm`` the UKF's weights
-    for n = 6."""
-    n_m, r = codes.shape[0], sigma_a_mps2.shape[0]
+    for n = 6; scales (R, M, 2, 2) as ``track_plots_3d``'s."""
+    n_m, r = plan.shape[0], sigma_a_mps2.shape[0]
     x, P = np.empty(6), np.empty((6, 6))
     x0, P0 = np.empty((r, 6)), np.empty((r, 6, 6))  # the models, mixed then advanced
     mu, c, ll, w = np.empty(r), np.empty(r), np.empty(r), np.empty((r, r))
@@ -300,13 +297,12 @@ def track_plots_imm_3d(
         if dt < 0.0:
             return i
         for j in range(n_m):
-            code = codes[j]
+            pj, kj = plan[j], scales[g, j]
             nis = np.nan
             if new:
                 start_track_3d(
-                    start_codes[j], x, P, rr, b, el, sr2, sb2, se2, sx, sy, sz, sigma_v0_mps, z,
-                    R, conv,
-                )  # fmt: skip
+                    pj, kj[1], x, P, rr, b, el, sr2, sb2, se2, sx, sy, sz, sigma_v0_mps, z, R, conv
+                )
                 if has_vr[i]:
                     doppler_update_3d(x, P, vr, trig, var_vr, sb2, se2, u, Uv, Kv, bufs[4])
                 _started(x, P, mu0, x0, P0, mu)
@@ -318,22 +314,23 @@ def track_plots_imm_3d(
                 if with_stats:
                     combine_3d(x0, P0, c, x, P)
                     position_measurement_3d(
-                        code, x, rr, b, el, sr2, sb2, se2, sx, sy, sz, nu, R, z, conv
+                        pj, kj[0], x, rr, b, el, sr2, sb2, se2, sx, sy, sz, nu, R, z, conv
                     )
                     nis = position_stats_3d_c(P, nu, R, bufs[0], bufs[1])[0]
-                # From the first conversion on, z and R hold this plot's (for codes < 4: one
-                # that does not read the prediction, so every model's is the same).
+                # From the first conversion on, z and R hold this plot's (for a conversion
+                # that does not read the prediction, every model's is the same).
                 converted = with_stats
                 for m in range(r):
                     xj, Pj = x0[m], P0[m]
                     position_measurement_3d(
-                        code, xj, rr, b, el, sr2, sb2, se2, sx, sy, sz, nu, R, z, conv, converted
-                    )
+                        pj, kj[0], xj, rr, b, el, sr2, sb2, se2, sx, sy, sz, nu, R, z, conv,
+                        converted,
+                    )  # fmt: skip
                     converted = True
                     st = position_stats_3d_c(Pj, nu, R, bufs[0], bufs[1])
                     ll[m] = log_likelihood(st[0], st[1], 3)
                     position_stage_3d(
-                        code, xj, Pj, rr, b, el, sr2, sb2, se2, sx, sy, sz, nu, R, prm, bufs
+                        pj, xj, Pj, rr, b, el, sr2, sb2, se2, sx, sy, sz, nu, R, prm, bufs
                     )
                 mode_probabilities(c, ll, mu)
                 if has_vr[i]:
@@ -395,38 +392,37 @@ def predicted_imm(xs, Ps, mus, slot, j: int, dt, sigma_a_mps2, omega, Pi, out_x,
 
 @_jit
 def gate_nis_imm_2d(
-    xs, Ps, mus, slot, j: int, dt, sigma_a_mps2, omega, Pi, code: int, r_m, az_rad, sigma_r_m,
+    xs, Ps, mus, slot, j: int, dt, sigma_a_mps2, omega, Pi, plan, co, r_m, az_rad, sigma_r_m,
     sigma_beta_rad, site, out,
 ):  # fmt: skip
     """d² = νᵀ S⁻¹ ν of N (track, plot) pairs, 2D: pair i's track (slot[i], method j, of
-    ``code``) predicted over dt[i] (``combined_prediction``) against its plot r_m[i],
-    az_rad[i] with noise std sigma_r_m[i], sigma_beta_rad[i] at site[i] (N, 2): the method's
-    position measurement and its NIS (``position_measurement``, ``position_nis``), the
-    statistic of the tracker kernels' monitor, into out (N,) (NaN where S is not positive
-    definite)."""
+    ``plan``, its row of ``method_plan``; co[i] its update's scalars for pair i) predicted
+    over dt[i] (``combined_prediction``) against its plot r_m[i], az_rad[i] with noise std
+    sigma_r_m[i], sigma_beta_rad[i] at site[i] (N, 2): the method's position measurement
+    and its NIS (``position_measurement``, ``position_nis``), the statistic of the tracker
+    kernels' monitor, into out (N,) (NaN where S is not positive definite)."""
     r = sigma_a_mps2.shape[0]
     x0, P0 = np.empty((r, 4)), np.empty((r, 4, 4))
     mu, c, w = np.empty(r), np.empty(r), np.empty((r, r))
     x, P = np.empty(4), np.empty((4, 4))
     for i in range(slot.shape[0]):
         k = slot[i]
-        co = coefficients(code, sigma_beta_rad[i] * sigma_beta_rad[i], sigma_r_m[i] * sigma_r_m[i])
         out[i] = pair_nis_2d(
-            xs[k, j], Ps[k, j], mus[k, j], dt[i], sigma_a_mps2, omega, Pi, code, r_m[i], az_rad[i],
-            sigma_r_m[i], sigma_beta_rad[i], site[i, 0], site[i, 1], co, x0, P0, mu, c, w, x, P,
+            xs[k, j], Ps[k, j], mus[k, j], dt[i], sigma_a_mps2, omega, Pi, plan, r_m[i], az_rad[i],
+            sigma_r_m[i], sigma_beta_rad[i], site[i, 0], site[i, 1], co[i], x0, P0, mu, c, w, x, P,
         )  # fmt: skip
 
 
 @_inline
-def pair_nis_2d(xm, Pm, mu_k, dt, sigma_a_mps2, omega, Pi, code, r, b, sigma_r_m, sigma_beta_rad,
+def pair_nis_2d(xm, Pm, mu_k, dt, sigma_a_mps2, omega, Pi, plan, r, b, sigma_r_m, sigma_beta_rad,
                 sx, sy, co, x0, P0, mu, c, w, x, P):  # fmt: skip
     """d² of one (track, plot) pair in 2D: the track's models xm, Pm, μ mu_k predicted over
     dt (``combined_prediction``) against the plot (r, b) with noise std sigma_r_m,
-    sigma_beta_rad at site (sx, sy) and the conversion's coefficients co (``coefficients``
-    of the noise: the same for every plot of a radar, so a caller forms them once), by method
-    ``code``'s position measurement and its NIS (NaN where S is not positive definite);
-    x0 … P scratch as ``combined_prediction``'s."""
+    sigma_beta_rad at site (sx, sy) and the conversion's scalars co (its row of
+    ``conversion_table`` for the noise: the same for every plot of a radar, so a caller forms
+    them once), by the position measurement of the method of ``plan`` and its NIS (NaN
+    where S is not positive definite); x0 … P scratch as ``combined_prediction``'s."""
     combined_prediction(xm, Pm, mu_k, dt, sigma_a_mps2, omega, Pi, x0, P0, mu, c, w, x, P)
     sr2, s = sigma_r_m * sigma_r_m, sigma_beta_rad * sigma_beta_rad
-    meas = position_measurement(code, x, r, b, sr2, s, sx, sy, co)
+    meas = position_measurement(plan, x, r, b, sr2, s, sx, sy, co)
     return position_nis(P, *meas)

@@ -21,20 +21,18 @@ from math import cos, log, sin
 
 import numpy as np
 
-from radarviz.core.filters.codes import UKF
 from radarviz.core.filters.kernels_2d import (
     _inline,
     _jit,
-    coefficients,
     convert,
     doppler_update,
     ekf_measurement_s,
-    is_polar_c,
     position_update,
     predict,
     start,
     ukf_update,
 )
+from radarviz.core.filters.methods import PLAN_COVARIANCE, PLAN_KIND, PLAN_START, Kind
 
 
 @_jit
@@ -85,36 +83,38 @@ def time_step(started, last_t, k: int, t: float) -> float:
 
 
 @_inline
-def position_measurement(code, x, r, b, sr2, s, sx, sy, co):
-    """The position stage of method ``code`` on the prediction x (4,) as a position
-    measurement (``MethodGroup.measurement``): (νx, νy, R00, R01, R11) in m, m². Converted
-    methods: ν = z + site − H x⁻ with the conversion's R (``co``: its coefficients); ``ekf``
-    and ``ukf``: ν' = J ν and R' = J R Jᵀ at the prediction (the UKF's statistics are the
-    EKF's, as the numpy engine's)."""
+def position_measurement(plan, x, r, b, sr2, s, sx, sy, co):
+    """The position stage of the method of ``plan`` (its row of
+    ``core.filters.methods.method_plan``) on the prediction x (4,) as a position measurement
+    (``MethodGroup.measurement``): (νx, νy, R00, R01, R11) in m, m². Converted methods:
+    ν = z + site − H x⁻ with the conversion's R (``co``: its scalars, a row of
+    ``conversion_table``); ``ekf`` and ``ukf``: ν' = J ν and R' = J R Jᵀ at the prediction
+    (the UKF's statistics are the EKF's, as the numpy engine's)."""
     px, py = x[0] - sx, x[2] - sy
-    if is_polar_c(code):
+    if plan[PLAN_KIND] != Kind.CONVERTED:
         return ekf_measurement_s(px, py, r, b, sr2, s)
-    zx, zy, r00, r01, r11 = convert(code, r, b, sr2, s, px, py, co)
+    zx, zy, r00, r01, r11 = convert(plan[PLAN_COVARIANCE], r, b, sr2, s, px, py, co)
     return zx + sx - x[0], zy + sy - x[2], r00, r01, r11
 
 
 @_inline
-def position_stage(code, x, P, r, b, sr2, s, sx, sy, prm, meas, bufs):
-    """The method's update of x (4,), P (4, 4) in place: the UKF's sigma points (``code`` ``UKF``)
-    or the position update by ``meas``, ``position_measurement``'s (νx, νy, R00, R01, R11);
-    ``bufs`` the scratch of ``scratch_2d``."""
+def position_stage(plan, x, P, r, b, sr2, s, sx, sy, prm, meas, bufs):
+    """The method's update of x (4,), P (4, 4) in place: the UKF's sigma points (kind
+    ``Kind.UKF``) or the position update by ``meas``, ``position_measurement``'s
+    (νx, νy, R00, R01, R11); ``bufs`` the scratch of ``scratch_2d``."""
     K, L, Z, E = bufs
-    if code == UKF:
+    if plan[PLAN_KIND] == Kind.UKF:
         ukf_update(x, P, r, b, sr2, s, sx, sy, prm, L, Z, K, E)
     else:
         position_update(x, P, meas[0], meas[1], meas[2], meas[3], meas[4], K, L)
 
 
 @_inline
-def start_track(start_code, x, P, r, b, sr2, s, sx, sy, co, sigma_v0_mps):
-    """A track started at its first plot into x (4,), P (4, 4): the method's start conversion
-    (``co`` its coefficients), velocity 0 with std ``sigma_v0_mps`` (``Method.start``)."""
-    zx, zy, r00, r01, r11 = convert(start_code, r, b, sr2, s, 0.0, 0.0, co)
+def start_track(plan, x, P, r, b, sr2, s, sx, sy, co, sigma_v0_mps):
+    """A track started at its first plot into x (4,), P (4, 4): the start conversion of the
+    method of ``plan`` (``co`` its scalars), velocity 0 with std ``sigma_v0_mps``
+    (``Method.start``)."""
+    zx, zy, r00, r01, r11 = convert(plan[PLAN_START], r, b, sr2, s, 0.0, 0.0, co)
     start(x, P, zx + sx, zy + sy, r00, r01, r11, sigma_v0_mps)
 
 
@@ -125,23 +125,8 @@ def scratch_2d():
 
 
 @_jit
-def conversion_tables(codes, start_codes, sigma_r_m, sigma_beta_rad):
-    """The conversions' noise-only scalars (``coefficients``), once per radar and method, not
-    per plot: (R, M, 8) for the methods' updates and for their starts."""
-    n_m, n_r = codes.shape[0], sigma_r_m.shape[0]
-    co = np.empty((n_r, n_m, 8))
-    co_s = np.empty((n_r, n_m, 8))
-    for g in range(n_r):
-        s, sr2 = sigma_beta_rad[g] * sigma_beta_rad[g], sigma_r_m[g] * sigma_r_m[g]
-        for j in range(n_m):
-            co[g, j, :] = coefficients(codes[j], s, sr2)
-            co_s[g, j, :] = coefficients(start_codes[j], s, sr2)
-    return co, co_s
-
-
-@_jit
 def track_plots_2d(
-    codes, start_codes, slot, time_s, r_m, az_rad, vr_mps, has_vr, radar, site, sigma_r_m,
+    plan, conversions, slot, time_s, r_m, az_rad, vr_mps, has_vr, radar, site, sigma_r_m,
     sigma_beta_rad, sigma_vr_mps, sigma_a_mps2, sigma_v0_mps, prm, xs, Ps, started, last_t, out_x,
     out_P, out_nis,
 ):  # fmt: skip
@@ -149,7 +134,8 @@ def track_plots_2d(
     time is before its slot's previous plot (nothing from it on is filtered).
 
     Args:
-        codes, start_codes: (M,) ``core.filters.compiled.METHOD_CODES`` / ``START_CODES``.
+        plan (M, 3): the methods' ``core.filters.methods.method_plan``.
+        conversions (R, M, 2, 8): their ``conversion_table`` for each radar's noise.
         slot (B,): each plot's target slot; time_s, r_m, az_rad, vr_mps (B,): its time (s),
             range (m), azimuth (rad) and radial velocity (m/s, read where has_vr (B,)).
         radar (B,): index into the radar table site (R, 2) (m), sigma_r_m, sigma_beta_rad,
@@ -163,8 +149,7 @@ def track_plots_2d(
             plus the Doppler stage's when the plot has V̂r; ``ekf`` and ``ukf`` the EKF's
             linearised statistics, as the numpy engine); NaN at a start (no prediction).
     """
-    n_m = codes.shape[0]
-    co, co_s = conversion_tables(codes, start_codes, sigma_r_m, sigma_beta_rad)
+    n_m = plan.shape[0]
     q = sigma_a_mps2 * sigma_a_mps2
     bufs = scratch_2d()
     K = bufs[0]
@@ -179,10 +164,10 @@ def track_plots_2d(
         if dt < 0.0:
             return i
         for j in range(n_m):
-            code = codes[j]
+            pj, co = plan[j], conversions[g, j]
             nis = np.nan
             if new:
-                start_track(start_codes[j], x, P, r, b, sr2, s, sx, sy, co_s[g, j], sigma_v0_mps)
+                start_track(pj, x, P, r, b, sr2, s, sx, sy, co[1], sigma_v0_mps)
             else:
                 for a in range(4):
                     x[a] = xs[k, j, a]
@@ -190,9 +175,9 @@ def track_plots_2d(
                         P[a, c] = Ps[k, j, a, c]
                 if dt > 0.0:
                     predict(x, P, dt, q)
-                meas = position_measurement(code, x, r, b, sr2, s, sx, sy, co[g, j])
+                meas = position_measurement(pj, x, r, b, sr2, s, sx, sy, co[0])
                 nis = position_nis(P, *meas)
-                position_stage(code, x, P, r, b, sr2, s, sx, sy, prm, meas, bufs)
+                position_stage(pj, x, P, r, b, sr2, s, sx, sy, prm, meas, bufs)
             if has_vr[i]:
                 var_vr = sigma_vr_mps[g] * sigma_vr_mps[g]
                 if not new:
@@ -229,11 +214,12 @@ def predicted_2d(xs, Ps, slot, j: int, dt, q: float, out_x, out_P):
 
 @_jit
 def gate_nis_2d(
-    xs, Ps, slot, j: int, dt, q: float, code: int, r_m, az_rad, sigma_r_m, sigma_beta_rad, site, out
+    xs, Ps, slot, j: int, dt, q: float, plan, co, r_m, az_rad, sigma_r_m, sigma_beta_rad, site, out
 ):
     """``core.filters.kernels_imm.gate_nis_imm_2d`` for the cv model: pair i's track
-    predicted over dt[i] by ``predict`` (σa² = q), then the method's position measurement
-    and its NIS against its plot, into out (N,)."""
+    predicted over dt[i] by ``predict`` (σa² = q), then the position measurement of the
+    method of ``plan`` (its row of ``method_plan``; co[i] its update's scalars for pair i's
+    noise) and its NIS against its plot, into out (N,)."""
     x, P = np.empty(4), np.empty((4, 4))
     for i in range(slot.shape[0]):
         k = slot[i]
@@ -242,6 +228,7 @@ def gate_nis_2d(
         if dt[i] > 0.0:
             predict(x, P, dt[i], q)
         sr2, s = sigma_r_m[i] * sigma_r_m[i], sigma_beta_rad[i] * sigma_beta_rad[i]
-        co = coefficients(code, s, sr2)
-        meas = position_measurement(code, x, r_m[i], az_rad[i], sr2, s, site[i, 0], site[i, 1], co)
+        meas = position_measurement(
+            plan, x, r_m[i], az_rad[i], sr2, s, site[i, 0], site[i, 1], co[i]
+        )
         out[i] = position_nis(P, *meas)

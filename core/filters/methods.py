@@ -32,12 +32,15 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from enum import IntEnum
 from typing import NamedTuple
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
+from radarviz.core.conversion.elementwise import conversion_coefficients
 from radarviz.core.conversion.planar import convert_parts
+from radarviz.core.conversion.registry import CONVERSIONS, Conversion
 from radarviz.core.conversion.spatial import UPPER_3D, convert_parts_3d
 from radarviz.core.filters.polar_ekf import ekf_pseudo_measurement, ekf_update, site_offsets
 from radarviz.core.filters.polar_ukf import ukf_update
@@ -95,25 +98,50 @@ def _parts_3d(name: str, plot: PolarPlot, noise: PolarNoise, predicted: list[Vec
     return list(c[:3]), dict(zip(UPPER_3D, c[3:], strict=True))
 
 
+class Kind(IntEnum):
+    """How a method brings a plot into the filter; the compiled kernels branch on these.
+
+    CONVERTED: its conversion's point and covariance, then the position update.
+    EKF: the polar measurement itself, linearised at the prediction.
+    UKF: the polar measurement itself, through scaled sigma points.
+    """
+
+    CONVERTED = 0
+    EKF = 1
+    UKF = 2
+
+
 @dataclass(frozen=True)
 class Method:
     """One tracking method.
 
     Attributes:
         name: the name used everywhere (CLI, files, recordings).
-        kind: ``"converted"``, ``"ekf"`` or ``"ukf"``: which update it uses.
+        kind: which update it uses (``Kind``).
         dims: the dimensions it exists in (2: (r, β); 3: (r, β, ε)).
+        conversion: a converted method's conversion (``core.conversion.registry``); None for
+            the polar filters.
         start_conversion: the conversion of its first plot.
-        about_prediction: its covariance is evaluated at the predicted position (``ducm``).
         summary: one line for help texts.
     """
 
     name: str
-    kind: str
+    kind: Kind
     dims: tuple[int, ...]
+    conversion: str | None
     start_conversion: str
-    about_prediction: bool
     summary: str
+
+    @property
+    def about_prediction(self) -> bool:
+        """Whether its covariance is taken at the predicted position (``ducm``)."""
+        return self.conversion is not None and CONVERSIONS[self.conversion].about_prediction
+
+    def conversions(self) -> tuple[Conversion, Conversion]:
+        """(its update's conversion, its start's); a polar filter's update row is its
+        start's (the kernels read it for nothing but a uniform table)."""
+        start = CONVERSIONS[self.start_conversion]
+        return CONVERSIONS[self.conversion] if self.conversion else start, start
 
     def convert(
         self,
@@ -127,7 +155,7 @@ class Method:
         ``predicted``: the predicted position minus the site, needed by ``ducm``.
         ``conversion``: another conversion than the method's own (the start's).
         """
-        name = conversion or self.name
+        name = conversion or self.conversion or self.start_conversion
         if plot.dims == 2:
             return _parts_2d(name, plot, noise, predicted)
         return _parts_3d(name, plot, noise, predicted)
@@ -154,9 +182,9 @@ class Method:
         out: CVBatch | None = None,
     ) -> CVBatch:
         """The measurement update of the predicted batch ``pred`` with this scan's plots."""
-        if self.kind == "ekf":
+        if self.kind == Kind.EKF:
             return ekf_update(pred, plot.vectors(), site=site, out=out, **noise._asdict())
-        if self.kind == "ukf":
+        if self.kind == Kind.UKF:
             return ukf_update(pred, plot.vectors(), site=site, out=out, **noise._asdict())
         predicted = site_offsets(pred, site) if self.about_prediction else None
         z, R = self.convert(plot, noise, predicted)
@@ -185,24 +213,31 @@ def _shifted(z: list[Vec], site: ArrayLike | None) -> list[Vec]:
     return [z[i] + s[..., i] for i in range(len(z))]
 
 
+_C = Kind.CONVERTED
 METHODS: dict[str, Method] = {
     m.name: m
     for m in (
-        Method("naive", "converted", (2, 3), "naive", False, "converted point, linearised cov."),
-        Method("seed", "converted", (2, 3), "seed", False, "Prosov's eq. 10 correction, eq. 11"),
-        Method("cmkf_d", "converted", (2, 3), "cmkf_d", False, "Lerro & Bar-Shalom debiased"),
-        Method("ucm", "converted", (2, 3), "ucm", False, "Mo et al. unbiased conversion"),
-        Method("ducm", "converted", (2, 3), "ucm", True, "Bordonaro et al. decorrelated ucm"),
-        Method("ekf", "ekf", (2, 3), "naive", False, "polar EKF"),
-        Method("ukf", "ukf", (2, 3), "naive", False, "polar UKF"),
+        Method("naive", _C, (2, 3), "naive", "naive", "converted point, linearised cov."),
+        Method("seed", _C, (2, 3), "seed", "seed", "Prosov's eq. 10 correction, eq. 11"),
+        Method("cmkf_d", _C, (2, 3), "cmkf_d", "cmkf_d", "Lerro & Bar-Shalom debiased"),
+        Method("ucm", _C, (2, 3), "ucm", "ucm", "Mo et al. unbiased conversion"),
+        Method("ducm", _C, (2, 3), "ducm", "ucm", "Bordonaro et al. decorrelated ucm"),
+        Method("ekf", Kind.EKF, (2, 3), None, "naive", "polar EKF"),
+        Method("ukf", Kind.UKF, (2, 3), None, "naive", "polar UKF"),
     )
 }
 #: Every method, in display order.
 ALL_METHODS: tuple[str, ...] = tuple(METHODS)
 #: The methods that filter the polar measurement directly.
-POLAR_METHODS: tuple[str, ...] = tuple(n for n, m in METHODS.items() if m.kind != "converted")
+POLAR_METHODS: tuple[str, ...] = tuple(n for n, m in METHODS.items() if m.kind != _C)
 #: The methods that exist in 3D.
 METHODS_3D: tuple[str, ...] = tuple(n for n, m in METHODS.items() if 3 in m.dims)
+
+
+def method_names(dims: int | None = None) -> tuple[str, ...]:
+    """The registered methods now (of dimension ``dims``, or all), in display order: what
+    the validators accept. ``ALL_METHODS`` and ``METHODS_3D`` are the same at import."""
+    return tuple(n for n, m in METHODS.items() if dims is None or dims in m.dims)
 
 
 def method_named(name: str) -> Method:
@@ -211,6 +246,57 @@ def method_named(name: str) -> Method:
         return METHODS[name]
     except KeyError:
         raise ValueError(f"method must be one of {', '.join(ALL_METHODS)} (got {name!r})") from None
+
+
+#: The columns of ``method_plan``: a method's ``Kind``, its update's ``Covariance``, its
+#: start's.
+PLAN_KIND, PLAN_COVARIANCE, PLAN_START = 0, 1, 2
+
+
+def method_plan(names: Sequence[str]) -> NDArray[np.int64]:
+    """What the compiled kernels branch on, a row per method (M, 3): its kind, the covariance
+    form of its update's conversion and of its start's (``PLAN_*``)."""
+    rows = []
+    for name in names:
+        method = method_named(name)
+        update, start = method.conversions()
+        rows.append((int(method.kind), int(update.covariance), int(start.covariance)))
+    return np.array(rows, dtype=np.int64).reshape(len(rows), 3)
+
+
+def conversion_table(
+    names: Sequence[str], sigma_r_m: ArrayLike, sigma_beta_rad: ArrayLike
+) -> NDArray[np.float64]:
+    """The 2D conversions' scalars of each radar (σr, σβ: (R,) or scalars), per method, for
+    its update then its start: (R, M, 2, 8), each row ``conversion_coefficients`` (κ first).
+
+    The compiled kernels take these in place of a conversion's name: formed here once per
+    radar, they are the only place a conversion's scale enters compiled code."""
+    sr = np.atleast_1d(np.asarray(sigma_r_m, dtype=np.float64))
+    sb = np.atleast_1d(np.asarray(sigma_beta_rad, dtype=np.float64))
+    sr, sb = np.broadcast_arrays(sr, sb)
+    sr2, s = sr * sr, sb * sb
+    out = np.empty((sr.shape[0], len(names), 2, 8))
+    for j, name in enumerate(names):
+        for k, conversion in enumerate(method_named(name).conversions()):
+            co = conversion_coefficients(conversion.covariance, conversion.scale(s), s, sr2)
+            out[:, j, k, :] = np.stack(np.broadcast_arrays(*co), axis=-1)
+    return out
+
+
+def scale_table(
+    names: Sequence[str], sigma_beta_rad: ArrayLike, sigma_elevation_rad: ArrayLike
+) -> NDArray[np.float64]:
+    """The 3D conversions' scales of each radar (σβ, σε: (R,) or scalars), per method, for its
+    update then its start: (R, M, 2, 2), each row (κxy, κz) (``Conversion.scales``)."""
+    sb = np.atleast_1d(np.asarray(sigma_beta_rad, dtype=np.float64))
+    se = np.atleast_1d(np.asarray(sigma_elevation_rad, dtype=np.float64))
+    sb, se = np.broadcast_arrays(sb, se)
+    out = np.empty((sb.shape[0], len(names), 2, 2))
+    for j, name in enumerate(names):
+        for k, conversion in enumerate(method_named(name).conversions()):
+            out[:, j, k, :] = np.stack(np.broadcast_arrays(*conversion.scales(sb, se)), axis=-1)
+    return out
 
 
 def stack_parts(parts: Sequence[Parts]) -> Parts:
@@ -239,10 +325,10 @@ def method_groups(names: Sequence[str], max_group: int | None = None) -> list[tu
     10⁴ tracks per method a group's working set would leave the cache, so callers with large
     batches pass a small ``max_group``.
     """
-    converted = [n for n in names if METHODS[n].kind == "converted"]
+    converted = [n for n in names if METHODS[n].kind == _C]
     size = max(1, len(converted) if max_group is None else max_group)
     groups = [tuple(converted[i : i + size]) for i in range(0, len(converted), size)]
-    return groups + [(n,) for n in names if METHODS[n].kind != "converted"]
+    return groups + [(n,) for n in names if METHODS[n].kind != _C]
 
 
 class MethodGroup:
@@ -259,7 +345,7 @@ class MethodGroup:
     def __init__(self, names: Sequence[str]):
         self.names = tuple(names)
         self.kinds = [method_named(n) for n in self.names]
-        self.converted = all(k.kind == "converted" for k in self.kinds)
+        self.converted = all(k.kind == _C for k in self.kinds)
         if not self.names or (not self.converted and len(self.names) > 1):
             raise ValueError("a method group is one polar method or only converted methods")
 

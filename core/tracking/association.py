@@ -108,9 +108,14 @@ from radarviz.core.chi2 import chi2_quantile
 from radarviz.core.filters.innovation import position_innovation
 from radarviz.core.filters.methods import (
     METHODS,
+    PLAN_COVARIANCE,
+    Kind,
     MethodGroup,
     PolarNoise,
     PolarPlot,
+    conversion_table,
+    method_names,
+    method_plan,
     stack_parts,
 )
 from radarviz.core.filters.state import CVBatch, position_index
@@ -127,7 +132,6 @@ from radarviz.core.tracking.coverage import (
 )
 from radarviz.core.tracking.management import CONFIRMED_CODE, TENTATIVE_CODE, TrackBook
 from radarviz.core.tracking.stream import (
-    ALL_METHODS,
     Plot,
     PlotError,
     StateRow,
@@ -171,7 +175,7 @@ class AssociationOptions:
     max_speed_mps: float = default("max_speed_mps")
 
     def __post_init__(self) -> None:
-        check_choice("associate_method", self.method, ALL_METHODS)
+        check_choice("associate_method", self.method, method_names())
         check("gate_probability", self.gate_probability)
         check("confirm_m", self.confirm_m)
         check("confirm_n", self.confirm_n)
@@ -389,7 +393,7 @@ def boxed(method: str) -> bool:
     converted method whose conversion is of the plot alone, so that ν = z + s − H x⁻ with z
     and R the plot's own (``ducm``'s R and the polar methods' ν', R' depend on the pair)."""
     m = METHODS[method]
-    return m.kind == "converted" and not m.about_prediction
+    return m.kind == Kind.CONVERTED and not m.about_prediction
 
 
 #: Motion models (``StreamOptions.model``; the IMM when its models are all constant-velocity
@@ -756,18 +760,20 @@ class GNNTracker:
         times = np.array([p.time_s for p in plots], dtype=np.float64)
         n_p = site.shape[0]
         if d == 2:  # one compiled pass, the tracker kernels' conversion
-            from radarviz.core.filters.compiled import METHOD_CODES
             from radarviz.core.tracking.kernels_gate import plot_points_2d
 
             points, r_ii = np.empty((n_p, 2)), np.empty((n_p, 2))
             sigma_r_m, sigma_beta_rad = (
                 np.ascontiguousarray(np.broadcast_to(v, (n_p,))) for v in noise[:2]
             )
-            code = METHOD_CODES[self._gate.method]
+            gate = [self._gate.method]
+            form = int(method_plan(gate)[0, PLAN_COVARIANCE])
+            co = np.ascontiguousarray(conversion_table(gate, sigma_r_m, sigma_beta_rad)[:, 0, 0])
             # Contiguous arrays throughout: one compiled specialisation of the kernel.
             site_c = np.ascontiguousarray(site)
             plot_points_2d(
-                code,
+                form,
+                co,
                 plot.range_m,
                 plot.azimuth_rad,
                 sigma_r_m,

@@ -24,6 +24,7 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import NDArray
 
+from radarviz.core.filters.methods import conversion_table
 from radarviz.core.tracking.compiled import CompiledTracks, TrackBlock
 from radarviz.core.tracking.coverage import (
     EDGE_FRACTION,
@@ -197,7 +198,8 @@ class CompiledAssociation:
         imm = tk.imm
         assert imm is not None
         tr = ka.TrackArrays(
-            tk.codes, tk.start_codes, tk.imm_sigma_a_mps2, tk.turn_rates, tk.transition, tk.mu0,
+            tk.plan, conversion_table(tk.methods, rd.sigma_r_m, rd.sigma_beta_rad),
+            tk.imm_sigma_a_mps2, tk.turn_rates, tk.transition, tk.mu0,
             tk.sigma_v0_mps, tk.prm, tk.xs, tk.Ps, tk.mus, tk.started, tk.last_t,
             self.gate_index, tk.feed is not None,
         )  # fmt: skip

@@ -41,7 +41,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from radarviz.core.cores import available_cores
-from radarviz.core.filters.compiled import METHOD_CODES, START_CODES
+from radarviz.core.filters.methods import conversion_table, method_plan, scale_table
 from radarviz.core.filters.models import IMMModel
 from radarviz.core.filters.polar_ukf import UKFParams
 from radarviz.core.tracking.consistency import ConsistencyMonitor, nis_band
@@ -138,8 +138,8 @@ class CompiledTracks:
         #: The leading methods the monitor sees (the rest are kept for a caller's own use:
         #: the association's gating method when it is not a requested one).
         self.reported = len(self.methods) if reported is None else int(reported)
-        self.codes = np.array([METHOD_CODES[m] for m in methods], dtype=np.int64)
-        self.start_codes = np.array([START_CODES[m] for m in methods], dtype=np.int64)
+        #: What the kernels branch on, a row per method (``core.filters.methods.method_plan``).
+        self.plan = method_plan(self.methods)
         self.sigma_a_mps2, self.sigma_v0_mps = float(sigma_a_mps2), float(sigma_v0_mps)
         self.use_doppler = bool(use_doppler)
         self.dims = int(dims)
@@ -271,7 +271,13 @@ class CompiledTracks:
             assert block.elevation_rad is not None
             plot.append(_f(block.elevation_rad))
             noise.append(_f(rd.sigma_elevation_rad))
-        # Per plot (split between the threads), then the radar table (shared).
+        # The methods' conversions of each radar's noise (``conversion_table``; in 3D the
+        # scales, ``scale_table``), per plot (split between the threads), then the radar
+        # table (shared).
+        if self.dims == 2:
+            conversions = conversion_table(self.methods, rd.sigma_r_m, rd.sigma_beta_rad)
+        else:
+            conversions = scale_table(self.methods, rd.sigma_beta_rad, rd.sigma_elevation_rad)
         rows = (slot, *plot, _f(vr), has_vr, np.ascontiguousarray(block.radar, dtype=np.intp))
         table = (
             np.ascontiguousarray(rd.site_m[:, : self.dims], dtype=np.float64),
@@ -287,7 +293,7 @@ class CompiledTracks:
         kernel = _track_kernel(self.dims, self.imm is not None)
 
         def run(rows: tuple[NDArray[Any], ...], outs: tuple[NDArray[np.float64], ...]) -> int:
-            args = (self.codes, self.start_codes, *rows, *table, *model)
+            args = (self.plan, conversions, *rows, *table, *model)
             return int(kernel(*args, self.started, self.last_t, *outs))
 
         split = n * m >= SPLIT_STEPS and _cores() > 1
@@ -388,17 +394,18 @@ class CompiledTracks:
             raise ValueError("gate_nis: a time before a track's last plot")
         out = np.empty(slot.size)
         plot = (_f(range_m), _f(azimuth_rad), _f(sigma_r_m), _f(sigma_beta_rad), _f(site))
-        code = int(self.codes[j])
+        plan = self.plan[j]
+        co = conversion_table([method], sigma_r_m, sigma_beta_rad)[:, 0, 0]
         if self.imm is not None:
             from radarviz.core.filters.kernels_imm import gate_nis_imm_2d
 
             model = (self.imm_sigma_a_mps2, self.turn_rates, self.transition)
-            gate_nis_imm_2d(self.xs, self.Ps, self.mus, slot, j, dt, *model, code, *plot, out)
+            gate_nis_imm_2d(self.xs, self.Ps, self.mus, slot, j, dt, *model, plan, co, *plot, out)
         else:
             from radarviz.core.filters.kernels_track import gate_nis_2d
 
             q = self._accel_variance
-            gate_nis_2d(self.xs, self.Ps, slot, j, dt, q, code, *plot, out)
+            gate_nis_2d(self.xs, self.Ps, slot, j, dt, q, plan, co, *plot, out)
         return out
 
     def forget(self, labels: list[str]) -> None:

@@ -31,8 +31,9 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
-from radarviz.core.filters.kernels_2d import _inline, _jit, coefficients
+from radarviz.core.filters.kernels_2d import _inline, _jit
 from radarviz.core.filters.kernels_imm import pair_nis_2d, track_plots_imm_2d
+from radarviz.core.filters.methods import PLAN_COVARIANCE
 from radarviz.core.tracking.kernels_gate import (
     BOX_FROM_S,
     BOX_UNTIL_S,
@@ -397,12 +398,13 @@ class TrackArrays(NamedTuple):
     """Every method's IMM tracks, one row per book slot: the arrays of the tracker's
     ``core.tracking.compiled.CompiledTracks`` (its rows bound to the book's slots), M methods:
     xs (K, M, r, 4), Ps (K, M, r, 4, 4), mus (K, M, r), started (K,), last_t (K,); their
-    model: codes, start_codes (M,) the methods', sigma_a_mps2, omega (r,), Pi (r, r),
+    model: plan (M, 3) the methods' ``core.filters.methods.method_plan``, conversions
+    (T, M, 2, 8) their ``conversion_table`` of each noise row, sigma_a_mps2, omega (r,), Pi (r, r),
     mu0 (r,), sigma_v0_mps (σv0, m/s), prm (the UKF's weights); gate, the gating method's
     index among the M; with_stats, whether to compute the monitor's NIS."""
 
-    codes: NDArray[np.int64]
-    start_codes: NDArray[np.int64]
+    plan: NDArray[np.int64]
+    conversions: NDArray[np.float64]
     sigma_a_mps2: NDArray[np.float64]
     omega: NDArray[np.float64]
     Pi: NDArray[np.float64]
@@ -519,15 +521,15 @@ def associate_2d(pl, beams, radar_site, book, tr, rules, live, counters, since, 
     # The gating method's conversion of every plot (z + s, R_ii), as the prefilter takes it.
     points, r_ii = np.empty((n_plots, 2)), np.empty((n_plots, 2))
     g = pl.noise
+    # The gating conversion's scalars of each noise row (``pair_nis_2d``), and of each plot.
+    co = tr.conversions[:, tr.gate, 0]
+    co_plot = np.empty((n_plots, 8))
+    for j in range(n_plots):
+        co_plot[j] = co[g[j]]
     plot_points_2d(
-        tr.codes[tr.gate], pl.range_m, pl.azimuth_rad, pl.sigma_r_m[g], pl.sigma_beta_rad[g],
-        pl.site[g], points, r_ii,
+        tr.plan[tr.gate, PLAN_COVARIANCE], co_plot, pl.range_m, pl.azimuth_rad, pl.sigma_r_m[g],
+        pl.sigma_beta_rad[g], pl.site[g], points, r_ii,
     )  # fmt: skip
-    # The gating conversion's coefficients of each noise row (``pair_nis_2d``), once.
-    co = np.empty((pl.sigma_r_m.shape[0], 8))
-    for t in range(co.shape[0]):
-        sr, sb = pl.sigma_r_m[t], pl.sigma_beta_rad[t]
-        co[t] = coefficients(tr.codes[tr.gate], sb * sb, sr * sr)
     r = tr.sigma_a_mps2.shape[0]
     x0, P0 = np.empty((r, 4)), np.empty((r, 4, 4))
     mu, cc, w = np.empty(r), np.empty(r), np.empty((r, r))
@@ -683,7 +685,7 @@ def _batch(pl, beams, radar_site, book, tr, rules, live, counters, since, owner,
     if n:
         vr = pl.radial_velocity_mps[lo:hi]
         bad = track_plots_imm_2d(
-            tr.codes, tr.start_codes, own, times, pl.range_m[lo:hi], pl.azimuth_rad[lo:hi],
+            tr.plan, tr.conversions, own, times, pl.range_m[lo:hi], pl.azimuth_rad[lo:hi],
             vr, ~np.isnan(vr), pl.noise[lo:hi], pl.site, pl.sigma_r_m, pl.sigma_beta_rad,
             pl.sigma_vr_mps, tr.sigma_a_mps2, tr.omega, tr.Pi, tr.mu0, tr.sigma_v0_mps, tr.prm,
             tr.with_stats, tr.xs, tr.Ps, tr.mus, tr.started, tr.last_t, out_x[lo:hi],
@@ -816,11 +818,11 @@ def _coast_s(beams, rules, n_radars) -> float:
 def _gate_d2(pl, tr, s, j, co, x0, P0, mu, cc, w, xp, Pp) -> float:
     """d² of plot j against slot s's gating track predicted to the plot's time
     (``core.filters.kernels_imm.pair_nis_2d``, the statistic of ``gate_nis_imm_2d``; co
-    (T, 8) the conversion's coefficients of each noise row); ∞ for a NaN."""
+    (T, 8) the conversion's scalars of each noise row); ∞ for a NaN."""
     g, a = pl.noise[j], tr.gate
     d2 = pair_nis_2d(
         tr.xs[s, a], tr.Ps[s, a], tr.mus[s, a], pl.time_s[j] - tr.last_t[s], tr.sigma_a_mps2,
-        tr.omega, tr.Pi, tr.codes[a], pl.range_m[j], pl.azimuth_rad[j], pl.sigma_r_m[g],
+        tr.omega, tr.Pi, tr.plan[a], pl.range_m[j], pl.azimuth_rad[j], pl.sigma_r_m[g],
         pl.sigma_beta_rad[g], pl.site[g, 0], pl.site[g, 1], co[g], x0, P0, mu, cc, w, xp, Pp,
     )  # fmt: skip
     return d2 if math.isfinite(d2) else np.inf

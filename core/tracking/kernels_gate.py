@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from radarviz.core.filters.kernels_2d import _inline, _jit, coefficients, convert
+from radarviz.core.filters.kernels_2d import _inline, _jit, convert
 
 
 @_jit
@@ -169,14 +169,14 @@ def boxes_near(slots, x, P, last_s, t_lo, t_hi, q_max, omega_max, points, r_ii, 
 
 
 @_jit
-def plot_points_2d(code: int, r_m, az_rad, sigma_r_m, sigma_beta_rad, site, points, r_ii):
+def plot_points_2d(form, co, r_m, az_rad, sigma_r_m, sigma_beta_rad, site, points, r_ii):
     """The converted plots of ``near_pairs`` in 2D: plot j's point z + s into points[j]
-    (B, 2) and its R_xx, R_yy into r_ii[j] (B, 2), by the tracker kernels' conversion of
-    method ``code`` (``core.filters.kernels_2d.coefficients`` and ``convert``; a method
-    that converts the plot alone). r_m, az_rad, sigma_r_m, sigma_beta_rad (B,), site (B, 2)."""
+    (B, 2) and its R_xx, R_yy into r_ii[j] (B, 2), by the tracker kernels' conversion
+    (``core.filters.kernels_2d.convert``) of covariance ``form`` with plot j's scalars co[j]
+    (B, 8) (``core.filters.methods.conversion_table``; a conversion of the plot alone).
+    r_m, az_rad, sigma_r_m, sigma_beta_rad (B,), site (B, 2)."""
     for j in range(r_m.shape[0]):
         sr2, s = sigma_r_m[j] * sigma_r_m[j], sigma_beta_rad[j] * sigma_beta_rad[j]
-        co = coefficients(code, s, sr2)
-        zx, zy, r00, _, r11 = convert(code, r_m[j], az_rad[j], sr2, s, 0.0, 0.0, co)
+        zx, zy, r00, _, r11 = convert(form, r_m[j], az_rad[j], sr2, s, 0.0, 0.0, co[j])
         points[j, 0], points[j, 1] = zx + site[j, 0], zy + site[j, 1]
         r_ii[j, 0], r_ii[j, 1] = r00, r11

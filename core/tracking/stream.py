@@ -63,13 +63,18 @@ from radarviz.core.filters.measurement import (
     doppler_measurement,
 )
 from radarviz.core.filters.methods import (
-    ALL_METHODS,
-    METHODS_3D,
+    ALL_METHODS as ALL_METHODS,  # the method lists, re-exported for the tracker's callers
+)
+from radarviz.core.filters.methods import (
+    METHODS_3D as METHODS_3D,
+)
+from radarviz.core.filters.methods import (
     MethodGroup,
     Parts,
     PolarNoise,
     PolarPlot,
     method_groups,
+    method_names,
 )
 from radarviz.core.filters.models import DEFAULT_IMM, MOTION_MODELS, CVModel, IMMModel
 from radarviz.core.filters.state import CVBatch
@@ -167,7 +172,7 @@ class TrackGroup:
         sigma_v0_mps: float = 1000.0,
     ):
         for m in methods:
-            check_choice("method", m, ALL_METHODS)
+            check_choice("method", m, method_names(dims))
         self.group = MethodGroup(methods)
         self.methods = tuple(methods)
         self.dims = dims
@@ -428,7 +433,7 @@ def motion_fields(
 
 def check_methods(methods: tuple[str, ...], three_d: bool) -> None:
     """``methods`` must be at least one of the methods that exist in 2D or in 3D."""
-    allowed = METHODS_3D if three_d else ALL_METHODS
+    allowed = method_names(3 if three_d else 2)
     if not methods:
         raise ParameterError(f"method must name at least one of {', '.join(allowed)}")
     for m in methods:
