@@ -208,16 +208,28 @@ def scratch_3d():
 
 
 @_jit
-def track_plots_3d(
-    plan, scales, slot, time_s, r_m, az_rad, el_rad, vr_mps, has_vr, radar, site,
-    sigma_r_m, sigma_beta_rad, sigma_elevation_rad, sigma_vr_mps, sigma_a_mps2, sigma_v0_mps, prm,
-    xs, Ps, started, last_t, out_x, out_P, out_nis,
-):  # fmt: skip
-    """``core.filters.kernels_track.track_plots_2d`` in 3D: plots with elevations el_rad
-    (B,), sites (R, 3), σε sigma_elevation_rad (R,), states xs (K, M, 6), Ps (K, M, 6, 6), outputs
-    (B, M, 6), (B, M, 6, 6), (B, M); ``prm`` the UKF's weights for n = 6; scales (R, M, 2, 2)
-    the methods' ``scale_table`` in place of 2D's conversion scalars. Returns −1 or the
-    index of the first plot before its slot's previous one."""
+def track_plots_3d(plan, scales, plots, radars, options, tracks, outs):
+    """``core.filters.kernels_track.track_plots_2d`` in 3D: the plots' elevations, sites
+    (R, 3) and σε read, tracks x (K, M, 6), P (K, M, 6, 6), outputs (B, M, 6),
+    (B, M, 6, 6), (B, M); the UKF's weights for n = 6; scales (R, M, 2, 2) the methods'
+    ``scale_table`` in place of 2D's conversion scalars. Returns −1 or the index of the
+    first plot before its slot's previous one."""
+    slot, time_s, r_m, az_rad = plots.slot, plots.time_s, plots.range_m, plots.azimuth_rad
+    el_rad, vr_mps, has_vr, radar = (
+        plots.elevation_rad,
+        plots.radial_velocity_mps,
+        plots.has_vr,
+        plots.radar,
+    )
+    site, sigma_r_m, sigma_beta_rad = radars.site_m, radars.sigma_r_m, radars.sigma_beta_rad
+    sigma_elevation_rad, sigma_vr_mps = radars.sigma_elevation_rad, radars.sigma_vr_mps
+    sigma_a_mps2, sigma_v0_mps, prm = (
+        options.sigma_a_mps2,
+        options.sigma_v0_mps,
+        options.ukf_weights,
+    )
+    xs, Ps, started, last_t = tracks.x, tracks.P, tracks.started, tracks.last_t
+    out_x, out_P, out_nis = outs.x, outs.P, outs.nis
     n_m = plan.shape[0]
     q = sigma_a_mps2 * sigma_a_mps2
     x, P = np.empty(6), np.empty((6, 6))

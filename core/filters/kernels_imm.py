@@ -175,25 +175,34 @@ def _started(x, P, mu0, xm, Pm, mu):
 
 
 @_jit
-def track_plots_imm_2d(
-    plan, conversions, slot, time_s, r_m, az_rad, vr_mps, has_vr, radar, site, sigma_r_m,
-    sigma_beta_rad, sigma_vr_mps, sigma_a_mps2, omega, Pi, mu0, sigma_v0_mps, prm, with_stats, xs,
-    Ps, mus, started, last_t, out_x, out_P, out_nis,
-):  # fmt: skip
+def track_plots_imm_2d(plan, conversions, plots, radars, options, tracks, outs):
     """``core.filters.kernels_track.track_plots_2d`` with the IMM (module docstring): returns
     −1, or the index of the first plot before its slot's previous one (nothing from it on is
     filtered).
 
     Args:
-        plan … sigma_vr_mps, sigma_v0_mps, prm: as ``track_plots_2d``.
-        sigma_a_mps2: (r,) σa of each model (m/s²); omega: (r,) its turn rate ω (rad/s, 0: constant
-            velocity); Pi: (r, r) Π; mu0: (r,) a new track's μ.
-        with_stats: compute the monitor's NIS (else out_nis is NaN).
-        xs (K, M, r, 4), Ps (K, M, r, 4, 4), mus (K, M, r), started (K,), last_t (K,): every
-            slot's model-conditioned tracks, updated in place.
-        out_x (B, M, 4), out_P (B, M, 4, 4): each plot's combined posterior per method;
-            out_nis (B, M): the NIS of the combined prediction, NaN at a start.
+        plan, conversions, plots, radars, outs: as ``track_plots_2d``.
+        options: each model's σa and turn rate ω, Π, a new track's μ, σv0, the UKF's
+            weights and whether to compute the monitor's NIS (else outs.nis is NaN)
+            (``core.filters.kernel_args.IMMOptions``).
+        tracks: every slot's model-conditioned tracks x (K, M, r, 4), P (K, M, r, 4, 4),
+            μ (K, M, r), started, last_t (``TrackState``), updated in place.
+        outs: each plot's combined posterior per method and the NIS of the combined
+            prediction, NaN at a start.
     """
+    slot, time_s, r_m, az_rad = plots.slot, plots.time_s, plots.range_m, plots.azimuth_rad
+    vr_mps, has_vr, radar = plots.radial_velocity_mps, plots.has_vr, plots.radar
+    site, sigma_r_m, sigma_beta_rad = radars.site_m, radars.sigma_r_m, radars.sigma_beta_rad
+    sigma_vr_mps = radars.sigma_vr_mps
+    sigma_a_mps2, omega, Pi, mu0 = (
+        options.sigma_a_mps2,
+        options.turn_rate_radps,
+        options.transition,
+        options.mu0,
+    )
+    sigma_v0_mps, prm, with_stats = options.sigma_v0_mps, options.ukf_weights, options.with_stats
+    xs, Ps, mus, started, last_t = tracks.x, tracks.P, tracks.mu, tracks.started, tracks.last_t
+    out_x, out_P, out_nis = outs.x, outs.P, outs.nis
     n_m, r = plan.shape[0], sigma_a_mps2.shape[0]
     bufs = scratch_2d()
     K = bufs[0]
@@ -252,15 +261,29 @@ def track_plots_imm_2d(
 
 
 @_jit
-def track_plots_imm_3d(
-    plan, scales, slot, time_s, r_m, az_rad, el_rad, vr_mps, has_vr, radar, site,
-    sigma_r_m, sigma_beta_rad, sigma_elevation_rad, sigma_vr_mps, sigma_a_mps2, omega, Pi, mu0,
-    sigma_v0_mps, prm, with_stats, xs, Ps, mus, started, last_t, out_x, out_P, out_nis,
-):  # fmt: skip
+def track_plots_imm_3d(plan, scales, plots, radars, options, tracks, outs):
     """``track_plots_imm_2d`` in 3D (``core.filters.kernels_3d.track_plots_3d``'s stages):
-    elevations el_rad (B,), sites (R, 3), σε sigma_elevation_rad (R,), models xs (K, M, r, 6),
-    Ps (K, M, r, 6, 6), outputs (B, M, 6), (B, M, 6, 6), (B, M); ``prm`` the UKF's weights
-    for n = 6; scales (R, M, 2, 2) as ``track_plots_3d``'s."""
+    the plots' elevations, sites (R, 3) and σε read, models x (K, M, r, 6),
+    P (K, M, r, 6, 6), outputs (B, M, 6), (B, M, 6, 6), (B, M); the UKF's weights for
+    n = 6; scales (R, M, 2, 2) as ``track_plots_3d``'s."""
+    slot, time_s, r_m, az_rad = plots.slot, plots.time_s, plots.range_m, plots.azimuth_rad
+    el_rad, vr_mps, has_vr, radar = (
+        plots.elevation_rad,
+        plots.radial_velocity_mps,
+        plots.has_vr,
+        plots.radar,
+    )
+    site, sigma_r_m, sigma_beta_rad = radars.site_m, radars.sigma_r_m, radars.sigma_beta_rad
+    sigma_elevation_rad, sigma_vr_mps = radars.sigma_elevation_rad, radars.sigma_vr_mps
+    sigma_a_mps2, omega, Pi, mu0 = (
+        options.sigma_a_mps2,
+        options.turn_rate_radps,
+        options.transition,
+        options.mu0,
+    )
+    sigma_v0_mps, prm, with_stats = options.sigma_v0_mps, options.ukf_weights, options.with_stats
+    xs, Ps, mus, started, last_t = tracks.x, tracks.P, tracks.mu, tracks.started, tracks.last_t
+    out_x, out_P, out_nis = outs.x, outs.P, outs.nis
     n_m, r = plan.shape[0], sigma_a_mps2.shape[0]
     x, P = np.empty(6), np.empty((6, 6))
     x0, P0 = np.empty((r, 6)), np.empty((r, 6, 6))  # the models, mixed then advanced

@@ -133,30 +133,34 @@ def scratch_2d():
 
 
 @_jit
-def track_plots_2d(
-    plan, conversions, slot, time_s, r_m, az_rad, vr_mps, has_vr, radar, site, sigma_r_m,
-    sigma_beta_rad, sigma_vr_mps, sigma_a_mps2, sigma_v0_mps, prm, xs, Ps, started, last_t, out_x,
-    out_P, out_nis,
-):  # fmt: skip
+def track_plots_2d(plan, conversions, plots, radars, options, tracks, outs):
     """Filter plots 0 … B − 1 in order; returns −1, or the index of the first plot whose
     time is before its slot's previous plot (nothing from it on is filtered).
 
     Args:
         plan (M, 3): the methods' ``core.filters.methods.method_plan``.
         conversions (R, M, 2, 8): their ``conversion_table`` for each radar's noise.
-        slot (B,): each plot's target slot; time_s, r_m, az_rad, vr_mps (B,): its time (s),
-            range (m), azimuth (rad) and radial velocity (m/s, read where has_vr (B,)).
-        radar (B,): index into the radar table site (R, 2) (m), sigma_r_m, sigma_beta_rad,
-            sigma_vr_mps (R,) (m, rad, m/s).
-        sigma_a_mps2: process-noise acceleration std (m/s²); sigma_v0_mps: start velocity std (m/s).
-        prm: (4,) the UKF's (λ + n, Wm₀, Wc₀, W).
-        xs (K, M, 4), Ps (K, M, 4, 4), started (K,), last_t (K,): every slot's tracks,
-            updated in place.
-        out_x (B, M, 4), out_P (B, M, 4, 4): each plot's posterior per method.
-        out_nis (B, M): each update's NIS (``core.filters.innovation``: the position stage's
-            plus the Doppler stage's when the plot has V̂r; ``ekf`` and ``ukf`` the EKF's
-            linearised statistics, as the numpy engine); NaN at a start (no prediction).
+        plots: the block (``core.filters.kernel_args.PlotColumns``).
+        radars: each radar's site (R, 2) and noise (``RadarArrays``).
+        options: σa, σv0 and the UKF's weights (``CVOptions``).
+        tracks: every slot's tracks, x (K, M, 4), P (K, M, 4, 4), started, last_t
+            (``TrackState``), updated in place.
+        outs: each plot's posterior per method, x (B, M, 4), P (B, M, 4, 4), and each
+            update's NIS (B, M) (``PlotOutputs``; ``core.filters.innovation``: the position
+            stage's plus the Doppler stage's when the plot has V̂r; ``ekf`` and ``ukf`` the
+            EKF's linearised statistics, as the numpy engine); NaN at a start.
     """
+    slot, time_s, r_m, az_rad = plots.slot, plots.time_s, plots.range_m, plots.azimuth_rad
+    vr_mps, has_vr, radar = plots.radial_velocity_mps, plots.has_vr, plots.radar
+    site, sigma_r_m, sigma_beta_rad = radars.site_m, radars.sigma_r_m, radars.sigma_beta_rad
+    sigma_vr_mps = radars.sigma_vr_mps
+    sigma_a_mps2, sigma_v0_mps, prm = (
+        options.sigma_a_mps2,
+        options.sigma_v0_mps,
+        options.ukf_weights,
+    )
+    xs, Ps, started, last_t = tracks.x, tracks.P, tracks.started, tracks.last_t
+    out_x, out_P, out_nis = outs.x, outs.P, outs.nis
     n_m = plan.shape[0]
     q = sigma_a_mps2 * sigma_a_mps2
     bufs = scratch_2d()

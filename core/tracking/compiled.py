@@ -41,6 +41,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from radarviz.core.cores import available_cores
+from radarviz.core.filters.kernel_args import (
+    CVOptions,
+    IMMOptions,
+    PlotColumns,
+    PlotOutputs,
+    RadarArrays,
+    TrackState,
+)
 from radarviz.core.filters.methods import conversion_table, method_plan, scale_table
 from radarviz.core.filters.models import IMMModel
 from radarviz.core.filters.polar_ukf import UKFParams
@@ -265,36 +273,55 @@ class CompiledTracks:
         out_P = np.empty((n, m, ns, ns))
         out_nis = np.empty((n, m))
         new = ~self.started[slot] if self.feed is not None else None
-        plot = [_f(block.time_s), _f(block.range_m), _f(block.azimuth_rad)]
-        noise = [_f(rd.sigma_r_m), _f(rd.sigma_beta_rad)]
-        if self.dims == 3:
+        none = np.zeros(0)  # a 2D block's elevations
+        three_d = self.dims == 3
+        if three_d:
             assert block.elevation_rad is not None
-            plot.append(_f(block.elevation_rad))
-            noise.append(_f(rd.sigma_elevation_rad))
-        # The methods' conversions of each radar's noise (``conversion_table``; in 3D the
-        # scales, ``scale_table``), per plot (split between the threads), then the radar
-        # table (shared).
-        if self.dims == 2:
-            conversions = conversion_table(self.methods, rd.sigma_r_m, rd.sigma_beta_rad)
-        else:
-            conversions = scale_table(self.methods, rd.sigma_beta_rad, rd.sigma_elevation_rad)
-        rows = (slot, *plot, _f(vr), has_vr, np.ascontiguousarray(block.radar, dtype=np.intp))
-        table = (
+        # The block's plots (split between the threads), then what they share: the radar
+        # table, the methods' conversions of each radar's noise (``conversion_table``; in 3D
+        # the scales, ``scale_table``), the options and the tracks.
+        rows = PlotColumns(
+            slot,
+            _f(block.time_s),
+            _f(block.range_m),
+            _f(block.azimuth_rad),
+            _f(block.elevation_rad) if three_d else none,
+            _f(vr),
+            has_vr,
+            np.ascontiguousarray(block.radar, dtype=np.intp),
+        )
+        radars = RadarArrays(
             np.ascontiguousarray(rd.site_m[:, : self.dims], dtype=np.float64),
-            *noise,
+            _f(rd.sigma_r_m),
+            _f(rd.sigma_beta_rad),
+            _f(rd.sigma_elevation_rad) if three_d else none,
             _f(rd.sigma_vr_mps),
         )
-        if self.imm is None:
-            model = (self.sigma_a_mps2, self.sigma_v0_mps, self.prm, self.xs, self.Ps)
+        if three_d:
+            conversions = scale_table(self.methods, rd.sigma_beta_rad, rd.sigma_elevation_rad)
         else:
-            model = (self.imm_sigma_a_mps2, self.turn_rates, self.transition, self.mu0)
-            model = (*model, self.sigma_v0_mps, self.prm)
-            model = (*model, self.feed is not None, self.xs, self.Ps, self.mus)
+            conversions = conversion_table(self.methods, rd.sigma_r_m, rd.sigma_beta_rad)
+        options: CVOptions | IMMOptions
+        if self.imm is None:
+            options = CVOptions(self.sigma_a_mps2, self.sigma_v0_mps, self.prm)
+        else:
+            options = IMMOptions(
+                self.imm_sigma_a_mps2,
+                self.turn_rates,
+                self.transition,
+                self.mu0,
+                self.sigma_v0_mps,
+                self.prm,
+                self.feed is not None,
+            )
+        mus = self.mus if self.imm is not None else np.zeros((0, 0))
+        tracks = TrackState(self.xs, self.Ps, mus, self.started, self.last_t)
         kernel = _track_kernel(self.dims, self.imm is not None)
 
-        def run(rows: tuple[NDArray[Any], ...], outs: tuple[NDArray[np.float64], ...]) -> int:
-            args = (self.plan, conversions, *rows, *table, *model)
-            return int(kernel(*args, self.started, self.last_t, *outs))
+        def run(rows: PlotColumns, outs: tuple[NDArray[np.float64], ...]) -> int:
+            return int(
+                kernel(self.plan, conversions, rows, radars, options, tracks, PlotOutputs(*outs))
+            )
 
         split = n * m >= SPLIT_STEPS and _cores() > 1
         halves = _halves(slot) if split else None
@@ -482,8 +509,8 @@ def _halves(slot: NDArray[np.intp]) -> tuple[NDArray[np.intp], NDArray[np.intp]]
 
 
 def _run_split(
-    run: Callable[[tuple[NDArray[Any], ...], tuple[NDArray[np.float64], ...]], int],
-    rows: tuple[NDArray[Any], ...],
+    run: Callable[[PlotColumns, tuple[NDArray[np.float64], ...]], int],
+    rows: PlotColumns,
     halves: tuple[NDArray[np.intp], NDArray[np.intp]],
     outs: tuple[NDArray[np.float64], ...],
 ) -> int:
@@ -502,7 +529,7 @@ def _run_split(
 
     def half(idx: NDArray[np.intp]) -> int:
         sub = tuple(np.empty((idx.size, *o.shape[1:])) for o in outs)
-        bad = run(tuple(r[idx] for r in rows), sub)
+        bad = run(rows.take(idx), sub)
         done = idx if bad < 0 else idx[:bad]
         for o, s in zip(outs, sub, strict=True):
             o[done] = s[: done.size]

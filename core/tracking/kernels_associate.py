@@ -31,6 +31,13 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
+from radarviz.core.filters.kernel_args import (
+    IMMOptions,
+    PlotColumns,
+    PlotOutputs,
+    RadarArrays,
+    TrackState,
+)
 from radarviz.core.filters.kernels_2d import _inline, _jit
 from radarviz.core.filters.kernels_imm import pair_nis_2d, track_plots_imm_2d
 from radarviz.core.filters.methods import PLAN_COVARIANCE
@@ -683,14 +690,18 @@ def _batch(pl, beams, radar_site, book, tr, rules, live, counters, since, owner,
         row_out[lo + j] = own[j]
     # Every method's update of every plot's track, in plot order.
     if n:
-        vr = pl.radial_velocity_mps[lo:hi]
-        bad = track_plots_imm_2d(
-            tr.plan, tr.conversions, own, times, pl.range_m[lo:hi], pl.azimuth_rad[lo:hi],
-            vr, ~np.isnan(vr), pl.noise[lo:hi], pl.site, pl.sigma_r_m, pl.sigma_beta_rad,
-            pl.sigma_vr_mps, tr.sigma_a_mps2, tr.omega, tr.Pi, tr.mu0, tr.sigma_v0_mps, tr.prm,
-            tr.with_stats, tr.xs, tr.Ps, tr.mus, tr.started, tr.last_t, out_x[lo:hi],
-            out_P[lo:hi], out_nis[lo:hi],
+        vr, none = pl.radial_velocity_mps[lo:hi], np.empty(0)
+        plots = PlotColumns(
+            own, times, pl.range_m[lo:hi], pl.azimuth_rad[lo:hi], none, vr, ~np.isnan(vr),
+            pl.noise[lo:hi],
         )  # fmt: skip
+        radars = RadarArrays(pl.site, pl.sigma_r_m, pl.sigma_beta_rad, none, pl.sigma_vr_mps)
+        options = IMMOptions(
+            tr.sigma_a_mps2, tr.omega, tr.Pi, tr.mu0, tr.sigma_v0_mps, tr.prm, tr.with_stats
+        )
+        tracks = TrackState(tr.xs, tr.Ps, tr.mus, tr.started, tr.last_t)
+        outs = PlotOutputs(out_x[lo:hi], out_P[lo:hi], out_nis[lo:hi])
+        bad = track_plots_imm_2d(tr.plan, tr.conversions, plots, radars, options, tracks, outs)
         if bad >= 0:
             return lo + bad
         a = tr.gate
