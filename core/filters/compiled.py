@@ -40,6 +40,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from radarviz.core.confidence import BAND_GROUPS
+from radarviz.core.filters.kernel_args import (
+    FilterOptions,
+    RunStates,
+    ScanMeasurements,
+    TermSums,
+)
 from radarviz.core.filters.methods import METHODS, conversion_table, method_plan
 from radarviz.core.filters.polar_ukf import UKFParams
 from radarviz.core.filters.state import CVBatch
@@ -180,41 +186,24 @@ def filter_scans(
     c, wm0, wc0, w = s.ukf.weights(4)
     plan = method_plan([method])[0]
     conversions = conversion_table([method], s.sigma_r_m, s.sigma_beta_rad)[0, 0]
+    plots = ScanMeasurements(r_runs, b_runs, vr_runs, doppler)
+    options = FilterOptions(
+        float(s.sigma_r_m),
+        float(s.sigma_beta_rad),
+        float(s.sigma_vr_mps),
+        float(s.period_s),
+        float(s.sigma_a_mps2),
+        float(s.sigma_v0_mps),
+        float(s.site_m[0]),
+        float(s.site_m[1]),
+        np.array([c, wm0, wc0, w], dtype=np.float64),
+    )
+    run_states = RunStates(state, states, xs, Ps)
+    term_sums = TermSums(n_terms, truth, cos_los, sin_los, sums, offset)
     for first in range(begin, steps, k):
         last = min(first + k, steps)
         sums[...] = 0.0
-        kernel(
-            plan,
-            conversions,
-            r_runs,
-            b_runs,
-            vr_runs,
-            doppler,
-            first,
-            last,
-            float(s.sigma_r_m),
-            float(s.sigma_beta_rad),
-            float(s.sigma_vr_mps),
-            float(s.period_s),
-            float(s.sigma_a_mps2),
-            float(s.sigma_v0_mps),
-            float(s.site_m[0]),
-            float(s.site_m[1]),
-            float(c),
-            float(wm0),
-            float(wc0),
-            float(w),
-            state,
-            states,
-            xs,
-            Ps,
-            n_terms,
-            truth,
-            cos_los,
-            sin_los,
-            sums,
-            offset,
-        )
+        kernel(plan, conversions, plots, options, first, last, run_states, term_sums)
         n = last - first
         yield ScanChunk(first, xs[:n], Ps[:n], sums[:, :n] if terms is not None else None)
 

@@ -1,5 +1,7 @@
-"""The tracker kernels' arguments, packed: one record per plot block, radar table, options,
-track state and output (``core.filters.kernels_track``, ``kernels_3d``, ``kernels_imm``).
+"""The compiled kernels' arguments, packed: the tracker kernels' (``core.filters.kernels_track``,
+``kernels_3d``, ``kernels_imm``) one record per plot block, radar table, options, track
+state and output; the Monte Carlo kernel's (``core.filters.kernels_2d.filter_scans_2d``) one
+per measurement block, options, run states and metric sums.
 
 Each is a NamedTuple of arrays and numbers, which numba takes as it is (its fields read by
 name in the kernels). ``core.tracking.compiled.CompiledTracks`` builds them for a block of
@@ -87,3 +89,53 @@ class PlotOutputs(NamedTuple):
     x: NDArray[np.float64]
     P: NDArray[np.float64]
     nis: NDArray[np.float64]
+
+
+class ScanMeasurements(NamedTuple):
+    """A Monte Carlo block's measurements, one run a row (m, N), any memory layout: r̂ (m),
+    β̂ (rad) and V̂r (m/s), the last read only with ``doppler``."""
+
+    range_m: NDArray[np.float64]
+    azimuth_rad: NDArray[np.float64]
+    radial_velocity_mps: NDArray[np.float64]
+    doppler: bool
+
+
+class FilterOptions(NamedTuple):
+    """The numbers every run of a Monte Carlo block shares: the noise std σr (m), σβ (rad),
+    σVr (m/s), the scan period T (s), σa (m/s²), σv0 (m/s), the radar's site (m) and the
+    UKF's weights (λ + n, Wm₀, Wc₀, W)."""
+
+    sigma_r_m: float
+    sigma_beta_rad: float
+    sigma_vr_mps: float
+    period_s: float
+    sigma_a_mps2: float
+    sigma_v0_mps: float
+    site_x_m: float
+    site_y_m: float
+    ukf_weights: NDArray[np.float64]
+
+
+class RunStates(NamedTuple):
+    """Each run's state between chunks of scans, (runs, 14): x then the upper entries of P;
+    with ``keep``, the states of the runs that give no terms at each scan of the chunk into
+    x (K, kept, 4) and P (K, kept, 4, 4)."""
+
+    state: NDArray[np.float64]
+    keep: bool
+    x: NDArray[np.float64]
+    P: NDArray[np.float64]
+
+
+class TermSums(NamedTuple):
+    """The metric terms the first ``runs`` runs add (``core.metrics.scan_terms``): the true
+    states (N, 4), the true line of sight's cosine and sine (N, 1), the sums per group
+    (G, K, 10) and the runs already counted (run j goes to group (offset + j) mod G)."""
+
+    runs: int
+    truth: NDArray[np.float64]
+    cos_los: NDArray[np.float64]
+    sin_los: NDArray[np.float64]
+    group_sums: NDArray[np.float64]
+    group_offset: int

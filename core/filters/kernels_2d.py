@@ -424,34 +424,47 @@ def _add_terms(buf, sums, i, m0, n_sum):
 
 
 @_jit
-def filter_scans_2d(
-    plan, conversions, r_hat, b_hat, vr_hat, doppler, first, last, sigma_r_m, sigma_beta_rad,
-    sigma_vr_mps, T, sigma_a_mps2, sigma_v0_mps, sx, sy, c, wm0, wc0, w, state, keep, xs, Ps,
-    n_terms, truth, cos_los, sin_los, group_sums, group_offset,
-):  # fmt: skip
+def filter_scans_2d(plan, conversions, plots, options, first, last, runs, terms):
     """Scans ``first … last − 1`` of every run; scan 0 starts a track from its plot, later
-    scans continue from ``state`` (runs, 14): each run's x then the upper entries of P
+    scans continue from ``runs.state`` (runs, 14): each run's x then the upper entries of P
     (``load_row``), updated in place.
 
     plan (3,), conversions (2, 8): the method's row of ``core.filters.methods.method_plan``
-    and of ``conversion_table`` (its update's scalars, then its start's).
-
-    r_hat, b_hat, vr_hat: (m, N) measurements, one run a row (any memory layout). Runs
-    m < ``n_terms`` add their metric terms (``terms_s``) at scan n into
-    group_sums[g, n − first] ((G, K, 10)), g = (group_offset + m) mod G
-    (``core.confidence.group_sums``' dealing), in the order of m; with ``keep`` the others
-    write their states into xs[n − first, m − n_terms], Ps[…].
+    and of ``conversion_table`` (its update's scalars, then its start's). plots: the
+    measurements (``core.filters.kernel_args.ScanMeasurements``); options: the shared numbers
+    (``FilterOptions``). Runs m < ``terms.runs`` add their metric terms (``terms_s``) at
+    scan n into terms.group_sums[g, n − first] ((G, K, 10)), g = (terms.group_offset + m)
+    mod G (``core.confidence.group_sums``' dealing), in the order of m; with ``runs.keep``
+    the others write their states into runs.x[n − first, m − terms.runs], runs.P[…]
+    (``RunStates``, ``TermSums``).
 
     Block-major: ``LANES`` runs at a time (the comment above ``LANES``), scan after scan, a
     stage of a scan one vectorised loop over the block's lanes; the block's states stay in
     its buffer over the chunk's scans and go through ``state`` once a chunk. Each run is
     filtered on its own, so its result does not depend on the block it falls in."""
+    r_hat, b_hat, vr_hat, doppler = (
+        plots.range_m,
+        plots.azimuth_rad,
+        plots.radial_velocity_mps,
+        plots.doppler,
+    )
+    sigma_r_m, sigma_beta_rad, sigma_vr_mps = (
+        options.sigma_r_m,
+        options.sigma_beta_rad,
+        options.sigma_vr_mps,
+    )
+    T, sigma_a_mps2, sigma_v0_mps = options.period_s, options.sigma_a_mps2, options.sigma_v0_mps
+    sx, sy, weights = options.site_x_m, options.site_y_m, options.ukf_weights
+    c, wm0, wc0, w = weights[0], weights[1], weights[2], weights[3]
+    state, keep, xs, Ps = runs.state, runs.keep, runs.x, runs.P
+    n_terms, truth, cos_los, sin_los = terms.runs, terms.truth, terms.cos_los, terms.sin_los
+    group_sums, group_offset = terms.group_sums, terms.group_offset
     sr2, s, q = sigma_r_m * sigma_r_m, sigma_beta_rad * sigma_beta_rad, sigma_a_mps2 * sigma_a_mps2
     var_vr = sigma_vr_mps * sigma_vr_mps
     kind, form, start_form = plan[0], plan[1], plan[2]
     co, co_start = row_tuple(conversions[0]), row_tuple(conversions[1])
     groups = group_sums.shape[0]
-    runs = r_hat.shape[0]
+    n_runs = r_hat.shape[0]
     buf = np.empty(_ROWS * LANES)
     # The sums by run phase m mod G (group (group_offset + m) mod G): sums[i, a·G + phase], so
     # a block's lanes add to consecutive entries (``_add_terms``)
@@ -461,8 +474,8 @@ def filter_scans_2d(
         for i in range(last - first):
             for a in range(10):
                 sums[i, a * groups + ph] = group_sums[g, i, a]
-    for m0 in range(0, runs, LANES):
-        nb = min(LANES, runs - m0)
+    for m0 in range(0, n_runs, LANES):
+        nb = min(LANES, n_runs - m0)
         for j in range(LANES):
             m = m0 + j if j < nb else m0  # a short block's spare lanes repeat its first run
             if first == 0:
