@@ -442,23 +442,11 @@ def filter_scans_2d(plan, conversions, plots, options, first, last, runs, terms)
     stage of a scan one vectorised loop over the block's lanes; the block's states stay in
     its buffer over the chunk's scans and go through ``state`` once a chunk. Each run is
     filtered on its own, so its result does not depend on the block it falls in."""
-    r_hat, b_hat, vr_hat, doppler = (
-        plots.range_m,
-        plots.azimuth_rad,
-        plots.radial_velocity_mps,
-        plots.doppler,
-    )
-    sigma_r_m, sigma_beta_rad, sigma_vr_mps = (
-        options.sigma_r_m,
-        options.sigma_beta_rad,
-        options.sigma_vr_mps,
-    )
-    T, sigma_a_mps2, sigma_v0_mps = options.period_s, options.sigma_a_mps2, options.sigma_v0_mps
-    sx, sy, weights = options.site_x_m, options.site_y_m, options.ukf_weights
-    c, wm0, wc0, w = weights[0], weights[1], weights[2], weights[3]
-    state, keep, xs, Ps = runs.state, runs.keep, runs.x, runs.P
-    n_terms, truth, cos_los, sin_los = terms.runs, terms.truth, terms.cos_los, terms.sin_los
-    group_sums, group_offset = terms.group_sums, terms.group_offset
+    r_hat, b_hat, vr_hat, doppler = plots
+    sigma_r_m, sigma_beta_rad, sigma_vr_mps, T, sigma_a_mps2, sigma_v0_mps, sx, sy, wt = options
+    c, wm0, wc0, w = wt[0], wt[1], wt[2], wt[3]
+    state, keep, xs, Ps = runs
+    n_terms, truth, cos_los, sin_los, group_sums, group_offset = terms
     sr2, s, q = sigma_r_m * sigma_r_m, sigma_beta_rad * sigma_beta_rad, sigma_a_mps2 * sigma_a_mps2
     var_vr = sigma_vr_mps * sigma_vr_mps
     kind, form, start_form = plan[0], plan[1], plan[2]

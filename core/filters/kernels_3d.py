@@ -214,22 +214,11 @@ def track_plots_3d(plan, scales, plots, radars, options, tracks, outs):
     (B, M, 6, 6), (B, M); the UKF's weights for n = 6; scales (R, M, 2, 2) the methods'
     ``scale_table`` in place of 2D's conversion scalars. Returns −1 or the index of the
     first plot before its slot's previous one."""
-    slot, time_s, r_m, az_rad = plots.slot, plots.time_s, plots.range_m, plots.azimuth_rad
-    el_rad, vr_mps, has_vr, radar = (
-        plots.elevation_rad,
-        plots.radial_velocity_mps,
-        plots.has_vr,
-        plots.radar,
-    )
-    site, sigma_r_m, sigma_beta_rad = radars.site_m, radars.sigma_r_m, radars.sigma_beta_rad
-    sigma_elevation_rad, sigma_vr_mps = radars.sigma_elevation_rad, radars.sigma_vr_mps
-    sigma_a_mps2, sigma_v0_mps, prm = (
-        options.sigma_a_mps2,
-        options.sigma_v0_mps,
-        options.ukf_weights,
-    )
-    xs, Ps, started, last_t = tracks.x, tracks.P, tracks.started, tracks.last_t
-    out_x, out_P, out_nis = outs.x, outs.P, outs.nis
+    slot, time_s, r_m, az_rad, el_rad, vr_mps, has_vr, radar = plots
+    site, sigma_r_m, sigma_beta_rad, sigma_elevation_rad, sigma_vr_mps = radars
+    sigma_a_mps2, sigma_v0_mps, prm = options
+    xs, Ps, _, started, last_t = tracks
+    out_x, out_P, out_nis = outs
     n_m = plan.shape[0]
     q = sigma_a_mps2 * sigma_a_mps2
     x, P = np.empty(6), np.empty((6, 6))

@@ -190,19 +190,11 @@ def track_plots_imm_2d(plan, conversions, plots, radars, options, tracks, outs):
         outs: each plot's combined posterior per method and the NIS of the combined
             prediction, NaN at a start.
     """
-    slot, time_s, r_m, az_rad = plots.slot, plots.time_s, plots.range_m, plots.azimuth_rad
-    vr_mps, has_vr, radar = plots.radial_velocity_mps, plots.has_vr, plots.radar
-    site, sigma_r_m, sigma_beta_rad = radars.site_m, radars.sigma_r_m, radars.sigma_beta_rad
-    sigma_vr_mps = radars.sigma_vr_mps
-    sigma_a_mps2, omega, Pi, mu0 = (
-        options.sigma_a_mps2,
-        options.turn_rate_radps,
-        options.transition,
-        options.mu0,
-    )
-    sigma_v0_mps, prm, with_stats = options.sigma_v0_mps, options.ukf_weights, options.with_stats
-    xs, Ps, mus, started, last_t = tracks.x, tracks.P, tracks.mu, tracks.started, tracks.last_t
-    out_x, out_P, out_nis = outs.x, outs.P, outs.nis
+    slot, time_s, r_m, az_rad, _, vr_mps, has_vr, radar = plots
+    site, sigma_r_m, sigma_beta_rad, _, sigma_vr_mps = radars
+    sigma_a_mps2, omega, Pi, mu0, sigma_v0_mps, prm, with_stats = options
+    xs, Ps, mus, started, last_t = tracks
+    out_x, out_P, out_nis = outs
     n_m, r = plan.shape[0], sigma_a_mps2.shape[0]
     bufs = scratch_2d()
     K = bufs[0]
@@ -266,24 +258,11 @@ def track_plots_imm_3d(plan, scales, plots, radars, options, tracks, outs):
     the plots' elevations, sites (R, 3) and σε read, models x (K, M, r, 6),
     P (K, M, r, 6, 6), outputs (B, M, 6), (B, M, 6, 6), (B, M); the UKF's weights for
     n = 6; scales (R, M, 2, 2) as ``track_plots_3d``'s."""
-    slot, time_s, r_m, az_rad = plots.slot, plots.time_s, plots.range_m, plots.azimuth_rad
-    el_rad, vr_mps, has_vr, radar = (
-        plots.elevation_rad,
-        plots.radial_velocity_mps,
-        plots.has_vr,
-        plots.radar,
-    )
-    site, sigma_r_m, sigma_beta_rad = radars.site_m, radars.sigma_r_m, radars.sigma_beta_rad
-    sigma_elevation_rad, sigma_vr_mps = radars.sigma_elevation_rad, radars.sigma_vr_mps
-    sigma_a_mps2, omega, Pi, mu0 = (
-        options.sigma_a_mps2,
-        options.turn_rate_radps,
-        options.transition,
-        options.mu0,
-    )
-    sigma_v0_mps, prm, with_stats = options.sigma_v0_mps, options.ukf_weights, options.with_stats
-    xs, Ps, mus, started, last_t = tracks.x, tracks.P, tracks.mu, tracks.started, tracks.last_t
-    out_x, out_P, out_nis = outs.x, outs.P, outs.nis
+    slot, time_s, r_m, az_rad, el_rad, vr_mps, has_vr, radar = plots
+    site, sigma_r_m, sigma_beta_rad, sigma_elevation_rad, sigma_vr_mps = radars
+    sigma_a_mps2, omega, Pi, mu0, sigma_v0_mps, prm, with_stats = options
+    xs, Ps, mus, started, last_t = tracks
+    out_x, out_P, out_nis = outs
     n_m, r = plan.shape[0], sigma_a_mps2.shape[0]
     x, P = np.empty(6), np.empty((6, 6))
     x0, P0 = np.empty((r, 6)), np.empty((r, 6, 6))  # the models, mixed then advanced

@@ -150,17 +150,11 @@ def track_plots_2d(plan, conversions, plots, radars, options, tracks, outs):
             stage's plus the Doppler stage's when the plot has V̂r; ``ekf`` and ``ukf`` the
             EKF's linearised statistics, as the numpy engine); NaN at a start.
     """
-    slot, time_s, r_m, az_rad = plots.slot, plots.time_s, plots.range_m, plots.azimuth_rad
-    vr_mps, has_vr, radar = plots.radial_velocity_mps, plots.has_vr, plots.radar
-    site, sigma_r_m, sigma_beta_rad = radars.site_m, radars.sigma_r_m, radars.sigma_beta_rad
-    sigma_vr_mps = radars.sigma_vr_mps
-    sigma_a_mps2, sigma_v0_mps, prm = (
-        options.sigma_a_mps2,
-        options.sigma_v0_mps,
-        options.ukf_weights,
-    )
-    xs, Ps, started, last_t = tracks.x, tracks.P, tracks.started, tracks.last_t
-    out_x, out_P, out_nis = outs.x, outs.P, outs.nis
+    slot, time_s, r_m, az_rad, _, vr_mps, has_vr, radar = plots
+    site, sigma_r_m, sigma_beta_rad, _, sigma_vr_mps = radars
+    sigma_a_mps2, sigma_v0_mps, prm = options
+    xs, Ps, _, started, last_t = tracks
+    out_x, out_P, out_nis = outs
     n_m = plan.shape[0]
     q = sigma_a_mps2 * sigma_a_mps2
     bufs = scratch_2d()
