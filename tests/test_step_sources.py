@@ -204,6 +204,19 @@ STEP_KINDS: dict[str, StepKind] = {
             ),
             "core/filters/innovation.py:linear_innovation": "the same, from H and R",
         },
+        not_yet={
+            "core/filters/kernels_track.py:position_stats": (
+                "the tracker kernels' own 2D statistics: bound to the steps' copy, a target's "
+                "IMM results came to depend by rounding on the other targets in its block"
+            ),
+            "core/filters/kernels_track.py:position_nis": "calls position_stats",
+            "core/filters/kernels_track.py:doppler_stats": "as position_stats",
+            "core/filters/kernels_track.py:doppler_nis": "calls doppler_stats",
+            "core/filters/kernels_3d.py:nis_3": "as position_stats, in 3D",
+            "core/filters/kernels_3d.py:position_stats_3d_c": "as position_stats, in 3D",
+            "core/filters/kernels_3d.py:doppler_stats_3d_c": "as position_stats, in 3D",
+            "core/filters/kernels_3d.py:doppler_nis_3d": "calls doppler_stats_3d_c",
+        },
     ),
     "IMM mode probabilities": StepKind(
         pattern=r"(predicted|updated|mode)_probabilit",
@@ -213,6 +226,12 @@ STEP_KINDS: dict[str, StepKind] = {
                 "core/filters/imm_moments.py:updated_probabilities",
             }
         ),
+        not_yet={
+            "core/filters/kernels_imm.py:mode_probabilities": (
+                "the IMM kernels' own update of μ: bound to the shared one, a split block's "
+                "3D IMM results differed from one thread's by rounding"
+            ),
+        },
     ),
     "semi-definite Cholesky factor": StepKind(
         pattern=r"cholesky",

@@ -303,9 +303,6 @@ _exact = numba.njit(
 )
 _sincos = _exact(sincos)
 _atan2_v = _exact(trig_atan2)
-# The innovation statistics' binding (``core.filters.kernels_track``): IEEE arithmetic, no
-# fastmath (why: there); not cached on its own, as ``_inline_v`` (the kernels inlining it are).
-_strict = numba.njit(cache=False, error_model="numpy", nogil=True, forceinline=True)
 _inline_v = numba.njit(
     cache=False, error_model="numpy", nogil=True, fastmath=_FAST, forceinline=True
 )

@@ -19,13 +19,11 @@ import numpy as np
 
 from radarviz.core.conversion.elementwise import Covariance
 from radarviz.core.conversion.elementwise_3d import CONVERSION_FUNCTIONS_3D
-from radarviz.core.filters import doppler_3d, position_3d
 from radarviz.core.filters.kernels_2d import (
     _exact,
     _inline,
     _jit,
     _select,
-    _strict,
     add_process_noise_c,
     predict_components_c,
     white_acceleration_c,
@@ -46,23 +44,6 @@ ekf_measurement_3d_c = _steps["ekf_measurement_3d"]
 ukf_update_3d = _steps["ukf_update_3d"]
 doppler_terms_3d = _steps["doppler_terms_3d"]
 doppler_update_3d = _steps["doppler_update_3d"]
-
-
-# The innovation statistics (``core.filters.position_3d.position_stats_3d``,
-# ``core.filters.doppler_3d.doppler_stats_3d``: the numpy engine's too), compiled without
-# fastmath as the 2D ones (``core.filters.kernels_track``).
-_stats_3d = {
-    **rebind(
-        (position_3d.position_stats_3d,), {"sqrt": sqrt, "where": _select, "log": log}, _strict
-    ),
-    **rebind(
-        (doppler_3d.doppler_terms_3d, doppler_3d.doppler_stats_3d),
-        {"where": _select, "log": log},
-        _strict,
-    ),
-}
-position_stats_3d = _stats_3d["position_stats_3d"]
-doppler_stats_3d = _stats_3d["doppler_stats_3d"]
 
 
 # The 3D conversions (``core.conversion.elementwise_3d``, the numpy engine's too), compiled
@@ -151,6 +132,50 @@ def predict_3d(x, P, T: float, q: float):
 
 
 @_inline
+def nis_3(S, nu) -> float:
+    # νᵀ S⁻¹ ν by the Cholesky factor (core.filters.state.quad_form_inv): NaN unless S is
+    # positive definite
+    l00 = S[0, 0]
+    if not l00 > 0.0:
+        return np.nan
+    l00 = sqrt(l00)
+    l10, l20 = S[1, 0] / l00, S[2, 0] / l00
+    d1 = S[1, 1] - l10 * l10
+    if not d1 > 0.0:
+        return np.nan
+    l11 = sqrt(d1)
+    l21 = (S[2, 1] - l20 * l10) / l11
+    d2 = S[2, 2] - l20 * l20 - l21 * l21
+    if not d2 > 0.0:
+        return np.nan
+    l22 = sqrt(d2)
+    y0 = nu[0] / l00
+    y1 = (nu[1] - l10 * y0) / l11
+    y2 = (nu[2] - l20 * y0 - l21 * y1) / l22
+    return y0 * y0 + y1 * y1 + y2 * y2
+
+
+@_inline
+def doppler_stats_3d_c(x, P, vr_hat, trig, var_vr, sb2, se2, u):
+    # (ν² / S, log S) of the Doppler stage (doppler_terms, linear_innovation); NaN unless S > 0
+    r_e = doppler_terms_3d(x, P, trig, var_vr, sb2, se2, u)
+    S = r_e
+    for a in range(3):
+        for c in range(3):
+            S += u[a] * P[2 * a + 1, 2 * c + 1] * u[c]
+    if not S > 0.0:
+        return np.nan, np.nan
+    nu = vr_hat - (u[0] * x[1] + u[1] * x[3] + u[2] * x[5])
+    return nu * nu / S, log(S)
+
+
+@_inline
+def doppler_nis_3d(x, P, vr_hat, trig, var_vr, sb2, se2, u) -> float:
+    # ν² / S of ``doppler_stats_3d_c``
+    return doppler_stats_3d_c(x, P, vr_hat, trig, var_vr, sb2, se2, u)[0]
+
+
+@_inline
 def position_measurement_3d(
     plan, k, x, r, b, el, sr2, sb2, se2, sx, sy, sz, nu, R, z, conv, converted=False
 ):
@@ -179,6 +204,20 @@ def start_track_3d(plan, k, x, P, r, b, el, sr2, sb2, se2, sx, sy, sz, sigma_v0_
     z (3,), R (3, 3), ``conv``: scratch."""
     convert_3d(plan[PLAN_START], k, r, sr2, sb2, se2, 0.0, 0.0, 0.0, z, R, conv)
     start_3d(x, P, z, R, sx, sy, sz, sigma_v0_mps)
+
+
+@_inline
+def position_stats_3d_c(P, nu, R, S, Si):
+    """(νᵀ S⁻¹ ν, log det S) of ``position_measurement_3d``'s (ν, R) on P (6, 6), S = H P Hᵀ + R
+    into S (3, 3) (Si: scratch); both NaN unless S is positive definite."""
+    for a in range(3):
+        for c in range(3):
+            S[a, c] = P[2 * a, 2 * c] + R[a, c]
+    nis = nis_3(S, nu)
+    det = inverse_3(S, Si)
+    if not (nis == nis and det > 0.0):
+        return np.nan, np.nan
+    return nis, log(det)
 
 
 @_inline
@@ -256,12 +295,12 @@ def track_plots_3d(plan, scales, plots, radars, options, tracks, outs):
                 position_measurement_3d(
                     pj, kj[0], x, r, b, el, sr2, sb2, se2, sx, sy, sz, nu, R, z, conv
                 )
-                nis = position_stats_3d(P, nu, R)[0]
+                nis = position_stats_3d_c(P, nu, R, bufs[0], bufs[1])[0]
                 position_stage_3d(pj, x, P, r, b, el, sr2, sb2, se2, sx, sy, sz, nu, R, prm, bufs)
             if has_vr[i]:
                 var_vr = sigma_vr_mps[g] * sigma_vr_mps[g]
                 if not new:
-                    nis += doppler_stats_3d(x, P, vr_mps[i], trig, var_vr, sb2, se2, u)[0]
+                    nis += doppler_nis_3d(x, P, vr_mps[i], trig, var_vr, sb2, se2, u)
                 doppler_update_3d(x, P, vr_mps[i], trig, var_vr, sb2, se2, u, Uv, Kv, bufs[4])
             out_nis[i, j] = nis
             for a in range(6):

@@ -40,8 +40,6 @@ from radarviz.core.filters.kernels_2d import (
     _add_outer,
     _inline,
     _jit,
-    _select,
-    _strict,
     add_process_noise_c,
     doppler_update,
     load,
@@ -53,13 +51,13 @@ from radarviz.core.filters.kernels_2d import (
 )
 from radarviz.core.filters.kernels_3d import (
     conversion_scratch,
-    doppler_stats_3d,
+    doppler_stats_3d_c,
     doppler_update_3d,
     fill_noise_table,
     plot_factors,
     position_measurement_3d,
     position_stage_3d,
-    position_stats_3d,
+    position_stats_3d_c,
     predict_3d,
     scratch_3d,
     start_track_3d,
@@ -136,14 +134,28 @@ mix_3d = _moments["mix_3d"]
 combine_3d = _moments["combine_3d"]
 
 
-# The update of μ (``core.filters.imm_moments.updated_probabilities``, the numpy engine's
-# too), compiled without fastmath as the innovation statistics (``kernels_track``).
-_probabilities = rebind(
-    (imm_moments._log_weight, imm_moments.updated_probabilities),
-    {"where": _select, "exp": exp, "log": math.log, "isfinite": math.isfinite, "maximum": max},
-    _strict,
-)
-mode_probabilities = _probabilities["updated_probabilities"]
+@_inline
+def mode_probabilities(prior, ll, mu):
+    """μⱼ ∝ Λⱼ c̄ⱼ (``core.filters.imm.mode_probabilities``) into mu (r,) (may be ``prior``):
+    exp(log Λⱼ + log c̄ⱼ − max), the prior inside the shift; a model whose likelihood is not
+    finite gets no weight; a track with no finite weight keeps its prior."""
+    r = prior.shape[0]
+    top = -np.inf
+    for j in range(r):
+        if prior[j] > 0.0 and math.isfinite(ll[j]):
+            v = ll[j] + math.log(prior[j])
+            if v > top:
+                top = v
+    ok = math.isfinite(top)
+    total = 0.0
+    for j in range(r):
+        w = prior[j]
+        if ok:
+            w = exp(ll[j] + math.log(prior[j]) - top) if w > 0.0 and math.isfinite(ll[j]) else 0.0
+        mu[j] = w
+        total += w
+    for j in range(r):
+        mu[j] /= total
 
 
 @_inline
@@ -306,7 +318,7 @@ def track_plots_imm_3d(plan, scales, plots, radars, options, tracks, outs):
                     position_measurement_3d(
                         pj, kj[0], x, rr, b, el, sr2, sb2, se2, sx, sy, sz, nu, R, z, conv
                     )
-                    nis = position_stats_3d(P, nu, R)[0]
+                    nis = position_stats_3d_c(P, nu, R, bufs[0], bufs[1])[0]
                 # From the first conversion on, z and R hold this plot's (for a conversion
                 # that does not read the prediction, every model's is the same).
                 converted = with_stats
@@ -317,7 +329,7 @@ def track_plots_imm_3d(plan, scales, plots, radars, options, tracks, outs):
                         converted,
                     )  # fmt: skip
                     converted = True
-                    st = position_stats_3d(Pj, nu, R)
+                    st = position_stats_3d_c(Pj, nu, R, bufs[0], bufs[1])
                     ll[m] = log_likelihood(st[0], st[1], 3)
                     position_stage_3d(
                         pj, xj, Pj, rr, b, el, sr2, sb2, se2, sx, sy, sz, nu, R, prm, bufs
@@ -326,10 +338,10 @@ def track_plots_imm_3d(plan, scales, plots, radars, options, tracks, outs):
                 if has_vr[i]:
                     if with_stats:
                         combine_3d(x0, P0, mu, x, P)
-                        nis += doppler_stats_3d(x, P, vr, trig, var_vr, sb2, se2, u)[0]
+                        nis += doppler_stats_3d_c(x, P, vr, trig, var_vr, sb2, se2, u)[0]
                     for m in range(r):
                         xj, Pj = x0[m], P0[m]
-                        st = doppler_stats_3d(xj, Pj, vr, trig, var_vr, sb2, se2, u)
+                        st = doppler_stats_3d_c(xj, Pj, vr, trig, var_vr, sb2, se2, u)
                         ll[m] = log_likelihood(st[0], st[1], 1)
                         doppler_update_3d(xj, Pj, vr, trig, var_vr, sb2, se2, u, Uv, Kv, bufs[4])
                     mode_probabilities(mu, ll, mu)

@@ -21,49 +21,32 @@ from math import cos, log, sin
 
 import numpy as np
 
-from radarviz.core.filters import doppler_2d, position_2d
 from radarviz.core.filters.kernels_2d import (
     _inline,
     _jit,
-    _select,
-    _strict,
     convert,
     doppler_update,
     ekf_measurement_s,
-    load,
     position_update,
     predict,
     start,
     ukf_update,
 )
 from radarviz.core.filters.methods import PLAN_COVARIANCE, PLAN_KIND, PLAN_START, Kind
-from radarviz.core.filters.rebind import rebind
-
-# The innovation statistics (``core.filters.position_2d.position_stats_2d``,
-# ``core.filters.doppler_2d.doppler_stats_2d``: the numpy engine's too), compiled here
-# without fastmath: inlined, a statistic's arithmetic then rounds alike wherever it lands
-# (the kernels are specialised for each caller's array types, and fused or reordered
-# differently in each, a target's NIS and its IMM weights would depend on its neighbours).
-_stats = {
-    **rebind((position_2d.position_stats_2d,), {"where": _select, "log": log}, _strict),
-    **rebind(
-        (doppler_2d.doppler_terms_2d, doppler_2d.doppler_stats_2d),
-        {"where": _select, "log": log, "cos": cos, "sin": sin},
-        _strict,
-    ),
-}
-_position_stats_2d = _stats["position_stats_2d"]
-_doppler_stats_2d = _stats["doppler_stats_2d"]
 
 
-@_inline
+@_jit
 def position_stats(P, nx: float, ny: float, r00: float, r01: float, r11: float):
-    # (νᵀ S⁻¹ ν, log det S) of a position measurement on P (4, 4), NaN unless S is positive
-    # definite (``core.filters.position_2d.position_stats_2d``)
-    return _position_stats_2d(P[0, 0], P[0, 2], P[2, 2], nx, ny, r00, r01, r11)
+    # (νᵀ S⁻¹ ν, log det S), S = H P⁻ Hᵀ + R (core.filters.innovation.position_innovation);
+    # both NaN unless S is positive definite, as the numpy engine's Cholesky and slogdet give
+    s00, s01, s11 = P[0, 0] + r00, P[0, 2] + r01, P[2, 2] + r11
+    det = s00 * s11 - s01 * s01
+    if not (s00 > 0.0 and det > 0.0):
+        return np.nan, np.nan
+    return (s11 * nx * nx - 2.0 * s01 * nx * ny + s00 * ny * ny) / det, log(det)
 
 
-@_inline
+@_jit
 def position_nis(P, nx: float, ny: float, r00: float, r01: float, r11: float) -> float:
     # νᵀ S⁻¹ ν of ``position_stats``
     return position_stats(P, nx, ny, r00, r01, r11)[0]
@@ -71,10 +54,19 @@ def position_nis(P, nx: float, ny: float, r00: float, r01: float, r11: float) ->
 
 @_inline
 def doppler_stats(x, P, vr_hat: float, b: float, var_vr: float, vb: float):
-    # (ν² / S, log S) of the Doppler stage on the state x (4,), P (4, 4) it updates
-    # (``core.filters.doppler_2d.doppler_stats_2d``)
-    xt, p = load(x, P)
-    return _doppler_stats_2d(xt, p, vr_hat, b, var_vr, vb)
+    # (ν² / S, log S) of the Doppler stage on the state it updates
+    # (core.filters.doppler.doppler_terms, linear_innovation): ν = V̂r − û·v,
+    # S = û P_vv ûᵀ + var e; both NaN unless S > 0
+    u0, u1 = cos(b), sin(b)
+    g0, g1 = -u1, u0
+    gv = g0 * x[1] + g1 * x[3]
+    gpg = g0 * g0 * P[1, 1] + g1 * g1 * P[3, 3] + 2.0 * g1 * g0 * P[3, 1]
+    S = u0 * u0 * P[1, 1] + 2.0 * u0 * u1 * P[1, 3] + u1 * u1 * P[3, 3]
+    S += var_vr + vb * (gv * gv + gpg)
+    if not S > 0.0:
+        return np.nan, np.nan
+    nu = vr_hat - (u0 * x[1] + u1 * x[3])
+    return nu * nu / S, log(S)
 
 
 @_inline
