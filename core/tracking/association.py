@@ -730,6 +730,18 @@ class GNNTracker:
             scale = threshold * PREFILTER_MARGIN
             self._compiled.retune(threshold, scale, q_max, association)
 
+    def reserve(self, tracks: int) -> None:
+        """Room for ``tracks`` more tracks, made now: the book's slots and, on the compiled
+        route, the tracker's rows (the monitor's with them). They otherwise grow by doubling
+        when a call needs more (``TrackBook.reserve``: a call may start a track from every
+        one of its plots), which in a session that runs for hours comes with its first
+        large run, minutes in: a step of megabytes at a random time, where memory taken at
+        the start stays the same. (The Python route's filters still grow with the tracks.)"""
+        if self._compiled is not None:
+            self._compiled.reserve(tracks)
+        else:
+            self.book.reserve(tracks)
+
     @property
     def gate(self) -> float:
         """γ, the gate on d²."""

@@ -33,6 +33,7 @@ from radarviz.viz_app.live.control import LiveControl
 from radarviz.viz_app.live.replay import parse_address
 from radarviz.viz_app.live.session import (
     QUEUE_PLOTS,
+    RESERVED_TRACKS,
     FeedCounts,
     FollowedFile,
     Horizon,
@@ -102,7 +103,11 @@ def run_live(args: argparse.Namespace) -> int:
     coverage = {n: radar_coverage(r) for n, r in radars.items()}
 
     def make(options: Any, association: Any) -> GNNTracker:
-        return GNNTracker(methods, False, options, association, coverage=coverage)
+        # Memory that does not grow with the session: the tracks' arrays are made at their
+        # size at once.
+        made = GNNTracker(methods, False, options, association, coverage=coverage)
+        made.reserve(RESERVED_TRACKS)
+        return made
 
     try:
         tracker = make(options, association)
