@@ -136,6 +136,22 @@ def test_room_reserved_at_the_start_is_the_room_the_tracks_take() -> None:
     assert capacities(plain)[0] > 128
 
 
+def test_a_tracker_that_does_not_keep_the_confirmed_ids_counts_them() -> None:
+    """``keep_confirmed=False`` (``radarviz live``'s): the same tracks and account, the
+    number of tracks confirmed, not their ids."""
+    plots = rotating_scene(5, targets=40, duration_s=40.0)
+    batches = batches_of(plots)
+    kept = GNNTracker(("ucm",), False, OPTIONS, AssociationOptions(), coverage=COVERAGE)
+    want = summary(kept, run(kept, batches, 7))
+    counted = GNNTracker(
+        ("ucm",), False, OPTIONS, AssociationOptions(), coverage=COVERAGE, keep_confirmed=False
+    )
+    got = summary(counted, run(counted, batches, 7))
+    assert got[4] == [] and counted.tracks_confirmed == len(want[4]) >= 30
+    assert got[:4] + got[5:] == want[:4] + want[5:]
+    assert kept.tracks_confirmed == len(kept.ever_confirmed)
+
+
 def test_compiled_route_gives_the_requested_methods_their_rows() -> None:
     """Every requested method's rows follow the compiled route's assignment, as the
     Python route's on the same engine: the same states."""

@@ -615,6 +615,11 @@ class GNNTracker:
             (``distances``, ``gnn_assign``: the reference route, the same assignment) instead
             of the coarse box and the per-component assignment (``pairs``,
             ``sparse_gnn_assign``).
+        coverage: each radar's coverage (``core.tracking.coverage``), by name.
+        keep_confirmed: keep the id of every track confirmed (``ever_confirmed``), for a
+            file's account; False for a session that runs for hours (``radarviz live``),
+            whose memory must not grow with the tracks it confirms: it keeps their number
+            (``tracks_confirmed``) only.
     """
 
     def __init__(
@@ -625,6 +630,7 @@ class GNNTracker:
         association: AssociationOptions,
         dense: bool = False,
         coverage: Mapping[str, RadarCoverage] | None = None,
+        keep_confirmed: bool = True,
     ):
         self.methods = tuple(methods)
         self.dense = dense
@@ -666,8 +672,11 @@ class GNNTracker:
         self._started = 0
         #: Batches (and scans) associated so far.
         self.batches = 0
-        #: Ids of every track confirmed so far, in order of confirmation.
+        #: Ids of every track confirmed so far, in order of confirmation (``keep_confirmed``;
+        #: empty otherwise), and their number.
         self.ever_confirmed: list[str] = []
+        self.tracks_confirmed = 0
+        self.keep_confirmed = keep_confirmed
         #: The compiled route (``core.tracking.association_compiled``), or None: the Python
         #: route of ``_add``.
         self._compiled: CompiledAssociation | None = None
@@ -1051,7 +1060,7 @@ class GNNTracker:
         out = []
         bounds = starts.tolist()
         for confirmed in res.confirmed:
-            self.ever_confirmed.extend(confirmed)
+            self._count_confirmed(confirmed)
         for b in range(len(batches)):
             lo, hi = bounds[b], bounds[b + 1]
             out.append(
@@ -1266,8 +1275,14 @@ class GNNTracker:
             self.tracker.forget(deleted)
             if self._gate.tracker is not self.tracker:
                 self._gate.tracker.forget(deleted)
-        self.ever_confirmed.extend(confirmed)
+        self._count_confirmed(confirmed)
         return confirmed, deleted
+
+    def _count_confirmed(self, ids: list[str]) -> None:
+        """Tracks ``ids`` confirmed: counted, and kept if ``keep_confirmed``."""
+        self.tracks_confirmed += len(ids)
+        if self.keep_confirmed:
+            self.ever_confirmed.extend(ids)
 
     def _swept(
         self,
@@ -1331,7 +1346,7 @@ class GNNTracker:
             {n: b.estimated() for n, b in self.beams.items()},
             {n: b.scan_stamped for n, b in self.beams.items()},
             self._started,
-            len(self.ever_confirmed),
+            self.tracks_confirmed,
         )
 
     def measured_period(self, radar: str, period_s: float) -> None:

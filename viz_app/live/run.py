@@ -103,9 +103,11 @@ def run_live(args: argparse.Namespace) -> int:
     coverage = {n: radar_coverage(r) for n, r in radars.items()}
 
     def make(options: Any, association: Any) -> GNNTracker:
-        # Memory that does not grow with the session: the tracks' arrays are made at their
-        # size at once.
-        made = GNNTracker(methods, False, options, association, coverage=coverage)
+        # Memory that does not grow with the session: the ids of the tracks confirmed are
+        # not kept (their number is), the tracks' arrays are made at their size at once.
+        made = GNNTracker(
+            methods, False, options, association, coverage=coverage, keep_confirmed=False
+        )
         made.reserve(RESERVED_TRACKS)
         return made
 
@@ -171,13 +173,15 @@ def run_live(args: argparse.Namespace) -> int:
                     recorder.send_layout()
                     laid_out[0] = True
 
-        # The plots' track ids in order, hashed: two runs on the same feed (or this one and
-        # ``track --associate gnn`` on its recording) compare by it.
-        ids = hashlib.sha256()
+        # The plots' track ids in order, and their tracks' statuses, hashed: two runs on the
+        # same feed (or this one and ``track --associate gnn`` on its recording) compare by
+        # them, in memory that does not grow with the session as a list of them would.
+        ids, statuses = hashlib.sha256(), hashlib.sha256()
         log_rows = recorder.add if recorder is not None else _discard
 
         def on_rows(plot: Plot, rows: list, status: str = "") -> None:
             ids.update(plot.target.encode() + b"\n")
+            statuses.update(status.encode() + b"\n")
             log_rows(plot, rows, status)
 
         latencies: Any = []
@@ -212,6 +216,7 @@ def run_live(args: argparse.Namespace) -> int:
     doc["settings"] = control.document()
     doc["latency_parts_ms"] = {k: latency_ms(v)["median"] for k, v in parts.items()}
     doc["track_ids_sha256"] = ids.hexdigest()
+    doc["track_statuses_sha256"] = statuses.hexdigest()
     check_finite_document("live", doc, nonnegative=True)
     if args.summary:
         with atomic_write(args.summary, "w", encoding="utf-8") as fh:
@@ -364,7 +369,6 @@ def _summary(
     doc["latency_ms"] = latency_ms(latencies)
     doc["tracks_started"] = report.started
     doc["tracks_confirmed"] = report.confirmed
-    doc["confirmed_tracks"] = list(tracker.ever_confirmed)
     doc["peak_rss_mb"] = peak_rss_mb()
     return doc
 
