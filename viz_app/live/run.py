@@ -54,6 +54,9 @@ if TYPE_CHECKING:
 SETTLE_S = 10.0
 #: Longest session asked for (s): a day.
 MAX_DURATION_S = 86_400.0
+#: Consistency events the session's monitor keeps (``ConsistencyMonitor.events_kept``): each
+#: goes to the viewer's log as it comes, and a feed of hours makes them without end.
+EVENTS_KEPT = 1000
 
 
 def _options(args: argparse.Namespace) -> tuple[Any, Any, Any, tuple[str, ...]]:
@@ -66,8 +69,9 @@ def _options(args: argparse.Namespace) -> tuple[Any, Any, Any, tuple[str, ...]]:
 
     given = {n: getattr(args, n) for n, _ in LIVE_ASSOCIATION_FLAGS}
     association = AssociationOptions(**{k: v for k, v in given.items() if v is not None})
-    # Hours of a feed start millions of tracks: the monitor keeps the live ones.
-    monitor = ConsistencyMonitor(keep_deleted=False)
+    # Hours of a feed start millions of tracks: the monitor keeps the live ones, and the
+    # newest of their events.
+    monitor = ConsistencyMonitor(keep_deleted=False, events_kept=EVENTS_KEPT)
     options = StreamOptions(monitor=monitor, **motion_fields())
     methods = tuple(args.method) if args.method else ALL_METHODS
     return association, monitor, options, methods
