@@ -23,6 +23,7 @@ from radarviz.core.tracking.association import (
     plot_batches,
     sparse_gnn_assign,
 )
+from radarviz.core.tracking.consistency import ConsistencyMonitor
 from radarviz.core.tracking.coverage import RadarCoverage
 from radarviz.core.tracking.kernels_associate import lsap, sparse_assign
 from radarviz.core.tracking.stream import Plot, StreamOptions
@@ -100,6 +101,55 @@ def test_compiled_route_associates_as_the_numpy_route(seed: int) -> None:
     assert len(set(ids)) > 80 and sum(map(len, deleted)) > 10 and len(confirmed) >= 55
     assert report.estimated["r0"]["rotation_period_s"] == pytest.approx(4.0, rel=0.02)
     assert "rotation_period_s" not in report.estimated["r1"]
+
+
+def capacities(gnn: GNNTracker) -> tuple[int, ...]:
+    """The track slots of the arrays that grow with the tracks: the book's, the tracker's
+    rows, the live tracks' and the monitor's."""
+    c = gnn._compiled
+    assert c is not None and c.tracks.feed is not None
+    rows = {a.shape[0] for a in c.tracks.feed.arrays.values()}
+    assert len(rows) == 1
+    return gnn.book.alive.shape[0], c.tracks.started.shape[0], c.live.pos.shape[0], *rows
+
+
+def test_room_reserved_at_the_start_is_the_room_the_tracks_take() -> None:
+    """A tracker given room for its tracks at the start (``GNNTracker.reserve``, as
+    ``radarviz live``'s) keeps its arrays at that size through calls that grow another's
+    from nothing, and tracks as that one does."""
+    plots = rotating_scene(4, targets=60, duration_s=60.0)
+    batches = batches_of(plots)
+
+    def made() -> GNNTracker:
+        options = replace(OPTIONS, monitor=ConsistencyMonitor(keep_deleted=False))
+        return GNNTracker(("ucm",), False, options, AssociationOptions(), coverage=COVERAGE)
+
+    plain = made()
+    want = summary(plain, run(plain, batches, 40))
+    gnn = made()
+    gnn.reserve(256)
+    room = capacities(gnn)
+    assert room == (256,) * 4
+    assert summary(gnn, run(gnn, batches, 40)) == want
+    assert capacities(gnn) == room
+    # The scene needs the room: up to 142 live tracks and a call's 60 plots.
+    assert capacities(plain)[0] > 128
+
+
+def test_a_tracker_that_does_not_keep_the_confirmed_ids_counts_them() -> None:
+    """``keep_confirmed=False`` (``radarviz live``'s): the same tracks and account, the
+    number of tracks confirmed, not their ids."""
+    plots = rotating_scene(5, targets=40, duration_s=40.0)
+    batches = batches_of(plots)
+    kept = GNNTracker(("ucm",), False, OPTIONS, AssociationOptions(), coverage=COVERAGE)
+    want = summary(kept, run(kept, batches, 7))
+    counted = GNNTracker(
+        ("ucm",), False, OPTIONS, AssociationOptions(), coverage=COVERAGE, keep_confirmed=False
+    )
+    got = summary(counted, run(counted, batches, 7))
+    assert got[4] == [] and counted.tracks_confirmed == len(want[4]) >= 30
+    assert got[:4] + got[5:] == want[:4] + want[5:]
+    assert kept.tracks_confirmed == len(kept.ever_confirmed)
 
 
 def test_compiled_route_gives_the_requested_methods_their_rows() -> None:

@@ -103,3 +103,16 @@ def test_a_sustained_exit_is_one_event_and_a_brief_one_none() -> None:
     assert r.above > 0 and r.first_exit_s == events[0].time_s
     mon.add("u", 0.0, math.nan, 2)  # a broken update counts as far above the band
     assert mon.result("u").updates == 1
+
+
+def test_a_monitor_keeping_its_newest_events_counts_every_one() -> None:
+    """``events_kept`` (``radarviz live``'s monitor, whose feed never ends): the newest
+    events are kept, as a monitor keeping every one has them, and ``events_seen`` counts
+    them all; memory does not grow with the events."""
+    values = ([2.0] * 10 + [40.0] * 12) * 20 + [2.0] * 10
+    every, newest = ConsistencyMonitor(4), ConsistencyMonitor(4, events_kept=3)
+    for mon in (every, newest):
+        for t, v in enumerate(values):
+            mon.add("t", float(t), v, 2)
+    assert every.events_seen == len(every.events) == 40
+    assert newest.events_seen == 40 and list(newest.events) == list(every.events)[-3:]

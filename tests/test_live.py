@@ -203,13 +203,11 @@ def test_live_tracks_a_replayed_feed_as_track_does_the_capture(capture, tmp_path
     out = tmp_path / "t.csv"
     argv = ["track", "--input", str(cap), "--radars", str(toml), "--out", str(out)]
     assert main([*argv, "--associate", "gnn", "--method", "ucm"]) == 0
-    expected = hashlib.sha256()
-    confirmed: set[str] = set()
+    expected, statuses = hashlib.sha256(), hashlib.sha256()
     with open(out, newline="") as fh:
         for row in csv.DictReader(fh):
             expected.update(row["target"].encode() + b"\n")
-            if row["status"] == "confirmed":
-                confirmed.add(row["target"])
+            statuses.update(row["status"].encode() + b"\n")
 
     port = free_udp_port()
     summary = tmp_path / "live.json"
@@ -245,7 +243,7 @@ def test_live_tracks_a_replayed_feed_as_track_does_the_capture(capture, tmp_path
     assert sum(doc[k] for k in parts) == n_plots
     assert doc["tracked"] == n_plots  # a clean loopback feed: nothing lost
     assert doc["track_ids_sha256"] == expected.hexdigest()
-    assert set(doc["confirmed_tracks"]) == confirmed
+    assert doc["track_statuses_sha256"] == statuses.hexdigest()
     lat = doc["latency_ms"]
     assert 0.0 < lat["median"] <= lat["p99"]
     assert f"{n_plots} tracked" in err and "latency median" in err
@@ -602,6 +600,50 @@ def test_the_live_recorders_layout_values_take_their_memory_at_the_start() -> No
         tracemalloc.stop()
     assert grown < 20_000, grown
     assert len(recorder._series["speed_mps"]) == recorder.layout_kept
+
+
+def test_the_live_recorder_logs_the_events_of_a_monitor_keeping_only_its_newest() -> None:
+    """A live session's monitor keeps its newest events only (``EVENTS_KEPT``): the recorder
+    logs each event it still has once, up to the plot's time, and goes on with the ones
+    that come after the oldest are gone."""
+    import numpy as np
+
+    from radarviz.core.tracking.consistency import ConsistencyEvent, ConsistencyMonitor
+    from radarviz.core.tracking.stream import Plot
+    from radarviz.viz_app.io.plots import Radar
+    from radarviz.viz_app.rerun.live_recording import LiveTrackRecorder
+
+    class Discard:
+        def __getattr__(self, name: str):
+            return lambda *args, **kwargs: None
+
+    logged: list[str] = []
+
+    class Logging(LiveTrackRecorder):
+        def _log_text(self, text: str, level: str = "INFO") -> None:
+            logged.append(text)
+
+    monitor = ConsistencyMonitor(events_kept=2)
+    radar = Radar("r", 0.0, 0.0, 0.0, 50.0, 0.3)
+    recorder = Logging(Discard(), [radar], monitor, clock=iter(range(10**6)).__next__)
+    x, P = np.zeros(6), np.eye(6)
+
+    def event(t: float) -> None:
+        monitor.record(ConsistencyEvent(f"{t:g}/ucm", t, "returns", 1.0, 0.5, 2.0))
+
+    def plot(t: float) -> None:
+        p = Plot(t, 1e4, 0.1, 50.0, 0.005, radar="r", target="1")
+        recorder.add(p, [("ucm", x, P)], "confirmed")
+
+    for t in range(5):
+        event(float(t))
+    plot(10.0)  # the first three are gone: the newest two are logged
+    event(11.0)
+    event(13.0)
+    plot(12.0)  # the one at 13 s waits for its plot's time
+    plot(14.0)
+    tracks = [line.split()[1] for line in logged if line.startswith("track ")]
+    assert tracks == ["3/ucm", "4/ucm", "11/ucm", "13/ucm"]
 
 
 def test_the_live_recorder_leaves_track_ids_out_of_the_sdks_string_store(

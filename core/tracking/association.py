@@ -619,6 +619,11 @@ class GNNTracker:
             (``distances``, ``gnn_assign``: the reference route, the same assignment) instead
             of the coarse box and the per-component assignment (``pairs``,
             ``sparse_gnn_assign``).
+        coverage: each radar's coverage (``core.tracking.coverage``), by name.
+        keep_confirmed: keep the id of every track confirmed (``ever_confirmed``), for a
+            file's account; False for a session that runs for hours (``radarviz live``),
+            whose memory must not grow with the tracks it confirms: it keeps their number
+            (``tracks_confirmed``) only.
     """
 
     def __init__(
@@ -629,6 +634,7 @@ class GNNTracker:
         association: AssociationOptions,
         dense: bool = False,
         coverage: Mapping[str, RadarCoverage] | None = None,
+        keep_confirmed: bool = True,
     ):
         self.methods = tuple(methods)
         self.dense = dense
@@ -670,8 +676,11 @@ class GNNTracker:
         self._started = 0
         #: Batches (and scans) associated so far.
         self.batches = 0
-        #: Ids of every track confirmed so far, in order of confirmation.
+        #: Ids of every track confirmed so far, in order of confirmation (``keep_confirmed``;
+        #: empty otherwise), and their number.
         self.ever_confirmed: list[str] = []
+        self.tracks_confirmed = 0
+        self.keep_confirmed = keep_confirmed
         #: The compiled route (``core.tracking.association_compiled``), or None: the Python
         #: route of ``_add``.
         self._compiled: CompiledAssociation | None = None
@@ -733,6 +742,18 @@ class GNNTracker:
         if self._compiled is not None:
             scale = threshold * PREFILTER_MARGIN
             self._compiled.retune(threshold, scale, q_max, association)
+
+    def reserve(self, tracks: int) -> None:
+        """Room for ``tracks`` more tracks, made now: the book's slots and, on the compiled
+        route, the tracker's rows (the monitor's with them). They otherwise grow by doubling
+        when a call needs more (``TrackBook.reserve``: a call may start a track from every
+        one of its plots), which in a session that runs for hours comes with its first
+        large run, minutes in: a step of megabytes at a random time, where memory taken at
+        the start stays the same. (The Python route's filters still grow with the tracks.)"""
+        if self._compiled is not None:
+            self._compiled.reserve(tracks)
+        else:
+            self.book.reserve(tracks)
 
     @property
     def gate(self) -> float:
@@ -1045,7 +1066,7 @@ class GNNTracker:
         out = []
         bounds = starts.tolist()
         for confirmed in res.confirmed:
-            self.ever_confirmed.extend(confirmed)
+            self._count_confirmed(confirmed)
         for b in range(len(batches)):
             lo, hi = bounds[b], bounds[b + 1]
             out.append(
@@ -1260,8 +1281,14 @@ class GNNTracker:
             self.tracker.forget(deleted)
             if self._gate.tracker is not self.tracker:
                 self._gate.tracker.forget(deleted)
-        self.ever_confirmed.extend(confirmed)
+        self._count_confirmed(confirmed)
         return confirmed, deleted
+
+    def _count_confirmed(self, ids: list[str]) -> None:
+        """Tracks ``ids`` confirmed: counted, and kept if ``keep_confirmed``."""
+        self.tracks_confirmed += len(ids)
+        if self.keep_confirmed:
+            self.ever_confirmed.extend(ids)
 
     def _swept(
         self,
@@ -1325,7 +1352,7 @@ class GNNTracker:
             {n: b.estimated() for n, b in self.beams.items()},
             {n: b.scan_stamped for n, b in self.beams.items()},
             self._started,
-            len(self.ever_confirmed),
+            self.tracks_confirmed,
         )
 
     def measured_period(self, radar: str, period_s: float) -> None:

@@ -128,6 +128,12 @@ class CompiledAssociation:
             delete_misses=int(a.delete_misses),  # type: ignore[attr-defined]
         )  # fmt: skip
 
+    def reserve(self, tracks: int) -> None:
+        """At least ``tracks`` free slots in the book now (``TrackBook.reserve``), and the
+        tracker's rows and the live tracks' arrays as many (``GNNTracker.reserve``)."""
+        self.book.reserve(tracks)
+        self._fit(self.live.due_s.shape[0])
+
     def _fit(self, radars: int) -> None:
         """The tracker's rows and the live tracks' arrays as many as the book's slots, with a
         sweep bound per radar."""

@@ -668,9 +668,7 @@ class MonitorFeed:
                 float(ev[4][e]),
                 float(ev[5][e]),
             )
-            mon.events.append(event)
-            if mon.on_event is not None:
-                mon.on_event(event)
+            mon.record(event)
 
     def release(self, targets: list[int]) -> None:
         """The rows of ``targets`` (deleted) go to new targets: their tracks' state is written

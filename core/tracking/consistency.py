@@ -33,7 +33,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from radarviz.core.chi2 import chi2_quantile
-from radarviz.core.params import check, check_real
+from radarviz.core.params import check, check_int, check_real
 
 #: Two-sided probability of the band.
 NIS_BAND_LEVEL = 0.95
@@ -131,7 +131,11 @@ class ConsistencyMonitor:
         keep_history: keep every window's (time, q, lo, hi) (``history``; for recordings).
         keep_deleted: keep the records of tracks the tracker deleted (``forget``), for a
             run's final figures; False for a session that runs for hours (``radarviz
-            live``), whose memory must follow the live tracks (the events are kept).
+            live``), whose memory must follow the live tracks.
+        events_kept: the newest events kept (``events``; None: every one, for a run's
+            account); ``events_seen`` counts them all. A session that runs for hours keeps
+            a bounded number: its events go to the viewer's log as they come
+            (``TrackRecorder``), none is read again later.
     """
 
     def __init__(
@@ -142,6 +146,7 @@ class ConsistencyMonitor:
         sustain: int | None = None,
         keep_history: bool = False,
         keep_deleted: bool = True,
+        events_kept: int | None = None,
     ) -> None:
         self.window = int(check("nis_window", window))
         self.sustain = 2 * self.window if sustain is None else int(check("nis_window", sustain))
@@ -149,7 +154,10 @@ class ConsistencyMonitor:
         self.on_event = on_event
         self.keep_history = keep_history
         self.keep_deleted = keep_deleted
-        self.events: list[ConsistencyEvent] = []
+        if events_kept is not None:
+            check_int("events_kept", events_kept, low=1)
+        self.events: deque[ConsistencyEvent] = deque(maxlen=events_kept)
+        self.events_seen = 0
         self._tracks: dict[str, _Track] = {}
         #: Feeds that hold some tracks' state in arrays (``core.tracking.compiled``): their
         #: state is written into the records before any is read.
@@ -198,10 +206,15 @@ class ConsistencyMonitor:
             tr.left = out
             if out and tr.first_exit_s is None:
                 tr.first_exit_s = time_s
-            event = ConsistencyEvent(track, time_s, "leaves" if out else "returns", q, lo, hi)
-            self.events.append(event)
-            if self.on_event is not None:
-                self.on_event(event)
+            self.record(ConsistencyEvent(track, time_s, "leaves" if out else "returns", q, lo, hi))
+
+    def record(self, event: ConsistencyEvent) -> None:
+        """An event happened: kept (the newest ``events_kept``), counted, and handed to
+        ``on_event``."""
+        self.events.append(event)
+        self.events_seen += 1
+        if self.on_event is not None:
+            self.on_event(event)
 
     def forget(self, tracks: list[str]) -> None:
         """Drop the records of ``tracks`` (deleted by the tracker), unless ``keep_deleted``."""

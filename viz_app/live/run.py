@@ -33,6 +33,7 @@ from radarviz.viz_app.live.control import LiveControl
 from radarviz.viz_app.live.replay import parse_address
 from radarviz.viz_app.live.session import (
     QUEUE_PLOTS,
+    RESERVED_TRACKS,
     FeedCounts,
     FollowedFile,
     Horizon,
@@ -53,6 +54,9 @@ if TYPE_CHECKING:
 SETTLE_S = 10.0
 #: Longest session asked for (s): a day.
 MAX_DURATION_S = 86_400.0
+#: Consistency events the session's monitor keeps (``ConsistencyMonitor.events_kept``): each
+#: goes to the viewer's log as it comes, and a feed of hours makes them without end.
+EVENTS_KEPT = 1000
 
 
 def _options(args: argparse.Namespace) -> tuple[Any, Any, Any, tuple[str, ...]]:
@@ -65,8 +69,9 @@ def _options(args: argparse.Namespace) -> tuple[Any, Any, Any, tuple[str, ...]]:
 
     given = {n: getattr(args, n) for n, _ in LIVE_ASSOCIATION_FLAGS}
     association = AssociationOptions(**{k: v for k, v in given.items() if v is not None})
-    # Hours of a feed start millions of tracks: the monitor keeps the live ones.
-    monitor = ConsistencyMonitor(keep_deleted=False)
+    # Hours of a feed start millions of tracks: the monitor keeps the live ones, and the
+    # newest of their events.
+    monitor = ConsistencyMonitor(keep_deleted=False, events_kept=EVENTS_KEPT)
     options = StreamOptions(monitor=monitor, **motion_fields())
     methods = tuple(args.method) if args.method else ALL_METHODS
     return association, monitor, options, methods
@@ -102,7 +107,13 @@ def run_live(args: argparse.Namespace) -> int:
     coverage = {n: radar_coverage(r) for n, r in radars.items()}
 
     def make(options: Any, association: Any) -> GNNTracker:
-        return GNNTracker(methods, False, options, association, coverage=coverage)
+        # Memory that does not grow with the session: the ids of the tracks confirmed are
+        # not kept (their number is), the tracks' arrays are made at their size at once.
+        made = GNNTracker(
+            methods, False, options, association, coverage=coverage, keep_confirmed=False
+        )
+        made.reserve(RESERVED_TRACKS)
+        return made
 
     try:
         tracker = make(options, association)
@@ -166,13 +177,15 @@ def run_live(args: argparse.Namespace) -> int:
                     recorder.send_layout()
                     laid_out[0] = True
 
-        # The plots' track ids in order, hashed: two runs on the same feed (or this one and
-        # ``track --associate gnn`` on its recording) compare by it.
-        ids = hashlib.sha256()
+        # The plots' track ids in order, and their tracks' statuses, hashed: two runs on the
+        # same feed (or this one and ``track --associate gnn`` on its recording) compare by
+        # them, in memory that does not grow with the session as a list of them would.
+        ids, statuses = hashlib.sha256(), hashlib.sha256()
         log_rows = recorder.add if recorder is not None else _discard
 
         def on_rows(plot: Plot, rows: list, status: str = "") -> None:
             ids.update(plot.target.encode() + b"\n")
+            statuses.update(status.encode() + b"\n")
             log_rows(plot, rows, status)
 
         latencies: Any = []
@@ -207,6 +220,7 @@ def run_live(args: argparse.Namespace) -> int:
     doc["settings"] = control.document()
     doc["latency_parts_ms"] = {k: latency_ms(v)["median"] for k, v in parts.items()}
     doc["track_ids_sha256"] = ids.hexdigest()
+    doc["track_statuses_sha256"] = statuses.hexdigest()
     check_finite_document("live", doc, nonnegative=True)
     if args.summary:
         with atomic_write(args.summary, "w", encoding="utf-8") as fh:
@@ -359,7 +373,6 @@ def _summary(
     doc["latency_ms"] = latency_ms(latencies)
     doc["tracks_started"] = report.started
     doc["tracks_confirmed"] = report.confirmed
-    doc["confirmed_tracks"] = list(tracker.ever_confirmed)
     doc["peak_rss_mb"] = peak_rss_mb()
     return doc
 

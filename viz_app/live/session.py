@@ -76,6 +76,12 @@ PARTS_KEPT = 100_000
 #: Shortest time between two runs of the tracker (s): a run as soon as the queue is empty
 #: would otherwise make a run, and a flush to the viewer, of every datagram of a light feed.
 MIN_RUN_S = 0.02
+#: Tracks the session's tracker has room for from its start (``GNNTracker.reserve``): those
+#: a run may start (one per plot, ``READ_BLOCK`` and a batch) beside about three thousand
+#: live ones. A tracker's arrays otherwise double when a run needs more room, and the first
+#: long run (the tracker held up a second) came minutes into a soak: 3.9 MiB at once, from
+#: 620 track slots to 2 480, over a scene of about 330 live tracks.
+RESERVED_TRACKS = 4 * READ_BLOCK
 #: The queue's end mark.
 _END = None
 

@@ -350,12 +350,16 @@ class TrackRecorder:
             self._log_text(STATUS_LEGEND)
         if self.monitor is not None:
             # The tracker runs ahead by a block of plots: log the events up to this plot's time.
-            events = self.monitor.events
+            # The monitor may keep only its newest events (``events_kept``): ``events`` starts
+            # at its ``first``-th event, and any older one not logged yet is gone.
+            events, seen = self.monitor.events, self.monitor.events_seen
+            first = seen - len(events)
+            self._events_logged = max(self._events_logged, first)
             while (
-                self._events_logged < len(events)
-                and events[self._events_logged].time_s <= plot.time_s
+                self._events_logged < seen
+                and events[self._events_logged - first].time_s <= plot.time_s
             ):
-                event = events[self._events_logged]
+                event = events[self._events_logged - first]
                 level = "WARN" if event.kind == "leaves" else "INFO"
                 self._log_text(event.message(), level)
                 self._events_logged += 1
