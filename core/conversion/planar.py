@@ -47,7 +47,6 @@ from numpy.typing import ArrayLike, NDArray
 from radarviz.core.conversion import elementwise
 from radarviz.core.conversion.elementwise import (
     averaged_coefficients,
-    conversion_coefficients,
     converted_point,
     true_cov_coefficients,
     true_entries,
@@ -220,10 +219,11 @@ def convert_parts(
             px, py = p[..., 0], p[..., 1]
         rp = polar_coordinates([px, py])[0]
         cp, sp = px / rp, py / rp
-    form = conversion.covariance
-    co = conversion_coefficients(form, conversion.scale(s), s, sr2)
+    co = conversion.coefficients(s, sr2)
     return ConvertedParts(
-        *converted_point(form, r, np.cos(beta), np.sin(beta), sr2, s, co, rp, cp, sp)
+        *converted_point(
+            conversion.covariance, r, np.cos(beta), np.sin(beta), sr2, s, co, rp, cp, sp
+        )
     )
 
 

@@ -30,6 +30,7 @@ from typing import Any
 
 from radarviz.core.conversion.elementwise import (
     Covariance,
+    conversion_coefficients,
     debiasing_scale,
     seed_scale,
     unbiasing_scale,
@@ -55,6 +56,11 @@ class Conversion:
     def about_prediction(self) -> bool:
         """Whether its covariance is taken at the filter's predicted position."""
         return self.covariance == Covariance.EXACT_AT_PREDICTION
+
+    def coefficients(self, s: Any, sr2: Any) -> tuple:
+        """Its eight scalars that depend on the noise only, at s = σβ² and σr² (numbers or
+        arrays): κ(s), then its covariance form's (``conversion_coefficients``)."""
+        return conversion_coefficients(self.covariance, self.scale(s), s, sr2)
 
     def scales(self, sigma_beta_rad: Any, sigma_elevation_rad: Any = 0.0) -> tuple[Any, Any]:
         """(κxy, κz) = (κ(σβ² + σε²), κ(σε²)): the scale per axis (in 2D κxy is κ(σβ²))."""

@@ -38,7 +38,6 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from radarviz.core.conversion.elementwise import conversion_coefficients
 from radarviz.core.conversion.planar import convert_parts
 from radarviz.core.conversion.registry import CONVERSIONS, Conversion
 from radarviz.core.conversion.spatial import UPPER_3D, convert_parts_3d
@@ -245,7 +244,8 @@ def method_named(name: str) -> Method:
     try:
         return METHODS[name]
     except KeyError:
-        raise ValueError(f"method must be one of {', '.join(ALL_METHODS)} (got {name!r})") from None
+        choices = ", ".join(method_names())
+        raise ValueError(f"method must be one of {choices} (got {name!r})") from None
 
 
 #: The columns of ``method_plan``: a method's ``Kind``, its update's ``Covariance``, its
@@ -264,24 +264,41 @@ def method_plan(names: Sequence[str]) -> NDArray[np.int64]:
     return np.array(rows, dtype=np.int64).reshape(len(rows), 3)
 
 
+def _radar_columns(*sigmas: ArrayLike) -> list[NDArray[np.float64]]:
+    """Noise std given per radar, each (R,) or a number, as (R,) arrays of one length."""
+    return np.broadcast_arrays(*(np.atleast_1d(np.asarray(v, dtype=np.float64)) for v in sigmas))
+
+
+def _rows(values: tuple) -> NDArray[np.float64]:
+    """Scalars of a conversion, each (R,) or a number, as one row per radar (R, k)."""
+    return np.stack(np.broadcast_arrays(*values), axis=-1)
+
+
 def conversion_table(
     names: Sequence[str], sigma_r_m: ArrayLike, sigma_beta_rad: ArrayLike
 ) -> NDArray[np.float64]:
     """The 2D conversions' scalars of each radar (σr, σβ: (R,) or scalars), per method, for
-    its update then its start: (R, M, 2, 8), each row ``conversion_coefficients`` (κ first).
+    its update then its start: (R, M, 2, 8), each row ``Conversion.coefficients`` (κ first).
 
     The compiled kernels take these in place of a conversion's name: formed here once per
     radar, they are the only place a conversion's scale enters compiled code."""
-    sr = np.atleast_1d(np.asarray(sigma_r_m, dtype=np.float64))
-    sb = np.atleast_1d(np.asarray(sigma_beta_rad, dtype=np.float64))
-    sr, sb = np.broadcast_arrays(sr, sb)
-    sr2, s = sr * sr, sb * sb
+    sr, sb = _radar_columns(sigma_r_m, sigma_beta_rad)
+    s, sr2 = sb * sb, sr * sr
     out = np.empty((sr.shape[0], len(names), 2, 8))
     for j, name in enumerate(names):
         for k, conversion in enumerate(method_named(name).conversions()):
-            co = conversion_coefficients(conversion.covariance, conversion.scale(s), s, sr2)
-            out[:, j, k, :] = np.stack(np.broadcast_arrays(*co), axis=-1)
+            out[:, j, k, :] = _rows(conversion.coefficients(s, sr2))
     return out
+
+
+def update_coefficients(
+    name: str, sigma_r_m: ArrayLike, sigma_beta_rad: ArrayLike
+) -> NDArray[np.float64]:
+    """``conversion_table``'s update rows of one method alone, (R, 8): for callers that
+    convert plot by plot with each plot's noise (the gates), which never start a track."""
+    sr, sb = _radar_columns(sigma_r_m, sigma_beta_rad)
+    update, _ = method_named(name).conversions()
+    return _rows(update.coefficients(sb * sb, sr * sr))
 
 
 def scale_table(
@@ -289,13 +306,11 @@ def scale_table(
 ) -> NDArray[np.float64]:
     """The 3D conversions' scales of each radar (σβ, σε: (R,) or scalars), per method, for its
     update then its start: (R, M, 2, 2), each row (κxy, κz) (``Conversion.scales``)."""
-    sb = np.atleast_1d(np.asarray(sigma_beta_rad, dtype=np.float64))
-    se = np.atleast_1d(np.asarray(sigma_elevation_rad, dtype=np.float64))
-    sb, se = np.broadcast_arrays(sb, se)
+    sb, se = _radar_columns(sigma_beta_rad, sigma_elevation_rad)
     out = np.empty((sb.shape[0], len(names), 2, 2))
     for j, name in enumerate(names):
         for k, conversion in enumerate(method_named(name).conversions()):
-            out[:, j, k, :] = np.stack(np.broadcast_arrays(*conversion.scales(sb, se)), axis=-1)
+            out[:, j, k, :] = _rows(conversion.scales(sb, se))
     return out
 
 

@@ -113,10 +113,10 @@ from radarviz.core.filters.methods import (
     MethodGroup,
     PolarNoise,
     PolarPlot,
-    conversion_table,
     method_names,
     method_plan,
     stack_parts,
+    update_coefficients,
 )
 from radarviz.core.filters.state import CVBatch, position_index
 from radarviz.core.geometry import direction_cosines
@@ -787,9 +787,9 @@ class GNNTracker:
             sigma_r_m, sigma_beta_rad = (
                 np.ascontiguousarray(np.broadcast_to(v, (n_p,))) for v in noise[:2]
             )
-            gate = [self._gate.method]
-            form = int(method_plan(gate)[0, PLAN_COVARIANCE])
-            co = np.ascontiguousarray(conversion_table(gate, sigma_r_m, sigma_beta_rad)[:, 0, 0])
+            method = self._gate.method
+            form = int(method_plan([method])[0, PLAN_COVARIANCE])
+            co = update_coefficients(method, sigma_r_m, sigma_beta_rad)
             # Contiguous arrays throughout: one compiled specialisation of the kernel.
             site_c = np.ascontiguousarray(site)
             plot_points_2d(

@@ -49,7 +49,12 @@ from radarviz.core.filters.kernel_args import (
     RadarArrays,
     TrackState,
 )
-from radarviz.core.filters.methods import conversion_table, method_plan, scale_table
+from radarviz.core.filters.methods import (
+    conversion_table,
+    method_plan,
+    scale_table,
+    update_coefficients,
+)
 from radarviz.core.filters.models import IMMModel
 from radarviz.core.filters.polar_ukf import UKFParams
 from radarviz.core.tracking.consistency import ConsistencyMonitor, nis_band
@@ -422,7 +427,7 @@ class CompiledTracks:
         out = np.empty(slot.size)
         plot = (_f(range_m), _f(azimuth_rad), _f(sigma_r_m), _f(sigma_beta_rad), _f(site))
         plan = self.plan[j]
-        co = conversion_table([method], sigma_r_m, sigma_beta_rad)[:, 0, 0]
+        co = update_coefficients(method, sigma_r_m, sigma_beta_rad)
         if self.imm is not None:
             from radarviz.core.filters.kernels_imm import gate_nis_imm_2d
 
