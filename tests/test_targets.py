@@ -27,11 +27,10 @@ import numpy as np
 import pytest
 from test_track_io import GOOD_RADARS  # the two radars a and b of the file-format tests
 
+from radarviz.core.filters.methods import ALL_METHODS, METHODS_3D
 from radarviz.core.filters.predict import cv_predict
 from radarviz.core.filters.state import CVBatch
 from radarviz.core.tracking.stream import (
-    ALL_METHODS,
-    METHODS_3D,
     Plot,
     StreamOptions,
     StreamTracker,

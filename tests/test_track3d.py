@@ -34,9 +34,10 @@ from filterpy.kalman import (
 from filterpy.kalman import update as kf_update
 from scipy.stats import chi2
 
+from radarviz.core.filters.methods import METHODS_3D
 from radarviz.core.finite_memory.fit import finite_memory_fit
 from radarviz.core.finite_memory.start import finite_memory_start
-from radarviz.core.tracking.stream import METHODS_3D, Plot, StreamOptions, StreamTracker
+from radarviz.core.tracking.stream import Plot, StreamOptions, StreamTracker
 from radarviz.core.velocity.estimate import BASELINE_VELOCITY_MPS
 from radarviz.viz_app.cli.main import main
 from radarviz.viz_app.io.plots import (

@@ -34,12 +34,11 @@ import numpy as np
 import pytest
 from test_targets import TOL, close  # |a − b| ≤ 1e-9 (1 + |a|), as the many-target tests
 
+from radarviz.core.filters.methods import ALL_METHODS, METHODS_3D
 from radarviz.core.tracking import compiled
 from radarviz.core.tracking.compiled import CompiledTracks, PlotBlock, TrackBlock
 from radarviz.core.tracking.consistency import ConsistencyMonitor
 from radarviz.core.tracking.stream import (
-    ALL_METHODS,
-    METHODS_3D,
     Plot,
     PlotError,
     StateRow,

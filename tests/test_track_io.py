@@ -28,9 +28,9 @@ from radarviz.core.experiments.prosov import (
     displayed_measurements,
     track_history,
 )
+from radarviz.core.filters.methods import METHODS_3D
 from radarviz.core.filters.predict import transition_matrix
 from radarviz.core.tracking.stream import (
-    METHODS_3D,
     StreamOptions,
     StreamTracker,
 )

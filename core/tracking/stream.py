@@ -63,12 +63,6 @@ from radarviz.core.filters.measurement import (
     doppler_measurement,
 )
 from radarviz.core.filters.methods import (
-    ALL_METHODS as ALL_METHODS,  # the method lists, re-exported for the tracker's callers
-)
-from radarviz.core.filters.methods import (
-    METHODS_3D as METHODS_3D,
-)
-from radarviz.core.filters.methods import (
     MethodGroup,
     Parts,
     PolarNoise,

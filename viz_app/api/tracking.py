@@ -218,7 +218,8 @@ def track(
         ``Tracks`` (``to_table`` gives one row per plot and method).
     """
     from radarviz.core.experiments.prosov import ALL_METHODS
-    from radarviz.core.tracking.stream import METHODS_3D, StreamTracker
+    from radarviz.core.filters.methods import METHODS_3D
+    from radarviz.core.tracking.stream import StreamTracker
     from radarviz.core.tracking.targets import TargetTracker
 
     options = _options(

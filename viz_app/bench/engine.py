@@ -354,13 +354,8 @@ def bench_targets(
     """The ``targets`` figures (module docstring)."""
     import math
 
-    from radarviz.core.tracking.stream import (
-        ALL_METHODS,
-        Plot,
-        StreamOptions,
-        StreamTracker,
-        plot_block,
-    )
+    from radarviz.core.filters.methods import ALL_METHODS
+    from radarviz.core.tracking.stream import Plot, StreamOptions, StreamTracker, plot_block
     from radarviz.core.tracking.targets import TargetTracker
     from radarviz.viz_app.io.plots import READ_BLOCK
 

@@ -15,6 +15,7 @@ import sys
 from collections.abc import Callable, Iterable
 from contextlib import AbstractContextManager
 
+from radarviz.core.filters.methods import METHODS_3D
 from radarviz.core.filters.models import DEFAULT_IMM
 from radarviz.core.params import ParameterError, check, check_choice, default, parameter
 from radarviz.core.scenarios.crossing import CrossingScene
@@ -23,7 +24,6 @@ from radarviz.core.tracking.consistency import ConsistencyMonitor
 from radarviz.core.tracking.scoring import Truth
 from radarviz.core.tracking.stream import (
     INIT_MODES,
-    METHODS_3D,
     Plot,
     StreamOptions,
     motion_fields,

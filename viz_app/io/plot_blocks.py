@@ -675,7 +675,7 @@ def run_track(
     from contextlib import ExitStack
 
     from radarviz.core.experiments.prosov import ALL_METHODS
-    from radarviz.core.tracking.stream import METHODS_3D
+    from radarviz.core.filters.methods import METHODS_3D
     from radarviz.viz_app.io.atomic import atomic_write
     from radarviz.viz_app.io.plots import _open_input, load_radars
     from radarviz.viz_app.io.plots import run_track as run_track_rows

@@ -83,6 +83,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from radarviz.core.experiments.prosov import ALL_METHODS, TrackingConfig, displayed_measurements
+from radarviz.core.filters.methods import METHODS_3D
 from radarviz.core.finite import check_finite_result
 from radarviz.core.params import PARAMETERS, ParameterError, check, check_choice, default
 from radarviz.core.scenarios.multi_radar import (
@@ -104,7 +105,6 @@ from radarviz.core.tracking.association import (
 from radarviz.core.tracking.compiled import RadarTable
 from radarviz.core.tracking.coverage import RadarCoverage
 from radarviz.core.tracking.stream import (
-    METHODS_3D,
     Plot,
     PlotError,
     StateRow,
